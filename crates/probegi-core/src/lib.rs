@@ -1,0 +1,20 @@
+//! probegi-core: the GI maths and data layouts.
+//!
+//! Nothing here knows about threads, files or scenes, so that a GPU backend can
+//! reuse every function as-is (STYLE.md, "Layout shows the architecture").
+//!
+//! - [`color`]: luminance, sRGB transfer functions and the one tone-mapping operator.
+//! - [`sampling`]: Monte Carlo sampling sets (`sample_x`, `x_pdf`, `invert_x`).
+//! - [`rng`]: a small deterministic PCG32 and seed hashing.
+//! - [`camera`]: pinhole camera maths.
+//! - [`image`]: the linear-RGB float image every renderer writes.
+//! - [`punctual`]: glTF KHR_lights_punctual attenuation maths.
+
+pub mod camera;
+pub mod color;
+pub mod image;
+pub mod punctual;
+pub mod rng;
+pub mod sampling;
+
+pub use glam::{Vec2, Vec3, Vec4};

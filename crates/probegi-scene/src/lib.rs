@@ -1,0 +1,28 @@
+//! probegi-scene: the scene model, its loaders and ray casting.
+//!
+//! - [`scene`], [`mesh`], [`material`], [`texture`], [`light`]: the model.
+//! - [`obj`], [`gltf_file`], [`scene_file`], [`builtin`], [`load`]: loaders.
+//! - [`tracer`]: the ray-casting trait; [`bvh`]: its obvhs CWBVH implementation.
+
+pub mod builtin;
+pub mod bvh;
+pub mod error;
+pub mod file_lookup;
+pub mod gltf_file;
+pub mod light;
+pub mod load;
+pub mod material;
+pub mod mesh;
+pub mod obj;
+pub mod scene;
+pub mod scene_file;
+pub mod texture;
+pub mod tracer;
+
+pub use bvh::{BvhSettings, BvhTracer};
+pub use error::SceneError;
+pub use light::{LightKind, PunctualLight};
+pub use load::load_scene;
+pub use material::Material;
+pub use scene::{Scene, SurfacePoint};
+pub use tracer::{Ray, RayHit, RayTracer};

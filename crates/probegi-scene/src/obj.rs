@@ -1,0 +1,374 @@
+//! Wavefront OBJ/MTL loader, written for the McGuire Computer Graphics Archive
+//! scenes: `v`/`vt`/`vn`/`f` with negative (relative) indices and polygons of any
+//! size (fan-triangulated), `usemtl`, `mtllib`; MTL `Kd`, `Ke`, `Ks`, `Ns`,
+//! `map_Kd`, `map_Ke`. Everything else (`g`, `o`, `s`, `l`, `Ka`, `illum`, bump
+//! maps, ...) is ignored.
+//!
+//! Conventions: texture `v` is flipped to the top-left origin the textures use;
+//! vertices without `vn` get angle-weighted normals; a missing `.mtl`, unknown
+//! material or missing texture degrades to grey / factor-only with a warning; any
+//! malformed line is an error naming the file and line.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use glam::{Vec2, Vec3};
+
+use crate::error::{Result, SceneError};
+use crate::file_lookup::resolve_case_insensitive;
+use crate::material::Material;
+use crate::mesh::Mesh;
+use crate::scene::Scene;
+use crate::texture::Texture;
+
+struct LineCtx<'a> {
+    path: &'a Path,
+    line: usize,
+}
+
+impl LineCtx<'_> {
+    fn err(&self, message: impl Into<String>) -> SceneError {
+        SceneError::Parse { path: self.path.to_path_buf(), line: self.line, message: message.into() }
+    }
+
+    fn float(&self, tok: Option<&str>, what: &str) -> Result<f32> {
+        let tok = tok.ok_or_else(|| self.err(format!("missing {what}")))?;
+        let v: f32 = tok.parse().map_err(|_| self.err(format!("{what} `{tok}` is not a number")))?;
+        if !v.is_finite() {
+            return Err(self.err(format!("{what} `{tok}` is not finite")));
+        }
+        Ok(v)
+    }
+
+    fn vec3(&self, toks: &mut std::str::SplitWhitespace<'_>, what: &str) -> Result<Vec3> {
+        Ok(Vec3::new(self.float(toks.next(), what)?, self.float(toks.next(), what)?, self.float(toks.next(), what)?))
+    }
+
+    /// A 1-based or negative OBJ index into a list of `count` elements, 0-based.
+    fn index(&self, tok: &str, count: usize, what: &str) -> Result<u32> {
+        let i: i64 = tok.parse().map_err(|_| self.err(format!("{what} index `{tok}` is not an integer")))?;
+        let resolved = if i > 0 { i - 1 } else { count as i64 + i };
+        if i == 0 || resolved < 0 || resolved >= count as i64 {
+            return Err(self.err(format!("{what} index {i} out of range ({count} {what}s defined so far)")));
+        }
+        Ok(resolved as u32)
+    }
+}
+
+/// Shared texture cache while loading one scene, keyed by resolved path.
+#[derive(Default)]
+pub(crate) struct TextureCache {
+    by_path: HashMap<PathBuf, usize>,
+}
+
+impl TextureCache {
+    /// Loads (once) the texture `name` relative to `base_dir`. Missing file: warning and
+    /// `None`. Present but undecodable: error.
+    pub(crate) fn get(
+        &mut self,
+        scene: &mut Scene,
+        base_dir: &Path,
+        name: &str,
+        referenced_from: &Path,
+    ) -> Result<Option<usize>> {
+        let Some(path) = resolve_case_insensitive(base_dir, name) else {
+            scene.warnings.push(format!(
+                "{}: texture `{name}` not found; using the colour factor only",
+                referenced_from.display()
+            ));
+            return Ok(None);
+        };
+        if let Some(&id) = self.by_path.get(&path) {
+            return Ok(Some(id));
+        }
+        let tex = Texture::load(&path)?;
+        scene.textures.push(tex);
+        let id = scene.textures.len() - 1;
+        self.by_path.insert(path, id);
+        Ok(Some(id))
+    }
+}
+
+/// Loads an OBJ file (and its MTL libraries and textures) as a scene.
+pub fn load_obj(path: &Path) -> Result<Scene> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut scene = Scene { name: path.display().to_string(), ..Default::default() };
+    let mut textures = TextureCache::default();
+    let mut material_ids: HashMap<String, u32> = HashMap::new();
+
+    let mut v: Vec<Vec3> = Vec::new();
+    let mut vt: Vec<Vec2> = Vec::new();
+    let mut vn: Vec<Vec3> = Vec::new();
+    let mut mesh = Mesh::default();
+    let mut needs_normal: Vec<bool> = Vec::new();
+    let mut vertex_of: HashMap<(u32, u32, u32), u32> = HashMap::new();
+    let mut current_material: Option<u32> = None;
+    let mut face: Vec<u32> = Vec::with_capacity(8);
+
+    for (line_idx, raw) in text.lines().enumerate() {
+        let ctx = LineCtx { path, line: line_idx + 1 };
+        let line = raw.split('#').next().unwrap_or("").trim();
+        let mut toks = line.split_whitespace();
+        let Some(keyword) = toks.next() else { continue };
+        match keyword {
+            "v" => v.push(ctx.vec3(&mut toks, "vertex coordinate")?),
+            "vn" => vn.push(ctx.vec3(&mut toks, "normal component")?),
+            "vt" => {
+                let u = ctx.float(toks.next(), "texture coordinate")?;
+                let tv = match toks.next() {
+                    Some(t) => ctx.float(Some(t), "texture coordinate")?,
+                    None => 0.0,
+                };
+                vt.push(Vec2::new(u, 1.0 - tv));
+            }
+            "f" => {
+                face.clear();
+                for tok in toks {
+                    let mut parts = tok.split('/');
+                    let pi = ctx.index(parts.next().unwrap_or(""), v.len(), "vertex")?;
+                    let ti = match parts.next() {
+                        Some("") | None => u32::MAX,
+                        Some(t) => ctx.index(t, vt.len(), "texture coordinate")?,
+                    };
+                    let ni = match parts.next() {
+                        Some("") | None => u32::MAX,
+                        Some(t) => ctx.index(t, vn.len(), "normal")?,
+                    };
+                    let id = *vertex_of.entry((pi, ti, ni)).or_insert_with(|| {
+                        mesh.positions.push(v[pi as usize]);
+                        mesh.uvs.push(if ti == u32::MAX { Vec2::ZERO } else { vt[ti as usize] });
+                        let n = if ni == u32::MAX { Vec3::ZERO } else { vn[ni as usize].normalize_or_zero() };
+                        mesh.normals.push(n);
+                        needs_normal.push(n == Vec3::ZERO);
+                        (mesh.positions.len() - 1) as u32
+                    });
+                    face.push(id);
+                }
+                if face.len() < 3 {
+                    return Err(ctx.err(format!("face has {} vertices; at least 3 are needed", face.len())));
+                }
+                let mat = match current_material {
+                    Some(m) => m,
+                    None => {
+                        let m = material_id(&mut scene, &mut material_ids, "default", None);
+                        current_material = Some(m);
+                        m
+                    }
+                };
+                for k in 1..face.len() - 1 {
+                    mesh.triangles.push([face[0], face[k], face[k + 1]]);
+                    mesh.triangle_materials.push(mat);
+                }
+            }
+            "usemtl" => {
+                let name = line["usemtl".len()..].trim();
+                let warn = format!("{}:{}: material `{name}` is not defined; using grey", path.display(), ctx.line);
+                current_material = Some(material_id(&mut scene, &mut material_ids, name, Some(warn)));
+            }
+            "mtllib" => {
+                // One library name with spaces, or several separated by spaces.
+                let rest = line["mtllib".len()..].trim();
+                let names: Vec<&str> = if resolve_case_insensitive(&base_dir, rest).is_some() {
+                    vec![rest]
+                } else {
+                    rest.split_whitespace().collect()
+                };
+                for name in names {
+                    match resolve_case_insensitive(&base_dir, name) {
+                        Some(mtl_path) => load_mtl(&mtl_path, &mut scene, &mut material_ids, &mut textures)?,
+                        None => scene.warnings.push(format!(
+                            "{}:{}: material library `{name}` not found; materials fall back to grey",
+                            path.display(),
+                            ctx.line
+                        )),
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    if mesh.triangles.is_empty() {
+        return Err(SceneError::Invalid { path: path.to_path_buf(), message: "no faces".into() });
+    }
+    mesh.generate_normals(&needs_normal);
+    scene.mesh = mesh;
+    Ok(scene)
+}
+
+/// The id of material `name`, creating a grey one (and recording `warn_if_new`) if unknown.
+fn material_id(scene: &mut Scene, ids: &mut HashMap<String, u32>, name: &str, warn_if_new: Option<String>) -> u32 {
+    if let Some(&id) = ids.get(name) {
+        return id;
+    }
+    if let Some(w) = warn_if_new {
+        scene.warnings.push(w);
+    }
+    scene.materials.push(Material::default_grey(name));
+    let id = (scene.materials.len() - 1) as u32;
+    ids.insert(name.to_string(), id);
+    id
+}
+
+fn load_mtl(path: &Path, scene: &mut Scene, ids: &mut HashMap<String, u32>, textures: &mut TextureCache) -> Result<()> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut current: Option<usize> = None;
+    for (line_idx, raw) in text.lines().enumerate() {
+        let ctx = LineCtx { path, line: line_idx + 1 };
+        let line = raw.split('#').next().unwrap_or("").trim();
+        let mut toks = line.split_whitespace();
+        let Some(keyword) = toks.next() else { continue };
+        if keyword == "newmtl" {
+            let name = line["newmtl".len()..].trim();
+            if name.is_empty() {
+                return Err(ctx.err("newmtl without a name"));
+            }
+            let mut m = Material::default_grey(name);
+            // MTL's implicit Kd is 0.8 (the spec's default).
+            m.base_color_factor = Vec3::splat(0.8);
+            scene.materials.push(m);
+            current = Some(scene.materials.len() - 1);
+            ids.insert(name.to_string(), (scene.materials.len() - 1) as u32);
+            continue;
+        }
+        let Some(cur) = current else {
+            if matches!(keyword, "Kd" | "Ke" | "Ks" | "Ns" | "map_Kd" | "map_Ke") {
+                return Err(ctx.err(format!("`{keyword}` before any `newmtl`")));
+            }
+            continue;
+        };
+        match keyword {
+            "Kd" => scene.materials[cur].base_color_factor = color(&ctx, &mut toks)?,
+            "Ke" => scene.materials[cur].emissive_factor = color(&ctx, &mut toks)?,
+            "Ks" => scene.materials[cur].specular_color = color(&ctx, &mut toks)?,
+            "Ns" => {
+                let ns = ctx.float(toks.next(), "Ns")?.max(0.0);
+                scene.materials[cur].specular_exponent = ns;
+                scene.materials[cur].roughness = (2.0 / (ns + 2.0)).sqrt();
+            }
+            "map_Kd" | "map_Ke" => {
+                // Options (`-bm 1`, `-s u v w`, ...) precede the file name: take the last token.
+                let Some(name) = line.split_whitespace().last().filter(|t| *t != keyword) else {
+                    return Err(ctx.err(format!("`{keyword}` without a file name")));
+                };
+                let tex = textures.get(scene, &base_dir, name, path)?;
+                if keyword == "map_Kd" {
+                    scene.materials[cur].base_color_texture = tex;
+                } else {
+                    scene.materials[cur].emissive_texture = tex;
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// An MTL colour: `r g b`, or a single value for grey. Negative components are an error.
+fn color(ctx: &LineCtx<'_>, toks: &mut std::str::SplitWhitespace<'_>) -> Result<Vec3> {
+    let r = ctx.float(toks.next(), "colour component")?;
+    let c = match toks.next() {
+        Some(g) => Vec3::new(r, ctx.float(Some(g), "colour component")?, ctx.float(toks.next(), "colour component")?),
+        None => Vec3::splat(r),
+    };
+    if c.min_element() < 0.0 {
+        return Err(ctx.err(format!("colour {c} has a negative component")));
+    }
+    Ok(c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write_tmp(name: &str, files: &[(&str, &str)]) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("probegi-obj-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("mkdir");
+        for (f, text) in files {
+            std::fs::write(dir.join(f), text).expect("write");
+        }
+        dir
+    }
+
+    #[test]
+    fn quads_negative_indices_and_materials() {
+        let dir = write_tmp(
+            "ok",
+            &[
+                (
+                    "a.obj",
+                    "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 1 0 -1\nv 0 0 -1\nvt 0 0\nusemtl lamp\nf -4/1 -3/1 -2/1 -1/1\n",
+                ),
+                ("a.mtl", "newmtl lamp\nKd 0.5 0.25 0.125\nKe 17 12 4\nNs 10\n"),
+            ],
+        );
+        let s = load_obj(&dir.join("a.obj")).expect("loads");
+        assert_eq!(s.mesh.triangles.len(), 2);
+        assert_eq!(s.materials.len(), 1);
+        assert_eq!(s.materials[0].base_color_factor, Vec3::new(0.5, 0.25, 0.125));
+        assert_eq!(s.materials[0].emissive_factor, Vec3::new(17.0, 12.0, 4.0));
+        assert!((s.materials[0].roughness - (2.0f32 / 12.0).sqrt()).abs() < 1e-6);
+        // Generated normals of a CCW quad seen from above point up; v was flipped.
+        assert!(s.mesh.normals.iter().all(|n| (*n - Vec3::Y).length() < 1e-6));
+        assert_eq!(s.mesh.uvs[0], Vec2::new(0.0, 1.0));
+        assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn missing_mtl_and_unknown_material_warn_and_fall_back_to_grey() {
+        let dir = write_tmp("nomtl", &[("b.obj", "mtllib gone.mtl\nusemtl x\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")]);
+        let s = load_obj(&dir.join("b.obj")).expect("loads");
+        assert_eq!(s.warnings.len(), 2, "{:?}", s.warnings);
+        assert_eq!(s.materials[0].base_color_factor, Vec3::splat(0.5));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    fn error_of(name: &str, obj: &str) -> String {
+        let dir = write_tmp(name, &[("bad.obj", obj)]);
+        let e = load_obj(&dir.join("bad.obj")).expect_err("must fail").to_string();
+        std::fs::remove_dir_all(&dir).ok();
+        e
+    }
+
+    #[test]
+    fn malformed_files_name_file_and_line() {
+        let e = error_of("range", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
+        assert!(e.contains("bad.obj:4:") && e.contains("out of range"), "{e}");
+        let e = error_of("few", "v 0 0 0\nv 1 0 0\nf 1 2\n");
+        assert!(e.contains("bad.obj:3:") && e.contains("at least 3"), "{e}");
+        let e = error_of("nan", "v 0 0 0\nv nan 0 0\n");
+        assert!(e.contains("bad.obj:2:") && e.contains("not finite"), "{e}");
+        let e = error_of("inf", "v 0 inf 0\n");
+        assert!(e.contains("bad.obj:1:") && e.contains("not finite"), "{e}");
+        let e = error_of("text", "v 0 zero 0\n");
+        assert!(e.contains("bad.obj:1:") && e.contains("not a number"), "{e}");
+        let e = error_of("zero", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n");
+        assert!(e.contains("bad.obj:4:"), "{e}");
+        let e = error_of("empty", "# nothing\n");
+        assert!(e.contains("no faces"), "{e}");
+    }
+
+    #[test]
+    fn corrupt_texture_is_an_error_missing_texture_a_warning() {
+        let dir = write_tmp(
+            "tex",
+            &[
+                ("c.obj", "mtllib c.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m\nf 1 2 3\n"),
+                ("c.mtl", "newmtl m\nmap_Kd broken.png\n"),
+                ("broken.png", "not a png"),
+                ("d.obj", "mtllib d.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m\nf 1 2 3\n"),
+                ("d.mtl", "newmtl m\nKd 0.3 0.3 0.3\nmap_Kd -bm 1 absent.png\n"),
+            ],
+        );
+        let e = load_obj(&dir.join("c.obj")).expect_err("corrupt texture").to_string();
+        assert!(e.contains("broken.png"), "{e}");
+        let s = load_obj(&dir.join("d.obj")).expect("missing texture is recoverable");
+        assert!(s.warnings.iter().any(|w| w.contains("absent.png")));
+        assert_eq!(s.materials[0].base_color_texture, None);
+        assert_eq!(s.materials[0].base_color_factor, Vec3::splat(0.3));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

@@ -1,0 +1,178 @@
+//! The scene model: one merged triangle mesh, its materials and textures, punctual
+//! lights, a constant sky and an optional camera. Emissive triangles are the area
+//! lights. Scenes are y-up, in metres.
+
+use glam::{Vec2, Vec3};
+use probegi_core::camera::Camera;
+
+use crate::light::PunctualLight;
+use crate::material::Material;
+use crate::mesh::Mesh;
+use crate::texture::Texture;
+use crate::tracer::RayHit;
+
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// For messages: the path or built-in name it was loaded from.
+    pub name: String,
+    pub mesh: Mesh,
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub lights: Vec<PunctualLight>,
+    /// Constant radiance of rays that leave the scene, W·sr⁻¹·m⁻² per channel.
+    pub sky_radiance: Vec3,
+    /// The camera the file asked for, if any.
+    pub camera: Option<Camera>,
+    /// Things the loader recovered from (missing .mtl or texture, unknown material).
+    pub warnings: Vec<String>,
+}
+
+/// Everything a shader needs about a ray-surface intersection.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfacePoint {
+    pub position: Vec3,
+    /// Unit counter-clockwise (front-face) geometric normal.
+    pub geometric_normal: Vec3,
+    /// Unit shading normal, interpolated and flipped into the geometric normal's hemisphere.
+    pub shading_normal: Vec3,
+    pub uv: Vec2,
+    pub material: u32,
+    pub triangle: u32,
+    /// The ray arrived on the front (counter-clockwise) side.
+    pub front_face: bool,
+}
+
+impl SurfacePoint {
+    /// The shading normal turned toward the side the ray came from: the frame two-sided
+    /// Lambertian shading uses.
+    pub fn facing_normal(&self) -> Vec3 {
+        if self.front_face { self.shading_normal } else { -self.shading_normal }
+    }
+
+    /// The geometric normal turned toward the side the ray came from.
+    pub fn facing_geometric_normal(&self) -> Vec3 {
+        if self.front_face { self.geometric_normal } else { -self.geometric_normal }
+    }
+
+    /// A point nudged off the surface toward `dir`, for spawning rays without
+    /// self-intersection. The offset scales with the magnitude of the position
+    /// (floating-point error grows with it).
+    pub fn spawn_origin(&self, dir: Vec3) -> Vec3 {
+        let n = if dir.dot(self.geometric_normal) >= 0.0 { self.geometric_normal } else { -self.geometric_normal };
+        let eps = 1e-4 * (1.0 + self.position.abs().max_element());
+        self.position + n * eps
+    }
+}
+
+impl Scene {
+    /// Reconstructs the surface at a hit reported by a tracer.
+    pub fn surface_point(&self, hit: &RayHit) -> SurfacePoint {
+        let tri = hit.triangle as usize;
+        let [ia, ib, ic] = self.mesh.triangles[tri];
+        let (ia, ib, ic) = (ia as usize, ib as usize, ic as usize);
+        let b = hit.barycentric;
+        let w = 1.0 - b.x - b.y;
+        let p = [self.mesh.positions[ia], self.mesh.positions[ib], self.mesh.positions[ic]];
+        let position = p[0] * w + p[1] * b.x + p[2] * b.y;
+        let geometric_normal = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        let n = self.mesh.normals[ia] * w + self.mesh.normals[ib] * b.x + self.mesh.normals[ic] * b.y;
+        let mut shading_normal = n.normalize_or_zero();
+        if shading_normal == Vec3::ZERO {
+            shading_normal = geometric_normal;
+        } else if shading_normal.dot(geometric_normal) < 0.0 {
+            shading_normal = -shading_normal;
+        }
+        let uv = self.mesh.uvs[ia] * w + self.mesh.uvs[ib] * b.x + self.mesh.uvs[ic] * b.y;
+        SurfacePoint {
+            position,
+            geometric_normal,
+            shading_normal,
+            uv,
+            material: self.mesh.triangle_materials[tri],
+            triangle: hit.triangle,
+            front_face: !hit.backface,
+        }
+    }
+
+    pub fn material(&self, id: u32) -> &Material {
+        &self.materials[id as usize]
+    }
+
+    /// Diffuse albedo at a surface point.
+    pub fn albedo(&self, sp: &SurfacePoint) -> Vec3 {
+        self.material(sp.material).base_color(&self.textures, sp.uv)
+    }
+
+    /// Radiance emitted toward the viewer of `sp`: non-zero only on the front face.
+    pub fn emitted(&self, sp: &SurfacePoint) -> Vec3 {
+        if !sp.front_face {
+            return Vec3::ZERO;
+        }
+        self.material(sp.material).emission(&self.textures, sp.uv)
+    }
+
+    /// Axis-aligned bounds of the geometry.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        self.mesh.bounds()
+    }
+
+    /// The camera to use: the file's, else one that frames the scene bounds from +Z.
+    pub fn default_camera(&self) -> Camera {
+        if let Some(c) = self.camera {
+            return c;
+        }
+        match self.bounds() {
+            Some((lo, hi)) => {
+                let centre = (lo + hi) * 0.5;
+                let half = (hi - lo) * 0.5;
+                let fov_y_deg = 45.0f32;
+                let dist = half.x.max(half.y) / (fov_y_deg.to_radians() * 0.5).tan() + half.z;
+                Camera {
+                    position: centre + Vec3::Z * dist.max(1e-3) * 1.05,
+                    target: centre,
+                    up: Vec3::Y,
+                    fov_y_deg,
+                }
+            }
+            None => Camera::default(),
+        }
+    }
+
+    /// Invariants every loader must establish; returns the first broken one.
+    pub fn validate(&self) -> Result<(), String> {
+        let m = &self.mesh;
+        if m.normals.len() != m.positions.len() || m.uvs.len() != m.positions.len() {
+            return Err("per-vertex arrays differ in length".into());
+        }
+        if m.triangle_materials.len() != m.triangles.len() {
+            return Err("one material id per triangle required".into());
+        }
+        if let Some(i) = m.positions.iter().position(|p| !p.is_finite()) {
+            return Err(format!("vertex {i} has a non-finite position"));
+        }
+        for (i, t) in m.triangles.iter().enumerate() {
+            if t.iter().any(|&v| v as usize >= m.positions.len()) {
+                return Err(format!("triangle {i} indexes past the vertex array"));
+            }
+        }
+        if let Some(i) = m.triangle_materials.iter().position(|&mat| mat as usize >= self.materials.len()) {
+            return Err(format!("triangle {i} has an unknown material"));
+        }
+        if !self.sky_radiance.is_finite() || self.sky_radiance.min_element() < 0.0 {
+            return Err("sky_radiance must be finite and non-negative".into());
+        }
+        for (i, l) in self.lights.iter().enumerate() {
+            l.validate().map_err(|e| format!("light {i}: {e}"))?;
+        }
+        for mat in &self.materials {
+            let vals = [mat.base_color_factor, mat.emissive_factor * mat.emissive_strength];
+            if vals.iter().any(|v| !v.is_finite() || v.min_element() < 0.0) {
+                return Err(format!("material `{}` has a negative or non-finite colour", mat.name));
+            }
+        }
+        if let Some(c) = &self.camera {
+            c.validate()?;
+        }
+        Ok(())
+    }
+}

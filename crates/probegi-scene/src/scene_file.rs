@@ -1,0 +1,131 @@
+//! The TOML scene file: references mesh files (OBJ, glTF, or `builtin:NAME`),
+//! adds punctual lights, sky and camera. Later issues add the GI volume and
+//! animation tables. Field names are those of the structs; unknown keys are
+//! errors, so a typo never silently does nothing.
+//!
+//! ```toml
+//! sky_radiance = [0.0, 0.0, 0.0]
+//!
+//! [[meshes]]
+//! path = "../shared/scenes/sibenik/sibenik.obj"   # relative to this file
+//! translation = [0.0, 0.0, 0.0]                   # metres
+//! rotation_deg = [0.0, 90.0, 0.0]                 # Euler X, Y, Z, degrees
+//! scale = [1.0, 1.0, 1.0]
+//!
+//! [[lights]]
+//! kind = "spot"                 # point | spot | directional
+//! position = [0.0, 10.0, 0.0]
+//! direction = [0.0, -1.0, 0.0]
+//! color = [1.0, 0.9, 0.8]
+//! intensity = 200.0             # W/sr (point, spot) or W/m² (directional)
+//! outer_cone_angle = 0.6
+//!
+//! [camera]
+//! position = [-10.0, 2.0, 0.0]
+//! target = [0.0, 2.0, 0.0]
+//! fov_y_deg = 60.0
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use glam::{EulerRot, Mat4, Quat, Vec3};
+use probegi_core::camera::Camera;
+use serde::Deserialize;
+
+use crate::error::{Result, SceneError};
+use crate::light::PunctualLight;
+use crate::scene::Scene;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    #[serde(default)]
+    pub meshes: Vec<MeshRef>,
+    #[serde(default)]
+    pub lights: Vec<PunctualLight>,
+    #[serde(default)]
+    pub sky_radiance: Option<Vec3>,
+    #[serde(default)]
+    pub camera: Option<Camera>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshRef {
+    /// OBJ, glTF/GLB, or `builtin:NAME`; relative paths are relative to the TOML file.
+    pub path: String,
+    #[serde(default)]
+    pub translation: Vec3,
+    /// Intrinsic Euler angles X, Y, Z in degrees.
+    #[serde(default)]
+    pub rotation_deg: Vec3,
+    #[serde(default = "one")]
+    pub scale: Vec3,
+}
+
+fn one() -> Vec3 {
+    Vec3::ONE
+}
+
+impl MeshRef {
+    pub fn world_from_local(&self) -> Mat4 {
+        let r = self.rotation_deg;
+        Mat4::from_scale_rotation_translation(
+            self.scale,
+            Quat::from_euler(EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians()),
+            self.translation,
+        )
+    }
+}
+
+pub fn load_scene_file(path: &Path) -> Result<Scene> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let file: SceneFile =
+        toml::from_str(&text).map_err(|e| SceneError::Toml { path: path.to_path_buf(), message: e.to_string() })?;
+    let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut scene = Scene { name: path.display().to_string(), ..Default::default() };
+    if file.meshes.is_empty() {
+        return Err(SceneError::Toml { path: path.to_path_buf(), message: "no [[meshes]] entries".into() });
+    }
+    for (i, m) in file.meshes.iter().enumerate() {
+        let xf = m.world_from_local();
+        if !xf.is_finite() || xf.determinant().abs() < 1e-12 {
+            return Err(SceneError::Toml {
+                path: path.to_path_buf(),
+                message: format!("meshes[{i}]: transform is degenerate or not finite"),
+            });
+        }
+        let sub_path: PathBuf = if m.path.starts_with("builtin:") { PathBuf::from(&m.path) } else { base_dir.join(&m.path) };
+        let mut sub = crate::load::load_scene(&sub_path.to_string_lossy())?;
+        sub.mesh.transform(xf);
+        scene.warnings.append(&mut sub.warnings);
+        merge_into(&mut scene, sub);
+    }
+    scene.lights.extend(file.lights);
+    if let Some(sky) = file.sky_radiance {
+        scene.sky_radiance = sky;
+    }
+    if file.camera.is_some() {
+        scene.camera = file.camera;
+    }
+    scene.validate().map_err(|message| SceneError::Toml { path: path.to_path_buf(), message })?;
+    Ok(scene)
+}
+
+/// Appends `sub`'s geometry, materials, textures and lights; keeps the first camera.
+fn merge_into(scene: &mut Scene, sub: Scene) {
+    let mat_offset = scene.materials.len() as u32;
+    let tex_offset = scene.textures.len();
+    scene.mesh.append(&sub.mesh, mat_offset);
+    scene.materials.extend(sub.materials.into_iter().map(|mut m| {
+        m.base_color_texture = m.base_color_texture.map(|t| t + tex_offset);
+        m.emissive_texture = m.emissive_texture.map(|t| t + tex_offset);
+        m
+    }));
+    scene.textures.extend(sub.textures);
+    scene.lights.extend(sub.lights);
+    scene.sky_radiance = scene.sky_radiance.max(sub.sky_radiance);
+    if scene.camera.is_none() {
+        scene.camera = sub.camera;
+    }
+}
