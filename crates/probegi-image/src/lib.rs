@@ -1,0 +1,7 @@
+//! probegi-image: image files (EXR, PNG) and FLIP comparison.
+
+pub mod compare;
+pub mod io;
+
+pub use compare::{FlipResult, compare_files, flip_srgb8};
+pub use io::{ImageError, LoadedImage, read_image, write_image};

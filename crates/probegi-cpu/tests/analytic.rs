@@ -1,0 +1,175 @@
+//! The renderers against closed-form answers (pbrt `integrators_test.cpp` style)
+//! and against each other.
+
+use glam::Vec3;
+use probegi_core::camera::{Camera, CameraRays};
+use probegi_core::image::Image;
+use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
+use probegi_scene::builtin::{add_polygon, furnace_box};
+use probegi_scene::{BvhSettings, BvhTracer, LightKind, Material, PunctualLight, Scene};
+use std::f32::consts::PI;
+
+fn reference(scene: &Scene, camera: &Camera, size: u32, settings: PathTracerSettings) -> Image {
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let rays = CameraRays::new(camera, size, size);
+    PathTracer::new(scene, &bvh, settings).render(&rays, size, size, &|| {}).0
+}
+
+fn direct(scene: &Scene, camera: &Camera, size: u32, frames: u32) -> Image {
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let rays = CameraRays::new(camera, size, size);
+    let settings = RenderSettings {
+        width: size,
+        height: size,
+        frames,
+        seed: 1,
+        gi: GiMethod::None,
+        direct: DirectSettings::default(),
+    };
+    render_frames(scene, &bvh, &rays, &settings, |_| {}).0
+}
+
+fn rel_err(got: f32, want: f32) -> f32 {
+    (got - want).abs() / want
+}
+
+#[test]
+fn furnace_box_converges_to_le_over_one_minus_rho() {
+    // ρ = 0.5, Le = 1 on every inward face: L = Le / (1 − ρ) = 2 everywhere.
+    let scene = furnace_box(0.5, 1.0);
+    let camera = scene.camera.expect("furnace has a camera");
+    let img = reference(&scene, &camera, 16, PathTracerSettings { pt_spp: 128, seed: 3, ..Default::default() });
+    let mean = img.mean();
+    for c in [mean.x, mean.y, mean.z] {
+        assert!(rel_err(c, 2.0) < 0.01, "furnace mean {mean}, want 2.0 within 1 %");
+    }
+    assert!(img.first_invalid_pixel().is_none());
+}
+
+#[test]
+fn furnace_box_without_light_sampling_agrees() {
+    // The BSDF-only estimator shares no code with NEE/MIS; both must give 2.
+    let scene = furnace_box(0.5, 1.0);
+    let camera = scene.camera.expect("camera");
+    let s = PathTracerSettings { pt_spp: 128, seed: 4, pt_light_sampling: false, ..Default::default() };
+    let mean = reference(&scene, &camera, 16, s).mean();
+    assert!(rel_err(mean.x, 2.0) < 0.01, "{mean}");
+}
+
+/// A large floor quad (y = 0, facing up, albedo ρ) and a camera at height `cam_y`
+/// looking straight down with a 2° field of view.
+fn floor_scene(albedo: f32) -> (Scene, Camera) {
+    let mut scene = Scene { materials: vec![Material::diffuse("floor", Vec3::splat(albedo))], ..Default::default() };
+    let s = 50.0;
+    add_polygon(
+        &mut scene.mesh,
+        &[Vec3::new(-s, 0.0, s), Vec3::new(s, 0.0, s), Vec3::new(s, 0.0, -s), Vec3::new(-s, 0.0, -s)],
+        0,
+    );
+    let camera = Camera { position: Vec3::new(0.0, 0.5, 0.0), target: Vec3::ZERO, up: Vec3::Z, fov_y_deg: 2.0 };
+    (scene, camera)
+}
+
+#[test]
+fn point_light_over_a_plane_matches_inverse_square_law() {
+    // L = ρ/π · I / h² directly beneath a point light of intensity I at height h.
+    let (mut scene, camera) = floor_scene(0.5);
+    scene.lights.push(PunctualLight::point(Vec3::new(0.0, 2.0, 0.0), Vec3::ONE, 10.0));
+    let want = 0.5 / PI * 10.0 / 4.0;
+    let pt = reference(&scene, &camera, 8, PathTracerSettings { pt_spp: 4, ..Default::default() }).mean();
+    let dl = direct(&scene, &camera, 8, 1).mean();
+    assert!(rel_err(pt.x, want) < 0.002, "path tracer {pt} want {want}");
+    assert!(rel_err(dl.x, want) < 0.002, "direct {dl} want {want}");
+}
+
+#[test]
+fn spot_and_directional_lights_follow_gltf_units() {
+    let (mut scene, camera) = floor_scene(0.8);
+    // Directional: 3 W/m² arriving at 60° from the normal: L = ρ/π · E · cos 60°.
+    let dir = Vec3::new(60f32.to_radians().sin(), -60f32.to_radians().cos(), 0.0);
+    scene.lights.push(PunctualLight { kind: LightKind::Directional, direction: dir, intensity: 3.0, ..PunctualLight::point(Vec3::ZERO, Vec3::ONE, 0.0) });
+    let want = 0.8 / PI * 3.0 * 0.5;
+    let got = direct(&scene, &camera, 4, 1).mean().x;
+    assert!(rel_err(got, want) < 0.002, "directional {got} want {want}");
+
+    // A spot aimed straight down adds I/h² inside its inner cone; one aimed away adds nothing.
+    let spot = |direction| PunctualLight {
+        kind: LightKind::Spot,
+        direction,
+        inner_cone_angle: 0.3,
+        outer_cone_angle: 0.5,
+        ..PunctualLight::point(Vec3::new(0.0, 1.0, 0.0), Vec3::ONE, 2.0)
+    };
+    scene.lights = vec![spot(Vec3::NEG_Y), spot(Vec3::X)];
+    let want = 0.8 / PI * 2.0;
+    let got = reference(&scene, &camera, 4, PathTracerSettings { pt_spp: 2, ..Default::default() }).mean().x;
+    assert!(rel_err(got, want) < 0.002, "spot {got} want {want}");
+}
+
+#[test]
+fn square_area_light_matches_the_point_to_rectangle_form_factor() {
+    // A black-backed 1 m × 1 m emitter (radiance Le) facing down at height c over
+    // the floor: beneath its centre L = ρ · Le · F, with F the form factor from a
+    // point to a parallel rectangle (four corner rectangles of a/2 × b/2).
+    let (c, le, rho) = (1.0f32, 5.0f32, 0.5f32);
+    let (mut scene, camera) = floor_scene(rho);
+    scene.materials.push(Material::emissive("lamp", Vec3::ZERO, Vec3::splat(le)));
+    add_polygon(
+        &mut scene.mesh,
+        &[Vec3::new(-0.5, c, -0.5), Vec3::new(0.5, c, -0.5), Vec3::new(0.5, c, 0.5), Vec3::new(-0.5, c, 0.5)],
+        1,
+    );
+    assert!(scene.mesh.face_normal_scaled(2).y < 0.0, "lamp must face the floor");
+    let corner = |a: f32, b: f32| {
+        let (x, y) = (a / c, b / c);
+        let (sx, sy) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
+        (x / sx * (y / sx).atan() + y / sy * (x / sy).atan()) / (2.0 * PI)
+    };
+    let form_factor = 4.0 * corner(0.5, 0.5);
+    let want = rho * le * form_factor;
+    let pt = reference(&scene, &camera, 8, PathTracerSettings { pt_spp: 256, seed: 9, ..Default::default() }).mean().x;
+    let dl = direct(&scene, &camera, 8, 16).mean().x;
+    assert!(rel_err(pt, want) < 0.01, "path tracer {pt} want {want}");
+    assert!(rel_err(dl, want) < 0.01, "direct {dl} want {want}");
+}
+
+#[test]
+fn emitters_shine_from_the_front_face_only() {
+    // The same lamp wound the other way (facing up) leaves the floor dark.
+    let (mut scene, camera) = floor_scene(0.5);
+    scene.materials.push(Material::emissive("lamp", Vec3::ZERO, Vec3::splat(5.0)));
+    add_polygon(
+        &mut scene.mesh,
+        &[Vec3::new(-0.5, 1.0, -0.5), Vec3::new(-0.5, 1.0, 0.5), Vec3::new(0.5, 1.0, 0.5), Vec3::new(0.5, 1.0, -0.5)],
+        1,
+    );
+    let pt = reference(&scene, &camera, 4, PathTracerSettings { pt_spp: 64, ..Default::default() }).mean();
+    assert_eq!(pt, Vec3::ZERO);
+}
+
+#[test]
+fn sky_lights_an_open_plane_by_rho_times_sky() {
+    // An unoccluded upward-facing plane under a constant sky L reflects ρ·L.
+    let (mut scene, _) = floor_scene(0.5);
+    scene.sky_radiance = Vec3::splat(2.0);
+    let camera = Camera { position: Vec3::new(0.0, 0.5, 0.0), target: Vec3::ZERO, up: Vec3::Z, fov_y_deg: 2.0 };
+    let pt = reference(&scene, &camera, 8, PathTracerSettings { pt_spp: 64, ..Default::default() }).mean().x;
+    let dl = direct(&scene, &camera, 8, 1).mean().x;
+    assert!(rel_err(pt, 1.0) < 1e-4, "{pt}");
+    assert!(rel_err(dl, 1.0) < 1e-4, "{dl}");
+}
+
+#[test]
+fn reference_is_identical_for_any_thread_count() {
+    let scene = probegi_scene::builtin::cornell_box();
+    let camera = scene.camera.expect("camera");
+    let s = PathTracerSettings { pt_spp: 4, seed: 7, ..Default::default() };
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    let four = rayon::ThreadPoolBuilder::new().num_threads(4).build().expect("pool");
+    let a = one.install(|| reference(&scene, &camera, 24, s));
+    let b = four.install(|| reference(&scene, &camera, 24, s));
+    assert_eq!(a, b);
+    let c = reference(&scene, &camera, 24, PathTracerSettings { seed: 8, ..s });
+    assert_ne!(a, c, "the seed must matter");
+}

@@ -1,0 +1,124 @@
+//! `probegi compare`: LDR-FLIP (Andersson et al. 2020, NVIDIA's implementation via
+//! the nv-flip crate) between a reference and a test image, and the contact sheet
+//! reference | test | error map in the magma colour map, as the seed papers show
+//! their figures.
+//!
+//! HDR (EXR) input is first mapped to 8-bit sRGB with the one fixed operator of
+//! `probegi_core::color::tonemap`; PNG input is taken as already display-referred.
+
+use std::path::Path;
+
+use crate::io::{ImageError, LoadedImage, read_image, write_png};
+
+/// FLIP's default viewing condition: 0.7 m from a 0.68 m wide 3840-pixel monitor.
+pub const FLIP_PIXELS_PER_DEGREE: f32 = nv_flip::DEFAULT_PIXELS_PER_DEGREE;
+
+pub struct FlipResult {
+    pub width: u32,
+    pub height: u32,
+    /// Mean of the per-pixel FLIP error, in [0, 1].
+    pub mean_flip: f32,
+    /// Per-pixel error, row-major.
+    pub error_map: Vec<f32>,
+}
+
+/// FLIP between two 8-bit sRGB images of equal size.
+pub fn flip_srgb8(width: u32, height: u32, reference: &[u8], test: &[u8]) -> FlipResult {
+    let r = nv_flip::FlipImageRgb8::with_data(width, height, reference);
+    let t = nv_flip::FlipImageRgb8::with_data(width, height, test);
+    let err = nv_flip::flip(r, t, FLIP_PIXELS_PER_DEGREE);
+    let mean_flip = nv_flip::FlipPool::from_image(&err).mean();
+    FlipResult { width, height, mean_flip, error_map: err.to_vec() }
+}
+
+/// FLIP between two loaded images; sizes must match.
+pub fn flip_images(
+    reference: &LoadedImage,
+    reference_path: &Path,
+    test: &LoadedImage,
+    test_path: &Path,
+) -> Result<FlipResult, ImageError> {
+    let (rw, rh) = reference.size();
+    let (tw, th) = test.size();
+    if (rw, rh) != (tw, th) {
+        return Err(ImageError::SizeMismatch {
+            reference: reference_path.to_path_buf(),
+            rw,
+            rh,
+            test: test_path.to_path_buf(),
+            tw,
+            th,
+        });
+    }
+    Ok(flip_srgb8(rw, rh, &reference.to_srgb8(), &test.to_srgb8()))
+}
+
+/// Magma-mapped error map as 8-bit RGB.
+pub fn error_map_magma(result: &FlipResult) -> Vec<u8> {
+    let err = nv_flip::FlipImageFloat::with_data(result.width, result.height, &result.error_map);
+    err.apply_color_lut(&nv_flip::magma_lut()).to_vec()
+}
+
+/// Three images side by side: reference | test | magma error map.
+pub fn contact_sheet(width: u32, height: u32, reference: &[u8], test: &[u8], magma: &[u8]) -> Vec<u8> {
+    let (w, h) = (width as usize, height as usize);
+    let mut sheet = vec![0u8; 3 * w * h * 3];
+    for y in 0..h {
+        for (panel, src) in [reference, test, magma].iter().enumerate() {
+            let dst = (y * 3 * w + panel * w) * 3;
+            sheet[dst..dst + 3 * w].copy_from_slice(&src[y * w * 3..(y + 1) * w * 3]);
+        }
+    }
+    sheet
+}
+
+/// The whole `compare` command: loads both files, computes FLIP, optionally
+/// writes the contact sheet. Returns the mean FLIP.
+pub fn compare_files(reference_path: &Path, test_path: &Path, sheet_path: Option<&Path>) -> Result<f32, ImageError> {
+    let reference = read_image(reference_path)?;
+    let test = read_image(test_path)?;
+    let result = flip_images(&reference, reference_path, &test, test_path)?;
+    if let Some(sheet) = sheet_path {
+        let magma = error_map_magma(&result);
+        let rgb = contact_sheet(result.width, result.height, &reference.to_srgb8(), &test.to_srgb8(), &magma);
+        write_png(sheet, result.width * 3, result.height, rgb)?;
+    }
+    Ok(result.mean_flip)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(w: u32, h: u32, shift: u8) -> Vec<u8> {
+        (0..w * h).flat_map(|i| {
+            let v = ((i % w) * 255 / w) as u8;
+            [v.saturating_add(shift), v, 255 - v]
+        }).collect()
+    }
+
+    #[test]
+    fn identical_images_have_zero_flip_and_different_ones_do_not() {
+        let a = ramp(32, 16, 0);
+        assert_eq!(flip_srgb8(32, 16, &a, &a).mean_flip, 0.0);
+        let b = ramp(32, 16, 40);
+        let small = flip_srgb8(32, 16, &a, &b).mean_flip;
+        let black = vec![0u8; a.len()];
+        let large = flip_srgb8(32, 16, &a, &black).mean_flip;
+        assert!(small > 0.01 && large > small && large <= 1.0, "small {small}, large {large}");
+    }
+
+    #[test]
+    fn contact_sheet_places_three_panels() {
+        let (w, h) = (4, 2);
+        let a = vec![10u8; 24];
+        let b = vec![20u8; 24];
+        let c = vec![30u8; 24];
+        let s = contact_sheet(w, h, &a, &b, &c);
+        assert_eq!(s.len(), 3 * 24);
+        assert_eq!(&s[0..3], &[10, 10, 10]);
+        assert_eq!(&s[12..15], &[20, 20, 20]);
+        assert_eq!(&s[24..27], &[30, 30, 30]);
+        assert_eq!(&s[36..39], &[10, 10, 10], "second row starts with the reference again");
+    }
+}
