@@ -1,0 +1,170 @@
+//! Command-line arguments: the contract scripts rely on (foundation issue, "CLI").
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use glam::Vec3;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "probegi",
+    version,
+    about = "Probe-based dynamic diffuse global illumination, with a path-traced reference and FLIP comparison.",
+    long_about = None,
+    after_help = format!(
+        "Without a subcommand, renders the built-in Cornell box to out/cornell-box.png.\n\
+         PNG output is tone-mapped with {}; EXR output is linear radiance.",
+        probegi_core::color::TONEMAP_NAME
+    )
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render frames with direct light (and, later, GI) into an image.
+    Render(RenderArgs),
+    /// Path-trace the unbiased reference image.
+    Reference(ReferenceArgs),
+    /// FLIP between a reference and a test image; prints `mean_flip: <value>`.
+    Compare(CompareArgs),
+    /// Ray-casting throughput on probe-like rays; prints JSON on stdout.
+    Bench(BenchArgs),
+}
+
+/// A comma-separated `X,Y,Z` triple of finite numbers.
+pub fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!("expected X,Y,Z (three comma-separated numbers), got `{s}`"));
+    }
+    let mut v = [0.0f32; 3];
+    for (o, p) in v.iter_mut().zip(&parts) {
+        *o = p.parse().map_err(|_| format!("`{p}` is not a number"))?;
+        if !o.is_finite() {
+            return Err(format!("`{p}` is not finite"));
+        }
+    }
+    Ok(Vec3::from(v))
+}
+
+/// A comma-separated `NX,NY,NZ` triple of positive integers.
+pub fn parse_uvec3(s: &str) -> Result<[u32; 3], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!("expected NX,NY,NZ (three comma-separated integers), got `{s}`"));
+    }
+    let mut v = [0u32; 3];
+    for (o, p) in v.iter_mut().zip(&parts) {
+        *o = p.parse().map_err(|_| format!("`{p}` is not a positive integer"))?;
+        if *o == 0 {
+            return Err("probe counts must be at least 1".into());
+        }
+    }
+    Ok(v)
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct SceneArgs {
+    /// Scene: a .obj, .gltf, .glb or .toml path, or `builtin:NAME` (cornell-box, furnace-box).
+    #[arg(long, default_value = "builtin:cornell-box")]
+    pub scene: String,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    /// Camera position X,Y,Z in metres (default: the scene's camera).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub camera_pos: Option<Vec3>,
+    /// Camera target X,Y,Z in metres.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub camera_target: Option<Vec3>,
+    /// Vertical field of view in degrees.
+    #[arg(long)]
+    pub fov_y: Option<f32>,
+    /// Constant sky radiance R,G,B for rays that leave the scene (default: the scene's, else black).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub sky: Option<Vec3>,
+    /// Random seed; the same seed gives the same image on any number of threads.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GiArg {
+    /// Direct light only.
+    None,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Global illumination method.
+    #[arg(long, value_enum, default_value_t = GiArg::None)]
+    pub gi: GiArg,
+    /// Frames to run; a static scene's direct light accumulates over them.
+    #[arg(long, default_value_t = 1)]
+    pub frames: u32,
+    /// Area-light shadow samples per pixel per frame (stratified).
+    #[arg(long, default_value_t = 16)]
+    pub area_samples: u32,
+    /// Output image: .png (tone-mapped sRGB) or .exr (linear radiance).
+    #[arg(long, default_value = "out/render.png")]
+    pub out: PathBuf,
+    /// Write per-pass timings and ray counts as JSON.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct ReferenceArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 256)]
+    pub spp: u32,
+    /// Maximum path length in surface interactions (Russian roulette ends most paths sooner).
+    #[arg(long, default_value_t = 64)]
+    pub max_depth: u32,
+    /// Output image: .exr (linear radiance, recommended) or .png (tone-mapped).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    /// Reference image (.exr or .png).
+    pub reference: PathBuf,
+    /// Test image (.exr or .png).
+    pub test: PathBuf,
+    /// Write a contact sheet: reference | test | FLIP error (magma).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Scene: a path or `builtin:NAME`.
+    #[arg(long, default_value = "builtin:cornell-box")]
+    pub scene: String,
+    /// Probe grid NX,NY,NZ spread over the scene bounds; rays start at the probes.
+    #[arg(long, value_parser = parse_uvec3, default_value = "16,8,16")]
+    pub probes: [u32; 3],
+    /// Rays per probe, uniformly distributed directions.
+    #[arg(long, default_value_t = 256)]
+    pub rays_per_probe: u32,
+    /// Timed repetitions; the best is reported.
+    #[arg(long, default_value_t = 5)]
+    pub repeat: u32,
+    /// Primitive AABB padding relative to the scene extent (0 = off, to measure it).
+    #[arg(long, default_value_t = 1e-5)]
+    pub aabb_pad_rel: f32,
+    /// Random seed for ray directions.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}

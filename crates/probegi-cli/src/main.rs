@@ -1,0 +1,230 @@
+//! `probegi`: render, reference, compare, bench. Errors are reported once, here,
+//! with the context chain ("loading scene x.obj: x.obj:12: ...") and exit code 1.
+
+mod args;
+mod bench;
+
+use std::path::Path;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use clap::Parser;
+use indicatif::{ProgressBar, ProgressStyle};
+use probegi_core::camera::{Camera, CameraRays};
+use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
+use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
+
+use args::{Cli, Command, GiArg, ReferenceArgs, RenderArgs, SceneArgs};
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        None => {
+            let args = RenderArgs::try_parse_default()?;
+            render(&args)
+        }
+        Some(Command::Render(a)) => render(&a),
+        Some(Command::Reference(a)) => reference(&a),
+        Some(Command::Compare(a)) => {
+            let mean = probegi_image::compare_files(&a.reference, &a.test, a.out.as_deref())?;
+            println!("mean_flip: {mean:.6}");
+            if let Some(sheet) = &a.out {
+                eprintln!("wrote contact sheet {}", sheet.display());
+            }
+            Ok(())
+        }
+        Some(Command::Bench(a)) => {
+            let report = bench::run(&a)?;
+            println!("{}", serde_json::to_string_pretty(&report)?);
+            Ok(())
+        }
+    }
+}
+
+impl RenderArgs {
+    /// The arguments of a bare `probegi` run: `render` of the built-in Cornell box.
+    fn try_parse_default() -> Result<Self> {
+        let mut a = match Cli::try_parse_from(["probegi", "render", "--out", "out/cornell-box.png"])?.command {
+            Some(Command::Render(a)) => a,
+            _ => bail!("internal: default render arguments did not parse"),
+        };
+        a.frames = 16;
+        Ok(a)
+    }
+}
+
+/// Fails if `bytes` exceeds the memory this machine has available.
+pub fn check_memory(bytes: u64, what: &str) -> Result<()> {
+    let available = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|m| {
+            m.lines()
+                .find(|l| l.starts_with("MemAvailable:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<u64>().ok())
+        })
+        .map(|kb| kb * 1024)
+        .unwrap_or(16 << 30);
+    if bytes > available {
+        bail!(
+            "{what} would need {:.1} GiB but only {:.1} GiB of memory is available",
+            bytes as f64 / (1u64 << 30) as f64,
+            available as f64 / (1u64 << 30) as f64
+        );
+    }
+    Ok(())
+}
+
+/// Loads the scene and resolves the camera and sky the arguments ask for.
+fn prepare(args: &SceneArgs, bytes_per_pixel: u64) -> Result<(Scene, Camera)> {
+    if args.width == 0 || args.height == 0 {
+        bail!("--width and --height must be at least 1 (got {}×{})", args.width, args.height);
+    }
+    if args.width > 65_536 || args.height > 65_536 {
+        bail!("--width and --height must be at most 65536 (got {}×{})", args.width, args.height);
+    }
+    check_memory(args.width as u64 * args.height as u64 * bytes_per_pixel, "the image buffers")?;
+    let mut scene = load_scene(&args.scene).with_context(|| format!("loading scene {}", args.scene))?;
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    if let Some(sky) = args.sky {
+        if sky.min_element() < 0.0 {
+            bail!("--sky {sky} must be non-negative");
+        }
+        scene.sky_radiance = sky;
+    }
+    let mut camera = scene.default_camera();
+    if let Some(p) = args.camera_pos {
+        camera.position = p;
+    }
+    if let Some(t) = args.camera_target {
+        camera.target = t;
+    }
+    if let Some(f) = args.fov_y {
+        camera.fov_y_deg = f;
+    }
+    camera.validate().map_err(anyhow::Error::msg).context("invalid camera")?;
+    Ok((scene, camera))
+}
+
+fn progress(len: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    if let Ok(style) = ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({elapsed} < {eta})") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(what.to_string());
+    bar
+}
+
+fn render(args: &RenderArgs) -> Result<()> {
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    probegi_image::io::ImageFormat::from_path(&args.out)?;
+    // G-buffer texel, frame and accumulation buffers.
+    let (scene, camera) = prepare(&args.scene, 160)?;
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
+    let settings = RenderSettings {
+        width: args.scene.width,
+        height: args.scene.height,
+        frames: args.frames,
+        seed: args.scene.seed,
+        gi: match args.gi {
+            GiArg::None => GiMethod::None,
+        },
+        direct: DirectSettings { direct_area_samples: args.area_samples, ..Default::default() },
+    };
+    let bar = progress(args.frames as u64, "render");
+    let start = Instant::now();
+    let (image, stats) = render_frames(&scene, &bvh, &rays, &settings, |_| bar.inc(1));
+    bar.finish_and_clear();
+    let elapsed = start.elapsed();
+    if let Some(i) = image.first_invalid_pixel() {
+        bail!("internal: pixel {i} is not a finite non-negative radiance; image not written");
+    }
+    probegi_image::write_image(&args.out, &image)?;
+    eprintln!(
+        "wrote {} ({}×{}, {} frame{}, {:.2} s, scene {})",
+        args.out.display(),
+        image.width,
+        image.height,
+        stats.frames,
+        if stats.frames == 1 { "" } else { "s" },
+        elapsed.as_secs_f64(),
+        scene.name
+    );
+    if let Some(path) = &args.stats {
+        let json = serde_json::json!({
+            "frames": stats.frames,
+            "pass_ms": stats.pass_ms,
+            "rays_traced": stats.rays_traced,
+            "width": image.width,
+            "height": image.height,
+            "triangles": scene.mesh.triangle_count(),
+            "bvh_build_ms": bvh.build_time.as_secs_f64() * 1e3,
+        });
+        write_text(path, &serde_json::to_string_pretty(&json)?)?;
+    }
+    Ok(())
+}
+
+fn reference(args: &ReferenceArgs) -> Result<()> {
+    if args.spp == 0 {
+        bail!("--spp must be at least 1");
+    }
+    if args.max_depth == 0 || args.max_depth > 4096 {
+        bail!("--max-depth must be in 1..=4096 (got {})", args.max_depth);
+    }
+    probegi_image::io::ImageFormat::from_path(&args.out)?;
+    let (scene, camera) = prepare(&args.scene, 16)?;
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
+    let settings = PathTracerSettings {
+        pt_spp: args.spp,
+        pt_max_depth: args.max_depth,
+        seed: args.scene.seed,
+        ..Default::default()
+    };
+    let pt = PathTracer::new(&scene, &bvh, settings);
+    let bar = progress(args.scene.height as u64, "reference");
+    let start = Instant::now();
+    let (image, counters) = pt.render(&rays, args.scene.width, args.scene.height, &|| bar.inc(1));
+    bar.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+    if let Some(i) = image.first_invalid_pixel() {
+        bail!("internal: pixel {i} is not a finite non-negative radiance; image not written");
+    }
+    probegi_image::write_image(&args.out, &image)?;
+    eprintln!(
+        "wrote {} ({}×{}, {} spp, {:.2} s, {:.2} Mrays/s, scene {})",
+        args.out.display(),
+        image.width,
+        image.height,
+        args.spp,
+        secs,
+        counters.rays_traced as f64 / secs / 1e6,
+        scene.name
+    );
+    Ok(())
+}
+
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
