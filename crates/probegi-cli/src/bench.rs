@@ -63,9 +63,8 @@ pub fn run(args: &BenchArgs) -> Result<serde_json::Value> {
     };
     let (closest_s, closest_hits) =
         time_best(&|| rays.par_iter().filter(|r| bvh.closest_hit(r).is_some()).count() as u64);
-    let (any_s, any_hits) = time_best(&|| {
-        rays.par_iter().filter(|r| bvh.occluded(&Ray { t_max: any_hit_len, ..**r })).count() as u64
-    });
+    let (any_s, any_hits) =
+        time_best(&|| rays.par_iter().filter(|r| bvh.occluded(&Ray { t_max: any_hit_len, ..**r })).count() as u64);
     let n = rays.len() as f64;
     Ok(json!({
         "scene": args.scene,

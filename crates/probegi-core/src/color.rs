@@ -11,25 +11,13 @@ pub fn luminance(c: Vec3) -> f32 {
 
 /// sRGB electro-optical transfer function (IEC 61966-2-1): encoded `[0,1]` to linear.
 pub fn srgb_to_linear(encoded: f32) -> f32 {
-    if encoded <= 0.04045 {
-        encoded / 12.92
-    } else {
-        ((encoded + 0.055) / 1.055).powf(2.4)
-    }
+    if encoded <= 0.04045 { encoded / 12.92 } else { ((encoded + 0.055) / 1.055).powf(2.4) }
 }
 
 /// Inverse of [`srgb_to_linear`]; input is clamped to `[0,1]`.
 pub fn linear_to_srgb(linear: f32) -> f32 {
-    let l = if linear.is_nan() {
-        0.0
-    } else {
-        linear.clamp(0.0, 1.0)
-    };
-    if l <= 0.003_130_8 {
-        l * 12.92
-    } else {
-        1.055 * l.powf(1.0 / 2.4) - 0.055
-    }
+    let l = if linear.is_nan() { 0.0 } else { linear.clamp(0.0, 1.0) };
+    if l <= 0.003_130_8 { l * 12.92 } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 }
 }
 
 /// Lookup table from an 8-bit sRGB code to linear, built once per texture user.
@@ -55,11 +43,7 @@ pub fn tonemap(linear: Vec3) -> Vec3 {
         let (a, b, c, d, e) = (2.51, 0.03, 2.43, 0.59, 0.14);
         ((x * (a * x + b)) / (x * (c * x + d) + e)).clamp(0.0, 1.0)
     }
-    Vec3::new(
-        linear_to_srgb(aces(linear.x)),
-        linear_to_srgb(aces(linear.y)),
-        linear_to_srgb(aces(linear.z)),
-    )
+    Vec3::new(linear_to_srgb(aces(linear.x)), linear_to_srgb(aces(linear.y)), linear_to_srgb(aces(linear.z)))
 }
 
 /// [`tonemap`] quantised to 8-bit sRGB.

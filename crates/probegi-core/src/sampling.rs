@@ -183,9 +183,7 @@ mod tests {
     use super::*;
 
     fn grid(n: usize) -> impl Iterator<Item = Vec2> {
-        (0..n * n).map(move |i| {
-            Vec2::new(((i % n) as f32 + 0.5) / n as f32, ((i / n) as f32 + 0.5) / n as f32)
-        })
+        (0..n * n).map(move |i| Vec2::new(((i % n) as f32 + 0.5) / n as f32, ((i / n) as f32 + 0.5) / n as f32))
     }
 
     #[test]
@@ -203,10 +201,9 @@ mod tests {
         assert!((mean - 2.0 / 3.0).abs() < 1e-3, "{mean}");
         // And the density integrates to one over the hemisphere (uniform-sphere estimator).
         let m = 256;
-        let integral: f32 = grid(m)
-            .map(|u| cosine_hemisphere_pdf(sample_uniform_sphere(u).z) / uniform_sphere_pdf())
-            .sum::<f32>()
-            / (m * m) as f32;
+        let integral: f32 =
+            grid(m).map(|u| cosine_hemisphere_pdf(sample_uniform_sphere(u).z) / uniform_sphere_pdf()).sum::<f32>()
+                / (m * m) as f32;
         assert!((integral - 1.0).abs() < 1e-3, "{integral}");
     }
 

@@ -120,7 +120,7 @@ impl<'a> DirectLighting<'a> {
                 }
                 rays
             },
-            &|| {},
+            || {},
         )
     }
 }

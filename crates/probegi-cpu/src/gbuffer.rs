@@ -57,7 +57,7 @@ pub fn trace_gbuffer(
             }
             row.len() as u64
         },
-        &|| {},
+        || {},
     );
     (GBuffer { width, height, texels }, rays)
 }

@@ -23,7 +23,7 @@ use probegi_core::camera::CameraRays;
 use probegi_core::image::Image;
 use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_core::sampling::{Frame, cosine_hemisphere_pdf, power_heuristic, sample_cosine_hemisphere};
-use probegi_scene::{Ray, RayTracer, Scene};
+use probegi_scene::{Ray, RayTracer, Scene, SurfacePoint};
 use std::f32::consts::FRAC_1_PI;
 
 use crate::light_sampling::AreaLights;
@@ -70,7 +70,13 @@ impl<'a> PathTracer<'a> {
     }
 
     /// Renders the whole image. `on_row_done` is called once per finished row.
-    pub fn render(&self, camera: &CameraRays, width: u32, height: u32, on_row_done: &(dyn Fn() + Sync)) -> (Image, RenderCounters) {
+    pub fn render(
+        &self,
+        camera: &CameraRays,
+        width: u32,
+        height: u32,
+        on_row_done: &(dyn Fn() + Sync),
+    ) -> (Image, RenderCounters) {
         let mut img = Image::new(width, height);
         let w = width as usize;
         let spp = self.settings.pt_spp.max(1);
@@ -102,6 +108,27 @@ impl<'a> PathTracer<'a> {
         (img, RenderCounters { rays_traced: rays })
     }
 
+    /// One next-event sample of the area lights at `sp`, MIS-weighted against
+    /// cosine BSDF sampling. Returns reflected radiance and rays traced.
+    fn area_light_nee(&self, sp: &SurfacePoint, brdf: Vec3, rng: &mut Pcg32) -> (Vec3, u64) {
+        let (u_select, u_point) = (rng.next_f32(), rng.next_vec2());
+        if !self.settings.pt_light_sampling {
+            return (Vec3::ZERO, 0);
+        }
+        let Some(s) = self.area_lights.sample(self.scene, sp.position, u_select, u_point) else {
+            return (Vec3::ZERO, 0);
+        };
+        let Some(cos) = lambert_cos(sp, s.wi) else { return (Vec3::ZERO, 0) };
+        if s.radiance == Vec3::ZERO || s.pdf_solid_angle <= 0.0 {
+            return (Vec3::ZERO, 0);
+        }
+        if self.tracer.occluded(&shadow_ray_to(sp, s.point)) {
+            return (Vec3::ZERO, 1);
+        }
+        let w = power_heuristic(s.pdf_solid_angle, cosine_hemisphere_pdf(cos));
+        (brdf * s.radiance * (cos * w / s.pdf_solid_angle), 1)
+    }
+
     /// Radiance arriving along `ray`, and the number of rays traced.
     pub fn radiance(&self, mut ray: Ray, rng: &mut Pcg32) -> (Vec3, u64) {
         let scene = self.scene;
@@ -122,7 +149,8 @@ impl<'a> PathTracer<'a> {
             if le != Vec3::ZERO {
                 let w = match prev_bsdf_pdf {
                     Some(pdf) if self.settings.pt_light_sampling => {
-                        let light_pdf = self.area_lights.pdf_solid_angle(scene, prev_position, sp.position, sp.triangle);
+                        let light_pdf =
+                            self.area_lights.pdf_solid_angle(scene, prev_position, sp.position, sp.triangle);
                         power_heuristic(pdf, light_pdf)
                     }
                     _ => 1.0,
@@ -135,23 +163,9 @@ impl<'a> PathTracer<'a> {
             }
             let brdf = albedo * FRAC_1_PI;
 
-            if self.settings.pt_light_sampling {
-                if let Some(s) = self.area_lights.sample(scene, sp.position, rng.next_f32(), rng.next_vec2()) {
-                    if let Some(cos) = lambert_cos(&sp, s.wi) {
-                        if s.radiance != Vec3::ZERO && s.pdf_solid_angle > 0.0 {
-                            rays += 1;
-                            if !self.tracer.occluded(&shadow_ray_to(&sp, s.point)) {
-                                let w = power_heuristic(s.pdf_solid_angle, cosine_hemisphere_pdf(cos));
-                                l += throughput * brdf * s.radiance * (cos * w / s.pdf_solid_angle);
-                            }
-                        }
-                    }
-                }
-            } else {
-                // Keep the random-number stream aligned with the NEE variant.
-                rng.next_f32();
-                rng.next_vec2();
-            }
+            let (ld, n) = self.area_light_nee(&sp, brdf, rng);
+            l += throughput * ld;
+            rays += n;
             let (lp, n) = punctual_direct(scene, self.tracer, &sp, albedo);
             l += throughput * lp;
             rays += n;

@@ -88,7 +88,12 @@ fn spot_and_directional_lights_follow_gltf_units() {
     let (mut scene, camera) = floor_scene(0.8);
     // Directional: 3 W/m² arriving at 60° from the normal: L = ρ/π · E · cos 60°.
     let dir = Vec3::new(60f32.to_radians().sin(), -60f32.to_radians().cos(), 0.0);
-    scene.lights.push(PunctualLight { kind: LightKind::Directional, direction: dir, intensity: 3.0, ..PunctualLight::point(Vec3::ZERO, Vec3::ONE, 0.0) });
+    scene.lights.push(PunctualLight {
+        kind: LightKind::Directional,
+        direction: dir,
+        intensity: 3.0,
+        ..PunctualLight::point(Vec3::ZERO, Vec3::ONE, 0.0)
+    });
     let want = 0.8 / PI * 3.0 * 0.5;
     let got = direct(&scene, &camera, 4, 1).mean().x;
     assert!(rel_err(got, want) < 0.002, "directional {got} want {want}");

@@ -91,10 +91,12 @@ mod tests {
     use super::*;
 
     fn ramp(w: u32, h: u32, shift: u8) -> Vec<u8> {
-        (0..w * h).flat_map(|i| {
-            let v = ((i % w) * 255 / w) as u8;
-            [v.saturating_add(shift), v, 255 - v]
-        }).collect()
+        (0..w * h)
+            .flat_map(|i| {
+                let v = ((i % w) * 255 / w) as u8;
+                [v.saturating_add(shift), v, 255 - v]
+            })
+            .collect()
     }
 
     #[test]

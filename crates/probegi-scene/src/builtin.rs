@@ -60,10 +60,18 @@ pub fn cornell_box() -> Scene {
     let (left, right, floor, ceiling, back, short_box, tall_box, light) = (0, 1, 2, 3, 4, 5, 6, 7);
     let mut m = Mesh::default();
     add_polygon(&mut m, &[v(-1.01, 0.0, 0.99), v(1.0, 0.0, 0.99), v(1.0, 0.0, -1.04), v(-0.99, 0.0, -1.04)], floor);
-    add_polygon(&mut m, &[v(-1.02, 1.99, 0.99), v(-1.02, 1.99, -1.04), v(1.0, 1.99, -1.04), v(1.0, 1.99, 0.99)], ceiling);
+    add_polygon(
+        &mut m,
+        &[v(-1.02, 1.99, 0.99), v(-1.02, 1.99, -1.04), v(1.0, 1.99, -1.04), v(1.0, 1.99, 0.99)],
+        ceiling,
+    );
     add_polygon(&mut m, &[v(-0.99, 0.0, -1.04), v(1.0, 0.0, -1.04), v(1.0, 1.99, -1.04), v(-1.02, 1.99, -1.04)], back);
     add_polygon(&mut m, &[v(1.0, 0.0, -1.04), v(1.0, 0.0, 0.99), v(1.0, 1.99, 0.99), v(1.0, 1.99, -1.04)], right);
-    add_polygon(&mut m, &[v(-1.01, 0.0, 0.99), v(-0.99, 0.0, -1.04), v(-1.02, 1.99, -1.04), v(-1.02, 1.99, 0.99)], left);
+    add_polygon(
+        &mut m,
+        &[v(-1.01, 0.0, 0.99), v(-0.99, 0.0, -1.04), v(-1.02, 1.99, -1.04), v(-1.02, 1.99, 0.99)],
+        left,
+    );
     // Short box: top, left, front, right, back, bottom.
     let sb = [
         [v(0.53, 0.6, 0.75), v(0.7, 0.6, 0.17), v(0.13, 0.6, 0.0), v(-0.05, 0.6, 0.57)],
@@ -88,7 +96,11 @@ pub fn cornell_box() -> Scene {
     for q in &tb {
         add_polygon(&mut m, q, tall_box);
     }
-    add_polygon(&mut m, &[v(-0.24, 1.98, 0.16), v(-0.24, 1.98, -0.22), v(0.23, 1.98, -0.22), v(0.23, 1.98, 0.16)], light);
+    add_polygon(
+        &mut m,
+        &[v(-0.24, 1.98, 0.16), v(-0.24, 1.98, -0.22), v(0.23, 1.98, -0.22), v(0.23, 1.98, 0.16)],
+        light,
+    );
     Scene {
         name: "builtin:cornell-box".into(),
         mesh: m,
@@ -147,7 +159,8 @@ mod tests {
     fn cornell_light_faces_down_and_walls_face_in() {
         let s = cornell_box();
         assert!(s.validate().is_ok());
-        let light_tris: Vec<usize> = (0..s.mesh.triangle_count()).filter(|&t| s.mesh.triangle_materials[t] == 7).collect();
+        let light_tris: Vec<usize> =
+            (0..s.mesh.triangle_count()).filter(|&t| s.mesh.triangle_materials[t] == 7).collect();
         assert_eq!(light_tris.len(), 2);
         for t in light_tris {
             assert!(s.mesh.face_normal_scaled(t).normalize().y < -0.99);

@@ -53,7 +53,12 @@ impl BvhTracer {
             })
             .collect();
         if tris.is_empty() {
-            return Self { bvh: CwBvh::default(), triangles: vec![], triangle_ids: vec![], build_time: start.elapsed() };
+            return Self {
+                bvh: CwBvh::default(),
+                triangles: vec![],
+                triangle_ids: vec![],
+                build_time: start.elapsed(),
+            };
         }
         let extent = mesh.bounds().map(|(lo, hi)| (hi - lo).max_element()).unwrap_or(1.0);
         let pad = Vec3A::splat(extent * settings.bvh_aabb_pad_rel.max(0.0));

@@ -23,9 +23,10 @@ pub fn resolve_case_insensitive(base_dir: &Path, name: &str) -> Option<PathBuf> 
                     continue;
                 }
                 let wanted = part.to_string_lossy().to_lowercase();
-                let found = std::fs::read_dir(&current).ok()?.filter_map(|e| e.ok()).find(|e| {
-                    e.file_name().to_string_lossy().to_lowercase() == wanted
-                })?;
+                let found = std::fs::read_dir(&current)
+                    .ok()?
+                    .filter_map(|e| e.ok())
+                    .find(|e| e.file_name().to_string_lossy().to_lowercase() == wanted)?;
                 current = found.path();
             }
             Component::ParentDir => current.push(".."),

@@ -98,16 +98,16 @@ impl Loader<'_> {
             l.validate().map_err(|e| self.err(format!("light {}: {e}", light.index())))?;
             self.scene.lights.push(l);
         }
-        if let (Some(cam), None) = (node.camera(), self.scene.camera) {
-            if let gltf::camera::Projection::Perspective(p) = cam.projection() {
-                let position = world.transform_point3(Vec3::ZERO);
-                self.scene.camera = Some(Camera {
-                    position,
-                    target: position + world.transform_vector3(Vec3::NEG_Z).normalize_or_zero(),
-                    up: world.transform_vector3(Vec3::Y).normalize_or_zero(),
-                    fov_y_deg: p.yfov().to_degrees(),
-                });
-            }
+        if let (Some(cam), None) = (node.camera(), self.scene.camera)
+            && let gltf::camera::Projection::Perspective(p) = cam.projection()
+        {
+            let position = world.transform_point3(Vec3::ZERO);
+            self.scene.camera = Some(Camera {
+                position,
+                target: position + world.transform_vector3(Vec3::NEG_Z).normalize_or_zero(),
+                up: world.transform_vector3(Vec3::Y).normalize_or_zero(),
+                fov_y_deg: p.yfov().to_degrees(),
+            });
         }
         for child in node.children() {
             self.visit(&child, world)?;
@@ -141,7 +141,7 @@ impl Loader<'_> {
             Some(ix) => ix.into_u32().collect(),
             None => (0..n as u32).collect(),
         };
-        if indices.len() % 3 != 0 {
+        if !indices.len().is_multiple_of(3) {
             return Err(self.err(format!("{what}: index count {} is not a multiple of 3", indices.len())));
         }
         if let Some(&bad) = indices.iter().find(|&&i| i as usize >= n) {
@@ -237,8 +237,9 @@ impl Loader<'_> {
                 _ => [p[0], p[1], p[2]],
             })
             .collect();
-        let t = Texture::from_rgb8(data.width, data.height, texels, format!("{} image {img_index}", self.path.display()))
-            .ok_or_else(|| self.err(format!("image {img_index}: pixel data does not match its size")))?;
+        let t =
+            Texture::from_rgb8(data.width, data.height, texels, format!("{} image {img_index}", self.path.display()))
+                .ok_or_else(|| self.err(format!("image {img_index}: pixel data does not match its size")))?;
         self.scene.textures.push(t);
         let id = Some(self.scene.textures.len() - 1);
         self.texture_ids.insert(img_index, id);

@@ -79,10 +79,10 @@ impl PunctualLight {
         if self.kind != LightKind::Point && self.direction.length_squared() < 1e-12 {
             return Err("light direction must be non-zero".into());
         }
-        if let Some(r) = self.range {
-            if !(r.is_finite() && r > 0.0) {
-                return Err(format!("light range {r} must be finite and > 0"));
-            }
+        if let Some(r) = self.range
+            && !(r.is_finite() && r > 0.0)
+        {
+            return Err(format!("light range {r} must be finite and > 0"));
         }
         if self.kind == LightKind::Spot
             && !(0.0 <= self.inner_cone_angle

@@ -20,8 +20,6 @@ pub fn load_scene(spec: &str) -> Result<Scene> {
             _ => return Err(SceneError::UnsupportedFormat { path: path.to_path_buf() }),
         }
     };
-    scene
-        .validate()
-        .map_err(|message| SceneError::Invalid { path: spec.into(), message })?;
+    scene.validate().map_err(|message| SceneError::Invalid { path: spec.into(), message })?;
     Ok(scene)
 }

@@ -127,12 +127,7 @@ impl Scene {
                 let half = (hi - lo) * 0.5;
                 let fov_y_deg = 45.0f32;
                 let dist = half.x.max(half.y) / (fov_y_deg.to_radians() * 0.5).tan() + half.z;
-                Camera {
-                    position: centre + Vec3::Z * dist.max(1e-3) * 1.05,
-                    target: centre,
-                    up: Vec3::Y,
-                    fov_y_deg,
-                }
+                Camera { position: centre + Vec3::Z * dist.max(1e-3) * 1.05, target: centre, up: Vec3::Y, fov_y_deg }
             }
             None => Camera::default(),
         }

@@ -95,7 +95,8 @@ pub fn load_scene_file(path: &Path) -> Result<Scene> {
                 message: format!("meshes[{i}]: transform is degenerate or not finite"),
             });
         }
-        let sub_path: PathBuf = if m.path.starts_with("builtin:") { PathBuf::from(&m.path) } else { base_dir.join(&m.path) };
+        let sub_path: PathBuf =
+            if m.path.starts_with("builtin:") { PathBuf::from(&m.path) } else { base_dir.join(&m.path) };
         let mut sub = crate::load::load_scene(&sub_path.to_string_lossy())?;
         sub.mesh.transform(xf);
         scene.warnings.append(&mut sub.warnings);

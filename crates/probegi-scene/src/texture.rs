@@ -43,8 +43,12 @@ impl Texture {
 
     /// A texture from raw RGB8 texels; `None` if the count does not match.
     pub fn from_rgb8(width: u32, height: u32, texels: Vec<[u8; 3]>, source: String) -> Option<Self> {
-        (width > 0 && height > 0 && texels.len() == width as usize * height as usize)
-            .then_some(Self { width, height, texels, source })
+        (width > 0 && height > 0 && texels.len() == width as usize * height as usize).then_some(Self {
+            width,
+            height,
+            texels,
+            source,
+        })
     }
 
     fn texel_linear(&self, x: i64, y: i64) -> Vec3 {

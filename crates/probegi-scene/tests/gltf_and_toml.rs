@@ -112,11 +112,11 @@ fn gltf_with_data_uri_buffer() {
 fn glb_binary_container() {
     let buf = quad_buffer();
     let mut json = gltf_json(None, buf.len()).into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let mut bin = buf.clone();
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();

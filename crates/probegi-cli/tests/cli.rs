@@ -1,0 +1,123 @@
+//! The command-line contract: outputs, JSON keys, and clear non-zero exits on bad input.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn probegi(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_probegi")).args(args).output().expect("spawn probegi")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("probegi-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&d).expect("mkdir");
+    d.join(name)
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn fails_with(args: &[&str], needle: &str) {
+    let o = probegi(args);
+    assert!(!o.status.success(), "{args:?} should fail");
+    let e = stderr(&o);
+    assert!(e.contains(needle), "{args:?}: stderr does not mention `{needle}`:\n{e}");
+    assert!(!e.contains("panicked"), "{args:?} panicked:\n{e}");
+}
+
+#[test]
+fn render_writes_png_exr_and_stats_json() {
+    let png = tmp("r.png");
+    let exr = tmp("r.exr");
+    let stats = tmp("stats.json");
+    let s = |p: &PathBuf| p.to_string_lossy().into_owned();
+    let o = probegi(&[
+        "render",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--frames",
+        "2",
+        "--out",
+        &s(&png),
+        "--stats",
+        &s(&stats),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("wrote"));
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    assert_eq!(json["frames"], 2);
+    assert!(json["rays_traced"].as_u64().expect("rays") >= 2 * 32 * 24);
+    assert!(json["pass_ms"]["gbuffer"].as_f64().is_some() && json["pass_ms"]["direct"].as_f64().is_some());
+    let o = probegi(&["render", "--width", "32", "--height", "24", "--out", &s(&exr)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    // compare: PNG against EXR of the same frames is close; it prints the contract line.
+    let sheet = tmp("sheet.png");
+    let o = probegi(&["compare", &s(&exr), &s(&png), "--out", &s(&sheet)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let line = out.lines().find(|l| l.starts_with("mean_flip: ")).expect("mean_flip line");
+    let v: f32 = line["mean_flip: ".len()..].trim().parse().expect("number");
+    assert!((0.0..0.2).contains(&v), "{v}");
+    assert!(sheet.exists());
+}
+
+#[test]
+fn reference_is_deterministic_for_a_seed() {
+    let a = tmp("a.exr");
+    let b = tmp("b.exr");
+    let s = |p: &PathBuf| p.to_string_lossy().into_owned();
+    for p in [&a, &b] {
+        let o = probegi(&["reference", "--width", "16", "--height", "16", "--spp", "4", "--seed", "3", "--out", &s(p)]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    assert_eq!(std::fs::read(&a).expect("a"), std::fs::read(&b).expect("b"));
+    let o = probegi(&["compare", &s(&a), &s(&b)]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("mean_flip: 0.000000"));
+}
+
+#[test]
+fn bad_input_exits_non_zero_with_a_clear_message() {
+    let out = tmp("never.png");
+    let o = out.to_string_lossy().into_owned();
+    fails_with(&["render", "--scene", "/no/such/scene.obj", "--out", &o], "/no/such/scene.obj");
+    fails_with(&["render", "--scene", "builtin:nope", "--out", &o], "cornell-box");
+    fails_with(&["render", "--width", "0", "--out", &o], "--width");
+    fails_with(&["render", "--width", "65536", "--height", "65536", "--out", &o], "memory");
+    fails_with(&["render", "--frames", "0", "--out", &o], "--frames");
+    fails_with(&["render", "--fov-y", "0", "--out", &o], "fov");
+    fails_with(&["render", "--camera-pos", "1,2", "--out", &o], "X,Y,Z");
+    fails_with(&["render", "--sky", "nan,0,0", "--out", &o], "not finite");
+    fails_with(&["render", "--out", "image.bmp"], "image.bmp");
+    fails_with(&["reference", "--spp", "0", "--out", &o], "--spp");
+    fails_with(&["reference", "--max-depth", "0", "--out", &o], "--max-depth");
+    fails_with(&["compare", "/no/ref.exr", "/no/test.exr"], "/no/ref.exr");
+    fails_with(&["bench", "--probes", "0,1,1"], "at least 1");
+    assert!(!out.exists(), "no image may be left behind by a failed run");
+
+    // A malformed OBJ names file and line.
+    let bad = tmp("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nv 0 1 nan\nf 1 2 3\n").expect("write");
+    fails_with(&["render", "--scene", &bad.to_string_lossy(), "--out", &o], "bad.obj:3:");
+
+    // Mismatched sizes in compare.
+    let (a, b) = (tmp("s1.png"), tmp("s2.png"));
+    for (p, w) in [(&a, "8"), (&b, "9")] {
+        let r = probegi(&["render", "--width", w, "--height", "8", "--out", &p.to_string_lossy()]);
+        assert!(r.status.success());
+    }
+    fails_with(&["compare", &a.to_string_lossy(), &b.to_string_lossy()], "sizes differ");
+}
+
+#[test]
+fn bench_prints_json_with_throughput() {
+    let o = probegi(&["bench", "--probes", "4,4,4", "--rays-per-probe", "64", "--repeat", "1"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("bench prints JSON");
+    assert_eq!(json["rays"], 4 * 4 * 4 * 64);
+    assert!(json["closest_hit_mrays_per_s"].as_f64().expect("closest") > 0.0);
+    assert!(json["any_hit_mrays_per_s"].as_f64().expect("any") > 0.0);
+    assert!(json["bvh_build_ms"].as_f64().expect("build") >= 0.0);
+}
