@@ -138,6 +138,37 @@ fn glb_binary_container() {
 }
 
 #[test]
+fn gltf_base_color_texture_is_srgb_decoded_and_multiplied_by_the_factor() {
+    // A 1×1 PNG of sRGB 128 grey as a data URI; base colour factor 0.5.
+    let mut png = Vec::new();
+    image::RgbImage::from_pixel(1, 1, image::Rgb([128, 128, 128]))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .expect("encode png");
+    let buf = quad_buffer();
+    let json = gltf_json(Some(format!("data:application/octet-stream;base64,{}", base64(&buf))), buf.len())
+        .replace(
+            r#""baseColorFactor": [0.2, 0.4, 0.6, 1]"#,
+            r#""baseColorFactor": [0.5, 0.5, 0.5, 1], "baseColorTexture": {"index": 0}"#,
+        )
+        .replace(
+            r#""buffers":"#,
+            &format!(
+                r#""textures": [{{"source": 0}}], "images": [{{"uri": "data:image/png;base64,{}"}}], "buffers":"#,
+                base64(&png)
+            ),
+        );
+    let dir = tmp_dir("gltftex");
+    let path = dir.join("tex.gltf");
+    std::fs::write(&path, json).expect("write");
+    let s = load_scene(&path.to_string_lossy()).expect("loads");
+    assert_eq!(s.textures.len(), 1);
+    let c = s.materials[0].base_color(&s.textures, glam::Vec2::new(0.3, 0.7));
+    // sRGB 128 decodes to 0.2158; times the 0.5 factor.
+    assert!((c.x - 0.5 * 0.215_860_5).abs() < 1e-5, "{c}");
+    std::fs::remove_dir_all(dir).ok();
+}
+
+#[test]
 fn malformed_gltf_is_an_error_naming_the_file() {
     let dir = tmp_dir("badgltf");
     let path = dir.join("broken.gltf");
