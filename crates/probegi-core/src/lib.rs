@@ -12,7 +12,15 @@
 
 pub mod camera;
 pub mod color;
+pub mod ddgi_query;
+pub mod ddgi_settings;
+pub mod fibonacci;
 pub mod image;
+pub mod octahedral;
+pub mod probe_atlas;
+pub mod probe_blend;
+pub mod probe_border;
+pub mod probe_grid;
 pub mod punctual;
 pub mod rng;
 pub mod sampling;

@@ -1,0 +1,191 @@
+//! The DDGI query: irradiance at a world position and normal from the 8-probe
+//! cage (seed 003 §4.4, seed 004 §2.2, §4.1–4.2; RTXGI `DDGIGetVolumeIrradiance`).
+//!
+//! Per cage probe, the weight is the product of (each switchable):
+//! - backface / wrap: `((dir·n + 1)/2)² + 0.2` (seed 003 eq. 4.4 with a = 1, plus
+//!   RTXGI's 0.2 floor so no probe is fully rejected by angle alone);
+//! - Chebyshev visibility (eq. 4.5–4.9) from the distance moments at the biased
+//!   point, `σ²/(σ² + (r − μ)²)` for r > μ, cubed and floored at 0.05 (RTXGI);
+//! - crush (eq. 4.10): weights below c are multiplied by w²/c² (RTXGI's form);
+//! - trilinear, from the biased point's position in the cage.
+//!
+//! The bias is seed 004 eq. 2's self-shadow bias by default, or seed 003 eq.
+//! 4.11's normal bias. Irradiance texels are decoded to `mean^(1/2)` (seed 004
+//! Listing 2), blended, normalised by Σw and squared back. The atlas holds mean
+//! radiance (see `probe_blend`), so the returned irradiance is π × that, scaled by
+//! the energy-conservation factor. Shading multiplies by albedo/π.
+
+use glam::{IVec3, UVec3, Vec2, Vec3};
+use std::f32::consts::PI;
+
+use crate::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
+use crate::octahedral::oct_encode;
+use crate::probe_atlas::ProbeAtlas;
+use crate::probe_grid::ProbeGrid;
+
+/// Everything a query reads: the grid, its settings and both atlases.
+#[derive(Clone, Copy)]
+pub struct DdgiFieldView<'a> {
+    pub grid: &'a ProbeGrid,
+    pub settings: &'a DdgiVolumeSettings,
+    pub irradiance: &'a ProbeAtlas<Vec3>,
+    pub distance: &'a ProbeAtlas<Vec2>,
+}
+
+/// The world-space offset seed 004 eq. 2 (or seed 003 eq. 4.11) adds to the query
+/// point before the visibility test. `view_dir` points from the surface toward
+/// the viewer (camera or probe).
+pub fn surface_bias(settings: &DdgiVolumeSettings, grid: &ProbeGrid, normal: Vec3, view_dir: Vec3) -> Vec3 {
+    match settings.probe_bias_mode {
+        ProbeBiasMode::SelfShadow => {
+            (normal * 0.2 + view_dir * 0.8) * (0.75 * grid.min_spacing_m()) * settings.probe_self_shadow_bias
+        }
+        ProbeBiasMode::Normal => (normal * 0.8 + view_dir * 0.3) * settings.probe_normal_bias_m,
+        ProbeBiasMode::None => Vec3::ZERO,
+    }
+}
+
+/// Chebyshev visibility weight for a point at `distance` from a probe whose
+/// distance moments are `(mean, mean²)`: 1 in front of the mean, falling behind it.
+pub fn chebyshev_weight(moments: Vec2, distance: f32) -> f32 {
+    let mean = moments.x;
+    if distance <= mean {
+        return 1.0;
+    }
+    let variance = (moments.x * moments.x - moments.y).abs();
+    let v = distance - mean;
+    let w = variance / (variance + v * v);
+    (w * w * w).max(0.0)
+}
+
+/// Wrap-shading backface weight for the direction from the surface to a probe.
+pub fn backface_weight(dir_to_probe: Vec3, normal: Vec3) -> f32 {
+    let wrap = (dir_to_probe.dot(normal) + 1.0) * 0.5;
+    wrap * wrap + 0.2
+}
+
+/// Irradiance (W·m⁻²) arriving at `position` on a surface with unit `normal`.
+pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_dir: Vec3) -> Vec3 {
+    let s = field.settings;
+    let g = field.grid;
+    let biased = position + surface_bias(s, g, normal, view_dir);
+    let base = g.base_probe(biased);
+    let base_pos = g.origin_m + g.spacing_m * base.as_vec3();
+    let alpha = ((biased - base_pos) / g.spacing_m).clamp(Vec3::ZERO, Vec3::ONE);
+    let max_coords = g.probe_counts.as_ivec3() - IVec3::ONE;
+    let normal_uv = oct_encode(normal);
+    let half_gamma = s.probe_irradiance_gamma * 0.5;
+
+    let mut sum = Vec3::ZERO;
+    let mut wsum = 0.0f32;
+    for i in 0..8 {
+        let offset = IVec3::new(i & 1, (i >> 1) & 1, (i >> 2) & 1);
+        let coords = (base + offset).min(max_coords);
+        let probe = g.probe_index(coords.as_uvec3());
+        let probe_pos = g.probe_position(UVec3::new(coords.x as u32, coords.y as u32, coords.z as u32));
+
+        let mut weight = 1.0f32;
+        if s.probe_backface_weight {
+            let dir = (probe_pos - position).normalize_or_zero();
+            weight *= backface_weight(dir, normal);
+        }
+        if s.probe_chebyshev_weight {
+            let to_probe = probe_pos - biased;
+            let dist = to_probe.length();
+            let uv = if dist > 0.0 { oct_encode(-to_probe / dist) } else { Vec2::ZERO };
+            let moments = field.distance.sample_bilinear(probe, uv);
+            weight *= chebyshev_weight(moments, dist).max(0.05);
+        }
+        weight = weight.max(1e-6);
+        if s.probe_crush_weight && weight < s.probe_crush_threshold {
+            let c = s.probe_crush_threshold;
+            weight *= weight * weight / (c * c);
+        }
+        if s.probe_trilinear_weight {
+            let o = offset.as_vec3();
+            let t = (Vec3::ONE - alpha) * (Vec3::ONE - o) + alpha * o;
+            let t = t.max(Vec3::splat(0.001));
+            weight *= t.x * t.y * t.z;
+        }
+        let e = field.irradiance.sample_bilinear(probe, normal_uv).max(Vec3::ZERO);
+        let decoded = Vec3::new(e.x.powf(half_gamma), e.y.powf(half_gamma), e.z.powf(half_gamma));
+        sum += decoded * weight;
+        wsum += weight;
+    }
+    if !(wsum > 0.0) {
+        return Vec3::ZERO;
+    }
+    let m = sum / wsum;
+    let e = m * m * PI * s.probe_energy_conservation;
+    if e.is_finite() { e } else { Vec3::ZERO }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn uniform_field(
+        mean_radiance: f32,
+        distance: f32,
+        counts: UVec3,
+    ) -> (ProbeGrid, DdgiVolumeSettings, ProbeAtlas<Vec3>, ProbeAtlas<Vec2>) {
+        let grid = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: counts, spacing_m: Vec3::ONE };
+        let settings = DdgiVolumeSettings::default();
+        let n = grid.probe_count();
+        let mut irr = ProbeAtlas::new(n, settings.probe_irradiance_texels);
+        let mut dist = ProbeAtlas::new(n, settings.probe_distance_texels);
+        irr.texels.fill(Vec3::splat(mean_radiance.powf(1.0 / settings.probe_irradiance_gamma)));
+        dist.texels.fill(Vec2::new(distance, distance * distance));
+        (grid, settings, irr, dist)
+    }
+
+    #[test]
+    fn uniform_field_returns_pi_times_mean_radiance_everywhere() {
+        let (grid, settings, irr, dist) = uniform_field(2.0, 10.0, UVec3::splat(3));
+        let f = DdgiFieldView { grid: &grid, settings: &settings, irradiance: &irr, distance: &dist };
+        for p in [Vec3::new(0.3, 0.7, 1.2), Vec3::new(1.9, 0.1, 0.5), Vec3::new(-4.0, 9.0, 0.0)] {
+            for n in [Vec3::X, Vec3::NEG_Y, Vec3::new(0.6, 0.0, 0.8)] {
+                let e = irradiance(&f, p, n, n);
+                assert!((e.x - 2.0 * PI).abs() < 1e-3, "{p} {n}: {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn chebyshev_is_one_in_front_of_the_mean_and_falls_behind_it() {
+        let m = Vec2::new(2.0, 4.0 + 0.01);
+        assert_eq!(chebyshev_weight(m, 1.0), 1.0);
+        assert_eq!(chebyshev_weight(m, 2.0), 1.0);
+        let a = chebyshev_weight(m, 2.1);
+        let b = chebyshev_weight(m, 2.5);
+        assert!(a < 1.0 && b < a && b > 0.0, "{a} {b}");
+        assert!(chebyshev_weight(m, 4.0) < 1e-4);
+    }
+
+    #[test]
+    fn a_probe_behind_the_surface_gets_little_weight() {
+        let n = Vec3::Y;
+        assert!((backface_weight(Vec3::Y, n) - 1.2).abs() < 1e-6);
+        assert!((backface_weight(Vec3::NEG_Y, n) - 0.2).abs() < 1e-6);
+        // Through a real query: two probes, one above and one below a floor at y = 0.5,
+        // the lower one seeing the floor's underside at 0.5 m (and dark).
+        let grid = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(1, 2, 1), spacing_m: Vec3::ONE };
+        let settings = DdgiVolumeSettings::default();
+        let mut irr = ProbeAtlas::new(2, settings.probe_irradiance_texels);
+        let mut dist = ProbeAtlas::new(2, settings.probe_distance_texels);
+        irr.tile_mut(1).fill(Vec3::ONE); // upper probe: lit
+        irr.tile_mut(0).fill(Vec3::ZERO); // lower probe: dark
+        dist.tile_mut(1).fill(Vec2::new(5.0, 25.0));
+        dist.tile_mut(0).fill(Vec2::new(0.5, 0.25));
+        let f = DdgiFieldView { grid: &grid, settings: &settings, irradiance: &irr, distance: &dist };
+        let e = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
+        // The lit probe dominates: nearly π·1 rather than the unweighted ~π/2.
+        assert!(e.x > 0.95 * PI, "{e}");
+        let mut off = settings.clone();
+        off.probe_backface_weight = false;
+        off.probe_chebyshev_weight = false;
+        let f = DdgiFieldView { grid: &grid, settings: &off, irradiance: &irr, distance: &dist };
+        let leaky = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
+        assert!(leaky.x < 0.8 * PI, "without the weights the dark probe leaks in: {leaky}");
+    }
+}

@@ -1,0 +1,186 @@
+//! Per-volume DDGI settings: a plain struct whose `Default` holds the papers' and
+//! RTXGI's published values (RTXGI `DDGIVolumeDesc`). Field names are the TOML
+//! keys of a scene file's `[volume]` table and of `--set KEY=VALUE`.
+
+use glam::{UVec3, Vec3};
+use serde::{Deserialize, Serialize};
+
+/// How the query offsets the visibility test point away from the surface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ProbeBiasMode {
+    /// Seed 004 eq. 2: (0.2·n + 0.8·ω_o) · 0.75 · min spacing · `probe_self_shadow_bias`.
+    SelfShadow,
+    /// Seed 003 eq. 4.11: (0.8·n + 0.3·v) · `probe_normal_bias`.
+    Normal,
+    /// No bias (for the leak ablation of seed 000 Fig. 7).
+    None,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DdgiVolumeSettings {
+    /// Probes per axis; any count ≥ 1 (seed 003 §4.1 allows non-powers of two).
+    pub probe_counts: UVec3,
+    /// World position of probe (0,0,0); absent = fit the grid to the scene bounds.
+    pub probe_origin_m: Option<Vec3>,
+    /// Spacing per axis in metres; absent = fit the grid to the scene bounds.
+    pub probe_spacing_m: Option<Vec3>,
+    /// Rays traced per probe per frame (RTXGI default 256; seed 000 Table 2 sweeps 32–256).
+    pub probe_rays_per_probe: u32,
+    /// Interior irradiance texels per side (seed 004 Table 2: 8×8 with the 1-texel border).
+    pub probe_irradiance_texels: u32,
+    /// Interior distance texels per side (seed 004 Table 2: 16×16 with the border).
+    pub probe_distance_texels: u32,
+    /// Temporal hysteresis α of eq. 4.12/4.15–4.16 (RTXGI 0.97).
+    pub probe_hysteresis: f32,
+    /// Power-cosine exponent k_s of the distance weight, seed 003 eq. 4.14 (RTXGI 50).
+    pub probe_distance_exponent: f32,
+    /// Perceptual irradiance encoding exponent, seed 004 §4.2 Listings 1–2 (5).
+    pub probe_irradiance_gamma: f32,
+    /// Which bias the query applies before the visibility test.
+    pub probe_bias_mode: ProbeBiasMode,
+    /// `TunableShadowBias` of seed 004 eq. 2 (default 0.3).
+    pub probe_self_shadow_bias: f32,
+    /// k_n of seed 003 eq. 4.11, metres; in [0, 1] per the thesis (we use 0.25).
+    pub probe_normal_bias_m: f32,
+    /// Energy conservation factor on sampled irradiance (seed 003 §4.4, in [0,1]).
+    /// 1 = none, as RTXGI; lower it only for scenes whose bounces diverge.
+    pub probe_energy_conservation: f32,
+    /// Probe rays longer than this count as misses (RTXGI `probeMaxRayDistance`).
+    pub probe_max_ray_distance_m: f32,
+    /// Weights below this are crushed by w²/c² (seed 003 eq. 4.10; RTXGI 0.2).
+    pub probe_crush_threshold: f32,
+    /// Wrap-shading backface weight ((cos+1)/2)² + 0.2 (seed 003 eq. 4.4 with a = 1, RTXGI's +0.2).
+    pub probe_backface_weight: bool,
+    /// Chebyshev visibility weight (seed 003 eq. 4.5–4.9), cubed with a 0.05 floor as RTXGI.
+    pub probe_chebyshev_weight: bool,
+    /// Crush of small weights (seed 003 eq. 4.10).
+    pub probe_crush_weight: bool,
+    /// Trilinear weight between the 8 cage probes.
+    pub probe_trilinear_weight: bool,
+    /// Area-light next-event samples per probe-ray hit in the shade pass.
+    pub probe_area_light_samples: u32,
+}
+
+impl Default for DdgiVolumeSettings {
+    fn default() -> Self {
+        Self {
+            probe_counts: UVec3::splat(8),
+            probe_origin_m: None,
+            probe_spacing_m: None,
+            probe_rays_per_probe: 256,
+            probe_irradiance_texels: 6,
+            probe_distance_texels: 14,
+            probe_hysteresis: 0.97,
+            probe_distance_exponent: 50.0,
+            probe_irradiance_gamma: 5.0,
+            probe_bias_mode: ProbeBiasMode::SelfShadow,
+            probe_self_shadow_bias: 0.3,
+            probe_normal_bias_m: 0.25,
+            probe_energy_conservation: 1.0,
+            probe_max_ray_distance_m: 1.0e4,
+            probe_crush_threshold: 0.2,
+            probe_backface_weight: true,
+            probe_chebyshev_weight: true,
+            probe_crush_weight: true,
+            probe_trilinear_weight: true,
+            probe_area_light_samples: 1,
+        }
+    }
+}
+
+impl DdgiVolumeSettings {
+    /// The first setting that makes no sense, as `(field, reason)`.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        let c = self.probe_counts;
+        if c.min_element() == 0 {
+            return Err(("probe_counts", format!("{c} has a zero count; every axis needs at least 1 probe")));
+        }
+        if c.max_element() > 1024 {
+            return Err(("probe_counts", format!("{c}: at most 1024 probes per axis")));
+        }
+        if let Some(s) = self.probe_spacing_m
+            && !(s.is_finite() && s.min_element() > 0.0)
+        {
+            return Err(("probe_spacing_m", format!("{s} must be finite and positive on every axis")));
+        }
+        if let Some(o) = self.probe_origin_m
+            && !o.is_finite()
+        {
+            return Err(("probe_origin_m", format!("{o} must be finite")));
+        }
+        if self.probe_rays_per_probe == 0 || self.probe_rays_per_probe > 65_536 {
+            return Err(("probe_rays_per_probe", format!("{} must be in 1..=65536", self.probe_rays_per_probe)));
+        }
+        for (name, v) in [
+            ("probe_irradiance_texels", self.probe_irradiance_texels),
+            ("probe_distance_texels", self.probe_distance_texels),
+        ] {
+            if v == 0 || v > 64 {
+                return Err((name, format!("{v} must be in 1..=64")));
+            }
+        }
+        let unit = |name: &'static str, v: f32| {
+            if (0.0..=1.0).contains(&v) { Ok(()) } else { Err((name, format!("{v} must be in [0, 1]"))) }
+        };
+        unit("probe_hysteresis", self.probe_hysteresis)?;
+        unit("probe_energy_conservation", self.probe_energy_conservation)?;
+        unit("probe_crush_threshold", self.probe_crush_threshold)?;
+        let positive = |name: &'static str, v: f32| {
+            if v.is_finite() && v > 0.0 { Ok(()) } else { Err((name, format!("{v} must be finite and > 0"))) }
+        };
+        positive("probe_distance_exponent", self.probe_distance_exponent)?;
+        positive("probe_irradiance_gamma", self.probe_irradiance_gamma)?;
+        positive("probe_max_ray_distance_m", self.probe_max_ray_distance_m)?;
+        let non_negative = |name: &'static str, v: f32| {
+            if v.is_finite() && v >= 0.0 { Ok(()) } else { Err((name, format!("{v} must be finite and >= 0"))) }
+        };
+        non_negative("probe_self_shadow_bias", self.probe_self_shadow_bias)?;
+        non_negative("probe_normal_bias_m", self.probe_normal_bias_m)?;
+        if self.probe_area_light_samples > 1024 {
+            return Err((
+                "probe_area_light_samples",
+                format!("{} must be at most 1024", self.probe_area_light_samples),
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn probe_count(&self) -> u64 {
+        self.probe_counts.as_u64vec3().element_product()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_the_papers_values_and_valid() {
+        let s = DdgiVolumeSettings::default();
+        assert_eq!(s.probe_rays_per_probe, 256);
+        assert_eq!((s.probe_irradiance_texels + 2, s.probe_distance_texels + 2), (8, 16));
+        assert_eq!(s.probe_hysteresis, 0.97);
+        assert_eq!(s.probe_distance_exponent, 50.0);
+        assert_eq!(s.probe_irradiance_gamma, 5.0);
+        assert_eq!(s.probe_self_shadow_bias, 0.3);
+        assert_eq!(s.probe_crush_threshold, 0.2);
+        assert!(s.validate().is_ok());
+    }
+
+    #[test]
+    fn nonsense_is_rejected_by_field_name() {
+        let bad = |f: fn(&mut DdgiVolumeSettings)| {
+            let mut s = DdgiVolumeSettings::default();
+            f(&mut s);
+            s.validate().expect_err("invalid").0
+        };
+        assert_eq!(bad(|s| s.probe_counts = UVec3::new(0, 4, 4)), "probe_counts");
+        assert_eq!(bad(|s| s.probe_rays_per_probe = 0), "probe_rays_per_probe");
+        assert_eq!(bad(|s| s.probe_spacing_m = Some(Vec3::new(1.0, -1.0, 1.0))), "probe_spacing_m");
+        assert_eq!(bad(|s| s.probe_hysteresis = 1.5), "probe_hysteresis");
+        assert_eq!(bad(|s| s.probe_hysteresis = -0.1), "probe_hysteresis");
+        assert_eq!(bad(|s| s.probe_distance_exponent = f32::NAN), "probe_distance_exponent");
+    }
+}

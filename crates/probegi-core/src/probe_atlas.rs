@@ -1,0 +1,120 @@
+//! Probe atlases: one octahedral map per probe, each with a 1-texel guard border
+//! (seed 003 Fig. 4.9 / seed 004 Fig. 9a, after Engelhardt & Dachsbacher 2008).
+//!
+//! Layout (the one place it is written down): **tile-major**. Probe `p`'s tile is
+//! `tile × tile` texels with `tile = interior + 2`, stored contiguously at
+//! `texels[p·tile² ..]`, row-major inside the tile, row 0 first. Interior texel
+//! `(i, j)`, `0 ≤ i, j < interior`, is tile texel `(i + 1, j + 1)` and holds the
+//! direction `oct_decode(texel_center_uv(i, j))`. One probe's texels are together,
+//! so blending a probe touches one cache-friendly span (a GPU backend maps tiles to
+//! a 2D atlas with [`ProbeAtlas::atlas_texel_position`]).
+//!
+//! Border rule (`probe_border`): the border texels repeat the interior mirrored
+//! across each edge, so bilinear lookups near an edge blend with the texels that
+//! are their neighbours on the sphere.
+
+use glam::{UVec2, Vec2};
+
+/// Values a tile can hold and bilinearly filter.
+pub trait Texel: Copy + Default + std::ops::Add<Output = Self> + std::ops::Mul<f32, Output = Self> {}
+impl Texel for glam::Vec2 {}
+impl Texel for glam::Vec3 {}
+impl Texel for f32 {}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProbeAtlas<T> {
+    pub probe_count: usize,
+    /// Interior texels per side.
+    pub interior: u32,
+    pub texels: Vec<T>,
+}
+
+impl<T: Texel> ProbeAtlas<T> {
+    pub fn new(probe_count: usize, interior: u32) -> Self {
+        let tile = (interior + 2) as usize;
+        Self { probe_count, interior, texels: vec![T::default(); probe_count * tile * tile] }
+    }
+
+    /// Texels per tile side, border included.
+    pub fn tile_size(&self) -> u32 {
+        self.interior + 2
+    }
+
+    pub fn tile_len(&self) -> usize {
+        let t = self.tile_size() as usize;
+        t * t
+    }
+
+    pub fn tile(&self, probe: usize) -> &[T] {
+        let n = self.tile_len();
+        &self.texels[probe * n..(probe + 1) * n]
+    }
+
+    pub fn tile_mut(&mut self, probe: usize) -> &mut [T] {
+        let n = self.tile_len();
+        &mut self.texels[probe * n..(probe + 1) * n]
+    }
+
+    /// Tiles as disjoint mutable chunks (for per-probe parallel passes).
+    pub fn tiles_mut(&mut self) -> std::slice::ChunksExactMut<'_, T> {
+        let n = self.tile_len();
+        self.texels.chunks_exact_mut(n)
+    }
+
+    /// Bilinear lookup in probe `probe`'s map at octahedral coordinates `uv ∈ [-1,1]²`.
+    /// Relies on the guard border being current.
+    pub fn sample_bilinear(&self, probe: usize, uv: Vec2) -> T {
+        sample_tile_bilinear(self.tile(probe), self.interior, uv)
+    }
+
+    /// Where tile texel `(x, y)` of `probe` lands in a 2D atlas image that places
+    /// tiles in rows of `probes_per_row` (used for dumps and, later, GPU textures).
+    pub fn atlas_texel_position(&self, probe: usize, x: u32, y: u32, probes_per_row: u32) -> UVec2 {
+        let t = self.tile_size();
+        let (px, py) = (probe as u32 % probes_per_row, probe as u32 / probes_per_row);
+        UVec2::new(px * t + x, py * t + y)
+    }
+}
+
+/// Bilinear lookup in one tile (`interior + 2` texels per side) at `uv ∈ [-1,1]²`.
+pub fn sample_tile_bilinear<T: Texel>(tile: &[T], interior: u32, uv: Vec2) -> T {
+    let size = interior + 2;
+    let n = interior as f32;
+    // Continuous tile coordinates: interior texel i covers [i + 1, i + 2).
+    let c = (uv.clamp(Vec2::splat(-1.0), Vec2::ONE) * 0.5 + Vec2::splat(0.5)) * n + Vec2::splat(0.5);
+    let x0 = (c.x.floor() as u32).min(size - 2);
+    let y0 = (c.y.floor() as u32).min(size - 2);
+    let f = Vec2::new(c.x - x0 as f32, c.y - y0 as f32).clamp(Vec2::ZERO, Vec2::ONE);
+    let s = size as usize;
+    let at = |x: u32, y: u32| tile[y as usize * s + x as usize];
+    let top = at(x0, y0) * (1.0 - f.x) + at(x0 + 1, y0) * f.x;
+    let bottom = at(x0, y0 + 1) * (1.0 - f.x) + at(x0 + 1, y0 + 1) * f.x;
+    top * (1.0 - f.y) + bottom * f.y
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::octahedral::texel_center_uv;
+
+    #[test]
+    fn texel_centres_sample_exactly_their_texel() {
+        let mut a = ProbeAtlas::<f32>::new(2, 6);
+        for (k, t) in a.texels.iter_mut().enumerate() {
+            *t = k as f32;
+        }
+        for j in 0..6 {
+            for i in 0..6 {
+                let want = a.tile(1)[((j + 1) * 8 + i + 1) as usize];
+                assert_eq!(a.sample_bilinear(1, texel_center_uv(i, j, 6)), want);
+            }
+        }
+    }
+
+    #[test]
+    fn atlas_positions_place_tiles_in_rows() {
+        let a = ProbeAtlas::<f32>::new(6, 6);
+        assert_eq!(a.atlas_texel_position(0, 0, 0, 4), UVec2::new(0, 0));
+        assert_eq!(a.atlas_texel_position(5, 2, 3, 4), UVec2::new(10, 11));
+    }
+}

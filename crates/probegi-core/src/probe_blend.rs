@@ -1,0 +1,204 @@
+//! Blend pass: fold one frame of probe-ray results into each probe's octahedral
+//! maps with hysteresis (seed 003 §4.5; seed 004 §2.3 eq. 1).
+//!
+//! - Irradiance texel in direction ω (eq. 4.12–4.13): the cosine-weighted mean
+//!   Σ max(0, ω·r)·L / Σ max(0, ω·r) of the ray radiances — the mean radiance of
+//!   the hemisphere around ω, i.e. irradiance / π. It is stored encoded as
+//!   `mean^(1/γ)` (seed 004 Listing 1) and blended as `lerp(new, old, α)`.
+//! - Distance texel (eq. 4.14–4.16): the power-cosine (`max(0, ω·r)^k_s`) weighted
+//!   mean of the ray length and of its square, lengths clamped to the volume's
+//!   distance limit. Deviation, as RTXGI does: normalised by the sum of the
+//!   power-cosine weights (the thesis's eq. 4.15 reuses the cosine sum w_sum).
+//! - A texel whose weights sum to zero, or whose new value is not finite, keeps its
+//!   old value: NaN and Inf never enter an atlas.
+//!
+//! All probes share one frame's ray directions (one random rotation per frame), so
+//! the texel-to-ray weights are computed once per frame ([`BlendWeights`]) and each
+//! probe's blend is a sparse weighted sum over its rays.
+
+use glam::{Vec2, Vec3};
+
+use crate::octahedral::{oct_decode, texel_center_uv};
+
+/// Weights below this are dropped from the sparse tables. `max(0, cos)^50 < 1e-6`
+/// beyond 40° from the texel direction; the dropped mass is below float precision
+/// of the normalised mean.
+pub const BLEND_WEIGHT_EPSILON: f32 = 1e-6;
+
+/// Sparse texel × ray weight table for one frame's ray directions.
+#[derive(Clone, Debug, Default)]
+pub struct BlendWeights {
+    /// Entries of texel `t` are `entries[offsets[t]..offsets[t + 1]]`.
+    pub offsets: Vec<u32>,
+    /// `(ray index, weight)`.
+    pub entries: Vec<(u32, f32)>,
+}
+
+impl BlendWeights {
+    /// Weights `max(0, ω_t · r)^exponent` for every interior texel `t` of an
+    /// `interior × interior` map (row-major) and every ray direction `r`.
+    pub fn new(ray_dirs: &[Vec3], interior: u32, exponent: f32) -> Self {
+        let mut offsets = Vec::with_capacity((interior * interior + 1) as usize);
+        let mut entries = Vec::new();
+        offsets.push(0);
+        for j in 0..interior {
+            for i in 0..interior {
+                let texel_dir = oct_decode(texel_center_uv(i, j, interior));
+                for (r, d) in ray_dirs.iter().enumerate() {
+                    let c = texel_dir.dot(*d);
+                    if c <= 0.0 {
+                        continue;
+                    }
+                    let w = if exponent == 1.0 { c } else { c.powf(exponent) };
+                    if w >= BLEND_WEIGHT_EPSILON {
+                        entries.push((r as u32, w));
+                    }
+                }
+                offsets.push(entries.len() as u32);
+            }
+        }
+        Self { offsets, entries }
+    }
+
+    fn texel(&self, t: usize) -> &[(u32, f32)] {
+        &self.entries[self.offsets[t] as usize..self.offsets[t + 1] as usize]
+    }
+}
+
+fn interior_index(t: usize, interior: u32) -> usize {
+    let (i, j) = (t as u32 % interior, t as u32 / interior);
+    ((j + 1) * (interior + 2) + i + 1) as usize
+}
+
+/// Blends one probe's ray radiances into its irradiance tile (encoded with `gamma`).
+/// `hysteresis` is the weight of the old value (0 replaces it).
+pub fn blend_irradiance_tile(
+    tile: &mut [Vec3],
+    interior: u32,
+    weights: &BlendWeights,
+    ray_radiance: &[Vec3],
+    hysteresis: f32,
+    gamma: f32,
+) {
+    for t in 0..(interior * interior) as usize {
+        let mut sum = Vec3::ZERO;
+        let mut wsum = 0.0f32;
+        for &(r, w) in weights.texel(t) {
+            let l = ray_radiance[r as usize];
+            if l.is_finite() {
+                sum += l * w;
+                wsum += w;
+            }
+        }
+        if wsum <= 0.0 {
+            continue;
+        }
+        let mean = (sum / wsum).max(Vec3::ZERO);
+        let encoded = Vec3::new(mean.x.powf(1.0 / gamma), mean.y.powf(1.0 / gamma), mean.z.powf(1.0 / gamma));
+        let dst = &mut tile[interior_index(t, interior)];
+        let blended = encoded * (1.0 - hysteresis) + *dst * hysteresis;
+        if blended.is_finite() {
+            *dst = blended;
+        }
+    }
+}
+
+/// Blends one probe's ray lengths into its distance tile as (mean, mean²).
+/// `ray_distance` is signed (negative marks a backface hit, already shortened);
+/// lengths are clamped to `max_distance_m`.
+pub fn blend_distance_tile(
+    tile: &mut [Vec2],
+    interior: u32,
+    weights: &BlendWeights,
+    ray_distance: &[f32],
+    hysteresis: f32,
+    max_distance_m: f32,
+) {
+    for t in 0..(interior * interior) as usize {
+        let mut sum = Vec2::ZERO;
+        let mut wsum = 0.0f32;
+        for &(r, w) in weights.texel(t) {
+            let d = ray_distance[r as usize].abs();
+            if d.is_nan() {
+                continue;
+            }
+            let d = d.min(max_distance_m);
+            sum += Vec2::new(d, d * d) * w;
+            wsum += w;
+        }
+        if wsum <= 0.0 {
+            continue;
+        }
+        let dst = &mut tile[interior_index(t, interior)];
+        let blended = (sum / wsum) * (1.0 - hysteresis) + *dst * hysteresis;
+        if blended.is_finite() {
+            *dst = blended;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fibonacci::spherical_fibonacci;
+
+    fn dirs(n: u32) -> Vec<Vec3> {
+        (0..n).map(|i| spherical_fibonacci(i, n)).collect()
+    }
+
+    #[test]
+    fn constant_radiance_blends_to_its_encoded_value() {
+        let d = dirs(256);
+        let w = BlendWeights::new(&d, 6, 1.0);
+        let mut tile = vec![Vec3::ZERO; 64];
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::splat(2.0); 256], 0.0, 5.0);
+        let want = 2.0f32.powf(0.2);
+        for j in 1..7 {
+            for i in 1..7 {
+                assert!((tile[j * 8 + i].x - want).abs() < 1e-5);
+            }
+        }
+        // Hysteresis 0.75 keeps three quarters of the old value.
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ZERO; 256], 0.75, 5.0);
+        assert!((tile[9].x - 0.75 * want).abs() < 1e-5);
+    }
+
+    #[test]
+    fn hemisphere_lighting_gives_cosine_weighted_means() {
+        // Radiance 1 from +z only: the +z texel sees only lit rays (mean 1), the −z
+        // texel none (mean 0), a horizon texel half its cosine mass (mean 1/2).
+        let d = dirs(4096);
+        let l: Vec<Vec3> = d.iter().map(|r| Vec3::splat(if r.z > 0.0 { 1.0 } else { 0.0 })).collect();
+        let n = 14;
+        let w = BlendWeights::new(&d, n, 1.0);
+        let mut tile = vec![Vec3::ZERO; 16 * 16];
+        blend_irradiance_tile(&mut tile, n, &w, &l, 0.0, 1.0);
+        let value_at = |dir: Vec3| {
+            let uv = crate::octahedral::oct_encode(dir);
+            crate::probe_atlas::sample_tile_bilinear(&tile, n, uv * (1.0 - 1.0 / n as f32)).x
+        };
+        assert!((value_at(Vec3::Z) - 1.0).abs() < 0.01);
+        assert!(value_at(Vec3::NEG_Z) < 0.01);
+        assert!((value_at(Vec3::X) - 0.5).abs() < 0.05, "{}", value_at(Vec3::X));
+    }
+
+    #[test]
+    fn distances_are_clamped_backfaces_use_their_magnitude_and_nan_is_dropped() {
+        let d = dirs(256);
+        let w = BlendWeights::new(&d, 4, 50.0);
+        let mut tile = vec![Vec2::ZERO; 36];
+        let mut dist = vec![3.0f32; 256];
+        dist[0] = f32::NAN;
+        dist[1] = -3.0;
+        blend_distance_tile(&mut tile, 4, &w, &dist, 0.0, 2.0);
+        for j in 1..5 {
+            for i in 1..5 {
+                assert_eq!(tile[j * 6 + i], Vec2::new(2.0, 4.0));
+            }
+        }
+        let mut irr = vec![Vec3::ONE; 36];
+        let w1 = BlendWeights::new(&d, 4, 1.0);
+        blend_irradiance_tile(&mut irr, 4, &w1, &vec![Vec3::splat(f32::NAN); 256], 0.0, 5.0);
+        assert!(irr.iter().all(|v| *v == Vec3::ONE), "all-NaN rays leave the old values");
+    }
+}
