@@ -98,6 +98,22 @@ pub struct SceneArgs {
 pub enum GiArg {
     /// Direct light only.
     None,
+    /// Dynamic diffuse global illumination: one probe volume over the scene.
+    Ddgi,
+}
+
+/// DDGI volume options shared by `render` and `bench`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct VolumeArgs {
+    /// Probe grid NX,NY,NZ fitted to the scene bounds (overrides the scene file's volume).
+    #[arg(long, value_parser = parse_uvec3)]
+    pub probes: Option<[u32; 3]>,
+    /// Rays per probe per frame.
+    #[arg(long)]
+    pub rays_per_probe: Option<u32>,
+    /// Override any volume setting by its TOML name, e.g. `--set hysteresis=0.9` (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
 }
 
 #[derive(Args, Debug)]
@@ -107,9 +123,18 @@ pub struct RenderArgs {
     /// Global illumination method.
     #[arg(long, value_enum, default_value_t = GiArg::None)]
     pub gi: GiArg,
-    /// Frames to run; a static scene's direct light accumulates over them.
+    /// Frames to run; a static scene's direct light accumulates over them, the
+    /// DDGI field updates once per frame and the final indirect light is the last frame's.
     #[arg(long, default_value_t = 1)]
     pub frames: u32,
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    /// Write the DDGI irradiance and distance atlases as images into this folder.
+    #[arg(long)]
+    pub dump_atlases: Option<PathBuf>,
+    /// Draw each DDGI probe as a small sphere shaded by its irradiance.
+    #[arg(long)]
+    pub show_probes: bool,
     /// Area-light shadow samples per pixel per frame (stratified).
     #[arg(long, default_value_t = 16)]
     pub area_samples: u32,
@@ -167,4 +192,16 @@ pub struct BenchArgs {
     /// Random seed for ray directions.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// `ddgi`: sweep rays per probe (32–256) × probe grids and time the field update.
+    #[arg(long, value_enum, default_value_t = GiArg::None)]
+    pub gi: GiArg,
+    /// DDGI sweep: frames timed per configuration (after one warm-up frame).
+    #[arg(long, default_value_t = 2)]
+    pub frames: u32,
+    /// DDGI sweep: grids to run, e.g. `--grids 16,8,16 --grids 32,16,32`.
+    #[arg(long, value_parser = parse_uvec3)]
+    pub grids: Vec<[u32; 3]>,
+    /// DDGI sweep: rays per probe to run (default 32, 64, 128, 256).
+    #[arg(long)]
+    pub rays: Vec<u32>,
 }

@@ -2,6 +2,7 @@
 //! with the context chain ("loading scene x.obj: x.obj:12: ...") and exit code 1.
 
 mod args;
+mod atlas_dump;
 mod bench;
 
 use std::path::Path;
@@ -16,7 +17,9 @@ use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 
-use args::{Cli, Command, GiArg, ReferenceArgs, RenderArgs, SceneArgs};
+use args::{Cli, Command, GiArg, ReferenceArgs, RenderArgs, SceneArgs, VolumeArgs};
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_cpu::ddgi::ddgi_volume_bytes;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -136,6 +139,13 @@ fn render(args: &RenderArgs) -> Result<()> {
     probegi_image::io::ImageFormat::from_path(&args.out)?;
     // G-buffer texel, frame and accumulation buffers.
     let (scene, camera) = prepare(&args.scene, 160)?;
+    let gi = match args.gi {
+        GiArg::None => GiMethod::None,
+        GiArg::Ddgi => GiMethod::Ddgi(Box::new(volume_settings(&scene, &args.volume)?)),
+    };
+    if gi == GiMethod::None && (args.dump_atlases.is_some() || args.show_probes) {
+        bail!("--dump-atlases and --show-probes need --gi ddgi");
+    }
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
     let settings = RenderSettings {
@@ -143,20 +153,24 @@ fn render(args: &RenderArgs) -> Result<()> {
         height: args.scene.height,
         frames: args.frames,
         seed: args.scene.seed,
-        gi: match args.gi {
-            GiArg::None => GiMethod::None,
-        },
+        gi,
         direct: DirectSettings { direct_area_samples: args.area_samples, ..Default::default() },
+        show_probes: args.show_probes,
     };
     let bar = progress(args.frames as u64, "render");
     let start = Instant::now();
-    let (image, stats) = render_frames(&scene, &bvh, &rays, &settings, |_| bar.inc(1));
+    let out = render_frames(&scene, &bvh, &rays, &settings, |_| bar.inc(1));
+    let (image, stats) = (out.image, out.stats);
     bar.finish_and_clear();
     let elapsed = start.elapsed();
     if let Some(i) = image.first_invalid_pixel() {
         bail!("internal: pixel {i} is not a finite non-negative radiance; image not written");
     }
     probegi_image::write_image(&args.out, &image)?;
+    if let (Some(dir), Some(volume)) = (&args.dump_atlases, &out.ddgi) {
+        atlas_dump::dump_atlases(dir, volume)?;
+        eprintln!("wrote atlases to {}", dir.display());
+    }
     eprintln!(
         "wrote {} ({}×{}, {} frame{}, {:.2} s, scene {})",
         args.out.display(),
@@ -176,10 +190,36 @@ fn render(args: &RenderArgs) -> Result<()> {
             "height": image.height,
             "triangles": scene.mesh.triangle_count(),
             "bvh_build_ms": bvh.build_time.as_secs_f64() * 1e3,
+            "probes": stats.probes,
+            "rays_per_frame": stats.rays_per_frame,
+            "field_update_ms": stats.field_update_ms,
+            "field_update_mrays_per_s": stats.field_update_mrays_per_s,
         });
         write_text(path, &serde_json::to_string_pretty(&json)?)?;
     }
     Ok(())
+}
+
+/// Volume settings: the papers' defaults, then the scene file's `[volume]`, then
+/// `--probes`, `--rays-per-probe` and each `--set` in order.
+pub fn volume_settings(scene: &Scene, args: &VolumeArgs) -> Result<DdgiVolumeSettings> {
+    let mut s = scene.volume.clone().unwrap_or_default();
+    if let Some(p) = args.probes {
+        s.probe_counts = glam::UVec3::from(p);
+        s.probe_origin_m = None;
+        s.probe_spacing_m = None;
+    }
+    if let Some(r) = args.rays_per_probe {
+        s.probe_rays_per_probe = r;
+    }
+    for a in &args.set {
+        s = probegi_scene::scene_file::apply_volume_override(&s, a)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("--set {a}"))?;
+    }
+    s.validate().map_err(|(field, why)| anyhow::anyhow!("volume setting {field}: {why}"))?;
+    check_memory(ddgi_volume_bytes(&s), "the DDGI volume")?;
+    Ok(s)
 }
 
 fn reference(args: &ReferenceArgs) -> Result<()> {

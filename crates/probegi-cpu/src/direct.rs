@@ -5,12 +5,11 @@
 //! methods add.
 
 use glam::{Vec2, Vec3};
-use probegi_core::rng::{Pcg32, hash_combine};
+use probegi_core::rng::Pcg32;
 use probegi_core::sampling::{Frame, sample_cosine_hemisphere};
 use probegi_scene::{RayTracer, Scene, SurfacePoint};
 use std::f32::consts::FRAC_1_PI;
 
-use crate::gbuffer::GBuffer;
 use crate::light_sampling::AreaLights;
 use crate::shading::{lambert_cos, punctual_direct, shadow_ray_along, shadow_ray_to};
 
@@ -51,14 +50,20 @@ impl<'a> DirectLighting<'a> {
     /// and rays traced.
     pub fn shade(&self, sp: &SurfacePoint, rng: &mut Pcg32) -> (Vec3, u64) {
         let scene = self.scene;
-        let albedo = scene.albedo(sp);
-        let mut l = scene.emitted(sp);
-        let (lp, mut rays) = punctual_direct(scene, self.tracer, sp, albedo);
-        l += lp;
+        let (l, rays) = self.reflected(sp, scene.albedo(sp), self.settings, rng);
+        (scene.emitted(sp) + l, rays)
+    }
+
+    /// Direct light reflected toward the viewer (no emission), with the sample counts
+    /// of `settings`: punctual lights exactly, area lights by stratified NEE, the sky
+    /// by stratified visibility (0 sky samples leaves the sky out).
+    pub fn reflected(&self, sp: &SurfacePoint, albedo: Vec3, settings: DirectSettings, rng: &mut Pcg32) -> (Vec3, u64) {
+        let scene = self.scene;
+        let (mut l, mut rays) = punctual_direct(scene, self.tracer, sp, albedo);
         let brdf = albedo * FRAC_1_PI;
 
-        if !self.area_lights.is_empty() && self.settings.direct_area_samples > 0 {
-            let k = (self.settings.direct_area_samples as f32).sqrt().ceil() as u32;
+        if !self.area_lights.is_empty() && settings.direct_area_samples > 0 {
+            let k = (settings.direct_area_samples as f32).sqrt().ceil() as u32;
             let n = k * k;
             let mut sum = Vec3::ZERO;
             for i in 0..n {
@@ -76,8 +81,8 @@ impl<'a> DirectLighting<'a> {
             l += brdf * sum / n as f32;
         }
 
-        if scene.sky_radiance != Vec3::ZERO && self.settings.direct_sky_samples > 0 {
-            let k = (self.settings.direct_sky_samples as f32).sqrt().ceil() as u32;
+        if scene.sky_radiance != Vec3::ZERO && settings.direct_sky_samples > 0 {
+            let k = (settings.direct_sky_samples as f32).sqrt().ceil() as u32;
             let n = k * k;
             let frame = Frame::from_normal(sp.facing_normal());
             let mut visible = 0u32;
@@ -95,32 +100,5 @@ impl<'a> DirectLighting<'a> {
             l += albedo * scene.sky_radiance * (visible as f32 / n as f32);
         }
         (l, rays)
-    }
-
-    /// Shades every G-buffer texel; pixels that see nothing get the sky. Returns
-    /// the frame's radiance and ray count.
-    pub fn shade_gbuffer(&self, gbuffer: &GBuffer, frame_index: u32, seed: u64, out: &mut [Vec3]) -> u64 {
-        let w = gbuffer.width as usize;
-        crate::parallel::for_each_row(
-            out,
-            w,
-            |y, row| {
-                let mut rays = 0;
-                for (x, px) in row.iter_mut().enumerate() {
-                    let pixel = (y * w + x) as u64;
-                    *px = match &gbuffer.texels[y * w + x].surface {
-                        None => self.scene.sky_radiance,
-                        Some(sp) => {
-                            let mut rng = Pcg32::new(hash_combine(&[seed, pixel, frame_index as u64, 0xd1]), pixel);
-                            let (l, n) = self.shade(sp, &mut rng);
-                            rays += n;
-                            if l.is_finite() { l } else { Vec3::ZERO }
-                        }
-                    };
-                }
-                rays
-            },
-            || {},
-        )
     }
 }

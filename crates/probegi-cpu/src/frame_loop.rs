@@ -1,22 +1,35 @@
-//! The per-frame loop of `probegi render`: passes in order, per-pass timings, ray
-//! counts, and accumulation of a static scene's direct term over frames.
+//! The per-frame loop of `probegi render`: passes in order, per-pass timings and
+//! ray counts.
+//!
+//! Per frame: the GI field update (DDGI: `ray_gen`, `trace`, `shade`, `blend`,
+//! `border`), then `gbuffer` (primary rays) and `camera` (shading each pixel).
+//! The direct term (emission + direct light) of a static scene accumulates over
+//! frames; the indirect term is the last frame's, so the image shows the field as
+//! it stands after N updates.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use probegi_core::camera::CameraRays;
+use probegi_core::ddgi_query::irradiance;
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
+use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_scene::{RayTracer, Scene};
+use std::f32::consts::FRAC_1_PI;
 
+use crate::ddgi::DdgiVolume;
 use crate::direct::{DirectLighting, DirectSettings};
-use crate::gbuffer::trace_gbuffer;
+use crate::gbuffer::{GBuffer, trace_gbuffer};
 
 /// Which global illumination runs on top of direct light.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum GiMethod {
     /// Direct light only.
     None,
+    /// Dynamic diffuse global illumination with one probe volume.
+    Ddgi(Box<DdgiVolumeSettings>),
 }
 
 #[derive(Clone, Debug)]
@@ -27,6 +40,8 @@ pub struct RenderSettings {
     pub seed: u64,
     pub gi: GiMethod,
     pub direct: DirectSettings,
+    /// Draw DDGI probes as spheres in the final image.
+    pub show_probes: bool,
 }
 
 /// Measurements of a render; serialised by the CLI's `--stats`.
@@ -36,44 +51,147 @@ pub struct RenderStats {
     /// Mean wall-clock milliseconds per frame, by pass name.
     pub pass_ms: BTreeMap<&'static str, f64>,
     pub rays_traced: u64,
+    /// DDGI only: probes, probe rays per frame, mean field-update ms (the four
+    /// update passes plus border) and probe rays per second over it.
+    pub probes: Option<usize>,
+    pub rays_per_frame: Option<u64>,
+    pub field_update_ms: Option<f64>,
+    pub field_update_mrays_per_s: Option<f64>,
 }
 
-/// Renders `settings.frames` frames and returns the final image. With `GiMethod::None`
-/// on a static scene the final image is the running mean of all frames.
+pub struct RenderOutput {
+    pub image: Image,
+    pub stats: RenderStats,
+    /// The DDGI volume after the last update (for atlas dumps).
+    pub ddgi: Option<DdgiVolume>,
+}
+
+/// Names of the passes that make up a DDGI field update.
+pub const FIELD_UPDATE_PASSES: [&str; 5] = ["ray_gen", "trace", "shade", "blend", "border"];
+
+/// Renders `settings.frames` frames and returns the final image.
 pub fn render_frames(
     scene: &Scene,
     tracer: &dyn RayTracer,
     camera: &CameraRays,
     settings: &RenderSettings,
     mut on_frame_done: impl FnMut(u32),
-) -> (Image, RenderStats) {
+) -> RenderOutput {
     let direct = DirectLighting::new(scene, tracer, settings.direct);
+    let mut volume = match &settings.gi {
+        GiMethod::None => None,
+        GiMethod::Ddgi(s) => {
+            let bounds = scene.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
+            Some(DdgiVolume::new((**s).clone(), bounds))
+        }
+    };
+    // The field carries the sky under DDGI (see `probe_shade`); direct-only renders sample it.
+    let camera_direct = match volume {
+        Some(_) => DirectSettings { direct_sky_samples: 0, ..settings.direct },
+        None => settings.direct,
+    };
     let n = settings.width as usize * settings.height as usize;
-    let mut frame = vec![Vec3::ZERO; n];
-    let mut accum = vec![glam::DVec3::ZERO; n];
+    let mut direct_sum = vec![DVec3::ZERO; n];
+    let mut frame_direct = vec![Vec3::ZERO; n];
+    let mut indirect = vec![Vec3::ZERO; n];
     let mut stats = RenderStats::default();
     let mut pass_totals: BTreeMap<&'static str, f64> = BTreeMap::new();
     let frames = settings.frames.max(1);
+    let mut last_gbuffer: Option<GBuffer> = None;
     for f in 0..frames {
+        if let Some(v) = volume.as_mut() {
+            stats.rays_traced += v.update(scene, tracer, &direct, settings.seed, f, &mut pass_totals);
+        }
+
         let t = Instant::now();
         let (gbuffer, rays) = trace_gbuffer(scene, tracer, camera, settings.width, settings.height, f, settings.seed);
         *pass_totals.entry("gbuffer").or_default() += t.elapsed().as_secs_f64() * 1e3;
         stats.rays_traced += rays;
 
         let t = Instant::now();
-        stats.rays_traced += direct.shade_gbuffer(&gbuffer, f, settings.seed, &mut frame);
-        *pass_totals.entry("direct").or_default() += t.elapsed().as_secs_f64() * 1e3;
-
-        let t = Instant::now();
-        for (a, p) in accum.iter_mut().zip(&frame) {
+        stats.rays_traced += shade_camera(
+            scene,
+            &direct,
+            camera_direct,
+            volume.as_ref(),
+            &gbuffer,
+            f,
+            settings.seed,
+            &mut frame_direct,
+            &mut indirect,
+        );
+        for (a, p) in direct_sum.iter_mut().zip(&frame_direct) {
             *a += p.as_dvec3();
         }
-        *pass_totals.entry("accumulate").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        last_gbuffer = Some(gbuffer);
         on_frame_done(f);
     }
     stats.frames = frames;
     stats.pass_ms = pass_totals.into_iter().map(|(k, v)| (k, v / frames as f64)).collect();
-    let pixels = accum.into_iter().map(|a| (a / frames as f64).as_vec3()).collect();
+    if let Some(v) = &volume {
+        let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| stats.pass_ms.get(p)).sum();
+        stats.probes = Some(v.grid.probe_count());
+        stats.rays_per_frame = Some(v.rays_per_frame());
+        stats.field_update_ms = Some(update_ms);
+        stats.field_update_mrays_per_s = Some(v.rays_per_frame() as f64 / (update_ms * 1e-3) / 1e6);
+    }
+    let mut pixels: Vec<Vec3> =
+        direct_sum.iter().zip(&indirect).map(|(d, i)| (*d / frames as f64).as_vec3() + *i).collect();
+    if let (true, Some(v), Some(g)) = (settings.show_probes, &volume, &last_gbuffer) {
+        crate::probe_vis::draw_probes(v, camera, g, &mut pixels);
+    }
     let image = Image { width: settings.width, height: settings.height, pixels };
-    (image, stats)
+    RenderOutput { image, stats, ddgi: volume }
+}
+
+/// The camera pass: per pixel, emission + direct light into `direct_out` and, with
+/// a DDGI volume, albedo/π × the queried irradiance into `indirect_out`. Pixels
+/// that see nothing get the sky. Returns rays traced.
+#[allow(clippy::too_many_arguments)]
+fn shade_camera(
+    scene: &Scene,
+    direct: &DirectLighting<'_>,
+    direct_settings: DirectSettings,
+    volume: Option<&DdgiVolume>,
+    gbuffer: &GBuffer,
+    frame: u32,
+    seed: u64,
+    direct_out: &mut [Vec3],
+    indirect_out: &mut [Vec3],
+) -> u64 {
+    use rayon::prelude::*;
+    let w = gbuffer.width as usize;
+    let field = volume.map(|v| v.view());
+    direct_out
+        .par_chunks_mut(w)
+        .zip(indirect_out.par_chunks_mut(w))
+        .enumerate()
+        .map(|(y, (drow, irow))| {
+            let mut rays = 0;
+            for (x, (d, i)) in drow.iter_mut().zip(irow.iter_mut()).enumerate() {
+                let texel = &gbuffer.texels[y * w + x];
+                let Some(sp) = &texel.surface else {
+                    *d = scene.sky_radiance;
+                    *i = Vec3::ZERO;
+                    continue;
+                };
+                let pixel = (y * w + x) as u64;
+                let mut rng = Pcg32::new(hash_combine(&[seed, pixel, frame as u64, 0xd1]), pixel);
+                let albedo = scene.albedo(sp);
+                let (l, k) = direct.reflected(sp, albedo, direct_settings, &mut rng);
+                rays += k;
+                let l = scene.emitted(sp) + l;
+                *d = if l.is_finite() { l } else { Vec3::ZERO };
+                *i = match &field {
+                    Some(f) => {
+                        let e = irradiance(f, sp.position, sp.facing_normal(), texel.view_dir_world);
+                        albedo * FRAC_1_PI * e
+                    }
+                    None => Vec3::ZERO,
+                };
+            }
+            rays
+        })
+        .sum()
 }

@@ -14,5 +14,10 @@ pub mod path_tracer;
 pub mod shading;
 
 pub use direct::{DirectLighting, DirectSettings};
-pub use frame_loop::{GiMethod, RenderSettings, RenderStats, render_frames};
+pub use frame_loop::{GiMethod, RenderOutput, RenderSettings, RenderStats, render_frames};
 pub use path_tracer::{PathTracer, PathTracerSettings};
+pub mod ddgi;
+pub mod probe_ray_gen;
+pub mod probe_shade;
+pub mod probe_trace;
+pub mod probe_vis;

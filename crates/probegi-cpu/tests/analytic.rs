@@ -26,8 +26,9 @@ fn direct(scene: &Scene, camera: &Camera, size: u32, frames: u32) -> Image {
         seed: 1,
         gi: GiMethod::None,
         direct: DirectSettings::default(),
+        show_probes: false,
     };
-    render_frames(scene, &bvh, &rays, &settings, |_| {}).0
+    render_frames(scene, &bvh, &rays, &settings, |_| {}).image
 }
 
 fn rel_err(got: f32, want: f32) -> f32 {

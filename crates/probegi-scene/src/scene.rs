@@ -23,6 +23,8 @@ pub struct Scene {
     pub sky_radiance: Vec3,
     /// The camera the file asked for, if any.
     pub camera: Option<Camera>,
+    /// The DDGI volume the file asked for, if any.
+    pub volume: Option<probegi_core::ddgi_settings::DdgiVolumeSettings>,
     /// Things the loader recovered from (missing .mtl or texture, unknown material).
     pub warnings: Vec<String>,
 }

@@ -30,6 +30,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{EulerRot, Mat4, Quat, Vec3};
 use probegi_core::camera::Camera;
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use serde::Deserialize;
 
 use crate::error::{Result, SceneError};
@@ -47,6 +48,9 @@ pub struct SceneFile {
     pub sky_radiance: Option<Vec3>,
     #[serde(default)]
     pub camera: Option<Camera>,
+    /// The DDGI volume (`probegi_core::ddgi_settings::DdgiVolumeSettings` field names).
+    #[serde(default)]
+    pub volume: Option<DdgiVolumeSettings>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -109,6 +113,13 @@ pub fn load_scene_file(path: &Path) -> Result<Scene> {
     if file.camera.is_some() {
         scene.camera = file.camera;
     }
+    if let Some(v) = file.volume {
+        v.validate().map_err(|(field, why)| SceneError::Toml {
+            path: path.to_path_buf(),
+            message: format!("volume.{field}: {why}"),
+        })?;
+        scene.volume = Some(v);
+    }
     scene.validate().map_err(|message| SceneError::Toml { path: path.to_path_buf(), message })?;
     Ok(scene)
 }
@@ -129,4 +140,49 @@ fn merge_into(scene: &mut Scene, sub: Scene) {
     if scene.camera.is_none() {
         scene.camera = sub.camera;
     }
+    if scene.volume.is_none() {
+        scene.volume = sub.volume;
+    }
+}
+
+/// Every key `--set` and a `[volume]` table accept.
+pub fn volume_setting_keys() -> Vec<String> {
+    let all =
+        DdgiVolumeSettings { probe_origin_m: Some(Vec3::ZERO), probe_spacing_m: Some(Vec3::ONE), ..Default::default() };
+    match toml::Table::try_from(&all) {
+        Ok(t) => t.keys().cloned().collect(),
+        Err(_) => Vec::new(),
+    }
+}
+
+/// Applies `--set KEY=VALUE` to volume settings. `KEY` is a `[volume]` field name,
+/// with or without its `probe_` prefix (`hysteresis` = `probe_hysteresis`);
+/// `VALUE` is a TOML value (`0.9`, `true`, `[4, 4, 4]`) or a bare word for enums
+/// (`normal`). Errors name the key and list the valid ones.
+pub fn apply_volume_override(
+    settings: &DdgiVolumeSettings,
+    assignment: &str,
+) -> std::result::Result<DdgiVolumeSettings, String> {
+    let (key, value) = assignment
+        .split_once('=')
+        .map(|(k, v)| (k.trim(), v.trim()))
+        .ok_or_else(|| format!("`{assignment}` is not KEY=VALUE"))?;
+    let keys = volume_setting_keys();
+    let canonical = if keys.iter().any(|k| k == key) {
+        key.to_string()
+    } else if keys.iter().any(|k| *k == format!("probe_{key}")) {
+        format!("probe_{key}")
+    } else {
+        return Err(format!("unknown volume setting `{key}`; valid keys: {}", keys.join(", ")));
+    };
+    let parsed: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
+        Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.to_string())),
+        Err(_) => toml::Value::String(value.to_string()),
+    };
+    let mut table = toml::Table::try_from(settings).map_err(|e| e.to_string())?;
+    table.insert(canonical.clone(), parsed);
+    let updated: DdgiVolumeSettings =
+        table.try_into().map_err(|e: toml::de::Error| format!("{canonical} = {value}: {}", e.message()))?;
+    updated.validate().map_err(|(field, why)| format!("{field}: {why}"))?;
+    Ok(updated)
 }

@@ -261,3 +261,39 @@ fn unknown_builtin_lists_the_available_ones() {
     let e = load_scene("scene.fbx").expect_err("format").to_string();
     assert!(e.contains("scene.fbx"), "{e}");
 }
+
+#[test]
+fn volume_settings_from_toml_and_set_overrides() {
+    use probegi_scene::scene_file::apply_volume_override;
+    let dir = tmp_dir("volume");
+    let path = dir.join("v.toml");
+    std::fs::write(
+        &path,
+        "[[meshes]]\npath = \"builtin:cornell-box\"\n[volume]\nprobe_counts = [4, 3, 5]\nprobe_hysteresis = 0.9\n",
+    )
+    .expect("write");
+    let s = load_scene(&path.to_string_lossy()).expect("loads");
+    let v = s.volume.expect("volume");
+    assert_eq!(v.probe_counts, glam::UVec3::new(4, 3, 5));
+    assert_eq!(v.probe_hysteresis, 0.9);
+    assert_eq!(v.probe_rays_per_probe, 256, "unset fields keep the papers' defaults");
+
+    let v2 = apply_volume_override(&v, "hysteresis=0.5").expect("alias without prefix");
+    assert_eq!(v2.probe_hysteresis, 0.5);
+    let v3 = apply_volume_override(&v2, "probe_bias_mode=normal").expect("enum as bare word");
+    assert_eq!(v3.probe_bias_mode, probegi_core::ddgi_settings::ProbeBiasMode::Normal);
+    let v4 = apply_volume_override(&v3, "probe_spacing_m=[0.5, 0.5, 0.5]").expect("optional vector");
+    assert_eq!(v4.probe_spacing_m, Some(Vec3::splat(0.5)));
+    let e = apply_volume_override(&v, "hysterisis=0.5").expect_err("typo");
+    assert!(e.contains("hysterisis") && e.contains("probe_hysteresis"), "{e}");
+    let e = apply_volume_override(&v, "hysteresis=1.5").expect_err("range");
+    assert!(e.contains("probe_hysteresis"), "{e}");
+    let e = apply_volume_override(&v, "rays_per_probe=lots").expect_err("type");
+    assert!(e.contains("probe_rays_per_probe"), "{e}");
+
+    std::fs::write(&path, "[[meshes]]\npath = \"builtin:cornell-box\"\n[volume]\nprobe_counts = [0, 3, 5]\n")
+        .expect("write");
+    let e = load_scene(&path.to_string_lossy()).expect_err("zero probes").to_string();
+    assert!(e.contains("volume.probe_counts") && e.contains("v.toml"), "{e}");
+    std::fs::remove_dir_all(dir).ok();
+}
