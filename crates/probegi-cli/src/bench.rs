@@ -16,6 +16,89 @@ use serde_json::json;
 use crate::args::BenchArgs;
 
 pub fn run(args: &BenchArgs) -> Result<serde_json::Value> {
+    match args.gi {
+        crate::args::GiArg::None => run_rays(args),
+        crate::args::GiArg::Ddgi => run_ddgi(args),
+    }
+}
+
+/// `bench --gi ddgi`: the field update over a sweep of rays per probe × probe grids
+/// (seed 000 Table 2), with the bare closest-hit rate of the same rays measured
+/// in the same run.
+fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
+    use probegi_core::ddgi_settings::DdgiVolumeSettings;
+    use probegi_cpu::ddgi::{DdgiVolume, ddgi_volume_bytes};
+    use probegi_cpu::frame_loop::FIELD_UPDATE_PASSES;
+    use probegi_cpu::probe_ray_gen::generate_probe_rays;
+    use probegi_cpu::{DirectLighting, DirectSettings};
+    use std::collections::BTreeMap;
+
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let grids = if args.grids.is_empty() { vec![[16, 8, 16], [24, 12, 24], [32, 16, 32]] } else { args.grids.clone() };
+    let ray_counts = if args.rays.is_empty() { vec![32, 64, 128, 256] } else { args.rays.clone() };
+    let scene = load_scene(&args.scene).with_context(|| format!("loading scene {}", args.scene))?;
+    let bounds = scene.bounds().context("scene has no geometry")?;
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let mut rows = Vec::new();
+    for grid in &grids {
+        for &rays in &ray_counts {
+            let settings = DdgiVolumeSettings {
+                probe_counts: glam::UVec3::from(*grid),
+                probe_rays_per_probe: rays,
+                ..Default::default()
+            };
+            settings.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
+            crate::check_memory(ddgi_volume_bytes(&settings), "the DDGI volume")?;
+            let mut volume = DdgiVolume::new(settings.clone(), bounds);
+            let mut warmup = BTreeMap::new();
+            volume.update(&scene, &bvh, &direct, args.seed, 0, &mut warmup);
+            let mut pass_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
+            for f in 1..=args.frames {
+                volume.update(&scene, &bvh, &direct, args.seed, f, &mut pass_ms);
+            }
+            for v in pass_ms.values_mut() {
+                *v /= args.frames as f64;
+            }
+            let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| pass_ms.get(p)).sum();
+            let n = volume.rays_per_frame() as f64;
+            // The same rays, bare: closest hit only, no surfel.
+            let dirs = generate_probe_rays(&settings, args.seed, args.frames).dirs;
+            let t = Instant::now();
+            let hits: usize = volume
+                .probe_positions
+                .par_iter()
+                .map(|&o| dirs.iter().filter(|&&d| bvh.closest_hit(&Ray::new(o, d)).is_some()).count())
+                .sum();
+            let bare_s = t.elapsed().as_secs_f64();
+            let get = |k: &str| pass_ms.get(k).copied().unwrap_or(0.0);
+            rows.push(json!({
+                "probes": grid,
+                "probe_count": volume.grid.probe_count(),
+                "rays_per_probe": rays,
+                "rays_per_frame": n as u64,
+                "pass_ms": pass_ms,
+                "field_update_ms": update_ms,
+                "field_update_mrays_per_s": n / (update_ms * 1e-3) / 1e6,
+                "bare_closest_hit_mrays_per_s": n / bare_s / 1e6,
+                "bare_hit_fraction": hits as f64 / n,
+                "trace_mrays_per_s": n / (get("trace") * 1e-3) / 1e6,
+                "shade_blend_border_over_trace": (get("shade") + get("blend") + get("border")) / get("trace"),
+            }));
+        }
+    }
+    Ok(json!({
+        "scene": args.scene,
+        "triangles": scene.mesh.triangle_count(),
+        "threads": rayon::current_num_threads(),
+        "frames_timed": args.frames,
+        "sweep": rows,
+    }))
+}
+
+fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     let ray_count = args.probes.iter().map(|&n| n as u64).product::<u64>() * args.rays_per_probe as u64;
     if args.rays_per_probe == 0 || args.repeat == 0 {
         bail!("--rays-per-probe and --repeat must be at least 1");

@@ -49,7 +49,7 @@ fn render_writes_png_exr_and_stats_json() {
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
     assert_eq!(json["frames"], 2);
     assert!(json["rays_traced"].as_u64().expect("rays") >= 2 * 32 * 24);
-    assert!(json["pass_ms"]["gbuffer"].as_f64().is_some() && json["pass_ms"]["direct"].as_f64().is_some());
+    assert!(json["pass_ms"]["gbuffer"].as_f64().is_some() && json["pass_ms"]["camera"].as_f64().is_some());
     let o = probegi(&["render", "--width", "32", "--height", "24", "--out", &s(&exr)]);
     assert!(o.status.success(), "{}", stderr(&o));
 
@@ -62,6 +62,65 @@ fn render_writes_png_exr_and_stats_json() {
     let v: f32 = line["mean_flip: ".len()..].trim().parse().expect("number");
     assert!((0.0..0.2).contains(&v), "{v}");
     assert!(sheet.exists());
+}
+
+#[test]
+fn ddgi_render_reports_field_stats_and_dumps_atlases() {
+    let out = tmp("ddgi.exr");
+    let stats = tmp("ddgi.json");
+    let atlases = tmp("atlases");
+    let s = |p: &PathBuf| p.to_string_lossy().into_owned();
+    let o = probegi(&[
+        "render",
+        "--gi",
+        "ddgi",
+        "--probes",
+        "3,3,3",
+        "--rays-per-probe",
+        "32",
+        "--set",
+        "hysteresis=0.5",
+        "--frames",
+        "3",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--show-probes",
+        "--out",
+        &s(&out),
+        "--stats",
+        &s(&stats),
+        "--dump-atlases",
+        &s(&atlases),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    assert_eq!(json["probes"], 27);
+    assert_eq!(json["rays_per_frame"], 27 * 32);
+    for pass in ["ray_gen", "trace", "shade", "blend", "border", "camera"] {
+        assert!(json["pass_ms"][pass].as_f64().is_some(), "pass_ms.{pass} missing");
+    }
+    assert!(json["field_update_ms"].as_f64().expect("field_update_ms") > 0.0);
+    assert!(json["field_update_mrays_per_s"].as_f64().expect("mrays") > 0.0);
+    for f in ["irradiance.exr", "irradiance.png", "distance.exr", "distance.png"] {
+        assert!(atlases.join(f).exists(), "{f} not written");
+    }
+    // 3×3×3 probes with 8×8 irradiance tiles: rows of 3 tiles.
+    let irr = probegi_image::read_image(&atlases.join("irradiance.exr")).expect("atlas");
+    assert_eq!(irr.size(), (3 * 8, 9 * 8));
+}
+
+#[test]
+fn bad_volume_settings_name_the_field() {
+    let o = tmp("never-ddgi.png").to_string_lossy().into_owned();
+    fails_with(&["render", "--gi", "ddgi", "--set", "hysterisis=0.9", "--out", &o], "probe_hysteresis");
+    fails_with(&["render", "--gi", "ddgi", "--set", "hysteresis=2", "--out", &o], "probe_hysteresis");
+    fails_with(&["render", "--gi", "ddgi", "--rays-per-probe", "0", "--out", &o], "probe_rays_per_probe");
+    fails_with(&["render", "--gi", "ddgi", "--probes", "0,4,4", "--out", &o], "at least 1");
+    fails_with(&["render", "--gi", "ddgi", "--set", "probe_spacing_m=[1,-1,1]", "--out", &o], "probe_spacing_m");
+    fails_with(&["render", "--gi", "ddgi", "--probes", "1000,1000,1000", "--out", &o], "memory");
+    fails_with(&["render", "--show-probes", "--out", &o], "--gi ddgi");
 }
 
 #[test]

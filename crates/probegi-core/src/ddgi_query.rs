@@ -20,7 +20,7 @@ use std::f32::consts::PI;
 
 use crate::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
 use crate::octahedral::oct_encode;
-use crate::probe_atlas::ProbeAtlas;
+use crate::probe_atlas::{BilinearFootprint, ProbeAtlas};
 use crate::probe_grid::ProbeGrid;
 
 /// Everything a query reads: the grid, its settings and both atlases.
@@ -64,6 +64,16 @@ pub fn backface_weight(dir_to_probe: Vec3, normal: Vec3) -> f32 {
     wrap * wrap + 0.2
 }
 
+/// `e^(γ/2)` per channel: the partial decode of seed 004 Listing 2. γ = 5 (the
+/// default) takes the exact `e²·√e` path instead of `powf`.
+fn decode_half(e: Vec3, half_gamma: f32) -> Vec3 {
+    if half_gamma == 2.5 {
+        e * e * Vec3::new(e.x.sqrt(), e.y.sqrt(), e.z.sqrt())
+    } else {
+        Vec3::new(e.x.powf(half_gamma), e.y.powf(half_gamma), e.z.powf(half_gamma))
+    }
+}
+
 /// Irradiance (W·m⁻²) arriving at `position` on a surface with unit `normal`.
 pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_dir: Vec3) -> Vec3 {
     let s = field.settings;
@@ -73,7 +83,7 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
     let base_pos = g.origin_m + g.spacing_m * base.as_vec3();
     let alpha = ((biased - base_pos) / g.spacing_m).clamp(Vec3::ZERO, Vec3::ONE);
     let max_coords = g.probe_counts.as_ivec3() - IVec3::ONE;
-    let normal_uv = oct_encode(normal);
+    let normal_texels = BilinearFootprint::new(field.irradiance.interior, oct_encode(normal));
     let half_gamma = s.probe_irradiance_gamma * 0.5;
 
     let mut sum = Vec3::ZERO;
@@ -107,12 +117,12 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
             let t = t.max(Vec3::splat(0.001));
             weight *= t.x * t.y * t.z;
         }
-        let e = field.irradiance.sample_bilinear(probe, normal_uv).max(Vec3::ZERO);
-        let decoded = Vec3::new(e.x.powf(half_gamma), e.y.powf(half_gamma), e.z.powf(half_gamma));
+        let e = normal_texels.sample(field.irradiance.tile(probe)).max(Vec3::ZERO);
+        let decoded = decode_half(e, half_gamma);
         sum += decoded * weight;
         wsum += weight;
     }
-    if !(wsum > 0.0) {
+    if wsum.is_nan() || wsum <= 0.0 {
         return Vec3::ZERO;
     }
     let m = sum / wsum;

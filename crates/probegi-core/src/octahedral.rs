@@ -13,7 +13,7 @@ fn sign_not_zero(v: Vec2) -> Vec2 {
 /// Unit direction → octahedral coordinates in `[-1, 1]²`.
 pub fn oct_encode(dir: Vec3) -> Vec2 {
     let l1 = dir.x.abs() + dir.y.abs() + dir.z.abs();
-    if !(l1 > 0.0) {
+    if l1.is_nan() || l1 <= 0.0 {
         return Vec2::ZERO;
     }
     let uv = Vec2::new(dir.x, dir.y) / l1;

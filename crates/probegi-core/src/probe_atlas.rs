@@ -76,20 +76,46 @@ impl<T: Texel> ProbeAtlas<T> {
     }
 }
 
+/// The four texels and weights of a bilinear lookup at octahedral coordinates `uv`
+/// in a tile with `interior` texels per side. The same footprint serves every
+/// probe's tile (the query reads 8 probes in one normal direction).
+#[derive(Clone, Copy, Debug)]
+pub struct BilinearFootprint {
+    /// Tile-local indices of texels (x0,y0), (x0+1,y0), (x0,y0+1), (x0+1,y0+1).
+    pub indices: [usize; 4],
+    pub weights: [f32; 4],
+}
+
+impl BilinearFootprint {
+    pub fn new(interior: u32, uv: Vec2) -> Self {
+        let size = interior + 2;
+        let n = interior as f32;
+        // Continuous tile coordinates: interior texel i covers [i + 1, i + 2); centres at i + 1.5.
+        let c = (uv.clamp(Vec2::splat(-1.0), Vec2::ONE) * 0.5 + Vec2::splat(0.5)) * n + Vec2::splat(0.5);
+        // c ≥ 0.5, so truncation is floor.
+        let x0 = (c.x as u32).min(size - 2);
+        let y0 = (c.y as u32).min(size - 2);
+        let fx = (c.x - x0 as f32).clamp(0.0, 1.0);
+        let fy = (c.y - y0 as f32).clamp(0.0, 1.0);
+        let s = size as usize;
+        let i00 = y0 as usize * s + x0 as usize;
+        Self {
+            indices: [i00, i00 + 1, i00 + s, i00 + s + 1],
+            weights: [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy],
+        }
+    }
+
+    pub fn sample<T: Texel>(&self, tile: &[T]) -> T {
+        tile[self.indices[0]] * self.weights[0]
+            + tile[self.indices[1]] * self.weights[1]
+            + tile[self.indices[2]] * self.weights[2]
+            + tile[self.indices[3]] * self.weights[3]
+    }
+}
+
 /// Bilinear lookup in one tile (`interior + 2` texels per side) at `uv ∈ [-1,1]²`.
 pub fn sample_tile_bilinear<T: Texel>(tile: &[T], interior: u32, uv: Vec2) -> T {
-    let size = interior + 2;
-    let n = interior as f32;
-    // Continuous tile coordinates: interior texel i covers [i + 1, i + 2).
-    let c = (uv.clamp(Vec2::splat(-1.0), Vec2::ONE) * 0.5 + Vec2::splat(0.5)) * n + Vec2::splat(0.5);
-    let x0 = (c.x.floor() as u32).min(size - 2);
-    let y0 = (c.y.floor() as u32).min(size - 2);
-    let f = Vec2::new(c.x - x0 as f32, c.y - y0 as f32).clamp(Vec2::ZERO, Vec2::ONE);
-    let s = size as usize;
-    let at = |x: u32, y: u32| tile[y as usize * s + x as usize];
-    let top = at(x0, y0) * (1.0 - f.x) + at(x0 + 1, y0) * f.x;
-    let bottom = at(x0, y0 + 1) * (1.0 - f.x) + at(x0 + 1, y0 + 1) * f.x;
-    top * (1.0 - f.y) + bottom * f.y
+    BilinearFootprint::new(interior, uv).sample(tile)
 }
 
 #[cfg(test)]

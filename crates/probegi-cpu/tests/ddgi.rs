@@ -1,0 +1,137 @@
+//! DDGI against known answers and the path-traced reference (foundation issue's
+//! stored converged image). Small images and probe counts keep these fast; the
+//! convergence maths is the same at any size.
+
+use std::path::PathBuf;
+
+use glam::{UVec3, Vec3};
+use probegi_core::camera::CameraRays;
+use probegi_core::ddgi_query::irradiance;
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::image::Image;
+use probegi_cpu::ddgi::DdgiVolume;
+use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
+use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_image::{LoadedImage, flip_srgb8, read_image};
+use probegi_scene::builtin::{cornell_box, furnace_box};
+use probegi_scene::{BvhSettings, BvhTracer, Scene};
+
+fn render(scene: &Scene, size: u32, frames: u32, gi: GiMethod) -> RenderOutput {
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let camera = CameraRays::new(&scene.camera.expect("camera"), size, size);
+    let settings = RenderSettings {
+        width: size,
+        height: size,
+        frames,
+        seed: 11,
+        gi,
+        direct: DirectSettings::default(),
+        show_probes: false,
+    };
+    render_frames(scene, &bvh, &camera, &settings, |_| {})
+}
+
+fn ddgi(settings: DdgiVolumeSettings) -> GiMethod {
+    GiMethod::Ddgi(Box::new(settings))
+}
+
+fn flip(a: &Image, b: &Image) -> f32 {
+    let (a8, b8) = (LoadedImage::Hdr(a.clone()).to_srgb8(), LoadedImage::Hdr(b.clone()).to_srgb8());
+    flip_srgb8(a.width, a.height, &a8, &b8).mean_flip
+}
+
+#[test]
+fn furnace_box_converges_to_le_over_one_minus_rho() {
+    // Every bounce must accumulate: L = 1 / (1 − 0.5) = 2 everywhere.
+    let scene = furnace_box(0.5, 1.0);
+    let settings = DdgiVolumeSettings {
+        probe_counts: UVec3::splat(3),
+        probe_rays_per_probe: 128,
+        probe_hysteresis: 0.8,
+        ..Default::default()
+    };
+    let out = render(&scene, 16, 80, ddgi(settings));
+    let mean = out.image.mean();
+    eprintln!("furnace DDGI mean {mean}");
+    assert!((mean.x - 2.0).abs() < 0.04, "furnace DDGI mean {mean}, want 2.0 within 2 %");
+    let v = out.ddgi.expect("volume");
+    v.validate();
+    assert!(out.image.first_invalid_pixel().is_none());
+}
+
+fn expected_cornell_64() -> Image {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/expected/cornell-box-64.exr");
+    match read_image(&p).expect("expected image") {
+        LoadedImage::Hdr(img) => img,
+        LoadedImage::Srgb8 { .. } => panic!("expected an EXR"),
+    }
+}
+
+#[test]
+fn cornell_box_ddgi_is_close_to_the_reference_and_far_closer_than_direct_only() {
+    let scene = cornell_box();
+    let reference = expected_cornell_64();
+    let settings = DdgiVolumeSettings { probe_rays_per_probe: 128, probe_hysteresis: 0.9, ..Default::default() };
+    let with_gi = render(&scene, 64, 100, ddgi(settings)).image;
+    let direct = render(&scene, 64, 100, GiMethod::None).image;
+    let (f_gi, f_direct) = (flip(&reference, &with_gi), flip(&reference, &direct));
+    eprintln!("Cornell 64×64 FLIP: DDGI {f_gi:.4}, direct only {f_direct:.4}");
+    assert!(f_gi < 0.09, "DDGI FLIP {f_gi}");
+    assert!(f_gi < 0.5 * f_direct, "DDGI {f_gi} should be far closer than direct-only {f_direct}");
+    let (m, r) = (with_gi.mean(), reference.mean());
+    assert!((m.x - r.x).abs() / r.x < 0.03, "mean radiance {m} vs reference {r}");
+}
+
+#[test]
+fn colour_bleeds_from_the_red_wall_onto_the_short_box() {
+    // The short box's left face looks at the red wall: its indirect light is red.
+    let scene = cornell_box();
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let settings = DdgiVolumeSettings { probe_rays_per_probe: 128, probe_hysteresis: 0.8, ..Default::default() };
+    let mut v = DdgiVolume::new(settings, scene.bounds().expect("bounds"));
+    let mut passes = Default::default();
+    for f in 0..40 {
+        v.update(&scene, &bvh, &direct, 1, f, &mut passes);
+    }
+    let face_centre = Vec3::new(0.04, 0.3, 0.285);
+    let normal = Vec3::new(-0.342, 0.0, -0.108).normalize();
+    let e = irradiance(&v.view(), face_centre + normal * 1e-3, normal, normal);
+    // The light is yellowish (R/G = 17/12); white walls keep that ratio, the red wall raises it.
+    let light_ratio = 17.0 / 12.0;
+    assert!(e.x / e.y > 1.5 * light_ratio, "irradiance {e}: R/G {} not red enough", e.x / e.y);
+    // The face toward the green wall (the back-right face) is greener instead.
+    let right = Vec3::new(0.342, 0.0, 0.108).normalize();
+    let e_right = irradiance(&v.view(), Vec3::new(0.615, 0.3, 0.46) + right * 1e-3, right, right);
+    assert!(e_right.y / e_right.x > e.y / e.x * 2.0, "{e_right} vs {e}");
+}
+
+#[test]
+fn converged_field_is_stable_from_frame_to_frame() {
+    let scene = cornell_box();
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let settings = DdgiVolumeSettings { probe_rays_per_probe: 128, ..Default::default() };
+    let mut v = DdgiVolume::new(settings, scene.bounds().expect("bounds"));
+    let mut passes = Default::default();
+    let probe_points: Vec<(Vec3, Vec3)> = (0..64)
+        .map(|i| {
+            let x = -0.9 + 1.8 * ((i % 8) as f32 + 0.5) / 8.0;
+            let z = -0.9 + 1.8 * ((i / 8) as f32 + 0.5) / 8.0;
+            (Vec3::new(x, 0.001, z), Vec3::Y)
+        })
+        .collect();
+    let sample = |v: &DdgiVolume| -> Vec<Vec3> {
+        probe_points.iter().map(|&(p, n)| irradiance(&v.view(), p, n, Vec3::Y)).collect()
+    };
+    for f in 0..150 {
+        v.update(&scene, &bvh, &direct, 2, f, &mut passes);
+    }
+    let before = sample(&v);
+    v.update(&scene, &bvh, &direct, 2, 150, &mut passes);
+    let after = sample(&v);
+    let mean: f32 = before.iter().map(|e| e.length()).sum::<f32>() / before.len() as f32;
+    let change: f32 = before.iter().zip(&after).map(|(a, b)| (*a - *b).length()).sum::<f32>() / before.len() as f32;
+    eprintln!("converged per-frame change {:.4} %", 100.0 * change / mean);
+    assert!(change / mean < 0.01, "floor irradiance changes by {:.3} % per frame", 100.0 * change / mean);
+}
