@@ -1,0 +1,132 @@
+//! Seed 000 Fig. 7: a closed room lit only through its door. Turning on the
+//! leak-reduction weights one by one (none → backface → Chebyshev → bias) must
+//! bring the interior closer to the path-traced reference.
+
+use glam::{UVec3, Vec3};
+use probegi_core::camera::{Camera, CameraRays};
+use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
+use probegi_core::image::Image;
+use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
+use probegi_image::{LoadedImage, flip_srgb8};
+use probegi_scene::builtin::add_polygon;
+use probegi_scene::{BvhSettings, BvhTracer, LightKind, Material, PunctualLight, Scene};
+
+/// An axis-aligned box with outward-facing faces.
+fn add_box(scene: &mut Scene, lo: Vec3, hi: Vec3, material: u32) {
+    let c = |x: bool, y: bool, z: bool| {
+        Vec3::new(if x { hi.x } else { lo.x }, if y { hi.y } else { lo.y }, if z { hi.z } else { lo.z })
+    };
+    let faces = [
+        [c(false, false, false), c(true, false, false), c(true, false, true), c(false, false, true)], // -y
+        [c(false, true, false), c(false, true, true), c(true, true, true), c(true, true, false)],     // +y
+        [c(false, false, false), c(false, true, false), c(true, true, false), c(true, false, false)], // -z
+        [c(false, false, true), c(true, false, true), c(true, true, true), c(false, true, true)],     // +z
+        [c(false, false, false), c(false, false, true), c(false, true, true), c(false, true, false)], // -x
+        [c(true, false, false), c(true, true, false), c(true, true, true), c(true, false, true)],     // +x
+    ];
+    for f in &faces {
+        add_polygon(&mut scene.mesh, f, material);
+    }
+}
+
+/// Room interior [0,4] × [0,3] × [0,4] with 0.2 m walls, a 1.2 m × 2.2 m door in
+/// the +z wall, open ground outside and a low sun shining in through the door.
+fn door_room() -> Scene {
+    let mut s = Scene { materials: vec![Material::diffuse("plaster", Vec3::splat(0.7))], ..Default::default() };
+    let t = 0.2;
+    add_polygon(
+        &mut s.mesh,
+        &[
+            Vec3::new(-8.0, 0.0, -4.0),
+            Vec3::new(-8.0, 0.0, 14.0),
+            Vec3::new(12.0, 0.0, 14.0),
+            Vec3::new(12.0, 0.0, -4.0),
+        ],
+        0,
+    );
+    add_box(&mut s, Vec3::new(-t, 0.0, -t), Vec3::new(0.0, 3.0, 4.0 + t), 0); // -x wall
+    add_box(&mut s, Vec3::new(4.0, 0.0, -t), Vec3::new(4.0 + t, 3.0, 4.0 + t), 0); // +x wall
+    add_box(&mut s, Vec3::new(0.0, 0.0, -t), Vec3::new(4.0, 3.0, 0.0), 0); // back wall
+    add_box(&mut s, Vec3::new(-t, 3.0, -t), Vec3::new(4.0 + t, 3.0 + t, 4.0 + t), 0); // roof
+    // Front wall with the door from x = 1.4 to 2.6, up to 2.2 m.
+    add_box(&mut s, Vec3::new(0.0, 0.0, 4.0), Vec3::new(1.4, 3.0, 4.0 + t), 0);
+    add_box(&mut s, Vec3::new(2.6, 0.0, 4.0), Vec3::new(4.0, 3.0, 4.0 + t), 0);
+    add_box(&mut s, Vec3::new(1.4, 2.2, 4.0), Vec3::new(2.6, 3.0, 4.0 + t), 0);
+    s.lights.push(PunctualLight {
+        kind: LightKind::Directional,
+        direction: Vec3::new(0.15, -0.5, -1.0).normalize(),
+        ..PunctualLight::point(Vec3::ZERO, Vec3::ONE, 6.0)
+    });
+    s.camera = Some(Camera {
+        position: Vec3::new(3.6, 1.6, 3.6),
+        target: Vec3::new(0.6, 0.9, 0.4),
+        up: Vec3::Y,
+        fov_y_deg: 70.0,
+    });
+    s
+}
+
+fn flip(a: &Image, b: &Image) -> f32 {
+    let (a8, b8) = (LoadedImage::Hdr(a.clone()).to_srgb8(), LoadedImage::Hdr(b.clone()).to_srgb8());
+    flip_srgb8(a.width, a.height, &a8, &b8).mean_flip
+}
+
+#[test]
+fn leak_weights_bring_the_interior_monotonically_closer_to_the_reference() {
+    let scene = door_room();
+    assert!(scene.validate().is_ok());
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let size = 48;
+    let camera = CameraRays::new(&scene.camera.expect("camera"), size, size);
+    let reference = PathTracer::new(&scene, &bvh, PathTracerSettings { pt_spp: 256, seed: 5, ..Default::default() })
+        .render(&camera, size, size, &|| {})
+        .0;
+
+    // Probes 0.5 m inside and 0.4 m outside each wall, so outside probes can leak in.
+    let base = DdgiVolumeSettings {
+        probe_counts: UVec3::new(6, 3, 6),
+        probe_origin_m: Some(Vec3::new(-0.5, 0.5, -0.5)),
+        probe_spacing_m: Some(Vec3::new(1.0, 1.0, 1.0)),
+        probe_rays_per_probe: 128,
+        probe_hysteresis: 0.8,
+        probe_backface_weight: false,
+        probe_chebyshev_weight: false,
+        probe_bias_mode: ProbeBiasMode::None,
+        ..Default::default()
+    };
+    let steps = [
+        ("none", base.clone()),
+        ("backface", DdgiVolumeSettings { probe_backface_weight: true, ..base.clone() }),
+        ("chebyshev", DdgiVolumeSettings { probe_backface_weight: true, probe_chebyshev_weight: true, ..base.clone() }),
+        (
+            "bias",
+            DdgiVolumeSettings {
+                probe_backface_weight: true,
+                probe_chebyshev_weight: true,
+                probe_bias_mode: ProbeBiasMode::SelfShadow,
+                ..base.clone()
+            },
+        ),
+    ];
+    let mut flips = Vec::new();
+    for (name, settings) in steps {
+        let rs = RenderSettings {
+            width: size,
+            height: size,
+            frames: 60,
+            seed: 3,
+            gi: GiMethod::Ddgi(Box::new(settings)),
+            direct: DirectSettings::default(),
+            show_probes: false,
+        };
+        let img = render_frames(&scene, &bvh, &camera, &rs, |_| {}).image;
+        let f = flip(&reference, &img);
+        eprintln!("door room, weights up to {name}: FLIP {f:.4}, mean {} (reference {})", img.mean(), reference.mean());
+        flips.push(f);
+    }
+    for w in flips.windows(2) {
+        assert!(w[1] <= w[0] + 0.002, "FLIP must not grow as weights are added: {flips:?}");
+    }
+    assert!(flips[3] < 0.8 * flips[0], "all weights together must clearly reduce leaks: {flips:?}");
+}
