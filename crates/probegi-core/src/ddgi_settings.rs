@@ -59,7 +59,8 @@ pub struct DdgiVolumeSettings {
     pub probe_crush_weight: bool,
     /// Trilinear weight between the 8 cage probes.
     pub probe_trilinear_weight: bool,
-    /// Area-light next-event samples per probe-ray hit in the shade pass.
+    /// Area-light next-event samples per probe-ray hit in the shade pass (stratified,
+    /// rounded up to a square count).
     pub probe_area_light_samples: u32,
 }
 

@@ -55,12 +55,6 @@ impl<T: Texel> ProbeAtlas<T> {
         &mut self.texels[probe * n..(probe + 1) * n]
     }
 
-    /// Tiles as disjoint mutable chunks (for per-probe parallel passes).
-    pub fn tiles_mut(&mut self) -> std::slice::ChunksExactMut<'_, T> {
-        let n = self.tile_len();
-        self.texels.chunks_exact_mut(n)
-    }
-
     /// Bilinear lookup in probe `probe`'s map at octahedral coordinates `uv ∈ [-1,1]²`.
     /// Relies on the guard border being current.
     pub fn sample_bilinear(&self, probe: usize, uv: Vec2) -> T {
