@@ -12,7 +12,7 @@ use glam::Vec3;
     about = "Probe-based dynamic diffuse global illumination, with a path-traced reference and FLIP comparison.",
     long_about = None,
     after_help = format!(
-        "Without a subcommand, renders the built-in Cornell box to out/cornell-box.png.\n\
+        "Without a subcommand, renders the built-in Cornell box with DDGI (64 frames) to out/cornell-box.png.\n\
          PNG output is tone-mapped with {}; EXR output is linear radiance.",
         probegi_core::color::TONEMAP_NAME
     )

@@ -57,14 +57,14 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 impl RenderArgs {
-    /// The arguments of a bare `probegi` run: `render` of the built-in Cornell box.
+    /// The arguments of a bare `probegi` run: the main job, a DDGI render of the
+    /// built-in Cornell box converged over 64 frames.
     fn try_parse_default() -> Result<Self> {
-        let mut a = match Cli::try_parse_from(["probegi", "render", "--out", "out/cornell-box.png"])?.command {
-            Some(Command::Render(a)) => a,
+        let argv = ["probegi", "render", "--gi", "ddgi", "--frames", "64", "--out", "out/cornell-box.png"];
+        match Cli::try_parse_from(argv)?.command {
+            Some(Command::Render(a)) => Ok(a),
             _ => bail!("internal: default render arguments did not parse"),
-        };
-        a.frames = 16;
-        Ok(a)
+        }
     }
 }
 
