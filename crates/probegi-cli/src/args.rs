@@ -204,4 +204,8 @@ pub struct BenchArgs {
     /// DDGI sweep: rays per probe to run (default 32, 64, 128, 256).
     #[arg(long)]
     pub rays: Vec<u32>,
+    /// DDGI sweep: override a volume setting for every configuration (repeatable),
+    /// e.g. `--set probe_states=all-active`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
 }

@@ -45,16 +45,22 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     let mut rows = Vec::new();
     for grid in &grids {
         for &rays in &ray_counts {
-            let settings = DdgiVolumeSettings {
+            let mut settings = DdgiVolumeSettings {
                 probe_counts: glam::UVec3::from(*grid),
                 probe_rays_per_probe: rays,
                 ..Default::default()
             };
+            for a in &args.set {
+                settings = probegi_scene::scene_file::apply_volume_override(&settings, a)
+                    .map_err(anyhow::Error::msg)
+                    .with_context(|| format!("--set {a}"))?;
+            }
             settings.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
             crate::check_memory(ddgi_volume_bytes(&settings), "the DDGI volume")?;
             let mut volume = DdgiVolume::new(settings.clone(), bounds);
             let mut warmup = BTreeMap::new();
             volume.update(&scene, &bvh, &direct, args.seed, 0, &mut warmup);
+            let init_ms = warmup.get("probe_init").copied().unwrap_or(0.0);
             let mut pass_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
             for f in 1..=args.frames {
                 volume.update(&scene, &bvh, &direct, args.seed, f, &mut pass_ms);
@@ -77,6 +83,9 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
             rows.push(json!({
                 "probes": grid,
                 "probe_count": volume.grid.probe_count(),
+                "probe_states": volume.state_counts(),
+                "active_probes": volume.active_probe_count(),
+                "probe_init_ms": init_ms,
                 "rays_per_probe": rays,
                 "rays_per_frame": n as u64,
                 "pass_ms": pass_ms,

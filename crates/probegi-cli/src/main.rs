@@ -194,6 +194,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             "rays_per_frame": stats.rays_per_frame,
             "field_update_ms": stats.field_update_ms,
             "field_update_mrays_per_s": stats.field_update_mrays_per_s,
+            "probe_states": stats.probe_states,
         });
         write_text(path, &serde_json::to_string_pretty(&json)?)?;
     }

@@ -23,13 +23,18 @@ use crate::octahedral::oct_encode;
 use crate::probe_atlas::{BilinearFootprint, ProbeAtlas};
 use crate::probe_grid::ProbeGrid;
 
-/// Everything a query reads: the grid, its settings and both atlases.
+/// Everything a query reads: the grid, its settings, both atlases, and per probe
+/// its relocation offset and whether queries may use it.
 #[derive(Clone, Copy)]
 pub struct DdgiFieldView<'a> {
     pub grid: &'a ProbeGrid,
     pub settings: &'a DdgiVolumeSettings,
     pub irradiance: &'a ProbeAtlas<Vec3>,
     pub distance: &'a ProbeAtlas<Vec2>,
+    /// Offset of each probe from its grid point (seed 004 §5); empty = none.
+    pub probe_offsets_m: &'a [Vec3],
+    /// Probes queries may read (Off / Sleeping / Dead are excluded); empty = all.
+    pub probe_usable: &'a [bool],
 }
 
 /// The world-space offset seed 004 eq. 2 (or seed 003 eq. 4.11) adds to the query
@@ -92,7 +97,11 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
         let offset = IVec3::new(i & 1, (i >> 1) & 1, (i >> 2) & 1);
         let coords = (base + offset).min(max_coords);
         let probe = g.probe_index(coords.as_uvec3());
-        let probe_pos = g.probe_position(UVec3::new(coords.x as u32, coords.y as u32, coords.z as u32));
+        if field.probe_usable.get(probe).is_some_and(|u| !u) {
+            continue;
+        }
+        let probe_pos = g.probe_position(UVec3::new(coords.x as u32, coords.y as u32, coords.z as u32))
+            + field.probe_offsets_m.get(probe).copied().unwrap_or(Vec3::ZERO);
 
         let mut weight = 1.0f32;
         if s.probe_backface_weight {
@@ -152,7 +161,14 @@ mod tests {
     #[test]
     fn uniform_field_returns_pi_times_mean_radiance_everywhere() {
         let (grid, settings, irr, dist) = uniform_field(2.0, 10.0, UVec3::splat(3));
-        let f = DdgiFieldView { grid: &grid, settings: &settings, irradiance: &irr, distance: &dist };
+        let f = DdgiFieldView {
+            grid: &grid,
+            settings: &settings,
+            irradiance: &irr,
+            distance: &dist,
+            probe_offsets_m: &[],
+            probe_usable: &[],
+        };
         for p in [Vec3::new(0.3, 0.7, 1.2), Vec3::new(1.9, 0.1, 0.5), Vec3::new(-4.0, 9.0, 0.0)] {
             for n in [Vec3::X, Vec3::NEG_Y, Vec3::new(0.6, 0.0, 0.8)] {
                 let e = irradiance(&f, p, n, n);
@@ -187,15 +203,34 @@ mod tests {
         irr.tile_mut(0).fill(Vec3::ZERO); // lower probe: dark
         dist.tile_mut(1).fill(Vec2::new(5.0, 25.0));
         dist.tile_mut(0).fill(Vec2::new(0.5, 0.25));
-        let f = DdgiFieldView { grid: &grid, settings: &settings, irradiance: &irr, distance: &dist };
+        let f = DdgiFieldView {
+            grid: &grid,
+            settings: &settings,
+            irradiance: &irr,
+            distance: &dist,
+            probe_offsets_m: &[],
+            probe_usable: &[],
+        };
         let e = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
         // The lit probe dominates: nearly π·1 rather than the unweighted ~π/2.
         assert!(e.x > 0.95 * PI, "{e}");
         let mut off = settings.clone();
         off.probe_backface_weight = false;
         off.probe_chebyshev_weight = false;
-        let f = DdgiFieldView { grid: &grid, settings: &off, irradiance: &irr, distance: &dist };
+        let f = DdgiFieldView {
+            grid: &grid,
+            settings: &off,
+            irradiance: &irr,
+            distance: &dist,
+            probe_offsets_m: &[],
+            probe_usable: &[],
+        };
         let leaky = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
         assert!(leaky.x < 0.8 * PI, "without the weights the dark probe leaks in: {leaky}");
+        // Excluding the dark probe from queries (an Off probe) removes it entirely.
+        let usable = [false, true];
+        let f = DdgiFieldView { probe_usable: &usable, ..f };
+        let culled = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
+        assert!((culled.x - PI).abs() < 1e-3, "{culled}");
     }
 }

@@ -5,6 +5,8 @@
 use glam::{UVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
+pub use crate::probe_classification::ProbeStatesMode;
+
 /// How the query offsets the visibility test point away from the surface.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -59,6 +61,25 @@ pub struct DdgiVolumeSettings {
     pub probe_crush_weight: bool,
     /// Trilinear weight between the 8 cage probes.
     pub probe_trilinear_weight: bool,
+    /// Fast-convergence heuristics (seed 004 §4.3, Listing 3): per-texel thresholds
+    /// and per-probe scene-event hysteresis reductions.
+    pub probe_fast_convergence: bool,
+    /// Per-texel change (encoded irradiance, max component) above which hysteresis drops by 0.15.
+    pub probe_significant_change_threshold: f32,
+    /// Per-texel change above which hysteresis drops to 0 (a new distribution).
+    pub probe_new_distribution_threshold: f32,
+    /// Probe position optimizer at initialisation (seed 004 §5, Listing 4).
+    pub probe_relocation: bool,
+    /// Optimizer iterations (seed 004: five).
+    pub probe_relocation_iterations: u32,
+    /// Largest offset per axis as a fraction of the spacing (RTXGI 0.45; < 0.5 keeps grid indexing).
+    pub probe_relocation_offset_limit_rel: f32,
+    /// A front face closer than this × the minimum spacing pushes the probe away.
+    pub probe_relocation_min_frontface_rel: f32,
+    /// Probe states: `all-active`, `jcgt` (seed 004 §6) or `usage` (seed 003 §6.1).
+    pub probe_states: ProbeStatesMode,
+    /// Usage scheme: SLEEPING probes update every this many frames (seed 003: 10).
+    pub probe_sleeping_update_interval: u32,
     /// Area-light next-event samples per probe-ray hit in the shade pass (stratified,
     /// rounded up to a square count).
     pub probe_area_light_samples: u32,
@@ -86,6 +107,15 @@ impl Default for DdgiVolumeSettings {
             probe_chebyshev_weight: true,
             probe_crush_weight: true,
             probe_trilinear_weight: true,
+            probe_fast_convergence: true,
+            probe_significant_change_threshold: 0.25,
+            probe_new_distribution_threshold: 0.8,
+            probe_relocation: true,
+            probe_relocation_iterations: 5,
+            probe_relocation_offset_limit_rel: 0.45,
+            probe_relocation_min_frontface_rel: 0.5,
+            probe_states: ProbeStatesMode::Jcgt,
+            probe_sleeping_update_interval: 10,
             probe_area_light_samples: 1,
         }
     }
@@ -139,6 +169,24 @@ impl DdgiVolumeSettings {
         };
         non_negative("probe_self_shadow_bias", self.probe_self_shadow_bias)?;
         non_negative("probe_normal_bias_m", self.probe_normal_bias_m)?;
+        if !(0.0..0.5).contains(&self.probe_relocation_offset_limit_rel) {
+            return Err((
+                "probe_relocation_offset_limit_rel",
+                format!("{} must be in [0, 0.5) so grid indexing holds", self.probe_relocation_offset_limit_rel),
+            ));
+        }
+        non_negative("probe_relocation_min_frontface_rel", self.probe_relocation_min_frontface_rel)?;
+        non_negative("probe_significant_change_threshold", self.probe_significant_change_threshold)?;
+        non_negative("probe_new_distribution_threshold", self.probe_new_distribution_threshold)?;
+        if self.probe_relocation_iterations > 100 {
+            return Err((
+                "probe_relocation_iterations",
+                format!("{} must be at most 100", self.probe_relocation_iterations),
+            ));
+        }
+        if self.probe_sleeping_update_interval == 0 {
+            return Err(("probe_sleeping_update_interval", "must be at least 1".into()));
+        }
         if self.probe_area_light_samples > 1024 {
             return Err((
                 "probe_area_light_samples",

@@ -70,8 +70,30 @@ fn interior_index(t: usize, interior: u32) -> usize {
     ((j + 1) * (interior + 2) + i + 1) as usize
 }
 
+/// Seed 004 §4.3 Listing 3's per-texel thresholds on the change of the encoded
+/// irradiance (max component): above `significant` the hysteresis drops by 0.15,
+/// above `new_distribution` to 0. Irradiance only; visibility is too unstable.
+#[derive(Clone, Copy, Debug)]
+pub struct TexelThresholds {
+    pub significant: f32,
+    pub new_distribution: f32,
+}
+
+/// Listing 3: the texel's hysteresis after its change is known.
+pub fn adjusted_hysteresis(hysteresis: f32, change: f32, thresholds: &TexelThresholds) -> f32 {
+    let change = change.abs();
+    if change > thresholds.new_distribution {
+        0.0
+    } else if change > thresholds.significant {
+        (hysteresis - 0.15).max(0.0)
+    } else {
+        hysteresis
+    }
+}
+
 /// Blends one probe's ray radiances into its irradiance tile (encoded with `gamma`).
-/// `hysteresis` is the weight of the old value (0 replaces it).
+/// `hysteresis` is the weight of the old value (0 replaces it); with `thresholds`
+/// each texel lowers it by Listing 3.
 pub fn blend_irradiance_tile(
     tile: &mut [Vec3],
     interior: u32,
@@ -79,6 +101,7 @@ pub fn blend_irradiance_tile(
     ray_radiance: &[Vec3],
     hysteresis: f32,
     gamma: f32,
+    thresholds: Option<&TexelThresholds>,
 ) {
     for t in 0..(interior * interior) as usize {
         let mut sum = Vec3::ZERO;
@@ -96,7 +119,11 @@ pub fn blend_irradiance_tile(
         let mean = (sum / wsum).max(Vec3::ZERO);
         let encoded = Vec3::new(mean.x.powf(1.0 / gamma), mean.y.powf(1.0 / gamma), mean.z.powf(1.0 / gamma));
         let dst = &mut tile[interior_index(t, interior)];
-        let blended = encoded * (1.0 - hysteresis) + *dst * hysteresis;
+        let h = match thresholds {
+            Some(th) => adjusted_hysteresis(hysteresis, (encoded - *dst).max_element(), th),
+            None => hysteresis,
+        };
+        let blended = encoded * (1.0 - h) + *dst * h;
         if blended.is_finite() {
             *dst = blended;
         }
@@ -151,7 +178,7 @@ mod tests {
         let d = dirs(256);
         let w = BlendWeights::new(&d, 6, 1.0);
         let mut tile = vec![Vec3::ZERO; 64];
-        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::splat(2.0); 256], 0.0, 5.0);
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::splat(2.0); 256], 0.0, 5.0, None);
         let want = 2.0f32.powf(0.2);
         for j in 1..7 {
             for i in 1..7 {
@@ -159,7 +186,7 @@ mod tests {
             }
         }
         // Hysteresis 0.75 keeps three quarters of the old value.
-        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ZERO; 256], 0.75, 5.0);
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ZERO; 256], 0.75, 5.0, None);
         assert!((tile[9].x - 0.75 * want).abs() < 1e-5);
     }
 
@@ -172,7 +199,7 @@ mod tests {
         let n = 14;
         let w = BlendWeights::new(&d, n, 1.0);
         let mut tile = vec![Vec3::ZERO; 16 * 16];
-        blend_irradiance_tile(&mut tile, n, &w, &l, 0.0, 1.0);
+        blend_irradiance_tile(&mut tile, n, &w, &l, 0.0, 1.0, None);
         let value_at = |dir: Vec3| {
             let uv = crate::octahedral::oct_encode(dir);
             crate::probe_atlas::sample_tile_bilinear(&tile, n, uv * (1.0 - 1.0 / n as f32)).x
@@ -180,6 +207,20 @@ mod tests {
         assert!((value_at(Vec3::Z) - 1.0).abs() < 0.01);
         assert!(value_at(Vec3::NEG_Z) < 0.01);
         assert!((value_at(Vec3::X) - 0.5).abs() < 0.05, "{}", value_at(Vec3::X));
+    }
+
+    #[test]
+    fn listing_3_thresholds_lower_the_hysteresis() {
+        let th = TexelThresholds { significant: 0.25, new_distribution: 0.8 };
+        assert_eq!(adjusted_hysteresis(0.97, 0.1, &th), 0.97);
+        assert!((adjusted_hysteresis(0.97, -0.3, &th) - 0.82).abs() < 1e-6);
+        assert_eq!(adjusted_hysteresis(0.97, 0.9, &th), 0.0);
+        // Through a blend: a texel jumping from 0 to 1 takes the new value at once.
+        let d = dirs(256);
+        let w = BlendWeights::new(&d, 6, 1.0);
+        let mut tile = vec![Vec3::ZERO; 64];
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ONE; 256], 0.97, 5.0, Some(&th));
+        assert!((tile[9].x - 1.0).abs() < 1e-5);
     }
 
     #[test]
@@ -198,7 +239,7 @@ mod tests {
         }
         let mut irr = vec![Vec3::ONE; 36];
         let w1 = BlendWeights::new(&d, 4, 1.0);
-        blend_irradiance_tile(&mut irr, 4, &w1, &vec![Vec3::splat(f32::NAN); 256], 0.0, 5.0);
+        blend_irradiance_tile(&mut irr, 4, &w1, &vec![Vec3::splat(f32::NAN); 256], 0.0, 5.0, None);
         assert!(irr.iter().all(|v| *v == Vec3::ONE), "all-NaN rays leave the old values");
     }
 }

@@ -4,27 +4,55 @@
 //! `probe_ray_gen` → `probe_trace` → `probe_shade` → blend (`probegi_core::probe_blend`)
 //! → border (`probegi_core::probe_border`).
 //!
-//! A probe's first update replaces its (empty) history, i.e. blends with
-//! hysteresis 0; every later update uses `probe_hysteresis`. Buffers are sized
-//! once, so a frame allocates only the per-frame blend-weight tables.
+//! Production extensions (seed 004), each switchable in the settings:
+//! - initialisation: `probe_relocation_iterations` distance-only traces with the
+//!   position optimizer (`probegi_core::probe_relocation`), then the state
+//!   classification (`probegi_core::probe_classification`);
+//! - per frame only probes whose state updates trace and blend; queries skip Off,
+//!   Sleeping and Dead probes;
+//! - fast convergence: Listing 3's per-texel thresholds, and scene events
+//!   ([`SceneEvent`]) that lower the hysteresis of all probes for a few frames.
+//!
+//! A probe's first update (and a Newly Awake / Newly Vigilant probe's) replaces
+//! its history, i.e. blends with hysteresis 0. Buffers are sized once.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
 
 use glam::{UVec3, Vec2, Vec3};
 use probegi_core::ddgi_query::DdgiFieldView;
-use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::probe_atlas::ProbeAtlas;
-use probegi_core::probe_blend::{blend_distance_tile, blend_irradiance_tile};
+use probegi_core::probe_blend::{TexelThresholds, blend_distance_tile, blend_irradiance_tile};
 use probegi_core::probe_border::update_tile_border;
+use probegi_core::probe_classification::{ProbeState, classify_jcgt, classify_usage, inside_grown_aabb, probe_usage};
 use probegi_core::probe_grid::ProbeGrid;
+use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats, relocation_step};
 use probegi_scene::{RayTracer, Scene};
 use rayon::prelude::*;
 
 use crate::direct::DirectLighting;
 use crate::probe_ray_gen::generate_probe_rays;
 use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
-use crate::probe_trace::{Surfel, trace_probe_rays};
+use crate::probe_trace::{Surfel, signed_distance, trace_probe_rays};
+
+/// Scene changes the application reports so the field reacts faster (seed 004 §4.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneEvent {
+    /// E.g. a flashlight turns on: irradiance hysteresis −15 % for 4 frames.
+    SmallLightChange,
+    /// E.g. an abrupt time-of-day change: irradiance hysteresis −50 % for 10 frames.
+    LargeLightChange,
+    /// E.g. a ceiling caves in: irradiance −50 % for 10 frames, visibility −50 % for 7.
+    LargeObjectChange,
+}
+
+/// A temporary hysteresis reduction: multiply by `scale` for `frames_left` more updates.
+#[derive(Clone, Copy, Debug)]
+struct HysteresisReduction {
+    scale: f32,
+    frames_left: u32,
+}
 
 pub struct DdgiVolume {
     pub grid: ProbeGrid,
@@ -33,8 +61,18 @@ pub struct DdgiVolume {
     pub irradiance: ProbeAtlas<Vec3>,
     /// (mean distance, mean squared distance) per texel.
     pub distance: ProbeAtlas<Vec2>,
+    /// Probe positions including relocation offsets.
     pub probe_positions: Vec<Vec3>,
+    pub probe_offsets: Vec<Vec3>,
+    pub probe_states: Vec<ProbeState>,
     pub frames_updated: u32,
+    probe_hysteresis: Vec<f32>,
+    probe_usable: Vec<bool>,
+    probe_has_history: Vec<bool>,
+    active: Vec<bool>,
+    initialized: bool,
+    irradiance_events: Vec<HysteresisReduction>,
+    visibility_events: Vec<HysteresisReduction>,
     surfels: Vec<Surfel>,
     ray_radiance: Vec<Vec3>,
     ray_distance: Vec<f32>,
@@ -46,11 +84,12 @@ pub fn ddgi_volume_bytes(settings: &DdgiVolumeSettings) -> u64 {
     let rays = probes * settings.probe_rays_per_probe as u64;
     let tile = |n: u32| ((n + 2) * (n + 2)) as u64;
     rays * (std::mem::size_of::<Surfel>() + std::mem::size_of::<Vec3>() + 4) as u64
-        + probes * (tile(settings.probe_irradiance_texels) * 12 + tile(settings.probe_distance_texels) * 8 + 12)
+        + probes * (tile(settings.probe_irradiance_texels) * 12 + tile(settings.probe_distance_texels) * 8 + 64)
 }
 
 impl DdgiVolume {
     /// A volume over `scene_bounds` (used when the settings give no origin/spacing).
+    /// Probes are placed and classified on the first [`Self::update`].
     pub fn new(settings: DdgiVolumeSettings, scene_bounds: (Vec3, Vec3)) -> Self {
         let counts: UVec3 = settings.probe_counts;
         let fitted = ProbeGrid::fit_to_bounds(scene_bounds.0, scene_bounds.1, counts);
@@ -66,12 +105,21 @@ impl DdgiVolume {
             irradiance: ProbeAtlas::new(probes, settings.probe_irradiance_texels),
             distance: ProbeAtlas::new(probes, settings.probe_distance_texels),
             grid,
-            settings,
             probe_positions,
+            probe_offsets: vec![Vec3::ZERO; probes],
+            probe_states: vec![ProbeState::Active; probes],
             frames_updated: 0,
+            probe_hysteresis: vec![settings.probe_hysteresis; probes],
+            probe_usable: vec![true; probes],
+            probe_has_history: vec![false; probes],
+            active: vec![true; probes],
+            initialized: false,
+            irradiance_events: Vec::new(),
+            visibility_events: Vec::new(),
             surfels: vec![Surfel::default(); rays],
             ray_radiance: vec![Vec3::ZERO; rays],
             ray_distance: vec![0.0; rays],
+            settings,
         }
     }
 
@@ -81,6 +129,8 @@ impl DdgiVolume {
             settings: &self.settings,
             irradiance: &self.irradiance,
             distance: &self.distance,
+            probe_offsets_m: &self.probe_offsets,
+            probe_usable: &self.probe_usable,
         }
     }
 
@@ -88,10 +138,130 @@ impl DdgiVolume {
         self.surfels.len() as u64
     }
 
+    /// Probe rays traced in the last update (active probes only).
+    pub fn active_probe_count(&self) -> usize {
+        self.active.iter().filter(|a| **a).count()
+    }
+
     /// The distance limit of the blend: RTXGI's 1.5 × the cell diagonal, or the
     /// trace limit if shorter.
     pub fn distance_clamp_m(&self) -> f32 {
         (1.5 * self.grid.spacing_m.length()).min(self.settings.probe_max_ray_distance_m)
+    }
+
+    /// Number of probes per state name.
+    pub fn state_counts(&self) -> BTreeMap<&'static str, usize> {
+        let mut m = BTreeMap::new();
+        for s in &self.probe_states {
+            *m.entry(s.name()).or_default() += 1;
+        }
+        m
+    }
+
+    /// Reports a scene change (seed 004 §4.3 per-probe heuristics; they apply to all
+    /// probes). No effect unless `probe_fast_convergence` is on.
+    pub fn notify_scene_event(&mut self, event: SceneEvent) {
+        let (irr, vis) = match event {
+            SceneEvent::SmallLightChange => (Some((0.85, 4)), None),
+            SceneEvent::LargeLightChange => (Some((0.5, 10)), None),
+            SceneEvent::LargeObjectChange => (Some((0.5, 10)), Some((0.5, 7))),
+        };
+        if let Some((scale, frames_left)) = irr {
+            self.irradiance_events.push(HysteresisReduction { scale, frames_left });
+        }
+        if let Some((scale, frames_left)) = vis {
+            self.visibility_events.push(HysteresisReduction { scale, frames_left });
+        }
+    }
+
+    /// Wakes Sleeping probes inside the AABBs of dynamic objects, grown by one cell
+    /// plus the self-shadow bias (seed 004 Listing 5); Awake probes no longer inside
+    /// any go back to sleep. jcgt states only. Returns the number of probes woken.
+    pub fn wake_probes_near(&mut self, dynamic_aabbs: &[(Vec3, Vec3)]) -> usize {
+        if self.settings.probe_states != ProbeStatesMode::Jcgt || !self.initialized {
+            return 0;
+        }
+        let bias = 0.75 * self.grid.min_spacing_m() * self.settings.probe_self_shadow_bias;
+        let grow = self.grid.spacing_m + Vec3::splat(bias);
+        let mut woken = 0;
+        for (p, state) in self.probe_states.iter_mut().enumerate() {
+            let pos = self.probe_positions[p];
+            let inside = dynamic_aabbs.iter().any(|&(lo, hi)| inside_grown_aabb(pos, lo, hi, grow));
+            match *state {
+                ProbeState::Sleeping if inside => {
+                    *state = ProbeState::NewlyAwake;
+                    woken += 1;
+                }
+                ProbeState::Awake if !inside => *state = ProbeState::Sleeping,
+                _ => {}
+            }
+            self.probe_usable[p] = state.usable_in_queries();
+        }
+        woken
+    }
+
+    /// Distance-only trace from every probe with directions of pseudo-frame `frame`;
+    /// returns signed true distances per ray (probe-major).
+    fn trace_distances(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64, frame: u32) -> (Vec<Vec3>, u64) {
+        let dirs = generate_probe_rays(&self.settings, seed, frame).dirs;
+        let max = self.settings.probe_max_ray_distance_m;
+        let n = trace_probe_rays(scene, tracer, &self.probe_positions, &[], &dirs, max, &mut self.surfels);
+        (dirs, n)
+    }
+
+    /// Relocation and classification (seed 004 Listing 5, first step). Returns rays traced.
+    fn initialize(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64) -> u64 {
+        let n = self.settings.probe_rays_per_probe as usize;
+        let mut traced = 0;
+        // Pseudo-frames far from real ones, so initialisation directions differ from frame 0's.
+        let init_frame = |i: u32| u32::MAX - i;
+        if self.settings.probe_relocation {
+            for it in 0..self.settings.probe_relocation_iterations {
+                let (dirs, k) = self.trace_distances(scene, tracer, seed, init_frame(it));
+                traced += k;
+                let spacing = self.grid.spacing_m;
+                let settings = &self.settings;
+                let surfels = &self.surfels;
+                self.probe_offsets.par_iter_mut().enumerate().for_each(|(p, offset)| {
+                    let d: Vec<f32> = surfels[p * n..(p + 1) * n].iter().map(signed_distance).collect();
+                    *offset = relocation_step(*offset, &probe_ray_stats(&dirs, &d), spacing, settings);
+                });
+                for (p, pos) in self.probe_positions.iter_mut().enumerate() {
+                    *pos = self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
+                }
+            }
+        }
+        match self.settings.probe_states {
+            ProbeStatesMode::AllActive => self.probe_states.fill(ProbeState::Active),
+            ProbeStatesMode::Usage => self.probe_states.fill(ProbeState::Alive),
+            ProbeStatesMode::Jcgt => {
+                let (dirs, k) = self.trace_distances(scene, tracer, seed, init_frame(1000));
+                traced += k;
+                let min_spacing = self.grid.min_spacing_m();
+                let surfels = &self.surfels;
+                self.probe_states.par_iter_mut().enumerate().for_each(|(p, state)| {
+                    let d: Vec<f32> = surfels[p * n..(p + 1) * n].iter().map(signed_distance).collect();
+                    *state = classify_jcgt(&probe_ray_stats(&dirs, &d), min_spacing);
+                });
+            }
+        }
+        for (u, s) in self.probe_usable.iter_mut().zip(&self.probe_states) {
+            *u = s.usable_in_queries();
+        }
+        self.initialized = true;
+        traced
+    }
+
+    /// Probes inside geometry by their rays (> 25 % backfaces), from a fresh trace.
+    pub fn count_probes_inside_geometry(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64) -> usize {
+        let n = self.settings.probe_rays_per_probe as usize;
+        let (dirs, _) = self.trace_distances(scene, tracer, seed, u32::MAX - 2000);
+        (0..self.grid.probe_count())
+            .filter(|&p| {
+                let d: Vec<f32> = self.surfels[p * n..(p + 1) * n].iter().map(signed_distance).collect();
+                is_inside_geometry(&probe_ray_stats(&dirs, &d))
+            })
+            .count()
     }
 
     /// One field update. Adds per-pass milliseconds to `pass_ms` and returns the
@@ -105,18 +275,29 @@ impl DdgiVolume {
         frame: u32,
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) -> u64 {
+        let mut traced = 0;
+        if !self.initialized {
+            let t = Instant::now();
+            traced += self.initialize(scene, tracer, seed);
+            *pass_ms.entry("probe_init").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        }
         let mut time =
             |name: &'static str, t: Instant| *pass_ms.entry(name).or_default() += t.elapsed().as_secs_f64() * 1e3;
+        let interval = self.settings.probe_sleeping_update_interval;
+        for (a, s) in self.active.iter_mut().zip(&self.probe_states) {
+            *a = s.updates_in_frame(frame, interval);
+        }
 
         let t = Instant::now();
         let rays = generate_probe_rays(&self.settings, seed, frame);
         time("ray_gen", t);
 
         let t = Instant::now();
-        let mut traced = trace_probe_rays(
+        traced += trace_probe_rays(
             scene,
             tracer,
             &self.probe_positions,
+            &self.active,
             &rays.dirs,
             self.settings.probe_max_ray_distance_m,
             &mut self.surfels,
@@ -132,9 +313,12 @@ impl DdgiVolume {
                 settings: &self.settings,
                 irradiance: &self.irradiance,
                 distance: &self.distance,
+                probe_offsets_m: &self.probe_offsets,
+                probe_usable: &self.probe_usable,
             },
             dirs: &rays.dirs,
             surfels: &self.surfels,
+            active: &self.active,
             seed,
             frame,
         };
@@ -142,34 +326,116 @@ impl DdgiVolume {
         time("shade", t);
 
         let t = Instant::now();
-        let hysteresis = if self.frames_updated == 0 { 0.0 } else { self.settings.probe_hysteresis };
+        let event_scale = |events: &[HysteresisReduction]| events.iter().map(|e| e.scale).product::<f32>();
+        let (irr_scale, vis_scale) = if self.settings.probe_fast_convergence {
+            (event_scale(&self.irradiance_events), event_scale(&self.visibility_events))
+        } else {
+            (1.0, 1.0)
+        };
+        let thresholds = self.settings.probe_fast_convergence.then_some(TexelThresholds {
+            significant: self.settings.probe_significant_change_threshold,
+            new_distribution: self.settings.probe_new_distribution_threshold,
+        });
         let n = rays.dirs.len();
         let (irr_n, dist_n) = (self.irradiance.interior, self.distance.interior);
         let gamma = self.settings.probe_irradiance_gamma;
         let clamp = self.distance_clamp_m();
         let irr_len = self.irradiance.tile_len();
         let dist_len = self.distance.tile_len();
-        self.irradiance.texels.par_chunks_mut(irr_len).zip(self.ray_radiance.par_chunks(n)).for_each(
-            |(tile, radiance)| {
-                blend_irradiance_tile(tile, irr_n, &rays.irradiance_weights, radiance, hysteresis, gamma);
-            },
-        );
-        self.distance.texels.par_chunks_mut(dist_len).zip(self.ray_distance.par_chunks(n)).for_each(
-            |(tile, distance)| {
-                blend_distance_tile(tile, dist_n, &rays.distance_weights, distance, hysteresis, clamp);
-            },
-        );
+        let base: Vec<Option<f32>> = (0..self.grid.probe_count())
+            .map(|p| {
+                self.active[p].then(|| {
+                    if !self.probe_has_history[p] || self.probe_states[p].is_new() {
+                        0.0
+                    } else {
+                        self.probe_hysteresis[p]
+                    }
+                })
+            })
+            .collect();
+        self.irradiance
+            .texels
+            .par_chunks_mut(irr_len)
+            .zip(self.ray_radiance.par_chunks(n))
+            .zip(base.par_iter())
+            .for_each(|((tile, radiance), h)| {
+                if let Some(h) = h {
+                    blend_irradiance_tile(
+                        tile,
+                        irr_n,
+                        &rays.irradiance_weights,
+                        radiance,
+                        h * irr_scale,
+                        gamma,
+                        thresholds.as_ref(),
+                    );
+                }
+            });
+        self.distance
+            .texels
+            .par_chunks_mut(dist_len)
+            .zip(self.ray_distance.par_chunks(n))
+            .zip(base.par_iter())
+            .for_each(|((tile, distance), h)| {
+                if let Some(h) = h {
+                    blend_distance_tile(tile, dist_n, &rays.distance_weights, distance, h * vis_scale, clamp);
+                }
+            });
         time("blend", t);
 
         let t = Instant::now();
-        self.irradiance.texels.par_chunks_mut(irr_len).for_each(|tile| update_tile_border(tile, irr_n));
-        self.distance.texels.par_chunks_mut(dist_len).for_each(|tile| update_tile_border(tile, dist_n));
+        let active = &self.active;
+        self.irradiance.texels.par_chunks_mut(irr_len).zip(active.par_iter()).for_each(|(tile, a)| {
+            if *a {
+                update_tile_border(tile, irr_n)
+            }
+        });
+        self.distance.texels.par_chunks_mut(dist_len).zip(active.par_iter()).for_each(|(tile, a)| {
+            if *a {
+                update_tile_border(tile, dist_n)
+            }
+        });
         time("border", t);
 
+        self.after_update(n);
         self.frames_updated += 1;
         #[cfg(debug_assertions)]
         self.validate();
         traced
+    }
+
+    /// State transitions and hysteresis ramps after a blend.
+    fn after_update(&mut self, rays_per_probe: usize) {
+        let max_h = self.settings.probe_hysteresis;
+        let cage_diagonal = self.grid.spacing_m.length();
+        for p in 0..self.grid.probe_count() {
+            if !self.active[p] {
+                continue;
+            }
+            self.probe_has_history[p] = true;
+            let state = self.probe_states[p].after_update();
+            self.probe_states[p] = match state {
+                ProbeState::Alive | ProbeState::UsageSleeping | ProbeState::Dead => {
+                    let d: Vec<f32> = self.surfels[p * rays_per_probe..(p + 1) * rays_per_probe]
+                        .iter()
+                        .map(signed_distance)
+                        .collect();
+                    let (usage, relevant, backfaces) = probe_usage(&d, cage_diagonal);
+                    let next = classify_usage(usage, relevant, backfaces);
+                    let target = if next == ProbeState::Alive { max_h } else { 0.5 * max_h };
+                    self.probe_hysteresis[p] += 0.1 * (target - self.probe_hysteresis[p]);
+                    next
+                }
+                s => s,
+            };
+            self.probe_usable[p] = self.probe_states[p].usable_in_queries();
+        }
+        for events in [&mut self.irradiance_events, &mut self.visibility_events] {
+            for e in events.iter_mut() {
+                e.frames_left = e.frames_left.saturating_sub(1);
+            }
+            events.retain(|e| e.frames_left > 0);
+        }
     }
 
     /// Atlas invariants: every texel finite and non-negative, every border equal to

@@ -57,6 +57,8 @@ pub struct RenderStats {
     pub rays_per_frame: Option<u64>,
     pub field_update_ms: Option<f64>,
     pub field_update_mrays_per_s: Option<f64>,
+    /// DDGI only: probes per state name after the last frame.
+    pub probe_states: Option<BTreeMap<&'static str, usize>>,
 }
 
 pub struct RenderOutput {
@@ -135,6 +137,7 @@ pub fn render_frames(
         stats.rays_per_frame = Some(v.rays_per_frame());
         stats.field_update_ms = Some(update_ms);
         stats.field_update_mrays_per_s = Some(v.rays_per_frame() as f64 / (update_ms * 1e-3) / 1e6);
+        stats.probe_states = Some(v.state_counts());
     }
     let mut pixels: Vec<Vec3> =
         direct_sum.iter().zip(&indirect).map(|(d, i)| (*d / frames as f64).as_vec3() + *i).collect();

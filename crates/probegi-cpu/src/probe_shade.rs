@@ -36,6 +36,8 @@ pub struct ProbeShadeInputs<'a> {
     pub field: DdgiFieldView<'a>,
     pub dirs: &'a [Vec3],
     pub surfels: &'a [Surfel],
+    /// Probes to shade this frame; empty = all.
+    pub active: &'a [bool],
     pub seed: u64,
     pub frame: u32,
 }
@@ -53,6 +55,9 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut [Vec3], di
         .enumerate()
         .map(|(probe, ((rad, dist), surfels))| {
             let mut rays = 0u64;
+            if inputs.active.get(probe).is_some_and(|a| !a) {
+                return 0;
+            }
             let mut rng =
                 Pcg32::new(hash_combine(&[inputs.seed, inputs.frame as u64, probe as u64, 0x5ade]), probe as u64);
             for ((r, d), (s, &dir)) in rad.iter_mut().zip(dist.iter_mut()).zip(surfels.iter().zip(inputs.dirs)) {

@@ -16,18 +16,23 @@ pub struct Surfel {
     pub distance: f32,
 }
 
-/// Traces `dirs` from every probe position into `surfels` (`probes × rays`,
-/// probe-major). Returns the number of rays traced.
+/// Traces `dirs` from every active probe position into `surfels` (`probes × rays`,
+/// probe-major); inactive probes' surfels are left as they were. `active` empty
+/// means all. Returns the number of rays traced.
 pub fn trace_probe_rays(
     scene: &Scene,
     tracer: &dyn RayTracer,
     probe_positions: &[Vec3],
+    active: &[bool],
     dirs: &[Vec3],
     max_distance_m: f32,
     surfels: &mut [Surfel],
 ) -> u64 {
     let n = dirs.len();
-    surfels.par_chunks_mut(n).zip(probe_positions.par_iter()).for_each(|(out, &origin)| {
+    surfels.par_chunks_mut(n).zip(probe_positions.par_iter()).enumerate().for_each(|(p, (out, &origin))| {
+        if active.get(p).is_some_and(|a| !a) {
+            return;
+        }
         for (s, &dir) in out.iter_mut().zip(dirs) {
             let ray = Ray::segment(origin, dir, max_distance_m);
             *s = match tracer.closest_hit(&ray) {
@@ -36,5 +41,16 @@ pub fn trace_probe_rays(
             };
         }
     });
-    (probe_positions.len() * n) as u64
+    let count = if active.is_empty() { probe_positions.len() } else { active.iter().filter(|a| **a).count() };
+    (count * n) as u64
+}
+
+/// Signed true distance of a surfel: positive for a front-face hit, negative for a
+/// backface hit, infinite for a miss (the input of relocation and classification).
+pub fn signed_distance(s: &Surfel) -> f32 {
+    match &s.surface {
+        None => f32::INFINITY,
+        Some(sp) if !sp.front_face => -s.distance,
+        Some(_) => s.distance,
+    }
 }

@@ -1,12 +1,15 @@
 //! `--show-probes`: draws each probe as a small sphere in the camera image, shaded
 //! by the probe's stored irradiance in the direction of the sphere's normal (the
 //! mean radiance, i.e. what a white diffuse surface facing that way would reflect).
+//! Probes that queries skip are drawn flat by state: Off and Dead dark red,
+//! Sleeping blue.
 //! Spheres are found by projecting each probe's bounding box to the screen and
 //! intersecting the covered pixels' camera rays exactly.
 
 use glam::{Vec2, Vec3};
 use probegi_core::camera::CameraRays;
 use probegi_core::octahedral::oct_encode;
+use probegi_core::probe_classification::ProbeState;
 
 use crate::ddgi::DdgiVolume;
 use crate::gbuffer::GBuffer;
@@ -64,8 +67,14 @@ pub fn draw_probes(volume: &DdgiVolume, camera: &CameraRays, gbuffer: &GBuffer, 
                     continue;
                 }
                 let n = (camera.origin_world + dir * t - c).normalize();
-                let e = volume.irradiance.sample_bilinear(probe, oct_encode(n));
-                image[idx] = Vec3::new(e.x.powf(gamma), e.y.powf(gamma), e.z.powf(gamma));
+                image[idx] = match volume.probe_states[probe] {
+                    ProbeState::Off | ProbeState::Dead => Vec3::new(0.3, 0.0, 0.0),
+                    ProbeState::Sleeping => Vec3::new(0.05, 0.1, 0.5),
+                    _ => {
+                        let e = volume.irradiance.sample_bilinear(probe, oct_encode(n));
+                        Vec3::new(e.x.powf(gamma), e.y.powf(gamma), e.z.powf(gamma))
+                    }
+                };
             }
         }
     }
