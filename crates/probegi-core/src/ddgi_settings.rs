@@ -80,6 +80,9 @@ pub struct DdgiVolumeSettings {
     pub probe_states: ProbeStatesMode,
     /// Usage scheme: SLEEPING probes update every this many frames (seed 003: 10).
     pub probe_sleeping_update_interval: u32,
+    /// Second-order glossy from probes (seed 004 §4.4): the hit of a camera glossy ray
+    /// adds its own specular reflection from the probes' irradiance.
+    pub glossy_second_order: bool,
     /// Area-light next-event samples per probe-ray hit in the shade pass (stratified,
     /// rounded up to a square count).
     pub probe_area_light_samples: u32,
@@ -116,6 +119,7 @@ impl Default for DdgiVolumeSettings {
             probe_relocation_min_frontface_rel: 0.5,
             probe_states: ProbeStatesMode::Jcgt,
             probe_sleeping_update_interval: 10,
+            glossy_second_order: true,
             probe_area_light_samples: 1,
         }
     }

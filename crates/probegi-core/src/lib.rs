@@ -10,6 +10,7 @@
 //! - [`image`]: the linear-RGB float image every renderer writes.
 //! - [`punctual`]: glTF KHR_lights_punctual attenuation maths.
 
+pub mod bsdf;
 pub mod camera;
 pub mod color;
 pub mod ddgi_query;

@@ -8,10 +8,9 @@ use glam::{Vec2, Vec3};
 use probegi_core::rng::Pcg32;
 use probegi_core::sampling::{Frame, sample_cosine_hemisphere};
 use probegi_scene::{RayTracer, Scene, SurfacePoint};
-use std::f32::consts::FRAC_1_PI;
 
 use crate::light_sampling::AreaLights;
-use crate::shading::{lambert_cos, punctual_direct, shadow_ray_along, shadow_ray_to};
+use crate::shading::{ShadingContext, lambert_cos, punctual_direct, shadow_ray_along, shadow_ray_to};
 
 #[derive(Clone, Copy, Debug)]
 pub struct DirectSettings {
@@ -46,21 +45,30 @@ impl<'a> DirectLighting<'a> {
         Self { scene, tracer, area_lights: AreaLights::new(scene), settings }
     }
 
-    /// Outgoing radiance toward the viewer: emission + direct light. Returns radiance
-    /// and rays traced.
-    pub fn shade(&self, sp: &SurfacePoint, rng: &mut Pcg32) -> (Vec3, u64) {
-        let scene = self.scene;
-        let (l, rays) = self.reflected(sp, scene.albedo(sp), self.settings, rng);
-        (scene.emitted(sp) + l, rays)
+    /// Outgoing radiance toward `to_viewer`: emission + direct light (full BSDF).
+    /// Returns radiance and rays traced.
+    pub fn shade(&self, sp: &SurfacePoint, to_viewer: Vec3, rng: &mut Pcg32) -> (Vec3, u64) {
+        let ctx = ShadingContext::new(self.scene, sp, to_viewer);
+        let (l, rays) = self.reflected(sp, &ctx, self.settings, true, rng);
+        (self.scene.emitted(sp) + l, rays)
     }
 
     /// Direct light reflected toward the viewer (no emission), with the sample counts
-    /// of `settings`: punctual lights exactly, area lights by stratified NEE, the sky
-    /// by stratified visibility (0 sky samples leaves the sky out).
-    pub fn reflected(&self, sp: &SurfacePoint, albedo: Vec3, settings: DirectSettings, rng: &mut Pcg32) -> (Vec3, u64) {
+    /// of `settings`: punctual lights exactly (full BSDF), area lights by stratified
+    /// NEE (full BSDF, or the diffuse lobe only when `specular_area` is false because
+    /// the caller gathers specular reflections of emitters with reflected rays), and
+    /// the sky by stratified cosine visibility on the diffuse lobe (0 sky samples
+    /// leaves the sky out).
+    pub fn reflected(
+        &self,
+        sp: &SurfacePoint,
+        ctx: &ShadingContext,
+        settings: DirectSettings,
+        specular_area: bool,
+        rng: &mut Pcg32,
+    ) -> (Vec3, u64) {
         let scene = self.scene;
-        let (mut l, mut rays) = punctual_direct(scene, self.tracer, sp, albedo);
-        let brdf = albedo * FRAC_1_PI;
+        let (mut l, mut rays) = punctual_direct(scene, self.tracer, sp, ctx);
 
         if !self.area_lights.is_empty() && settings.direct_area_samples > 0 {
             let k = (settings.direct_area_samples as f32).sqrt().ceil() as u32;
@@ -75,11 +83,13 @@ impl<'a> DirectLighting<'a> {
                 }
                 rays += 1;
                 if !self.tracer.occluded(&shadow_ray_to(sp, s.point)) {
-                    sum += s.radiance * (cos / s.pdf_solid_angle);
+                    let f = if specular_area { ctx.eval(s.wi) } else { ctx.eval_diffuse(s.wi) };
+                    sum += f * s.radiance * (cos / s.pdf_solid_angle);
                 }
             }
-            l += brdf * sum / n as f32;
+            l += sum / n as f32;
         }
+        let albedo = ctx.bsdf.diffuse_albedo();
 
         if scene.sky_radiance != Vec3::ZERO && settings.direct_sky_samples > 0 {
             let k = (settings.direct_sky_samples as f32).sqrt().ceil() as u32;

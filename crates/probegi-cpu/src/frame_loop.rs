@@ -16,12 +16,13 @@ use probegi_core::ddgi_query::irradiance;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
 use probegi_core::rng::{Pcg32, hash_combine};
-use probegi_scene::{RayTracer, Scene};
+use probegi_scene::{Ray, RayTracer, Scene};
 use std::f32::consts::FRAC_1_PI;
 
 use crate::ddgi::DdgiVolume;
 use crate::direct::{DirectLighting, DirectSettings};
 use crate::gbuffer::{GBuffer, trace_gbuffer};
+use crate::shading::{ShadingContext, lambert_cos};
 
 /// Which global illumination runs on top of direct light.
 #[derive(Clone, Debug, PartialEq)]
@@ -113,6 +114,7 @@ pub fn render_frames(
         let t = Instant::now();
         stats.rays_traced += shade_camera(
             scene,
+            tracer,
             &direct,
             camera_direct,
             volume.as_ref(),
@@ -149,11 +151,18 @@ pub fn render_frames(
 }
 
 /// The camera pass: per pixel, emission + direct light into `direct_out` and, with
-/// a DDGI volume, albedo/π × the queried irradiance into `indirect_out`. Pixels
-/// that see nothing get the sky. Returns rays traced.
+/// a DDGI volume, the diffuse albedo/π × the queried irradiance into `indirect_out`.
+/// Glossy pixels under DDGI also trace one reflected ray per frame (seed 004 §4.4),
+/// importance-sampled from the GGX lobe, whose hit is shaded with direct light plus
+/// probe irradiance (and, with `glossy_second_order`, the hit's own specular
+/// reflection read from the probes); that term accumulates with the direct one.
+/// Area lights' specular highlights then come from reflected rays that hit the
+/// emitter, so the direct NEE uses the diffuse lobe only for them (no double count).
+/// Pixels that see nothing get the sky. Returns rays traced.
 #[allow(clippy::too_many_arguments)]
 fn shade_camera(
     scene: &Scene,
+    tracer: &dyn RayTracer,
     direct: &DirectLighting<'_>,
     direct_settings: DirectSettings,
     volume: Option<&DdgiVolume>,
@@ -166,6 +175,7 @@ fn shade_camera(
     use rayon::prelude::*;
     let w = gbuffer.width as usize;
     let field = volume.map(|v| v.view());
+    let second_order = volume.is_some_and(|v| v.settings.glossy_second_order);
     direct_out
         .par_chunks_mut(w)
         .zip(indirect_out.par_chunks_mut(w))
@@ -181,15 +191,43 @@ fn shade_camera(
                 };
                 let pixel = (y * w + x) as u64;
                 let mut rng = Pcg32::new(hash_combine(&[seed, pixel, frame as u64, 0xd1]), pixel);
-                let albedo = scene.albedo(sp);
-                let (l, k) = direct.reflected(sp, albedo, direct_settings, &mut rng);
+                let ctx = ShadingContext::new(scene, sp, texel.view_dir_world);
+                let glossy_rays = field.is_some() && ctx.bsdf.has_specular();
+                let (l, k) = direct.reflected(sp, &ctx, direct_settings, !glossy_rays, &mut rng);
                 rays += k;
-                let l = scene.emitted(sp) + l;
+                let mut l = scene.emitted(sp) + l;
+                if let (true, Some(f)) = (glossy_rays, &field)
+                    && let Some((wi_local, weight)) = ctx.bsdf.sample_specular(ctx.wo, rng.next_vec2())
+                {
+                    let wi = ctx.frame.to_world(wi_local);
+                    if lambert_cos(sp, wi).is_some() {
+                        rays += 1;
+                        let ray = Ray::new(sp.spawn_origin(wi), wi);
+                        let lr = match tracer.closest_hit(&ray) {
+                            None => scene.sky_radiance,
+                            Some(hit) => {
+                                let (lh, kh) = shade_glossy_hit(
+                                    scene,
+                                    direct,
+                                    direct_settings,
+                                    f,
+                                    &scene.surface_point(&hit),
+                                    wi,
+                                    second_order,
+                                    &mut rng,
+                                );
+                                rays += kh;
+                                lh
+                            }
+                        };
+                        l += weight * lr;
+                    }
+                }
                 *d = if l.is_finite() { l } else { Vec3::ZERO };
                 *i = match &field {
                     Some(f) => {
                         let e = irradiance(f, sp.position, sp.facing_normal(), texel.view_dir_world);
-                        albedo * FRAC_1_PI * e
+                        ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e
                     }
                     None => Vec3::ZERO,
                 };
@@ -197,4 +235,37 @@ fn shade_camera(
             rays
         })
         .sum()
+}
+
+/// Radiance leaving the hit of a camera glossy ray toward the camera surface:
+/// emission + direct light + diffuse albedo/π × probe irradiance, plus with
+/// `second_order` its specular reflection taken from the probes — seed 004 §4.4's
+/// reuse of irradiance as prefiltered radiance at maximum roughness. The atlas
+/// holds mean radiance E/π (see `probe_blend`), so the radiance around the mirror
+/// direction r is irradiance(x, r)/π; seed 004's factor 2π belongs to RTXGI's
+/// storage (E/2π), the same quantity. It is weighted by Schlick's Fresnel at the
+/// viewing angle.
+#[allow(clippy::too_many_arguments)]
+fn shade_glossy_hit(
+    scene: &Scene,
+    direct: &DirectLighting<'_>,
+    direct_settings: DirectSettings,
+    field: &probegi_core::ddgi_query::DdgiFieldView<'_>,
+    sp: &probegi_scene::SurfacePoint,
+    ray_dir: Vec3,
+    second_order: bool,
+    rng: &mut Pcg32,
+) -> (Vec3, u64) {
+    let ctx = ShadingContext::new(scene, sp, -ray_dir);
+    let (l, rays) = direct.reflected(sp, &ctx, direct_settings, true, rng);
+    let n = sp.facing_normal();
+    let e = irradiance(field, sp.position, n, -ray_dir);
+    let mut out = scene.emitted(sp) + l + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e;
+    if second_order && ctx.bsdf.has_specular() {
+        let mirror = ray_dir - n * (2.0 * ray_dir.dot(n));
+        let e_mirror = irradiance(field, sp.position, mirror, -ray_dir);
+        let fresnel = probegi_core::bsdf::fresnel_schlick(ctx.bsdf.specular_f0, (-ray_dir).dot(n));
+        out += fresnel * e_mirror * FRAC_1_PI;
+    }
+    (out, rays)
 }

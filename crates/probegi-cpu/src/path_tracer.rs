@@ -1,9 +1,9 @@
-//! The reference: unbiased path tracing of two-sided Lambertian surfaces
-//! (`probegi reference`).
+//! The reference: unbiased path tracing of two-sided surfaces with the shared
+//! diffuse + GGX BSDF (`probegi reference`).
 //!
 //! Estimator per path vertex (Veach 1997, ch. 9):
 //! - emissive triangles by next-event estimation (power-weighted triangle, uniform
-//!   point) combined with cosine BSDF sampling by the power heuristic;
+//!   point) combined with BSDF sampling (`probegi_core::bsdf`) by the power heuristic;
 //! - punctual lights (point, spot, directional) by next-event estimation only
 //!   (delta lights cannot be hit);
 //! - the constant sky by BSDF sampling only. Deliberate: for a constant sky the
@@ -22,12 +22,11 @@ use glam::Vec3;
 use probegi_core::camera::CameraRays;
 use probegi_core::image::Image;
 use probegi_core::rng::{Pcg32, hash_combine};
-use probegi_core::sampling::{Frame, cosine_hemisphere_pdf, power_heuristic, sample_cosine_hemisphere};
+use probegi_core::sampling::power_heuristic;
 use probegi_scene::{Ray, RayTracer, Scene, SurfacePoint};
-use std::f32::consts::FRAC_1_PI;
 
 use crate::light_sampling::AreaLights;
-use crate::shading::{lambert_cos, punctual_direct, shadow_ray_to};
+use crate::shading::{ShadingContext, lambert_cos, punctual_direct, shadow_ray_to};
 
 #[derive(Clone, Copy, Debug)]
 pub struct PathTracerSettings {
@@ -109,8 +108,8 @@ impl<'a> PathTracer<'a> {
     }
 
     /// One next-event sample of the area lights at `sp`, MIS-weighted against
-    /// cosine BSDF sampling. Returns reflected radiance and rays traced.
-    fn area_light_nee(&self, sp: &SurfacePoint, brdf: Vec3, rng: &mut Pcg32) -> (Vec3, u64) {
+    /// BSDF sampling. Returns reflected radiance and rays traced.
+    fn area_light_nee(&self, sp: &SurfacePoint, ctx: &ShadingContext, rng: &mut Pcg32) -> (Vec3, u64) {
         let (u_select, u_point) = (rng.next_f32(), rng.next_vec2());
         if !self.settings.pt_light_sampling {
             return (Vec3::ZERO, 0);
@@ -125,8 +124,8 @@ impl<'a> PathTracer<'a> {
         if self.tracer.occluded(&shadow_ray_to(sp, s.point)) {
             return (Vec3::ZERO, 1);
         }
-        let w = power_heuristic(s.pdf_solid_angle, cosine_hemisphere_pdf(cos));
-        (brdf * s.radiance * (cos * w / s.pdf_solid_angle), 1)
+        let w = power_heuristic(s.pdf_solid_angle, ctx.pdf(s.wi));
+        (ctx.eval(s.wi) * s.radiance * (cos * w / s.pdf_solid_angle), 1)
     }
 
     /// Radiance arriving along `ray`, and the number of rays traced.
@@ -157,25 +156,28 @@ impl<'a> PathTracer<'a> {
                 };
                 l += throughput * le * w;
             }
-            let albedo = scene.albedo(&sp);
-            if albedo == Vec3::ZERO {
+            let ctx = ShadingContext::new(scene, &sp, -ray.dir);
+            if ctx.bsdf.diffuse == Vec3::ZERO && !ctx.bsdf.has_specular() {
                 break;
             }
-            let brdf = albedo * FRAC_1_PI;
 
-            let (ld, n) = self.area_light_nee(&sp, brdf, rng);
+            let (ld, n) = self.area_light_nee(&sp, &ctx, rng);
             l += throughput * ld;
             rays += n;
-            let (lp, n) = punctual_direct(scene, self.tracer, &sp, albedo);
+            let (lp, n) = punctual_direct(scene, self.tracer, &sp, &ctx);
             l += throughput * lp;
             rays += n;
 
-            let frame = Frame::from_normal(sp.facing_normal());
-            let wi = frame.to_world(sample_cosine_hemisphere(rng.next_vec2()));
-            let Some(cos) = lambert_cos(&sp, wi) else { break };
-            // f·cos/pdf = (albedo/π)·cos / (cos/π) = albedo.
-            throughput *= albedo;
-            prev_bsdf_pdf = Some(cosine_hemisphere_pdf(cos));
+            // The lobe choice draws a number only when there is a choice, so that
+            // diffuse scenes keep their random streams.
+            let u_lobe = if ctx.bsdf.has_specular() { rng.next_f32() } else { 1.0 };
+            let Some((wi_local, weight, pdf)) = ctx.bsdf.sample(ctx.wo, u_lobe, rng.next_vec2()) else { break };
+            let wi = ctx.frame.to_world(wi_local);
+            if lambert_cos(&sp, wi).is_none() {
+                break;
+            }
+            throughput *= weight;
+            prev_bsdf_pdf = Some(pdf);
             prev_position = sp.position;
             if depth + 1 >= self.settings.pt_rr_start_depth {
                 let survive = throughput.max_element().min(0.95);

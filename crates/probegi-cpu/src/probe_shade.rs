@@ -29,6 +29,7 @@ use std::f32::consts::FRAC_1_PI;
 
 use crate::direct::{DirectLighting, DirectSettings};
 use crate::probe_trace::Surfel;
+use crate::shading::ShadingContext;
 
 pub struct ProbeShadeInputs<'a> {
     pub scene: &'a Scene,
@@ -71,8 +72,10 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut [Vec3], di
                         *d = -0.2 * s.distance;
                     }
                     Some(sp) => {
-                        let albedo = inputs.scene.albedo(sp);
-                        let (direct, k) = inputs.direct.reflected(sp, albedo, area, &mut rng);
+                        // Probe rays see the diffuse lobe only: DDGI stores diffuse irradiance.
+                        let ctx = ShadingContext::diffuse(inputs.scene, sp, -dir);
+                        let albedo = ctx.bsdf.diffuse;
+                        let (direct, k) = inputs.direct.reflected(sp, &ctx, area, true, &mut rng);
                         rays += k;
                         let e = irradiance(&inputs.field, sp.position, sp.facing_normal(), -dir);
                         let l = direct + albedo * FRAC_1_PI * e;

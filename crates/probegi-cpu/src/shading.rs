@@ -1,19 +1,58 @@
-//! The surface model every CPU renderer shares: two-sided Lambertian reflection
-//! with albedo/π, shadow-ray construction, and the direct contribution of
-//! punctual lights.
+//! The surface model every CPU renderer shares: the two-sided BSDF of
+//! `probegi_core::bsdf` in the frame of the shading normal on the viewer's side,
+//! shadow-ray construction, and the direct contribution of punctual lights.
 
 use glam::Vec3;
+use probegi_core::bsdf::SurfaceBsdf;
+use probegi_core::sampling::Frame;
 use probegi_scene::{Ray, RayTracer, Scene, SurfacePoint};
-use std::f32::consts::FRAC_1_PI;
 
 use crate::light_sampling::punctual_incident;
 
 /// Cosine of `wi` to the side of the surface the viewer is on, or `None` when `wi`
 /// points into the surface (by the shading or the geometric normal): two-sided
-/// Lambertian reflects on the viewer's side only.
+/// surfaces reflect on the viewer's side only.
 pub fn lambert_cos(sp: &SurfacePoint, wi: Vec3) -> Option<f32> {
     let cos = wi.dot(sp.facing_normal());
     (cos > 0.0 && wi.dot(sp.facing_geometric_normal()) > 0.0).then_some(cos)
+}
+
+/// A surface point ready for BSDF queries with world-space directions.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadingContext {
+    pub frame: Frame,
+    /// Direction toward the viewer, local frame (+z = facing normal).
+    pub wo: Vec3,
+    pub bsdf: SurfaceBsdf,
+}
+
+impl ShadingContext {
+    pub fn new(scene: &Scene, sp: &SurfacePoint, to_viewer_world: Vec3) -> Self {
+        let frame = Frame::from_normal(sp.facing_normal());
+        let mut wo = frame.to_local(to_viewer_world);
+        // Interpolated normals can put the viewer slightly below the shading horizon.
+        wo.z = wo.z.max(1e-4);
+        Self { frame, wo: wo.normalize(), bsdf: scene.bsdf(sp) }
+    }
+
+    /// Diffuse-only context (probe rays: DDGI stores diffuse irradiance).
+    pub fn diffuse(scene: &Scene, sp: &SurfacePoint, to_viewer_world: Vec3) -> Self {
+        let mut c = Self::new(scene, sp, to_viewer_world);
+        c.bsdf = SurfaceBsdf::lambertian(c.bsdf.diffuse_albedo());
+        c
+    }
+
+    pub fn eval(&self, wi_world: Vec3) -> Vec3 {
+        self.bsdf.eval(self.wo, self.frame.to_local(wi_world))
+    }
+
+    pub fn eval_diffuse(&self, wi_world: Vec3) -> Vec3 {
+        self.bsdf.eval_diffuse(self.frame.to_local(wi_world))
+    }
+
+    pub fn pdf(&self, wi_world: Vec3) -> f32 {
+        self.bsdf.pdf(self.wo, self.frame.to_local(wi_world))
+    }
 }
 
 /// Shadow ray from the surface toward a point, stopping just short of it.
@@ -31,7 +70,7 @@ pub fn shadow_ray_along(sp: &SurfacePoint, wi: Vec3, distance: f32) -> Ray {
 
 /// Radiance reflected toward the viewer from all punctual lights (exact, one shadow
 /// ray each). Returns the radiance and the number of rays traced.
-pub fn punctual_direct(scene: &Scene, tracer: &dyn RayTracer, sp: &SurfacePoint, albedo: Vec3) -> (Vec3, u64) {
+pub fn punctual_direct(scene: &Scene, tracer: &dyn RayTracer, sp: &SurfacePoint, ctx: &ShadingContext) -> (Vec3, u64) {
     let mut l = Vec3::ZERO;
     let mut rays = 0;
     for light in &scene.lights {
@@ -39,7 +78,7 @@ pub fn punctual_direct(scene: &Scene, tracer: &dyn RayTracer, sp: &SurfacePoint,
         let Some(cos) = lambert_cos(sp, inc.wi) else { continue };
         rays += 1;
         if !tracer.occluded(&shadow_ray_along(sp, inc.wi, inc.distance)) {
-            l += albedo * FRAC_1_PI * inc.irradiance * cos;
+            l += ctx.eval(inc.wi) * inc.irradiance * cos;
         }
     }
     (l, rays)

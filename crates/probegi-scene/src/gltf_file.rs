@@ -193,6 +193,7 @@ impl Loader<'_> {
             metallic: pbr.metallic_factor(),
             specular_color: Vec3::ZERO,
             specular_exponent: 0.0,
+            specular_model: crate::material::SpecularModel::MetallicRoughness,
         };
         self.scene.materials.push(m);
         let id = (self.scene.materials.len() - 1) as u32;

@@ -4,8 +4,20 @@
 //! the glossy work that follows.
 
 use glam::{Vec2, Vec3};
+use probegi_core::bsdf::SurfaceBsdf;
 
 use crate::texture::Texture;
+
+/// How a material's specular lobe is derived (seed 004 §4.4's glossy materials).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpecularModel {
+    /// Lambertian only.
+    None,
+    /// MTL: F0 = `Ks`, diffuse = `Kd`, α from `Ns`.
+    Mtl,
+    /// glTF metallic-roughness: F0 = lerp(0.04, base, metallic), diffuse = base·(1 − metallic).
+    MetallicRoughness,
+}
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
@@ -20,13 +32,16 @@ pub struct Material {
     pub emissive_texture: Option<usize>,
     /// KHR_materials_emissive_strength multiplier; 1 when absent.
     pub emissive_strength: f32,
-    /// glTF perceptual roughness; for MTL derived from `Ns` as sqrt(2 / (Ns + 2)).
+    /// Perceptual roughness r (GGX α = r²). glTF: `roughnessFactor`; MTL: from the
+    /// Phong exponent via the Beckmann equivalence α = sqrt(2 / (Ns + 2)), i.e.
+    /// r = (2 / (Ns + 2))^¼.
     pub roughness: f32,
     pub metallic: f32,
     /// MTL `Ks`, kept verbatim.
     pub specular_color: Vec3,
     /// MTL `Ns` (Phong exponent), kept verbatim.
     pub specular_exponent: f32,
+    pub specular_model: SpecularModel,
 }
 
 impl Material {
@@ -44,6 +59,7 @@ impl Material {
             metallic: 0.0,
             specular_color: Vec3::ZERO,
             specular_exponent: 0.0,
+            specular_model: SpecularModel::None,
         }
     }
 
@@ -65,6 +81,21 @@ impl Material {
         match self.base_color_texture.and_then(|t| textures.get(t)) {
             Some(t) => self.base_color_factor * t.sample_bilinear(uv),
             None => self.base_color_factor,
+        }
+    }
+
+    /// The BSDF at `uv` (see `probegi_core::bsdf`).
+    pub fn bsdf(&self, textures: &[Texture], uv: Vec2) -> SurfaceBsdf {
+        let base = self.base_color(textures, uv);
+        let alpha = (self.roughness * self.roughness).clamp(probegi_core::bsdf::MIN_ALPHA, 1.0);
+        match self.specular_model {
+            SpecularModel::None => SurfaceBsdf::lambertian(base),
+            SpecularModel::Mtl => SurfaceBsdf { diffuse: base, specular_f0: self.specular_color, alpha },
+            SpecularModel::MetallicRoughness => SurfaceBsdf {
+                diffuse: base * (1.0 - self.metallic),
+                specular_f0: Vec3::splat(0.04).lerp(base, self.metallic),
+                alpha,
+            },
         }
     }
 

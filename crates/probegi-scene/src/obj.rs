@@ -228,6 +228,7 @@ fn load_mtl(path: &Path, scene: &mut Scene, ids: &mut HashMap<String, u32>, text
             let mut m = Material::default_grey(name);
             // MTL's implicit Kd is 0.8 (the spec's default).
             m.base_color_factor = Vec3::splat(0.8);
+            m.specular_model = crate::material::SpecularModel::Mtl;
             scene.materials.push(m);
             current = Some(scene.materials.len() - 1);
             ids.insert(name.to_string(), (scene.materials.len() - 1) as u32);
@@ -246,7 +247,7 @@ fn load_mtl(path: &Path, scene: &mut Scene, ids: &mut HashMap<String, u32>, text
             "Ns" => {
                 let ns = ctx.float(toks.next(), "Ns")?.max(0.0);
                 scene.materials[cur].specular_exponent = ns;
-                scene.materials[cur].roughness = (2.0 / (ns + 2.0)).sqrt();
+                scene.materials[cur].roughness = (2.0 / (ns + 2.0)).powf(0.25);
             }
             "map_Kd" | "map_Ke" => {
                 // Options (`-bm 1`, `-s u v w`, ...) precede the file name: take the last token.
@@ -309,7 +310,7 @@ mod tests {
         assert_eq!(s.materials.len(), 1);
         assert_eq!(s.materials[0].base_color_factor, Vec3::new(0.5, 0.25, 0.125));
         assert_eq!(s.materials[0].emissive_factor, Vec3::new(17.0, 12.0, 4.0));
-        assert!((s.materials[0].roughness - (2.0f32 / 12.0).sqrt()).abs() < 1e-6);
+        assert!((s.materials[0].roughness - (2.0f32 / 12.0).powf(0.25)).abs() < 1e-6);
         // Generated normals of a CCW quad seen from above point up; v was flipped.
         assert!(s.mesh.normals.iter().all(|n| (*n - Vec3::Y).length() < 1e-6));
         assert_eq!(s.mesh.uvs[0], Vec2::new(0.0, 1.0));

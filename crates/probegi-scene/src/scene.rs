@@ -105,6 +105,11 @@ impl Scene {
         self.material(sp.material).base_color(&self.textures, sp.uv)
     }
 
+    /// The BSDF at a surface point.
+    pub fn bsdf(&self, sp: &SurfacePoint) -> probegi_core::bsdf::SurfaceBsdf {
+        self.material(sp.material).bsdf(&self.textures, sp.uv)
+    }
+
     /// Radiance emitted toward the viewer of `sp`: non-zero only on the front face.
     pub fn emitted(&self, sp: &SurfacePoint) -> Vec3 {
         if !sp.front_face {

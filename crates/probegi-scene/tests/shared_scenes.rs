@@ -124,3 +124,13 @@ fn bvh_agrees_with_brute_force_on_sponza() {
         assert_eq!(bvh.occluded(&ray), best.is_finite());
     }
 }
+
+#[test]
+fn the_repository_scene_files_load() {
+    for f in ["sponza-sun.toml", "sibenik-lamp.toml"] {
+        let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes").join(f);
+        let s = load_scene(&p.to_string_lossy()).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(!s.lights.is_empty() && s.camera.is_some() && s.volume.is_some(), "{f}");
+        assert!(s.mesh.triangle_count() > 60_000, "{f}");
+    }
+}
