@@ -161,7 +161,7 @@ impl SurfaceBsdf {
             return None;
         }
         let pdf = self.pdf(wo, wi);
-        if !(pdf > 0.0) || !pdf.is_finite() {
+        if pdf.is_nan() || pdf <= 0.0 || !pdf.is_finite() {
             return None;
         }
         let weight = self.eval(wo, wi) * (wi.z / pdf);

@@ -239,12 +239,8 @@ fn shade_camera(
 
 /// Radiance leaving the hit of a camera glossy ray toward the camera surface:
 /// emission + direct light + diffuse albedo/π × probe irradiance, plus with
-/// `second_order` its specular reflection taken from the probes — seed 004 §4.4's
-/// reuse of irradiance as prefiltered radiance at maximum roughness. The atlas
-/// holds mean radiance E/π (see `probe_blend`), so the radiance around the mirror
-/// direction r is irradiance(x, r)/π; seed 004's factor 2π belongs to RTXGI's
-/// storage (E/2π), the same quantity. It is weighted by Schlick's Fresnel at the
-/// viewing angle.
+/// `second_order` its specular reflection taken from the probes
+/// (`glossy::second_order_specular`).
 #[allow(clippy::too_many_arguments)]
 fn shade_glossy_hit(
     scene: &Scene,
@@ -258,14 +254,10 @@ fn shade_glossy_hit(
 ) -> (Vec3, u64) {
     let ctx = ShadingContext::new(scene, sp, -ray_dir);
     let (l, rays) = direct.reflected(sp, &ctx, direct_settings, true, rng);
-    let n = sp.facing_normal();
-    let e = irradiance(field, sp.position, n, -ray_dir);
+    let e = irradiance(field, sp.position, sp.facing_normal(), -ray_dir);
     let mut out = scene.emitted(sp) + l + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e;
-    if second_order && ctx.bsdf.has_specular() {
-        let mirror = ray_dir - n * (2.0 * ray_dir.dot(n));
-        let e_mirror = irradiance(field, sp.position, mirror, -ray_dir);
-        let fresnel = probegi_core::bsdf::fresnel_schlick(ctx.bsdf.specular_f0, (-ray_dir).dot(n));
-        out += fresnel * e_mirror * FRAC_1_PI;
+    if second_order {
+        out += crate::glossy::second_order_specular(field, sp, &ctx, ray_dir);
     }
     (out, rays)
 }

@@ -8,6 +8,7 @@
 pub mod direct;
 pub mod frame_loop;
 pub mod gbuffer;
+pub mod glossy;
 pub mod light_sampling;
 pub mod parallel;
 pub mod path_tracer;

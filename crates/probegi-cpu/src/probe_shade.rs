@@ -4,10 +4,12 @@
 //! - Miss: the sky radiance.
 //! - Backface hit: zero radiance, distance shortened to 20 % and marked negative
 //!   (seed 004 §4.1; RTXGI stores `-0.2·t`), so the probe reads as shadowed there.
-//! - Front hit: direct light reflected toward the probe (punctual lights exactly,
-//!   area lights with `probe_area_light_samples` NEE samples, shadow rays) plus
-//!   albedo/π × the field's own previous irradiance at the hit — the recursion that
-//!   accumulates one more bounce per frame.
+//! - Front hit: direct light reflected toward the probe with the hit's full BSDF
+//!   (punctual lights exactly, area lights with `probe_area_light_samples` NEE
+//!   samples, shadow rays) plus diffuse albedo/π × the field's own previous
+//!   irradiance at the hit — the recursion that accumulates one more bounce per
+//!   frame — plus, with `glossy_second_order`, the hit's specular reflection of the
+//!   field (`glossy`), so light bouncing off glossy objects reaches the field.
 //!
 //! Deliberate deviations, both to avoid counting light twice:
 //! - The emission of the hit surface is *not* added. Emissive triangles are
@@ -72,13 +74,14 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut [Vec3], di
                         *d = -0.2 * s.distance;
                     }
                     Some(sp) => {
-                        // Probe rays see the diffuse lobe only: DDGI stores diffuse irradiance.
-                        let ctx = ShadingContext::diffuse(inputs.scene, sp, -dir);
-                        let albedo = ctx.bsdf.diffuse;
+                        let ctx = ShadingContext::new(inputs.scene, sp, -dir);
                         let (direct, k) = inputs.direct.reflected(sp, &ctx, area, true, &mut rng);
                         rays += k;
                         let e = irradiance(&inputs.field, sp.position, sp.facing_normal(), -dir);
-                        let l = direct + albedo * FRAC_1_PI * e;
+                        let mut l = direct + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e;
+                        if inputs.field.settings.glossy_second_order {
+                            l += crate::glossy::second_order_specular(&inputs.field, sp, &ctx, dir);
+                        }
                         *r = if l.is_finite() { l } else { Vec3::NAN };
                         *d = s.distance;
                     }

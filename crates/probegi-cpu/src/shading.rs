@@ -35,13 +35,6 @@ impl ShadingContext {
         Self { frame, wo: wo.normalize(), bsdf: scene.bsdf(sp) }
     }
 
-    /// Diffuse-only context (probe rays: DDGI stores diffuse irradiance).
-    pub fn diffuse(scene: &Scene, sp: &SurfacePoint, to_viewer_world: Vec3) -> Self {
-        let mut c = Self::new(scene, sp, to_viewer_world);
-        c.bsdf = SurfaceBsdf::lambertian(c.bsdf.diffuse_albedo());
-        c
-    }
-
     pub fn eval(&self, wi_world: Vec3) -> Vec3 {
         self.bsdf.eval(self.wo, self.frame.to_local(wi_world))
     }
