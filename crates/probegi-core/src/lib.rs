@@ -27,5 +27,6 @@ pub mod probe_relocation;
 pub mod punctual;
 pub mod rng;
 pub mod sampling;
+pub mod sh;
 
 pub use glam::{Vec2, Vec3, Vec4};
