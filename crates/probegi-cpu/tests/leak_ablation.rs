@@ -9,26 +9,8 @@ use probegi_core::image::Image;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
 use probegi_image::{LoadedImage, flip_srgb8};
-use probegi_scene::builtin::add_polygon;
+use probegi_scene::builtin::{add_box, add_polygon};
 use probegi_scene::{BvhSettings, BvhTracer, LightKind, Material, PunctualLight, Scene};
-
-/// An axis-aligned box with outward-facing faces.
-fn add_box(scene: &mut Scene, lo: Vec3, hi: Vec3, material: u32) {
-    let c = |x: bool, y: bool, z: bool| {
-        Vec3::new(if x { hi.x } else { lo.x }, if y { hi.y } else { lo.y }, if z { hi.z } else { lo.z })
-    };
-    let faces = [
-        [c(false, false, false), c(true, false, false), c(true, false, true), c(false, false, true)], // -y
-        [c(false, true, false), c(false, true, true), c(true, true, true), c(true, true, false)],     // +y
-        [c(false, false, false), c(false, true, false), c(true, true, false), c(true, false, false)], // -z
-        [c(false, false, true), c(true, false, true), c(true, true, true), c(false, true, true)],     // +z
-        [c(false, false, false), c(false, false, true), c(false, true, true), c(false, true, false)], // -x
-        [c(true, false, false), c(true, true, false), c(true, true, true), c(true, false, true)],     // +x
-    ];
-    for f in &faces {
-        add_polygon(&mut scene.mesh, f, material);
-    }
-}
 
 /// Room interior [0,4] × [0,3] × [0,4] with 0.2 m walls, a 1.2 m × 2.2 m door in
 /// the +z wall, open ground outside and a low sun shining in through the door.
@@ -45,14 +27,14 @@ fn door_room() -> Scene {
         ],
         0,
     );
-    add_box(&mut s, Vec3::new(-t, 0.0, -t), Vec3::new(0.0, 3.0, 4.0 + t), 0); // -x wall
-    add_box(&mut s, Vec3::new(4.0, 0.0, -t), Vec3::new(4.0 + t, 3.0, 4.0 + t), 0); // +x wall
-    add_box(&mut s, Vec3::new(0.0, 0.0, -t), Vec3::new(4.0, 3.0, 0.0), 0); // back wall
-    add_box(&mut s, Vec3::new(-t, 3.0, -t), Vec3::new(4.0 + t, 3.0 + t, 4.0 + t), 0); // roof
+    add_box(&mut s.mesh, Vec3::new(-t, 0.0, -t), Vec3::new(0.0, 3.0, 4.0 + t), 0); // -x wall
+    add_box(&mut s.mesh, Vec3::new(4.0, 0.0, -t), Vec3::new(4.0 + t, 3.0, 4.0 + t), 0); // +x wall
+    add_box(&mut s.mesh, Vec3::new(0.0, 0.0, -t), Vec3::new(4.0, 3.0, 0.0), 0); // back wall
+    add_box(&mut s.mesh, Vec3::new(-t, 3.0, -t), Vec3::new(4.0 + t, 3.0 + t, 4.0 + t), 0); // roof
     // Front wall with the door from x = 1.4 to 2.6, up to 2.2 m.
-    add_box(&mut s, Vec3::new(0.0, 0.0, 4.0), Vec3::new(1.4, 3.0, 4.0 + t), 0);
-    add_box(&mut s, Vec3::new(2.6, 0.0, 4.0), Vec3::new(4.0, 3.0, 4.0 + t), 0);
-    add_box(&mut s, Vec3::new(1.4, 2.2, 4.0), Vec3::new(2.6, 3.0, 4.0 + t), 0);
+    add_box(&mut s.mesh, Vec3::new(0.0, 0.0, 4.0), Vec3::new(1.4, 3.0, 4.0 + t), 0);
+    add_box(&mut s.mesh, Vec3::new(2.6, 0.0, 4.0), Vec3::new(4.0, 3.0, 4.0 + t), 0);
+    add_box(&mut s.mesh, Vec3::new(1.4, 2.2, 4.0), Vec3::new(2.6, 3.0, 4.0 + t), 0);
     s.lights.push(PunctualLight {
         kind: LightKind::Directional,
         direction: Vec3::new(0.15, -0.5, -1.0).normalize(),

@@ -7,24 +7,8 @@ use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::probe_classification::ProbeState;
 use probegi_cpu::ddgi::{DdgiVolume, SceneEvent};
 use probegi_cpu::{DirectLighting, DirectSettings};
-use probegi_scene::builtin::{add_polygon, cornell_box};
+use probegi_scene::builtin::{add_box, add_polygon, cornell_box};
 use probegi_scene::{BvhSettings, BvhTracer, Material, Scene};
-
-fn add_box(scene: &mut Scene, lo: Vec3, hi: Vec3, material: u32) {
-    let c = |x: bool, y: bool, z: bool| {
-        Vec3::new(if x { hi.x } else { lo.x }, if y { hi.y } else { lo.y }, if z { hi.z } else { lo.z })
-    };
-    for f in [
-        [c(false, false, false), c(true, false, false), c(true, false, true), c(false, false, true)],
-        [c(false, true, false), c(false, true, true), c(true, true, true), c(true, true, false)],
-        [c(false, false, false), c(false, true, false), c(true, true, false), c(true, false, false)],
-        [c(false, false, true), c(true, false, true), c(true, true, true), c(false, true, true)],
-        [c(false, false, false), c(false, false, true), c(false, true, true), c(false, true, false)],
-        [c(true, false, false), c(true, true, false), c(true, true, true), c(true, false, true)],
-    ] {
-        add_polygon(&mut scene.mesh, &f, material);
-    }
-}
 
 fn run(volume: &mut DdgiVolume, scene: &Scene, frames: std::ops::Range<u32>) {
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
@@ -39,7 +23,7 @@ fn run(volume: &mut DdgiVolume, scene: &Scene, frames: std::ops::Range<u32>) {
 fn a_probe_inside_a_thin_wall_is_moved_out_of_it() {
     // A 0.1 m wall through x ∈ [0.95, 1.05]; the probe at x = 1 sits inside it.
     let mut scene = Scene { materials: vec![Material::diffuse("wall", Vec3::splat(0.5))], ..Default::default() };
-    add_box(&mut scene, Vec3::new(0.96, -2.0, -2.0), Vec3::new(1.04, 2.0, 2.0), 0);
+    add_box(&mut scene.mesh, Vec3::new(0.96, -2.0, -2.0), Vec3::new(1.04, 2.0, 2.0), 0);
     let settings = DdgiVolumeSettings {
         probe_counts: UVec3::new(3, 1, 1),
         probe_origin_m: Some(Vec3::ZERO),

@@ -41,6 +41,24 @@ pub fn add_polygon(mesh: &mut Mesh, corners: &[Vec3], material: u32) {
     }
 }
 
+/// Adds an axis-aligned box `[lo, hi]` whose faces point outward (a solid object).
+pub fn add_box(mesh: &mut Mesh, lo: Vec3, hi: Vec3, material: u32) {
+    let c = |x: bool, y: bool, z: bool| {
+        Vec3::new(if x { hi.x } else { lo.x }, if y { hi.y } else { lo.y }, if z { hi.z } else { lo.z })
+    };
+    let faces = [
+        [c(false, false, false), c(true, false, false), c(true, false, true), c(false, false, true)], // -y
+        [c(false, true, false), c(false, true, true), c(true, true, true), c(true, true, false)],     // +y
+        [c(false, false, false), c(false, true, false), c(true, true, false), c(true, false, false)], // -z
+        [c(false, false, true), c(true, false, true), c(true, true, true), c(false, true, true)],     // +z
+        [c(false, false, false), c(false, false, true), c(false, true, true), c(false, true, false)], // -x
+        [c(true, false, false), c(true, true, false), c(true, true, true), c(true, false, true)],     // +x
+    ];
+    for f in &faces {
+        add_polygon(mesh, f, material);
+    }
+}
+
 fn v(x: f32, y: f32, z: f32) -> Vec3 {
     Vec3::new(x, y, z)
 }
@@ -143,6 +161,17 @@ pub fn furnace_box(albedo: f32, emission: f32) -> Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn box_faces_point_outward() {
+        let mut m = Mesh::default();
+        add_box(&mut m, Vec3::ZERO, Vec3::ONE, 0);
+        assert_eq!(m.triangle_count(), 12);
+        for t in 0..12 {
+            let [a, b, c] = m.vertices(t);
+            assert!(m.face_normal_scaled(t).dot((a + b + c) / 3.0 - Vec3::splat(0.5)) > 0.0, "triangle {t}");
+        }
+    }
 
     #[test]
     fn furnace_faces_point_inward() {
