@@ -24,13 +24,14 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Render frames with direct light (and, later, GI) into an image.
+    /// Render frames with direct light and, with `--gi ddgi`, dynamic diffuse GI.
     Render(RenderArgs),
     /// Path-trace the unbiased reference image.
     Reference(ReferenceArgs),
     /// FLIP between a reference and a test image; prints `mean_flip: <value>`.
     Compare(CompareArgs),
-    /// Ray-casting throughput on probe-like rays; prints JSON on stdout.
+    /// Ray-casting throughput on probe-like rays, or with `--gi ddgi` the field-update
+    /// sweep; prints JSON on stdout.
     Bench(BenchArgs),
 }
 
