@@ -111,7 +111,8 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
         if s.probe_chebyshev_weight {
             let to_probe = probe_pos - biased;
             let dist = to_probe.length();
-            let uv = if dist > 0.0 { oct_encode(-to_probe / dist) } else { Vec2::ZERO };
+            // oct_encode normalises by the L1 norm itself, so the direction need not be unit.
+            let uv = oct_encode(-to_probe);
             let moments = field.distance.sample_bilinear(probe, uv);
             weight *= chebyshev_weight(moments, dist).max(0.05);
         }

@@ -100,11 +100,6 @@ impl Scene {
         &self.materials[id as usize]
     }
 
-    /// Diffuse albedo at a surface point.
-    pub fn albedo(&self, sp: &SurfacePoint) -> Vec3 {
-        self.material(sp.material).base_color(&self.textures, sp.uv)
-    }
-
     /// The BSDF at a surface point.
     pub fn bsdf(&self, sp: &SurfacePoint) -> probegi_core::bsdf::SurfaceBsdf {
         self.material(sp.material).bsdf(&self.textures, sp.uv)
