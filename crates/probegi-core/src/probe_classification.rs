@@ -114,9 +114,9 @@ pub fn inside_grown_aabb(point: Vec3, lo: Vec3, hi: Vec3, grow: Vec3) -> bool {
 
 /// Seed 003 eq. 6.1–6.2 over one probe's signed distances (negative = backface,
 /// infinite = miss) with cage diagonal `r`: (usage, relevant samples, backfaces).
-pub fn probe_usage(signed_distance: &[f32], cage_diagonal_m: f32) -> (i32, u32, u32) {
+pub fn probe_usage(signed_distance: impl IntoIterator<Item = f32>, cage_diagonal_m: f32) -> (i32, u32, u32) {
     let (mut usage, mut relevant, mut backfaces) = (0i32, 0u32, 0u32);
-    for &d in signed_distance {
+    for d in signed_distance {
         if d < 0.0 {
             usage -= 1;
             relevant += 1;
@@ -159,7 +159,7 @@ mod tests {
     #[test]
     fn usage_counts_follow_eq_6_2() {
         let d = [0.5, 1.5, -0.2, f32::INFINITY, 0.9];
-        assert_eq!(probe_usage(&d, 1.0), (1, 3, 1));
+        assert_eq!(probe_usage(d, 1.0), (1, 3, 1));
         assert_eq!(classify_usage(1, 3, 1), ProbeState::Alive);
         assert_eq!(classify_usage(0, 0, 0), ProbeState::UsageSleeping);
         assert_eq!(classify_usage(-3, 4, 3), ProbeState::Dead);

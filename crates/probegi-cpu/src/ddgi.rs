@@ -416,11 +416,8 @@ impl DdgiVolume {
             let state = self.probe_states[p].after_update();
             self.probe_states[p] = match state {
                 ProbeState::Alive | ProbeState::UsageSleeping | ProbeState::Dead => {
-                    let d: Vec<f32> = self.surfels[p * rays_per_probe..(p + 1) * rays_per_probe]
-                        .iter()
-                        .map(signed_distance)
-                        .collect();
-                    let (usage, relevant, backfaces) = probe_usage(&d, cage_diagonal);
+                    let rays = &self.surfels[p * rays_per_probe..(p + 1) * rays_per_probe];
+                    let (usage, relevant, backfaces) = probe_usage(rays.iter().map(signed_distance), cage_diagonal);
                     let next = classify_usage(usage, relevant, backfaces);
                     let target = if next == ProbeState::Alive { max_h } else { 0.5 * max_h };
                     self.probe_hysteresis[p] += 0.1 * (target - self.probe_hysteresis[p]);
