@@ -121,6 +121,8 @@ fn bad_volume_settings_name_the_field() {
     fails_with(&["render", "--gi", "ddgi", "--set", "probe_spacing_m=[1,-1,1]", "--out", &o], "probe_spacing_m");
     fails_with(&["render", "--gi", "ddgi", "--probes", "1000,1000,1000", "--out", &o], "memory");
     fails_with(&["render", "--show-probes", "--out", &o], "--gi ddgi");
+    fails_with(&["render", "--gi", "ddgi", "--set", "probe_states=weird", "--out", &o], "all-active");
+    fails_with(&["render", "--gi", "ddgi", "--set", "relocation=maybe", "--out", &o], "probe_relocation");
 }
 
 #[test]
