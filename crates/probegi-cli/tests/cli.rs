@@ -103,6 +103,8 @@ fn ddgi_render_reports_field_stats_and_dumps_atlases() {
     }
     assert!(json["field_update_ms"].as_f64().expect("field_update_ms") > 0.0);
     assert!(json["field_update_mrays_per_s"].as_f64().expect("mrays") > 0.0);
+    let states = json["probe_states"].as_object().expect("probe_states");
+    assert_eq!(states.values().filter_map(|v| v.as_u64()).sum::<u64>(), 27, "{states:?}");
     for f in ["irradiance.exr", "irradiance.png", "distance.exr", "distance.png"] {
         assert!(atlases.join(f).exists(), "{f} not written");
     }
