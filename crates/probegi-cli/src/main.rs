@@ -195,6 +195,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             "field_update_ms": stats.field_update_ms,
             "field_update_mrays_per_s": stats.field_update_mrays_per_s,
             "probe_states": stats.probe_states,
+            "active_probes": stats.active_probes,
         });
         write_text(path, &serde_json::to_string_pretty(&json)?)?;
     }

@@ -60,6 +60,8 @@ pub struct RenderStats {
     pub field_update_mrays_per_s: Option<f64>,
     /// DDGI only: probes per state name after the last frame.
     pub probe_states: Option<BTreeMap<&'static str, usize>>,
+    /// DDGI only: probes that traced and blended in the last frame.
+    pub active_probes: Option<usize>,
 }
 
 pub struct RenderOutput {
@@ -140,6 +142,7 @@ pub fn render_frames(
         stats.field_update_ms = Some(update_ms);
         stats.field_update_mrays_per_s = Some(v.rays_per_frame() as f64 / (update_ms * 1e-3) / 1e6);
         stats.probe_states = Some(v.state_counts());
+        stats.active_probes = Some(v.active_probe_count());
     }
     let mut pixels: Vec<Vec3> =
         direct_sum.iter().zip(&indirect).map(|(d, i)| (*d / frames as f64).as_vec3() + *i).collect();

@@ -135,3 +135,14 @@ fn converged_field_is_stable_from_frame_to_frame() {
     eprintln!("converged per-frame change {:.4} %", 100.0 * change / mean);
     assert!(change / mean < 0.01, "floor irradiance changes by {:.3} % per frame", 100.0 * change / mean);
 }
+
+#[test]
+fn ddgi_renders_are_identical_for_any_thread_count() {
+    let scene = cornell_box();
+    let settings = DdgiVolumeSettings { probe_counts: UVec3::splat(4), probe_rays_per_probe: 32, ..Default::default() };
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+    let three = rayon::ThreadPoolBuilder::new().num_threads(3).build().expect("pool");
+    let a = one.install(|| render(&scene, 24, 4, ddgi(settings.clone())).image);
+    let b = three.install(|| render(&scene, 24, 4, ddgi(settings.clone())).image);
+    assert_eq!(a, b);
+}
