@@ -134,8 +134,9 @@ impl DdgiVolume {
         }
     }
 
+    /// Probe rays traced by the last update (active probes × rays per probe).
     pub fn rays_per_frame(&self) -> u64 {
-        self.surfels.len() as u64
+        self.active_probe_count() as u64 * self.settings.probe_rays_per_probe as u64
     }
 
     /// Probe rays traced in the last update (active probes only).
