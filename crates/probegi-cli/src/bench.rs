@@ -86,6 +86,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
                 "probe_states": volume.state_counts(),
                 "active_probes": volume.active_probe_count(),
                 "probe_init_ms": init_ms,
+                "volume_mib": ddgi_volume_bytes(&settings) as f64 / (1u64 << 20) as f64,
                 "rays_per_probe": rays,
                 "rays_per_frame": n as u64,
                 "pass_ms": pass_ms,
@@ -103,8 +104,16 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
         "triangles": scene.mesh.triangle_count(),
         "threads": rayon::current_num_threads(),
         "frames_timed": args.frames,
+        "peak_rss_mib": peak_rss_mib(),
         "sweep": rows,
     }))
+}
+
+/// The process's peak resident set (VmHWM) in MiB, where /proc provides it.
+fn peak_rss_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kb: f64 = status.lines().find(|l| l.starts_with("VmHWM:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
 }
 
 fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
@@ -173,5 +182,6 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
         "any_hit_max_distance_m": any_hit_len,
         "any_hit_mrays_per_s": n / any_s / 1e6,
         "any_hit_fraction": any_hits as f64 / n,
+        "peak_rss_mib": peak_rss_mib(),
     }))
 }

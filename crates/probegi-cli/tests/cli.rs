@@ -185,4 +185,5 @@ fn bench_prints_json_with_throughput() {
     assert!(json["closest_hit_mrays_per_s"].as_f64().expect("closest") > 0.0);
     assert!(json["any_hit_mrays_per_s"].as_f64().expect("any") > 0.0);
     assert!(json["bvh_build_ms"].as_f64().expect("build") >= 0.0);
+    assert!(json["peak_rss_mib"].as_f64().expect("peak rss") > 0.0);
 }
