@@ -29,7 +29,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     use probegi_core::ddgi_settings::DdgiVolumeSettings;
     use probegi_cpu::ddgi::{DdgiVolume, ddgi_volume_bytes};
     use probegi_cpu::frame_loop::FIELD_UPDATE_PASSES;
-    use probegi_cpu::probe_ray_gen::generate_probe_rays;
+    use probegi_cpu::probe_ray_gen::probe_ray_directions;
     use probegi_cpu::{DirectLighting, DirectSettings};
     use std::collections::BTreeMap;
 
@@ -71,7 +71,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
             let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| pass_ms.get(p)).sum();
             let n = volume.rays_per_frame() as f64;
             // The same rays, bare: closest hit only, no surfel.
-            let dirs = generate_probe_rays(&settings, args.seed, args.frames).dirs;
+            let dirs = probe_ray_directions(&settings, args.seed, args.frames);
             let t = Instant::now();
             let hits: usize = volume
                 .probe_positions

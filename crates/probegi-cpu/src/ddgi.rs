@@ -32,7 +32,7 @@ use probegi_scene::{RayTracer, Scene};
 use rayon::prelude::*;
 
 use crate::direct::DirectLighting;
-use crate::probe_ray_gen::generate_probe_rays;
+use crate::probe_ray_gen::{generate_probe_rays, probe_ray_directions};
 use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
 use crate::probe_trace::{Surfel, signed_distance, trace_probe_rays};
 
@@ -204,7 +204,7 @@ impl DdgiVolume {
     /// Distance-only trace from every probe with directions of pseudo-frame `frame`;
     /// returns signed true distances per ray (probe-major).
     fn trace_distances(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64, frame: u32) -> (Vec<Vec3>, u64) {
-        let dirs = generate_probe_rays(&self.settings, seed, frame).dirs;
+        let dirs = probe_ray_directions(&self.settings, seed, frame);
         let max = self.settings.probe_max_ray_distance_m;
         let n = trace_probe_rays(scene, tracer, &self.probe_positions, &[], &dirs, max, &mut self.surfels);
         (dirs, n)

@@ -22,11 +22,17 @@ pub struct ProbeRayDirections {
     pub distance_weights: BlendWeights,
 }
 
-pub fn generate_probe_rays(settings: &DdgiVolumeSettings, seed: u64, frame: u32) -> ProbeRayDirections {
+/// The frame's rotated spherical Fibonacci directions alone (distance-only traces
+/// need no blend weights).
+pub fn probe_ray_directions(settings: &DdgiVolumeSettings, seed: u64, frame: u32) -> Vec<Vec3> {
     let n = settings.probe_rays_per_probe;
     let mut rng = Pcg32::new(hash_combine(&[seed, frame as u64, 0x7261_7973]), frame as u64);
     let rotation = sample_uniform_rotation(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()));
-    let dirs: Vec<Vec3> = (0..n).map(|i| (rotation * spherical_fibonacci(i, n)).normalize()).collect();
+    (0..n).map(|i| (rotation * spherical_fibonacci(i, n)).normalize()).collect()
+}
+
+pub fn generate_probe_rays(settings: &DdgiVolumeSettings, seed: u64, frame: u32) -> ProbeRayDirections {
+    let dirs = probe_ray_directions(settings, seed, frame);
     ProbeRayDirections {
         irradiance_weights: BlendWeights::new(&dirs, settings.probe_irradiance_texels, 1.0),
         distance_weights: BlendWeights::new(&dirs, settings.probe_distance_texels, settings.probe_distance_exponent),

@@ -12,7 +12,7 @@ use probegi_core::image::Image;
 use probegi_cpu::ddgi::DdgiVolume;
 use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
 use probegi_cpu::{DirectLighting, DirectSettings};
-use probegi_image::{LoadedImage, flip_srgb8, read_image};
+use probegi_image::{LoadedImage, mean_flip_hdr, read_image};
 use probegi_scene::builtin::{cornell_box, furnace_box};
 use probegi_scene::{BvhSettings, BvhTracer, Scene};
 
@@ -36,8 +36,7 @@ fn ddgi(settings: DdgiVolumeSettings) -> GiMethod {
 }
 
 fn flip(a: &Image, b: &Image) -> f32 {
-    let (a8, b8) = (LoadedImage::Hdr(a.clone()).to_srgb8(), LoadedImage::Hdr(b.clone()).to_srgb8());
-    flip_srgb8(a.width, a.height, &a8, &b8).mean_flip
+    mean_flip_hdr(a, b).expect("same size")
 }
 
 #[test]

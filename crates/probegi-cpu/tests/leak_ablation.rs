@@ -8,7 +8,7 @@ use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
 use probegi_core::image::Image;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
-use probegi_image::{LoadedImage, flip_srgb8};
+use probegi_image::mean_flip_hdr;
 use probegi_scene::builtin::{add_box, add_polygon};
 use probegi_scene::{BvhSettings, BvhTracer, LightKind, Material, PunctualLight, Scene};
 
@@ -50,8 +50,7 @@ fn door_room() -> Scene {
 }
 
 fn flip(a: &Image, b: &Image) -> f32 {
-    let (a8, b8) = (LoadedImage::Hdr(a.clone()).to_srgb8(), LoadedImage::Hdr(b.clone()).to_srgb8());
-    flip_srgb8(a.width, a.height, &a8, &b8).mean_flip
+    mean_flip_hdr(a, b).expect("same size")
 }
 
 #[test]

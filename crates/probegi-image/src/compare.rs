@@ -31,6 +31,16 @@ pub fn flip_srgb8(width: u32, height: u32, reference: &[u8], test: &[u8]) -> Fli
     FlipResult { width, height, mean_flip, error_map: err.to_vec() }
 }
 
+/// Mean FLIP between two in-memory HDR images, both through the fixed tone map;
+/// `None` when their sizes differ.
+pub fn mean_flip_hdr(reference: &probegi_core::image::Image, test: &probegi_core::image::Image) -> Option<f32> {
+    if (reference.width, reference.height) != (test.width, test.height) {
+        return None;
+    }
+    let (r, t) = (LoadedImage::Hdr(reference.clone()).to_srgb8(), LoadedImage::Hdr(test.clone()).to_srgb8());
+    Some(flip_srgb8(reference.width, reference.height, &r, &t).mean_flip)
+}
+
 /// FLIP between two loaded images; sizes must match.
 pub fn flip_images(
     reference: &LoadedImage,
@@ -108,6 +118,15 @@ mod tests {
         let black = vec![0u8; a.len()];
         let large = flip_srgb8(32, 16, &a, &black).mean_flip;
         assert!(small > 0.01 && large > small && large <= 1.0, "small {small}, large {large}");
+    }
+
+    #[test]
+    fn hdr_flip_is_zero_for_equal_images_and_none_for_different_sizes() {
+        let mut a = probegi_core::image::Image::new(8, 8);
+        a.set(3, 3, glam::Vec3::splat(2.0));
+        assert_eq!(mean_flip_hdr(&a, &a), Some(0.0));
+        assert!(mean_flip_hdr(&a, &probegi_core::image::Image::new(8, 8)).expect("same size") > 0.0);
+        assert_eq!(mean_flip_hdr(&a, &probegi_core::image::Image::new(8, 9)), None);
     }
 
     #[test]

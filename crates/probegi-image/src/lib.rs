@@ -3,5 +3,5 @@
 pub mod compare;
 pub mod io;
 
-pub use compare::{FlipResult, compare_files, flip_srgb8};
+pub use compare::{FlipResult, compare_files, flip_srgb8, mean_flip_hdr};
 pub use io::{ImageError, LoadedImage, read_image, write_image};
