@@ -48,7 +48,7 @@ fn main() -> anyhow::Result<()> {
                 (d, env(d), 4.0 * PI / m as f32)
             })
             .collect();
-        progressive_update(&mut prog, &samples, 0.05);
+        progressive_update(&mut prog, samples, 0.05);
         let err: f32 = prog.c.iter().zip(stat.c).map(|(a, b)| (*a - b).length_squared()).sum::<f32>().sqrt();
         println!("iteration {it:3}: |c - c_static| = {err:.5}");
         if [1, 5, 20, 100].contains(&it) {

@@ -91,6 +91,14 @@ impl CameraRays {
             .normalize()
     }
 
+    /// Solid angle of the pixel whose ray runs along `dir_world` (unit): the pixel's
+    /// area on the image plane at distance 1, times cos³ of its angle off the axis.
+    pub fn pixel_solid_angle_sr(&self, dir_world: Vec3) -> f32 {
+        let pixel = 2.0 * self.tan_half_fov_y / self.height;
+        let cos = dir_world.dot(self.forward_world).max(0.0);
+        pixel * pixel * cos * cos * cos
+    }
+
     /// Continuous pixel position a world point projects to, if it is in front of the camera.
     pub fn project_world(&self, point_world: glam::Vec3) -> Option<glam::Vec2> {
         let d = point_world - self.origin_world;
@@ -129,6 +137,20 @@ mod tests {
             let back = rays.project_world(p).expect("in front");
             assert!((back - glam::Vec2::new(x, y)).length() < 1e-3);
         }
+    }
+
+    #[test]
+    fn pixel_solid_angles_sum_to_the_frustum() {
+        // A 90°×90° frustum spans 2π/3 sr.
+        let cam = Camera { fov_y_deg: 90.0, ..Camera::default() };
+        let rays = CameraRays::new(&cam, 200, 200);
+        let mut sum = 0.0f64;
+        for y in 0..200 {
+            for x in 0..200 {
+                sum += rays.pixel_solid_angle_sr(rays.ray_dir_world(x as f32 + 0.5, y as f32 + 0.5)) as f64;
+            }
+        }
+        assert!((sum - 2.0 * std::f64::consts::PI / 3.0).abs() < 1e-3, "{sum}");
     }
 
     #[test]

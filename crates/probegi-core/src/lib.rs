@@ -30,3 +30,6 @@ pub mod sampling;
 pub mod sh;
 
 pub use glam::{Vec2, Vec3, Vec4};
+pub mod sh_cascades;
+pub mod sh_probe_update;
+pub mod sh_settings;

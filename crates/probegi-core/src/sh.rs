@@ -89,14 +89,18 @@ impl ShRgb9 {
 /// (tested below) and, for screen samples that cover only part of the sphere,
 /// corrects only the directions it observed. A step whose result is not finite is
 /// dropped.
-pub fn progressive_update(c: &mut ShRgb9, samples: &[(Vec3, Vec3, f32)], hysteresis: f32) {
+pub fn progressive_update(c: &mut ShRgb9, samples: impl IntoIterator<Item = (Vec3, Vec3, f32)>, hysteresis: f32) {
     let mut next = *c;
-    for &(d, f, w) in samples {
+    for (d, f, w) in samples {
         if !(f.is_finite() && w.is_finite()) || w < 0.0 {
             continue;
         }
-        let error = f - c.eval(d);
-        next.add_sample(d, error, w * hysteresis);
+        let y = sh9_basis(d);
+        let predicted: Vec3 = c.c.iter().zip(y).map(|(c, y)| *c * y).sum();
+        let step = (f - predicted) * (w * hysteresis);
+        for (n, y) in next.c.iter_mut().zip(y) {
+            *n += step * y;
+        }
     }
     if next.is_finite() {
         *c = next;
@@ -194,7 +198,7 @@ mod tests {
                     (d, env(d), 4.0 * PI / m as f32)
                 })
                 .collect();
-            progressive_update(&mut prog, &samples, h);
+            progressive_update(&mut prog, samples, h);
             let err: f32 = prog.c.iter().zip(stat.c).map(|(a, b)| (*a - b).length_squared()).sum::<f32>().sqrt();
             errors.push(err);
         }
