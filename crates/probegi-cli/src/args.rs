@@ -24,14 +24,15 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Render frames with direct light and, with `--gi ddgi`, dynamic diffuse GI.
+    /// Render frames with direct light and, with `--gi ddgi` or `--gi sh`, diffuse GI.
     Render(RenderArgs),
     /// Path-trace the unbiased reference image.
     Reference(ReferenceArgs),
     /// FLIP between a reference and a test image; prints `mean_flip: <value>`.
     Compare(CompareArgs),
-    /// Ray-casting throughput on probe-like rays, or with `--gi ddgi` the field-update
-    /// sweep; prints JSON on stdout.
+    /// Ray-casting throughput on probe-like rays; with `--gi ddgi` the field-update
+    /// sweep; with `--gi sh` SH probe update against DDGI at the same probe count.
+    /// Prints JSON on stdout.
     Bench(BenchArgs),
 }
 
@@ -101,6 +102,9 @@ pub enum GiArg {
     None,
     /// Dynamic diffuse global illumination: one probe volume over the scene.
     Ddgi,
+    /// Screen-space GI with progressive spherical-harmonics probes (seed 001):
+    /// camera-centred cascades updated from the lit frame, no probe rays.
+    Sh,
 }
 
 /// DDGI volume options shared by `render` and `bench`.
@@ -112,7 +116,8 @@ pub struct VolumeArgs {
     /// Rays per probe per frame.
     #[arg(long)]
     pub rays_per_probe: Option<u32>,
-    /// Override any volume setting by its TOML name, e.g. `--set hysteresis=0.9` (repeatable).
+    /// Override any volume setting by its TOML name, e.g. `--set hysteresis=0.9`
+    /// (repeatable). Under `--gi sh` the keys are the `[sh]` settings, e.g. `--set sh_occlusion=true`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
 }
@@ -193,7 +198,9 @@ pub struct BenchArgs {
     /// Random seed for ray directions.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// `ddgi`: sweep rays per probe (32–256) × probe grids and time the field update.
+    /// `ddgi`: sweep rays per probe (32–256) × probe grids and time the field update;
+    /// `sh`: per grid, the SH probe update (without and with occlusion) against the
+    /// DDGI field update at the same probe count (`--rays`, default 256) on the scene's camera.
     #[arg(long, value_enum, default_value_t = GiArg::None)]
     pub gi: GiArg,
     /// DDGI sweep: frames timed per configuration (after one warm-up frame).

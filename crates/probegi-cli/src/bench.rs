@@ -19,7 +19,91 @@ pub fn run(args: &BenchArgs) -> Result<serde_json::Value> {
     match args.gi {
         crate::args::GiArg::None => run_rays(args),
         crate::args::GiArg::Ddgi => run_ddgi(args),
+        crate::args::GiArg::Sh => run_sh(args),
     }
+}
+
+/// `bench --gi sh`: seed 001 §7.2's cost comparison. Per grid, in one run on the
+/// scene's camera: the DDGI field update (`--rays` per probe, default 256) and the
+/// SH probe update with one cascade of the same probe count, without and with
+/// occlusion. Both run inside the real frame loop at 256×256; only their update
+/// passes are timed (mean over all `--frames` + 1 frames).
+fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
+    use probegi_core::camera::CameraRays;
+    use probegi_core::ddgi_settings::DdgiVolumeSettings;
+    use probegi_core::sh_settings::ShProbeSettings;
+    use probegi_cpu::DirectSettings;
+    use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+
+    if args.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let grids = if args.grids.is_empty() { vec![[16, 8, 16]] } else { args.grids.clone() };
+    let rays = args.rays.first().copied().unwrap_or(256);
+    let scene = load_scene(&args.scene).with_context(|| format!("loading scene {}", args.scene))?;
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
+    let camera = CameraRays::new(&scene.default_camera(), 256, 256);
+    let timed = |gi: GiMethod| {
+        let settings = RenderSettings {
+            width: 256,
+            height: 256,
+            frames: args.frames + 1,
+            seed: args.seed,
+            gi,
+            direct: DirectSettings::default(),
+            show_probes: false,
+        };
+        render_frames(&scene, &bvh, &camera, &settings, |_| {}).stats
+    };
+    let mut rows = Vec::new();
+    for grid in &grids {
+        let mut ddgi = DdgiVolumeSettings {
+            probe_counts: glam::UVec3::from(*grid),
+            probe_rays_per_probe: rays,
+            ..Default::default()
+        };
+        for a in &args.set {
+            ddgi = probegi_scene::scene_file::apply_volume_override(&ddgi, a)
+                .map_err(anyhow::Error::msg)
+                .with_context(|| format!("--set {a}"))?;
+        }
+        ddgi.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
+        crate::check_memory(probegi_cpu::ddgi::ddgi_volume_bytes(&ddgi), "the DDGI volume")?;
+        let d = timed(GiMethod::Ddgi(Box::new(ddgi)));
+        let ddgi_ms = d.field_update_ms.unwrap_or(0.0);
+        let mut row = json!({
+            "probes": grid,
+            "probe_count": d.probes,
+            "ddgi_rays_per_probe": rays,
+            "ddgi_active_probes": d.active_probes,
+            "ddgi_field_update_ms": ddgi_ms,
+            "ddgi_pass_ms": d.pass_ms,
+        });
+        for occlusion in [false, true] {
+            let sh = ShProbeSettings {
+                sh_cascade_count: 1,
+                sh_cascade_probe_counts: glam::UVec3::from(*grid),
+                sh_occlusion: occlusion,
+                ..Default::default()
+            };
+            let s = timed(GiMethod::Sh(Box::new(sh)));
+            let sh_ms = s.field_update_ms.unwrap_or(0.0);
+            let key = if occlusion { "sh_occlusion" } else { "sh" };
+            row[format!("{key}_update_ms")] = json!(sh_ms);
+            row[format!("{key}_pass_ms")] = json!(s.pass_ms);
+            row[format!("ddgi_over_{key}")] = json!(ddgi_ms / sh_ms);
+        }
+        rows.push(row);
+    }
+    Ok(json!({
+        "scene": args.scene,
+        "triangles": scene.mesh.triangle_count(),
+        "threads": rayon::current_num_threads(),
+        "frames": args.frames + 1,
+        "note": "update ms are means over all frames of the run, the first included",
+        "peak_rss_mib": peak_rss_mib(),
+        "comparison": rows,
+    }))
 }
 
 /// `bench --gi ddgi`: the field update over a sweep of rays per probe × probe grids

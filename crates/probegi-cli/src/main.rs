@@ -19,6 +19,7 @@ use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 
 use args::{Cli, Command, GiArg, ReferenceArgs, RenderArgs, SceneArgs, VolumeArgs};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::sh_settings::ShProbeSettings;
 use probegi_cpu::ddgi::ddgi_volume_bytes;
 
 fn main() -> ExitCode {
@@ -142,8 +143,9 @@ fn render(args: &RenderArgs) -> Result<()> {
     let gi = match args.gi {
         GiArg::None => GiMethod::None,
         GiArg::Ddgi => GiMethod::Ddgi(Box::new(volume_settings(&scene, &args.volume)?)),
+        GiArg::Sh => GiMethod::Sh(Box::new(sh_settings(&scene, &args.volume)?)),
     };
-    if gi == GiMethod::None && (args.dump_atlases.is_some() || args.show_probes) {
+    if !matches!(gi, GiMethod::Ddgi(_)) && (args.dump_atlases.is_some() || args.show_probes) {
         bail!("--dump-atlases and --show-probes need --gi ddgi");
     }
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
@@ -221,6 +223,25 @@ pub fn volume_settings(scene: &Scene, args: &VolumeArgs) -> Result<DdgiVolumeSet
     }
     s.validate().map_err(|(field, why)| anyhow::anyhow!("volume setting {field}: {why}"))?;
     check_memory(ddgi_volume_bytes(&s), "the DDGI volume")?;
+    Ok(s)
+}
+
+/// SH probe settings: the paper's defaults, then the scene file's `[sh]`, then each
+/// `--set`. `--probes` sets the probe counts of every cascade.
+pub fn sh_settings(scene: &Scene, args: &VolumeArgs) -> Result<ShProbeSettings> {
+    let mut s = scene.sh_probes.clone().unwrap_or_default();
+    if let Some(p) = args.probes {
+        s.sh_cascade_probe_counts = glam::UVec3::from(p);
+    }
+    if args.rays_per_probe.is_some() {
+        bail!("--rays-per-probe is a DDGI setting; SH probes trace no rays (see --set sh_screen_samples)");
+    }
+    for a in &args.set {
+        s = probegi_scene::scene_file::apply_sh_override(&s, a)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("--set {a}"))?;
+    }
+    s.validate().map_err(|(field, why)| anyhow::anyhow!("SH setting {field}: {why}"))?;
     Ok(s)
 }
 

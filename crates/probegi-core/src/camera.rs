@@ -91,6 +91,11 @@ impl CameraRays {
             .normalize()
     }
 
+    /// Unit viewing direction (the optical axis).
+    pub fn forward_world(&self) -> Vec3 {
+        self.forward_world
+    }
+
     /// Solid angle of the pixel whose ray runs along `dir_world` (unit): the pixel's
     /// area on the image plane at distance 1, times cos³ of its angle off the axis.
     pub fn pixel_solid_angle_sr(&self, dir_world: Vec3) -> f32 {

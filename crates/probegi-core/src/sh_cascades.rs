@@ -120,23 +120,39 @@ impl ShCascade {
 pub struct ShCascades {
     /// Finest first.
     pub cascades: Vec<ShCascade>,
+    /// Each cascade's centre moves this fraction of its half-extent (smallest
+    /// axis) along the view direction; 0 centres it on the camera (the paper).
+    pub view_offset_rel: f32,
 }
 
 impl ShCascades {
     pub fn new(count: u32, counts: UVec3, spacing_m: f32, spacing_ratio: f32) -> Self {
-        let cascades = (0..count.max(1)).map(|k| ShCascade::new(spacing_m * spacing_ratio.powi(k as i32), counts)).collect();
-        Self { cascades }
+        let cascades =
+            (0..count.max(1)).map(|k| ShCascade::new(spacing_m * spacing_ratio.powi(k as i32), counts)).collect();
+        Self { cascades, view_offset_rel: 0.0 }
     }
 
-    /// Moves every cascade to the quantized position around `camera_m`; see the
-    /// module doc for what happens to the data. Returns the probes reset.
-    pub fn recentre(&mut self, camera_m: Vec3) -> usize {
+    /// The finest spacing for which the coarsest cascade, centred on `camera_m`,
+    /// contains every point of the box `lo..hi` with a cell to spare.
+    pub fn spacing_to_cover(camera_m: Vec3, lo: Vec3, hi: Vec3, count: u32, counts: UVec3, spacing_ratio: f32) -> f32 {
+        let reach = (hi - camera_m).abs().max((camera_m - lo).abs());
+        let half_cells = ((counts / 2).as_vec3() - Vec3::splat(1.5)).max(Vec3::splat(0.5));
+        let coarsest = (reach / half_cells).max_element().max(1e-4);
+        coarsest / spacing_ratio.powi(count.max(1) as i32 - 1)
+    }
+
+    /// Moves every cascade to the quantized position around the camera (pushed
+    /// along `view_dir` by `view_offset_rel`); see the module doc for what happens
+    /// to the data. Returns the probes reset.
+    pub fn recentre(&mut self, camera_m: Vec3, view_dir: Vec3) -> usize {
         let mut reset = 0;
         for k in (0..self.cascades.len()).rev() {
             let (finer, coarser) = self.cascades.split_at_mut(k + 1);
             let cascade = &mut finer[k];
             let coarser = coarser.first();
-            let origin = cascade.centred_origin(camera_m);
+            let half_extent = (cascade.counts / 2).min_element() as f32 * cascade.spacing_m;
+            let centre = camera_m + view_dir * (self.view_offset_rel * half_extent);
+            let origin = cascade.centred_origin(centre);
             if origin == cascade.origin_lattice {
                 continue;
             }
@@ -205,19 +221,37 @@ mod tests {
     #[test]
     fn grids_centre_on_the_camera_in_whole_cells() {
         let mut c = ShCascades::new(2, UVec3::new(4, 4, 4), 0.5, 2.0);
-        c.recentre(Vec3::new(0.2, 0.1, -0.2));
+        c.recentre(Vec3::new(0.2, 0.1, -0.2), Vec3::Z);
         assert_eq!(c.cascades[0].origin_lattice, IVec3::new(-2, -2, -2));
         assert_eq!(c.cascades[1].origin_lattice, IVec3::new(-2, -2, -2));
         // A move smaller than half a cell keeps the grid where it is.
-        assert_eq!(c.recentre(Vec3::new(0.2, 0.2, -0.2)), 0);
+        assert_eq!(c.recentre(Vec3::new(0.2, 0.2, -0.2), Vec3::Z), 0);
         assert!(c.cascades[0].contains(Vec3::splat(0.4)) && !c.cascades[0].contains(Vec3::splat(0.6)));
         assert!(c.cascades[1].contains(Vec3::splat(0.9)) && !c.cascades[1].contains(Vec3::splat(1.1)));
+        // Pushed along the view by its half-extent, the fine grid starts at the camera.
+        c.view_offset_rel = 1.0;
+        c.recentre(Vec3::ZERO, Vec3::X);
+        assert_eq!(c.cascades[0].origin_lattice, IVec3::new(0, -2, -2));
+    }
+
+    #[test]
+    fn fitted_spacing_puts_the_scene_inside_the_coarsest_cascade() {
+        let (lo, hi) = (Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 2.0, 1.0));
+        let cam = Vec3::new(0.0, 1.0, 3.9);
+        let counts = UVec3::new(16, 8, 16);
+        let s = ShCascades::spacing_to_cover(cam, lo, hi, 2, counts, 2.0);
+        let mut c = ShCascades::new(2, counts, s, 2.0);
+        c.recentre(cam, Vec3::NEG_Z);
+        for corner in 0..8 {
+            let p = Vec3::select(glam::BVec3::new(corner & 1 == 1, corner & 2 == 2, corner & 4 == 4), hi, lo);
+            assert!(c.cascades[1].contains(p), "{p} outside");
+        }
     }
 
     #[test]
     fn a_shift_keeps_probes_that_stay_and_seeds_entering_ones_from_the_coarser_cascade() {
         let mut c = ShCascades::new(2, UVec3::new(4, 4, 4), 1.0, 2.0);
-        c.recentre(Vec3::ZERO);
+        c.recentre(Vec3::ZERO, Vec3::Z);
         for (i, s) in c.cascades[0].coeffs.iter_mut().enumerate() {
             *s = constant(10.0 + i as f32);
         }
@@ -227,7 +261,7 @@ mod tests {
         let before: Vec<(IVec3, ShRgb9)> =
             c.cascades[0].slot_lattice.iter().copied().zip(c.cascades[0].coeffs.iter().copied()).collect();
         // One cell along +x: the fine grid moves, the coarse one (spacing 2) does not.
-        let reset = c.recentre(Vec3::new(0.9, 0.0, 0.0));
+        let reset = c.recentre(Vec3::new(0.9, 0.0, 0.0), Vec3::Z);
         assert_eq!(reset, 16, "one 4×4 slab enters the fine cascade");
         let fine = &c.cascades[0];
         for (lattice, coeffs) in before {
@@ -245,7 +279,7 @@ mod tests {
     #[test]
     fn interpolation_reproduces_linear_fields_and_blends_into_the_coarser_cascade() {
         let mut c = ShCascades::new(2, UVec3::new(4, 4, 4), 1.0, 2.0);
-        c.recentre(Vec3::ZERO);
+        c.recentre(Vec3::ZERO, Vec3::Z);
         for cascade in &mut c.cascades {
             for slot in 0..cascade.coeffs.len() {
                 let p = cascade.lattice_position(cascade.slot_lattice[slot]);

@@ -117,7 +117,8 @@ mod tests {
                     }
                 })
                 .collect();
-            let weighted = samples.iter().filter_map(|s| sample_toward_probe(s, probe).map(|(d, w)| (d, s.radiance, w)));
+            let weighted =
+                samples.iter().filter_map(|s| sample_toward_probe(s, probe).map(|(d, w)| (d, s.radiance, w)));
             progressive_update(&mut c, weighted, 0.1);
             assert!(c.is_finite(), "frame {frame}");
         }

@@ -7,8 +7,9 @@
 //!   hysteresis" (§4) without a value. 0.1 converges the Cornell box in about
 //!   60 frames without visible flicker (see the issue-5 note for the sweep).
 //! - `sh_cascade_count` = 2: the paper supports "multiple nested cascades" (§6.3).
-//! - `sh_cascade_spacing_m` absent: the finest cascade's spacing is fitted so that
-//!   it spans the scene's largest extent; each coarser cascade doubles it.
+//! - `sh_cascade_spacing_m` absent: the spacing is fitted so that the coarsest
+//!   cascade, centred on the camera, contains the whole scene; each finer cascade
+//!   halves it.
 //! - the light-injection weights and cut-off (§5.2: "a reasonable magic number").
 
 use glam::{UVec2, UVec3};
@@ -31,6 +32,11 @@ pub struct ShProbeSettings {
     pub sh_cascade_spacing_m: Option<f32>,
     /// Spacing ratio between consecutive cascades.
     pub sh_cascade_spacing_ratio: f32,
+    /// Moves each cascade's centre along the view direction by this fraction of
+    /// its half-extent: 0 centres the cascades on the camera (seed 001 §6.2);
+    /// 1 puts the camera on the near face, so a camera outside the scene (the
+    /// Cornell box) spends its probes in front of it instead of behind it.
+    pub sh_cascade_view_offset_rel: f32,
     /// Jitter each probe uniformly within its cell at every update (seed 001 §6.2).
     pub sh_probe_jitter: bool,
     /// Seed 001 §5.2: area lights and the sky reach surfaces through the probes:
@@ -65,6 +71,7 @@ impl Default for ShProbeSettings {
             sh_cascade_probe_counts: UVec3::new(16, 8, 16),
             sh_cascade_spacing_m: None,
             sh_cascade_spacing_ratio: 2.0,
+            sh_cascade_view_offset_rel: 0.0,
             sh_probe_jitter: true,
             sh_light_injection: true,
             sh_light_samples_per_emitter: 4,
@@ -106,6 +113,12 @@ impl ShProbeSettings {
         }
         if !(self.sh_cascade_spacing_ratio.is_finite() && self.sh_cascade_spacing_ratio >= 1.0) {
             return Err(("sh_cascade_spacing_ratio", format!("{} must be at least 1", self.sh_cascade_spacing_ratio)));
+        }
+        if !(0.0..=1.0).contains(&self.sh_cascade_view_offset_rel) {
+            return Err((
+                "sh_cascade_view_offset_rel",
+                format!("{} must be in [0, 1]", self.sh_cascade_view_offset_rel),
+            ));
         }
         if self.sh_light_samples_per_emitter > 1024 || self.sh_sky_samples_per_probe > 4096 {
             return Err((

@@ -1,8 +1,10 @@
 //! The per-frame loop of `probegi render`: passes in order, per-pass timings and
 //! ray counts.
 //!
-//! Per frame: the GI field update (DDGI: `ray_gen`, `trace`, `shade`, `blend`,
+//! Per frame, DDGI: the field update (`ray_gen`, `trace`, `shade`, `blend`,
 //! `border`), then `gbuffer` (primary rays) and `camera` (shading each pixel).
+//! SH probes (seed 001 §6.1): `gbuffer`, `camera` (the lighting pass reads the
+//! probes), then the probe update from that frame (`sh_screen_samples`, `sh_update`).
 //! The direct term (emission + direct light) of a static scene accumulates over
 //! frames; the indirect term is the last frame's, so the image shows the field as
 //! it stands after N updates.
@@ -22,7 +24,11 @@ use std::f32::consts::FRAC_1_PI;
 use crate::ddgi::DdgiVolume;
 use crate::direct::{DirectLighting, DirectSettings};
 use crate::gbuffer::{GBuffer, trace_gbuffer};
+use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
 use crate::shading::{ShadingContext, lambert_cos};
+use probegi_core::ddgi_query::DdgiFieldView;
+use probegi_core::sh_cascades::ShCascades;
+use probegi_core::sh_settings::ShProbeSettings;
 
 /// Which global illumination runs on top of direct light.
 #[derive(Clone, Debug, PartialEq)]
@@ -31,6 +37,23 @@ pub enum GiMethod {
     None,
     /// Dynamic diffuse global illumination with one probe volume.
     Ddgi(Box<DdgiVolumeSettings>),
+    /// Screen-space GI with progressive SH probes (seed 001).
+    Sh(Box<ShProbeSettings>),
+}
+
+/// Where the camera pass reads indirect irradiance.
+enum IndirectField<'a> {
+    Ddgi(DdgiFieldView<'a>),
+    Sh(&'a ShCascades),
+}
+
+impl IndirectField<'_> {
+    fn irradiance(&self, position: Vec3, normal: Vec3, view_dir: Vec3) -> Vec3 {
+        match self {
+            IndirectField::Ddgi(f) => irradiance(f, position, normal, view_dir),
+            IndirectField::Sh(c) => c.irradiance(position, normal),
+        }
+    }
 }
 
 #[derive(Clone, Debug)]
@@ -52,7 +75,7 @@ pub struct RenderStats {
     /// Mean wall-clock milliseconds per frame, by pass name.
     pub pass_ms: BTreeMap<&'static str, f64>,
     pub rays_traced: u64,
-    /// DDGI only: probes, probe rays per frame, mean field-update ms (the four
+    /// DDGI and SH: probes; DDGI only: probe rays per frame, mean field-update ms (the four
     /// update passes plus border) and probe rays per second over it.
     pub probes: Option<usize>,
     pub rays_per_frame: Option<u64>,
@@ -69,6 +92,8 @@ pub struct RenderOutput {
     pub stats: RenderStats,
     /// The DDGI volume after the last update (for atlas dumps).
     pub ddgi: Option<DdgiVolume>,
+    /// The SH probes after the last update.
+    pub sh: Option<ShProbes>,
 }
 
 /// Names of the passes that make up a DDGI field update.
@@ -84,16 +109,22 @@ pub fn render_frames(
 ) -> RenderOutput {
     let direct = DirectLighting::new(scene, tracer, settings.direct);
     let mut volume = match &settings.gi {
-        GiMethod::None => None,
         GiMethod::Ddgi(s) => {
             let bounds = scene.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
             Some(DdgiVolume::new((**s).clone(), bounds))
         }
+        _ => None,
     };
-    // The field carries the sky under DDGI (see `probe_shade`); direct-only renders sample it.
-    let camera_direct = match volume {
-        Some(_) => DirectSettings { direct_sky_samples: 0, ..settings.direct },
-        None => settings.direct,
+    let mut sh = match &settings.gi {
+        GiMethod::Sh(s) => Some(ShProbes::new((**s).clone(), scene, camera.origin_world)),
+        _ => None,
+    };
+    // The field carries the sky under DDGI (see `probe_shade`); SH probes carry
+    // emitters and sky with light injection; direct-only renders sample both.
+    let camera_direct = match (&volume, &sh) {
+        (Some(_), _) => DirectSettings { direct_sky_samples: 0, ..settings.direct },
+        (_, Some(p)) => p.camera_direct_settings(settings.direct),
+        _ => settings.direct,
     };
     let n = settings.width as usize * settings.height as usize;
     let mut direct_sum = vec![DVec3::ZERO; n];
@@ -113,13 +144,22 @@ pub fn render_frames(
         *pass_totals.entry("gbuffer").or_default() += t.elapsed().as_secs_f64() * 1e3;
         stats.rays_traced += rays;
 
+        if let Some(p) = sh.as_mut() {
+            p.recentre(camera.origin_world, camera.forward_world());
+        }
+        let field = match (&volume, &sh) {
+            (Some(v), _) => Some(IndirectField::Ddgi(v.view())),
+            (_, Some(p)) => Some(IndirectField::Sh(&p.cascades)),
+            _ => None,
+        };
         let t = Instant::now();
         stats.rays_traced += shade_camera(
             scene,
             tracer,
             &direct,
             camera_direct,
-            volume.as_ref(),
+            field,
+            volume.as_ref().is_some_and(|v| v.settings.glossy_second_order),
             &gbuffer,
             f,
             settings.seed,
@@ -130,6 +170,10 @@ pub fn render_frames(
             *a += p.as_dvec3();
         }
         *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        if let Some(p) = sh.as_mut() {
+            stats.rays_traced +=
+                p.update(scene, tracer, &direct, settings.direct, camera, &gbuffer, settings.seed, f, &mut pass_totals);
+        }
         last_gbuffer = Some(gbuffer);
         on_frame_done(f);
     }
@@ -144,13 +188,17 @@ pub fn render_frames(
         stats.probe_states = Some(v.state_counts());
         stats.active_probes = Some(v.active_probe_count());
     }
+    if let Some(p) = &sh {
+        stats.probes = Some(p.cascades.probe_count());
+        stats.field_update_ms = Some(SH_UPDATE_PASSES.iter().filter_map(|k| stats.pass_ms.get(k)).sum());
+    }
     let mut pixels: Vec<Vec3> =
         direct_sum.iter().zip(&indirect).map(|(d, i)| (*d / frames as f64).as_vec3() + *i).collect();
     if let (true, Some(v), Some(g)) = (settings.show_probes, &volume, &last_gbuffer) {
         crate::probe_vis::draw_probes(v, camera, g, &mut pixels);
     }
     let image = Image { width: settings.width, height: settings.height, pixels };
-    RenderOutput { image, stats, ddgi: volume }
+    RenderOutput { image, stats, ddgi: volume, sh }
 }
 
 /// The camera pass: per pixel, emission + direct light into `direct_out` and, with
@@ -168,7 +216,8 @@ fn shade_camera(
     tracer: &dyn RayTracer,
     direct: &DirectLighting<'_>,
     direct_settings: DirectSettings,
-    volume: Option<&DdgiVolume>,
+    field: Option<IndirectField<'_>>,
+    second_order: bool,
     gbuffer: &GBuffer,
     frame: u32,
     seed: u64,
@@ -177,8 +226,10 @@ fn shade_camera(
 ) -> u64 {
     use rayon::prelude::*;
     let w = gbuffer.width as usize;
-    let field = volume.map(|v| v.view());
-    let second_order = volume.is_some_and(|v| v.settings.glossy_second_order);
+    let ddgi = match &field {
+        Some(IndirectField::Ddgi(f)) => Some(f),
+        _ => None,
+    };
     direct_out
         .par_chunks_mut(w)
         .zip(indirect_out.par_chunks_mut(w))
@@ -195,11 +246,11 @@ fn shade_camera(
                 let pixel = (y * w + x) as u64;
                 let mut rng = Pcg32::new(hash_combine(&[seed, pixel, frame as u64, 0xd1]), pixel);
                 let ctx = ShadingContext::new(scene, sp, texel.view_dir_world);
-                let glossy_rays = field.is_some() && ctx.bsdf.has_specular();
+                let glossy_rays = ddgi.is_some() && ctx.bsdf.has_specular();
                 let (l, k) = direct.reflected(sp, &ctx, direct_settings, !glossy_rays, &mut rng);
                 rays += k;
                 let mut l = scene.emitted(sp) + l;
-                if let (true, Some(f)) = (glossy_rays, &field)
+                if let (true, Some(f)) = (glossy_rays, ddgi)
                     && let Some((wi_local, weight)) = ctx.bsdf.sample_specular(ctx.wo, rng.next_vec2())
                 {
                     let wi = ctx.frame.to_world(wi_local);
@@ -229,7 +280,7 @@ fn shade_camera(
                 *d = if l.is_finite() { l } else { Vec3::ZERO };
                 *i = match &field {
                     Some(f) => {
-                        let e = irradiance(f, sp.position, sp.facing_normal(), texel.view_dir_world);
+                        let e = f.irradiance(sp.position, sp.facing_normal(), texel.view_dir_world);
                         ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e
                     }
                     None => Vec3::ZERO,

@@ -22,3 +22,6 @@ pub mod probe_ray_gen;
 pub mod probe_shade;
 pub mod probe_trace;
 pub mod probe_vis;
+pub mod sh_inject;
+pub mod sh_probes;
+pub mod sh_screen_samples;

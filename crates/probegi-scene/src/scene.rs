@@ -25,6 +25,8 @@ pub struct Scene {
     pub camera: Option<Camera>,
     /// The DDGI volume the file asked for, if any.
     pub volume: Option<probegi_core::ddgi_settings::DdgiVolumeSettings>,
+    /// SH probe settings from a scene file's `[sh]` table.
+    pub sh_probes: Option<probegi_core::sh_settings::ShProbeSettings>,
     /// Things the loader recovered from (missing .mtl or texture, unknown material).
     pub warnings: Vec<String>,
 }

@@ -31,6 +31,7 @@ use std::path::{Path, PathBuf};
 use glam::{EulerRot, Mat4, Quat, Vec3};
 use probegi_core::camera::Camera;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::sh_settings::ShProbeSettings;
 use serde::Deserialize;
 
 use crate::error::{Result, SceneError};
@@ -51,6 +52,9 @@ pub struct SceneFile {
     /// The DDGI volume (`probegi_core::ddgi_settings::DdgiVolumeSettings` field names).
     #[serde(default)]
     pub volume: Option<DdgiVolumeSettings>,
+    /// The SH probes of `--gi sh` (`probegi_core::sh_settings::ShProbeSettings` field names).
+    #[serde(default)]
+    pub sh: Option<ShProbeSettings>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -120,6 +124,13 @@ pub fn load_scene_file(path: &Path) -> Result<Scene> {
         })?;
         scene.volume = Some(v);
     }
+    if let Some(v) = file.sh {
+        v.validate().map_err(|(field, why)| SceneError::Toml {
+            path: path.to_path_buf(),
+            message: format!("sh.{field}: {why}"),
+        })?;
+        scene.sh_probes = Some(v);
+    }
     scene.validate().map_err(|message| SceneError::Toml { path: path.to_path_buf(), message })?;
     Ok(scene)
 }
@@ -143,13 +154,25 @@ fn merge_into(scene: &mut Scene, sub: Scene) {
     if scene.volume.is_none() {
         scene.volume = sub.volume;
     }
+    if scene.sh_probes.is_none() {
+        scene.sh_probes = sub.sh_probes;
+    }
 }
 
 /// Every key `--set` and a `[volume]` table accept.
 pub fn volume_setting_keys() -> Vec<String> {
     let all =
         DdgiVolumeSettings { probe_origin_m: Some(Vec3::ZERO), probe_spacing_m: Some(Vec3::ONE), ..Default::default() };
-    match toml::Table::try_from(&all) {
+    setting_keys(&all)
+}
+
+/// Every key `--set` (under `--gi sh`) and an `[sh]` table accept.
+pub fn sh_setting_keys() -> Vec<String> {
+    setting_keys(&ShProbeSettings { sh_cascade_spacing_m: Some(1.0), ..Default::default() })
+}
+
+fn setting_keys<T: serde::Serialize>(all: &T) -> Vec<String> {
+    match toml::Table::try_from(all) {
         Ok(t) => t.keys().cloned().collect(),
         Err(_) => Vec::new(),
     }
@@ -163,17 +186,35 @@ pub fn apply_volume_override(
     settings: &DdgiVolumeSettings,
     assignment: &str,
 ) -> std::result::Result<DdgiVolumeSettings, String> {
+    let updated: DdgiVolumeSettings = apply_override(settings, assignment, "probe_", &volume_setting_keys())?;
+    updated.validate().map_err(|(field, why)| format!("{field}: {why}"))?;
+    Ok(updated)
+}
+
+/// Applies `--set KEY=VALUE` to SH probe settings; `KEY` is an `[sh]` field name,
+/// with or without its `sh_` prefix.
+pub fn apply_sh_override(settings: &ShProbeSettings, assignment: &str) -> std::result::Result<ShProbeSettings, String> {
+    let updated: ShProbeSettings = apply_override(settings, assignment, "sh_", &sh_setting_keys())?;
+    updated.validate().map_err(|(field, why)| format!("{field}: {why}"))?;
+    Ok(updated)
+}
+
+fn apply_override<T: serde::Serialize + serde::de::DeserializeOwned>(
+    settings: &T,
+    assignment: &str,
+    prefix: &str,
+    keys: &[String],
+) -> std::result::Result<T, String> {
     let (key, value) = assignment
         .split_once('=')
         .map(|(k, v)| (k.trim(), v.trim()))
         .ok_or_else(|| format!("`{assignment}` is not KEY=VALUE"))?;
-    let keys = volume_setting_keys();
     let canonical = if keys.iter().any(|k| k == key) {
         key.to_string()
-    } else if keys.iter().any(|k| *k == format!("probe_{key}")) {
-        format!("probe_{key}")
+    } else if keys.iter().any(|k| *k == format!("{prefix}{key}")) {
+        format!("{prefix}{key}")
     } else {
-        return Err(format!("unknown volume setting `{key}`; valid keys: {}", keys.join(", ")));
+        return Err(format!("unknown setting `{key}`; valid keys: {}", keys.join(", ")));
     };
     let parsed: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
         Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.to_string())),
@@ -181,8 +222,5 @@ pub fn apply_volume_override(
     };
     let mut table = toml::Table::try_from(settings).map_err(|e| e.to_string())?;
     table.insert(canonical.clone(), parsed);
-    let updated: DdgiVolumeSettings =
-        table.try_into().map_err(|e: toml::de::Error| format!("{canonical} = {value}: {}", e.message()))?;
-    updated.validate().map_err(|(field, why)| format!("{field}: {why}"))?;
-    Ok(updated)
+    table.try_into().map_err(|e: toml::de::Error| format!("{canonical} = {value}: {}", e.message()))
 }
