@@ -187,3 +187,39 @@ fn bench_prints_json_with_throughput() {
     assert!(json["bvh_build_ms"].as_f64().expect("build") >= 0.0);
     assert!(json["peak_rss_mib"].as_f64().expect("peak rss") > 0.0);
 }
+
+#[test]
+fn sh_render_reports_probes_and_rejects_bad_settings_by_name() {
+    let stats = tmp("sh.json");
+    let out = tmp("sh.png");
+    let o = probegi(&[
+        "render",
+        "--gi",
+        "sh",
+        "--width",
+        "24",
+        "--height",
+        "24",
+        "--frames",
+        "3",
+        "--probes",
+        "4,4,4",
+        "--set",
+        "hysteresis=0.2",
+        "--out",
+        &out.to_string_lossy(),
+        "--stats",
+        &stats.to_string_lossy(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    assert_eq!(json["probes"], 2 * 64, "two cascades of 4×4×4");
+    assert!(json["pass_ms"]["sh_update"].as_f64().is_some() && json["field_update_ms"].as_f64().is_some());
+    fails_with(&["render", "--gi", "sh", "--set", "hysteresis=0"], "sh_hysteresis");
+    fails_with(&["render", "--gi", "sh", "--set", "bogus=1"], "unknown setting `bogus`");
+    fails_with(&["render", "--gi", "sh", "--rays-per-probe", "8"], "SH probes trace no rays");
+    fails_with(&["render", "--gi", "sh", "--show-probes"], "need --gi ddgi");
+    let toml = tmp("bad-sh.toml");
+    std::fs::write(&toml, "[[meshes]]\npath = \"builtin:cornell-box\"\n[sh]\nsh_cascade_count = 0\n").expect("write");
+    fails_with(&["render", "--gi", "sh", "--scene", &toml.to_string_lossy()], "sh.sh_cascade_count");
+}
