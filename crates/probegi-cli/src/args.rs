@@ -150,6 +150,13 @@ pub struct RenderArgs {
     /// Write per-pass timings and ray counts as JSON.
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// Write every frame into this folder as frame-NNNN.png (what the frame would
+    /// show if it were the last: accumulated direct light + that frame's indirect).
+    #[arg(long)]
+    pub sequence: Option<PathBuf>,
+    /// With --sequence, also write frame-NNNN.exr (linear radiance).
+    #[arg(long, requires = "sequence")]
+    pub sequence_exr: bool,
 }
 
 #[derive(Args, Debug)]
@@ -162,6 +169,9 @@ pub struct ReferenceArgs {
     /// Maximum path length in surface interactions (Russian roulette ends most paths sooner).
     #[arg(long, default_value_t = 64)]
     pub max_depth: u32,
+    /// Render the scene as it is at this frame of its animation (light keyframes).
+    #[arg(long, default_value_t = 0.0)]
+    pub frame: f32,
     /// Output image: .exr (linear radiance, recommended) or .png (tone-mapped).
     #[arg(long)]
     pub out: PathBuf,

@@ -53,7 +53,7 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
             direct: DirectSettings::default(),
             show_probes: false,
         };
-        render_frames(&scene, &bvh, &camera, &settings, |_| {}).stats
+        render_frames(&scene, &bvh, &camera, &settings, |_, _| {}).stats
     };
     let mut rows = Vec::new();
     for grid in &grids {

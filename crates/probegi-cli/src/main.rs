@@ -161,7 +161,24 @@ fn render(args: &RenderArgs) -> Result<()> {
     };
     let bar = progress(args.frames as u64, "render");
     let start = Instant::now();
-    let out = render_frames(&scene, &bvh, &rays, &settings, |_| bar.inc(1));
+    if let Some(dir) = &args.sequence {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut sequence_error = None;
+    let out = render_frames(&scene, &bvh, &rays, &settings, |f, image| {
+        bar.inc(1);
+        if let (Some(dir), None) = (&args.sequence, &sequence_error) {
+            let img = image();
+            let mut result = probegi_image::write_image(&dir.join(format!("frame-{f:04}.png")), &img);
+            if args.sequence_exr && result.is_ok() {
+                result = probegi_image::write_image(&dir.join(format!("frame-{f:04}.exr")), &img);
+            }
+            sequence_error = result.err();
+        }
+    });
+    if let Some(e) = sequence_error {
+        return Err(anyhow::Error::new(e).context("writing the --sequence frames"));
+    }
     let (image, stats) = (out.image, out.stats);
     bar.finish_and_clear();
     let elapsed = start.elapsed();
@@ -253,7 +270,12 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
         bail!("--max-depth must be in 1..=4096 (got {})", args.max_depth);
     }
     probegi_image::io::ImageFormat::from_path(&args.out)?;
-    let (scene, camera) = prepare(&args.scene, 16)?;
+    if !args.frame.is_finite() {
+        bail!("--frame must be a finite frame number");
+    }
+    let (mut scene, camera) = prepare(&args.scene, 16)?;
+    let base = scene.clone();
+    scene.set_frame_from(&base, args.frame);
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
     let settings = PathTracerSettings {

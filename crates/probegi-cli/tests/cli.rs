@@ -223,3 +223,54 @@ fn sh_render_reports_probes_and_rejects_bad_settings_by_name() {
     std::fs::write(&toml, "[[meshes]]\npath = \"builtin:cornell-box\"\n[sh]\nsh_cascade_count = 0\n").expect("write");
     fails_with(&["render", "--gi", "sh", "--scene", &toml.to_string_lossy()], "sh.sh_cascade_count");
 }
+
+#[test]
+fn sequence_writes_every_frame_and_reference_renders_any_frame() {
+    let scene = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-moving-light.toml");
+    let dir = tmp("seq");
+    let o = probegi(&[
+        "render",
+        "--scene",
+        &scene.to_string_lossy(),
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--frames",
+        "4",
+        "--sequence",
+        &dir.to_string_lossy(),
+        "--sequence-exr",
+        "--out",
+        &tmp("seq-last.png").to_string_lossy(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in 0..4 {
+        for ext in ["png", "exr"] {
+            assert!(dir.join(format!("frame-{f:04}.{ext}")).is_file(), "frame {f} {ext}");
+        }
+    }
+    // The light sweeps from the red wall to the green: frames 0 and 30 differ.
+    let r = |frame: &str, name: &str| {
+        let out = tmp(name);
+        let o = probegi(&[
+            "reference",
+            "--scene",
+            &scene.to_string_lossy(),
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--spp",
+            "4",
+            "--frame",
+            frame,
+            "--out",
+            &out.to_string_lossy(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        std::fs::read(out).expect("reference written")
+    };
+    assert_ne!(r("0", "f0.exr"), r("30", "f30.exr"));
+    fails_with(&["reference", "--frame", "nan", "--out", "x.exr"], "--frame");
+}

@@ -99,15 +99,24 @@ pub struct RenderOutput {
 /// Names of the passes that make up a DDGI field update.
 pub const FIELD_UPDATE_PASSES: [&str; 5] = ["ray_gen", "trace", "shade", "blend", "border"];
 
-/// Renders `settings.frames` frames and returns the final image.
+/// Renders `settings.frames` frames and returns the final image. After each frame
+/// `on_frame_done(f, image)` is called; `image()` composes that frame's image
+/// (for `--sequence`), at a cost only when called.
+///
+/// An animated scene (`Scene::is_animated`) is set to each frame's state before
+/// the frame, and its direct term is that frame's alone (no accumulation). A
+/// light switching on or off notifies the DDGI volume of a large light change.
 pub fn render_frames(
-    scene: &Scene,
+    base_scene: &Scene,
     tracer: &dyn RayTracer,
     camera: &CameraRays,
     settings: &RenderSettings,
-    mut on_frame_done: impl FnMut(u32),
+    mut on_frame_done: impl FnMut(u32, &dyn Fn() -> Image),
 ) -> RenderOutput {
-    let direct = DirectLighting::new(scene, tracer, settings.direct);
+    let scene = base_scene;
+    let animated = scene.is_animated();
+    let mut frame_scene = animated.then(|| scene.clone());
+    let static_direct = DirectLighting::new(scene, tracer, settings.direct);
     let mut volume = match &settings.gi {
         GiMethod::Ddgi(s) => {
             let bounds = scene.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
@@ -134,9 +143,23 @@ pub fn render_frames(
     let mut pass_totals: BTreeMap<&'static str, f64> = BTreeMap::new();
     let frames = settings.frames.max(1);
     let mut last_gbuffer: Option<GBuffer> = None;
+    let mut accumulated = 0u32;
     for f in 0..frames {
+        if let Some(fs) = frame_scene.as_mut() {
+            let was_on: Vec<bool> = fs.lights.iter().map(|l| l.intensity > 0.0).collect();
+            fs.set_frame_from(base_scene, f as f32);
+            // A light switching on or off is a large light change (seed 004 §4.3):
+            // the frame loop reports it as an application would.
+            let toggled = fs.lights.iter().zip(&was_on).any(|(l, &on)| (l.intensity > 0.0) != on);
+            if let (true, true, Some(v)) = (toggled, f > 0, volume.as_mut()) {
+                v.notify_scene_event(crate::ddgi::SceneEvent::LargeLightChange);
+            }
+        }
+        let scene: &Scene = frame_scene.as_ref().unwrap_or(base_scene);
+        let frame_direct_lighting = animated.then(|| DirectLighting::new(scene, tracer, settings.direct));
+        let direct = frame_direct_lighting.as_ref().unwrap_or(&static_direct);
         if let Some(v) = volume.as_mut() {
-            stats.rays_traced += v.update(scene, tracer, &direct, settings.seed, f, &mut pass_totals);
+            stats.rays_traced += v.update(scene, tracer, direct, settings.seed, f, &mut pass_totals);
         }
 
         let t = Instant::now();
@@ -156,7 +179,7 @@ pub fn render_frames(
         stats.rays_traced += shade_camera(
             scene,
             tracer,
-            &direct,
+            direct,
             camera_direct,
             field,
             volume.as_ref().is_some_and(|v| v.settings.glossy_second_order),
@@ -166,16 +189,26 @@ pub fn render_frames(
             &mut frame_direct,
             &mut indirect,
         );
+        if animated {
+            accumulated = 0;
+            direct_sum.iter_mut().for_each(|a| *a = DVec3::ZERO);
+        }
         for (a, p) in direct_sum.iter_mut().zip(&frame_direct) {
             *a += p.as_dvec3();
         }
+        accumulated += 1;
         *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
         if let Some(p) = sh.as_mut() {
             stats.rays_traced +=
-                p.update(scene, tracer, &direct, settings.direct, camera, &gbuffer, settings.seed, f, &mut pass_totals);
+                p.update(scene, tracer, direct, settings.direct, camera, &gbuffer, settings.seed, f, &mut pass_totals);
         }
         last_gbuffer = Some(gbuffer);
-        on_frame_done(f);
+        let compose = || Image {
+            width: settings.width,
+            height: settings.height,
+            pixels: compose_pixels(&direct_sum, accumulated, &indirect),
+        };
+        on_frame_done(f, &compose);
     }
     stats.frames = frames;
     stats.pass_ms = pass_totals.into_iter().map(|(k, v)| (k, v / frames as f64)).collect();
@@ -192,13 +225,17 @@ pub fn render_frames(
         stats.probes = Some(p.cascades.probe_count());
         stats.field_update_ms = Some(SH_UPDATE_PASSES.iter().filter_map(|k| stats.pass_ms.get(k)).sum());
     }
-    let mut pixels: Vec<Vec3> =
-        direct_sum.iter().zip(&indirect).map(|(d, i)| (*d / frames as f64).as_vec3() + *i).collect();
+    let mut pixels = compose_pixels(&direct_sum, accumulated, &indirect);
     if let (true, Some(v), Some(g)) = (settings.show_probes, &volume, &last_gbuffer) {
         crate::probe_vis::draw_probes(v, camera, g, &mut pixels);
     }
     let image = Image { width: settings.width, height: settings.height, pixels };
     RenderOutput { image, stats, ddgi: volume, sh }
+}
+
+/// Mean direct term over the accumulated frames plus the last frame's indirect term.
+fn compose_pixels(direct_sum: &[DVec3], accumulated: u32, indirect: &[Vec3]) -> Vec<Vec3> {
+    direct_sum.iter().zip(indirect).map(|(d, i)| (*d / accumulated.max(1) as f64).as_vec3() + *i).collect()
 }
 
 /// The camera pass: per pixel, emission + direct light into `direct_out` and, with

@@ -28,7 +28,7 @@ fn direct(scene: &Scene, camera: &Camera, size: u32, frames: u32) -> Image {
         direct: DirectSettings::default(),
         show_probes: false,
     };
-    render_frames(scene, &bvh, &rays, &settings, |_| {}).image
+    render_frames(scene, &bvh, &rays, &settings, |_, _| {}).image
 }
 
 fn rel_err(got: f32, want: f32) -> f32 {

@@ -28,7 +28,7 @@ fn render(scene: &Scene, size: u32, frames: u32, gi: GiMethod) -> RenderOutput {
         direct: DirectSettings::default(),
         show_probes: false,
     };
-    render_frames(scene, &bvh, &camera, &settings, |_| {})
+    render_frames(scene, &bvh, &camera, &settings, |_, _| {})
 }
 
 fn ddgi(settings: DdgiVolumeSettings) -> GiMethod {

@@ -64,7 +64,7 @@ fn second_order_glossy_brings_the_glossy_box_closer_to_the_reference() {
             direct: DirectSettings::default(),
             show_probes: false,
         };
-        render_frames(&scene, &bvh, &cam, &rs, |_| {}).image
+        render_frames(&scene, &bvh, &cam, &rs, |_, _| {}).image
     };
     let base = DdgiVolumeSettings { probe_rays_per_probe: 128, probe_hysteresis: 0.9, ..Default::default() };
     let with = render(GiMethod::Ddgi(Box::new(base.clone())));

@@ -101,7 +101,7 @@ fn leak_weights_bring_the_interior_monotonically_closer_to_the_reference() {
             direct: DirectSettings::default(),
             show_probes: false,
         };
-        let img = render_frames(&scene, &bvh, &camera, &rs, |_| {}).image;
+        let img = render_frames(&scene, &bvh, &camera, &rs, |_, _| {}).image;
         let f = flip(&reference, &img);
         eprintln!("door room, weights up to {name}: FLIP {f:.4}, mean {} (reference {})", img.mean(), reference.mean());
         flips.push(f);

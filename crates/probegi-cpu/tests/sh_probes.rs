@@ -25,7 +25,7 @@ fn render_with(scene: &Scene, camera: &Camera, size: u32, frames: u32, gi: GiMet
         direct: DirectSettings::default(),
         show_probes: false,
     };
-    render_frames(scene, &bvh, &rays, &settings, |_| {})
+    render_frames(scene, &bvh, &rays, &settings, |_, _| {})
 }
 
 fn render(scene: &Scene, size: u32, frames: u32, gi: GiMethod) -> RenderOutput {

@@ -94,6 +94,7 @@ impl Loader<'_> {
                 range: light.range(),
                 inner_cone_angle: inner,
                 outer_cone_angle: if kind == LightKind::Spot { outer } else { std::f32::consts::FRAC_PI_4 },
+                keyframes: Vec::new(),
             };
             l.validate().map_err(|e| self.err(format!("light {}: {e}", light.index())))?;
             self.scene.lights.push(l);

@@ -39,6 +39,47 @@ pub struct PunctualLight {
     /// Spot outer cone angle, radians (glTF default π/4).
     #[serde(default = "default_outer_cone")]
     pub outer_cone_angle: f32,
+    /// Animation over frame numbers (dynamic-scenes issue): each key sets any of
+    /// position, direction and intensity; each channel interpolates linearly
+    /// between the keys that set it and holds before the first and after the last.
+    /// Intensity 0 switches the light off.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub keyframes: Vec<LightKeyframe>,
+}
+
+/// One key of a light's animation.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightKeyframe {
+    /// Frame number (fractional frames allowed); keys must be in increasing order.
+    pub frame: f32,
+    #[serde(default)]
+    pub position: Option<Vec3>,
+    #[serde(default)]
+    pub direction: Option<Vec3>,
+    #[serde(default)]
+    pub intensity: Option<f32>,
+}
+
+/// Linear interpolation of one channel over the keys that set it.
+fn channel<T: Copy>(
+    keys: &[LightKeyframe],
+    frame: f32,
+    get: impl Fn(&LightKeyframe) -> Option<T>,
+    lerp: impl Fn(T, T, f32) -> T,
+) -> Option<T> {
+    let mut prev: Option<(f32, T)> = None;
+    for k in keys {
+        let Some(v) = get(k) else { continue };
+        if k.frame >= frame {
+            return Some(match prev {
+                Some((f0, v0)) if k.frame > f0 => lerp(v0, v, (frame - f0) / (k.frame - f0)),
+                _ => v,
+            });
+        }
+        prev = Some((k.frame, v));
+    }
+    prev.map(|p| p.1)
 }
 
 fn default_direction() -> Vec3 {
@@ -52,6 +93,22 @@ fn default_outer_cone() -> f32 {
 }
 
 impl PunctualLight {
+    /// This light at `frame` with its keyframes applied (itself if it has none).
+    pub fn at_frame(&self, frame: f32) -> PunctualLight {
+        let mut l = self.clone();
+        let k = &self.keyframes;
+        if let Some(p) = channel(k, frame, |k| k.position, |a, b, t| a.lerp(b, t)) {
+            l.position = p;
+        }
+        if let Some(d) = channel(k, frame, |k| k.direction, |a, b, t| a.lerp(b, t).normalize_or(b)) {
+            l.direction = d;
+        }
+        if let Some(i) = channel(k, frame, |k| k.intensity, |a, b, t| a + (b - a) * t) {
+            l.intensity = i;
+        }
+        l
+    }
+
     pub fn point(position: Vec3, color: Vec3, intensity: f32) -> Self {
         Self {
             kind: LightKind::Point,
@@ -62,6 +119,7 @@ impl PunctualLight {
             range: None,
             inner_cone_angle: 0.0,
             outer_cone_angle: default_outer_cone(),
+            keyframes: Vec::new(),
         }
     }
 
@@ -94,6 +152,49 @@ impl PunctualLight {
                 self.inner_cone_angle, self.outer_cone_angle
             ));
         }
+        for (i, k) in self.keyframes.iter().enumerate() {
+            if !k.frame.is_finite() || (i > 0 && k.frame <= self.keyframes[i - 1].frame) {
+                return Err(format!("keyframe {i}: frame {} must be finite and after the previous key's", k.frame));
+            }
+            if k.position.is_some_and(|p| !p.is_finite()) || k.direction.is_some_and(|d| !d.is_finite()) {
+                return Err(format!("keyframe {i}: position and direction must be finite"));
+            }
+            if k.direction.is_some_and(|d| d.length_squared() < 1e-12) {
+                return Err(format!("keyframe {i}: direction must be non-zero"));
+            }
+            if k.intensity.is_some_and(|v| !(v.is_finite() && v >= 0.0)) {
+                return Err(format!("keyframe {i}: intensity must be finite and >= 0"));
+            }
+        }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keyframes_interpolate_per_channel_and_hold_at_the_ends() {
+        let mut l = PunctualLight::point(Vec3::ZERO, Vec3::ONE, 10.0);
+        l.keyframes = vec![
+            LightKeyframe { frame: 0.0, position: Some(Vec3::ZERO), direction: None, intensity: None },
+            LightKeyframe {
+                frame: 10.0,
+                position: Some(Vec3::new(2.0, 0.0, 0.0)),
+                direction: None,
+                intensity: Some(10.0),
+            },
+            LightKeyframe { frame: 20.0, position: None, direction: None, intensity: Some(0.0) },
+        ];
+        assert!(l.validate().is_ok());
+        assert_eq!(l.at_frame(5.0).position, Vec3::new(1.0, 0.0, 0.0));
+        assert_eq!(l.at_frame(-3.0).position, Vec3::ZERO);
+        assert_eq!(l.at_frame(30.0).position, Vec3::new(2.0, 0.0, 0.0));
+        assert_eq!(l.at_frame(5.0).intensity, 10.0, "held before its first key");
+        assert_eq!(l.at_frame(15.0).intensity, 5.0);
+        assert_eq!(l.at_frame(25.0).intensity, 0.0, "switched off");
+        l.keyframes[2].frame = 5.0;
+        assert!(l.validate().is_err_and(|e| e.contains("keyframe 2")));
     }
 }

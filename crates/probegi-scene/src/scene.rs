@@ -115,6 +115,18 @@ impl Scene {
         self.material(sp.material).emission(&self.textures, sp.uv)
     }
 
+    /// Whether anything in the scene changes from frame to frame.
+    pub fn is_animated(&self) -> bool {
+        self.lights.iter().any(|l| !l.keyframes.is_empty())
+    }
+
+    /// Sets this scene's animated state to frame `frame` of `base` (same scene).
+    pub fn set_frame_from(&mut self, base: &Scene, frame: f32) {
+        for (l, b) in self.lights.iter_mut().zip(&base.lights) {
+            *l = b.at_frame(frame);
+        }
+    }
+
     /// Axis-aligned bounds of the geometry.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         self.mesh.bounds()
