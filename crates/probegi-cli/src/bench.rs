@@ -30,7 +30,6 @@ pub fn run(args: &BenchArgs) -> Result<serde_json::Value> {
 /// passes are timed (mean over all `--frames` + 1 frames).
 fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
     use probegi_core::camera::CameraRays;
-    use probegi_core::ddgi_settings::DdgiVolumeSettings;
     use probegi_core::sh_settings::ShProbeSettings;
     use probegi_cpu::DirectSettings;
     use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
@@ -57,18 +56,7 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
     };
     let mut rows = Vec::new();
     for grid in &grids {
-        let mut ddgi = DdgiVolumeSettings {
-            probe_counts: glam::UVec3::from(*grid),
-            probe_rays_per_probe: rays,
-            ..Default::default()
-        };
-        for a in &args.set {
-            ddgi = probegi_scene::scene_file::apply_volume_override(&ddgi, a)
-                .map_err(anyhow::Error::msg)
-                .with_context(|| format!("--set {a}"))?;
-        }
-        ddgi.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
-        crate::check_memory(probegi_cpu::ddgi::ddgi_volume_bytes(&ddgi), "the DDGI volume")?;
+        let ddgi = bench_volume_settings(args, *grid, rays)?;
         let d = timed(GiMethod::Ddgi(Box::new(ddgi)));
         let ddgi_ms = d.field_update_ms.unwrap_or(0.0);
         let mut row = json!({
@@ -110,7 +98,6 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
 /// (seed 000 Table 2), with the bare closest-hit rate of the same rays measured
 /// in the same run.
 fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
-    use probegi_core::ddgi_settings::DdgiVolumeSettings;
     use probegi_cpu::ddgi::{DdgiVolume, ddgi_volume_bytes};
     use probegi_cpu::frame_loop::FIELD_UPDATE_PASSES;
     use probegi_cpu::probe_ray_gen::probe_ray_directions;
@@ -129,18 +116,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     let mut rows = Vec::new();
     for grid in &grids {
         for &rays in &ray_counts {
-            let mut settings = DdgiVolumeSettings {
-                probe_counts: glam::UVec3::from(*grid),
-                probe_rays_per_probe: rays,
-                ..Default::default()
-            };
-            for a in &args.set {
-                settings = probegi_scene::scene_file::apply_volume_override(&settings, a)
-                    .map_err(anyhow::Error::msg)
-                    .with_context(|| format!("--set {a}"))?;
-            }
-            settings.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
-            crate::check_memory(ddgi_volume_bytes(&settings), "the DDGI volume")?;
+            let settings = bench_volume_settings(args, *grid, rays)?;
             let mut volume = DdgiVolume::new(settings.clone(), bounds);
             let mut warmup = BTreeMap::new();
             volume.update(&scene, &bvh, &direct, args.seed, 0, &mut warmup);
@@ -191,6 +167,28 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
         "peak_rss_mib": peak_rss_mib(),
         "sweep": rows,
     }))
+}
+
+/// DDGI settings of one bench configuration: defaults, the grid and ray count,
+/// then every `--set`; validated and checked against available memory.
+fn bench_volume_settings(
+    args: &BenchArgs,
+    grid: [u32; 3],
+    rays: u32,
+) -> Result<probegi_core::ddgi_settings::DdgiVolumeSettings> {
+    let mut settings = probegi_core::ddgi_settings::DdgiVolumeSettings {
+        probe_counts: glam::UVec3::from(grid),
+        probe_rays_per_probe: rays,
+        ..Default::default()
+    };
+    for a in &args.set {
+        settings = probegi_scene::scene_file::apply_volume_override(&settings, a)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("--set {a}"))?;
+    }
+    settings.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
+    crate::check_memory(probegi_cpu::ddgi::ddgi_volume_bytes(&settings), "the DDGI volume")?;
+    Ok(settings)
 }
 
 /// The process's peak resident set (VmHWM) in MiB, where /proc provides it.

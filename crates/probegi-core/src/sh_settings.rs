@@ -127,11 +127,14 @@ impl ShProbeSettings {
                 format!("{} must be in [0, 1]", self.sh_cascade_view_offset_rel),
             ));
         }
-        if self.sh_light_samples_per_emitter > 1024 || self.sh_sky_samples_per_probe > 4096 {
+        if self.sh_light_samples_per_emitter > 1024 {
             return Err((
                 "sh_light_samples_per_emitter",
-                "light samples per emitter must be ≤ 1024 and sky samples per probe ≤ 4096".into(),
+                format!("{} must be ≤ 1024", self.sh_light_samples_per_emitter),
             ));
+        }
+        if self.sh_sky_samples_per_probe > 4096 {
+            return Err(("sh_sky_samples_per_probe", format!("{} must be ≤ 4096", self.sh_sky_samples_per_probe)));
         }
         if !(self.sh_light_sample_weight.is_finite() && self.sh_light_sample_weight >= 0.0) {
             return Err(("sh_light_sample_weight", format!("{} must be finite and ≥ 0", self.sh_light_sample_weight)));

@@ -36,13 +36,24 @@ fn stratum(i: u32, k: u32, u: Vec2) -> Vec2 {
 pub struct DirectLighting<'a> {
     scene: &'a Scene,
     tracer: &'a dyn RayTracer,
-    area_lights: AreaLights,
+    area_lights: std::borrow::Cow<'a, AreaLights>,
     settings: DirectSettings,
 }
 
 impl<'a> DirectLighting<'a> {
     pub fn new(scene: &'a Scene, tracer: &'a dyn RayTracer, settings: DirectSettings) -> Self {
-        Self { scene, tracer, area_lights: AreaLights::new(scene), settings }
+        Self { scene, tracer, area_lights: std::borrow::Cow::Owned(AreaLights::new(scene)), settings }
+    }
+
+    /// The same lighting over `scene`, a later frame of the same scene whose
+    /// punctual lights moved: the emitter distribution (geometry only) is reused.
+    pub fn for_frame<'b>(&'b self, scene: &'b Scene) -> DirectLighting<'b> {
+        DirectLighting {
+            scene,
+            tracer: self.tracer,
+            area_lights: std::borrow::Cow::Borrowed(self.area_lights.as_ref()),
+            settings: self.settings,
+        }
     }
 
     /// Outgoing radiance toward `to_viewer`: emission + direct light (full BSDF).

@@ -156,7 +156,7 @@ pub fn render_frames(
             }
         }
         let scene: &Scene = frame_scene.as_ref().unwrap_or(base_scene);
-        let frame_direct_lighting = animated.then(|| DirectLighting::new(scene, tracer, settings.direct));
+        let frame_direct_lighting = animated.then(|| static_direct.for_frame(scene));
         let direct = frame_direct_lighting.as_ref().unwrap_or(&static_direct);
         if let Some(v) = volume.as_mut() {
             stats.rays_traced += v.update(scene, tracer, direct, settings.seed, f, &mut pass_totals);
@@ -239,7 +239,8 @@ fn compose_pixels(direct_sum: &[DVec3], accumulated: u32, indirect: &[Vec3]) -> 
 }
 
 /// The camera pass: per pixel, emission + direct light into `direct_out` and, with
-/// a DDGI volume, the diffuse albedo/π × the queried irradiance into `indirect_out`.
+/// a DDGI volume or SH probes, the diffuse albedo/π × the field's irradiance into
+/// `indirect_out`.
 /// Glossy pixels under DDGI also trace one reflected ray per frame (seed 004 §4.4),
 /// importance-sampled from the GGX lobe, whose hit is shaded with direct light plus
 /// probe irradiance (and, with `glossy_second_order`, the hit's own specular

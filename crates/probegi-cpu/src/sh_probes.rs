@@ -117,7 +117,7 @@ impl ShProbes {
                 .coeffs
                 .par_iter_mut()
                 .enumerate()
-                .map(|(slot, coeffs)| {
+                .map_init(Vec::new, |light_samples, (slot, coeffs)| {
                     let lattice: IVec3 = slots[slot];
                     let key = hash_combine(&[seed, frame as u64, k as u64, slot as u64, 0x54]);
                     let mut rng = Pcg32::new(key, slot as u64);
@@ -127,7 +127,8 @@ impl ShProbes {
                         Vec3::ZERO
                     };
                     let probe = (lattice.as_vec3() + jitter) * spacing;
-                    update_probe(scene, tracer, emitters, settings, &samples, probe, coeffs, &mut rng)
+                    let probe_inputs = ProbeInputs { scene, tracer, emitters, settings, samples: &samples };
+                    update_probe(&probe_inputs, probe, coeffs, &mut rng, light_samples)
                 })
                 .sum::<u64>();
         }
@@ -137,18 +138,25 @@ impl ShProbes {
     }
 }
 
-/// Screen update then light injection of one probe. Returns rays traced.
-#[allow(clippy::too_many_arguments)]
+/// What every probe's update reads.
+struct ProbeInputs<'a> {
+    scene: &'a Scene,
+    tracer: &'a dyn RayTracer,
+    emitters: &'a EmitterGrid,
+    settings: &'a ShProbeSettings,
+    samples: &'a [ScreenSample],
+}
+
+/// Screen update then light injection of one probe; `light` is a reused buffer.
+/// Returns rays traced.
 fn update_probe(
-    scene: &Scene,
-    tracer: &dyn RayTracer,
-    emitters: &EmitterGrid,
-    settings: &ShProbeSettings,
-    samples: &[ScreenSample],
+    inputs: &ProbeInputs<'_>,
     probe: Vec3,
     coeffs: &mut probegi_core::sh::ShRgb9,
     rng: &mut Pcg32,
+    light: &mut Vec<(Vec3, Vec3, f32)>,
 ) -> u64 {
+    let ProbeInputs { scene, tracer, emitters, settings, samples } = *inputs;
     let mut rays = 0u64;
     let weighted = samples.iter().filter_map(|s| {
         let (dir, w) = sample_toward_probe(&s.sample, probe)?;
@@ -165,9 +173,9 @@ fn update_probe(
     });
     progressive_update(coeffs, weighted, settings.sh_hysteresis);
     if settings.sh_light_injection && (!emitters.is_empty() || scene.sky_radiance != Vec3::ZERO) {
-        let mut light = Vec::new();
-        rays += injection_samples(scene, tracer, emitters, settings, probe, rng, &mut light);
-        progressive_update(coeffs, light, settings.sh_hysteresis);
+        light.clear();
+        rays += injection_samples(scene, tracer, emitters, settings, probe, rng, light);
+        progressive_update(coeffs, light.iter().copied(), settings.sh_hysteresis);
     }
     rays
 }

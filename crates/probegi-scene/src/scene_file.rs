@@ -19,11 +19,18 @@
 //! color = [1.0, 0.9, 0.8]
 //! intensity = 200.0             # W/sr (point, spot) or W/m² (directional)
 //! outer_cone_angle = 0.6
+//! keyframes = [{ frame = 0, position = [0.0, 10.0, 0.0] }, { frame = 30, intensity = 0.0 }]
 //!
 //! [camera]
 //! position = [-10.0, 2.0, 0.0]
 //! target = [0.0, 2.0, 0.0]
 //! fov_y_deg = 60.0
+//!
+//! [volume]                      # DDGI: DdgiVolumeSettings field names
+//! probe_counts = [16, 8, 16]
+//!
+//! [sh]                          # --gi sh: ShProbeSettings field names
+//! sh_occlusion = true
 //! ```
 
 use std::path::{Path, PathBuf};
