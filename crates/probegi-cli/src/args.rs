@@ -157,6 +157,12 @@ pub struct RenderArgs {
     /// With --sequence, also write frame-NNNN.exr (linear radiance).
     #[arg(long, requires = "sequence")]
     pub sequence_exr: bool,
+    /// Write an animated, looping GIF preview of every frame (tone-mapped).
+    #[arg(long)]
+    pub gif: Option<PathBuf>,
+    /// Playback rate of the --gif preview.
+    #[arg(long, default_value_t = 25.0, requires = "gif")]
+    pub gif_fps: f32,
 }
 
 #[derive(Args, Debug)]

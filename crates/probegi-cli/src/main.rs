@@ -148,7 +148,8 @@ fn render(args: &RenderArgs) -> Result<()> {
     if !matches!(gi, GiMethod::Ddgi(_)) && (args.dump_atlases.is_some() || args.show_probes) {
         bail!("--dump-atlases and --show-probes need --gi ddgi");
     }
-    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    // Static geometry in one BVH, moving objects instanced (see probegi_scene::bvh).
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
     let settings = RenderSettings {
         width: args.scene.width,
@@ -164,20 +165,33 @@ fn render(args: &RenderArgs) -> Result<()> {
     if let Some(dir) = &args.sequence {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
+    let mut gif = match &args.gif {
+        Some(path) => Some(probegi_image::AnimatedGif::create(path, args.gif_fps)?),
+        None => None,
+    };
     let mut sequence_error = None;
     let out = render_frames(&scene, &bvh, &rays, &settings, |f, image| {
         bar.inc(1);
-        if let (Some(dir), None) = (&args.sequence, &sequence_error) {
-            let img = image();
+        if sequence_error.is_some() || (args.sequence.is_none() && gif.is_none()) {
+            return;
+        }
+        let img = image();
+        if let Some(dir) = &args.sequence {
             let mut result = probegi_image::write_image(&dir.join(format!("frame-{f:04}.png")), &img);
             if args.sequence_exr && result.is_ok() {
                 result = probegi_image::write_image(&dir.join(format!("frame-{f:04}.exr")), &img);
             }
             sequence_error = result.err();
         }
+        if let (Some(g), None) = (gif.as_mut(), &sequence_error) {
+            sequence_error = g.push(&img).err();
+        }
     });
     if let Some(e) = sequence_error {
-        return Err(anyhow::Error::new(e).context("writing the --sequence frames"));
+        return Err(anyhow::Error::new(e).context("writing the --sequence / --gif frames"));
+    }
+    if let Some(g) = gif {
+        g.finish()?;
     }
     let (image, stats) = (out.image, out.stats);
     bar.finish_and_clear();

@@ -5,9 +5,11 @@
 //! → border (`probegi_core::probe_border`).
 //!
 //! Production extensions (seed 004), each switchable in the settings:
-//! - initialisation: `probe_relocation_iterations` distance-only traces with the
-//!   position optimizer (`probegi_core::probe_relocation`), then the state
-//!   classification (`probegi_core::probe_classification`);
+//! - initialisation, against the static geometry (`RayTracer::static_part`):
+//!   `probe_relocation_iterations` distance-only traces with the position
+//!   optimizer (`probegi_core::probe_relocation`), then the state classification
+//!   (`probegi_core::probe_classification`); each frame, probes around moving
+//!   objects wake up (`wake_probes_near`, called by the frame loop);
 //! - per frame only probes whose state updates trace and blend; queries skip Off,
 //!   Sleeping and Dead probes;
 //! - fast convergence: Listing 3's per-texel thresholds, and scene events
@@ -212,6 +214,9 @@ impl DdgiVolume {
 
     /// Relocation and classification (seed 004 Listing 5, first step). Returns rays traced.
     fn initialize(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64) -> u64 {
+        // Against static geometry only: moving objects wake probes instead.
+        let static_part = tracer.static_part();
+        let tracer = static_part.as_deref().unwrap_or(tracer);
         let n = self.settings.probe_rays_per_probe as usize;
         let mut traced = 0;
         // Pseudo-frames far from real ones, so initialisation directions differ from frame 0's.

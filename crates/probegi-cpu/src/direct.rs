@@ -45,15 +45,21 @@ impl<'a> DirectLighting<'a> {
         Self { scene, tracer, area_lights: std::borrow::Cow::Owned(AreaLights::new(scene)), settings }
     }
 
-    /// The same lighting over `scene`, a later frame of the same scene whose
-    /// punctual lights moved: the emitter distribution (geometry only) is reused.
-    pub fn for_frame<'b>(&'b self, scene: &'b Scene) -> DirectLighting<'b> {
-        DirectLighting {
-            scene,
-            tracer: self.tracer,
-            area_lights: std::borrow::Cow::Borrowed(self.area_lights.as_ref()),
-            settings: self.settings,
-        }
+    /// The same lighting over `scene`, a later frame of the same scene, traced with
+    /// `tracer` (that frame's). The emitter distribution is reused unless an
+    /// emissive triangle belongs to a moving object (its area may change).
+    pub fn for_frame<'b>(&'b self, scene: &'b Scene, tracer: &'b dyn RayTracer) -> DirectLighting<'b> {
+        let emitter_moves = scene
+            .objects
+            .iter()
+            .filter(|o| o.is_animated())
+            .any(|o| o.triangles().any(|t| scene.material(scene.mesh.triangle_materials[t]).is_emissive()));
+        let area_lights = if emitter_moves {
+            std::borrow::Cow::Owned(AreaLights::new(scene))
+        } else {
+            std::borrow::Cow::Borrowed(self.area_lights.as_ref())
+        };
+        DirectLighting { scene, tracer, area_lights, settings: self.settings }
     }
 
     /// Outgoing radiance toward `to_viewer`: emission + direct light (full BSDF).

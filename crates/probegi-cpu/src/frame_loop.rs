@@ -106,6 +106,8 @@ pub const FIELD_UPDATE_PASSES: [&str; 5] = ["ray_gen", "trace", "shade", "blend"
 /// An animated scene (`Scene::is_animated`) is set to each frame's state before
 /// the frame, and its direct term is that frame's alone (no accumulation). A
 /// light switching on or off notifies the DDGI volume of a large light change.
+/// Moving objects are placed by `tracer.at_frame` (pass `instances`), and DDGI
+/// probes around them are woken each frame.
 pub fn render_frames(
     base_scene: &Scene,
     tracer: &dyn RayTracer,
@@ -156,9 +158,20 @@ pub fn render_frames(
             }
         }
         let scene: &Scene = frame_scene.as_ref().unwrap_or(base_scene);
-        let frame_direct_lighting = animated.then(|| static_direct.for_frame(scene));
+        // Moving geometry: place the instances for this frame (TLAS rebuild).
+        let t = Instant::now();
+        let frame_tracer = if animated { tracer.at_frame(scene, f as f32) } else { None };
+        let tracer: &dyn RayTracer = frame_tracer.as_deref().unwrap_or(tracer);
+        if animated {
+            *pass_totals.entry("instances").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        }
+        let frame_direct_lighting = animated.then(|| static_direct.for_frame(scene, tracer));
         let direct = frame_direct_lighting.as_ref().unwrap_or(&static_direct);
         if let Some(v) = volume.as_mut() {
+            if scene.has_moving_geometry() {
+                // Seed 004 Listing 5: sleeping probes around dynamic objects wake up.
+                v.wake_probes_near(&scene.moving_object_bounds());
+            }
             stats.rays_traced += v.update(scene, tracer, direct, settings.seed, f, &mut pass_totals);
         }
 

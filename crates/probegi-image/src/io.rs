@@ -80,11 +80,11 @@ impl LoadedImage {
     }
 }
 
-fn io_err(path: &Path, e: impl std::fmt::Display) -> ImageError {
+pub(crate) fn io_err(path: &Path, e: impl std::fmt::Display) -> ImageError {
     ImageError::Io { path: path.to_path_buf(), message: e.to_string() }
 }
 
-fn temp_path(path: &Path) -> PathBuf {
+pub(crate) fn temp_path(path: &Path) -> PathBuf {
     let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
     name.push(format!(".partial-{}", std::process::id()));
     let ext = path.extension().map(|e| e.to_os_string()).unwrap_or_default();

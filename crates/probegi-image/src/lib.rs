@@ -1,7 +1,9 @@
-//! probegi-image: image files (EXR, PNG) and FLIP comparison.
+//! probegi-image: image files (EXR, PNG, animated GIF previews) and FLIP comparison.
 
 pub mod compare;
+pub mod gif;
 pub mod io;
 
 pub use compare::{FlipResult, compare_files, flip_srgb8, mean_flip_hdr};
+pub use gif::AnimatedGif;
 pub use io::{ImageError, LoadedImage, read_image, write_image};

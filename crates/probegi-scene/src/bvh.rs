@@ -5,10 +5,14 @@
 //! because their boxes have zero extent on one axis and the build's surface-area
 //! cost degenerates. The pad is relative to the scene's extent, far below any
 //! feature size, and intersection still uses the exact triangles.
+//!
+//! Moving geometry is instanced (dynamic-scenes issue): a BVH per moving object in
+//! its rest space, built once, under a top-level BVH over the instances' bounds
+//! that is rebuilt every frame; the static part keeps its one BVH.
 
 use std::time::{Duration, Instant};
 
-use glam::{Vec2, Vec3A};
+use glam::{Affine3A, Vec2, Vec3, Vec3A};
 use obvhs::{
     BvhBuildParams,
     aabb::Aabb,
@@ -18,6 +22,7 @@ use obvhs::{
 };
 
 use crate::mesh::Mesh;
+use crate::scene::Scene;
 use crate::tracer::{Ray, RayHit, RayTracer};
 
 /// How the BVH is built.
@@ -34,34 +39,31 @@ impl Default for BvhSettings {
     }
 }
 
-pub struct BvhTracer {
+/// A BVH over some of the mesh's triangles, in one space (world for the static
+/// part, rest space for a moving object).
+struct Blas {
     bvh: CwBvh,
     /// Triangles in BVH leaf order: the traversal's primitive id indexes this directly.
     triangles: Vec<RtTriangle>,
     /// Leaf order → `Mesh::triangles` index.
     triangle_ids: Vec<u32>,
-    pub build_time: Duration,
+    /// Bounds of the triangles, `None` when empty.
+    bounds: Option<(Vec3, Vec3)>,
 }
 
-impl BvhTracer {
-    pub fn build(mesh: &Mesh, settings: BvhSettings) -> Self {
-        let start = Instant::now();
-        let tris: Vec<RtTriangle> = (0..mesh.triangle_count())
-            .map(|i| {
-                let [a, b, c] = mesh.vertices(i);
+impl Blas {
+    fn build(mesh: &Mesh, ids: &[u32], pad_m: f32) -> Self {
+        let tris: Vec<RtTriangle> = ids
+            .iter()
+            .map(|&i| {
+                let [a, b, c] = mesh.vertices(i as usize);
                 RtTriangle::new(a.into(), b.into(), c.into())
             })
             .collect();
         if tris.is_empty() {
-            return Self {
-                bvh: CwBvh::default(),
-                triangles: vec![],
-                triangle_ids: vec![],
-                build_time: start.elapsed(),
-            };
+            return Self { bvh: CwBvh::default(), triangles: vec![], triangle_ids: vec![], bounds: None };
         }
-        let extent = mesh.bounds().map(|(lo, hi)| (hi - lo).max_element()).unwrap_or(1.0);
-        let pad = Vec3A::splat(extent * settings.bvh_aabb_pad_rel.max(0.0));
+        let pad = Vec3A::splat(pad_m);
         let aabbs: Vec<Aabb> = tris
             .iter()
             .map(|t| {
@@ -69,55 +71,285 @@ impl BvhTracer {
                 Aabb::new(b.min - pad, b.max + pad)
             })
             .collect();
+        let bounds = aabbs.iter().skip(1).fold(aabbs[0], |acc, b| acc.union(b));
         let bvh = build_cwbvh(&aabbs, BvhBuildParams::medium_build(), &mut Duration::default());
         let triangles = bvh.primitive_indices.iter().map(|&i| tris[i as usize]).collect();
-        let triangle_ids = bvh.primitive_indices.clone();
-        Self { bvh, triangles, triangle_ids, build_time: start.elapsed() }
+        let triangle_ids = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
+        Self { bvh, triangles, triangle_ids, bounds: Some((bounds.min.into(), bounds.max.into())) }
+    }
+
+    /// Closest hit along `r` (leaf index and t).
+    fn closest(&self, r: ObRay) -> Option<(u32, f32)> {
+        if self.triangles.is_empty() {
+            return None;
+        }
+        let mut hit = ObRayHit::none();
+        self.bvh.ray_traverse(r, &mut hit, |r, id| self.triangles[id].intersect(r)).then_some((hit.primitive_id, hit.t))
+    }
+
+    fn occluded(&self, r: ObRay) -> bool {
+        !self.triangles.is_empty() && !self.bvh.ray_traverse_miss(r, |r, id| self.triangles[id].intersect(r))
+    }
+
+    /// The public hit record of leaf `leaf` hit by `r` (in this BLAS's space) at `t`.
+    fn hit(&self, leaf: u32, r: &ObRay, t: f32) -> RayHit {
+        let tri = &self.triangles[leaf as usize];
+        let bary = tri.compute_barycentric(r);
+        // RtTriangle::ng is the negated counter-clockwise normal. Instance transforms
+        // have positive scale, so the side is the same in rest and world space.
+        let backface = tri.ng.dot(r.direction) < 0.0;
+        RayHit { t, triangle: self.triangle_ids[leaf as usize], barycentric: Vec2::new(bary.x, bary.y), backface }
+    }
+}
+
+/// One BLAS placed in the world for a frame.
+struct Instance {
+    /// Index into `BvhTracer::blases`.
+    blas: usize,
+    /// `None` for the identity (the static part).
+    local_from_world: Option<Affine3A>,
+}
+
+impl Instance {
+    fn to_local(&self, r: &ObRay) -> ObRay {
+        match &self.local_from_world {
+            None => *r,
+            // Unnormalised direction: the ray parameter t is the same in both spaces.
+            Some(m) => ObRay::new(m.transform_point3a(r.origin), m.transform_vector3a(r.direction), r.tmin, r.tmax),
+        }
+    }
+}
+
+/// The top-level structure of one frame: a BVH over instance bounds.
+struct Tlas {
+    bvh: CwBvh,
+    instances: Vec<Instance>,
+}
+
+/// The scene's ray tracer. Static triangles share one BVH built once; each moving
+/// object (`BvhTracer::for_scene`) has its own BVH in rest space, built once, and
+/// [`RayTracer::at_frame`] places them with a top-level BVH over the instances,
+/// rebuilt every frame. With no moving objects, rays go straight to the static BVH.
+pub struct BvhTracer {
+    /// `blases[0]` is the static part; then one per moving object.
+    blases: Vec<Blas>,
+    /// Scene object index of `blases[k + 1]`.
+    object_ids: Vec<usize>,
+    /// The instances in their rest pose (what this tracer traces by itself).
+    rest: Option<Tlas>,
+    pad_rel: f32,
+    pub build_time: Duration,
+}
+
+impl BvhTracer {
+    /// One BVH over every triangle of `mesh`: geometry that never moves.
+    pub fn build(mesh: &Mesh, settings: BvhSettings) -> Self {
+        let start = Instant::now();
+        let pad = pad_m(mesh.bounds(), settings);
+        let ids: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
+        let blases = vec![Blas::build(mesh, &ids, pad)];
+        Self { blases, object_ids: vec![], rest: None, pad_rel: settings.bvh_aabb_pad_rel, build_time: start.elapsed() }
+    }
+
+    /// A static BVH over everything that does not move, plus one per moving object
+    /// of `scene` (in the pose `scene` is in, which the loaders leave at rest).
+    pub fn for_scene(scene: &Scene, settings: BvhSettings) -> Self {
+        if !scene.has_moving_geometry() {
+            return Self::build(&scene.mesh, settings);
+        }
+        let start = Instant::now();
+        let mesh = &scene.mesh;
+        let pad = pad_m(mesh.bounds(), settings);
+        let mut moving = vec![false; mesh.triangle_count()];
+        let mut blases = vec![];
+        let mut object_ids = vec![];
+        for (i, o) in scene.objects.iter().enumerate().filter(|(_, o)| o.is_animated()) {
+            let ids: Vec<u32> = o.triangles().map(|t| t as u32).collect();
+            o.triangles().for_each(|t| moving[t] = true);
+            blases.push(Blas::build(mesh, &ids, pad));
+            object_ids.push(i);
+        }
+        let static_ids: Vec<u32> = (0..mesh.triangle_count() as u32).filter(|&t| !moving[t as usize]).collect();
+        blases.insert(0, Blas::build(mesh, &static_ids, pad));
+        let mut tracer =
+            Self { blases, object_ids, rest: None, pad_rel: settings.bvh_aabb_pad_rel, build_time: Duration::ZERO };
+        let rest = vec![None; tracer.object_ids.len()];
+        tracer.rest = Some(tracer.build_tlas(&rest));
+        tracer.build_time = start.elapsed();
+        tracer
     }
 
     pub fn triangle_count(&self) -> usize {
-        self.triangles.len()
+        self.blases.iter().map(|b| b.triangles.len()).sum()
     }
+
+    /// Moving objects this tracer instances.
+    pub fn instanced_object_count(&self) -> usize {
+        self.object_ids.len()
+    }
+
+    /// The top-level BVH for objects placed by `world_from_rest` (`None`: at rest).
+    fn build_tlas(&self, world_from_rest: &[Option<Affine3A>]) -> Tlas {
+        let mut instances = vec![];
+        let mut aabbs = vec![];
+        let pad = Vec3A::splat(self.pad_rel.max(0.0));
+        for (k, blas) in self.blases.iter().enumerate() {
+            let Some((lo, hi)) = blas.bounds else { continue };
+            let xf = if k == 0 { None } else { world_from_rest[k - 1] };
+            let (lo, hi) = match xf {
+                None => (lo, hi),
+                Some(m) => transformed_bounds(&m, lo, hi),
+            };
+            let extent = (hi - lo).max_element().max(1e-6);
+            aabbs.push(Aabb::new(Vec3A::from(lo) - pad * extent, Vec3A::from(hi) + pad * extent));
+            instances.push(Instance { blas: k, local_from_world: xf.map(|m| m.inverse()) });
+        }
+        let bvh = if aabbs.is_empty() {
+            CwBvh::default()
+        } else {
+            build_cwbvh(&aabbs, BvhBuildParams::fastest_build(), &mut Duration::default())
+        };
+        let instances = if aabbs.is_empty() {
+            instances
+        } else {
+            let mut slots: Vec<Option<Instance>> = instances.into_iter().map(Some).collect();
+            bvh.primitive_indices.iter().filter_map(|&i| slots[i as usize].take()).collect()
+        };
+        Tlas { bvh, instances }
+    }
+
+    fn closest_in(&self, tlas: Option<&Tlas>, ray: &Ray) -> Option<RayHit> {
+        let r = to_obvhs(ray);
+        let Some(tlas) = tlas else {
+            let (leaf, t) = self.blases[0].closest(r)?;
+            return Some(self.blases[0].hit(leaf, &r, t));
+        };
+        if tlas.instances.is_empty() {
+            return None;
+        }
+        let mut best: Option<(usize, u32, ObRay, f32)> = None;
+        let mut hit = ObRayHit::none();
+        tlas.bvh.ray_traverse(r, &mut hit, |r, id| {
+            let inst = &tlas.instances[id];
+            let local = inst.to_local(r);
+            match self.blases[inst.blas].closest(local) {
+                Some((leaf, t)) => {
+                    best = Some((inst.blas, leaf, local, t));
+                    t
+                }
+                None => f32::INFINITY,
+            }
+        });
+        let (blas, leaf, local, t) = best?;
+        Some(self.blases[blas].hit(leaf, &local, t))
+    }
+
+    fn occluded_in(&self, tlas: Option<&Tlas>, ray: &Ray) -> bool {
+        let r = to_obvhs(ray);
+        let Some(tlas) = tlas else { return self.blases[0].occluded(r) };
+        if tlas.instances.is_empty() {
+            return false;
+        }
+        !tlas.bvh.ray_traverse_miss(r, |r, id| {
+            let inst = &tlas.instances[id];
+            if self.blases[inst.blas].occluded(inst.to_local(r)) { r.tmin } else { f32::INFINITY }
+        })
+    }
+}
+
+fn pad_m(bounds: Option<(Vec3, Vec3)>, settings: BvhSettings) -> f32 {
+    let extent = bounds.map(|(lo, hi)| (hi - lo).max_element()).unwrap_or(1.0);
+    extent * settings.bvh_aabb_pad_rel.max(0.0)
+}
+
+/// Bounds of the box `[lo, hi]` after an affine transform (its 8 corners).
+fn transformed_bounds(m: &Affine3A, lo: Vec3, hi: Vec3) -> (Vec3, Vec3) {
+    let mut out = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for c in 0..8 {
+        let p = Vec3::new(
+            if c & 1 == 0 { lo.x } else { hi.x },
+            if c & 2 == 0 { lo.y } else { hi.y },
+            if c & 4 == 0 { lo.z } else { hi.z },
+        );
+        let q = m.transform_point3(p);
+        out = (out.0.min(q), out.1.max(q));
+    }
+    out
 }
 
 fn to_obvhs(ray: &Ray) -> ObRay {
     ObRay::new(ray.origin.into(), ray.dir.into(), ray.t_min, ray.t_max)
 }
 
-impl RayTracer for BvhTracer {
+/// A tracer with its moving objects placed for one frame.
+struct FrameTracer<'a> {
+    base: &'a BvhTracer,
+    tlas: Tlas,
+}
+
+impl RayTracer for FrameTracer<'_> {
     fn closest_hit(&self, ray: &Ray) -> Option<RayHit> {
-        if self.triangles.is_empty() {
-            return None;
-        }
-        let r = to_obvhs(ray);
-        let mut hit = ObRayHit::none();
-        if !self.bvh.ray_traverse(r, &mut hit, |r, id| self.triangles[id].intersect(r)) {
-            return None;
-        }
-        let tri = &self.triangles[hit.primitive_id as usize];
-        let bary = tri.compute_barycentric(&r);
-        // RtTriangle::ng is the negated counter-clockwise normal.
-        let backface = tri.ng.dot(r.direction) < 0.0;
-        Some(RayHit {
-            t: hit.t,
-            triangle: self.triangle_ids[hit.primitive_id as usize],
-            barycentric: Vec2::new(bary.x, bary.y),
-            backface,
-        })
+        self.base.closest_in(Some(&self.tlas), ray)
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        if self.triangles.is_empty() {
-            return false;
+        self.base.occluded_in(Some(&self.tlas), ray)
+    }
+
+    fn static_part<'a>(&'a self) -> Option<Box<dyn RayTracer + 'a>> {
+        self.base.static_part()
+    }
+}
+
+/// The static BVH alone.
+struct StaticPart<'a>(&'a BvhTracer);
+
+impl RayTracer for StaticPart<'_> {
+    fn closest_hit(&self, ray: &Ray) -> Option<RayHit> {
+        self.0.closest_in(None, ray)
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.0.occluded_in(None, ray)
+    }
+}
+
+impl RayTracer for BvhTracer {
+    fn closest_hit(&self, ray: &Ray) -> Option<RayHit> {
+        self.closest_in(self.rest.as_ref(), ray)
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.occluded_in(self.rest.as_ref(), ray)
+    }
+
+    /// Places the moving objects at `frame` (a TLAS rebuild over the instances). A
+    /// tracer built without the scene's objects (`BvhTracer::build`) cannot follow
+    /// them; it then rebuilds one BVH over the posed mesh, which is correct but
+    /// costs a full build per frame.
+    fn at_frame<'a>(&'a self, posed: &Scene, frame: f32) -> Option<Box<dyn RayTracer + 'a>> {
+        if !posed.has_moving_geometry() {
+            return None;
         }
-        !self.bvh.ray_traverse_miss(to_obvhs(ray), |r, id| self.triangles[id].intersect(r))
+        let follows = self.object_ids.len() == posed.objects.iter().filter(|o| o.is_animated()).count()
+            && self.object_ids.iter().all(|&i| posed.objects.get(i).is_some_and(|o| o.is_animated()));
+        if !follows {
+            let settings = BvhSettings { bvh_aabb_pad_rel: self.pad_rel };
+            return Some(Box::new(BvhTracer::build(&posed.mesh, settings)));
+        }
+        let xfs: Vec<Option<Affine3A>> =
+            self.object_ids.iter().map(|&i| Some(posed.objects[i].world_from_rest(frame))).collect();
+        Some(Box::new(FrameTracer { base: self, tlas: self.build_tlas(&xfs) }))
+    }
+
+    fn static_part<'a>(&'a self) -> Option<Box<dyn RayTracer + 'a>> {
+        (!self.object_ids.is_empty()).then(|| Box::new(StaticPart(self)) as Box<dyn RayTracer + 'a>)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Vec3;
 
     fn one_triangle() -> Mesh {
         Mesh {
@@ -149,6 +381,89 @@ mod tests {
         assert!(bvh.occluded(&Ray::segment(p - Vec3::Z, Vec3::Z, 2.0)));
         assert!(!bvh.occluded(&Ray::segment(p - Vec3::Z, Vec3::Z, 0.5)));
         assert!(bvh.closest_hit(&Ray::new(Vec3::new(2.0, 2.0, 1.0), Vec3::NEG_Z)).is_none());
+    }
+
+    /// A static floor and box, and a box that slides, turns and grows.
+    fn moving_scene() -> Scene {
+        use crate::animation::{ObjectAnimation, SceneObject, TransformKeyframe};
+        use crate::builtin::{add_box, add_polygon};
+        let mut s = Scene { materials: vec![crate::Material::diffuse("m", Vec3::ONE)], ..Default::default() };
+        let floor = [
+            Vec3::new(-5.0, 0.0, -5.0),
+            Vec3::new(-5.0, 0.0, 5.0),
+            Vec3::new(5.0, 0.0, 5.0),
+            Vec3::new(5.0, 0.0, -5.0),
+        ];
+        add_polygon(&mut s.mesh, &floor, 0);
+        add_box(&mut s.mesh, Vec3::new(2.0, 0.2, 2.0), Vec3::new(3.0, 1.0, 3.0), 0);
+        let (t0, v0) = (s.mesh.triangle_count() as u32, s.mesh.positions.len() as u32);
+        add_box(&mut s.mesh, Vec3::new(-0.5, 0.0, -0.5), Vec3::new(0.5, 1.0, 0.5), 0);
+        let key = |frame: f32, x: f32, deg: f32, k: f32| TransformKeyframe {
+            frame,
+            translation: Some(Vec3::new(x, 0.5, 0.0)),
+            rotation: Some(glam::Quat::from_rotation_y(deg.to_radians())),
+            scale: Some(Vec3::splat(k)),
+        };
+        s.objects.push(SceneObject {
+            name: "mover".into(),
+            first_triangle: t0,
+            triangle_count: 12,
+            first_vertex: v0,
+            vertex_count: 24,
+            pivot_m: Vec3::new(0.0, 0.5, 0.0),
+            animation: ObjectAnimation {
+                keyframes: vec![key(0.0, -3.0, 0.0, 1.0), key(10.0, 3.0, 90.0, 1.5)],
+                motion: None,
+            },
+            placement: glam::Mat4::IDENTITY,
+        });
+        assert_eq!(s.validate(), Ok(()));
+        s
+    }
+
+    #[test]
+    fn instanced_tracing_matches_a_full_rebuild_of_the_posed_mesh() {
+        let base = moving_scene();
+        let tracer = BvhTracer::for_scene(&base, BvhSettings::default());
+        assert_eq!(tracer.instanced_object_count(), 1);
+        let mut posed = base.clone();
+        let mut rng = probegi_core::rng::Pcg32::new(7, 1);
+        let mut hits = 0;
+        for frame in [0.0, 3.5, 10.0] {
+            posed.set_frame_from(&base, frame);
+            let reference = BvhTracer::build(&posed.mesh, BvhSettings::default());
+            let framed = tracer.at_frame(&posed, frame).expect("moving scene");
+            for _ in 0..2000 {
+                let o = Vec3::new(rng.next_f32() * 8.0 - 4.0, rng.next_f32() * 2.0 + 0.05, rng.next_f32() * 8.0 - 4.0);
+                let d = probegi_core::sampling::sample_uniform_sphere(rng.next_vec2());
+                let ray = Ray::segment(o, d, 1.0 + 6.0 * rng.next_f32());
+                let (a, b) = (framed.closest_hit(&ray), reference.closest_hit(&ray));
+                assert_eq!(a.is_some(), b.is_some(), "frame {frame} ray {ray:?}");
+                if let (Some(a), Some(b)) = (a, b) {
+                    hits += 1;
+                    assert_eq!((a.triangle, a.backface), (b.triangle, b.backface), "frame {frame}");
+                    assert!((a.t - b.t).abs() < 1e-4 && (a.barycentric - b.barycentric).length() < 1e-3);
+                    let p = posed.surface_point(&a).position;
+                    assert!((p - ray.at(a.t)).length() < 1e-4, "reconstructed hit off the ray: {p}");
+                }
+                assert_eq!(framed.occluded(&ray), reference.occluded(&ray));
+            }
+        }
+        assert!(hits > 1000, "{hits}");
+    }
+
+    #[test]
+    fn a_static_tracer_still_follows_moving_objects_by_rebuilding() {
+        let base = moving_scene();
+        let stale = BvhTracer::build(&base.mesh, BvhSettings::default());
+        let mut posed = base.clone();
+        posed.set_frame_from(&base, 10.0);
+        // The mover now sits at x = 3 (scaled 1.5): a ray down onto it hits its top.
+        let ray = Ray::new(Vec3::new(3.0, 5.0, 0.0), Vec3::NEG_Y);
+        assert!(stale.closest_hit(&ray).is_some_and(|h| (h.t - 5.0).abs() < 1e-4), "rest pose: the floor");
+        let framed = stale.at_frame(&posed, 10.0).expect("rebuilt");
+        let h = framed.closest_hit(&ray).expect("hit");
+        assert!((h.t - (5.0 - 1.75)).abs() < 1e-4, "{}", h.t);
     }
 
     #[test]

@@ -1,9 +1,10 @@
 //! probegi-scene: the scene model, its loaders and ray casting.
 //!
-//! - [`scene`], [`mesh`], [`material`], [`texture`], [`light`]: the model.
+//! - [`scene`], [`animation`] (rigid objects over frames), [`mesh`], [`material`], [`texture`], [`light`]: the model.
 //! - [`obj`], [`gltf_file`], [`scene_file`], [`builtin`], [`load`]: loaders.
 //! - [`tracer`]: the ray-casting trait; [`bvh`]: its obvhs CWBVH implementation.
 
+pub mod animation;
 pub mod builtin;
 pub mod bvh;
 pub mod error;
@@ -19,6 +20,7 @@ pub mod scene_file;
 pub mod texture;
 pub mod tracer;
 
+pub use animation::{MotionPath, ObjectAnimation, SceneObject, TransformKeyframe};
 pub use bvh::{BvhSettings, BvhTracer};
 pub use error::SceneError;
 pub use light::{LightKind, PunctualLight};

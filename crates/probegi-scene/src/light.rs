@@ -5,6 +5,8 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
+use crate::animation::channel;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LightKind {
@@ -61,25 +63,10 @@ pub struct LightKeyframe {
     pub intensity: Option<f32>,
 }
 
-/// Linear interpolation of one channel over the keys that set it.
-fn channel<T: Copy>(
-    keys: &[LightKeyframe],
-    frame: f32,
-    get: impl Fn(&LightKeyframe) -> Option<T>,
-    lerp: impl Fn(T, T, f32) -> T,
-) -> Option<T> {
-    let mut prev: Option<(f32, T)> = None;
-    for k in keys {
-        let Some(v) = get(k) else { continue };
-        if k.frame >= frame {
-            return Some(match prev {
-                Some((f0, v0)) if k.frame > f0 => lerp(v0, v, (frame - f0) / (k.frame - f0)),
-                _ => v,
-            });
-        }
-        prev = Some((k.frame, v));
+impl crate::animation::Keyed for LightKeyframe {
+    fn frame(&self) -> f32 {
+        self.frame
     }
-    prev.map(|p| p.1)
 }
 
 fn default_direction() -> Vec3 {
@@ -152,10 +139,8 @@ impl PunctualLight {
                 self.inner_cone_angle, self.outer_cone_angle
             ));
         }
+        crate::animation::validate_key_frames(&self.keyframes)?;
         for (i, k) in self.keyframes.iter().enumerate() {
-            if !k.frame.is_finite() || (i > 0 && k.frame <= self.keyframes[i - 1].frame) {
-                return Err(format!("keyframe {i}: frame {} must be finite and after the previous key's", k.frame));
-            }
             if k.position.is_some_and(|p| !p.is_finite()) || k.direction.is_some_and(|d| !d.is_finite()) {
                 return Err(format!("keyframe {i}: position and direction must be finite"));
             }

@@ -1,17 +1,21 @@
 //! The scene model: one merged triangle mesh, its materials and textures, punctual
 //! lights, a constant sky and an optional camera. Emissive triangles are the area
-//! lights. Scenes are y-up, in metres.
+//! lights. Scenes are y-up, in metres. Rigid [`SceneObject`]s are ranges of the
+//! mesh that move over frames; [`Scene::set_frame_from`] poses them (and the
+//! lights) for a frame, and a tracer built with `BvhTracer::for_scene` follows
+//! them through its per-frame top-level structure.
 
 use glam::{Vec2, Vec3};
 use probegi_core::camera::Camera;
 
+use crate::animation::SceneObject;
 use crate::light::PunctualLight;
 use crate::material::Material;
 use crate::mesh::Mesh;
 use crate::texture::Texture;
 use crate::tracer::RayHit;
 
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct Scene {
     /// For messages: the path or built-in name it was loaded from.
     pub name: String,
@@ -19,6 +23,11 @@ pub struct Scene {
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub lights: Vec<PunctualLight>,
+    /// Named mesh ranges, animated or not; ranges do not overlap.
+    pub objects: Vec<SceneObject>,
+    /// Frames per second of the animation clock, for animations authored in
+    /// seconds (glTF); frame `f` is at `f / frames_per_second` seconds.
+    pub frames_per_second: f32,
     /// Constant radiance of rays that leave the scene, W·sr⁻¹·m⁻² per channel.
     pub sky_radiance: Vec3,
     /// The camera the file asked for, if any.
@@ -65,6 +74,25 @@ impl SurfacePoint {
         let n = if dir.dot(self.geometric_normal) >= 0.0 { self.geometric_normal } else { -self.geometric_normal };
         let eps = 1e-4 * (1.0 + self.position.abs().max_element());
         self.position + n * eps
+    }
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        Self {
+            name: String::new(),
+            mesh: Mesh::default(),
+            materials: Vec::new(),
+            textures: Vec::new(),
+            lights: Vec::new(),
+            objects: Vec::new(),
+            frames_per_second: 30.0,
+            sky_radiance: Vec3::ZERO,
+            camera: None,
+            volume: None,
+            sh_probes: None,
+            warnings: Vec::new(),
+        }
     }
 }
 
@@ -117,14 +145,42 @@ impl Scene {
 
     /// Whether anything in the scene changes from frame to frame.
     pub fn is_animated(&self) -> bool {
-        self.lights.iter().any(|l| !l.keyframes.is_empty())
+        self.lights.iter().any(|l| !l.keyframes.is_empty()) || self.has_moving_geometry()
     }
 
-    /// Sets this scene's animated state to frame `frame` of `base` (same scene).
+    /// Whether any object moves.
+    pub fn has_moving_geometry(&self) -> bool {
+        self.objects.iter().any(|o| o.is_animated())
+    }
+
+    /// Sets this scene's animated state to frame `frame` of `base` (same scene):
+    /// lights from their keyframes, and the vertices and normals of every moving
+    /// object from `base`'s rest pose.
     pub fn set_frame_from(&mut self, base: &Scene, frame: f32) {
         for (l, b) in self.lights.iter_mut().zip(&base.lights) {
             *l = b.at_frame(frame);
         }
+        for o in base.objects.iter().filter(|o| o.is_animated()) {
+            let xf = o.world_from_rest(frame);
+            let normal_matrix = glam::Mat3::from(xf.matrix3).inverse().transpose();
+            for v in o.vertices() {
+                self.mesh.positions[v] = xf.transform_point3(base.mesh.positions[v]);
+                self.mesh.normals[v] = (normal_matrix * base.mesh.normals[v]).normalize_or(Vec3::Y);
+            }
+        }
+    }
+
+    /// World bounds of every moving object as posed in this scene, for waking
+    /// the probes around them (seed 004 §4.3).
+    pub fn moving_object_bounds(&self) -> Vec<(Vec3, Vec3)> {
+        self.objects
+            .iter()
+            .filter(|o| o.is_animated() && o.vertex_count > 0)
+            .map(|o| {
+                let p = &self.mesh.positions[o.vertices()];
+                p.iter().fold((p[0], p[0]), |(lo, hi), &q| (lo.min(q), hi.max(q)))
+            })
+            .collect()
     }
 
     /// Axis-aligned bounds of the geometry.
@@ -183,6 +239,34 @@ impl Scene {
         }
         if let Some(c) = &self.camera {
             c.validate()?;
+        }
+        let mut claimed = vec![false; m.triangles.len()];
+        for o in &self.objects {
+            let name = &o.name;
+            if o.triangles().end > m.triangles.len() || o.vertices().end > m.positions.len() {
+                return Err(format!("object `{name}` reaches past the mesh"));
+            }
+            if o.triangles().any(|t| std::mem::replace(&mut claimed[t], true)) {
+                return Err(format!("object `{name}` overlaps another object"));
+            }
+            let vs = o.vertices();
+            if o.triangles().any(|t| m.triangles[t].iter().any(|&v| !vs.contains(&(v as usize)))) {
+                return Err(format!("object `{name}` has triangles that use vertices outside its range"));
+            }
+            o.validate().map_err(|e| format!("object `{name}`: {e}"))?;
+        }
+        let mut vertex_owner = vec![u32::MAX; m.positions.len()];
+        for (i, o) in self.objects.iter().enumerate() {
+            vertex_owner[o.vertices()].iter_mut().for_each(|v| *v = i as u32);
+        }
+        let loose = (0..m.triangles.len()).filter(|&t| !claimed[t]);
+        if let Some(t) =
+            loose.into_iter().find(|&t| m.triangles[t].iter().any(|&v| vertex_owner[v as usize] != u32::MAX))
+        {
+            return Err(format!("triangle {t} is in no object but uses an object's vertices"));
+        }
+        if !(self.frames_per_second.is_finite() && self.frames_per_second > 0.0) {
+            return Err(format!("frames_per_second must be positive, got {}", self.frames_per_second));
         }
         Ok(())
     }

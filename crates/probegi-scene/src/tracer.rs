@@ -44,4 +44,15 @@ pub trait RayTracer: Send + Sync {
     fn closest_hit(&self, ray: &Ray) -> Option<RayHit>;
     /// Whether anything intersects the ray within `[t_min, t_max]` (shadow rays).
     fn occluded(&self, ray: &Ray) -> bool;
+    /// A tracer over `posed` (a scene set to `frame` by `Scene::set_frame_from`),
+    /// or `None` when this one already matches it (no moving geometry).
+    fn at_frame<'a>(&'a self, _posed: &crate::Scene, _frame: f32) -> Option<Box<dyn RayTracer + 'a>> {
+        None
+    }
+    /// A tracer over the geometry that never moves, or `None` when that is all
+    /// there is. DDGI classifies and relocates probes against it (seed 004 §6:
+    /// dynamic objects wake probes instead).
+    fn static_part<'a>(&'a self) -> Option<Box<dyn RayTracer + 'a>> {
+        None
+    }
 }

@@ -1,0 +1,298 @@
+//! Rigid object animation over frame numbers (dynamic-scenes issue; seed 000 §4.1
+//! moves a spotlight, seed 003 moves occluders, seed 004 §4.3 wakes probes around
+//! dynamic objects).
+//!
+//! An object is a contiguous range of the scene mesh's triangles and vertices.
+//! Its authored geometry is its *rest* pose; at frame `f` every vertex is
+//! `world_from_rest(f) · p_rest`, where
+//!
+//! ```text
+//! world_from_rest(f) = placement · motion(f) · T(pivot) · T(t(f)) · R(r(f)) · S(s(f)) · T(−pivot) · placement⁻¹
+//! ```
+//!
+//! - `t, r, s` come from keyframes, each channel interpolated linearly (rotation by
+//!   slerp) between the keys that set it and held before the first and after the
+//!   last, as light keyframes are;
+//! - `motion(f)` is an optional closed-form path: a constant velocity, an orbit
+//!   about an axis, or a spin about the pivot;
+//! - `pivot` defaults to the centre of the rest bounds, so rotation and scale act
+//!   about the object itself;
+//! - `placement` is the transform a scene file applied when it placed a file that
+//!   carries its own animation (glTF), so that the animation moves with it.
+//!
+//! Scales must be positive: a mirroring animation would flip triangle windings
+//! mid-sequence.
+
+use glam::{Affine3A, Mat4, Quat, Vec3};
+
+/// A key whose frame number orders it.
+pub(crate) trait Keyed {
+    fn frame(&self) -> f32;
+}
+
+/// Linear interpolation of one channel over the keys that set it; holds before
+/// the first and after the last. `None` when no key sets the channel.
+pub(crate) fn channel<K: Keyed, T: Copy>(
+    keys: &[K],
+    frame: f32,
+    get: impl Fn(&K) -> Option<T>,
+    lerp: impl Fn(T, T, f32) -> T,
+) -> Option<T> {
+    let mut prev: Option<(f32, T)> = None;
+    for k in keys {
+        let Some(v) = get(k) else { continue };
+        if k.frame() >= frame {
+            return Some(match prev {
+                Some((f0, v0)) if k.frame() > f0 => lerp(v0, v, (frame - f0) / (k.frame() - f0)),
+                _ => v,
+            });
+        }
+        prev = Some((k.frame(), v));
+    }
+    prev.map(|p| p.1)
+}
+
+/// Why a key sequence is unusable: frames must be finite and increasing (a step
+/// change is two keys one frame apart).
+pub(crate) fn validate_key_frames<K: Keyed>(keys: &[K]) -> Result<(), String> {
+    for (i, k) in keys.iter().enumerate() {
+        if !k.frame().is_finite() || (i > 0 && k.frame() <= keys[i - 1].frame()) {
+            return Err(format!("keyframe {i}: frame {} must be finite and after the previous key's", k.frame()));
+        }
+    }
+    Ok(())
+}
+
+/// One key of an object's animation; any channel may be absent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransformKeyframe {
+    pub frame: f32,
+    /// Offset from the rest pose, metres.
+    pub translation: Option<Vec3>,
+    /// Rotation about the pivot.
+    pub rotation: Option<Quat>,
+    /// Scale about the pivot; every component positive.
+    pub scale: Option<Vec3>,
+}
+
+impl Keyed for TransformKeyframe {
+    fn frame(&self) -> f32 {
+        self.frame
+    }
+}
+
+/// Closed-form motion paths.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MotionPath {
+    /// Constant velocity from the rest pose at frame 0.
+    Translate { velocity_m_per_frame: Vec3 },
+    /// The whole object revolves about the axis through `centre_m`, one turn per
+    /// `period_frames` (it keeps facing the centre, like a moon).
+    Orbit { centre_m: Vec3, axis: Vec3, period_frames: f32 },
+    /// The object spins about its pivot, one turn per `period_frames`.
+    Rotate { axis: Vec3, period_frames: f32 },
+}
+
+impl MotionPath {
+    fn transform(&self, frame: f32, pivot: Vec3) -> Affine3A {
+        let turn =
+            |axis: Vec3, period: f32| Quat::from_axis_angle(axis.normalize(), std::f32::consts::TAU * frame / period);
+        match *self {
+            MotionPath::Translate { velocity_m_per_frame } => Affine3A::from_translation(velocity_m_per_frame * frame),
+            MotionPath::Orbit { centre_m, axis, period_frames } => {
+                Affine3A::from_rotation_translation(turn(axis, period_frames), centre_m)
+                    * Affine3A::from_translation(-centre_m)
+            }
+            MotionPath::Rotate { axis, period_frames } => {
+                Affine3A::from_rotation_translation(turn(axis, period_frames), pivot)
+                    * Affine3A::from_translation(-pivot)
+            }
+        }
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        let (vectors, period) = match *self {
+            MotionPath::Translate { velocity_m_per_frame } => (vec![velocity_m_per_frame], None),
+            MotionPath::Orbit { centre_m, axis, period_frames } => (vec![centre_m, axis], Some((axis, period_frames))),
+            MotionPath::Rotate { axis, period_frames } => (vec![axis], Some((axis, period_frames))),
+        };
+        if vectors.iter().any(|v| !v.is_finite()) {
+            return Err("motion vectors must be finite".into());
+        }
+        if let Some((axis, period)) = period {
+            if axis.length_squared() < 1e-12 {
+                return Err("motion axis must be non-zero".into());
+            }
+            if !(period.is_finite() && period > 0.0) {
+                return Err(format!("motion period_frames must be positive, got {period}"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// How an object moves; `Default` is still.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ObjectAnimation {
+    pub keyframes: Vec<TransformKeyframe>,
+    pub motion: Option<MotionPath>,
+}
+
+impl ObjectAnimation {
+    pub fn is_still(&self) -> bool {
+        self.keyframes.is_empty() && self.motion.is_none()
+    }
+}
+
+/// A rigid object: a contiguous range of the scene mesh and its animation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneObject {
+    pub name: String,
+    pub first_triangle: u32,
+    pub triangle_count: u32,
+    pub first_vertex: u32,
+    pub vertex_count: u32,
+    /// Rotation and scale centre in rest space, metres.
+    pub pivot_m: Vec3,
+    pub animation: ObjectAnimation,
+    /// The transform a scene file placed this object's source with (see module docs).
+    pub placement: Mat4,
+}
+
+impl SceneObject {
+    pub fn triangles(&self) -> std::ops::Range<usize> {
+        self.first_triangle as usize..(self.first_triangle + self.triangle_count) as usize
+    }
+
+    pub fn vertices(&self) -> std::ops::Range<usize> {
+        self.first_vertex as usize..(self.first_vertex + self.vertex_count) as usize
+    }
+
+    /// Whether the object moves at all.
+    pub fn is_animated(&self) -> bool {
+        !self.animation.is_still()
+    }
+
+    /// The object's transform at `frame`, from its rest pose to world space.
+    pub fn world_from_rest(&self, frame: f32) -> Affine3A {
+        let a = &self.animation;
+        if a.is_still() {
+            return Affine3A::IDENTITY;
+        }
+        let k = &a.keyframes;
+        let t = channel(k, frame, |k| k.translation, |a, b, t| a.lerp(b, t)).unwrap_or(Vec3::ZERO);
+        let r = channel(k, frame, |k| k.rotation, |a, b, t| a.slerp(b, t)).unwrap_or(Quat::IDENTITY);
+        let s = channel(k, frame, |k| k.scale, |a, b, t| a.lerp(b, t)).unwrap_or(Vec3::ONE);
+        let keyed = Affine3A::from_translation(self.pivot_m + t)
+            * Affine3A::from_scale_rotation_translation(s, r, Vec3::ZERO)
+            * Affine3A::from_translation(-self.pivot_m);
+        let motion = a.motion.map(|m| m.transform(frame, self.pivot_m)).unwrap_or(Affine3A::IDENTITY);
+        let local = motion * keyed;
+        if self.placement == Mat4::IDENTITY {
+            return local;
+        }
+        let placement = Affine3A::from_mat4(self.placement);
+        placement * local * placement.inverse()
+    }
+
+    /// Why this object is unusable, if it is.
+    pub fn validate(&self) -> Result<(), String> {
+        let a = &self.animation;
+        validate_key_frames(&a.keyframes)?;
+        for (i, k) in a.keyframes.iter().enumerate() {
+            if k.translation.is_some_and(|t| !t.is_finite()) || k.rotation.is_some_and(|r| !r.is_finite()) {
+                return Err(format!("keyframe {i}: translation and rotation must be finite"));
+            }
+            if k.scale.is_some_and(|s| !s.is_finite() || s.min_element() <= 0.0) {
+                return Err(format!("keyframe {i}: scale must be finite and positive on every axis"));
+            }
+        }
+        if let Some(m) = &a.motion {
+            m.validate()?;
+        }
+        if !self.pivot_m.is_finite() || !self.placement.is_finite() {
+            return Err("pivot and placement must be finite".into());
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn object(animation: ObjectAnimation) -> SceneObject {
+        SceneObject {
+            name: "o".into(),
+            first_triangle: 0,
+            triangle_count: 0,
+            first_vertex: 0,
+            vertex_count: 0,
+            pivot_m: Vec3::new(1.0, 0.0, 0.0),
+            animation,
+            placement: Mat4::IDENTITY,
+        }
+    }
+
+    #[test]
+    fn keyframed_translation_interpolates_and_holds() {
+        let key = |frame, x| TransformKeyframe {
+            frame,
+            translation: Some(Vec3::new(x, 0.0, 0.0)),
+            rotation: None,
+            scale: None,
+        };
+        let o = object(ObjectAnimation { keyframes: vec![key(10.0, 0.0), key(20.0, 2.0)], motion: None });
+        let at = |f: f32| o.world_from_rest(f).transform_point3(Vec3::ZERO).x;
+        assert_eq!(at(0.0), 0.0);
+        assert!((at(15.0) - 1.0).abs() < 1e-6);
+        assert!((at(40.0) - 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn rotation_turns_about_the_pivot_and_orbit_about_its_centre() {
+        let quarter = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+        let o = object(ObjectAnimation {
+            keyframes: vec![TransformKeyframe { frame: 0.0, translation: None, rotation: Some(quarter), scale: None }],
+            motion: None,
+        });
+        // The pivot stays; a point 1 m along +x from it goes to −z.
+        assert!(
+            (o.world_from_rest(3.0).transform_point3(Vec3::new(1.0, 0.0, 0.0)) - Vec3::new(1.0, 0.0, 0.0)).length()
+                < 1e-6
+        );
+        let p = o.world_from_rest(3.0).transform_point3(Vec3::new(2.0, 0.0, 0.0));
+        assert!((p - Vec3::new(1.0, 0.0, -1.0)).length() < 1e-5, "{p}");
+
+        let orbit = object(ObjectAnimation {
+            keyframes: vec![],
+            motion: Some(MotionPath::Orbit { centre_m: Vec3::ZERO, axis: Vec3::Y, period_frames: 8.0 }),
+        });
+        let p = orbit.world_from_rest(2.0).transform_point3(Vec3::new(1.0, 0.0, 0.0));
+        assert!((p - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-5, "{p}");
+        assert!((orbit.world_from_rest(8.0).transform_point3(Vec3::X) - Vec3::X).length() < 1e-5);
+    }
+
+    #[test]
+    fn bad_animation_is_rejected() {
+        let key =
+            TransformKeyframe { frame: 0.0, translation: None, rotation: None, scale: Some(Vec3::new(1.0, -1.0, 1.0)) };
+        let o = object(ObjectAnimation { keyframes: vec![key], motion: None });
+        assert!(o.validate().unwrap_err().contains("scale"));
+        let o = object(ObjectAnimation {
+            keyframes: vec![],
+            motion: Some(MotionPath::Rotate { axis: Vec3::ZERO, period_frames: 10.0 }),
+        });
+        assert!(o.validate().unwrap_err().contains("axis"));
+        let keys = vec![
+            TransformKeyframe { frame: 5.0, translation: None, rotation: None, scale: None },
+            TransformKeyframe { frame: 2.0, translation: None, rotation: None, scale: None },
+        ];
+        assert!(
+            object(ObjectAnimation { keyframes: keys, motion: None })
+                .validate()
+                .unwrap_err()
+                .contains("after the previous")
+        );
+    }
+}
