@@ -3,50 +3,19 @@
 //! bring the interior closer to the path-traced reference.
 
 use glam::{UVec3, Vec3};
-use probegi_core::camera::{Camera, CameraRays};
+use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
 use probegi_core::image::Image;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
 use probegi_image::mean_flip_hdr;
-use probegi_scene::builtin::{add_box, add_polygon};
-use probegi_scene::{BvhSettings, BvhTracer, LightKind, Material, PunctualLight, Scene};
+use probegi_scene::{BvhSettings, BvhTracer, Scene};
 
 /// Room interior [0,4] × [0,3] × [0,4] with 0.2 m walls, a 1.2 m × 2.2 m door in
-/// the +z wall, open ground outside and a low sun shining in through the door.
+/// the +z wall, open ground outside and a low sun shining in through the door
+/// (`scenes/builtin/door-room.toml`).
 fn door_room() -> Scene {
-    let mut s = Scene { materials: vec![Material::diffuse("plaster", Vec3::splat(0.7))], ..Default::default() };
-    let t = 0.2;
-    add_polygon(
-        &mut s.mesh,
-        &[
-            Vec3::new(-8.0, 0.0, -4.0),
-            Vec3::new(-8.0, 0.0, 14.0),
-            Vec3::new(12.0, 0.0, 14.0),
-            Vec3::new(12.0, 0.0, -4.0),
-        ],
-        0,
-    );
-    add_box(&mut s.mesh, Vec3::new(-t, 0.0, -t), Vec3::new(0.0, 3.0, 4.0 + t), 0); // -x wall
-    add_box(&mut s.mesh, Vec3::new(4.0, 0.0, -t), Vec3::new(4.0 + t, 3.0, 4.0 + t), 0); // +x wall
-    add_box(&mut s.mesh, Vec3::new(0.0, 0.0, -t), Vec3::new(4.0, 3.0, 0.0), 0); // back wall
-    add_box(&mut s.mesh, Vec3::new(-t, 3.0, -t), Vec3::new(4.0 + t, 3.0 + t, 4.0 + t), 0); // roof
-    // Front wall with the door from x = 1.4 to 2.6, up to 2.2 m.
-    add_box(&mut s.mesh, Vec3::new(0.0, 0.0, 4.0), Vec3::new(1.4, 3.0, 4.0 + t), 0);
-    add_box(&mut s.mesh, Vec3::new(2.6, 0.0, 4.0), Vec3::new(4.0, 3.0, 4.0 + t), 0);
-    add_box(&mut s.mesh, Vec3::new(1.4, 2.2, 4.0), Vec3::new(2.6, 3.0, 4.0 + t), 0);
-    s.lights.push(PunctualLight {
-        kind: LightKind::Directional,
-        direction: Vec3::new(0.15, -0.5, -1.0).normalize(),
-        ..PunctualLight::point(Vec3::ZERO, Vec3::ONE, 6.0)
-    });
-    s.camera = Some(Camera {
-        position: Vec3::new(3.6, 1.6, 3.6),
-        target: Vec3::new(0.6, 0.9, 0.4),
-        up: Vec3::Y,
-        fov_y_deg: 70.0,
-    });
-    s
+    probegi_scene::load_scene("builtin:door-room").expect("built in")
 }
 
 fn flip(a: &Image, b: &Image) -> f32 {

@@ -15,6 +15,8 @@
 //!   last, as light keyframes are;
 //! - `motion(f)` is an optional closed-form path: a constant velocity, an orbit
 //!   about an axis, or a spin about the pivot;
+//! - key times count frames, or seconds (glTF) converted with the scene's
+//!   `frames_per_second`;
 //! - `pivot` defaults to the centre of the rest bounds, so rotation and scale act
 //!   about the object itself;
 //! - `placement` is the transform a scene file applied when it placed a file that
@@ -131,10 +133,21 @@ impl MotionPath {
     }
 }
 
+/// What a keyframe's `frame` counts.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum KeyClock {
+    /// Frame numbers (scene files).
+    #[default]
+    Frames,
+    /// Seconds (glTF), played at `frames_per_second` (the scene's clock).
+    Seconds { frames_per_second: f32 },
+}
+
 /// How an object moves; `Default` is still.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ObjectAnimation {
     pub keyframes: Vec<TransformKeyframe>,
+    pub clock: KeyClock,
     pub motion: Option<MotionPath>,
 }
 
@@ -180,9 +193,13 @@ impl SceneObject {
             return Affine3A::IDENTITY;
         }
         let k = &a.keyframes;
-        let t = channel(k, frame, |k| k.translation, |a, b, t| a.lerp(b, t)).unwrap_or(Vec3::ZERO);
-        let r = channel(k, frame, |k| k.rotation, |a, b, t| a.slerp(b, t)).unwrap_or(Quat::IDENTITY);
-        let s = channel(k, frame, |k| k.scale, |a, b, t| a.lerp(b, t)).unwrap_or(Vec3::ONE);
+        let key_time = match a.clock {
+            KeyClock::Frames => frame,
+            KeyClock::Seconds { frames_per_second } => frame / frames_per_second,
+        };
+        let t = channel(k, key_time, |k| k.translation, |a, b, t| a.lerp(b, t)).unwrap_or(Vec3::ZERO);
+        let r = channel(k, key_time, |k| k.rotation, |a, b, t| a.slerp(b, t)).unwrap_or(Quat::IDENTITY);
+        let s = channel(k, key_time, |k| k.scale, |a, b, t| a.lerp(b, t)).unwrap_or(Vec3::ONE);
         let keyed = Affine3A::from_translation(self.pivot_m + t)
             * Affine3A::from_scale_rotation_translation(s, r, Vec3::ZERO)
             * Affine3A::from_translation(-self.pivot_m);
@@ -209,6 +226,11 @@ impl SceneObject {
         }
         if let Some(m) = &a.motion {
             m.validate()?;
+        }
+        if let KeyClock::Seconds { frames_per_second } = a.clock
+            && !(frames_per_second.is_finite() && frames_per_second > 0.0)
+        {
+            return Err(format!("frames_per_second must be positive, got {frames_per_second}"));
         }
         if !self.pivot_m.is_finite() || !self.placement.is_finite() {
             return Err("pivot and placement must be finite".into());
@@ -242,7 +264,7 @@ mod tests {
             rotation: None,
             scale: None,
         };
-        let o = object(ObjectAnimation { keyframes: vec![key(10.0, 0.0), key(20.0, 2.0)], motion: None });
+        let o = object(ObjectAnimation { keyframes: vec![key(10.0, 0.0), key(20.0, 2.0)], ..Default::default() });
         let at = |f: f32| o.world_from_rest(f).transform_point3(Vec3::ZERO).x;
         assert_eq!(at(0.0), 0.0);
         assert!((at(15.0) - 1.0).abs() < 1e-6);
@@ -254,7 +276,7 @@ mod tests {
         let quarter = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
         let o = object(ObjectAnimation {
             keyframes: vec![TransformKeyframe { frame: 0.0, translation: None, rotation: Some(quarter), scale: None }],
-            motion: None,
+            ..Default::default()
         });
         // The pivot stays; a point 1 m along +x from it goes to −z.
         assert!(
@@ -265,7 +287,7 @@ mod tests {
         assert!((p - Vec3::new(1.0, 0.0, -1.0)).length() < 1e-5, "{p}");
 
         let orbit = object(ObjectAnimation {
-            keyframes: vec![],
+            clock: KeyClock::Frames,
             motion: Some(MotionPath::Orbit { centre_m: Vec3::ZERO, axis: Vec3::Y, period_frames: 8.0 }),
         });
         let p = orbit.world_from_rest(2.0).transform_point3(Vec3::new(1.0, 0.0, 0.0));
@@ -277,21 +299,21 @@ mod tests {
     fn bad_animation_is_rejected() {
         let key =
             TransformKeyframe { frame: 0.0, translation: None, rotation: None, scale: Some(Vec3::new(1.0, -1.0, 1.0)) };
-        let o = object(ObjectAnimation { keyframes: vec![key], motion: None });
-        assert!(o.validate().unwrap_err().contains("scale"));
+        let o = object(ObjectAnimation { keyframes: vec![key], ..Default::default() });
+        assert!(o.validate().expect_err("invalid").contains("scale"));
         let o = object(ObjectAnimation {
-            keyframes: vec![],
+            clock: KeyClock::Frames,
             motion: Some(MotionPath::Rotate { axis: Vec3::ZERO, period_frames: 10.0 }),
         });
-        assert!(o.validate().unwrap_err().contains("axis"));
+        assert!(o.validate().expect_err("invalid").contains("axis"));
         let keys = vec![
             TransformKeyframe { frame: 5.0, translation: None, rotation: None, scale: None },
             TransformKeyframe { frame: 2.0, translation: None, rotation: None, scale: None },
         ];
         assert!(
-            object(ObjectAnimation { keyframes: keys, motion: None })
+            object(ObjectAnimation { keyframes: keys, ..Default::default() })
                 .validate()
-                .unwrap_err()
+                .expect_err("invalid")
                 .contains("after the previous")
         );
     }

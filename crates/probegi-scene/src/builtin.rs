@@ -1,5 +1,8 @@
 //! Scenes compiled into the binary, named on the command line as `builtin:NAME`.
 //!
+//! `color-bleed`, `door-room`, `flood-room`, `sponza-sun`: the seeds' test scenes,
+//! defined once as scene files in `scenes/builtin/` and compiled in.
+//!
 //! `cornell-box`: the geometry and materials of McGuire's CornellBox-Original.obj
 //! (Cardenas & McGuire 2011, after the Cornell measurements; public domain):
 //! the same vertices, windings and Kd/Ke values (area light Ke = 17 12 4), with
@@ -16,13 +19,31 @@ use crate::material::Material;
 use crate::mesh::Mesh;
 use crate::scene::Scene;
 
-pub const BUILTIN_NAMES: &[&str] = &["cornell-box", "furnace-box"];
+pub const BUILTIN_NAMES: &[&str] =
+    &["cornell-box", "furnace-box", "color-bleed", "door-room", "flood-room", "sponza-sun"];
+
+/// The seeds' test scenes (dynamic-scenes issue), compiled in from the scene files
+/// in `scenes/builtin/`, so `builtin:NAME` and the file are the same scene.
+const SCENE_FILES: &[(&str, &str)] = &[
+    ("color-bleed", include_str!("../../../scenes/builtin/color-bleed.toml")),
+    ("door-room", include_str!("../../../scenes/builtin/door-room.toml")),
+    ("flood-room", include_str!("../../../scenes/builtin/flood-room.toml")),
+    ("sponza-sun", include_str!("../../../scenes/builtin/sponza-sun.toml")),
+];
 
 pub fn load_builtin(name: &str) -> Result<Scene> {
     match name {
         "cornell-box" => Ok(cornell_box()),
         "furnace-box" => Ok(furnace_box(0.5, 1.0)),
-        _ => Err(SceneError::UnknownBuiltin { name: name.to_string(), available: BUILTIN_NAMES.join(", ") }),
+        _ => match SCENE_FILES.iter().find(|(n, _)| *n == name) {
+            Some((_, text)) => {
+                let label = std::path::PathBuf::from(format!("builtin:{name}"));
+                let mut scene = crate::scene_file::parse_scene_file(text, &label, std::path::Path::new("."))?;
+                scene.name = format!("builtin:{name}");
+                Ok(scene)
+            }
+            None => Err(SceneError::UnknownBuiltin { name: name.to_string(), available: BUILTIN_NAMES.join(", ") }),
+        },
     }
 }
 
@@ -57,6 +78,15 @@ pub fn add_box(mesh: &mut Mesh, lo: Vec3, hi: Vec3, material: u32) {
     for f in &faces {
         add_polygon(mesh, f, material);
     }
+}
+
+/// Adds an axis-aligned box `[lo, hi]` whose faces point inward (a room seen
+/// from inside; probes outside it see back faces).
+pub fn add_room(mesh: &mut Mesh, lo: Vec3, hi: Vec3, material: u32) {
+    let (t0, v0) = (mesh.triangles.len(), mesh.positions.len());
+    add_box(mesh, lo, hi, material);
+    mesh.triangles[t0..].iter_mut().for_each(|t| t.swap(1, 2));
+    mesh.normals[v0..].iter_mut().for_each(|n| *n = -*n);
 }
 
 fn v(x: f32, y: f32, z: f32) -> Vec3 {

@@ -413,7 +413,7 @@ mod tests {
             pivot_m: Vec3::new(0.0, 0.5, 0.0),
             animation: ObjectAnimation {
                 keyframes: vec![key(0.0, -3.0, 0.0, 1.0), key(10.0, 3.0, 90.0, 1.5)],
-                motion: None,
+                ..Default::default()
             },
             placement: glam::Mat4::IDENTITY,
         });

@@ -36,6 +36,40 @@ pub fn resolve_case_insensitive(base_dir: &Path, name: &str) -> Option<PathBuf> 
     current.exists().then_some(current)
 }
 
+/// The environment variable that names the shared folder (the one holding `scenes/`).
+pub const SHARED_DIR_ENV: &str = "PROBEGI_SHARED_DIR";
+
+/// The shared data folder (`shared/`, holding `scenes/`): `$PROBEGI_SHARED_DIR`,
+/// else a `shared` folder in the working directory or any of its ancestors (the
+/// repository sits beside it), else beside the executable's ancestors. The error
+/// says where it looked.
+pub fn shared_dir() -> Result<PathBuf, String> {
+    if let Some(dir) = std::env::var_os(SHARED_DIR_ENV) {
+        let dir = PathBuf::from(dir);
+        return if dir.join("scenes").is_dir() {
+            Ok(dir)
+        } else {
+            Err(format!("${SHARED_DIR_ENV} = {} has no scenes/ folder", dir.display()))
+        };
+    }
+    let mut starts = vec![];
+    starts.extend(std::env::current_dir().ok());
+    starts.extend(std::env::current_exe().ok().and_then(|e| e.parent().map(Path::to_path_buf)));
+    for start in &starts {
+        for dir in start.ancestors() {
+            let candidate = dir.join("shared");
+            if candidate.join("scenes").is_dir() {
+                return Ok(candidate);
+            }
+        }
+    }
+    Err(format!(
+        "the shared scene folder was not found: set ${SHARED_DIR_ENV}, or run from inside a directory that has \
+         shared/scenes beside it (looked above {})",
+        starts.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(" and ")
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -148,6 +148,16 @@ impl Scene {
         self.lights.iter().any(|l| !l.keyframes.is_empty()) || self.has_moving_geometry()
     }
 
+    /// Sets the animation clock; animations keyed in seconds play at it.
+    pub fn set_frames_per_second(&mut self, fps: f32) {
+        self.frames_per_second = fps;
+        for o in &mut self.objects {
+            if let crate::animation::KeyClock::Seconds { frames_per_second } = &mut o.animation.clock {
+                *frames_per_second = fps;
+            }
+        }
+    }
+
     /// Whether any object moves.
     pub fn has_moving_geometry(&self) -> bool {
         self.objects.iter().any(|o| o.is_animated())

@@ -1,16 +1,28 @@
-//! The TOML scene file: references mesh files (OBJ, glTF, or `builtin:NAME`),
-//! adds punctual lights, sky and camera. Later issues add the GI volume and
-//! animation tables. Field names are those of the structs; unknown keys are
+//! The TOML scene file: references mesh files (OBJ, glTF, `builtin:NAME`, or
+//! `shared:PATH` for the shared scene folder), adds objects built from boxes and
+//! polygons or files (still or animated), punctual lights, sky, camera, the GI
+//! volume and SH settings. Field names are those of the structs; unknown keys are
 //! errors, so a typo never silently does nothing.
 //!
 //! ```toml
 //! sky_radiance = [0.0, 0.0, 0.0]
+//! frames_per_second = 30.0                        # animation clock (glTF seconds)
 //!
 //! [[meshes]]
 //! path = "../shared/scenes/sibenik/sibenik.obj"   # relative to this file
 //! translation = [0.0, 0.0, 0.0]                   # metres
 //! rotation_deg = [0.0, 90.0, 0.0]                 # Euler X, Y, Z, degrees
 //! scale = [1.0, 1.0, 1.0]
+//!
+//! [[objects]]                   # one rigid object: a box, a polygon or a file
+//! name = "occluder"
+//! box_min_m = [1.0, 0.0, 1.0]   # faces outward; `box_inward = true` for a room
+//! box_max_m = [2.0, 1.0, 2.0]
+//! albedo = [0.8, 0.8, 0.8]      # diffuse; `emission` makes it an area light
+//! keyframes = [{ frame = 0, translation = [0.0, 0.0, 0.0] }, { frame = 60, translation = [3.0, 0.0, 0.0], rotation_deg = [0.0, 90.0, 0.0] }]
+//! motion = { kind = "orbit", centre_m = [0.0, 0.0, 0.0], axis = [0.0, 1.0, 0.0], period_frames = 120 }
+//! # or: polygon_m = [[x, y, z], ...] (one planar polygon, counter-clockwise = front)
+//! # or: path = "part.obj" with translation / rotation_deg / scale as for meshes
 //!
 //! [[lights]]
 //! kind = "spot"                 # point | spot | directional
@@ -41,6 +53,7 @@ use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::sh_settings::ShProbeSettings;
 use serde::Deserialize;
 
+use crate::animation::{KeyClock, MotionPath, ObjectAnimation, SceneObject, TransformKeyframe};
 use crate::error::{Result, SceneError};
 use crate::light::PunctualLight;
 use crate::scene::Scene;
@@ -62,6 +75,73 @@ pub struct SceneFile {
     /// The SH probes of `--gi sh` (`probegi_core::sh_settings::ShProbeSettings` field names).
     #[serde(default)]
     pub sh: Option<ShProbeSettings>,
+    #[serde(default)]
+    pub objects: Vec<ObjectEntry>,
+    /// The animation clock for animations authored in seconds (glTF).
+    #[serde(default)]
+    pub frames_per_second: Option<f32>,
+}
+
+/// One `[[objects]]` entry: exactly one of a box, a polygon or a file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectEntry {
+    #[serde(default)]
+    pub name: Option<String>,
+    #[serde(default)]
+    pub box_min_m: Option<Vec3>,
+    #[serde(default)]
+    pub box_max_m: Option<Vec3>,
+    /// The box's faces point inward (a closed room seen from inside).
+    #[serde(default)]
+    pub box_inward: bool,
+    #[serde(default)]
+    pub polygon_m: Option<Vec<Vec3>>,
+    /// A mesh file (as in `[[meshes]]`), placed by translation / rotation_deg / scale.
+    #[serde(default)]
+    pub path: Option<String>,
+    #[serde(default)]
+    pub translation: Vec3,
+    #[serde(default)]
+    pub rotation_deg: Vec3,
+    #[serde(default = "one")]
+    pub scale: Vec3,
+    /// Diffuse albedo of a box or polygon (default 0.8 grey).
+    #[serde(default)]
+    pub albedo: Option<Vec3>,
+    /// Emitted radiance of a box or polygon, W·sr⁻¹·m⁻² (front faces).
+    #[serde(default)]
+    pub emission: Option<Vec3>,
+    /// Rotation and scale centre; default the centre of the object's bounds.
+    #[serde(default)]
+    pub pivot_m: Option<Vec3>,
+    #[serde(default)]
+    pub keyframes: Vec<ObjectKeyframe>,
+    #[serde(default)]
+    pub motion: Option<MotionEntry>,
+}
+
+/// A key of `[[objects]].keyframes`: offsets from the authored pose.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectKeyframe {
+    pub frame: f32,
+    #[serde(default)]
+    pub translation: Option<Vec3>,
+    /// Intrinsic Euler angles X, Y, Z in degrees, about the pivot.
+    #[serde(default)]
+    pub rotation_deg: Option<Vec3>,
+    #[serde(default)]
+    pub scale: Option<Vec3>,
+}
+
+/// `[[objects]].motion`: a closed-form path (see `crate::animation::MotionPath`).
+#[derive(Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum MotionEntry {
+    Translate { velocity_m_per_frame: Vec3 },
+    Orbit { centre_m: Vec3, axis: Vec3, period_frames: f32 },
+    Rotate { axis: Vec3, period_frames: f32 },
 }
 
 #[derive(Debug, Deserialize)]
@@ -95,27 +175,39 @@ impl MeshRef {
 
 pub fn load_scene_file(path: &Path) -> Result<Scene> {
     let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
-    let file: SceneFile =
-        toml::from_str(&text).map_err(|e| SceneError::Toml { path: path.to_path_buf(), message: e.to_string() })?;
     let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    parse_scene_file(&text, path, &base_dir)
+}
+
+/// Parses scene-file text; `name` is what errors call it, `base_dir` what relative
+/// paths are relative to.
+pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scene> {
+    let path = name;
+    let toml_err = |message: String| SceneError::Toml { path: path.to_path_buf(), message };
+    let file: SceneFile = toml::from_str(text).map_err(|e| toml_err(e.to_string()))?;
     let mut scene = Scene { name: path.display().to_string(), ..Default::default() };
-    if file.meshes.is_empty() {
-        return Err(SceneError::Toml { path: path.to_path_buf(), message: "no [[meshes]] entries".into() });
+    if file.meshes.is_empty() && file.objects.is_empty() {
+        return Err(toml_err("no [[meshes]] or [[objects]] entries".into()));
     }
     for (i, m) in file.meshes.iter().enumerate() {
-        let xf = m.world_from_local();
-        if !xf.is_finite() || xf.determinant().abs() < 1e-12 {
-            return Err(SceneError::Toml {
-                path: path.to_path_buf(),
-                message: format!("meshes[{i}]: transform is degenerate or not finite"),
-            });
-        }
-        let sub_path: PathBuf =
-            if m.path.starts_with("builtin:") { PathBuf::from(&m.path) } else { base_dir.join(&m.path) };
-        let mut sub = crate::load::load_scene(&sub_path.to_string_lossy())?;
+        let xf = placement(m.world_from_local()).map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
+        let mut sub = load_sub_scene(&m.path, base_dir)?;
         sub.mesh.transform(xf);
+        for o in &mut sub.objects {
+            o.placement = xf * o.placement;
+        }
         scene.warnings.append(&mut sub.warnings);
         merge_into(&mut scene, sub);
+    }
+    for (i, o) in file.objects.iter().enumerate() {
+        let sub = object_scene(o, base_dir).map_err(|e| match e {
+            ObjectError::Message(m) => toml_err(format!("objects[{i}]: {m}")),
+            ObjectError::Scene(e) => e,
+        })?;
+        merge_into(&mut scene, sub);
+    }
+    if let Some(fps) = file.frames_per_second {
+        scene.set_frames_per_second(fps);
     }
     scene.lights.extend(file.lights);
     if let Some(sky) = file.sky_radiance {
@@ -125,27 +217,152 @@ pub fn load_scene_file(path: &Path) -> Result<Scene> {
         scene.camera = file.camera;
     }
     if let Some(v) = file.volume {
-        v.validate().map_err(|(field, why)| SceneError::Toml {
-            path: path.to_path_buf(),
-            message: format!("volume.{field}: {why}"),
-        })?;
+        v.validate().map_err(|(field, why)| toml_err(format!("volume.{field}: {why}")))?;
         scene.volume = Some(v);
     }
     if let Some(v) = file.sh {
-        v.validate().map_err(|(field, why)| SceneError::Toml {
-            path: path.to_path_buf(),
-            message: format!("sh.{field}: {why}"),
-        })?;
+        v.validate().map_err(|(field, why)| toml_err(format!("sh.{field}: {why}")))?;
         scene.sh_probes = Some(v);
     }
-    scene.validate().map_err(|message| SceneError::Toml { path: path.to_path_buf(), message })?;
+    scene.validate().map_err(toml_err)?;
     Ok(scene)
+}
+
+fn placement(xf: Mat4) -> std::result::Result<Mat4, String> {
+    if !xf.is_finite() || xf.determinant().abs() < 1e-12 {
+        return Err("transform is degenerate or not finite".into());
+    }
+    Ok(xf)
+}
+
+/// Loads a file named in a scene file: `builtin:NAME`, `shared:PATH` (the shared
+/// scene folder, see [`crate::file_lookup::shared_dir`]) or a path relative to `base_dir`.
+fn load_sub_scene(spec: &str, base_dir: &Path) -> Result<Scene> {
+    if spec.starts_with("builtin:") {
+        return crate::load::load_scene(spec);
+    }
+    let path: PathBuf = match spec.strip_prefix("shared:") {
+        Some(rel) => crate::file_lookup::shared_dir()
+            .map(|d| d.join(rel))
+            .map_err(|message| SceneError::Invalid { path: PathBuf::from(spec), message })?,
+        None => base_dir.join(spec),
+    };
+    crate::load::load_scene(&path.to_string_lossy())
+}
+
+enum ObjectError {
+    Message(String),
+    Scene(SceneError),
+}
+
+impl From<String> for ObjectError {
+    fn from(m: String) -> Self {
+        ObjectError::Message(m)
+    }
+}
+
+/// The scene holding one `[[objects]]` entry as a single object.
+fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, ObjectError> {
+    let name = o.name.clone().unwrap_or_else(|| "object".into());
+    let shapes = [o.box_min_m.is_some() || o.box_max_m.is_some(), o.polygon_m.is_some(), o.path.is_some()];
+    if shapes.iter().filter(|&&b| b).count() != 1 {
+        return Err("give exactly one of box_min_m + box_max_m, polygon_m or path".to_string().into());
+    }
+    let mut sub = if let Some(spec) = &o.path {
+        if o.albedo.is_some() || o.emission.is_some() {
+            return Err("albedo and emission apply to boxes and polygons; a file brings its materials"
+                .to_string()
+                .into());
+        }
+        let mut sub = load_sub_scene(spec, base_dir).map_err(ObjectError::Scene)?;
+        if sub.has_moving_geometry() {
+            return Err(format!("{spec} is animated itself; place it with [[meshes]] instead").into());
+        }
+        let xf = placement(
+            MeshRef { path: String::new(), translation: o.translation, rotation_deg: o.rotation_deg, scale: o.scale }
+                .world_from_local(),
+        )?;
+        sub.mesh.transform(xf);
+        sub.objects.clear();
+        sub
+    } else {
+        let albedo = o.albedo.unwrap_or(Vec3::splat(0.8));
+        let material = match o.emission {
+            Some(e) => crate::Material::emissive(&name, albedo, e),
+            None => crate::Material::diffuse(&name, albedo),
+        };
+        let mut mesh = crate::mesh::Mesh::default();
+        if let Some(poly) = &o.polygon_m {
+            if poly.len() < 3 || poly.iter().any(|p| !p.is_finite()) {
+                return Err("polygon_m needs at least 3 finite corners".to_string().into());
+            }
+            crate::builtin::add_polygon(&mut mesh, poly, 0);
+        } else {
+            let (Some(lo), Some(hi)) = (o.box_min_m, o.box_max_m) else {
+                return Err("a box needs both box_min_m and box_max_m".to_string().into());
+            };
+            if !(lo.is_finite() && hi.is_finite() && lo.cmplt(hi).all()) {
+                return Err(format!("box_min_m {lo} must be below box_max_m {hi} on every axis").into());
+            }
+            if o.box_inward {
+                crate::builtin::add_room(&mut mesh, lo, hi, 0);
+            } else {
+                crate::builtin::add_box(&mut mesh, lo, hi, 0);
+            }
+        }
+        if o.translation != Vec3::ZERO || o.rotation_deg != Vec3::ZERO || o.scale != Vec3::ONE {
+            return Err("translation / rotation_deg / scale place files; give a box or polygon in place"
+                .to_string()
+                .into());
+        }
+        Scene { materials: vec![material], mesh, ..Default::default() }
+    };
+    let animation = ObjectAnimation {
+        keyframes: o
+            .keyframes
+            .iter()
+            .map(|k| TransformKeyframe {
+                frame: k.frame,
+                translation: k.translation,
+                rotation: k
+                    .rotation_deg
+                    .map(|r| Quat::from_euler(EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians())),
+                scale: k.scale,
+            })
+            .collect(),
+        clock: KeyClock::Frames,
+        motion: o.motion.as_ref().map(|m| match *m {
+            MotionEntry::Translate { velocity_m_per_frame } => MotionPath::Translate { velocity_m_per_frame },
+            MotionEntry::Orbit { centre_m, axis, period_frames } => MotionPath::Orbit { centre_m, axis, period_frames },
+            MotionEntry::Rotate { axis, period_frames } => MotionPath::Rotate { axis, period_frames },
+        }),
+    };
+    let bounds = sub.mesh.bounds().ok_or_else(|| "the object has no geometry".to_string())?;
+    let object = SceneObject {
+        name,
+        first_triangle: 0,
+        triangle_count: sub.mesh.triangle_count() as u32,
+        first_vertex: 0,
+        vertex_count: sub.mesh.positions.len() as u32,
+        pivot_m: o.pivot_m.unwrap_or((bounds.0 + bounds.1) * 0.5),
+        animation,
+        placement: Mat4::IDENTITY,
+    };
+    object.validate()?;
+    sub.objects = vec![object];
+    Ok(sub)
 }
 
 /// Appends `sub`'s geometry, materials, textures and lights; keeps the first camera.
 fn merge_into(scene: &mut Scene, sub: Scene) {
     let mat_offset = scene.materials.len() as u32;
     let tex_offset = scene.textures.len();
+    let (tri_offset, vertex_offset) = (scene.mesh.triangle_count() as u32, scene.mesh.positions.len() as u32);
+    scene.objects.extend(sub.objects.into_iter().map(|mut o| {
+        o.first_triangle += tri_offset;
+        o.first_vertex += vertex_offset;
+        o
+    }));
     scene.mesh.append(&sub.mesh, mat_offset);
     scene.materials.extend(sub.materials.into_iter().map(|mut m| {
         m.base_color_texture = m.base_color_texture.map(|t| t + tex_offset);
