@@ -287,8 +287,8 @@ mod tests {
         assert!((p - Vec3::new(1.0, 0.0, -1.0)).length() < 1e-5, "{p}");
 
         let orbit = object(ObjectAnimation {
-            clock: KeyClock::Frames,
             motion: Some(MotionPath::Orbit { centre_m: Vec3::ZERO, axis: Vec3::Y, period_frames: 8.0 }),
+            ..Default::default()
         });
         let p = orbit.world_from_rest(2.0).transform_point3(Vec3::new(1.0, 0.0, 0.0));
         assert!((p - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-5, "{p}");
@@ -302,8 +302,8 @@ mod tests {
         let o = object(ObjectAnimation { keyframes: vec![key], ..Default::default() });
         assert!(o.validate().expect_err("invalid").contains("scale"));
         let o = object(ObjectAnimation {
-            clock: KeyClock::Frames,
             motion: Some(MotionPath::Rotate { axis: Vec3::ZERO, period_frames: 10.0 }),
+            ..Default::default()
         });
         assert!(o.validate().expect_err("invalid").contains("axis"));
         let keys = vec![
