@@ -85,6 +85,8 @@ pub struct RenderStats {
     pub probe_states: Option<BTreeMap<&'static str, usize>>,
     /// DDGI only: probes that traced and blended in the last frame.
     pub active_probes: Option<usize>,
+    /// DDGI with moving objects: Sleeping probes woken around them, summed over frames.
+    pub probes_woken: u64,
 }
 
 pub struct RenderOutput {
@@ -170,7 +172,7 @@ pub fn render_frames(
         if let Some(v) = volume.as_mut() {
             if scene.has_moving_geometry() {
                 // Seed 004 Listing 5: sleeping probes around dynamic objects wake up.
-                v.wake_probes_near(&scene.moving_object_bounds());
+                stats.probes_woken += v.wake_probes_near(&scene.moving_object_bounds()) as u64;
             }
             stats.rays_traced += v.update(scene, tracer, direct, settings.seed, f, &mut pass_totals);
         }
