@@ -11,9 +11,7 @@ use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_fra
 use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::builtin::add_box;
-use probegi_scene::{
-    BvhSettings, BvhTracer, ObjectAnimation, RayTracer, Scene, SceneObject, TransformKeyframe, load_scene,
-};
+use probegi_scene::{BvhSettings, BvhTracer, ObjectAnimation, Scene, SceneObject, TransformKeyframe, load_scene};
 
 const SIZE: u32 = 32;
 
