@@ -34,6 +34,40 @@ pub enum Command {
     /// sweep; with `--gi sh` SH probe update against DDGI at the same probe count.
     /// Prints JSON on stdout.
     Bench(BenchArgs),
+    /// Convergence lag after a step change (a light switched on; an occluder put
+    /// into the doorway) in the door room, against hysteresis with the fast-
+    /// convergence heuristics on and off: a PNG plot, a curves PNG and a CSV.
+    Lag(LagArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct LagArgs {
+    /// The plot of frames-to-converge against hysteresis; the per-frame FLIP curves
+    /// go beside it as NAME-curves.png and the numbers as NAME.csv.
+    #[arg(long, default_value = "out/convergence-lag.png")]
+    pub out: std::path::PathBuf,
+    /// Image size (square) of the compared frames.
+    #[arg(long, default_value_t = 48)]
+    pub size: u32,
+    /// Hysteresis values to try (comma-separated).
+    #[arg(long, value_delimiter = ',', default_value = "0.8,0.9,0.95,0.97,0.99")]
+    pub hysteresis: Vec<f32>,
+    /// Frames before the step (the field converges to the old state).
+    #[arg(long, default_value_t = 100)]
+    pub frames_before: u32,
+    /// Frames after the step that are compared.
+    #[arg(long, default_value_t = 300)]
+    pub frames_after: u32,
+    /// Converged means: FLIP against the new state's converged image stays below
+    /// this. The default sits above the noise floor of 64 rays per probe at 48²
+    /// (FLIP 0.05–0.06 between two converged runs of the same state).
+    #[arg(long, default_value_t = 0.1)]
+    pub flip_threshold: f32,
+    /// Probe rays per probe per frame.
+    #[arg(long, default_value_t = 64)]
+    pub rays_per_probe: u32,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
 }
 
 /// A comma-separated `X,Y,Z` triple of finite numbers.
@@ -70,7 +104,8 @@ pub fn parse_uvec3(s: &str) -> Result<[u32; 3], String> {
 
 #[derive(Args, Debug, Clone)]
 pub struct SceneArgs {
-    /// Scene: a .obj, .gltf, .glb or .toml path, or `builtin:NAME` (cornell-box, furnace-box).
+    /// Scene: a .obj, .gltf, .glb or .toml path, or `builtin:NAME` (cornell-box, furnace-box,
+    /// color-bleed, door-room, flood-room, sponza-sun).
     #[arg(long, default_value = "builtin:cornell-box")]
     pub scene: String,
     /// Image width in pixels.

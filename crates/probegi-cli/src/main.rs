@@ -4,6 +4,7 @@
 mod args;
 mod atlas_dump;
 mod bench;
+mod lag;
 
 use std::path::Path;
 use std::process::ExitCode;
@@ -49,6 +50,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
+        Some(Command::Lag(a)) => lag::run(&a),
         Some(Command::Bench(a)) => {
             let report = bench::run(&a)?;
             println!("{}", serde_json::to_string_pretty(&report)?);

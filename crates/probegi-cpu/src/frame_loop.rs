@@ -108,8 +108,9 @@ pub const FIELD_UPDATE_PASSES: [&str; 5] = ["ray_gen", "trace", "shade", "blend"
 /// An animated scene (`Scene::is_animated`) is set to each frame's state before
 /// the frame, and its direct term is that frame's alone (no accumulation). A
 /// light switching on or off notifies the DDGI volume of a large light change.
-/// Moving objects are placed by `tracer.at_frame` (pass `instances`), and DDGI
-/// probes around them are woken each frame.
+/// Moving objects are placed by `tracer.at_frame` (pass `instances`), DDGI
+/// probes around them are woken each frame, and an object that jumps by more than
+/// a probe cell between frames notifies a large object change.
 pub fn render_frames(
     base_scene: &Scene,
     tracer: &dyn RayTracer,
@@ -148,6 +149,7 @@ pub fn render_frames(
     let frames = settings.frames.max(1);
     let mut last_gbuffer: Option<GBuffer> = None;
     let mut accumulated = 0u32;
+    let mut prev_object_bounds: Vec<(Vec3, Vec3)> = Vec::new();
     for f in 0..frames {
         if let Some(fs) = frame_scene.as_mut() {
             let was_on: Vec<bool> = fs.lights.iter().map(|l| l.intensity > 0.0).collect();
@@ -172,7 +174,21 @@ pub fn render_frames(
         if let Some(v) = volume.as_mut() {
             if scene.has_moving_geometry() {
                 // Seed 004 Listing 5: sleeping probes around dynamic objects wake up.
-                stats.probes_woken += v.wake_probes_near(&scene.moving_object_bounds()) as u64;
+                let bounds = scene.moving_object_bounds();
+                stats.probes_woken += v.wake_probes_near(&bounds) as u64;
+                // An object that jumps by more than a probe cell in one frame (an
+                // occluder put in place) is a large object change (seed 004 §4.3),
+                // reported as an application would.
+                let centre = |b: &(Vec3, Vec3)| (b.0 + b.1) * 0.5;
+                let jumped = prev_object_bounds.len() == bounds.len()
+                    && prev_object_bounds
+                        .iter()
+                        .zip(&bounds)
+                        .any(|(a, b)| centre(a).distance(centre(b)) > v.grid.min_spacing_m());
+                if jumped {
+                    v.notify_scene_event(crate::ddgi::SceneEvent::LargeObjectChange);
+                }
+                prev_object_bounds = bounds;
             }
             stats.rays_traced += v.update(scene, tracer, direct, settings.seed, f, &mut pass_totals);
         }

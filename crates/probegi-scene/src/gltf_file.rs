@@ -4,6 +4,16 @@
 //! repeat addressing), KHR_materials_emissive_strength, KHR_lights_punctual and
 //! the first perspective camera.
 //!
+//! Animations: translation, rotation and scale channels of every animation play
+//! together on the scene clock (`Scene::frames_per_second`, key times in seconds).
+//! Each mesh node under an animated node becomes a rigid [`SceneObject`] whose
+//! world transform is baked, relative to its rest pose, at the union of the key
+//! times of its ancestor chain (plus 3 samples between consecutive keys) and
+//! interpolated between them (lerp, slerp); with one animated node and linear
+//! channels this is exact at keys and close between. STEP channels hold,
+//! CUBICSPLINE channels use their key values linearly (a warning says so); morph
+//! weights, and animated lights and cameras, are not followed (warnings).
+//!
 //! Units: light intensities are used as the spec's photometric numbers without a
 //! lm→W conversion (candela → W·sr⁻¹, lux → W·m⁻²), which is what a renderer
 //! working in relative radiance expects (see `probegi_core::punctual`).
@@ -11,9 +21,10 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat4, Quat, Vec2, Vec3};
 use probegi_core::camera::Camera;
 
+use crate::animation::{KeyClock, ObjectAnimation, SceneObject, TransformKeyframe};
 use crate::error::{Result, SceneError};
 use crate::light::{LightKind, PunctualLight};
 use crate::material::Material;
@@ -28,6 +39,47 @@ struct Loader<'a> {
     scene: Scene,
     material_ids: HashMap<Option<usize>, u32>,
     texture_ids: HashMap<usize, Option<usize>>,
+    /// Animation channels by node index.
+    channels: HashMap<usize, NodeChannels>,
+}
+
+/// A node's animated local TRS channels, `(time s, value)` sorted by time.
+#[derive(Default)]
+struct NodeChannels {
+    translation: Vec<(f32, Vec3)>,
+    rotation: Vec<(f32, Quat)>,
+    scale: Vec<(f32, Vec3)>,
+}
+
+/// Piecewise-linear sample of a channel, held beyond its ends.
+fn sample<T: Copy>(keys: &[(f32, T)], t: f32, lerp: impl Fn(T, T, f32) -> T) -> Option<T> {
+    let first = keys.first()?;
+    if t <= first.0 {
+        return Some(first.1);
+    }
+    for w in keys.windows(2) {
+        let ((t0, a), (t1, b)) = (w[0], w[1]);
+        if t <= t1 {
+            return Some(if t1 > t0 { lerp(a, b, (t - t0) / (t1 - t0)) } else { b });
+        }
+    }
+    keys.last().map(|k| k.1)
+}
+
+impl NodeChannels {
+    fn times(&self) -> impl Iterator<Item = f32> + '_ {
+        let t = self.translation.iter().map(|k| k.0);
+        t.chain(self.rotation.iter().map(|k| k.0)).chain(self.scale.iter().map(|k| k.0))
+    }
+
+    /// The node's local matrix at `t`, channels overriding its static TRS.
+    fn local(&self, node: &gltf::Node, t: f32) -> Mat4 {
+        let (tr, rot, sc) = node.transform().decomposed();
+        let tr = sample(&self.translation, t, |a, b, u| a.lerp(b, u)).unwrap_or(Vec3::from(tr));
+        let rot = sample(&self.rotation, t, |a, b, u| a.slerp(b, u)).unwrap_or(Quat::from_array(rot));
+        let sc = sample(&self.scale, t, |a, b, u| a.lerp(b, u)).unwrap_or(Vec3::from(sc));
+        Mat4::from_scale_rotation_translation(sc, rot.normalize(), tr)
+    }
 }
 
 pub fn load_gltf(path: &Path) -> Result<Scene> {
@@ -46,13 +98,15 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         scene: Scene { name: path.display().to_string(), ..Default::default() },
         material_ids: HashMap::new(),
         texture_ids: HashMap::new(),
+        channels: HashMap::new(),
     };
+    loader.read_animations(&doc)?;
     let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
         Some(s) => s.nodes().collect(),
         None => doc.nodes().collect(),
     };
     for node in roots {
-        loader.visit(&node, Mat4::IDENTITY)?;
+        loader.visit(&node, Mat4::IDENTITY, &[])?;
     }
     if loader.scene.mesh.triangles.is_empty() {
         return Err(SceneError::Invalid { path: path.to_path_buf(), message: "no triangle primitives".into() });
@@ -65,15 +119,99 @@ impl Loader<'_> {
         SceneError::Gltf { path: self.path.to_path_buf(), message }
     }
 
-    fn visit(&mut self, node: &gltf::Node, parent: Mat4) -> Result<()> {
+    /// Reads every animation's TRS channels into `self.channels`.
+    fn read_animations(&mut self, doc: &gltf::Document) -> Result<()> {
+        use gltf::animation::util::ReadOutputs;
+        use gltf::animation::{Interpolation, Property};
+        for anim in doc.animations() {
+            for ch in anim.channels() {
+                let node = ch.target().node().index();
+                let what = format!("animation {} channel {}", anim.index(), ch.index());
+                let buffers = &self.buffers;
+                let reader = ch.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+                let times: Vec<f32> =
+                    reader.read_inputs().ok_or_else(|| self.err(format!("{what}: no input times")))?.collect();
+                if times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| w[1] < w[0]) {
+                    return Err(self.err(format!("{what}: key times must be finite and increasing")));
+                }
+                let interpolation = ch.sampler().interpolation();
+                if interpolation == Interpolation::CubicSpline {
+                    self.scene.warnings.push(format!(
+                        "{}: {what}: CUBICSPLINE interpolated linearly between its key values",
+                        self.path.display()
+                    ));
+                }
+                // CUBICSPLINE outputs are (in-tangent, value, out-tangent) triples.
+                let pick = |k: usize| if interpolation == Interpolation::CubicSpline { 3 * k + 1 } else { k };
+                let outputs = reader.read_outputs().ok_or_else(|| self.err(format!("{what}: no outputs")))?;
+                let keys_of = |values: Vec<[f32; 4]>| -> Option<Vec<(f32, [f32; 4])>> {
+                    let mut keys = Vec::new();
+                    for (k, &t) in times.iter().enumerate() {
+                        let v = *values.get(pick(k))?;
+                        if interpolation == Interpolation::Step
+                            && let Some(&(_, prev)) = keys.last()
+                        {
+                            // Hold the previous value up to just before this key.
+                            keys.push(((t - 1e-4).max(0.0), prev));
+                        }
+                        keys.push((t, v));
+                    }
+                    Some(keys)
+                };
+                let path = self.path;
+                let short = || SceneError::Gltf {
+                    path: path.to_path_buf(),
+                    message: format!("{what}: fewer output values than key times"),
+                };
+                let entry = self.channels.entry(node).or_default();
+                match (ch.target().property(), outputs) {
+                    (Property::Translation, ReadOutputs::Translations(it)) => {
+                        let keys = keys_of(it.map(|v| [v[0], v[1], v[2], 0.0]).collect()).ok_or_else(short)?;
+                        entry.translation = keys.into_iter().map(|(t, v)| (t, Vec3::new(v[0], v[1], v[2]))).collect();
+                    }
+                    (Property::Rotation, ReadOutputs::Rotations(it)) => {
+                        let keys = keys_of(it.into_f32().collect()).ok_or_else(short)?;
+                        entry.rotation = keys.into_iter().map(|(t, v)| (t, Quat::from_array(v).normalize())).collect();
+                    }
+                    (Property::Scale, ReadOutputs::Scales(it)) => {
+                        let keys = keys_of(it.map(|v| [v[0], v[1], v[2], 0.0]).collect()).ok_or_else(short)?;
+                        entry.scale = keys.into_iter().map(|(t, v)| (t, Vec3::new(v[0], v[1], v[2]))).collect();
+                    }
+                    _ => self
+                        .scene
+                        .warnings
+                        .push(format!("{}: {what}: morph-target weights are not animated", path.display())),
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Visits `node` under `parent` (its world matrix at rest); `chain` lists the
+    /// animated ancestors' nodes, root first.
+    fn visit<'n>(&mut self, node: &gltf::Node<'n>, parent: Mat4, chain: &[gltf::Node<'n>]) -> Result<()> {
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if !world.is_finite() {
             return Err(self.err(format!("node {} has a non-finite transform", node.index())));
         }
+        let mut chain = chain.to_vec();
+        chain.push(node.clone());
+        let animated = chain.iter().any(|n| self.channels.contains_key(&n.index()));
         if let Some(mesh) = node.mesh() {
+            let (t0, v0) = (self.scene.mesh.triangle_count() as u32, self.scene.mesh.positions.len() as u32);
             for prim in mesh.primitives() {
                 self.add_primitive(&mesh, &prim, world)?;
             }
+            if animated {
+                self.add_animated_object(node, &chain, world, t0, v0)?;
+            }
+        }
+        if animated && (node.light().is_some() || node.camera().is_some()) {
+            self.scene.warnings.push(format!(
+                "{}: node {}: animated lights and cameras stay at their rest pose",
+                self.path.display(),
+                node.index()
+            ));
         }
         if let Some(light) = node.light() {
             let position = world.transform_point3(Vec3::ZERO);
@@ -111,8 +249,67 @@ impl Loader<'_> {
             });
         }
         for child in node.children() {
-            self.visit(&child, world)?;
+            self.visit(&child, world, &chain)?;
         }
+        Ok(())
+    }
+
+    /// The mesh node's triangles from `t0` / vertices from `v0` as a rigid object
+    /// following its animated ancestor chain (see the module docs).
+    fn add_animated_object(
+        &mut self,
+        node: &gltf::Node,
+        chain: &[gltf::Node],
+        rest_world: Mat4,
+        t0: u32,
+        v0: u32,
+    ) -> Result<()> {
+        let mut times: Vec<f32> =
+            chain.iter().filter_map(|n| self.channels.get(&n.index())).flat_map(|c| c.times()).collect();
+        times.sort_by(f32::total_cmp);
+        times.dedup();
+        let mut samples = vec![];
+        for (k, &t) in times.iter().enumerate() {
+            samples.push(t);
+            if let Some(&next) = times.get(k + 1) {
+                samples.extend((1..4).map(|i| t + (next - t) * i as f32 / 4.0));
+            }
+        }
+        let rest_inverse = rest_world.inverse();
+        let empty = NodeChannels::default();
+        let mut keyframes = vec![];
+        for &t in &samples {
+            let world = chain
+                .iter()
+                .fold(Mat4::IDENTITY, |m, n| m * self.channels.get(&n.index()).unwrap_or(&empty).local(n, t));
+            let (scale, rotation, translation) = (world * rest_inverse).to_scale_rotation_translation();
+            if !(scale.is_finite() && rotation.is_finite() && translation.is_finite()) || scale.min_element() <= 0.0 {
+                return Err(
+                    self.err(format!("node {}: animated transform at {t} s is degenerate or mirrored", node.index()))
+                );
+            }
+            keyframes.push(TransformKeyframe {
+                frame: t,
+                translation: Some(translation),
+                rotation: Some(rotation),
+                scale: Some(scale),
+            });
+        }
+        let mesh = &self.scene.mesh;
+        self.scene.objects.push(SceneObject {
+            name: node.name().map_or_else(|| format!("node {}", node.index()), str::to_string),
+            first_triangle: t0,
+            triangle_count: mesh.triangle_count() as u32 - t0,
+            first_vertex: v0,
+            vertex_count: mesh.positions.len() as u32 - v0,
+            pivot_m: Vec3::ZERO,
+            animation: ObjectAnimation {
+                keyframes,
+                clock: KeyClock::Seconds { frames_per_second: self.scene.frames_per_second },
+                motion: None,
+            },
+            placement: Mat4::IDENTITY,
+        });
         Ok(())
     }
 

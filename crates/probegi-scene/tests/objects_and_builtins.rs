@@ -132,3 +132,92 @@ fn object_errors_name_the_file_and_the_entry() {
         );
     }
 }
+
+/// A unit quad on node 0 with a translation channel (0,2,0) → (2,2,0) and a
+/// rotation channel 0° → 90° about +Y over one second, as a .gltf with a data URI.
+fn animated_gltf() -> String {
+    let mut b: Vec<u8> = Vec::new();
+    let mut f32s = |v: &[f32], b: &mut Vec<u8>| v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
+    f32s(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0], &mut b);
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        b.extend_from_slice(&i.to_le_bytes());
+    }
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    f32s(&[0.0, 1.0], &mut b);
+    f32s(&[0.0, 2.0, 0.0, 2.0, 2.0, 0.0], &mut b);
+    f32s(&[0.0, 0.0, 0.0, 1.0, 0.0, h, 0.0, h], &mut b);
+    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut b64 = String::new();
+    for chunk in b.chunks(3) {
+        let n = chunk.iter().enumerate().fold(0u32, |acc, (i, &x)| acc | (x as u32) << (16 - 8 * i));
+        for i in 0..4 {
+            b64.push(if i <= chunk.len() { T[((n >> (18 - 6 * i)) & 63) as usize] as char } else { '=' });
+        }
+    }
+    let json = format!(
+        r#"{{
+  "asset": {{"version": "2.0"}},
+  "scene": 0,
+  "scenes": [{{"nodes": [0]}}],
+  "nodes": [{{"mesh": 0, "name": "door", "translation": [0, 2, 0]}}],
+  "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1}}]}}],
+  "animations": [{{
+    "samplers": [{{"input": 2, "output": 3}}, {{"input": 2, "output": 4}}],
+    "channels": [{{"sampler": 0, "target": {{"node": 0, "path": "translation"}}}},
+                 {{"sampler": 1, "target": {{"node": 0, "path": "rotation"}}}}]
+  }}],
+  "buffers": [{{"uri": "data:application/octet-stream;base64,{b64}", "byteLength": {}}}],
+  "bufferViews": [
+    {{"buffer": 0, "byteOffset": 0, "byteLength": 48}},
+    {{"buffer": 0, "byteOffset": 48, "byteLength": 12}},
+    {{"buffer": 0, "byteOffset": 60, "byteLength": 8}},
+    {{"buffer": 0, "byteOffset": 68, "byteLength": 24}},
+    {{"buffer": 0, "byteOffset": 92, "byteLength": 32}}
+  ],
+  "accessors": [
+    {{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}},
+    {{"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}},
+    {{"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0], "max": [1]}},
+    {{"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"}},
+    {{"bufferView": 4, "componentType": 5126, "count": 2, "type": "VEC4"}}
+  ]
+}}"#,
+        b.len()
+    );
+    write("anim.gltf", &json)
+}
+
+#[test]
+fn gltf_animation_channels_move_the_node_on_the_scene_clock() {
+    let gltf = animated_gltf();
+    let base = load_scene(&gltf).expect("loads");
+    assert_eq!(base.objects.len(), 1);
+    assert_eq!(base.objects[0].name, "door");
+    assert!(base.has_moving_geometry());
+    // Rest pose: the node's own translation.
+    assert!((base.mesh.positions[1] - Vec3::new(1.0, 2.0, 0.0)).length() < 1e-6);
+    let at = |scene: &probegi_scene::Scene, frame: f32| {
+        let mut posed = scene.clone();
+        posed.set_frame_from(scene, frame);
+        posed.mesh.positions.clone()
+    };
+    // 30 frames per second: frame 15 is 0.5 s, halfway: (1, 2, 0) and 45° about +Y.
+    let h = std::f32::consts::FRAC_1_SQRT_2;
+    let expected = Vec3::new(1.0 + h, 2.0, -h);
+    let p = at(&base, 15.0);
+    assert!((p[1] - expected).length() < 1e-3, "{}", p[1]);
+    assert!((at(&base, 30.0)[1] - Vec3::new(2.0, 2.0, -1.0)).length() < 1e-4, "end pose");
+    assert!((at(&base, 90.0)[1] - Vec3::new(2.0, 2.0, -1.0)).length() < 1e-4, "held after the last key");
+
+    // Placed by a scene file with its own clock: 10 frames per second, moved +5 z.
+    let toml = write(
+        "anim.toml",
+        &format!(
+            "frames_per_second = 10.0\n[[meshes]]\npath = \"{}\"\ntranslation = [0.0, 0.0, 5.0]\n",
+            gltf.replace('\\', "/")
+        ),
+    );
+    let placed = load_scene(&toml).expect("loads");
+    let p = at(&placed, 5.0);
+    assert!((p[1] - (expected + Vec3::new(0.0, 0.0, 5.0))).length() < 1e-3, "{}", p[1]);
+}
