@@ -137,7 +137,7 @@ fn object_errors_name_the_file_and_the_entry() {
 /// rotation channel 0° → 90° about +Y over one second, as a .gltf with a data URI.
 fn animated_gltf() -> String {
     let mut b: Vec<u8> = Vec::new();
-    let mut f32s = |v: &[f32], b: &mut Vec<u8>| v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
+    let f32s = |v: &[f32], b: &mut Vec<u8>| v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
     f32s(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0], &mut b);
     for i in [0u16, 1, 2, 0, 2, 3] {
         b.extend_from_slice(&i.to_le_bytes());
