@@ -66,6 +66,9 @@ pub struct LagArgs {
     /// Probe rays per probe per frame.
     #[arg(long, default_value_t = 64)]
     pub rays_per_probe: u32,
+    /// Frames the after-step state is held to make the converged target image.
+    #[arg(long, default_value_t = 400)]
+    pub target_frames: u32,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
 }

@@ -1,8 +1,8 @@
 //! `probegi lag`: convergence lag after a step change (seed 000 §5.1, seed 004
 //! §4.3). In the door room, either the sun switches on or a panel appears in the
 //! doorway at frame `frames_before`; every frame after it is compared by FLIP with
-//! the converged image of the new state (the same scene held in that state for 400
-//! frames). The lag is the first frame after the step from which FLIP stays below
+//! the converged image of the new state (the same scene held in that state for
+//! `--target-frames`, 400 by default). The lag is the first frame after the step from which FLIP stays below
 //! `--flip-threshold`. It is measured for each hysteresis, with the fast-
 //! convergence heuristics (Listing 3 thresholds and scene events) on and off.
 //!
@@ -136,7 +136,8 @@ pub fn run(args: &LagArgs) -> Result<()> {
     let mut runs = vec![];
     for step in [Step::LightOn, Step::Occluder] {
         let target_scene = step_scene(step, at as f32, true)?;
-        let target = render_sequence(&target_scene, 400, args.size, args.seed, &volume, 399).remove(0);
+        let n = args.target_frames.max(1);
+        let target = render_sequence(&target_scene, n, args.size, args.seed, &volume, n - 1).remove(0);
         let scene = step_scene(step, at as f32, false)?;
         for &h in &args.hysteresis {
             for heuristics in [true, false] {

@@ -274,3 +274,67 @@ fn sequence_writes_every_frame_and_reference_renders_any_frame() {
     assert_ne!(r("0", "f0.exr"), r("30", "f30.exr"));
     fails_with(&["reference", "--frame", "nan", "--out", "x.exr"], "--frame");
 }
+
+#[test]
+fn lag_writes_the_plot_the_curves_and_the_numbers() {
+    let out = tmp("lag").join("lag.png");
+    let o = probegi(&[
+        "lag",
+        "--out",
+        &out.to_string_lossy(),
+        "--size",
+        "12",
+        "--hysteresis",
+        "0.5,0.9",
+        "--frames-before",
+        "4",
+        "--frames-after",
+        "6",
+        "--rays-per-probe",
+        "16",
+        "--target-frames",
+        "12",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.is_file() && out.with_file_name("lag-curves.png").is_file());
+    let csv = std::fs::read_to_string(out.with_extension("csv")).expect("csv");
+    // Header + 2 steps × 2 hysteresis × heuristics on/off.
+    assert_eq!(csv.lines().count(), 1 + 8, "{csv}");
+    assert!(csv.lines().nth(1).is_some_and(|l| l.starts_with("light on,0.5,true,")), "{csv}");
+    fails_with(&["lag", "--hysteresis", "1.5"], "--hysteresis");
+}
+
+#[test]
+fn gif_preview_and_builtin_seed_scenes() {
+    let gif = tmp("preview.gif");
+    let o = probegi(&[
+        "render",
+        "--scene",
+        "builtin:color-bleed",
+        "--gi",
+        "ddgi",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--frames",
+        "5",
+        "--gif",
+        &gif.to_string_lossy(),
+        "--out",
+        &tmp("color-bleed.png").to_string_lossy(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let bytes = std::fs::read(&gif).expect("gif written");
+    assert!(bytes.starts_with(b"GIF89a"));
+    // Five frames: five image descriptors (0x2C after a graphic control extension).
+    assert_eq!(bytes.windows(2).filter(|w| w == &[0x00, 0x2C]).count(), 5);
+    // Sponza with a moving sun needs the shared folder and says so.
+    let o = Command::new(env!("CARGO_BIN_EXE_probegi"))
+        .args(["render", "--scene", "builtin:sponza-sun", "--out", &tmp("s.png").to_string_lossy()])
+        .env("PROBEGI_SHARED_DIR", "/nonexistent/shared")
+        .output()
+        .expect("runs");
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("PROBEGI_SHARED_DIR"), "{}", stderr(&o));
+}
