@@ -252,6 +252,10 @@ pub struct BenchArgs {
     /// Random seed for ray directions.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Add this many orbiting boxes and report the instancing costs: static build,
+    /// per-frame pose + TLAS rebuild, a full rebuild for comparison, and throughput.
+    #[arg(long, default_value_t = 0)]
+    pub moving_objects: u32,
     /// `ddgi`: sweep rays per probe (32–256) × probe grids and time the field update;
     /// `sh`: per grid, the SH probe update (without and with occlusion) against the
     /// DDGI field update at the same probe count (`--rays`, default 256) on the scene's camera.

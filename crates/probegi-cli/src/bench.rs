@@ -264,6 +264,73 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
         "any_hit_max_distance_m": any_hit_len,
         "any_hit_mrays_per_s": n / any_s / 1e6,
         "any_hit_fraction": any_hits as f64 / n,
+        "instancing": if args.moving_objects > 0 { bench_instancing(args, scene, &rays)? } else { json!(null) },
         "peak_rss_mib": peak_rss_mib(),
+    }))
+}
+
+/// `--moving-objects K`: K boxes (a twentieth of the scene's extent) orbiting the
+/// scene centre, instanced over the static BVH (dynamic-scenes issue). Reports the
+/// one-off build, the per-frame cost (posing the vertices, then the TLAS rebuild),
+/// a full rebuild of the posed mesh for comparison, and closest-hit throughput on
+/// the same rays through the TLAS.
+fn bench_instancing(args: &BenchArgs, mut scene: probegi_scene::Scene, rays: &[Ray]) -> Result<serde_json::Value> {
+    use probegi_scene::{MotionPath, ObjectAnimation, SceneObject};
+    let (lo, hi) = scene.bounds().context("scene has no geometry")?;
+    let (centre, extent) = ((lo + hi) * 0.5, (hi - lo).max_element());
+    let material = scene.materials.len() as u32;
+    scene.materials.push(probegi_scene::Material::diffuse("bench box", Vec3::splat(0.5)));
+    let k = args.moving_objects;
+    for i in 0..k {
+        let angle = std::f32::consts::TAU * i as f32 / k as f32;
+        let at = centre + Vec3::new(angle.cos(), 0.0, angle.sin()) * extent * 0.25;
+        let (t0, v0) = (scene.mesh.triangle_count() as u32, scene.mesh.positions.len() as u32);
+        probegi_scene::builtin::add_box(&mut scene.mesh, at - extent / 40.0, at + extent / 40.0, material);
+        scene.objects.push(SceneObject {
+            name: format!("box {i}"),
+            first_triangle: t0,
+            triangle_count: 12,
+            first_vertex: v0,
+            vertex_count: 24,
+            pivot_m: at,
+            animation: ObjectAnimation {
+                motion: Some(MotionPath::Orbit { centre_m: centre, axis: Vec3::Y, period_frames: 100.0 }),
+                ..Default::default()
+            },
+            placement: glam::Mat4::IDENTITY,
+        });
+    }
+    scene.validate().map_err(anyhow::Error::msg)?;
+    let settings = BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel };
+    let tracer = BvhTracer::for_scene(&scene, settings);
+    let mut posed = scene.clone();
+    let (mut pose_ms, mut tlas_ms, mut rebuild_ms) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    for r in 0..args.repeat {
+        let frame = 7.0 + r as f32;
+        let t = Instant::now();
+        posed.set_frame_from(&scene, frame);
+        pose_ms = pose_ms.min(t.elapsed().as_secs_f64() * 1e3);
+        let t = Instant::now();
+        let framed = tracer.at_frame(&posed, frame);
+        tlas_ms = tlas_ms.min(t.elapsed().as_secs_f64() * 1e3);
+        drop(framed);
+        let t = Instant::now();
+        drop(BvhTracer::build(&posed.mesh, settings));
+        rebuild_ms = rebuild_ms.min(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let framed = tracer.at_frame(&posed, 7.0).context("moving objects must give a frame tracer")?;
+    let mut best = f64::INFINITY;
+    for _ in 0..args.repeat {
+        let t = Instant::now();
+        rays.par_iter().filter(|r| framed.closest_hit(r).is_some()).count();
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    Ok(json!({
+        "moving_objects": k,
+        "static_and_object_build_ms": tracer.build_time.as_secs_f64() * 1e3,
+        "per_frame_pose_ms": pose_ms,
+        "per_frame_tlas_ms": tlas_ms,
+        "full_rebuild_ms": rebuild_ms,
+        "closest_hit_mrays_per_s": rays.len() as f64 / best / 1e6,
     }))
 }
