@@ -162,18 +162,28 @@ impl DdgiVolume {
     }
 
     /// Reports a scene change (seed 004 §4.3 per-probe heuristics; they apply to all
-    /// probes). No effect unless `probe_fast_convergence` is on.
+    /// probes). No effect unless `probe_fast_convergence` is on. Repeating an event
+    /// while its reduction lasts restarts the reduction's window.
     pub fn notify_scene_event(&mut self, event: SceneEvent) {
         let (irr, vis) = match event {
             SceneEvent::SmallLightChange => (Some((0.85, 4)), None),
             SceneEvent::LargeLightChange => (Some((0.5, 10)), None),
             SceneEvent::LargeObjectChange => (Some((0.5, 10)), Some((0.5, 7))),
         };
-        if let Some((scale, frames_left)) = irr {
-            self.irradiance_events.push(HysteresisReduction { scale, frames_left });
+        // The same reduction reported again (an object moving on every frame) restarts
+        // its window rather than compounding: different reductions still multiply.
+        let add = |events: &mut Vec<HysteresisReduction>, (scale, frames_left): (f32, u32)| match events
+            .iter_mut()
+            .find(|e| e.scale == scale)
+        {
+            Some(e) => e.frames_left = e.frames_left.max(frames_left),
+            None => events.push(HysteresisReduction { scale, frames_left }),
+        };
+        if let Some(r) = irr {
+            add(&mut self.irradiance_events, r);
         }
-        if let Some((scale, frames_left)) = vis {
-            self.visibility_events.push(HysteresisReduction { scale, frames_left });
+        if let Some(r) = vis {
+            add(&mut self.visibility_events, r);
         }
     }
 

@@ -177,14 +177,17 @@ pub fn render_frames(
                 let bounds = scene.moving_object_bounds();
                 stats.probes_woken += v.wake_probes_near(&bounds) as u64;
                 // An object that jumps by more than a probe cell in one frame (an
-                // occluder put in place) is a large object change (seed 004 §4.3),
-                // reported as an application would.
+                // occluder put in place) inside the volume (grown by a cell) is a
+                // large object change (seed 004 §4.3), reported as an application would.
+                let g = &v.grid;
+                let (lo, hi) = (g.probe_position(glam::UVec3::ZERO), g.probe_position(g.probe_counts - 1));
+                let near = |b: &(Vec3, Vec3)| b.0.cmple(hi + g.spacing_m).all() && b.1.cmpge(lo - g.spacing_m).all();
                 let centre = |b: &(Vec3, Vec3)| (b.0 + b.1) * 0.5;
                 let jumped = prev_object_bounds.len() == bounds.len()
                     && prev_object_bounds
                         .iter()
                         .zip(&bounds)
-                        .any(|(a, b)| centre(a).distance(centre(b)) > v.grid.min_spacing_m());
+                        .any(|(a, b)| (near(a) || near(b)) && centre(a).distance(centre(b)) > g.min_spacing_m());
                 if jumped {
                     v.notify_scene_event(crate::ddgi::SceneEvent::LargeObjectChange);
                 }
