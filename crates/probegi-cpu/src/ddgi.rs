@@ -469,3 +469,22 @@ fn check_borders<T: PartialEq + Copy + std::fmt::Debug>(tile: &[T], interior: u3
         assert_eq!(tile[dy as usize * s + dx as usize], tile[sy as usize * s + sx as usize], "border texel");
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_repeated_event_restarts_its_window_instead_of_compounding() {
+        let mut v = DdgiVolume::new(DdgiVolumeSettings::default(), (Vec3::ZERO, Vec3::ONE));
+        for _ in 0..10 {
+            v.notify_scene_event(SceneEvent::LargeObjectChange);
+        }
+        v.notify_scene_event(SceneEvent::SmallLightChange);
+        let scales = |e: &[HysteresisReduction]| e.iter().map(|r| r.scale).product::<f32>();
+        // One 0.5 (not 0.5¹⁰) and the small light change's 0.85 on top.
+        assert!((scales(&v.irradiance_events) - 0.5 * 0.85).abs() < 1e-6);
+        assert!((scales(&v.visibility_events) - 0.5).abs() < 1e-6);
+        assert_eq!(v.irradiance_events.iter().map(|r| r.frames_left).max(), Some(10));
+    }
+}
