@@ -275,30 +275,26 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
 /// a full rebuild of the posed mesh for comparison, and closest-hit throughput on
 /// the same rays through the TLAS.
 fn bench_instancing(args: &BenchArgs, mut scene: probegi_scene::Scene, rays: &[Ray]) -> Result<serde_json::Value> {
-    use probegi_scene::{MotionPath, ObjectAnimation, SceneObject};
+    use probegi_scene::{MotionPath, ObjectAnimation};
     let (lo, hi) = scene.bounds().context("scene has no geometry")?;
     let (centre, extent) = ((lo + hi) * 0.5, (hi - lo).max_element());
     let material = scene.materials.len() as u32;
     scene.materials.push(probegi_scene::Material::diffuse("bench box", Vec3::splat(0.5)));
     let k = args.moving_objects;
+    if k > 100_000 {
+        bail!("--moving-objects {k} is more than 100000");
+    }
     for i in 0..k {
         let angle = std::f32::consts::TAU * i as f32 / k as f32;
         let at = centre + Vec3::new(angle.cos(), 0.0, angle.sin()) * extent * 0.25;
-        let (t0, v0) = (scene.mesh.triangle_count() as u32, scene.mesh.positions.len() as u32);
-        probegi_scene::builtin::add_box(&mut scene.mesh, at - extent / 40.0, at + extent / 40.0, material);
-        scene.objects.push(SceneObject {
-            name: format!("box {i}"),
-            first_triangle: t0,
-            triangle_count: 12,
-            first_vertex: v0,
-            vertex_count: 24,
-            pivot_m: at,
-            animation: ObjectAnimation {
-                motion: Some(MotionPath::Orbit { centre_m: centre, axis: Vec3::Y, period_frames: 100.0 }),
-                ..Default::default()
-            },
-            placement: glam::Mat4::IDENTITY,
-        });
+        let animation = ObjectAnimation {
+            motion: Some(MotionPath::Orbit { centre_m: centre, axis: Vec3::Y, period_frames: 100.0 }),
+            ..Default::default()
+        };
+        let half = Vec3::splat(extent / 40.0);
+        let add =
+            |m: &mut probegi_scene::mesh::Mesh| probegi_scene::builtin::add_box(m, at - half, at + half, material);
+        scene.add_object(&format!("box {i}"), add, animation);
     }
     scene.validate().map_err(anyhow::Error::msg)?;
     let settings = BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel };

@@ -19,7 +19,7 @@ use probegi_cpu::DirectSettings;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_image::plot::{LinePlot, PALETTE, Series};
 use probegi_scene::light::LightKeyframe;
-use probegi_scene::{BvhSettings, BvhTracer, ObjectAnimation, Scene, SceneObject, TransformKeyframe, load_scene};
+use probegi_scene::{BvhSettings, BvhTracer, ObjectAnimation, Scene, TransformKeyframe, load_scene};
 
 use crate::args::LagArgs;
 
@@ -51,27 +51,18 @@ fn step_scene(step: Step, at: f32, held: bool) -> Result<Scene> {
         Step::Occluder => {
             // Keyframes that change nothing keep the scene animated like the other cases.
             s.lights[0].keyframes = vec![key(0.0, sun)];
-            let (t0, v0) = (s.mesh.triangle_count() as u32, s.mesh.positions.len() as u32);
-            probegi_scene::builtin::add_box(&mut s.mesh, Vec3::new(1.4, 0.0, 4.0), Vec3::new(2.0, 2.2, 4.2), 0);
             let place = |frame, y| TransformKeyframe {
                 frame,
                 translation: Some(Vec3::new(0.0, y, 0.0)),
                 rotation: None,
                 scale: None,
             };
-            s.objects.push(SceneObject {
-                name: "door panel".into(),
-                first_triangle: t0,
-                triangle_count: 12,
-                first_vertex: v0,
-                vertex_count: 24,
-                pivot_m: Vec3::new(1.7, 1.1, 4.1),
-                animation: ObjectAnimation {
-                    keyframes: vec![place(before, -50.0), place(after, 0.0)],
-                    ..Default::default()
-                },
-                placement: glam::Mat4::IDENTITY,
-            });
+            let animation =
+                ObjectAnimation { keyframes: vec![place(before, -50.0), place(after, 0.0)], ..Default::default() };
+            let panel = |m: &mut probegi_scene::mesh::Mesh| {
+                probegi_scene::builtin::add_box(m, Vec3::new(1.4, 0.0, 4.0), Vec3::new(2.0, 2.2, 4.2), 0)
+            };
+            s.add_object("door panel", panel, animation);
         }
     }
     s.validate().map_err(anyhow::Error::msg)?;

@@ -11,7 +11,7 @@ use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_fra
 use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::builtin::add_box;
-use probegi_scene::{BvhSettings, BvhTracer, ObjectAnimation, Scene, SceneObject, TransformKeyframe, load_scene};
+use probegi_scene::{BvhSettings, BvhTracer, ObjectAnimation, Scene, TransformKeyframe, load_scene};
 
 const SIZE: u32 = 32;
 
@@ -36,33 +36,23 @@ fn render(scene: &Scene, frames: u32, volume: DdgiVolumeSettings, mut each: impl
 /// animated the same way and differ only in the box's path.
 fn door_room_with_mover(with_box: bool) -> Scene {
     let mut s = load_scene("builtin:door-room").expect("built in");
-    let (t0, v0) = (s.mesh.triangle_count() as u32, s.mesh.positions.len() as u32);
-    add_box(&mut s.mesh, Vec3::new(0.6, 0.0, 0.6), Vec3::new(1.4, 0.8, 1.4), 0);
     let key = |frame: f32, t: Vec3| TransformKeyframe {
         frame,
         translation: Some(if with_box { t } else { Vec3::new(0.0, -50.0, 0.0) }),
         rotation: Some(Quat::from_rotation_y(frame * 0.05)),
         scale: None,
     };
-    s.objects.push(SceneObject {
-        name: "mover".into(),
-        first_triangle: t0,
-        triangle_count: 12,
-        first_vertex: v0,
-        vertex_count: 24,
-        pivot_m: Vec3::new(1.0, 0.4, 1.0),
-        animation: ObjectAnimation {
-            keyframes: vec![
-                key(0.0, Vec3::ZERO),
-                key(20.0, Vec3::new(2.0, 0.0, 1.5)),
-                key(40.0, Vec3::new(1.0, 0.0, 6.0)),
-                // Then it sinks out of the world, so the room is as if it never was.
-                key(50.0, Vec3::new(1.0, -50.0, 6.0)),
-            ],
-            ..Default::default()
-        },
-        placement: glam::Mat4::IDENTITY,
-    });
+    let animation = ObjectAnimation {
+        keyframes: vec![
+            key(0.0, Vec3::ZERO),
+            key(20.0, Vec3::new(2.0, 0.0, 1.5)),
+            key(40.0, Vec3::new(1.0, 0.0, 6.0)),
+            // Then it sinks out of the world, so the room is as if it never was.
+            key(50.0, Vec3::new(1.0, -50.0, 6.0)),
+        ],
+        ..Default::default()
+    };
+    s.add_object("mover", |m| add_box(m, Vec3::new(0.6, 0.0, 0.6), Vec3::new(1.4, 0.8, 1.4), 0), animation);
     s.validate().expect("valid");
     s
 }

@@ -83,8 +83,10 @@ impl Keyed for TransformKeyframe {
     }
 }
 
-/// Closed-form motion paths.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Closed-form motion paths; in a scene file, `motion = { kind = "orbit", ... }`
+/// with these field names.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum MotionPath {
     /// Constant velocity from the rest pose at frame 0.
     Translate { velocity_m_per_frame: Vec3 },

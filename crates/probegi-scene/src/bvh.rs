@@ -385,7 +385,7 @@ mod tests {
 
     /// A static floor and box, and a box that slides, turns and grows.
     fn moving_scene() -> Scene {
-        use crate::animation::{ObjectAnimation, SceneObject, TransformKeyframe};
+        use crate::animation::{ObjectAnimation, TransformKeyframe};
         use crate::builtin::{add_box, add_polygon};
         let mut s = Scene { materials: vec![crate::Material::diffuse("m", Vec3::ONE)], ..Default::default() };
         let floor = [
@@ -396,27 +396,18 @@ mod tests {
         ];
         add_polygon(&mut s.mesh, &floor, 0);
         add_box(&mut s.mesh, Vec3::new(2.0, 0.2, 2.0), Vec3::new(3.0, 1.0, 3.0), 0);
-        let (t0, v0) = (s.mesh.triangle_count() as u32, s.mesh.positions.len() as u32);
-        add_box(&mut s.mesh, Vec3::new(-0.5, 0.0, -0.5), Vec3::new(0.5, 1.0, 0.5), 0);
         let key = |frame: f32, x: f32, deg: f32, k: f32| TransformKeyframe {
             frame,
             translation: Some(Vec3::new(x, 0.5, 0.0)),
             rotation: Some(glam::Quat::from_rotation_y(deg.to_radians())),
             scale: Some(Vec3::splat(k)),
         };
-        s.objects.push(SceneObject {
-            name: "mover".into(),
-            first_triangle: t0,
-            triangle_count: 12,
-            first_vertex: v0,
-            vertex_count: 24,
-            pivot_m: Vec3::new(0.0, 0.5, 0.0),
-            animation: ObjectAnimation {
-                keyframes: vec![key(0.0, -3.0, 0.0, 1.0), key(10.0, 3.0, 90.0, 1.5)],
-                ..Default::default()
-            },
-            placement: glam::Mat4::IDENTITY,
-        });
+        let animation = ObjectAnimation {
+            keyframes: vec![key(0.0, -3.0, 0.0, 1.0), key(10.0, 3.0, 90.0, 1.5)],
+            ..Default::default()
+        };
+        // Pivot: the box's centre (0, 0.5, 0).
+        s.add_object("mover", |m| add_box(m, Vec3::new(-0.5, 0.0, -0.5), Vec3::new(0.5, 1.0, 0.5), 0), animation);
         assert_eq!(s.validate(), Ok(()));
         s
     }

@@ -148,6 +148,38 @@ impl Scene {
         self.lights.iter().any(|l| !l.keyframes.is_empty()) || self.has_moving_geometry()
     }
 
+    /// Appends geometry (`add_geometry` writes it into the mesh) as one object that
+    /// moves by `animation`, pivoting about the centre of its bounds. Returns the
+    /// object's index.
+    pub fn add_object(
+        &mut self,
+        name: &str,
+        add_geometry: impl FnOnce(&mut Mesh),
+        animation: crate::animation::ObjectAnimation,
+    ) -> usize {
+        let (t0, v0) = (self.mesh.triangle_count(), self.mesh.positions.len());
+        add_geometry(&mut self.mesh);
+        let added = &self.mesh.positions[v0..];
+        let pivot_m = match added.first() {
+            Some(&p) => {
+                let (lo, hi) = added.iter().fold((p, p), |(lo, hi), &q| (lo.min(q), hi.max(q)));
+                (lo + hi) * 0.5
+            }
+            None => Vec3::ZERO,
+        };
+        self.objects.push(SceneObject {
+            name: name.to_string(),
+            first_triangle: t0 as u32,
+            triangle_count: (self.mesh.triangle_count() - t0) as u32,
+            first_vertex: v0 as u32,
+            vertex_count: (self.mesh.positions.len() - v0) as u32,
+            pivot_m,
+            animation,
+            placement: glam::Mat4::IDENTITY,
+        });
+        self.objects.len() - 1
+    }
+
     /// Sets the animation clock; animations keyed in seconds play at it.
     pub fn set_frames_per_second(&mut self, fps: f32) {
         self.frames_per_second = fps;

@@ -118,7 +118,7 @@ pub struct ObjectEntry {
     #[serde(default)]
     pub keyframes: Vec<ObjectKeyframe>,
     #[serde(default)]
-    pub motion: Option<MotionEntry>,
+    pub motion: Option<MotionPath>,
 }
 
 /// A key of `[[objects]].keyframes`: offsets from the authored pose.
@@ -133,15 +133,6 @@ pub struct ObjectKeyframe {
     pub rotation_deg: Option<Vec3>,
     #[serde(default)]
     pub scale: Option<Vec3>,
-}
-
-/// `[[objects]].motion`: a closed-form path (see `crate::animation::MotionPath`).
-#[derive(Debug, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum MotionEntry {
-    Translate { velocity_m_per_frame: Vec3 },
-    Orbit { centre_m: Vec3, axis: Vec3, period_frames: f32 },
-    Rotate { axis: Vec3, period_frames: f32 },
 }
 
 #[derive(Debug, Deserialize)]
@@ -164,12 +155,7 @@ fn one() -> Vec3 {
 
 impl MeshRef {
     pub fn world_from_local(&self) -> Mat4 {
-        let r = self.rotation_deg;
-        Mat4::from_scale_rotation_translation(
-            self.scale,
-            Quat::from_euler(EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians()),
-            self.translation,
-        )
+        placement_matrix(self.translation, self.rotation_deg, self.scale)
     }
 }
 
@@ -228,6 +214,16 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
     Ok(scene)
 }
 
+/// Intrinsic Euler angles X, Y, Z in degrees, as scene files write rotations.
+fn quat_from_euler_deg(r: Vec3) -> Quat {
+    Quat::from_euler(EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians())
+}
+
+/// Scale, then rotation (Euler degrees), then translation.
+fn placement_matrix(translation: Vec3, rotation_deg: Vec3, scale: Vec3) -> Mat4 {
+    Mat4::from_scale_rotation_translation(scale, quat_from_euler_deg(rotation_deg), translation)
+}
+
 fn placement(xf: Mat4) -> std::result::Result<Mat4, String> {
     if !xf.is_finite() || xf.determinant().abs() < 1e-12 {
         return Err("transform is degenerate or not finite".into());
@@ -268,6 +264,9 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
     if shapes.iter().filter(|&&b| b).count() != 1 {
         return Err("give exactly one of box_min_m + box_max_m, polygon_m or path".to_string().into());
     }
+    if o.box_inward && !shapes[0] {
+        return Err("box_inward applies to a box (box_min_m + box_max_m)".to_string().into());
+    }
     let mut sub = if let Some(spec) = &o.path {
         if o.albedo.is_some() || o.emission.is_some() {
             return Err("albedo and emission apply to boxes and polygons; a file brings its materials"
@@ -278,10 +277,7 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
         if sub.has_moving_geometry() {
             return Err(format!("{spec} is animated itself; place it with [[meshes]] instead").into());
         }
-        let xf = placement(
-            MeshRef { path: String::new(), translation: o.translation, rotation_deg: o.rotation_deg, scale: o.scale }
-                .world_from_local(),
-        )?;
+        let xf = placement(placement_matrix(o.translation, o.rotation_deg, o.scale))?;
         sub.mesh.transform(xf);
         sub.objects.clear();
         sub
@@ -324,18 +320,12 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
             .map(|k| TransformKeyframe {
                 frame: k.frame,
                 translation: k.translation,
-                rotation: k
-                    .rotation_deg
-                    .map(|r| Quat::from_euler(EulerRot::XYZ, r.x.to_radians(), r.y.to_radians(), r.z.to_radians())),
+                rotation: k.rotation_deg.map(quat_from_euler_deg),
                 scale: k.scale,
             })
             .collect(),
         clock: KeyClock::Frames,
-        motion: o.motion.as_ref().map(|m| match *m {
-            MotionEntry::Translate { velocity_m_per_frame } => MotionPath::Translate { velocity_m_per_frame },
-            MotionEntry::Orbit { centre_m, axis, period_frames } => MotionPath::Orbit { centre_m, axis, period_frames },
-            MotionEntry::Rotate { axis, period_frames } => MotionPath::Rotate { axis, period_frames },
-        }),
+        motion: o.motion,
     };
     let bounds = sub.mesh.bounds().ok_or_else(|| "the object has no geometry".to_string())?;
     let object = SceneObject {

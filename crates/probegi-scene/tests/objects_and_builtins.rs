@@ -103,6 +103,7 @@ fn object_errors_name_the_file_and_the_entry() {
             "exactly one",
         ),
         ("[[objects]]\npolygon_m = [[0.0,0.0,0.0],[1.0,0.0,0.0]]\n", "at least 3"),
+        ("[[objects]]\npolygon_m = [[0.0,0.0,0.0],[1.0,0.0,0.0],[0.0,1.0,0.0]]\nbox_inward = true\n", "box_inward"),
         (
             "[[objects]]\nbox_min_m = [0.0, 0.0, 0.0]\nbox_max_m = [1.0, 1.0, 1.0]\nkeyframes = [{ frame = 0, scale = [1.0, -1.0, 1.0] }]\n",
             "scale",
