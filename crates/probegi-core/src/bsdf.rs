@@ -12,6 +12,11 @@
 //! scaled diffuse albedo (clamped to [0.1, 0.9] when both exist), the specular
 //! half-vector from the visible normals (Heitz 2018), the diffuse direction
 //! cosine-weighted; `pdf` is the one-sample mixture of both.
+//!
+//! [`specular_directional_albedo`] is the lobe's hemispherical-directional
+//! reflectance ∫ f_spec cos θi dωi = F0·A(μo, α) + B(μo, α) (the split-sum factors
+//! of Karis 2013, with Schlick's F split into F0 and 1 − F0 parts), from a table
+//! integrated once by VNDF sampling: masking, shadowing and roughness included.
 
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
@@ -84,6 +89,60 @@ pub fn ggx_reflection_pdf(wo: Vec3, wi: Vec3, alpha: f32) -> f32 {
     let o_h = wo.dot(h).max(1e-8);
     // D_v(h) = G1(wo)·max(0, wo·h)·D(h)/cosθo; pdf(wi) = D_v(h) / (4 wo·h).
     smith_g1(wo.z, alpha) * ggx_d(h.z, alpha) / (4.0 * wo.z) * if o_h > 0.0 { 1.0 } else { 0.0 }
+}
+
+/// Table resolution of [`specular_directional_albedo`] in μo and in α.
+const ALBEDO_TABLE_SIZE: usize = 32;
+
+/// (A, B) per (α, μo) node, row-major in α; node i sits at i/(N − 1), so both ends
+/// of [0, 1] are nodes. 1024 stratified VNDF samples each.
+fn albedo_table() -> &'static [[f32; 2]] {
+    static TABLE: std::sync::OnceLock<Vec<[f32; 2]>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let n = ALBEDO_TABLE_SIZE;
+        let m = 32;
+        let mut table = Vec::with_capacity(n * n);
+        for ia in 0..n {
+            let alpha = (ia as f32 / (n - 1) as f32).max(MIN_ALPHA);
+            for im in 0..n {
+                let mu = (im as f32 / (n - 1) as f32).max(1e-3);
+                let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                let (mut a, mut b) = (0.0f64, 0.0f64);
+                for k in 0..m * m {
+                    let u = Vec2::new(((k % m) as f32 + 0.5) / m as f32, ((k / m) as f32 + 0.5) / m as f32);
+                    let h = sample_ggx_vndf(wo, alpha, u);
+                    let wi = reflect(wo, h);
+                    if wi.z <= 0.0 {
+                        continue;
+                    }
+                    // VNDF sampling: f·cos/pdf = F · G2/G1(wo).
+                    let g = smith_g2(wo.z, wi.z, alpha) / smith_g1(wo.z, alpha);
+                    let fc = (1.0 - wo.dot(h).clamp(0.0, 1.0)).powi(5);
+                    a += ((1.0 - fc) * g) as f64;
+                    b += (fc * g) as f64;
+                }
+                let count = (m * m) as f64;
+                table.push([(a / count) as f32, (b / count) as f32]);
+            }
+        }
+        table
+    })
+}
+
+/// The GGX lobe's directional albedo ∫ f_spec(wo, wi) cos θi dωi for a viewer at
+/// cos θo = `cos_o` (F0·A + B, bilinear in the table): the fraction of uniform
+/// incident radiance the specular lobe reflects toward the viewer.
+pub fn specular_directional_albedo(f0: Vec3, cos_o: f32, alpha: f32) -> Vec3 {
+    let n = ALBEDO_TABLE_SIZE;
+    let t = albedo_table();
+    let x = cos_o.clamp(0.0, 1.0) * (n - 1) as f32;
+    let y = alpha.clamp(0.0, 1.0) * (n - 1) as f32;
+    let (x0, y0) = ((x as usize).min(n - 2), (y as usize).min(n - 2));
+    let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+    let at = |i: usize, j: usize| t[j * n + i];
+    let lerp = |a: [f32; 2], b: [f32; 2], f: f32| [a[0] + (b[0] - a[0]) * f, a[1] + (b[1] - a[1]) * f];
+    let ab = lerp(lerp(at(x0, y0), at(x0 + 1, y0), fx), lerp(at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx), fy);
+    f0 * ab[0] + Vec3::splat(ab[1])
 }
 
 fn reflect(wo: Vec3, h: Vec3) -> Vec3 {
@@ -244,6 +303,31 @@ mod tests {
                 / (m * m) as f32;
             assert!((direct - albedo).abs().max_element() < 0.03, "{bsdf:?}: {direct} vs {albedo}");
         }
+    }
+
+    #[test]
+    fn the_directional_albedo_table_matches_direct_integration() {
+        let m = 700;
+        for (f0, mu, alpha) in [(0.04f32, 0.9f32, 0.3f32), (0.9, 0.5, 0.6), (0.5, 0.2, 0.9), (0.9, 0.75, 0.1)] {
+            let b = SurfaceBsdf { diffuse: Vec3::ZERO, specular_f0: Vec3::splat(f0), alpha };
+            let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+            // Uniform-sphere estimate: independent of the table's VNDF sampling.
+            let direct: f32 = grid(m)
+                .map(|u| {
+                    let wi = sample_uniform_sphere(u);
+                    if wi.z > 0.0 { b.eval_specular(wo, wi).x * wi.z / uniform_sphere_pdf() } else { 0.0 }
+                })
+                .sum::<f32>()
+                / (m * m) as f32;
+            let table = specular_directional_albedo(Vec3::splat(f0), mu, alpha).x;
+            assert!((table - direct).abs() < 0.02 + 0.03 * direct, "F0 {f0} μ {mu} α {alpha}: {table} vs {direct}");
+        }
+        // Rough lobes lose energy to masking: well below Schlick's F at the same angle.
+        let rough = specular_directional_albedo(Vec3::splat(0.9), 0.3, 1.0).x;
+        assert!(rough < 0.85 * fresnel_schlick(Vec3::splat(0.9), 0.3).x, "{rough}");
+        // A near-mirror reflects Schlick's F.
+        let mirror = specular_directional_albedo(Vec3::splat(0.5), 0.8, 0.0).x;
+        assert!((mirror - fresnel_schlick(Vec3::splat(0.5), 0.8).x).abs() < 0.01, "{mirror}");
     }
 
     #[test]

@@ -14,8 +14,17 @@
 //! Listing 2), blended, normalised by Σw and squared back. The atlas holds mean
 //! radiance (see `probe_blend`), so the returned irradiance is π × that, scaled by
 //! the energy-conservation factor. Shading multiplies by albedo/π.
+//!
+//! Probes that queries may not read (culled, or not yet blended) are skipped, and
+//! the sum is renormalised over the rest. When no probe of the cage is usable the
+//! query does not return black (RTXGI does, and under DDGI the sky reaches surfaces
+//! only through the field): each corner's nearest usable probe
+//! ([`nearest_usable_probes`]) stands in for it, with the same weights, so the
+//! backface and Chebyshev terms still prefer stand-ins that see the point. That
+//! value is less exact (a stand-in can be cells away), but it is the field's light,
+//! not black.
 
-use glam::{IVec3, UVec3, Vec2, Vec3};
+use glam::{IVec3, Vec2, Vec3};
 use std::f32::consts::PI;
 
 use crate::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
@@ -35,6 +44,42 @@ pub struct DdgiFieldView<'a> {
     pub probe_offsets_m: &'a [Vec3],
     /// Probes queries may read (Off / Sleeping / Dead are excluded); empty = all.
     pub probe_usable: &'a [bool],
+    /// Per probe, the nearest usable probe (itself when usable; `u32::MAX` when no
+    /// probe is usable), from [`nearest_usable_probes`]; empty = no fallback.
+    pub probe_fallback: &'a [u32],
+}
+
+/// For every probe, the index of the nearest usable probe in grid steps (the
+/// 26-neighbourhood, so Chebyshev distance; ties go to the lower index), itself
+/// when it is usable, `u32::MAX` when none is. A breadth-first search from all
+/// usable probes at once: O(probes).
+pub fn nearest_usable_probes(grid: &ProbeGrid, usable: &[bool]) -> Vec<u32> {
+    let n = grid.probe_count();
+    let mut nearest = vec![u32::MAX; n];
+    let mut queue = std::collections::VecDeque::new();
+    for p in 0..n {
+        if usable.get(p).copied().unwrap_or(true) {
+            nearest[p] = p as u32;
+            queue.push_back(p);
+        }
+    }
+    let max = grid.probe_counts.as_ivec3() - IVec3::ONE;
+    while let Some(p) = queue.pop_front() {
+        let c = grid.probe_coords(p).as_ivec3();
+        for i in 0..27 {
+            let d = IVec3::new(i % 3 - 1, (i / 3) % 3 - 1, i / 9 - 1);
+            let q = c + d;
+            if q.cmplt(IVec3::ZERO).any() || q.cmpgt(max).any() {
+                continue;
+            }
+            let q = grid.probe_index(q.as_uvec3());
+            if nearest[q] == u32::MAX {
+                nearest[q] = nearest[p];
+                queue.push_back(q);
+            }
+        }
+    }
+    nearest
 }
 
 /// The world-space offset seed 004 eq. 2 (or seed 003 eq. 4.11) adds to the query
@@ -91,18 +136,12 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
     let normal_texels = BilinearFootprint::new(field.irradiance.interior, oct_encode(normal));
     let half_gamma = s.probe_irradiance_gamma * 0.5;
 
-    let mut sum = Vec3::ZERO;
-    let mut wsum = 0.0f32;
-    for i in 0..8 {
+    // One cage probe's (weight, decoded irradiance); `probe` may be a corner's
+    // fallback, which is weighted like the corner it stands in for.
+    let weigh = |i: i32, probe: usize| {
         let offset = IVec3::new(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        let coords = (base + offset).min(max_coords);
-        let probe = g.probe_index(coords.as_uvec3());
-        if field.probe_usable.get(probe).is_some_and(|u| !u) {
-            continue;
-        }
-        let probe_pos = g.probe_position(UVec3::new(coords.x as u32, coords.y as u32, coords.z as u32))
-            + field.probe_offsets_m.get(probe).copied().unwrap_or(Vec3::ZERO);
-
+        let coords = g.probe_coords(probe);
+        let probe_pos = g.probe_position(coords) + field.probe_offsets_m.get(probe).copied().unwrap_or(Vec3::ZERO);
         let mut weight = 1.0f32;
         if s.probe_backface_weight {
             let dir = (probe_pos - position).normalize_or_zero();
@@ -128,11 +167,38 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
             weight *= t.x * t.y * t.z;
         }
         let e = normal_texels.sample(field.irradiance.tile(probe)).max(Vec3::ZERO);
-        let decoded = decode_half(e, half_gamma);
-        sum += decoded * weight;
-        wsum += weight;
+        (weight, decode_half(e, half_gamma))
+    };
+    let corner_probe = |i: i32| {
+        let offset = IVec3::new(i & 1, (i >> 1) & 1, (i >> 2) & 1);
+        g.probe_index((base + offset).min(max_coords).as_uvec3())
+    };
+
+    let mut sum = Vec3::ZERO;
+    let mut wsum = 0.0f32;
+    for i in 0..8 {
+        let probe = corner_probe(i);
+        if field.probe_usable.get(probe).is_some_and(|u| !u) {
+            continue;
+        }
+        let (w, e) = weigh(i, probe);
+        sum += e * w;
+        wsum += w;
     }
-    if wsum.is_nan() || wsum <= 0.0 {
+    if !(wsum.is_finite() && wsum > 0.0) {
+        // No usable probe in the cage: each corner's nearest usable probe stands in
+        // for it, with the same weights (so visibility still picks among them).
+        for i in 0..8 {
+            if let Some(&q) = field.probe_fallback.get(corner_probe(i))
+                && q != u32::MAX
+            {
+                let (w, e) = weigh(i, q as usize);
+                sum += e * w;
+                wsum += w;
+            }
+        }
+    }
+    if !(wsum.is_finite() && wsum > 0.0) {
         return Vec3::ZERO;
     }
     let m = sum / wsum;
@@ -143,6 +209,7 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::UVec3;
 
     fn uniform_field(
         mean_radiance: f32,
@@ -169,6 +236,7 @@ mod tests {
             distance: &dist,
             probe_offsets_m: &[],
             probe_usable: &[],
+            probe_fallback: &[],
         };
         for p in [Vec3::new(0.3, 0.7, 1.2), Vec3::new(1.9, 0.1, 0.5), Vec3::new(-4.0, 9.0, 0.0)] {
             for n in [Vec3::X, Vec3::NEG_Y, Vec3::new(0.6, 0.0, 0.8)] {
@@ -211,6 +279,7 @@ mod tests {
             distance: &dist,
             probe_offsets_m: &[],
             probe_usable: &[],
+            probe_fallback: &[],
         };
         let e = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
         // The lit probe dominates: nearly π·1 rather than the unweighted ~π/2.
@@ -225,6 +294,7 @@ mod tests {
             distance: &dist,
             probe_offsets_m: &[],
             probe_usable: &[],
+            probe_fallback: &[],
         };
         let leaky = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
         assert!(leaky.x < 0.8 * PI, "without the weights the dark probe leaks in: {leaky}");
@@ -233,5 +303,48 @@ mod tests {
         let f = DdgiFieldView { probe_usable: &usable, ..f };
         let culled = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
         assert!((culled.x - PI).abs() < 1e-3, "{culled}");
+    }
+
+    #[test]
+    fn a_cage_without_usable_probes_reads_the_nearest_usable_probe_not_black() {
+        // 5 × 1 × 1 probes; only the last one (x = 4) is usable and lit.
+        let grid = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(5, 1, 1), spacing_m: Vec3::ONE };
+        let settings = DdgiVolumeSettings::default();
+        let mut irr = ProbeAtlas::new(5, settings.probe_irradiance_texels);
+        let mut dist = ProbeAtlas::new(5, settings.probe_distance_texels);
+        irr.tile_mut(4).fill(Vec3::splat(3.0f32.powf(1.0 / settings.probe_irradiance_gamma)));
+        dist.texels.fill(Vec2::new(5.0, 25.0));
+        let usable = [false, false, false, false, true];
+        let fallback = nearest_usable_probes(&grid, &usable);
+        assert_eq!(fallback, vec![4; 5]);
+        let f = DdgiFieldView {
+            grid: &grid,
+            settings: &settings,
+            irradiance: &irr,
+            distance: &dist,
+            probe_offsets_m: &[],
+            probe_usable: &usable,
+            probe_fallback: &fallback,
+        };
+        // The cage of x = 0.4 holds probes 0 and 1, both unusable.
+        let e = irradiance(&f, Vec3::new(0.4, 0.0, 0.0), Vec3::Y, Vec3::Y);
+        assert!((e.x - 3.0 * PI).abs() < 1e-3, "{e}");
+        // Without the fallback table the same query is black.
+        let black = irradiance(&DdgiFieldView { probe_fallback: &[], ..f }, Vec3::new(0.4, 0.0, 0.0), Vec3::Y, Vec3::Y);
+        assert_eq!(black, Vec3::ZERO);
+        // Nothing usable anywhere: no fallback exists.
+        assert_eq!(nearest_usable_probes(&grid, &[false; 5]), vec![u32::MAX; 5]);
+        // Ties and distances on a 3-D grid: every probe gets a usable probe no farther
+        // (in grid steps) than any other usable probe.
+        let g3 = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(4, 3, 5), spacing_m: Vec3::ONE };
+        let u3: Vec<bool> = (0..g3.probe_count()).map(|i| i % 7 == 3).collect();
+        let n3 = nearest_usable_probes(&g3, &u3);
+        let steps = |a: usize, b: usize| {
+            (g3.probe_coords(a).as_ivec3() - g3.probe_coords(b).as_ivec3()).abs().max_element()
+        };
+        for p in 0..g3.probe_count() {
+            let best = (0..g3.probe_count()).filter(|&q| u3[q]).map(|q| steps(p, q)).min().unwrap_or(0);
+            assert!(u3[n3[p] as usize] && steps(p, n3[p] as usize) == best, "probe {p}");
+        }
     }
 }

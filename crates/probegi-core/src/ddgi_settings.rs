@@ -78,8 +78,17 @@ pub struct DdgiVolumeSettings {
     pub probe_relocation_min_frontface_rel: f32,
     /// Probe states: `all-active`, `jcgt` (seed 004 §6) or `usage` (seed 003 §6.1).
     pub probe_states: ProbeStatesMode,
+    /// jcgt classification: a probe stays Vigilant when a front-face hit lies within
+    /// this fraction of the spacing of its grid point on every axis (see
+    /// `probe_classification`): 0.5 = its Voronoi cell (each surface point keeps its
+    /// nearest probe), 1 = RTXGI's rule. Not in the papers; measured on Sponza.
+    pub probe_classification_reach_rel: f32,
     /// Usage scheme: SLEEPING probes update every this many frames (seed 003: 10).
     pub probe_sleeping_update_interval: u32,
+    /// Usage scheme: frames a probe stays ALIVE before it may fall asleep (seed 003
+    /// §6.1 keeps ALIVE probes "for some minimum of frames" without a number; we use
+    /// the sleeping interval, so a probe at the rim r is never stale longer than it).
+    pub probe_alive_min_frames: u32,
     /// Second-order glossy from probes (seed 004 §4.4): the hit of a camera glossy ray
     /// adds its own specular reflection from the probes' irradiance.
     pub glossy_second_order: bool,
@@ -118,7 +127,9 @@ impl Default for DdgiVolumeSettings {
             probe_relocation_offset_limit_rel: 0.45,
             probe_relocation_min_frontface_rel: 0.5,
             probe_states: ProbeStatesMode::Jcgt,
+            probe_classification_reach_rel: 0.5,
             probe_sleeping_update_interval: 10,
+            probe_alive_min_frames: 10,
             glossy_second_order: true,
             probe_area_light_samples: 1,
         }
@@ -162,6 +173,7 @@ impl DdgiVolumeSettings {
         unit("probe_hysteresis", self.probe_hysteresis)?;
         unit("probe_energy_conservation", self.probe_energy_conservation)?;
         unit("probe_crush_threshold", self.probe_crush_threshold)?;
+        unit("probe_classification_reach_rel", self.probe_classification_reach_rel)?;
         let positive = |name: &'static str, v: f32| {
             if v.is_finite() && v > 0.0 { Ok(()) } else { Err((name, format!("{v} must be finite and > 0"))) }
         };

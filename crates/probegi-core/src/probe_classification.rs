@@ -2,28 +2,57 @@
 //!
 //! **jcgt** — seed 004 §6, Listing 5: Off, Sleeping, Newly Awake, Newly Vigilant,
 //! Awake, Vigilant. After relocation a probe still inside geometry is Off; one
-//! with a front face closer than the minimum spacing is Newly Vigilant; otherwise
-//! Sleeping. Sleeping probes inside a dynamic object's AABB (grown by one cell plus
-//! the self-shadow bias) become Newly Awake. Newly * probes update once with
+//! that sees a front face it serves is Newly Vigilant; otherwise Sleeping.
+//! Sleeping probes inside a dynamic object's AABB (grown by one cell plus the
+//! self-shadow bias) become Newly Awake. Newly * probes update once with
 //! hysteresis 0, then become Awake / Vigilant. Only those trace and update.
+//!
+//! Deviation (the "serves" test): Listing 5 keeps a probe Vigilant when a front face
+//! is closer than the *minimum* spacing. But a probe belongs to the cages of the
+//! eight cells around it, so it serves surfaces up to one spacing away *per axis*
+//! (a cell diagonal away, and more in the long axis of a non-cubic cell). On the
+//! shared Sponza at 16×8×16 the minimum-spacing rule slept probes that were the only
+//! lit members of cages on the upper back wall, which rendered black. Our rule is
+//! per axis, in the grid's own cells: a probe stays Vigilant when a front-face hit
+//! lies within `probe_classification_reach_rel` × the spacing of its grid point on
+//! every axis (plus the query's surface bias; unbounded outward of the boundary
+//! layers, whose cages serve everything beyond the grid) — [`probe_watches`]. With
+//! the default 0.5 that box is the probe's Voronoi cell: every surface point the
+//! rays find keeps its nearest grid probe, whatever the spacing per axis, and a
+//! probe that sees surfaces only from the far half of its cells, where it has less
+//! trilinear weight than a closer corner, sleeps. 1.0 is RTXGI's
+//! `ProbeClassificationCS` rule (any front face within one spacing per axis).
+//! Relocation helps the rule: a probe pushed out of a thick wall still has its grid
+//! point in the wall, within half a cell of the wall's face, so it watches it.
+//! A cage left without any usable probe is handled by the query's fallback.
 //!
 //! **usage** — seed 003 §6.1, eq. 6.1–6.2: Usage(P) = Σ R(dᵢ) over a probe's
 //! samples, R = 1 for a hit within the cage diagonal r, −1 for a backface, 0
-//! otherwise. More than half of the relevant samples backfaces → DEAD (updated
-//! once, culled from queries); usage > 0 → ALIVE (updated every frame, hysteresis
-//! raised toward the maximum); else SLEEPING (updated every
-//! `probe_sleeping_update_interval` frames, hysteresis lowered).
+//! otherwise. Every probe traces every frame and is classified from that frame's
+//! rays, so the state follows the scene (a probe swallowed by a moving object
+//! becomes DEAD and leaves DEAD when it is uncovered); the states only decide
+//! which probes are shaded and blended:
+//! - more than half of the relevant samples backfaces → DEAD: blended in the frame
+//!   it becomes DEAD, then not again while it stays DEAD, and culled from queries;
+//! - usage > 0 → ALIVE: blended every frame, hysteresis raised toward the maximum;
+//!   it stays ALIVE for at least `probe_alive_min_frames` updates before it may
+//!   fall asleep (the thesis's "minimum of frames", against flicker at the rim r);
+//! - else SLEEPING: blended every `probe_sleeping_update_interval` frames,
+//!   hysteresis lowered.
 //!
-//! Off, Sleeping (jcgt) and Dead (usage) probes are excluded from queries: they are
-//! not updated, so their data would be stale. Deviation: the thesis's "logarithmic"
-//! hysteresis ramps are not specified further; we move the hysteresis 10 % of the
-//! way toward its target per update (up to the volume's `probe_hysteresis` for
-//! ALIVE, down to half of it for SLEEPING).
+//! A probe leaving DEAD replaces its stale history (hysteresis 0) on its first blend.
+//!
+//! Queries read only probes that have been blended since they last (re)started:
+//! Off, Sleeping (jcgt), Dead (usage) and Newly Awake / Newly Vigilant probes (not
+//! yet blended in their new state) are excluded. Deviation: the thesis's
+//! "logarithmic" hysteresis ramps are not specified further; we move the hysteresis
+//! 10 % of the way toward its target per update (up to the volume's
+//! `probe_hysteresis` for ALIVE, down to half of it for SLEEPING).
 
-use glam::Vec3;
+use glam::{UVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::probe_relocation::{ProbeRayStats, is_inside_geometry};
+use crate::probe_grid::ProbeGrid;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -66,13 +95,21 @@ impl ProbeState {
         }
     }
 
-    /// Whether queries may read this probe.
+    /// Whether queries may read this probe: not culled, and not waiting for its
+    /// first blend in a new state (a Newly * probe's atlas is stale or empty).
     pub fn usable_in_queries(self) -> bool {
-        !matches!(self, Self::Off | Self::Sleeping | Self::Dead)
+        !matches!(self, Self::Off | Self::Sleeping | Self::Dead | Self::NewlyAwake | Self::NewlyVigilant)
     }
 
-    /// Whether the probe traces and updates in frame `frame` (usage scheme:
-    /// sleeping probes every `sleep_interval` frames).
+    /// Whether the probe traces rays this frame: every probe but jcgt's Off and
+    /// Sleeping ones (usage probes all trace: their state comes from the rays).
+    pub fn traces(self) -> bool {
+        !matches!(self, Self::Off | Self::Sleeping)
+    }
+
+    /// Whether the probe is shaded and blended in frame `frame` (usage scheme:
+    /// SLEEPING every `sleep_interval` frames, DEAD never; a probe entering DEAD
+    /// is blended by the caller once).
     pub fn updates_in_frame(self, frame: u32, sleep_interval: u32) -> bool {
         match self {
             Self::Off | Self::Sleeping | Self::Dead => false,
@@ -96,11 +133,28 @@ impl ProbeState {
     }
 }
 
-/// Seed 004 Listing 5's initial classification from the post-relocation trace.
-pub fn classify_jcgt(stats: &ProbeRayStats, min_spacing_m: f32) -> ProbeState {
-    if is_inside_geometry(stats) {
+/// Whether a front-face surface point at `offset_m` from a probe's grid point lies
+/// in the box the probe keeps watch over: `reach_rel` × the spacing per axis, plus
+/// `bias_m` (the query picks the cage at the biased point), unbounded outward of
+/// the grid's first and last layers (the query clamps points beyond the grid onto
+/// them). `reach_rel` 0.5 is the probe's own Voronoi box (every point's nearest
+/// grid probe); 1 is every cell the probe belongs to (RTXGI's classifier).
+pub fn probe_watches(grid: &ProbeGrid, coords: UVec3, offset_m: Vec3, reach_rel: f32, bias_m: f32) -> bool {
+    let last = grid.probe_counts.saturating_sub(UVec3::ONE);
+    (0..3).all(|axis| {
+        let o = offset_m[axis];
+        let outward = (coords[axis] == 0 && o < 0.0) || (coords[axis] == last[axis] && o > 0.0);
+        outward || o.abs() <= reach_rel * grid.spacing_m[axis] + bias_m
+    })
+}
+
+/// Seed 004 Listing 5's initial classification from the post-relocation trace:
+/// inside geometry (Listing 4's backface test) → Off; watching some front-face
+/// point ([`probe_watches`] over its front-face hits) → Newly Vigilant; else Sleeping.
+pub fn classify_jcgt(inside_geometry: bool, serves_a_surface: bool) -> ProbeState {
+    if inside_geometry {
         ProbeState::Off
-    } else if stats.closest_frontface.is_some_and(|(_, d)| d < min_spacing_m) {
+    } else if serves_a_surface {
         ProbeState::NewlyVigilant
     } else {
         ProbeState::Sleeping
@@ -145,15 +199,26 @@ mod tests {
     use super::*;
 
     #[test]
-    fn jcgt_classification_follows_listing_5() {
-        let inside = ProbeRayStats { backface_fraction: 0.5, ..Default::default() };
-        assert_eq!(classify_jcgt(&inside, 1.0), ProbeState::Off);
-        let near = ProbeRayStats { closest_frontface: Some((Vec3::X, 0.4)), ..Default::default() };
-        assert_eq!(classify_jcgt(&near, 1.0), ProbeState::NewlyVigilant);
-        let far = ProbeRayStats { closest_frontface: Some((Vec3::X, 4.0)), ..Default::default() };
-        assert_eq!(classify_jcgt(&far, 1.0), ProbeState::Sleeping);
+    fn jcgt_classification_keeps_probes_that_watch_a_surface_per_axis() {
+        // Cells 4 × 1 × 1 m: a probe watches 2 m in x and 0.5 m in y and z (plus bias).
+        let grid = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::splat(3), spacing_m: Vec3::new(4.0, 1.0, 1.0) };
+        let inner = UVec3::ONE;
+        let watches = |o: Vec3| probe_watches(&grid, inner, o, 0.5, 0.1);
+        // 1.9 m away in x: beyond the minimum spacing (Listing 5 would sleep the probe),
+        // yet it is the nearest grid probe of that point.
+        assert!(watches(Vec3::new(1.9, 0.3, -0.5)));
+        assert!(!watches(Vec3::new(2.2, 0.0, 0.0)) && !watches(Vec3::new(0.0, 0.7, 0.0)));
+        assert!(probe_watches(&grid, inner, Vec3::new(3.9, 0.9, 0.9), 1.0, 0.0), "reach 1: RTXGI's rule");
+        // The bottom layer watches everything below the grid, not above its reach.
+        let bottom = UVec3::new(1, 0, 1);
+        assert!(probe_watches(&grid, bottom, Vec3::new(0.0, -7.0, 0.0), 0.5, 0.0));
+        assert!(!probe_watches(&grid, bottom, Vec3::new(0.0, 0.6, 0.0), 0.5, 0.0));
+        assert_eq!(classify_jcgt(true, true), ProbeState::Off);
+        assert_eq!(classify_jcgt(false, true), ProbeState::NewlyVigilant);
+        assert_eq!(classify_jcgt(false, false), ProbeState::Sleeping);
         assert_eq!(ProbeState::NewlyVigilant.after_update(), ProbeState::Vigilant);
         assert!(!ProbeState::Off.usable_in_queries() && ProbeState::Vigilant.usable_in_queries());
+        assert!(!ProbeState::NewlyAwake.usable_in_queries() && !ProbeState::NewlyVigilant.usable_in_queries());
     }
 
     #[test]
@@ -165,5 +230,7 @@ mod tests {
         assert_eq!(classify_usage(-3, 4, 3), ProbeState::Dead);
         assert!(ProbeState::UsageSleeping.updates_in_frame(20, 10));
         assert!(!ProbeState::UsageSleeping.updates_in_frame(21, 10));
+        assert!(ProbeState::UsageSleeping.traces() && ProbeState::Dead.traces());
+        assert!(!ProbeState::Dead.updates_in_frame(20, 10));
     }
 }

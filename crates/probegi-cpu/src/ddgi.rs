@@ -10,8 +10,11 @@
 //!   optimizer (`probegi_core::probe_relocation`), then the state classification
 //!   (`probegi_core::probe_classification`); each frame, probes around moving
 //!   objects wake up (`wake_probes_near`, called by the frame loop);
-//! - per frame only probes whose state updates trace and blend; queries skip Off,
-//!   Sleeping and Dead probes;
+//! - per frame only probes whose state traces trace (jcgt: not Off or Sleeping;
+//!   usage: all, then classified from the frame's rays before the blend), and only
+//!   probes whose state updates are shaded and blended; queries skip probes that
+//!   are culled or not yet blended, and fall back to the nearest usable probe when
+//!   a whole cage is unusable (`probegi_core::ddgi_query`);
 //! - fast convergence: Listing 3's per-texel thresholds, and scene events
 //!   ([`SceneEvent`]) that lower the hysteresis of all probes for a few frames.
 //!
@@ -22,12 +25,14 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use glam::{UVec3, Vec2, Vec3};
-use probegi_core::ddgi_query::DdgiFieldView;
+use probegi_core::ddgi_query::{DdgiFieldView, nearest_usable_probes};
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::probe_atlas::ProbeAtlas;
 use probegi_core::probe_blend::{TexelThresholds, blend_distance_tile, blend_irradiance_tile};
 use probegi_core::probe_border::update_tile_border;
-use probegi_core::probe_classification::{ProbeState, classify_jcgt, classify_usage, inside_grown_aabb, probe_usage};
+use probegi_core::probe_classification::{
+    ProbeState, classify_jcgt, classify_usage, inside_grown_aabb, probe_usage, probe_watches,
+};
 use probegi_core::probe_grid::ProbeGrid;
 use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats, relocation_step};
 use probegi_scene::{RayTracer, Scene};
@@ -70,7 +75,16 @@ pub struct DdgiVolume {
     pub frames_updated: u32,
     probe_hysteresis: Vec<f32>,
     probe_usable: Vec<bool>,
+    /// Per probe, the nearest usable probe (the query's fallback for empty cages).
+    probe_fallback: Vec<u32>,
+    /// False until the probe's first blend, and again when its history is stale
+    /// (leaving DEAD): the next blend then replaces the history.
     probe_has_history: Vec<bool>,
+    /// Usage scheme: consecutive frames the probe has been ALIVE.
+    probe_alive_frames: Vec<u32>,
+    /// Probes that trace this frame.
+    tracing: Vec<bool>,
+    /// Probes that are shaded and blended this frame.
     active: Vec<bool>,
     initialized: bool,
     irradiance_events: Vec<HysteresisReduction>,
@@ -112,8 +126,11 @@ impl DdgiVolume {
             probe_states: vec![ProbeState::Active; probes],
             frames_updated: 0,
             probe_hysteresis: vec![settings.probe_hysteresis; probes],
-            probe_usable: vec![true; probes],
+            probe_usable: vec![false; probes],
+            probe_fallback: vec![u32::MAX; probes],
             probe_has_history: vec![false; probes],
+            probe_alive_frames: vec![0; probes],
+            tracing: vec![true; probes],
             active: vec![true; probes],
             initialized: false,
             irradiance_events: Vec::new(),
@@ -133,17 +150,36 @@ impl DdgiVolume {
             distance: &self.distance,
             probe_offsets_m: &self.probe_offsets,
             probe_usable: &self.probe_usable,
+            probe_fallback: &self.probe_fallback,
         }
     }
 
-    /// Probe rays traced by the last update (active probes × rays per probe).
+    /// Probe rays traced by the last update (tracing probes × rays per probe).
     pub fn rays_per_frame(&self) -> u64 {
-        self.active_probe_count() as u64 * self.settings.probe_rays_per_probe as u64
+        self.tracing.iter().filter(|a| **a).count() as u64 * self.settings.probe_rays_per_probe as u64
     }
 
-    /// Probe rays traced in the last update (active probes only).
+    /// Probes shaded and blended in the last update.
     pub fn active_probe_count(&self) -> usize {
         self.active.iter().filter(|a| **a).count()
+    }
+
+    /// Whether queries may read probe `p` now.
+    pub fn probe_usable(&self, p: usize) -> bool {
+        self.probe_usable[p]
+    }
+
+    /// Recomputes which probes queries may read, and the fallback table if that changed.
+    fn refresh_usable(&mut self) {
+        let mut changed = false;
+        for (p, u) in self.probe_usable.iter_mut().enumerate() {
+            let now = self.probe_states[p].usable_in_queries() && self.probe_has_history[p];
+            changed |= *u != now;
+            *u = now;
+        }
+        if changed {
+            self.probe_fallback = nearest_usable_probes(&self.grid, &self.probe_usable);
+        }
     }
 
     /// The distance limit of the blend: RTXGI's 1.5 × the cell diagonal, or the
@@ -208,8 +244,8 @@ impl DdgiVolume {
                 ProbeState::Awake if !inside => *state = ProbeState::Sleeping,
                 _ => {}
             }
-            self.probe_usable[p] = state.usable_in_queries();
         }
+        self.refresh_usable();
         woken
     }
 
@@ -253,19 +289,62 @@ impl DdgiVolume {
             ProbeStatesMode::Jcgt => {
                 let (dirs, k) = self.trace_distances(scene, tracer, seed, init_frame(1000));
                 traced += k;
-                let min_spacing = self.grid.min_spacing_m();
-                let surfels = &self.surfels;
+                let bias = self.max_surface_bias_m();
+                let reach = self.settings.probe_classification_reach_rel;
+                let (grid, surfels) = (&self.grid, &self.surfels);
                 self.probe_states.par_iter_mut().enumerate().for_each(|(p, state)| {
-                    let d: Vec<f32> = surfels[p * n..(p + 1) * n].iter().map(signed_distance).collect();
-                    *state = classify_jcgt(&probe_ray_stats(&dirs, &d), min_spacing);
+                    let rays = &surfels[p * n..(p + 1) * n];
+                    let d: Vec<f32> = rays.iter().map(signed_distance).collect();
+                    let coords = grid.probe_coords(p);
+                    let grid_point = grid.probe_position(coords);
+                    let serves = rays
+                        .iter()
+                        .filter_map(|s| s.surface.as_ref().filter(|sp| sp.front_face))
+                        .any(|sp| probe_watches(grid, coords, sp.position - grid_point, reach, bias));
+                    *state = classify_jcgt(is_inside_geometry(&probe_ray_stats(&dirs, &d)), serves);
                 });
             }
         }
-        for (u, s) in self.probe_usable.iter_mut().zip(&self.probe_states) {
-            *u = s.usable_in_queries();
-        }
+        self.refresh_usable();
         self.initialized = true;
         traced
+    }
+
+    /// The largest offset the query's surface bias can add to a shading point.
+    fn max_surface_bias_m(&self) -> f32 {
+        use probegi_core::ddgi_settings::ProbeBiasMode;
+        match self.settings.probe_bias_mode {
+            ProbeBiasMode::SelfShadow => 0.75 * self.grid.min_spacing_m() * self.settings.probe_self_shadow_bias,
+            ProbeBiasMode::Normal => 1.1 * self.settings.probe_normal_bias_m,
+            ProbeBiasMode::None => 0.0,
+        }
+    }
+
+    /// Usage scheme (seed 003 §6.1): every probe's state from this frame's rays, and
+    /// which probes blend this frame (see `probegi_core::probe_classification`).
+    fn classify_usage_from_rays(&mut self, frame: u32) {
+        let n = self.settings.probe_rays_per_probe as usize;
+        let cage_diagonal = self.grid.spacing_m.length();
+        let (interval, min_alive) = (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
+        for p in 0..self.grid.probe_count() {
+            let rays = &self.surfels[p * n..(p + 1) * n];
+            let (usage, relevant, backfaces) = probe_usage(rays.iter().map(signed_distance), cage_diagonal);
+            let prev = self.probe_states[p];
+            let mut next = classify_usage(usage, relevant, backfaces);
+            if prev == ProbeState::Alive && next == ProbeState::UsageSleeping && self.probe_alive_frames[p] < min_alive {
+                next = ProbeState::Alive;
+            }
+            self.probe_alive_frames[p] = if next == ProbeState::Alive { self.probe_alive_frames[p] + 1 } else { 0 };
+            if prev == ProbeState::Dead && next != ProbeState::Dead {
+                // Uncovered: the atlas holds light from before, so start over.
+                self.probe_has_history[p] = false;
+            }
+            self.active[p] = match next {
+                ProbeState::Dead => prev != ProbeState::Dead,
+                s => s.updates_in_frame(frame, interval) || !self.probe_has_history[p],
+            };
+            self.probe_states[p] = next;
+        }
     }
 
     /// Probes inside geometry by their rays (> 25 % backfaces), from a fresh trace.
@@ -300,7 +379,8 @@ impl DdgiVolume {
         let mut time =
             |name: &'static str, t: Instant| *pass_ms.entry(name).or_default() += t.elapsed().as_secs_f64() * 1e3;
         let interval = self.settings.probe_sleeping_update_interval;
-        for (a, s) in self.active.iter_mut().zip(&self.probe_states) {
+        for ((t, a), s) in self.tracing.iter_mut().zip(self.active.iter_mut()).zip(&self.probe_states) {
+            *t = s.traces();
             *a = s.updates_in_frame(frame, interval);
         }
 
@@ -313,11 +393,14 @@ impl DdgiVolume {
             scene,
             tracer,
             &self.probe_positions,
-            &self.active,
+            &self.tracing,
             &rays.dirs,
             self.settings.probe_max_ray_distance_m,
             &mut self.surfels,
         );
+        if self.settings.probe_states == ProbeStatesMode::Usage {
+            self.classify_usage_from_rays(frame);
+        }
         time("trace", t);
 
         let t = Instant::now();
@@ -331,6 +414,7 @@ impl DdgiVolume {
                 distance: &self.distance,
                 probe_offsets_m: &self.probe_offsets,
                 probe_usable: &self.probe_usable,
+                probe_fallback: &self.probe_fallback,
             },
             dirs: &rays.dirs,
             surfels: &self.surfels,
@@ -413,7 +497,7 @@ impl DdgiVolume {
         });
         time("border", t);
 
-        self.after_update(n);
+        self.after_update();
         self.frames_updated += 1;
         #[cfg(debug_assertions)]
         self.validate();
@@ -421,28 +505,21 @@ impl DdgiVolume {
     }
 
     /// State transitions and hysteresis ramps after a blend.
-    fn after_update(&mut self, rays_per_probe: usize) {
+    fn after_update(&mut self) {
         let max_h = self.settings.probe_hysteresis;
-        let cage_diagonal = self.grid.spacing_m.length();
         for p in 0..self.grid.probe_count() {
             if !self.active[p] {
                 continue;
             }
             self.probe_has_history[p] = true;
             let state = self.probe_states[p].after_update();
-            self.probe_states[p] = match state {
-                ProbeState::Alive | ProbeState::UsageSleeping | ProbeState::Dead => {
-                    let rays = &self.surfels[p * rays_per_probe..(p + 1) * rays_per_probe];
-                    let (usage, relevant, backfaces) = probe_usage(rays.iter().map(signed_distance), cage_diagonal);
-                    let next = classify_usage(usage, relevant, backfaces);
-                    let target = if next == ProbeState::Alive { max_h } else { 0.5 * max_h };
-                    self.probe_hysteresis[p] += 0.1 * (target - self.probe_hysteresis[p]);
-                    next
-                }
-                s => s,
-            };
-            self.probe_usable[p] = self.probe_states[p].usable_in_queries();
+            if matches!(state, ProbeState::Alive | ProbeState::UsageSleeping) {
+                let target = if state == ProbeState::Alive { max_h } else { 0.5 * max_h };
+                self.probe_hysteresis[p] += 0.1 * (target - self.probe_hysteresis[p]);
+            }
+            self.probe_states[p] = state;
         }
+        self.refresh_usable();
         for events in [&mut self.irradiance_events, &mut self.visibility_events] {
             for e in events.iter_mut() {
                 e.frames_left = e.frames_left.saturating_sub(1);

@@ -4,10 +4,13 @@
 //! holds mean radiance E/π (see `probegi_core::probe_blend`), so the radiance
 //! around the mirror direction r is irradiance(x, r)/π; seed 004's factor 2π
 //! belongs to RTXGI's storage (E/2π) and converts the same quantity. The term is
-//! weighted by Schlick's Fresnel at the viewing angle.
+//! weighted by the GGX lobe's directional albedo at the viewing angle and roughness
+//! (`probegi_core::bsdf::specular_directional_albedo`: Fresnel, masking-shadowing
+//! and the energy a rough lobe loses), the split-sum's second factor; the field's
+//! cosine-filtered radiance stands in for the prefiltered first factor.
 
 use glam::Vec3;
-use probegi_core::bsdf::fresnel_schlick;
+use probegi_core::bsdf::specular_directional_albedo;
 use probegi_core::ddgi_query::{DdgiFieldView, irradiance};
 use probegi_scene::SurfacePoint;
 use std::f32::consts::FRAC_1_PI;
@@ -27,5 +30,6 @@ pub fn second_order_specular(
     let n = sp.facing_normal();
     let mirror = ray_dir - n * (2.0 * ray_dir.dot(n));
     let e_mirror = irradiance(field, sp.position, mirror, -ray_dir);
-    fresnel_schlick(ctx.bsdf.specular_f0, (-ray_dir).dot(n).max(0.0)) * e_mirror * FRAC_1_PI
+    let b = &ctx.bsdf;
+    specular_directional_albedo(b.specular_f0, (-ray_dir).dot(n).max(0.0), b.alpha) * e_mirror * FRAC_1_PI
 }

@@ -164,3 +164,50 @@ fn usage_states_cull_probes_buried_in_the_boxes() {
     run(&mut v, &scene, 3..4);
     assert_eq!(v.irradiance.tile(p), &before[..]);
 }
+
+/// Mean of the decoded irradiance atlas over every interior texel (a field-wide
+/// energy figure: mean radiance per texel, linear).
+fn field_energy(v: &DdgiVolume) -> f64 {
+    let n = v.irradiance.interior as usize;
+    let s = n + 2;
+    let gamma = v.settings.probe_irradiance_gamma;
+    let mut sum = 0.0f64;
+    for p in 0..v.grid.probe_count() {
+        let tile = v.irradiance.tile(p);
+        for j in 1..=n {
+            for i in 1..=n {
+                let e = tile[j * s + i];
+                sum += (e.x.powf(gamma) + e.y.powf(gamma) + e.z.powf(gamma)) as f64;
+            }
+        }
+    }
+    sum / (v.grid.probe_count() * n * n) as f64
+}
+
+#[test]
+fn listing_3_thresholds_do_not_bias_a_noisy_converged_field() {
+    // Few rays make every texel noisy, so the per-texel thresholds fire on noise
+    // alone; the converged field must stay where the plain blend puts it.
+    let scene = cornell_box();
+    for rays in [16u32, 64] {
+        let mean_over = |fast: bool| {
+            let settings = DdgiVolumeSettings {
+                probe_rays_per_probe: rays,
+                probe_fast_convergence: fast,
+                probe_counts: UVec3::splat(4),
+                ..Default::default()
+            };
+            let mut v = DdgiVolume::new(settings, scene.bounds().expect("bounds"));
+            run(&mut v, &scene, 0..300);
+            let mut sum = 0.0;
+            for f in 300..400 {
+                run(&mut v, &scene, f..f + 1);
+                sum += field_energy(&v);
+            }
+            sum / 100.0
+        };
+        let (fast, plain) = (mean_over(true), mean_over(false));
+        eprintln!("{rays} rays: field energy {fast:.5} with heuristics, {plain:.5} without ({:+.2} %)", 100.0 * (fast / plain - 1.0));
+        assert!((fast / plain - 1.0).abs() < 0.02, "{rays} rays: {fast} vs {plain}");
+    }
+}
