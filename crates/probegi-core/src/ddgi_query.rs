@@ -57,9 +57,9 @@ pub fn nearest_usable_probes(grid: &ProbeGrid, usable: &[bool]) -> Vec<u32> {
     let n = grid.probe_count();
     let mut nearest = vec![u32::MAX; n];
     let mut queue = std::collections::VecDeque::new();
-    for p in 0..n {
+    for (p, nearest) in nearest.iter_mut().enumerate() {
         if usable.get(p).copied().unwrap_or(true) {
-            nearest[p] = p as u32;
+            *nearest = p as u32;
             queue.push_back(p);
         }
     }
@@ -339,9 +339,8 @@ mod tests {
         let g3 = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(4, 3, 5), spacing_m: Vec3::ONE };
         let u3: Vec<bool> = (0..g3.probe_count()).map(|i| i % 7 == 3).collect();
         let n3 = nearest_usable_probes(&g3, &u3);
-        let steps = |a: usize, b: usize| {
-            (g3.probe_coords(a).as_ivec3() - g3.probe_coords(b).as_ivec3()).abs().max_element()
-        };
+        let steps =
+            |a: usize, b: usize| (g3.probe_coords(a).as_ivec3() - g3.probe_coords(b).as_ivec3()).abs().max_element();
         for p in 0..g3.probe_count() {
             let best = (0..g3.probe_count()).filter(|&q| u3[q]).map(|q| steps(p, q)).min().unwrap_or(0);
             assert!(u3[n3[p] as usize] && steps(p, n3[p] as usize) == best, "probe {p}");

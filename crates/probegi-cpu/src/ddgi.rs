@@ -325,13 +325,15 @@ impl DdgiVolume {
     fn classify_usage_from_rays(&mut self, frame: u32) {
         let n = self.settings.probe_rays_per_probe as usize;
         let cage_diagonal = self.grid.spacing_m.length();
-        let (interval, min_alive) = (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
+        let (interval, min_alive) =
+            (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
         for p in 0..self.grid.probe_count() {
             let rays = &self.surfels[p * n..(p + 1) * n];
             let (usage, relevant, backfaces) = probe_usage(rays.iter().map(signed_distance), cage_diagonal);
             let prev = self.probe_states[p];
             let mut next = classify_usage(usage, relevant, backfaces);
-            if prev == ProbeState::Alive && next == ProbeState::UsageSleeping && self.probe_alive_frames[p] < min_alive {
+            if prev == ProbeState::Alive && next == ProbeState::UsageSleeping && self.probe_alive_frames[p] < min_alive
+            {
                 next = ProbeState::Alive;
             }
             self.probe_alive_frames[p] = if next == ProbeState::Alive { self.probe_alive_frames[p] + 1 } else { 0 };

@@ -2,7 +2,8 @@
 //! by the probe's stored irradiance in the direction of the sphere's normal (the
 //! mean radiance, i.e. what a white diffuse surface facing that way would reflect).
 //! Probes that queries skip are drawn flat by state: Off and Dead dark red,
-//! Sleeping blue.
+//! Sleeping (jcgt) blue; the usage scheme's SLEEPING probes, which queries read but
+//! which update only every few frames, show their irradiance tinted blue.
 //! Spheres are found by projecting each probe's bounding box to the screen and
 //! intersecting the covered pixels' camera rays exactly.
 
@@ -70,9 +71,10 @@ pub fn draw_probes(volume: &DdgiVolume, camera: &CameraRays, gbuffer: &GBuffer, 
                 image[idx] = match volume.probe_states[probe] {
                     ProbeState::Off | ProbeState::Dead => Vec3::new(0.3, 0.0, 0.0),
                     ProbeState::Sleeping => Vec3::new(0.05, 0.1, 0.5),
-                    _ => {
+                    state => {
                         let e = volume.irradiance.sample_bilinear(probe, oct_encode(n));
-                        Vec3::new(e.x.powf(gamma), e.y.powf(gamma), e.z.powf(gamma))
+                        let l = Vec3::new(e.x.powf(gamma), e.y.powf(gamma), e.z.powf(gamma));
+                        if state == ProbeState::UsageSleeping { l * Vec3::new(0.3, 0.5, 1.0) } else { l }
                     }
                 };
             }

@@ -20,8 +20,7 @@ use probegi_scene::{BvhSettings, BvhTracer, Scene};
 fn ddgi_render(scene: &Scene, frames: u32, rays: u32, sequence: &mut Vec<Image>) -> Image {
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let camera = CameraRays::new(&scene.camera.expect("camera"), 32, 32);
-    let volume =
-        DdgiVolumeSettings { probe_counts: UVec3::splat(4), probe_rays_per_probe: rays, ..Default::default() };
+    let volume = DdgiVolumeSettings { probe_counts: UVec3::splat(4), probe_rays_per_probe: rays, ..Default::default() };
     let settings = RenderSettings {
         width: 32,
         height: 32,
@@ -107,7 +106,8 @@ fn energy_returns_exactly_after_a_light_toggles_on_and_off_repeatedly() {
     }
     assert!(rel_mean(&toggled[59], &never[59]) > 0.5, "the light must matter");
     let last = frames as usize - 1;
-    let (rel, flip) = (rel_mean(&toggled[last], &never[last]), mean_flip_hdr(&never[last], &toggled[last]).expect("size"));
+    let (rel, flip) =
+        (rel_mean(&toggled[last], &never[last]), mean_flip_hdr(&never[last], &toggled[last]).expect("size"));
     assert!(rel < 0.01, "mean {rel} after the light went off for good");
     assert!(flip < 0.02, "FLIP {flip} after the light went off for good");
 }

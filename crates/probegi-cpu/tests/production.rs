@@ -1,6 +1,9 @@
 //! Seed 004's production extensions and seed 003's usage culling: relocation,
 //! probe states, fast convergence.
 
+mod common;
+
+use common::field_energy;
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_query::irradiance;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
@@ -71,7 +74,12 @@ fn jcgt_states_sleep_far_probes_and_wake_them_around_a_moved_box() {
     // Box at the top layer's height: wakes the probes around it.
     let woken = v.wake_probes_near(&[(Vec3::new(-0.2, 3.3, -0.2), Vec3::new(0.2, 3.7, 0.2))]);
     assert!(woken >= 4, "woke {woken}");
+    // Newly Awake probes hold no blend of their own yet: queries must not read them.
+    let newly: Vec<usize> = (0..64).filter(|&p| v.probe_states[p] == ProbeState::NewlyAwake).collect();
+    assert_eq!(newly.len(), woken);
+    assert!(newly.iter().all(|&p| !v.probe_usable(p)));
     run(&mut v, &scene, 2..3);
+    assert!(newly.iter().all(|&p| v.probe_usable(p)), "usable after their first blend");
     assert_eq!(v.state_counts().get("awake"), Some(&woken));
     // The box leaves: they go back to sleep.
     v.wake_probes_near(&[]);
@@ -163,25 +171,80 @@ fn usage_states_cull_probes_buried_in_the_boxes() {
     let before = v.irradiance.tile(p).to_vec();
     run(&mut v, &scene, 3..4);
     assert_eq!(v.irradiance.tile(p), &before[..]);
+    assert!(!v.probe_usable(p));
+    // Every probe traces every frame (seed 003 §6.1: culling skips the update only).
+    assert_eq!(v.rays_per_frame(), v.grid.probe_count() as u64 * 64);
 }
 
-/// Mean of the decoded irradiance atlas over every interior texel (a field-wide
-/// energy figure: mean radiance per texel, linear).
-fn field_energy(v: &DdgiVolume) -> f64 {
-    let n = v.irradiance.interior as usize;
-    let s = n + 2;
-    let gamma = v.settings.probe_irradiance_gamma;
-    let mut sum = 0.0f64;
-    for p in 0..v.grid.probe_count() {
-        let tile = v.irradiance.tile(p);
-        for j in 1..=n {
-            for i in 1..=n {
-                let e = tile[j * s + i];
-                sum += (e.x.powf(gamma) + e.y.powf(gamma) + e.z.powf(gamma)) as f64;
-            }
-        }
+/// A floor at y = 0 and a 3 × 3 × 3 grid 1 m apart from y = 0.5; `covered` adds a
+/// box around the middle probe (1, 1, 1) at (0, 1.5, 0).
+fn usage_scene(covered: bool) -> Scene {
+    let mut scene = Scene { materials: vec![Material::diffuse("grey", Vec3::splat(0.5))], ..Default::default() };
+    add_polygon(
+        &mut scene.mesh,
+        &[Vec3::new(-5.0, 0.0, -5.0), Vec3::new(-5.0, 0.0, 5.0), Vec3::new(5.0, 0.0, 5.0), Vec3::new(5.0, 0.0, -5.0)],
+        0,
+    );
+    if covered {
+        add_box(&mut scene.mesh, Vec3::new(-0.3, 1.2, -0.3), Vec3::new(0.3, 1.8, 0.3), 0);
     }
-    sum / (v.grid.probe_count() * n * n) as f64
+    scene.sky_radiance = Vec3::splat(1.0);
+    scene
+}
+
+fn usage_volume(min_alive: u32) -> DdgiVolume {
+    let settings = DdgiVolumeSettings {
+        probe_counts: UVec3::splat(3),
+        probe_origin_m: Some(Vec3::new(-1.0, 0.5, -1.0)),
+        probe_spacing_m: Some(Vec3::ONE),
+        probe_rays_per_probe: 128,
+        probe_relocation: false,
+        probe_states: ProbeStatesMode::Usage,
+        probe_alive_min_frames: min_alive,
+        ..Default::default()
+    };
+    DdgiVolume::new(settings, (Vec3::splat(-5.0), Vec3::splat(5.0)))
+}
+
+#[test]
+fn a_probe_covered_from_frame_0_leaves_dead_once_uncovered() {
+    // The box covers the middle probe from the very first frame (as a moving object
+    // passing there at frame 0 would), then it is gone.
+    let middle = 13;
+    let mut v = usage_volume(10);
+    run(&mut v, &usage_scene(true), 0..3);
+    assert_eq!(v.probe_states[middle], ProbeState::Dead, "{:?}", v.state_counts());
+    assert!(!v.probe_usable(middle));
+    run(&mut v, &usage_scene(false), 3..4);
+    assert_ne!(v.probe_states[middle], ProbeState::Dead, "usage says it is free: it must leave DEAD");
+    assert!(v.probe_usable(middle), "blended (history replaced) in the frame it left DEAD");
+    // Its atlas now holds the open sky above the floor, not the box's dark inside.
+    let up = irradiance(&v.view(), Vec3::new(0.0, 1.5, 0.0), Vec3::Y, Vec3::Y);
+    assert!(up.x > 0.5 * std::f32::consts::PI, "{up}");
+}
+
+#[test]
+fn alive_probes_stay_alive_for_the_minimum_time_then_sleep() {
+    // The floor makes the bottom layer ALIVE; then the floor is gone (an empty scene)
+    // and those probes have no relevant samples.
+    let empty = Scene { materials: vec![Material::diffuse("grey", Vec3::splat(0.5))], ..Default::default() };
+    let bottom = 4; // (1, 0, 1)
+    let mut v = usage_volume(6);
+    run(&mut v, &usage_scene(false), 0..2);
+    assert_eq!(v.probe_states[bottom], ProbeState::Alive);
+    for f in 2..6 {
+        run(&mut v, &empty, f..f + 1);
+        assert_eq!(v.probe_states[bottom], ProbeState::Alive, "frame {f}: within the minimum time");
+    }
+    run(&mut v, &empty, 6..8);
+    assert_eq!(v.probe_states[bottom], ProbeState::UsageSleeping);
+    // SLEEPING probes still trace every frame; they blend every 10th.
+    assert_eq!(v.rays_per_frame(), 27 * 128);
+    let before = v.irradiance.tile(bottom).to_vec();
+    run(&mut v, &empty, 8..10);
+    assert_eq!(v.irradiance.tile(bottom), &before[..], "frames 8, 9: not blended");
+    run(&mut v, &empty, 10..11);
+    assert_ne!(v.irradiance.tile(bottom), &before[..], "frame 10: blended");
 }
 
 #[test]
@@ -207,7 +270,10 @@ fn listing_3_thresholds_do_not_bias_a_noisy_converged_field() {
             sum / 100.0
         };
         let (fast, plain) = (mean_over(true), mean_over(false));
-        eprintln!("{rays} rays: field energy {fast:.5} with heuristics, {plain:.5} without ({:+.2} %)", 100.0 * (fast / plain - 1.0));
+        eprintln!(
+            "{rays} rays: field energy {fast:.5} with heuristics, {plain:.5} without ({:+.2} %)",
+            100.0 * (fast / plain - 1.0)
+        );
         assert!((fast / plain - 1.0).abs() < 0.02, "{rays} rays: {fast} vs {plain}");
     }
 }
