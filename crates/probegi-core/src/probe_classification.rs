@@ -24,7 +24,19 @@
 //! `ProbeClassificationCS` rule (any front face within one spacing per axis).
 //! Relocation helps the rule: a probe pushed out of a thick wall still has its grid
 //! point in the wall, within half a cell of the wall's face, so it watches it.
-//! A cage left without any usable probe is handled by the query's fallback.
+//!
+//! The Voronoi cell alone fails where a surface's nearest probes lie behind it: a
+//! thick wall whose front-side probes are all more than half a cell away (on the
+//! shared Sponza lit by the sun, `builtin:sponza-sun`, the upper gallery fronts
+//! went dark, FLIP 0.038 against all-active). So a second pass covers every
+//! surface point the rays found: if none of the probes of its cage on the
+//! surface's front side is kept, the heaviest of them is ([`uncovered_point_probe`]).
+//! The pass is greedy, in probe and ray order, so a probe added for one point
+//! covers the points after it (deterministic; run against the first pass alone it
+//! kept 6 % more of Sponza's probes for a slightly better image). Every seen
+//! surface point then has a usable front-side cage probe, unless all of them are
+//! inside geometry; sponza-sun improves to FLIP 0.027. A cage left without any
+//! usable probe at all is handled by the query's fallback.
 //!
 //! **usage** — seed 003 §6.1, eq. 6.1–6.2: Usage(P) = Σ R(dᵢ) over a probe's
 //! samples, R = 1 for a hit within the cage diagonal r, −1 for a backface, 0
@@ -148,9 +160,47 @@ pub fn probe_watches(grid: &ProbeGrid, coords: UVec3, offset_m: Vec3, reach_rel:
     })
 }
 
+/// The second pass of the jcgt classification, for one front-face surface point
+/// (`point`, `normal`) a probe ray found: `None` when one of its cage's probes on
+/// the surface's front side (probe position strictly in front of the surface's
+/// plane) is already `kept`; else the front-side probe with the largest trilinear
+/// weight there (the query's weights, clamped onto the boundary layers beyond the
+/// grid), among those `eligible` (not Off), if any.
+pub fn uncovered_point_probe(
+    grid: &ProbeGrid,
+    probe_positions: &[Vec3],
+    kept: &[bool],
+    eligible: &[bool],
+    point: Vec3,
+    normal: Vec3,
+) -> Option<usize> {
+    let base = grid.base_probe(point);
+    let base_pos = grid.origin_m + grid.spacing_m * base.as_vec3();
+    let alpha = ((point - base_pos) / grid.spacing_m).clamp(Vec3::ZERO, Vec3::ONE);
+    let max = grid.probe_counts.as_ivec3() - glam::IVec3::ONE;
+    let mut best: Option<(usize, f32)> = None;
+    for i in 0..8 {
+        let o = glam::IVec3::new(i & 1, (i >> 1) & 1, (i >> 2) & 1);
+        let p = grid.probe_index((base + o).min(max).as_uvec3());
+        if (probe_positions[p] - point).dot(normal) <= 0.0 {
+            continue;
+        }
+        if kept[p] {
+            return None;
+        }
+        let t = (Vec3::ONE - alpha) * (Vec3::ONE - o.as_vec3()) + alpha * o.as_vec3();
+        let w = t.x * t.y * t.z;
+        if eligible[p] && best.is_none_or(|(_, b)| w > b) {
+            best = Some((p, w));
+        }
+    }
+    best.map(|(p, _)| p)
+}
+
 /// Seed 004 Listing 5's initial classification from the post-relocation trace:
 /// inside geometry (Listing 4's backface test) → Off; watching some front-face
-/// point ([`probe_watches`] over its front-face hits) → Newly Vigilant; else Sleeping.
+/// point ([`probe_watches`] over its front-face hits), or chosen by the covering
+/// pass ([`uncovered_point_probe`]) → Newly Vigilant; else Sleeping.
 pub fn classify_jcgt(inside_geometry: bool, serves_a_surface: bool) -> ProbeState {
     if inside_geometry {
         ProbeState::Off
@@ -214,6 +264,25 @@ mod tests {
         let bottom = UVec3::new(1, 0, 1);
         assert!(probe_watches(&grid, bottom, Vec3::new(0.0, -7.0, 0.0), 0.5, 0.0));
         assert!(!probe_watches(&grid, bottom, Vec3::new(0.0, 0.6, 0.0), 0.5, 0.0));
+        // Covering pass: a wall facing −x at x = 3.4 in the cell of probes x = 0 and
+        // x = 1 (4 m apart). The x = 0 probes, 3.4 m in front, watch nothing; the
+        // x = 1 probes are behind the wall. The heaviest front-side corner is added.
+        let positions: Vec<Vec3> = (0..27).map(|p| grid.probe_position(grid.probe_coords(p))).collect();
+        let (point, n) = (Vec3::new(3.4, 1.3, 1.0), Vec3::NEG_X);
+        let none = vec![false; 27];
+        let all = vec![true; 27];
+        let front = uncovered_point_probe(&grid, &positions, &none, &all, point, n).expect("a front-side probe");
+        assert_eq!(grid.probe_coords(front), UVec3::new(0, 1, 1), "the nearest front-side corner");
+        let mut kept = none.clone();
+        kept[grid.probe_index(UVec3::new(0, 2, 1))] = true;
+        assert_eq!(uncovered_point_probe(&grid, &positions, &kept, &all, point, n), None, "already covered");
+        kept = none.clone();
+        kept[grid.probe_index(UVec3::new(1, 1, 1))] = true;
+        assert!(
+            uncovered_point_probe(&grid, &positions, &kept, &all, point, n).is_some(),
+            "a probe behind does not cover"
+        );
+        assert_eq!(uncovered_point_probe(&grid, &positions, &none, &none, point, n), None, "Off probes are not chosen");
         assert_eq!(classify_jcgt(true, true), ProbeState::Off);
         assert_eq!(classify_jcgt(false, true), ProbeState::NewlyVigilant);
         assert_eq!(classify_jcgt(false, false), ProbeState::Sleeping);

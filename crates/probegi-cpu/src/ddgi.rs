@@ -31,7 +31,7 @@ use probegi_core::probe_atlas::ProbeAtlas;
 use probegi_core::probe_blend::{TexelThresholds, blend_distance_tile, blend_irradiance_tile};
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::probe_classification::{
-    ProbeState, classify_jcgt, classify_usage, inside_grown_aabb, probe_usage, probe_watches,
+    ProbeState, classify_jcgt, classify_usage, inside_grown_aabb, probe_usage, probe_watches, uncovered_point_probe,
 };
 use probegi_core::probe_grid::ProbeGrid;
 use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats, relocation_step};
@@ -292,17 +292,38 @@ impl DdgiVolume {
                 let bias = self.max_surface_bias_m();
                 let reach = self.settings.probe_classification_reach_rel;
                 let (grid, surfels) = (&self.grid, &self.surfels);
-                self.probe_states.par_iter_mut().enumerate().for_each(|(p, state)| {
-                    let rays = &surfels[p * n..(p + 1) * n];
-                    let d: Vec<f32> = rays.iter().map(signed_distance).collect();
-                    let coords = grid.probe_coords(p);
-                    let grid_point = grid.probe_position(coords);
-                    let serves = rays
-                        .iter()
-                        .filter_map(|s| s.surface.as_ref().filter(|sp| sp.front_face))
-                        .any(|sp| probe_watches(grid, coords, sp.position - grid_point, reach, bias));
-                    *state = classify_jcgt(is_inside_geometry(&probe_ray_stats(&dirs, &d)), serves);
-                });
+                let front_hits = |p: usize| {
+                    surfels[p * n..(p + 1) * n].iter().filter_map(|s| s.surface.as_ref().filter(|sp| sp.front_face))
+                };
+                let first: Vec<(bool, bool)> = (0..grid.probe_count())
+                    .into_par_iter()
+                    .map(|p| {
+                        let d: Vec<f32> = surfels[p * n..(p + 1) * n].iter().map(signed_distance).collect();
+                        let coords = grid.probe_coords(p);
+                        let grid_point = grid.probe_position(coords);
+                        let watches =
+                            front_hits(p).any(|sp| probe_watches(grid, coords, sp.position - grid_point, reach, bias));
+                        (is_inside_geometry(&probe_ray_stats(&dirs, &d)), watches)
+                    })
+                    .collect();
+                let eligible: Vec<bool> = first.iter().map(|(inside, _)| !inside).collect();
+                let mut kept: Vec<bool> = first.iter().map(|&(inside, watches)| !inside && watches).collect();
+                // Second pass, in probe and ray order (sequential, so deterministic and
+                // greedy: a probe added for one point covers the points after it):
+                // every seen surface point keeps a front-side cage probe.
+                let positions = &self.probe_positions;
+                for p in 0..grid.probe_count() {
+                    for sp in front_hits(p) {
+                        let add =
+                            uncovered_point_probe(grid, positions, &kept, &eligible, sp.position, sp.facing_normal());
+                        if let Some(q) = add {
+                            kept[q] = true;
+                        }
+                    }
+                }
+                for (p, state) in self.probe_states.iter_mut().enumerate() {
+                    *state = classify_jcgt(first[p].0, kept[p]);
+                }
             }
         }
         self.refresh_usable();

@@ -77,7 +77,21 @@ fn sponza_default_states_render_what_all_active_probes_do() {
         DdgiVolumeSettings { probe_counts: UVec3::new(16, 8, 16), probe_rays_per_probe: 128, ..Default::default() };
     let (flip, idle, black) = compare_states(&scene, volume);
     assert!(flip <= 0.02, "FLIP {flip}");
-    assert!(idle >= 0.25, "only {idle} of the probes sleep");
+    assert!(idle >= 0.22, "only {idle} of the probes sleep");
+    assert!(black < 0.002, "{black} of the lit pixels are black");
+}
+
+#[test]
+fn sunlit_sponza_keeps_a_front_side_probe_for_every_gallery_front() {
+    // 16 × 8 × 8 probes: cells 1.5–1.9 m, so the upper gallery fronts' nearest grid
+    // probes lie inside the walls, behind them. The Voronoi rule alone left them
+    // darker (FLIP 0.038 against all-active at 192 × 144); the covering pass keeps a
+    // front-side probe for each (0.027).
+    let scene = load_scene("builtin:sponza-sun").expect("built in, reads the shared Sponza");
+    let volume = DdgiVolumeSettings { probe_rays_per_probe: 128, ..scene.volume.clone().expect("volume") };
+    let (flip, idle, black) = compare_states(&scene, volume);
+    assert!(flip <= 0.035, "FLIP {flip}");
+    assert!(idle >= 0.1, "only {idle} of the probes sleep");
     assert!(black < 0.002, "{black} of the lit pixels are black");
 }
 
