@@ -123,6 +123,10 @@ pub struct SceneArgs {
     /// Camera target X,Y,Z in metres.
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub camera_target: Option<Vec3>,
+    /// Camera up direction X,Y,Z (default: the scene's, else +Y); needed for a view
+    /// straight along +Y or −Y.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub camera_up: Option<Vec3>,
     /// Vertical field of view in degrees.
     #[arg(long)]
     pub fov_y: Option<f32>,

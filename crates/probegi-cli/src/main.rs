@@ -119,10 +119,19 @@ fn prepare(args: &SceneArgs, bytes_per_pixel: u64) -> Result<(Scene, Camera)> {
     if let Some(t) = args.camera_target {
         camera.target = t;
     }
+    if let Some(u) = args.camera_up {
+        camera.up = u;
+    }
     if let Some(f) = args.fov_y {
         camera.fov_y_deg = f;
     }
-    camera.validate().map_err(anyhow::Error::msg).context("invalid camera")?;
+    camera.validate().map_err(anyhow::Error::msg).with_context(|| {
+        format!(
+            "invalid camera for scene {} (position {}, target {}, up {}); --camera-pos, --camera-target, \
+             --camera-up and --fov-y set it",
+            args.scene, camera.position, camera.target, camera.up
+        )
+    })?;
     Ok((scene, camera))
 }
 
@@ -142,6 +151,10 @@ fn render(args: &RenderArgs) -> Result<()> {
     probegi_image::io::ImageFormat::from_path(&args.out)?;
     // G-buffer texel, frame and accumulation buffers.
     let (scene, camera) = prepare(&args.scene, 160)?;
+    let v = &args.volume;
+    if args.gi == GiArg::None && (v.probes.is_some() || v.rays_per_probe.is_some() || !v.set.is_empty()) {
+        bail!("--probes, --rays-per-probe and --set configure probes: they need --gi ddgi or --gi sh");
+    }
     let gi = match args.gi {
         GiArg::None => GiMethod::None,
         GiArg::Ddgi => GiMethod::Ddgi(Box::new(volume_settings(&scene, &args.volume)?)),
@@ -172,6 +185,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         None => None,
     };
     let mut sequence_error = None;
+    let mut sequence_written: Vec<std::path::PathBuf> = Vec::new();
     let out = render_frames(&scene, &bvh, &rays, &settings, |f, image| {
         bar.inc(1);
         if sequence_error.is_some() || (args.sequence.is_none() && gif.is_none()) {
@@ -179,18 +193,33 @@ fn render(args: &RenderArgs) -> Result<()> {
         }
         let img = image();
         if let Some(dir) = &args.sequence {
-            let mut result = probegi_image::write_image(&dir.join(format!("frame-{f:04}.png")), &img);
-            if args.sequence_exr && result.is_ok() {
-                result = probegi_image::write_image(&dir.join(format!("frame-{f:04}.exr")), &img);
+            let mut names = vec![format!("frame-{f:04}.png")];
+            if args.sequence_exr {
+                names.push(format!("frame-{f:04}.exr"));
             }
-            sequence_error = result.err();
+            for path in names.into_iter().map(|n| dir.join(n)) {
+                match probegi_image::write_image(&path, &img) {
+                    Ok(()) => sequence_written.push(path),
+                    Err(e) => {
+                        sequence_error = Some(e);
+                        break;
+                    }
+                }
+            }
         }
         if let (Some(g), None) = (gif.as_mut(), &sequence_error) {
             sequence_error = g.push(&img).err();
         }
     });
     if let Some(e) = sequence_error {
-        return Err(anyhow::Error::new(e).context("writing the --sequence / --gif frames"));
+        // No partial sequence that looks complete: this run's frames go too.
+        for path in &sequence_written {
+            std::fs::remove_file(path).ok();
+        }
+        return Err(anyhow::Error::new(e).context(
+            "writing the --sequence / --gif frames (this run's frames were removed); a non-finite pixel \
+             usually comes from a material, texture or light with huge or non-finite values",
+        ));
     }
     if let Some(g) = gif {
         g.finish()?;
@@ -199,7 +228,13 @@ fn render(args: &RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     let elapsed = start.elapsed();
     if let Some(i) = image.first_invalid_pixel() {
-        bail!("internal: pixel {i} is not a finite non-negative radiance; image not written");
+        bail!(
+            "pixel ({}, {}) is {} (not a finite non-negative radiance); image not written. Check the scene's \
+             materials (Kd, Ke, emissive factors), textures and light intensities for huge or non-finite values",
+            i as u32 % image.width.max(1),
+            i as u32 / image.width.max(1),
+            image.pixels[i]
+        );
     }
     probegi_image::write_image(&args.out, &image)?;
     if let (Some(dir), Some(volume)) = (&args.dump_atlases, &out.ddgi) {
@@ -307,7 +342,13 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     if let Some(i) = image.first_invalid_pixel() {
-        bail!("internal: pixel {i} is not a finite non-negative radiance; image not written");
+        bail!(
+            "pixel ({}, {}) is {} (not a finite non-negative radiance); image not written. Check the scene's \
+             materials (Kd, Ke, emissive factors), textures and light intensities for huge or non-finite values",
+            i as u32 % image.width.max(1),
+            i as u32 / image.width.max(1),
+            image.pixels[i]
+        );
     }
     probegi_image::write_image(&args.out, &image)?;
     eprintln!(

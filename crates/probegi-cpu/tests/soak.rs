@@ -102,3 +102,25 @@ fn a_light_toggled_for_2_000_frames_leaves_no_trace() {
     assert!(lit_energy > 1.5 * b, "the light must matter: {lit_energy} vs {b}");
     assert!((a / b - 1.0).abs() < 0.01, "{a} vs {b}");
 }
+
+#[test]
+fn a_poisoned_emitter_never_puts_nan_or_inf_into_the_atlases() {
+    // Emission 3e38 is finite (the scene validates) but overflows to Inf in any
+    // product: the shade pass yields non-finite ray radiance, which the blend drops.
+    let mut scene = cornell_box();
+    let light = scene.materials.iter_mut().find(|m| m.emissive_factor.max_element() > 0.0).expect("an emitter");
+    light.emissive_factor = Vec3::splat(3e38);
+    scene.lights.push(PunctualLight::point(Vec3::new(0.0, 1.0, 0.0), Vec3::ONE, 3e38));
+    assert!(scene.validate().is_ok());
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let mut v = tiny_volume(scene.bounds().expect("bounds"));
+    let mut passes = Default::default();
+    for f in 0..20 {
+        v.update(&scene, &bvh, &direct, 3, f, &mut passes);
+        assert_atlases_sound(&v, f);
+    }
+    // The query over the poisoned field is finite too.
+    let e = probegi_core::ddgi_query::irradiance(&v.view(), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
+    assert!(e.is_finite(), "{e}");
+}

@@ -13,7 +13,7 @@ use probegi_core::image::Image;
 
 use probegi_core::color::tonemap_rgb8;
 
-use crate::io::{ImageError, io_err, temp_path};
+use crate::io::{ImageError, check_extension, check_finite, io_err, temp_path};
 
 pub struct AnimatedGif {
     path: PathBuf,
@@ -27,6 +27,7 @@ pub struct AnimatedGif {
 impl AnimatedGif {
     /// Starts a looping GIF at `frames_per_second` (GIF stores delays in 10 ms units).
     pub fn create(path: &Path, frames_per_second: f32) -> Result<Self, ImageError> {
+        check_extension(path, "gif")?;
         if !(frames_per_second.is_finite() && frames_per_second > 0.0) {
             return Err(io_err(path, format!("frames per second must be positive, got {frames_per_second}")));
         }
@@ -48,7 +49,9 @@ impl AnimatedGif {
         })
     }
 
+    /// Appends a frame; a frame with a non-finite or negative pixel is refused.
     pub fn push(&mut self, img: &Image) -> Result<(), ImageError> {
+        check_finite(&self.path, img)?;
         let rgba: Vec<u8> = img
             .pixels
             .iter()
@@ -108,6 +111,24 @@ mod tests {
         // Brighter radiance, brighter pixels.
         let lum = |f: &Frame| f.buffer().get_pixel(3, 2)[1];
         assert!(lum(&frames[0]) < lum(&frames[1]) && lum(&frames[1]) < lum(&frames[2]));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_frame_with_inf_is_refused_and_an_unfinished_gif_leaves_nothing() {
+        let dir = std::env::temp_dir().join(format!("probegi-gif-inf-{}", std::process::id()));
+        let path = dir.join("t.gif");
+        {
+            let mut gif = AnimatedGif::create(&path, 25.0).expect("create");
+            gif.push(&Image::new(4, 4)).expect("a finite frame");
+            let mut bad = Image::new(4, 4);
+            bad.pixels[5] = Vec3::new(f32::INFINITY, 0.0, 0.0);
+            let e = gif.push(&bad).expect_err("Inf").to_string();
+            assert!(e.contains("(1, 1)") && e.contains("t.gif"), "{e}");
+        }
+        let left: Vec<_> = std::fs::read_dir(&dir).map(|d| d.flatten().collect()).unwrap_or_default();
+        assert!(left.is_empty(), "{left:?}");
+        assert!(AnimatedGif::create(&dir.join("x.png"), 25.0).is_err(), "GIF data under .png");
         std::fs::remove_dir_all(&dir).ok();
     }
 

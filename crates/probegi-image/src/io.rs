@@ -1,7 +1,9 @@
 //! Image files. `.exr` holds linear HDR radiance (RGB, 32-bit float); `.png` holds
 //! the tone-mapped 8-bit sRGB image (`probegi_core::color::tonemap`). Writes go to
-//! a temporary file that is renamed into place, so a failed or interrupted write
-//! never leaves a partial image under the requested name.
+//! a temporary file (`NAME.partial-PID-N.EXT`, unique per process and write) that
+//! is renamed into place, so a failed or interrupted write never leaves a partial
+//! image under the requested name and concurrent writers never share one. An image
+//! with a non-finite or negative pixel is refused before anything is written.
 
 use std::path::{Path, PathBuf};
 
@@ -15,6 +17,10 @@ pub enum ImageError {
     Io { path: PathBuf, message: String },
     #[error("{path}: unsupported image extension (expected .exr or .png)")]
     UnsupportedFormat { path: PathBuf },
+    #[error("{path}: not written: pixel ({x}, {y}) is {value} (radiance must be finite and non-negative)")]
+    NonFinite { path: PathBuf, x: u32, y: u32, value: String },
+    #[error("{path}: the file name must end in .{expected} for this output")]
+    WrongExtension { path: PathBuf, expected: &'static str },
     #[error("image sizes differ: {reference} is {rw}×{rh}, {test} is {tw}×{th}")]
     SizeMismatch { reference: PathBuf, rw: u32, rh: u32, test: PathBuf, tw: u32, th: u32 },
 }
@@ -84,19 +90,46 @@ pub(crate) fn io_err(path: &Path, e: impl std::fmt::Display) -> ImageError {
     ImageError::Io { path: path.to_path_buf(), message: e.to_string() }
 }
 
+/// `NAME.partial-PID-N.EXT` beside `path`: unique per process and call, with the
+/// real extension last so that format-sniffing writers accept it.
 pub(crate) fn temp_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(format!(".partial-{}", std::process::id()));
-    let ext = path.extension().map(|e| e.to_os_string()).unwrap_or_default();
-    // Keep the real extension last so that format-sniffing writers accept it.
-    let mut p = path.with_file_name(name);
-    p.set_extension(ext);
-    p
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let mut name = path.file_stem().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(format!(".partial-{}-{n}", std::process::id()));
+    if let Some(ext) = path.extension() {
+        name.push(".");
+        name.push(ext);
+    }
+    path.with_file_name(name)
+}
+
+/// The image's first pixel that is not a finite, non-negative radiance, as an error
+/// naming the output.
+pub(crate) fn check_finite(path: &Path, img: &Image) -> Result<(), ImageError> {
+    match img.first_invalid_pixel() {
+        None => Ok(()),
+        Some(i) => Err(ImageError::NonFinite {
+            path: path.to_path_buf(),
+            x: i as u32 % img.width.max(1),
+            y: i as u32 / img.width.max(1),
+            value: format!("{}", img.pixels[i]),
+        }),
+    }
+}
+
+/// Refuses a path whose extension is not `expected` (case-insensitive).
+pub(crate) fn check_extension(path: &Path, expected: &'static str) -> Result<(), ImageError> {
+    match path.extension().map(|e| e.to_string_lossy().to_lowercase()) {
+        Some(e) if e == expected => Ok(()),
+        _ => Err(ImageError::WrongExtension { path: path.to_path_buf(), expected }),
+    }
 }
 
 /// Writes radiance to `.exr` (linear) or `.png` (tone-mapped), atomically.
 pub fn write_image(path: &Path, img: &Image) -> Result<(), ImageError> {
     let format = ImageFormat::from_path(path)?;
+    check_finite(path, img)?;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| io_err(path, e))?;
     }
@@ -126,6 +159,7 @@ pub fn write_image(path: &Path, img: &Image) -> Result<(), ImageError> {
 
 /// Writes 8-bit sRGB data as PNG, atomically.
 pub fn write_png(path: &Path, width: u32, height: u32, rgb: Vec<u8>) -> Result<(), ImageError> {
+    check_extension(path, "png")?;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| io_err(path, e))?;
     }
@@ -220,5 +254,31 @@ mod tests {
         std::fs::write(&bogus, b"not an exr").expect("write");
         assert!(read_image(&bogus).expect_err("corrupt").to_string().contains("probegi-bogus"));
         std::fs::remove_file(&bogus).ok();
+    }
+
+    #[test]
+    fn temporary_names_are_unique_and_keep_the_extension() {
+        let (a, b) = (temp_path(Path::new("out/o.exr")), temp_path(Path::new("out/o.exr")));
+        assert_ne!(a, b);
+        let name = a.file_name().expect("name").to_string_lossy().into_owned();
+        assert!(name.starts_with(&format!("o.partial-{}-", std::process::id())) && name.ends_with(".exr"), "{name}");
+        assert!(!name.contains(".exr.exr"), "{name}");
+    }
+
+    #[test]
+    fn non_finite_images_are_refused_and_leave_the_previous_file() {
+        let dir = std::env::temp_dir().join(format!("probegi-io-nan-{}", std::process::id()));
+        let path = dir.join("o.exr");
+        write_image(&path, &gradient()).expect("first write");
+        let mut bad = gradient();
+        bad.pixels[7] = Vec3::new(0.0, f32::NAN, 0.0);
+        let e = write_image(&path, &bad).expect_err("NaN").to_string();
+        assert!(e.contains("o.exr") && e.contains("(2, 1)"), "{e}");
+        let LoadedImage::Hdr(back) = read_image(&path).expect("read") else { panic!("HDR") };
+        assert_eq!(back, gradient(), "the previous file is intact");
+        let names: Vec<_> = std::fs::read_dir(&dir).expect("dir").flatten().map(|e| e.file_name()).collect();
+        assert_eq!(names.len(), 1, "no temporary left: {names:?}");
+        assert!(write_png(&dir.join("sheet.jpg"), 1, 1, vec![0, 0, 0]).is_err(), "PNG data under .jpg");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -8,7 +8,7 @@ use crate::scene::Scene;
 
 /// Loads and validates a scene.
 pub fn load_scene(spec: &str) -> Result<Scene> {
-    let scene = if let Some(name) = spec.strip_prefix("builtin:") {
+    let mut scene = if let Some(name) = spec.strip_prefix("builtin:") {
         crate::builtin::load_builtin(name)?
     } else {
         let path = Path::new(spec);
@@ -21,5 +21,7 @@ pub fn load_scene(spec: &str) -> Result<Scene> {
         }
     };
     scene.validate().map_err(|message| SceneError::Invalid { path: spec.into(), message })?;
+    let warnings = scene.energy_warnings();
+    scene.warnings.extend(warnings);
     Ok(scene)
 }

@@ -89,9 +89,47 @@ impl TextureCache {
     }
 }
 
+/// A text file as UTF-8, leniently: a leading byte-order mark is dropped and bytes
+/// that are not UTF-8 (Latin-1 comments and names in old exports) are replaced.
+fn read_text_lossy(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let bytes = bytes.strip_prefix(&[0xEF, 0xBB, 0xBF][..]).unwrap_or(&bytes);
+    Ok(String::from_utf8_lossy(bytes).into_owned())
+}
+
+/// The file name of an MTL texture statement's arguments: the options (`-bm 1`,
+/// `-s 1 1 1`, `-clamp on`, `-imfchan l`, ...) are skipped, the rest of the line,
+/// spaces included, is the name.
+fn texture_file_name(args: &str) -> Option<&str> {
+    let mut rest = args.trim_start();
+    while rest.starts_with('-') {
+        let (option, after) = rest.split_once(char::is_whitespace).unwrap_or((rest, ""));
+        rest = after.trim_start();
+        // Each option takes at most three values: numbers, on/off, or a channel or type word.
+        let words = match option {
+            "-o" | "-s" | "-t" => 3,
+            "-mm" => 2,
+            _ => 1,
+        };
+        for _ in 0..words {
+            let (value, after) = rest.split_once(char::is_whitespace).unwrap_or((rest, ""));
+            let is_value = value.parse::<f32>().is_ok()
+                || matches!(value, "on" | "off" | "r" | "g" | "b" | "m" | "l" | "z")
+                || (option == "-type" && !value.is_empty());
+            // The last "value" is the file name when nothing follows it.
+            if !is_value || after.trim().is_empty() {
+                break;
+            }
+            rest = after.trim_start();
+        }
+    }
+    let name = rest.trim();
+    (!name.is_empty()).then_some(name)
+}
+
 /// Loads an OBJ file (and its MTL libraries and textures) as a scene.
 pub fn load_obj(path: &Path) -> Result<Scene> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let text = read_text_lossy(path)?;
     let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut scene = Scene { name: path.display().to_string(), ..Default::default() };
     let mut textures = TextureCache::default();
@@ -212,7 +250,7 @@ fn material_id(scene: &mut Scene, ids: &mut HashMap<String, u32>, name: &str, wa
 }
 
 fn load_mtl(path: &Path, scene: &mut Scene, ids: &mut HashMap<String, u32>, textures: &mut TextureCache) -> Result<()> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let text = read_text_lossy(path)?;
     let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut current: Option<usize> = None;
     for (line_idx, raw) in text.lines().enumerate() {
@@ -250,8 +288,9 @@ fn load_mtl(path: &Path, scene: &mut Scene, ids: &mut HashMap<String, u32>, text
                 scene.materials[cur].roughness = (2.0 / (ns + 2.0)).powf(0.25);
             }
             "map_Kd" | "map_Ke" => {
-                // Options (`-bm 1`, `-s u v w`, ...) precede the file name: take the last token.
-                let Some(name) = line.split_whitespace().last().filter(|t| *t != keyword) else {
+                // Options (`-bm 1`, `-s u v w`, ...) precede the file name, which is
+                // the rest of the line (names may contain spaces).
+                let Some(name) = texture_file_name(&line[keyword.len()..]) else {
                     return Err(ctx.err(format!("`{keyword}` without a file name")));
                 };
                 let tex = textures.get(scene, &base_dir, name, path)?;
@@ -371,5 +410,26 @@ mod tests {
         assert_eq!(s.materials[0].base_color_texture, None);
         assert_eq!(s.materials[0].base_color_factor, Vec3::splat(0.3));
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn texture_names_keep_their_spaces_and_options_are_skipped() {
+        assert_eq!(texture_file_name(" my texture.png"), Some("my texture.png"));
+        assert_eq!(texture_file_name(" -bm 1 -s 1 1 1 stone wall.jpg"), Some("stone wall.jpg"));
+        assert_eq!(texture_file_name(" -clamp on -imfchan l a.png"), Some("a.png"));
+        assert_eq!(texture_file_name(" -bm 1"), Some("1"), "a lone value after an option is a name");
+        assert_eq!(texture_file_name("   "), None);
+    }
+
+    #[test]
+    fn latin_1_comments_and_a_byte_order_mark_are_accepted() {
+        let d = std::env::temp_dir().join(format!("probegi-obj-lossy-{}", std::process::id()));
+        std::fs::create_dir_all(&d).expect("mkdir");
+        let mut bytes = vec![0xEF, 0xBB, 0xBF];
+        bytes.extend_from_slice(b"v 0 0 0\n# caf\xE9\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+        std::fs::write(d.join("t.obj"), bytes).expect("write");
+        let s = load_obj(&d.join("t.obj")).expect("lenient load");
+        assert_eq!(s.mesh.triangles.len(), 1, "the first vertex after the BOM is kept");
+        std::fs::remove_dir_all(&d).ok();
     }
 }

@@ -96,6 +96,9 @@ impl Default for Scene {
     }
 }
 
+/// The largest vertex coordinate a scene may have, metres.
+pub const MAX_COORDINATE_M: f32 = 1e15;
+
 impl Scene {
     /// Reconstructs the surface at a hit reported by a tracer.
     pub fn surface_point(&self, hit: &RayHit) -> SurfacePoint {
@@ -248,6 +251,22 @@ impl Scene {
     }
 
     /// Invariants every loader must establish; returns the first broken one.
+    /// Warnings about values that are valid but physically suspect: a diffuse
+    /// colour above 1 reflects more energy than it receives.
+    pub fn energy_warnings(&self) -> Vec<String> {
+        self.materials
+            .iter()
+            .filter(|m| m.base_color_factor.max_element() > 1.0)
+            .map(|m| {
+                format!(
+                    "material `{}`: diffuse colour {} is above 1, so it reflects more light than it receives \
+                     (energy gain; bounces may not converge)",
+                    m.name, m.base_color_factor
+                )
+            })
+            .collect()
+    }
+
     pub fn validate(&self) -> Result<(), String> {
         let m = &self.mesh;
         if m.normals.len() != m.positions.len() || m.uvs.len() != m.positions.len() {
@@ -258,6 +277,15 @@ impl Scene {
         }
         if let Some(i) = m.positions.iter().position(|p| !p.is_finite()) {
             return Err(format!("vertex {i} has a non-finite position"));
+        }
+        // Beyond this, products of coordinates overflow f32 in ray casting and BVH
+        // builds (seen panicking in obvhs from about 1e19 m).
+        if let Some(i) = m.positions.iter().position(|p| p.abs().max_element() > MAX_COORDINATE_M) {
+            return Err(format!(
+                "vertex {i} at {} lies beyond ±{MAX_COORDINATE_M:e} m: the scene's extent is absurd \
+                 (wrong units or a corrupt file?)",
+                m.positions[i]
+            ));
         }
         for (i, t) in m.triangles.iter().enumerate() {
             if t.iter().any(|&v| v as usize >= m.positions.len()) {

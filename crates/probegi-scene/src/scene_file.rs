@@ -159,8 +159,42 @@ impl MeshRef {
     }
 }
 
+/// Scene files may name other scene files in `[[meshes]]`; this many deep at most.
+pub const MAX_SCENE_FILE_DEPTH: usize = 16;
+
+thread_local! {
+    /// The scene files being loaded on this thread, outermost first (cycle detection).
+    static INCLUDE_STACK: std::cell::RefCell<Vec<PathBuf>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Pops the include stack however the load ends.
+struct IncludeGuard;
+
+impl Drop for IncludeGuard {
+    fn drop(&mut self) {
+        INCLUDE_STACK.with(|s| s.borrow_mut().pop());
+    }
+}
+
 pub fn load_scene_file(path: &Path) -> Result<Scene> {
     let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let key = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+    let chain = INCLUDE_STACK.with(|s| {
+        let s = s.borrow();
+        (s.contains(&key) || s.len() >= MAX_SCENE_FILE_DEPTH).then(|| {
+            s.iter().chain(std::iter::once(&key)).map(|p| p.display().to_string()).collect::<Vec<_>>().join(" → ")
+        })
+    });
+    if let Some(chain) = chain {
+        return Err(SceneError::Invalid {
+            path: path.to_path_buf(),
+            message: format!(
+                "scene files include each other in a cycle or more than {MAX_SCENE_FILE_DEPTH} deep: {chain}"
+            ),
+        });
+    }
+    INCLUDE_STACK.with(|s| s.borrow_mut().push(key));
+    let _guard = IncludeGuard;
     let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     parse_scene_file(&text, path, &base_dir)
 }
