@@ -14,6 +14,12 @@
 //! CUBICSPLINE channels use their key values linearly (a warning says so); morph
 //! weights, and animated lights and cameras, are not followed (warnings).
 //!
+//! Hostile files: every accessor is checked (component type, type, stride and
+//! byte range inside its buffer) before the library reads it, sparse accessors are
+//! refused, a GLB whose header claims more bytes than the file holds is refused
+//! before anything is allocated, and the node hierarchy is walked with a cycle
+//! check and a depth limit ([`MAX_NODE_DEPTH`]).
+//!
 //! Units: light intensities are used as the spec's photometric numbers without a
 //! lm→W conversion (candela → W·sr⁻¹, lux → W·m⁻²), which is what a renderer
 //! working in relative radiance expects (see `probegi_core::punctual`).
@@ -82,15 +88,191 @@ impl NodeChannels {
     }
 }
 
+/// Node hierarchies deeper than this are refused (a recursion bound).
+pub const MAX_NODE_DEPTH: usize = 256;
+
+/// A GLB's header and chunk lengths against the file's size, before the library
+/// allocates what they claim.
+fn check_glb_header(path: &Path) -> Result<()> {
+    use std::io::Read;
+    let err = |message: String| SceneError::Gltf { path: path.to_path_buf(), message };
+    let size = std::fs::metadata(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?.len();
+    let mut head = [0u8; 20];
+    let mut f = std::fs::File::open(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let n = f.read(&mut head).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    if n < 4 || &head[..4] != b"glTF" {
+        return Ok(()); // JSON glTF, or the library's own error.
+    }
+    if n < 20 {
+        return Err(err(format!("GLB header truncated ({size} bytes)")));
+    }
+    let u32_at = |i: usize| u32::from_le_bytes([head[i], head[i + 1], head[i + 2], head[i + 3]]) as u64;
+    let (length, chunk) = (u32_at(8), u32_at(12));
+    if length > size {
+        return Err(err(format!("GLB header says {length} bytes, the file has {size}")));
+    }
+    if chunk + 20 > length {
+        return Err(err(format!("GLB JSON chunk of {chunk} bytes does not fit the {length}-byte file")));
+    }
+    Ok(())
+}
+
+/// Checks an accessor before the library reads it: not sparse, a buffer view, one
+/// of the `allowed` (component type, type) pairs, a stride no smaller than an
+/// element, and every element's bytes inside the view and the view inside its
+/// buffer.
+fn check_accessor(
+    path: &Path,
+    buffers: &[gltf::buffer::Data],
+    accessor: &gltf::Accessor,
+    allowed: &[(gltf::accessor::DataType, gltf::accessor::Dimensions)],
+    what: &str,
+) -> Result<()> {
+    let err = |m: String| SceneError::Gltf {
+        path: path.to_path_buf(),
+        message: format!("{what}: accessor {}: {m}", accessor.index()),
+    };
+    if accessor.sparse().is_some() {
+        return Err(err("sparse accessors are not supported".into()));
+    }
+    let (dt, dims) = (accessor.data_type(), accessor.dimensions());
+    if !allowed.contains(&(dt, dims)) {
+        return Err(err(format!("{dt:?} {dims:?} is not allowed here (expected one of {allowed:?})")));
+    }
+    let view = accessor.view().ok_or_else(|| err("no bufferView".into()))?;
+    let elem = (dt.size() * dims.multiplicity()) as u64;
+    let stride = view.stride().map_or(elem, |s| s as u64);
+    if stride < elem {
+        return Err(err(format!("byteStride {stride} is smaller than an element ({elem} bytes)")));
+    }
+    let buffer_len = buffers.get(view.buffer().index()).map_or(0, |b| b.0.len() as u64);
+    let (view_start, view_len) = (view.offset() as u64, view.length() as u64);
+    if view_start + view_len > buffer_len {
+        return Err(err(format!(
+            "bufferView {} ends at byte {} of a {buffer_len}-byte buffer",
+            view.index(),
+            view_start + view_len
+        )));
+    }
+    let count = accessor.count() as u64;
+    let end = accessor.offset() as u64 + if count == 0 { 0 } else { stride * (count - 1) + elem };
+    if end > view_len {
+        return Err(err(format!("{count} elements need {end} bytes, bufferView {} has {view_len}", view.index())));
+    }
+    Ok(())
+}
+
+/// Every index the loader follows, against the array it points into: the library
+/// trusts them and panics on one out of range.
+fn check_json_indices(path: &Path, root: &gltf::json::Root) -> Result<()> {
+    let err = |m: String| SceneError::Gltf { path: path.to_path_buf(), message: m };
+    let within = |what: String, i: usize, n: usize| {
+        if i < n { Ok(()) } else { Err(err(format!("{what} = {i} is out of range ({n} defined)"))) }
+    };
+    let (accessors, views, nodes) = (root.accessors.len(), root.buffer_views.len(), root.nodes.len());
+    for (i, a) in root.accessors.iter().enumerate() {
+        if let Some(v) = &a.buffer_view {
+            within(format!("accessors[{i}].bufferView"), v.value(), views)?;
+        }
+        if let Some(sp) = &a.sparse {
+            within(format!("accessors[{i}].sparse.indices.bufferView"), sp.indices.buffer_view.value(), views)?;
+            within(format!("accessors[{i}].sparse.values.bufferView"), sp.values.buffer_view.value(), views)?;
+        }
+    }
+    for (i, v) in root.buffer_views.iter().enumerate() {
+        within(format!("bufferViews[{i}].buffer"), v.buffer.value(), root.buffers.len())?;
+    }
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (k, prim) in mesh.primitives.iter().enumerate() {
+            for a in prim.attributes.values() {
+                within(format!("meshes[{m}].primitives[{k}].attributes"), a.value(), accessors)?;
+            }
+            if let Some(a) = &prim.indices {
+                within(format!("meshes[{m}].primitives[{k}].indices"), a.value(), accessors)?;
+            }
+            if let Some(mat) = &prim.material {
+                within(format!("meshes[{m}].primitives[{k}].material"), mat.value(), root.materials.len())?;
+            }
+        }
+    }
+    for (i, n) in root.nodes.iter().enumerate() {
+        for c in n.children.iter().flatten() {
+            within(format!("nodes[{i}].children"), c.value(), nodes)?;
+        }
+        if let Some(m) = &n.mesh {
+            within(format!("nodes[{i}].mesh"), m.value(), root.meshes.len())?;
+        }
+        if let Some(c) = &n.camera {
+            within(format!("nodes[{i}].camera"), c.value(), root.cameras.len())?;
+        }
+    }
+    for (i, sc) in root.scenes.iter().enumerate() {
+        for n in &sc.nodes {
+            within(format!("scenes[{i}].nodes"), n.value(), nodes)?;
+        }
+    }
+    for (i, anim) in root.animations.iter().enumerate() {
+        for (k, ch) in anim.channels.iter().enumerate() {
+            within(format!("animations[{i}].channels[{k}].sampler"), ch.sampler.value(), anim.samplers.len())?;
+            within(format!("animations[{i}].channels[{k}].target.node"), ch.target.node.value(), nodes)?;
+        }
+        for (k, sm) in anim.samplers.iter().enumerate() {
+            within(format!("animations[{i}].samplers[{k}].input"), sm.input.value(), accessors)?;
+            within(format!("animations[{i}].samplers[{k}].output"), sm.output.value(), accessors)?;
+        }
+    }
+    Ok(())
+}
+
+thread_local! {
+    /// Set while this thread runs the glTF library under [`guarded`].
+    static IN_GLTF_GUARD: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f` (the glTF library and our reads through it) so that a panic inside it
+/// becomes an error naming the file. gltf-json 1.4 panics on some malformed
+/// documents during its own validation (an invalid enum value it then unwraps, a
+/// POSITION accessor index out of range); those are caught here, and the panic
+/// hook stays quiet for them (installed once, it defers to the previous hook for
+/// every other panic).
+fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    static QUIET_HOOK: std::sync::Once = std::sync::Once::new();
+    QUIET_HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !IN_GLTF_GUARD.with(|g| g.get()) {
+                previous(info);
+            }
+        }));
+    });
+    IN_GLTF_GUARD.with(|g| g.set(true));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    IN_GLTF_GUARD.with(|g| g.set(false));
+    result.unwrap_or_else(|panic| {
+        let why = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown".into());
+        Err(SceneError::Gltf { path: path.to_path_buf(), message: format!("malformed document ({why})") })
+    })
+}
+
 pub fn load_gltf(path: &Path) -> Result<Scene> {
+    guarded(path, || load_gltf_unguarded(path))
+}
+
+fn load_gltf_unguarded(path: &Path) -> Result<Scene> {
     if !path.exists() {
         return Err(SceneError::Io {
             path: path.to_path_buf(),
             source: std::io::Error::new(std::io::ErrorKind::NotFound, "file not found"),
         });
     }
+    check_glb_header(path)?;
     let (doc, buffers, images) =
         gltf::import(path).map_err(|e| SceneError::Gltf { path: path.to_path_buf(), message: e.to_string() })?;
+    check_json_indices(path, doc.as_json())?;
     let mut loader = Loader {
         path,
         buffers,
@@ -106,7 +288,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene> {
         None => doc.nodes().collect(),
     };
     for node in roots {
-        loader.visit(&node, Mat4::IDENTITY, &[])?;
+        loader.visit(&node, Mat4::IDENTITY, &[], &mut Vec::new())?;
     }
     if loader.scene.mesh.triangles.is_empty() {
         return Err(SceneError::Invalid { path: path.to_path_buf(), message: "no triangle primitives".into() });
@@ -127,6 +309,29 @@ impl Loader<'_> {
             for ch in anim.channels() {
                 let node = ch.target().node().index();
                 let what = format!("animation {} channel {}", anim.index(), ch.index());
+                {
+                    use gltf::accessor::{DataType as T, Dimensions as D};
+                    let sampler = ch.sampler();
+                    check_accessor(self.path, &self.buffers, &sampler.input(), &[(T::F32, D::Scalar)], &what)?;
+                    let out: &[(T, D)] = match ch.target().property() {
+                        Property::Rotation => &[
+                            (T::F32, D::Vec4),
+                            (T::I8, D::Vec4),
+                            (T::U8, D::Vec4),
+                            (T::I16, D::Vec4),
+                            (T::U16, D::Vec4),
+                        ],
+                        Property::MorphTargetWeights => &[
+                            (T::F32, D::Scalar),
+                            (T::I8, D::Scalar),
+                            (T::U8, D::Scalar),
+                            (T::I16, D::Scalar),
+                            (T::U16, D::Scalar),
+                        ],
+                        _ => &[(T::F32, D::Vec3)],
+                    };
+                    check_accessor(self.path, &self.buffers, &sampler.output(), out, &what)?;
+                }
                 let buffers = &self.buffers;
                 let reader = ch.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
                 let times: Vec<f32> =
@@ -189,7 +394,22 @@ impl Loader<'_> {
 
     /// Visits `node` under `parent` (its world matrix at rest); `chain` lists the
     /// animated ancestors' nodes, root first.
-    fn visit<'n>(&mut self, node: &gltf::Node<'n>, parent: Mat4, chain: &[gltf::Node<'n>]) -> Result<()> {
+    /// `path` holds the node indices from the root to `node`'s parent (cycle check).
+    fn visit<'n>(
+        &mut self,
+        node: &gltf::Node<'n>,
+        parent: Mat4,
+        chain: &[gltf::Node<'n>],
+        path: &mut Vec<usize>,
+    ) -> Result<()> {
+        if path.contains(&node.index()) {
+            return Err(self.err(format!("node {} is its own ancestor (a cycle in the node hierarchy)", node.index())));
+        }
+        if path.len() >= MAX_NODE_DEPTH {
+            return Err(
+                self.err(format!("node hierarchy deeper than {MAX_NODE_DEPTH} levels at node {}", node.index()))
+            );
+        }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if !world.is_finite() {
             return Err(self.err(format!("node {} has a non-finite transform", node.index())));
@@ -248,9 +468,11 @@ impl Loader<'_> {
                 fov_y_deg: p.yfov().to_degrees(),
             });
         }
+        path.push(node.index());
         for child in node.children() {
-            self.visit(&child, world, &chain)?;
+            self.visit(&child, world, &chain, path)?;
         }
+        path.pop();
         Ok(())
     }
 
@@ -318,6 +540,25 @@ impl Loader<'_> {
         if prim.mode() != gltf::mesh::Mode::Triangles {
             self.scene.warnings.push(format!("{}: {what}: mode {:?} skipped", self.path.display(), prim.mode()));
             return Ok(());
+        }
+        {
+            use gltf::accessor::{DataType as T, Dimensions as D};
+            use gltf::mesh::Semantic;
+            let check = |a: &gltf::Accessor, allowed: &[(T, D)], name: &str| {
+                check_accessor(self.path, &self.buffers, a, allowed, &format!("{what}: {name}"))
+            };
+            let pos =
+                prim.get(&Semantic::Positions).ok_or_else(|| self.err(format!("{what}: no POSITION attribute")))?;
+            check(&pos, &[(T::F32, D::Vec3)], "POSITION")?;
+            if let Some(a) = prim.get(&Semantic::Normals) {
+                check(&a, &[(T::F32, D::Vec3)], "NORMAL")?;
+            }
+            if let Some(a) = prim.get(&Semantic::TexCoords(0)) {
+                check(&a, &[(T::F32, D::Vec2), (T::U8, D::Vec2), (T::U16, D::Vec2)], "TEXCOORD_0")?;
+            }
+            if let Some(a) = prim.indices() {
+                check(&a, &[(T::U8, D::Scalar), (T::U16, D::Scalar), (T::U32, D::Scalar)], "indices")?;
+            }
         }
         let buffers = &self.buffers;
         let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
