@@ -87,6 +87,12 @@ pub fn contact_sheet(width: u32, height: u32, reference: &[u8], test: &[u8], mag
 pub fn compare_files(reference_path: &Path, test_path: &Path, sheet_path: Option<&Path>) -> Result<f32, ImageError> {
     let reference = read_image(reference_path)?;
     let test = read_image(test_path)?;
+    // A score over NaN or Inf pixels would be silently meaningless.
+    for (img, path) in [(&reference, reference_path), (&test, test_path)] {
+        if let LoadedImage::Hdr(hdr) = img {
+            crate::io::check_finite(path, hdr)?;
+        }
+    }
     let result = flip_images(&reference, reference_path, &test, test_path)?;
     if let Some(sheet) = sheet_path {
         let magma = error_map_magma(&result);
@@ -141,5 +147,24 @@ mod tests {
         assert_eq!(&s[12..15], &[20, 20, 20]);
         assert_eq!(&s[24..27], &[30, 30, 30]);
         assert_eq!(&s[36..39], &[10, 10, 10], "second row starts with the reference again");
+    }
+
+    #[test]
+    fn comparing_an_image_with_nan_is_an_error_not_a_score() {
+        let dir = std::env::temp_dir().join(format!("probegi-compare-nan-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("mkdir");
+        let (good, bad) = (dir.join("good.exr"), dir.join("bad.exr"));
+        exr::prelude::write_rgb_file(&good, 4, 4, |_, _| (0.5f32, 0.5f32, 0.5f32)).expect("write");
+        exr::prelude::write_rgb_file(
+            &bad,
+            4,
+            4,
+            |x, y| if (x, y) == (2, 3) { (f32::NAN, 0.0, 0.0) } else { (0.5, 0.5, 0.5) },
+        )
+        .expect("write");
+        assert!(compare_files(&good, &good, None).is_ok());
+        let e = compare_files(&good, &bad, None).expect_err("NaN").to_string();
+        assert!(e.contains("bad.exr") && e.contains("(2, 3)"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

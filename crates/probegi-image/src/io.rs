@@ -17,7 +17,7 @@ pub enum ImageError {
     Io { path: PathBuf, message: String },
     #[error("{path}: unsupported image extension (expected .exr or .png)")]
     UnsupportedFormat { path: PathBuf },
-    #[error("{path}: not written: pixel ({x}, {y}) is {value} (radiance must be finite and non-negative)")]
+    #[error("{path}: pixel ({x}, {y}) is {value} (radiance must be finite and non-negative)")]
     NonFinite { path: PathBuf, x: u32, y: u32, value: String },
     #[error("{path}: the file name must end in .{expected} for this output")]
     WrongExtension { path: PathBuf, expected: &'static str },
@@ -179,12 +179,27 @@ fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: Vec<u8>) -> Result<
 }
 
 /// Reads an `.exr` (first RGB(A) layer, linear) or `.png` (8-bit sRGB).
+/// The largest image `read_image` loads, in pixels (8192 × 4096), so a header
+/// claiming more cannot exhaust memory.
+pub const MAX_READ_PIXELS: u64 = 1 << 25;
+
 pub fn read_image(path: &Path) -> Result<LoadedImage, ImageError> {
     if !path.exists() {
         return Err(io_err(path, "file not found"));
     }
     match ImageFormat::from_path(path)? {
         ImageFormat::Exr => {
+            // The header's size against a bound before the reader allocates for it.
+            let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| io_err(path, e))?;
+            for h in &meta.headers {
+                let (w, hh) = (h.layer_size.x() as u64, h.layer_size.y() as u64);
+                if w * hh > MAX_READ_PIXELS {
+                    return Err(io_err(
+                        path,
+                        format!("{w}×{hh} pixels is more than this tool reads ({MAX_READ_PIXELS})"),
+                    ));
+                }
+            }
             let img = exr::prelude::read_first_rgba_layer_from_file(
                 path,
                 |res, _| Image::new(res.width() as u32, res.height() as u32),
