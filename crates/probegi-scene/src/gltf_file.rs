@@ -117,6 +117,57 @@ fn check_glb_header(path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// `%XX` escapes of a URI reference decoded (glTF URIs are percent-encoded).
+fn decode_uri(uri: &str) -> String {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = |b: u8| (b as char).to_digit(16);
+        if bytes[i] == b'%'
+            && i + 2 < bytes.len()
+            && let (Some(h), Some(l)) = (hex(bytes[i + 1]), hex(bytes[i + 2]))
+        {
+            out.push((h * 16 + l) as u8);
+            i += 3;
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// Every external buffer and image file the document names exists, so a missing
+/// one is reported by its own name (the library's error does not name it).
+fn check_external_files(path: &Path) -> Result<()> {
+    let Ok(doc) = gltf::Gltf::open(path) else {
+        return Ok(()); // the library's own error follows
+    };
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let buffers = doc.buffers().filter_map(|b| match b.source() {
+        gltf::buffer::Source::Uri(uri) => Some(("buffer", b.index(), uri.to_string())),
+        gltf::buffer::Source::Bin => None,
+    });
+    let images = doc.images().filter_map(|im| match im.source() {
+        gltf::image::Source::Uri { uri, .. } => Some(("image", im.index(), uri.to_string())),
+        gltf::image::Source::View { .. } => None,
+    });
+    for (what, i, uri) in buffers.chain(images) {
+        if uri.starts_with("data:") {
+            continue;
+        }
+        let file = dir.join(decode_uri(&uri));
+        if !file.exists() {
+            return Err(SceneError::Gltf {
+                path: path.to_path_buf(),
+                message: format!("{what} {i}: file {} not found", file.display()),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Checks an accessor before the library reads it: not sparse, a buffer view, one
 /// of the `allowed` (component type, type) pairs, a stride no smaller than an
 /// element, and every element's bytes inside the view and the view inside its
@@ -270,6 +321,7 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene> {
         });
     }
     check_glb_header(path)?;
+    check_external_files(path)?;
     let (doc, buffers, images) =
         gltf::import(path).map_err(|e| SceneError::Gltf { path: path.to_path_buf(), message: e.to_string() })?;
     check_json_indices(path, doc.as_json())?;

@@ -250,6 +250,10 @@ fn crafted_gltf_attacks_are_errors_that_name_the_file() {
         let e = load_scene(&path.to_string_lossy()).expect_err(name).to_string();
         assert!(e.contains(&format!("{name}.gltf")) && e.contains(expect), "{name}: {e}");
     }
+    // A missing external buffer is named.
+    std::fs::write(dir.join("nobin.gltf"), base.replace("e.bin", "missing%20file.bin")).expect("write");
+    let e = load_scene(&dir.join("nobin.gltf").to_string_lossy()).expect_err("missing bin").to_string();
+    assert!(e.contains("nobin.gltf") && e.contains("missing file.bin") && e.contains("not found"), "{e}");
     // A GLB header claiming 4 GiB in a small file is refused before any allocation.
     let mut g = glb();
     g[8..12].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
