@@ -135,6 +135,18 @@ fn prepare(args: &SceneArgs, bytes_per_pixel: u64) -> Result<(Scene, Camera)> {
     Ok((scene, camera))
 }
 
+/// Writes a rendered image; a non-finite pixel (which `write_image` refuses, naming
+/// it) gets a hint at its usual causes.
+fn write_radiance(path: &std::path::Path, image: &probegi_core::image::Image) -> Result<()> {
+    probegi_image::write_image(path, image).map_err(|e| {
+        let hint = matches!(e, probegi_image::ImageError::NonFinite { .. }).then_some(
+            "; check the scene's materials (Kd, Ke, emissive factors), textures and light intensities for huge or \
+             non-finite values",
+        );
+        anyhow::anyhow!("{e}{}", hint.unwrap_or(""))
+    })
+}
+
 fn progress(len: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
     if let Ok(style) = ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({elapsed} < {eta})") {
@@ -227,16 +239,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     let (image, stats) = (out.image, out.stats);
     bar.finish_and_clear();
     let elapsed = start.elapsed();
-    if let Some(i) = image.first_invalid_pixel() {
-        bail!(
-            "pixel ({}, {}) is {} (not a finite non-negative radiance); image not written. Check the scene's \
-             materials (Kd, Ke, emissive factors), textures and light intensities for huge or non-finite values",
-            i as u32 % image.width.max(1),
-            i as u32 / image.width.max(1),
-            image.pixels[i]
-        );
-    }
-    probegi_image::write_image(&args.out, &image)?;
+    write_radiance(&args.out, &image)?;
     if let (Some(dir), Some(volume)) = (&args.dump_atlases, &out.ddgi) {
         atlas_dump::dump_atlases(dir, volume)?;
         eprintln!("wrote atlases to {}", dir.display());
@@ -341,16 +344,7 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
     let (image, counters) = pt.render(&rays, args.scene.width, args.scene.height, &|| bar.inc(1));
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
-    if let Some(i) = image.first_invalid_pixel() {
-        bail!(
-            "pixel ({}, {}) is {} (not a finite non-negative radiance); image not written. Check the scene's \
-             materials (Kd, Ke, emissive factors), textures and light intensities for huge or non-finite values",
-            i as u32 % image.width.max(1),
-            i as u32 / image.width.max(1),
-            image.pixels[i]
-        );
-    }
-    probegi_image::write_image(&args.out, &image)?;
+    write_radiance(&args.out, &image)?;
     eprintln!(
         "wrote {} ({}×{}, {} spp, {:.2} s, {:.2} Mrays/s, scene {})",
         args.out.display(),

@@ -24,7 +24,7 @@
 //! value is less exact (a stand-in can be cells away), but it is the field's light,
 //! not black.
 
-use glam::{IVec3, Vec2, Vec3};
+use glam::{IVec3, UVec3, Vec2, Vec3};
 use std::f32::consts::PI;
 
 use crate::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
@@ -95,6 +95,16 @@ pub fn surface_bias(settings: &DdgiVolumeSettings, grid: &ProbeGrid, normal: Vec
     }
 }
 
+/// The longest offset [`surface_bias`] can produce for these settings (unit normal
+/// and view direction): |0.2·n + 0.8·ω| ≤ 1 and |0.8·n + 0.3·v| ≤ 1.1.
+pub fn max_surface_bias_m(settings: &DdgiVolumeSettings, grid: &ProbeGrid) -> f32 {
+    match settings.probe_bias_mode {
+        ProbeBiasMode::SelfShadow => 0.75 * grid.min_spacing_m() * settings.probe_self_shadow_bias,
+        ProbeBiasMode::Normal => 1.1 * settings.probe_normal_bias_m,
+        ProbeBiasMode::None => 0.0,
+    }
+}
+
 /// Chebyshev visibility weight for a point at `distance` from a probe whose
 /// distance moments are `(mean, mean²)`: 1 in front of the mean, falling behind it.
 pub fn chebyshev_weight(moments: Vec2, distance: f32) -> f32 {
@@ -129,18 +139,13 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
     let s = field.settings;
     let g = field.grid;
     let biased = position + surface_bias(s, g, normal, view_dir);
-    let base = g.base_probe(biased);
-    let base_pos = g.origin_m + g.spacing_m * base.as_vec3();
-    let alpha = ((biased - base_pos) / g.spacing_m).clamp(Vec3::ZERO, Vec3::ONE);
-    let max_coords = g.probe_counts.as_ivec3() - IVec3::ONE;
+    let cage = g.cage(biased);
     let normal_texels = BilinearFootprint::new(field.irradiance.interior, oct_encode(normal));
     let half_gamma = s.probe_irradiance_gamma * 0.5;
 
-    // One cage probe's (weight, decoded irradiance); `probe` may be a corner's
-    // fallback, which is weighted like the corner it stands in for.
-    let weigh = |i: i32, probe: usize| {
-        let offset = IVec3::new(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        let coords = g.probe_coords(probe);
+    // One cage probe's (weight, decoded irradiance) for corner `i`; `probe` (at grid
+    // coordinates `coords`) may be the corner's fallback, weighted like the corner.
+    let weigh = |i: usize, probe: usize, coords: UVec3| {
         let probe_pos = g.probe_position(coords) + field.probe_offsets_m.get(probe).copied().unwrap_or(Vec3::ZERO);
         let mut weight = 1.0f32;
         if s.probe_backface_weight {
@@ -161,27 +166,22 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
             weight *= weight * weight / (c * c);
         }
         if s.probe_trilinear_weight {
-            let o = offset.as_vec3();
-            let t = (Vec3::ONE - alpha) * (Vec3::ONE - o) + alpha * o;
-            let t = t.max(Vec3::splat(0.001));
+            let t = cage.trilinear(i).max(Vec3::splat(0.001));
             weight *= t.x * t.y * t.z;
         }
         let e = normal_texels.sample(field.irradiance.tile(probe)).max(Vec3::ZERO);
         (weight, decode_half(e, half_gamma))
     };
-    let corner_probe = |i: i32| {
-        let offset = IVec3::new(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        g.probe_index((base + offset).min(max_coords).as_uvec3())
-    };
 
     let mut sum = Vec3::ZERO;
     let mut wsum = 0.0f32;
     for i in 0..8 {
-        let probe = corner_probe(i);
+        let coords = cage.corner(i);
+        let probe = g.probe_index(coords);
         if field.probe_usable.get(probe).is_some_and(|u| !u) {
             continue;
         }
-        let (w, e) = weigh(i, probe);
+        let (w, e) = weigh(i, probe, coords);
         sum += e * w;
         wsum += w;
     }
@@ -189,10 +189,10 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
         // No usable probe in the cage: each corner's nearest usable probe stands in
         // for it, with the same weights (so visibility still picks among them).
         for i in 0..8 {
-            if let Some(&q) = field.probe_fallback.get(corner_probe(i))
+            if let Some(&q) = field.probe_fallback.get(g.probe_index(cage.corner(i)))
                 && q != u32::MAX
             {
-                let (w, e) = weigh(i, q as usize);
+                let (w, e) = weigh(i, q as usize, g.probe_coords(q as usize));
                 sum += e * w;
                 wsum += w;
             }
@@ -209,7 +209,24 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::UVec3;
+
+    /// A view with no relocation offsets, every probe usable and no fallback table.
+    fn bare_view<'a>(
+        grid: &'a ProbeGrid,
+        settings: &'a DdgiVolumeSettings,
+        irradiance: &'a ProbeAtlas<Vec3>,
+        distance: &'a ProbeAtlas<Vec2>,
+    ) -> DdgiFieldView<'a> {
+        DdgiFieldView {
+            grid,
+            settings,
+            irradiance,
+            distance,
+            probe_offsets_m: &[],
+            probe_usable: &[],
+            probe_fallback: &[],
+        }
+    }
 
     fn uniform_field(
         mean_radiance: f32,
@@ -229,15 +246,7 @@ mod tests {
     #[test]
     fn uniform_field_returns_pi_times_mean_radiance_everywhere() {
         let (grid, settings, irr, dist) = uniform_field(2.0, 10.0, UVec3::splat(3));
-        let f = DdgiFieldView {
-            grid: &grid,
-            settings: &settings,
-            irradiance: &irr,
-            distance: &dist,
-            probe_offsets_m: &[],
-            probe_usable: &[],
-            probe_fallback: &[],
-        };
+        let f = bare_view(&grid, &settings, &irr, &dist);
         for p in [Vec3::new(0.3, 0.7, 1.2), Vec3::new(1.9, 0.1, 0.5), Vec3::new(-4.0, 9.0, 0.0)] {
             for n in [Vec3::X, Vec3::NEG_Y, Vec3::new(0.6, 0.0, 0.8)] {
                 let e = irradiance(&f, p, n, n);
@@ -272,30 +281,14 @@ mod tests {
         irr.tile_mut(0).fill(Vec3::ZERO); // lower probe: dark
         dist.tile_mut(1).fill(Vec2::new(5.0, 25.0));
         dist.tile_mut(0).fill(Vec2::new(0.5, 0.25));
-        let f = DdgiFieldView {
-            grid: &grid,
-            settings: &settings,
-            irradiance: &irr,
-            distance: &dist,
-            probe_offsets_m: &[],
-            probe_usable: &[],
-            probe_fallback: &[],
-        };
+        let f = bare_view(&grid, &settings, &irr, &dist);
         let e = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
         // The lit probe dominates: nearly π·1 rather than the unweighted ~π/2.
         assert!(e.x > 0.95 * PI, "{e}");
         let mut off = settings.clone();
         off.probe_backface_weight = false;
         off.probe_chebyshev_weight = false;
-        let f = DdgiFieldView {
-            grid: &grid,
-            settings: &off,
-            irradiance: &irr,
-            distance: &dist,
-            probe_offsets_m: &[],
-            probe_usable: &[],
-            probe_fallback: &[],
-        };
+        let f = bare_view(&grid, &off, &irr, &dist);
         let leaky = irradiance(&f, Vec3::new(0.0, 0.5, 0.0), Vec3::Y, Vec3::Y);
         assert!(leaky.x < 0.8 * PI, "without the weights the dark probe leaks in: {leaky}");
         // Excluding the dark probe from queries (an Off probe) removes it entirely.
@@ -318,13 +311,9 @@ mod tests {
         let fallback = nearest_usable_probes(&grid, &usable);
         assert_eq!(fallback, vec![4; 5]);
         let f = DdgiFieldView {
-            grid: &grid,
-            settings: &settings,
-            irradiance: &irr,
-            distance: &dist,
-            probe_offsets_m: &[],
             probe_usable: &usable,
             probe_fallback: &fallback,
+            ..bare_view(&grid, &settings, &irr, &dist)
         };
         // The cage of x = 0.4 holds probes 0 and 1, both unusable.
         let e = irradiance(&f, Vec3::new(0.4, 0.0, 0.0), Vec3::Y, Vec3::Y);

@@ -78,10 +78,11 @@ pub struct DdgiVolumeSettings {
     pub probe_relocation_min_frontface_rel: f32,
     /// Probe states: `all-active`, `jcgt` (seed 004 §6) or `usage` (seed 003 §6.1).
     pub probe_states: ProbeStatesMode,
-    /// jcgt classification: a probe stays Vigilant when a front-face hit lies within
-    /// this fraction of the spacing of its grid point on every axis (see
-    /// `probe_classification`): 0.5 = its Voronoi cell (each surface point keeps its
-    /// nearest probe), 1 = RTXGI's rule. Not in the papers; measured on Sponza.
+    /// jcgt classification, first pass: a probe stays Vigilant when a front-face hit
+    /// lies within this fraction of the spacing of its grid point on every axis
+    /// (0.5 = its Voronoi cell, 1 = RTXGI's rule); a covering pass then keeps a
+    /// front-side probe for every seen surface point (see `probe_classification`).
+    /// Deviation from seed 004 Listing 5 (minimum spacing); 0.5 measured on Sponza.
     pub probe_classification_reach_rel: f32,
     /// Usage scheme: SLEEPING probes update every this many frames (seed 003: 10).
     pub probe_sleeping_update_interval: u32,

@@ -174,21 +174,17 @@ pub fn uncovered_point_probe(
     point: Vec3,
     normal: Vec3,
 ) -> Option<usize> {
-    let base = grid.base_probe(point);
-    let base_pos = grid.origin_m + grid.spacing_m * base.as_vec3();
-    let alpha = ((point - base_pos) / grid.spacing_m).clamp(Vec3::ZERO, Vec3::ONE);
-    let max = grid.probe_counts.as_ivec3() - glam::IVec3::ONE;
+    let cage = grid.cage(point);
     let mut best: Option<(usize, f32)> = None;
     for i in 0..8 {
-        let o = glam::IVec3::new(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        let p = grid.probe_index((base + o).min(max).as_uvec3());
+        let p = grid.probe_index(cage.corner(i));
         if (probe_positions[p] - point).dot(normal) <= 0.0 {
             continue;
         }
         if kept[p] {
             return None;
         }
-        let t = (Vec3::ONE - alpha) * (Vec3::ONE - o.as_vec3()) + alpha * o.as_vec3();
+        let t = cage.trilinear(i);
         let w = t.x * t.y * t.z;
         if eligible[p] && best.is_none_or(|(_, b)| w > b) {
             best = Some((p, w));

@@ -54,6 +54,43 @@ impl ProbeGrid {
         let max = (self.probe_counts.as_ivec3() - IVec3::ONE).max(IVec3::ZERO);
         rel.floor().as_ivec3().clamp(IVec3::ZERO, max)
     }
+
+    /// The cage of `position` (seed 003 §4.4): its lowest corner and the position's
+    /// fraction across the cell per axis, clamped to [0, 1] so points beyond the
+    /// grid take their boundary layer's values.
+    pub fn cage(&self, position: Vec3) -> Cage {
+        let base = self.base_probe(position);
+        let base_pos = self.origin_m + self.spacing_m * base.as_vec3();
+        let alpha = ((position - base_pos) / self.spacing_m).clamp(Vec3::ZERO, Vec3::ONE);
+        Cage { base, alpha, max: (self.probe_counts.as_ivec3() - IVec3::ONE).max(IVec3::ZERO) }
+    }
+}
+
+/// A point's 8-probe cage: corner `i` has offset bit 0 = x, bit 1 = y, bit 2 = z.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cage {
+    pub base: IVec3,
+    /// The point's fraction across the cell per axis, in [0, 1].
+    pub alpha: Vec3,
+    max: IVec3,
+}
+
+impl Cage {
+    /// Grid coordinates of corner `i`, clamped into the grid (a grid with one probe
+    /// on an axis repeats it).
+    pub fn corner(&self, i: usize) -> UVec3 {
+        (self.base + corner_offset(i)).min(self.max).as_uvec3()
+    }
+
+    /// Per-axis trilinear factors of corner `i`; their product is its weight.
+    pub fn trilinear(&self, i: usize) -> Vec3 {
+        let o = corner_offset(i).as_vec3();
+        (Vec3::ONE - self.alpha) * (Vec3::ONE - o) + self.alpha * o
+    }
+}
+
+fn corner_offset(i: usize) -> IVec3 {
+    IVec3::new((i & 1) as i32, ((i >> 1) & 1) as i32, ((i >> 2) & 1) as i32)
 }
 
 #[cfg(test)]
@@ -75,5 +112,22 @@ mod tests {
         assert_eq!(g.probe_position(UVec3::new(3, 1, 0)), Vec3::new(3.5, 1.5, 0.5));
         assert_eq!(g.base_probe(Vec3::new(1.7, 0.2, 0.5)), IVec3::new(1, 0, 0));
         assert_eq!(g.base_probe(Vec3::new(-5.0, 9.0, 0.5)), IVec3::new(0, 1, 0));
+    }
+
+    #[test]
+    fn cage_weights_sum_to_one_and_clamp_beyond_the_grid() {
+        let g =
+            ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(3, 2, 1), spacing_m: Vec3::new(2.0, 1.0, 1.0) };
+        let c = g.cage(Vec3::new(1.5, 0.25, 0.0));
+        assert_eq!((c.base, c.alpha), (IVec3::ZERO, Vec3::new(0.75, 0.25, 0.0)));
+        let sum: f32 = (0..8).map(|i| c.trilinear(i).element_product()).sum();
+        assert!((sum - 1.0).abs() < 1e-6);
+        assert!((c.trilinear(1).element_product() - 0.75 * 0.75).abs() < 1e-6, "corner (1, 0, 0)");
+        // One probe in z: both z corners are that probe.
+        assert_eq!(c.corner(4), UVec3::new(0, 0, 0));
+        // Beyond the grid: clamped onto the last layer, which takes the full weight.
+        let far = g.cage(Vec3::new(9.0, 0.5, 0.0));
+        assert_eq!(far.corner(1), UVec3::new(2, 0, 0));
+        assert_eq!(far.alpha.x, 1.0);
     }
 }

@@ -25,7 +25,7 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use glam::{UVec3, Vec2, Vec3};
-use probegi_core::ddgi_query::{DdgiFieldView, nearest_usable_probes};
+use probegi_core::ddgi_query::{DdgiFieldView, max_surface_bias_m, nearest_usable_probes};
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::probe_atlas::ProbeAtlas;
 use probegi_core::probe_blend::{TexelThresholds, blend_distance_tile, blend_irradiance_tile};
@@ -289,7 +289,7 @@ impl DdgiVolume {
             ProbeStatesMode::Jcgt => {
                 let (dirs, k) = self.trace_distances(scene, tracer, seed, init_frame(1000));
                 traced += k;
-                let bias = self.max_surface_bias_m();
+                let bias = max_surface_bias_m(&self.settings, &self.grid);
                 let reach = self.settings.probe_classification_reach_rel;
                 let (grid, surfels) = (&self.grid, &self.surfels);
                 let front_hits = |p: usize| {
@@ -329,16 +329,6 @@ impl DdgiVolume {
         self.refresh_usable();
         self.initialized = true;
         traced
-    }
-
-    /// The largest offset the query's surface bias can add to a shading point.
-    fn max_surface_bias_m(&self) -> f32 {
-        use probegi_core::ddgi_settings::ProbeBiasMode;
-        match self.settings.probe_bias_mode {
-            ProbeBiasMode::SelfShadow => 0.75 * self.grid.min_spacing_m() * self.settings.probe_self_shadow_bias,
-            ProbeBiasMode::Normal => 1.1 * self.settings.probe_normal_bias_m,
-            ProbeBiasMode::None => 0.0,
-        }
     }
 
     /// Usage scheme (seed 003 §6.1): every probe's state from this frame's rays, and
