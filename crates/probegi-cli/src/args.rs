@@ -160,6 +160,7 @@ pub struct VolumeArgs {
     pub rays_per_probe: Option<u32>,
     /// Override any volume setting by its TOML name, e.g. `--set hysteresis=0.9`
     /// (repeatable). Under `--gi sh` the keys are the `[sh]` settings, e.g. `--set sh_occlusion=true`.
+    /// Scene settings apply under every `--gi`: `normal_maps=false`, `alpha_cutouts=false`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
 }
@@ -223,6 +224,9 @@ pub struct ReferenceArgs {
     /// Output image: .exr (linear radiance, recommended) or .png (tone-mapped).
     #[arg(long)]
     pub out: PathBuf,
+    /// Scene settings, e.g. `--set normal_maps=false`, `--set alpha_cutouts=false`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
 }
 
 #[derive(Args, Debug)]

@@ -39,8 +39,8 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
     }
     let grids = if args.grids.is_empty() { vec![[16, 8, 16]] } else { args.grids.clone() };
     let rays = args.rays.first().copied().unwrap_or(256);
-    let scene = load_scene(&args.scene).with_context(|| format!("loading scene {}", args.scene))?;
-    let bvh = BvhTracer::build(&scene.mesh, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
+    let scene = bench_scene(args)?;
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
     let camera = CameraRays::new(&scene.default_camera(), 256, 256);
     let timed = |gi: GiMethod| {
         let settings = RenderSettings {
@@ -109,9 +109,9 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     }
     let grids = if args.grids.is_empty() { vec![[16, 8, 16], [24, 12, 24], [32, 16, 32]] } else { args.grids.clone() };
     let ray_counts = if args.rays.is_empty() { vec![32, 64, 128, 256] } else { args.rays.clone() };
-    let scene = load_scene(&args.scene).with_context(|| format!("loading scene {}", args.scene))?;
+    let scene = bench_scene(args)?;
     let bounds = scene.bounds().context("scene has no geometry")?;
-    let bvh = BvhTracer::build(&scene.mesh, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let mut rows = Vec::new();
     for grid in &grids {
@@ -183,7 +183,7 @@ fn bench_volume_settings(
         probe_rays_per_probe: rays,
         ..Default::default()
     };
-    for a in &args.set {
+    for a in crate::probe_settings(&args.set) {
         settings = probegi_scene::scene_file::apply_volume_override(&settings, a)
             .map_err(anyhow::Error::msg)
             .with_context(|| format!("--set {a}"))?;
@@ -191,6 +191,13 @@ fn bench_volume_settings(
     settings.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
     crate::check_memory(probegi_cpu::ddgi::ddgi_volume_bytes(&settings), "the DDGI volume")?;
     Ok(settings)
+}
+
+/// The scene of `--scene` with the scene-level `--set` keys applied.
+fn bench_scene(args: &BenchArgs) -> Result<probegi_scene::Scene> {
+    let mut scene = load_scene(&args.scene).with_context(|| format!("loading scene {}", args.scene))?;
+    crate::apply_scene_settings(&mut scene, &args.set)?;
+    Ok(scene)
 }
 
 /// The process's peak resident set (VmHWM) in MiB, where /proc provides it.
@@ -210,14 +217,14 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
         bail!("--aabb-pad-rel {} must be in [0, 0.1)", args.aabb_pad_rel);
     }
     let t = Instant::now();
-    let scene = load_scene(&args.scene).with_context(|| format!("loading scene {}", args.scene))?;
+    let scene = bench_scene(args)?;
     let load_ms = t.elapsed().as_secs_f64() * 1e3;
     let (lo, hi) = scene.bounds().context("scene has no geometry")?;
 
     let mut build_ms = f64::INFINITY;
     let mut bvh = None;
     for _ in 0..args.repeat.min(3) {
-        let b = BvhTracer::build(&scene.mesh, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
+        let b = BvhTracer::for_scene(&scene, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
         build_ms = build_ms.min(b.build_time.as_secs_f64() * 1e3);
         bvh = Some(b);
     }
@@ -246,11 +253,31 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
         }
         (best, hits)
     };
-    let (closest_s, closest_hits) =
-        time_best(&|| rays.par_iter().filter(|r| bvh.closest_hit(r).is_some()).count() as u64);
-    let (any_s, any_hits) =
-        time_best(&|| rays.par_iter().filter(|r| bvh.occluded(&Ray { t_max: any_hit_len, ..**r })).count() as u64);
+    let rates = |bvh: &BvhTracer| {
+        let (closest_s, closest_hits) =
+            time_best(&|| rays.par_iter().filter(|r| bvh.closest_hit(r).is_some()).count() as u64);
+        let (any_s, any_hits) =
+            time_best(&|| rays.par_iter().filter(|r| bvh.occluded(&Ray { t_max: any_hit_len, ..**r })).count() as u64);
+        (closest_s, closest_hits, any_s, any_hits)
+    };
+    let (closest_s, closest_hits, any_s, any_hits) = rates(&bvh);
     let n = rays.len() as f64;
+    // Alpha testing's cost: the same rays through the same triangles, all opaque.
+    let cutouts = if bvh.cutout_triangle_count() > 0 {
+        let opaque = BvhTracer::build(&scene.mesh, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
+        let (c_s, c_hits, a_s, a_hits) = rates(&opaque);
+        json!({
+            "cutout_triangles": bvh.cutout_triangle_count(),
+            "opaque_closest_hit_mrays_per_s": n / c_s / 1e6,
+            "opaque_closest_hit_fraction": c_hits as f64 / n,
+            "opaque_any_hit_mrays_per_s": n / a_s / 1e6,
+            "opaque_any_hit_fraction": a_hits as f64 / n,
+            "cutout_closest_hit_time_ratio": closest_s / c_s,
+            "cutout_any_hit_time_ratio": any_s / a_s,
+        })
+    } else {
+        json!(null)
+    };
     Ok(json!({
         "scene": args.scene,
         "triangles": scene.mesh.triangle_count(),
@@ -266,6 +293,7 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
         "any_hit_max_distance_m": any_hit_len,
         "any_hit_mrays_per_s": n / any_s / 1e6,
         "any_hit_fraction": any_hits as f64 / n,
+        "alpha_cutouts": cutouts,
         "instancing": if args.moving_objects > 0 { bench_instancing(args, scene, &rays)? } else { json!(null) },
         "peak_rss_mib": peak_rss_mib(),
     }))

@@ -94,7 +94,7 @@ pub fn check_memory(bytes: u64, what: &str) -> Result<()> {
 }
 
 /// Loads the scene and resolves the camera and sky the arguments ask for.
-fn prepare(args: &SceneArgs, bytes_per_pixel: u64) -> Result<(Scene, Camera)> {
+fn prepare(args: &SceneArgs, set: &[String], bytes_per_pixel: u64) -> Result<(Scene, Camera)> {
     if args.width == 0 || args.height == 0 {
         bail!("--width and --height must be at least 1 (got {}×{})", args.width, args.height);
     }
@@ -106,6 +106,7 @@ fn prepare(args: &SceneArgs, bytes_per_pixel: u64) -> Result<(Scene, Camera)> {
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }
+    apply_scene_settings(&mut scene, set)?;
     if let Some(sky) = args.sky {
         if sky.min_element() < 0.0 {
             bail!("--sky {sky} must be non-negative");
@@ -162,9 +163,11 @@ fn render(args: &RenderArgs) -> Result<()> {
     }
     probegi_image::io::ImageFormat::from_path(&args.out)?;
     // G-buffer texel, frame and accumulation buffers.
-    let (scene, camera) = prepare(&args.scene, 160)?;
+    let (scene, camera) = prepare(&args.scene, &args.volume.set, 160)?;
     let v = &args.volume;
-    if args.gi == GiArg::None && (v.probes.is_some() || v.rays_per_probe.is_some() || !v.set.is_empty()) {
+    if args.gi == GiArg::None
+        && (v.probes.is_some() || v.rays_per_probe.is_some() || probe_settings(&v.set).next().is_some())
+    {
         bail!("--probes, --rays-per-probe and --set configure probes: they need --gi ddgi or --gi sh");
     }
     let gi = match args.gi {
@@ -275,6 +278,21 @@ fn render(args: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+/// The scene-level `--set` keys (`normal_maps`, `alpha_cutouts`) among `set`.
+pub fn apply_scene_settings(scene: &mut Scene, set: &[String]) -> Result<()> {
+    for a in set.iter().filter(|a| probegi_scene::scene_file::is_scene_setting(a)) {
+        probegi_scene::scene_file::apply_scene_setting(scene, a)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("--set {a}"))?;
+    }
+    Ok(())
+}
+
+/// The `--set` assignments that configure probes (not the scene).
+pub fn probe_settings(set: &[String]) -> impl Iterator<Item = &String> {
+    set.iter().filter(|a| !probegi_scene::scene_file::is_scene_setting(a))
+}
+
 /// Volume settings: the papers' defaults, then the scene file's `[volume]`, then
 /// `--probes`, `--rays-per-probe` and each `--set` in order.
 pub fn volume_settings(scene: &Scene, args: &VolumeArgs) -> Result<DdgiVolumeSettings> {
@@ -287,7 +305,7 @@ pub fn volume_settings(scene: &Scene, args: &VolumeArgs) -> Result<DdgiVolumeSet
     if let Some(r) = args.rays_per_probe {
         s.probe_rays_per_probe = r;
     }
-    for a in &args.set {
+    for a in probe_settings(&args.set) {
         s = probegi_scene::scene_file::apply_volume_override(&s, a)
             .map_err(anyhow::Error::msg)
             .with_context(|| format!("--set {a}"))?;
@@ -307,7 +325,7 @@ pub fn sh_settings(scene: &Scene, args: &VolumeArgs) -> Result<ShProbeSettings> 
     if args.rays_per_probe.is_some() {
         bail!("--rays-per-probe is a DDGI setting; SH probes trace no rays (see --set sh_screen_samples)");
     }
-    for a in &args.set {
+    for a in probe_settings(&args.set) {
         s = probegi_scene::scene_file::apply_sh_override(&s, a)
             .map_err(anyhow::Error::msg)
             .with_context(|| format!("--set {a}"))?;
@@ -327,10 +345,16 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
     if !args.frame.is_finite() {
         bail!("--frame must be a finite frame number");
     }
-    let (mut scene, camera) = prepare(&args.scene, 16)?;
+    let (mut scene, camera) = prepare(&args.scene, &args.set, 16)?;
+    if let Some(a) = probe_settings(&args.set).next() {
+        bail!(
+            "--set {a}: the reference takes scene settings only ({})",
+            probegi_scene::scene_file::SCENE_SETTING_KEYS.join(", ")
+        );
+    }
     let base = scene.clone();
     scene.set_frame_from(&base, args.frame);
-    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
     let settings = PathTracerSettings {
         pt_spp: args.spp,

@@ -9,6 +9,13 @@
 //! Moving geometry is instanced (dynamic-scenes issue): a BVH per moving object in
 //! its rest space, built once, under a top-level BVH over the instances' bounds
 //! that is rebuilt every frame; the static part keeps its one BVH.
+//!
+//! Alpha cutouts (`material.rs`) are tested inside traversal: the intersection
+//! closure of a cut-out triangle interpolates its UVs at the hit and reports a
+//! miss where the coverage is below the cutoff, so closest-hit and any-hit
+//! queries go on past it without re-tracing. Every ray kind goes through here.
+//! [`BvhTracer::for_scene`] reads the cutouts from the scene's materials;
+//! [`BvhTracer::build`] sees opaque triangles only.
 
 use std::time::{Duration, Instant};
 
@@ -39,6 +46,80 @@ impl Default for BvhSettings {
     }
 }
 
+/// A material's coverage for alpha testing, copied out of its texture so that
+/// the tracer needs no scene: the same bilinear filter and rule as
+/// `Material::opaque_at`.
+#[derive(Clone, Debug)]
+struct CoverageMask {
+    width: u32,
+    height: u32,
+    /// One unorm byte per texel; empty for a constant coverage of 1.
+    coverage: Vec<u8>,
+    factor: f32,
+    cutoff: f32,
+}
+
+impl CoverageMask {
+    fn opaque_at(&self, uv: Vec2) -> bool {
+        let c = if self.coverage.is_empty() {
+            1.0
+        } else {
+            crate::texture::Footprint::at(self.width, self.height, uv)
+                .blend(|i| self.coverage[i] as f32 * (1.0 / 255.0))
+        };
+        self.factor * c >= self.cutoff
+    }
+}
+
+/// The cut-out triangles of a scene.
+#[derive(Clone, Debug, Default)]
+struct Cutouts {
+    masks: Vec<CoverageMask>,
+    /// Per mesh triangle: index into `masks`, or `u32::MAX` for opaque. Empty: all opaque.
+    triangle_mask: Vec<u32>,
+}
+
+impl Cutouts {
+    fn of_scene(scene: &Scene) -> Self {
+        let mut masks = vec![];
+        let material_mask: Vec<u32> = scene
+            .materials
+            .iter()
+            .map(|m| {
+                let crate::material::AlphaMode::Mask { cutoff } = m.alpha_mode else { return u32::MAX };
+                if !m.has_cutout() {
+                    return u32::MAX;
+                }
+                let tex = m.alpha_texture.and_then(|t| scene.textures.get(t));
+                masks.push(CoverageMask {
+                    width: tex.map_or(1, |t| t.width),
+                    height: tex.map_or(1, |t| t.height),
+                    coverage: tex.map(|t| t.coverage_plane()).unwrap_or_default(),
+                    factor: m.alpha_factor,
+                    cutoff,
+                });
+                (masks.len() - 1) as u32
+            })
+            .collect();
+        if masks.is_empty() {
+            return Self::default();
+        }
+        let triangle_mask = scene.mesh.triangle_materials.iter().map(|&m| material_mask[m as usize]).collect();
+        Self { masks, triangle_mask }
+    }
+
+    fn mask_of(&self, triangle: u32) -> u32 {
+        self.triangle_mask.get(triangle as usize).copied().unwrap_or(u32::MAX)
+    }
+}
+
+/// A cut-out triangle's mask and corner UVs, in a BLAS.
+#[derive(Clone, Copy, Debug)]
+struct CutTriangle {
+    mask: u32,
+    uv: [Vec2; 3],
+}
+
 /// A BVH over some of the mesh's triangles, in one space (world for the static
 /// part, rest space for a moving object).
 struct Blas {
@@ -49,10 +130,13 @@ struct Blas {
     triangle_ids: Vec<u32>,
     /// Bounds of the triangles, `None` when empty.
     bounds: Option<(Vec3, Vec3)>,
+    /// Leaf order → index into `cut`, or `u32::MAX`; empty when nothing is cut out.
+    leaf_cut: Vec<u32>,
+    cut: Vec<CutTriangle>,
 }
 
 impl Blas {
-    fn build(mesh: &Mesh, ids: &[u32], pad_m: f32) -> Self {
+    fn build(mesh: &Mesh, ids: &[u32], pad_m: f32, cutouts: &Cutouts) -> Self {
         let tris: Vec<RtTriangle> = ids
             .iter()
             .map(|&i| {
@@ -61,7 +145,14 @@ impl Blas {
             })
             .collect();
         if tris.is_empty() {
-            return Self { bvh: CwBvh::default(), triangles: vec![], triangle_ids: vec![], bounds: None };
+            return Self {
+                bvh: CwBvh::default(),
+                triangles: vec![],
+                triangle_ids: vec![],
+                bounds: None,
+                leaf_cut: vec![],
+                cut: vec![],
+            };
         }
         let pad = Vec3A::splat(pad_m);
         let aabbs: Vec<Aabb> = tris
@@ -74,21 +165,49 @@ impl Blas {
         let bounds = aabbs.iter().skip(1).fold(aabbs[0], |acc, b| acc.union(b));
         let bvh = build_cwbvh(&aabbs, BvhBuildParams::medium_build(), &mut Duration::default());
         let triangles = bvh.primitive_indices.iter().map(|&i| tris[i as usize]).collect();
-        let triangle_ids = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
-        Self { bvh, triangles, triangle_ids, bounds: Some((bounds.min.into(), bounds.max.into())) }
+        let triangle_ids: Vec<u32> = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
+        let (mut leaf_cut, mut cut) = (vec![], vec![]);
+        if triangle_ids.iter().any(|&t| cutouts.mask_of(t) != u32::MAX) {
+            leaf_cut = triangle_ids
+                .iter()
+                .map(|&t| match cutouts.mask_of(t) {
+                    u32::MAX => u32::MAX,
+                    mask => {
+                        let uv = mesh.triangles[t as usize].map(|v| mesh.uvs[v as usize]);
+                        cut.push(CutTriangle { mask, uv });
+                        (cut.len() - 1) as u32
+                    }
+                })
+                .collect();
+        }
+        Self { bvh, triangles, triangle_ids, bounds: Some((bounds.min.into(), bounds.max.into())), leaf_cut, cut }
+    }
+
+    /// Distance to leaf `id` along `r`, `INFINITY` for a miss or a cut-out point.
+    #[inline(always)]
+    fn intersect(&self, masks: &[CoverageMask], r: &ObRay, id: usize) -> f32 {
+        let tri = &self.triangles[id];
+        let t = tri.intersect(r);
+        if t == f32::INFINITY || self.leaf_cut.is_empty() {
+            return t;
+        }
+        let Some(c) = self.cut.get(self.leaf_cut[id] as usize) else { return t };
+        let b = tri.compute_barycentric(r);
+        let uv = c.uv[0] * (1.0 - b.x - b.y) + c.uv[1] * b.x + c.uv[2] * b.y;
+        if masks[c.mask as usize].opaque_at(uv) { t } else { f32::INFINITY }
     }
 
     /// Closest hit along `r` (leaf index and t).
-    fn closest(&self, r: ObRay) -> Option<(u32, f32)> {
+    fn closest(&self, masks: &[CoverageMask], r: ObRay) -> Option<(u32, f32)> {
         if self.triangles.is_empty() {
             return None;
         }
         let mut hit = ObRayHit::none();
-        self.bvh.ray_traverse(r, &mut hit, |r, id| self.triangles[id].intersect(r)).then_some((hit.primitive_id, hit.t))
+        self.bvh.ray_traverse(r, &mut hit, |r, id| self.intersect(masks, r, id)).then_some((hit.primitive_id, hit.t))
     }
 
-    fn occluded(&self, r: ObRay) -> bool {
-        !self.triangles.is_empty() && !self.bvh.ray_traverse_miss(r, |r, id| self.triangles[id].intersect(r))
+    fn occluded(&self, masks: &[CoverageMask], r: ObRay) -> bool {
+        !self.triangles.is_empty() && !self.bvh.ray_traverse_miss(r, |r, id| self.intersect(masks, r, id))
     }
 
     /// The public hit record of leaf `leaf` hit by `r` (in this BLAS's space) at `t`.
@@ -138,24 +257,38 @@ pub struct BvhTracer {
     /// The instances in their rest pose (what this tracer traces by itself).
     rest: Option<Tlas>,
     pad_rel: f32,
+    cutouts: Cutouts,
     pub build_time: Duration,
 }
 
 impl BvhTracer {
-    /// One BVH over every triangle of `mesh`: geometry that never moves.
+    /// One BVH over every triangle of `mesh`, all opaque: geometry that never moves.
     pub fn build(mesh: &Mesh, settings: BvhSettings) -> Self {
+        Self::build_static(mesh, Cutouts::default(), settings)
+    }
+
+    fn build_static(mesh: &Mesh, cutouts: Cutouts, settings: BvhSettings) -> Self {
         let start = Instant::now();
         let pad = pad_m(mesh.bounds(), settings);
         let ids: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
-        let blases = vec![Blas::build(mesh, &ids, pad)];
-        Self { blases, object_ids: vec![], rest: None, pad_rel: settings.bvh_aabb_pad_rel, build_time: start.elapsed() }
+        let blases = vec![Blas::build(mesh, &ids, pad, &cutouts)];
+        Self {
+            blases,
+            object_ids: vec![],
+            rest: None,
+            pad_rel: settings.bvh_aabb_pad_rel,
+            cutouts,
+            build_time: start.elapsed(),
+        }
     }
 
     /// A static BVH over everything that does not move, plus one per moving object
-    /// of `scene` (in the pose `scene` is in, which the loaders leave at rest).
+    /// of `scene` (in the pose `scene` is in, which the loaders leave at rest), with
+    /// the alpha cutouts of the scene's materials.
     pub fn for_scene(scene: &Scene, settings: BvhSettings) -> Self {
+        let cutouts = Cutouts::of_scene(scene);
         if !scene.has_moving_geometry() {
-            return Self::build(&scene.mesh, settings);
+            return Self::build_static(&scene.mesh, cutouts, settings);
         }
         let start = Instant::now();
         let mesh = &scene.mesh;
@@ -166,13 +299,19 @@ impl BvhTracer {
         for (i, o) in scene.objects.iter().enumerate().filter(|(_, o)| o.is_animated()) {
             let ids: Vec<u32> = o.triangles().map(|t| t as u32).collect();
             o.triangles().for_each(|t| moving[t] = true);
-            blases.push(Blas::build(mesh, &ids, pad));
+            blases.push(Blas::build(mesh, &ids, pad, &cutouts));
             object_ids.push(i);
         }
         let static_ids: Vec<u32> = (0..mesh.triangle_count() as u32).filter(|&t| !moving[t as usize]).collect();
-        blases.insert(0, Blas::build(mesh, &static_ids, pad));
-        let mut tracer =
-            Self { blases, object_ids, rest: None, pad_rel: settings.bvh_aabb_pad_rel, build_time: Duration::ZERO };
+        blases.insert(0, Blas::build(mesh, &static_ids, pad, &cutouts));
+        let mut tracer = Self {
+            blases,
+            object_ids,
+            rest: None,
+            pad_rel: settings.bvh_aabb_pad_rel,
+            cutouts,
+            build_time: Duration::ZERO,
+        };
         let rest = vec![None; tracer.object_ids.len()];
         tracer.rest = Some(tracer.build_tlas(&rest));
         tracer.build_time = start.elapsed();
@@ -181,6 +320,11 @@ impl BvhTracer {
 
     pub fn triangle_count(&self) -> usize {
         self.blases.iter().map(|b| b.triangles.len()).sum()
+    }
+
+    /// Triangles whose hits are alpha-tested.
+    pub fn cutout_triangle_count(&self) -> usize {
+        self.blases.iter().map(|b| b.cut.len()).sum()
     }
 
     /// Moving objects this tracer instances.
@@ -220,8 +364,9 @@ impl BvhTracer {
 
     fn closest_in(&self, tlas: Option<&Tlas>, ray: &Ray) -> Option<RayHit> {
         let r = to_obvhs(ray);
+        let masks = &self.cutouts.masks[..];
         let Some(tlas) = tlas else {
-            let (leaf, t) = self.blases[0].closest(r)?;
+            let (leaf, t) = self.blases[0].closest(masks, r)?;
             return Some(self.blases[0].hit(leaf, &r, t));
         };
         if tlas.instances.is_empty() {
@@ -232,7 +377,7 @@ impl BvhTracer {
         tlas.bvh.ray_traverse(r, &mut hit, |r, id| {
             let inst = &tlas.instances[id];
             let local = inst.to_local(r);
-            match self.blases[inst.blas].closest(local) {
+            match self.blases[inst.blas].closest(masks, local) {
                 Some((leaf, t)) => {
                     best = Some((inst.blas, leaf, local, t));
                     t
@@ -246,13 +391,14 @@ impl BvhTracer {
 
     fn occluded_in(&self, tlas: Option<&Tlas>, ray: &Ray) -> bool {
         let r = to_obvhs(ray);
-        let Some(tlas) = tlas else { return self.blases[0].occluded(r) };
+        let masks = &self.cutouts.masks[..];
+        let Some(tlas) = tlas else { return self.blases[0].occluded(masks, r) };
         if tlas.instances.is_empty() {
             return false;
         }
         !tlas.bvh.ray_traverse_miss(r, |r, id| {
             let inst = &tlas.instances[id];
-            if self.blases[inst.blas].occluded(inst.to_local(r)) { r.tmin } else { f32::INFINITY }
+            if self.blases[inst.blas].occluded(masks, inst.to_local(r)) { r.tmin } else { f32::INFINITY }
         })
     }
 }
@@ -335,7 +481,7 @@ impl RayTracer for BvhTracer {
             && self.object_ids.iter().all(|&i| posed.objects.get(i).is_some_and(|o| o.is_animated()));
         if !follows {
             let settings = BvhSettings { bvh_aabb_pad_rel: self.pad_rel };
-            return Some(Box::new(BvhTracer::build(&posed.mesh, settings)));
+            return Some(Box::new(BvhTracer::build_static(&posed.mesh, self.cutouts.clone(), settings)));
         }
         let xfs: Vec<Option<Affine3A>> =
             self.object_ids.iter().map(|&i| Some(posed.objects[i].world_from_rest(frame))).collect();
@@ -358,6 +504,7 @@ mod tests {
             uvs: vec![glam::Vec2::ZERO; 3],
             triangles: vec![[0, 1, 2]],
             triangle_materials: vec![0],
+            ..Default::default()
         }
     }
 

@@ -27,14 +27,14 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use glam::{Mat4, Quat, Vec2, Vec3};
+use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
 use probegi_core::camera::Camera;
 
 use crate::animation::{KeyClock, ObjectAnimation, SceneObject, TransformKeyframe};
 use crate::error::{Result, SceneError};
 use crate::light::{LightKind, PunctualLight};
 use crate::material::Material;
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, NormalSource};
 use crate::scene::Scene;
 use crate::texture::Texture;
 
@@ -605,6 +605,9 @@ impl Loader<'_> {
             if let Some(a) = prim.get(&Semantic::Normals) {
                 check(&a, &[(T::F32, D::Vec3)], "NORMAL")?;
             }
+            if let Some(a) = prim.get(&Semantic::Tangents) {
+                check(&a, &[(T::F32, D::Vec4)], "TANGENT")?;
+            }
             if let Some(a) = prim.get(&Semantic::TexCoords(0)) {
                 check(&a, &[(T::F32, D::Vec2), (T::U8, D::Vec2), (T::U16, D::Vec2)], "TEXCOORD_0")?;
             }
@@ -641,17 +644,36 @@ impl Loader<'_> {
         if uvs.len() != n || normals.as_ref().is_some_and(|v| v.len() != n) {
             return Err(self.err(format!("{what}: attribute counts differ from POSITION ({n})")));
         }
+        // glTF §3.7.2.1: without NORMAL, flat normals, and TANGENT is ignored.
+        let tangents: Vec<Vec4> = match (&normals, reader.read_tangents()) {
+            (Some(_), Some(t)) => t.map(Vec4::from).collect(),
+            _ => vec![],
+        };
         let material = self.material(prim.material())?;
+        if !tangents.is_empty() && tangents.len() != n {
+            return Err(self.err(format!("{what}: attribute counts differ from POSITION ({n})")));
+        }
         let mut local = Mesh {
             positions,
             normals: normals.clone().unwrap_or_else(|| vec![Vec3::ZERO; n]),
             uvs,
             triangles: indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
             triangle_materials: vec![material; indices.len() / 3],
+            tangents: tangents.into_iter().map(|t| if t.is_finite() { t } else { Vec4::ZERO }).collect(),
         };
         let needs: Vec<bool> = local.normals.iter().map(|v| !(v.is_finite() && v.length_squared() > 0.0)).collect();
         if needs.iter().any(|&b| b) {
-            local.generate_normals(&needs);
+            local.derive_normals(&vec![NormalSource::Flat; local.triangle_count()], &needs, 180.0);
+        }
+        for v in &mut local.normals {
+            *v = v.normalize_or(Vec3::Y);
+        }
+        let normal_mapped = self.scene.materials[material as usize].normal_texture.is_some();
+        if normal_mapped && local.tangents.iter().all(|t| *t == Vec4::ZERO) && local.generate_tangents().is_none() {
+            self.scene.warnings.push(format!(
+                "{}: {what}: MikkTSpace could not build tangents; its normal map is ignored",
+                self.path.display()
+            ));
         }
         local.transform(world);
         self.scene.mesh.append(&local, 0);
@@ -669,6 +691,18 @@ impl Loader<'_> {
             Some(info) => self.texture(info.texture(), info.tex_coord())?,
             None => None,
         };
+        let (normal_texture, normal_scale) = match mat.normal_texture() {
+            Some(info) => (self.texture(info.texture(), info.tex_coord())?, info.scale()),
+            None => (None, 1.0),
+        };
+        use crate::material::{AlphaMode, DEFAULT_ALPHA_CUTOFF};
+        let alpha_mode = match mat.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+            gltf::material::AlphaMode::Mask => {
+                AlphaMode::Mask { cutoff: mat.alpha_cutoff().unwrap_or(DEFAULT_ALPHA_CUTOFF) }
+            }
+            gltf::material::AlphaMode::Blend => AlphaMode::Mask { cutoff: DEFAULT_ALPHA_CUTOFF },
+        };
         let emissive_texture = match mat.emissive_texture() {
             Some(info) => self.texture(info.texture(), info.tex_coord())?,
             None => None,
@@ -685,6 +719,12 @@ impl Loader<'_> {
             specular_color: Vec3::ZERO,
             specular_exponent: 0.0,
             specular_model: crate::material::SpecularModel::MetallicRoughness,
+            alpha_mode,
+            alpha_factor: bc[3],
+            alpha_texture: base_color_texture.filter(|&t| self.scene.textures[t].alpha.is_some()),
+            normal_texture,
+            normal_scale,
+            ..Material::default_grey("")
         };
         self.scene.materials.push(m);
         let id = (self.scene.materials.len() - 1) as u32;
@@ -729,9 +769,14 @@ impl Loader<'_> {
                 _ => [p[0], p[1], p[2]],
             })
             .collect();
-        let t =
+        let mismatch = || self.err(format!("image {img_index}: pixel data does not match its size"));
+        let mut t =
             Texture::from_rgb8(data.width, data.height, texels, format!("{} image {img_index}", self.path.display()))
-                .ok_or_else(|| self.err(format!("image {img_index}: pixel data does not match its size")))?;
+                .ok_or_else(mismatch)?;
+        if channels == 2 || channels == 4 {
+            let alpha = data.pixels.chunks_exact(channels).map(|p| p[channels - 1]).collect();
+            t = t.with_alpha(alpha).ok_or_else(mismatch)?;
+        }
         self.scene.textures.push(t);
         let id = Some(self.scene.textures.len() - 1);
         self.texture_ids.insert(img_index, id);

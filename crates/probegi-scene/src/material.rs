@@ -1,7 +1,22 @@
 //! Materials: glTF metallic-roughness semantics, with the OBJ/MTL fields kept
-//! beside them. In this release surfaces shade as two-sided Lambertian with
-//! `base_color`; roughness, metallic and the MTL specular fields are stored for
-//! the glossy work that follows.
+//! beside them. Surfaces shade as two-sided Lambertian with `base_color`, plus
+//! the GGX lobe of [`SpecularModel`].
+//!
+//! Alpha cutouts ([`AlphaMode::Mask`]): coverage = `alpha_factor` × the alpha
+//! texture's coverage (its alpha channel, else its grey level), filtered
+//! bilinearly in unorm (not sRGB-decoded); a point is opaque when coverage ≥
+//! the cutoff, else every ray passes through it (the tracers test it inside
+//! traversal, see `bvh.rs`). glTF: `alphaMode` MASK with `alphaCutoff`
+//! (default 0.5), BLEND treated as MASK at 0.5 (a ray tracer without ordered
+//! compositing; RTXGI and most path tracers do the same for any-hit alpha),
+//! OPAQUE ignores alpha. MTL: `map_d`, else the alpha channel of `map_Kd`
+//! when it has one (the convention of most OBJ viewers), times `d` (or
+//! 1 − `Tr`), cut at 0.5.
+//!
+//! Normal perturbation (`Scene::surface_point`): glTF `normalTexture` in
+//! tangent space with its `scale`; MTL `bump`/`map_bump` height maps with
+//! `-bm` as a displacement of `bm × height` scene units along the normal (the
+//! convention of pbrt's and Mitsuba's bump maps).
 
 use glam::{Vec2, Vec3};
 use probegi_core::bsdf::SurfaceBsdf;
@@ -18,6 +33,18 @@ pub enum SpecularModel {
     /// glTF metallic-roughness: F0 = lerp(0.04, base, metallic), diffuse = base·(1 − metallic).
     MetallicRoughness,
 }
+
+/// How a material's alpha is used.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AlphaMode {
+    /// Alpha ignored: every point is opaque.
+    Opaque,
+    /// Opaque where coverage ≥ `cutoff`, absent elsewhere.
+    Mask { cutoff: f32 },
+}
+
+/// The cutoff glTF gives `alphaCutoff` when absent, and the one MTL cutouts use.
+pub const DEFAULT_ALPHA_CUTOFF: f32 = 0.5;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
@@ -42,6 +69,19 @@ pub struct Material {
     /// MTL `Ns` (Phong exponent), kept verbatim.
     pub specular_exponent: f32,
     pub specular_model: SpecularModel,
+    pub alpha_mode: AlphaMode,
+    /// Constant coverage factor (glTF `baseColorFactor.a`, MTL `d` or 1 − `Tr`).
+    pub alpha_factor: f32,
+    /// Index into `Scene::textures` whose coverage multiplies `alpha_factor`.
+    pub alpha_texture: Option<usize>,
+    /// Tangent-space normal map (glTF `normalTexture`), read as unorm.
+    pub normal_texture: Option<usize>,
+    /// glTF `normalTexture.scale`: scales the map's X and Y.
+    pub normal_scale: f32,
+    /// Height map (MTL `bump` / `map_bump`), grey level read as unorm.
+    pub bump_texture: Option<usize>,
+    /// MTL `-bm`: scene units of displacement per unit of height.
+    pub bump_multiplier: f32,
 }
 
 impl Material {
@@ -60,7 +100,54 @@ impl Material {
             specular_color: Vec3::ZERO,
             specular_exponent: 0.0,
             specular_model: SpecularModel::None,
+            alpha_mode: AlphaMode::Opaque,
+            alpha_factor: 1.0,
+            alpha_texture: None,
+            normal_texture: None,
+            normal_scale: 1.0,
+            bump_texture: None,
+            bump_multiplier: 1.0,
         }
+    }
+
+    /// Shifts every texture index by `offset` (the material's textures moved).
+    pub fn offset_textures(&mut self, offset: usize) {
+        for t in [
+            &mut self.base_color_texture,
+            &mut self.emissive_texture,
+            &mut self.alpha_texture,
+            &mut self.normal_texture,
+            &mut self.bump_texture,
+        ] {
+            *t = t.map(|i| i + offset);
+        }
+    }
+
+    /// Whether some points of this material are cut out.
+    pub fn has_cutout(&self) -> bool {
+        match self.alpha_mode {
+            AlphaMode::Opaque => false,
+            AlphaMode::Mask { cutoff } => self.alpha_texture.is_some() || self.alpha_factor < cutoff,
+        }
+    }
+
+    /// Whether the point at `uv` is opaque (see the module docs).
+    pub fn opaque_at(&self, textures: &[Texture], uv: Vec2) -> bool {
+        match self.alpha_mode {
+            AlphaMode::Opaque => true,
+            AlphaMode::Mask { cutoff } => {
+                let coverage = match self.alpha_texture.and_then(|t| textures.get(t)) {
+                    Some(t) => t.sample_coverage(uv),
+                    None => 1.0,
+                };
+                self.alpha_factor * coverage >= cutoff
+            }
+        }
+    }
+
+    /// Whether a normal or bump map perturbs this material's shading normals.
+    pub fn perturbs_normals(&self) -> bool {
+        self.normal_texture.is_some() || self.bump_texture.is_some()
     }
 
     pub fn diffuse(name: &str, base_color: Vec3) -> Self {

@@ -1,11 +1,17 @@
 //! Wavefront OBJ/MTL loader, written for the McGuire Computer Graphics Archive
 //! scenes: `v`/`vt`/`vn`/`f` with negative (relative) indices and polygons of any
-//! size (fan-triangulated), `usemtl`, `mtllib`; MTL `Kd`, `Ke`, `Ks`, `Ns`,
-//! `map_Kd`, `map_Ke`. Everything else (`g`, `o`, `s`, `l`, `Ka`, `illum`, bump
-//! maps, ...) is ignored.
+//! size (fan-triangulated), `s`, `usemtl`, `mtllib`; MTL `Kd`, `Ke`, `Ks`, `Ns`,
+//! `d`, `Tr`, `map_Kd`, `map_Ke`, `map_d`, `bump`/`map_bump` (with `-bm`).
+//! Everything else (`g`, `o`, `l`, `Ka`, `illum`, ...) is ignored.
+//!
+//! Shading normals follow the OBJ specification: a `vn` is used as given;
+//! corners without one are smoothed within their smoothing group (`s N`,
+//! N ≠ 0: angle-weighted normals of the group's faces that share the corner's
+//! position), and take the face normal where smoothing is off (`s 0`,
+//! `s off`, or no `s` statement at all).
 //!
 //! Conventions: texture `v` is flipped to the top-left origin the textures use;
-//! vertices without `vn` get angle-weighted normals; a missing `.mtl`, unknown
+//! cutouts and bump maps as in `material.rs`; a missing `.mtl`, unknown
 //! material or missing texture degrades to grey / factor-only with a warning; any
 //! malformed line is an error naming the file and line.
 
@@ -16,8 +22,8 @@ use glam::{Vec2, Vec3};
 
 use crate::error::{Result, SceneError};
 use crate::file_lookup::resolve_case_insensitive;
-use crate::material::Material;
-use crate::mesh::Mesh;
+use crate::material::{AlphaMode, DEFAULT_ALPHA_CUTOFF, Material};
+use crate::mesh::{Mesh, NormalSource};
 use crate::scene::Scene;
 use crate::texture::Texture;
 
@@ -143,6 +149,9 @@ pub fn load_obj(path: &Path) -> Result<Scene> {
     let mut vertex_of: HashMap<(u32, u32, u32), u32> = HashMap::new();
     let mut current_material: Option<u32> = None;
     let mut face: Vec<u32> = Vec::with_capacity(8);
+    // Smoothing group of the faces that follow; 0 = off (the specification's default).
+    let mut smoothing_group: u32 = 0;
+    let mut normal_sources: Vec<NormalSource> = Vec::new();
 
     for (line_idx, raw) in text.lines().enumerate() {
         let ctx = LineCtx { path, line: line_idx + 1 };
@@ -194,10 +203,24 @@ pub fn load_obj(path: &Path) -> Result<Scene> {
                         m
                     }
                 };
+                let source = match smoothing_group {
+                    0 => NormalSource::Flat,
+                    g => NormalSource::Smooth(g),
+                };
                 for k in 1..face.len() - 1 {
                     mesh.triangles.push([face[0], face[k], face[k + 1]]);
                     mesh.triangle_materials.push(mat);
+                    normal_sources.push(source);
                 }
+            }
+            "s" => {
+                smoothing_group = match toks.next() {
+                    Some("off") | Some("0") => 0,
+                    Some(t) => t
+                        .parse::<u32>()
+                        .map_err(|_| ctx.err(format!("smoothing group `{t}` is not `off` or a whole number")))?,
+                    None => return Err(ctx.err("`s` without a smoothing group")),
+                };
             }
             "usemtl" => {
                 let name = line["usemtl".len()..].trim();
@@ -230,7 +253,9 @@ pub fn load_obj(path: &Path) -> Result<Scene> {
     if mesh.triangles.is_empty() {
         return Err(SceneError::Invalid { path: path.to_path_buf(), message: "no faces".into() });
     }
-    mesh.generate_normals(&needs_normal);
+    if needs_normal.iter().any(|&b| b) {
+        mesh.derive_normals(&normal_sources, &needs_normal, 180.0);
+    }
     scene.mesh = mesh;
     Ok(scene)
 }
@@ -253,6 +278,7 @@ fn load_mtl(path: &Path, scene: &mut Scene, ids: &mut HashMap<String, u32>, text
     let text = read_text_lossy(path)?;
     let base_dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut current: Option<usize> = None;
+    let first_material = scene.materials.len();
     for (line_idx, raw) in text.lines().enumerate() {
         let ctx = LineCtx { path, line: line_idx + 1 };
         let line = raw.split('#').next().unwrap_or("").trim();
@@ -267,13 +293,17 @@ fn load_mtl(path: &Path, scene: &mut Scene, ids: &mut HashMap<String, u32>, text
             // MTL's implicit Kd is 0.8 (the spec's default).
             m.base_color_factor = Vec3::splat(0.8);
             m.specular_model = crate::material::SpecularModel::Mtl;
+            m.alpha_mode = AlphaMode::Mask { cutoff: DEFAULT_ALPHA_CUTOFF };
             scene.materials.push(m);
             current = Some(scene.materials.len() - 1);
             ids.insert(name.to_string(), (scene.materials.len() - 1) as u32);
             continue;
         }
         let Some(cur) = current else {
-            if matches!(keyword, "Kd" | "Ke" | "Ks" | "Ns" | "map_Kd" | "map_Ke") {
+            if matches!(
+                keyword,
+                "Kd" | "Ke" | "Ks" | "Ns" | "d" | "Tr" | "map_Kd" | "map_Ke" | "map_d" | "bump" | "map_bump"
+            ) {
                 return Err(ctx.err(format!("`{keyword}` before any `newmtl`")));
             }
             continue;
@@ -287,23 +317,53 @@ fn load_mtl(path: &Path, scene: &mut Scene, ids: &mut HashMap<String, u32>, text
                 scene.materials[cur].specular_exponent = ns;
                 scene.materials[cur].roughness = (2.0 / (ns + 2.0)).powf(0.25);
             }
-            "map_Kd" | "map_Ke" => {
+            "d" | "Tr" => {
+                let v = ctx.float(toks.next(), keyword)?;
+                if !(0.0..=1.0).contains(&v) {
+                    return Err(ctx.err(format!("`{keyword}` {v} is outside [0, 1]")));
+                }
+                scene.materials[cur].alpha_factor = if keyword == "d" { v } else { 1.0 - v };
+            }
+            "map_Kd" | "map_Ke" | "map_d" | "bump" | "map_bump" => {
                 // Options (`-bm 1`, `-s u v w`, ...) precede the file name, which is
                 // the rest of the line (names may contain spaces).
-                let Some(name) = texture_file_name(&line[keyword.len()..]) else {
+                let args = &line[keyword.len()..];
+                let Some(name) = texture_file_name(args) else {
                     return Err(ctx.err(format!("`{keyword}` without a file name")));
                 };
                 let tex = textures.get(scene, &base_dir, name, path)?;
-                if keyword == "map_Kd" {
-                    scene.materials[cur].base_color_texture = tex;
-                } else {
-                    scene.materials[cur].emissive_texture = tex;
+                let m = &mut scene.materials[cur];
+                match keyword {
+                    "map_Kd" => m.base_color_texture = tex,
+                    "map_Ke" => m.emissive_texture = tex,
+                    "map_d" => m.alpha_texture = tex,
+                    _ => {
+                        m.bump_texture = tex;
+                        m.bump_multiplier = bump_multiplier(&ctx, args)?;
+                    }
                 }
             }
             _ => {}
         }
     }
+    // Without `map_d`, the alpha channel of `map_Kd` cuts out (most OBJ viewers' rule).
+    for m in &mut scene.materials[first_material..] {
+        if m.alpha_texture.is_none() {
+            m.alpha_texture = m.base_color_texture.filter(|&t| scene.textures[t].alpha.is_some());
+        }
+    }
     Ok(())
+}
+
+/// The `-bm` value of a bump statement's options, 1 when absent.
+fn bump_multiplier(ctx: &LineCtx<'_>, args: &str) -> Result<f32> {
+    let mut toks = args.split_whitespace();
+    while let Some(t) = toks.next() {
+        if t == "-bm" {
+            return ctx.float(toks.next(), "-bm multiplier");
+        }
+    }
+    Ok(1.0)
 }
 
 /// An MTL colour: `r g b`, or a single value for grey. Negative components are an error.

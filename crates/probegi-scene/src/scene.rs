@@ -96,6 +96,21 @@ impl Default for Scene {
     }
 }
 
+/// ∂p/∂u and ∂p/∂v of a triangle's linear UV mapping (pbrt's
+/// `Triangle::Intersect`); `None` when its UVs are degenerate.
+fn uv_derivatives(p: [Vec3; 3], uv: [Vec2; 3]) -> Option<(Vec3, Vec3)> {
+    let (duv02, duv12) = (uv[0] - uv[2], uv[1] - uv[2]);
+    let (dp02, dp12) = (p[0] - p[2], p[1] - p[2]);
+    let det = duv02.x * duv12.y - duv02.y * duv12.x;
+    if det.abs() < 1e-12 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let dpdu = (dp02 * duv12.y - dp12 * duv02.y) * inv;
+    let dpdv = (dp12 * duv02.x - dp02 * duv12.x) * inv;
+    (dpdu.is_finite() && dpdv.is_finite()).then_some((dpdu, dpdv))
+}
+
 /// The largest vertex coordinate a scene may have, metres.
 pub const MAX_COORDINATE_M: f32 = 1e15;
 
@@ -118,6 +133,14 @@ impl Scene {
             shading_normal = -shading_normal;
         }
         let uv = self.mesh.uvs[ia] * w + self.mesh.uvs[ib] * b.x + self.mesh.uvs[ic] * b.y;
+        let material = &self.materials[self.mesh.triangle_materials[tri] as usize];
+        if material.perturbs_normals() {
+            let perturbed = self.perturbed_normal(material, [ia, ib, ic], Vec3::new(w, b.x, b.y), shading_normal, uv);
+            // A perturbed normal below the surface would shade light from inside it.
+            if perturbed.dot(geometric_normal) > 1e-3 {
+                shading_normal = perturbed;
+            }
+        }
         SurfacePoint {
             position,
             geometric_normal,
@@ -127,6 +150,49 @@ impl Scene {
             triangle: hit.triangle,
             front_face: !hit.backface,
         }
+    }
+
+    /// The shading normal `n` at `uv` perturbed by the material's normal map
+    /// (tangent space: the interpolated tangent, made orthogonal to `n`, and
+    /// bitangent = sign · n × tangent, glTF's convention) or height map (the
+    /// surface displaced by `bump_multiplier × height` along `n`, with
+    /// ∂p/∂u and ∂p/∂v from the triangle's UV mapping, as pbrt and Mitsuba's
+    /// `bumpmap` do). Returns `n` where the frame is degenerate.
+    fn perturbed_normal(&self, material: &Material, v: [usize; 3], bary: Vec3, n: Vec3, uv: Vec2) -> Vec3 {
+        let m = &self.mesh;
+        let [a, b, c] = v;
+        if let Some(t) = material.normal_texture.and_then(|t| self.textures.get(t)) {
+            let tangents = [a, b, c].map(|i| m.tangents.get(i).copied().unwrap_or(glam::Vec4::ZERO));
+            let tan =
+                tangents[0].truncate() * bary.x + tangents[1].truncate() * bary.y + tangents[2].truncate() * bary.z;
+            let tan = (tan - n * n.dot(tan)).normalize_or_zero();
+            let sign = if tangents[0].w < 0.0 { -1.0 } else { 1.0 };
+            if tan == Vec3::ZERO {
+                return n;
+            }
+            let bitangent = n.cross(tan) * sign;
+            let s = t.sample_raw(uv) * 2.0 - Vec3::ONE;
+            let local = Vec3::new(s.x * material.normal_scale, s.y * material.normal_scale, s.z);
+            return (tan * local.x + bitangent * local.y + n * local.z).normalize_or(n);
+        }
+        if let Some(t) = material.bump_texture.and_then(|t| self.textures.get(t)) {
+            let Some((dpdu, dpdv)) =
+                uv_derivatives([m.positions[a], m.positions[b], m.positions[c]], [m.uvs[a], m.uvs[b], m.uvs[c]])
+            else {
+                return n;
+            };
+            let (_, grad) = t.sample_height_gradient(uv);
+            let grad = grad * material.bump_multiplier;
+            // Mitsuba's bumpmap: replace the normal component of each derivative by the height's slope.
+            let dpdu = dpdu + n * (grad.x - n.dot(dpdu));
+            let dpdv = dpdv + n * (grad.y - n.dot(dpdv));
+            let bumped = dpdu.cross(dpdv).normalize_or_zero();
+            if bumped == Vec3::ZERO {
+                return n;
+            }
+            return if bumped.dot(n) < 0.0 { -bumped } else { bumped };
+        }
+        n
     }
 
     pub fn material(&self, id: u32) -> &Material {
@@ -149,6 +215,20 @@ impl Scene {
     /// Whether anything in the scene changes from frame to frame.
     pub fn is_animated(&self) -> bool {
         self.lights.iter().any(|l| !l.keyframes.is_empty()) || self.has_moving_geometry()
+    }
+
+    /// Re-derives shading normals of every triangle by `rule` (see
+    /// [`Mesh::derive_normals`]), keeping the objects' vertex ranges.
+    pub fn derive_normals(&mut self, source: crate::mesh::NormalSource, crease_angle_deg: f32) {
+        let sources = vec![source; self.mesh.triangle_count()];
+        self.mesh.derive_normals(&sources, &[], crease_angle_deg);
+        // New vertices are numbered in triangle order and objects own contiguous
+        // triangles and their vertices, so each object's vertices stay contiguous.
+        for o in &mut self.objects {
+            let used = o.triangles().flat_map(|t| self.mesh.triangles[t]);
+            let (lo, hi) = used.fold((u32::MAX, 0), |(lo, hi), v| (lo.min(v), hi.max(v + 1)));
+            (o.first_vertex, o.vertex_count) = if lo == u32::MAX { (0, 0) } else { (lo, hi - lo) };
+        }
     }
 
     /// Appends geometry (`add_geometry` writes it into the mesh) as one object that
@@ -212,6 +292,13 @@ impl Scene {
                 self.mesh.positions[v] = xf.transform_point3(base.mesh.positions[v]);
                 self.mesh.normals[v] = (normal_matrix * base.mesh.normals[v]).normalize_or(Vec3::Y);
             }
+            if !base.mesh.tangents.is_empty() {
+                let xf = glam::Mat4::from(xf);
+                let mirror = if xf.determinant() < 0.0 { -1.0 } else { 1.0 };
+                for v in o.vertices() {
+                    self.mesh.tangents[v] = crate::mesh::transformed_tangent(xf, base.mesh.tangents[v], mirror);
+                }
+            }
         }
     }
 
@@ -269,7 +356,10 @@ impl Scene {
 
     pub fn validate(&self) -> Result<(), String> {
         let m = &self.mesh;
-        if m.normals.len() != m.positions.len() || m.uvs.len() != m.positions.len() {
+        if m.normals.len() != m.positions.len()
+            || m.uvs.len() != m.positions.len()
+            || !(m.tangents.is_empty() || m.tangents.len() == m.positions.len())
+        {
             return Err("per-vertex arrays differ in length".into());
         }
         if m.triangle_materials.len() != m.triangles.len() {

@@ -13,6 +13,15 @@
 //! translation = [0.0, 0.0, 0.0]                   # metres
 //! rotation_deg = [0.0, 90.0, 0.0]                 # Euler X, Y, Z, degrees
 //! scale = [1.0, 1.0, 1.0]
+//! normals = "file"                                # file (default) | flat | smooth
+//! crease_angle_deg = 180.0                        # "smooth": faces further apart keep their edge
+//!
+//! [[instances]]                 # copies of one file, placed by a list or a grid of transforms
+//! path = "shared:scenes/scrub-pine/scrubPine.obj"
+//! scale = [0.01, 0.01, 0.01]    # translation / rotation_deg / scale: each copy's own placement first
+//! transforms = [{ translation = [0.0, 0.0, 0.0], rotation_deg = [0.0, 30.0, 0.0] }]
+//! # or: grid = { count = [10, 10], spacing_m = [4.0, 4.0], origin_m = [-18.0, 0.0, -18.0],
+//! #              jitter_m = 1.0, random_yaw = true, scale_range = [0.8, 1.2], seed = 1 }
 //!
 //! [[objects]]                   # one rigid object: a box, a polygon or a file
 //! name = "occluder"
@@ -63,6 +72,9 @@ use crate::scene::Scene;
 pub struct SceneFile {
     #[serde(default)]
     pub meshes: Vec<MeshRef>,
+    /// Copies of one file each.
+    #[serde(default)]
+    pub instances: Vec<InstanceEntry>,
     #[serde(default)]
     pub lights: Vec<PunctualLight>,
     #[serde(default)]
@@ -147,10 +159,159 @@ pub struct MeshRef {
     pub rotation_deg: Vec3,
     #[serde(default = "one")]
     pub scale: Vec3,
+    /// Shading normals: as the file says, or overridden.
+    #[serde(default)]
+    pub normals: NormalsRule,
+    /// For `normals = "smooth"`: faces turned further apart than this keep a
+    /// hard edge; 180 smooths across every face sharing a position.
+    #[serde(default = "no_crease")]
+    pub crease_angle_deg: f32,
 }
 
 fn one() -> Vec3 {
     Vec3::ONE
+}
+
+fn no_crease() -> f32 {
+    180.0
+}
+
+/// A mesh entry's shading normals.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NormalsRule {
+    /// The format's rule (OBJ: `vn`, smoothing groups, else flat; glTF: `NORMAL`, else flat).
+    #[default]
+    File,
+    /// Face normals everywhere.
+    Flat,
+    /// Angle-weighted normals across shared positions, within the crease angle.
+    Smooth,
+}
+
+impl NormalsRule {
+    fn apply(self, scene: &mut Scene, crease_angle_deg: f32) -> std::result::Result<(), String> {
+        if !(crease_angle_deg.is_finite() && crease_angle_deg >= 0.0) {
+            return Err(format!("crease_angle_deg must be a non-negative angle, got {crease_angle_deg}"));
+        }
+        match self {
+            NormalsRule::File => {}
+            NormalsRule::Flat => scene.derive_normals(crate::mesh::NormalSource::Flat, 180.0),
+            NormalsRule::Smooth => scene.derive_normals(crate::mesh::NormalSource::Smooth(1), crease_angle_deg),
+        }
+        Ok(())
+    }
+}
+
+/// `[[instances]]`: one file, copied. Each copy is placed by the entry's own
+/// translation / rotation_deg / scale, then by its transform from `transforms`
+/// or `grid`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InstanceEntry {
+    pub path: String,
+    #[serde(default)]
+    pub translation: Vec3,
+    #[serde(default)]
+    pub rotation_deg: Vec3,
+    #[serde(default = "one")]
+    pub scale: Vec3,
+    #[serde(default)]
+    pub normals: NormalsRule,
+    #[serde(default = "no_crease")]
+    pub crease_angle_deg: f32,
+    #[serde(default)]
+    pub transforms: Vec<InstanceTransform>,
+    pub grid: Option<InstanceGrid>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InstanceTransform {
+    #[serde(default)]
+    pub translation: Vec3,
+    #[serde(default)]
+    pub rotation_deg: Vec3,
+    #[serde(default = "one")]
+    pub scale: Vec3,
+}
+
+/// Copies on a jittered grid in the XZ plane.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InstanceGrid {
+    /// Copies along X and Z.
+    pub count: [u32; 2],
+    /// Distance between neighbours along X and Z, metres.
+    pub spacing_m: [f32; 2],
+    /// Where copy (0, 0) stands before jitter.
+    #[serde(default)]
+    pub origin_m: Vec3,
+    /// Each copy moves by up to this much along X and Z (uniform).
+    #[serde(default)]
+    pub jitter_m: f32,
+    /// A uniform random turn about +Y per copy.
+    #[serde(default)]
+    pub random_yaw: bool,
+    /// Uniform scale per copy, drawn from this range.
+    #[serde(default = "unit_range")]
+    pub scale_range: [f32; 2],
+    #[serde(default = "seed_one")]
+    pub seed: u64,
+}
+
+fn unit_range() -> [f32; 2] {
+    [1.0, 1.0]
+}
+
+fn seed_one() -> u64 {
+    1
+}
+
+/// The most copies one scene file may make.
+pub const MAX_INSTANCES: usize = 1 << 20;
+
+impl InstanceEntry {
+    /// World-from-file transform of every copy.
+    fn placements(&self) -> std::result::Result<Vec<Mat4>, String> {
+        let own = placement_matrix(self.translation, self.rotation_deg, self.scale);
+        let mut out: Vec<Mat4> =
+            self.transforms.iter().map(|t| placement_matrix(t.translation, t.rotation_deg, t.scale) * own).collect();
+        if let Some(g) = &self.grid {
+            let n = g.count[0] as usize * g.count[1] as usize;
+            if n + out.len() > MAX_INSTANCES {
+                return Err(format!("grid of {} × {} copies is more than {MAX_INSTANCES}", g.count[0], g.count[1]));
+            }
+            let finite = g.spacing_m.iter().chain(&g.scale_range).all(|v| v.is_finite()) && g.jitter_m.is_finite();
+            if !finite || g.scale_range[0] <= 0.0 || g.scale_range[1] < g.scale_range[0] || g.jitter_m < 0.0 {
+                return Err("grid needs finite spacing, jitter_m ≥ 0 and 0 < scale_range[0] ≤ scale_range[1]".into());
+            }
+            let mut rng = probegi_core::rng::Pcg32::new(g.seed, 0x1257);
+            for j in 0..g.count[1] {
+                for i in 0..g.count[0] {
+                    let (jx, jz) = (rng.next_f32() * 2.0 - 1.0, rng.next_f32() * 2.0 - 1.0);
+                    let yaw = if g.random_yaw { rng.next_f32() * std::f32::consts::TAU } else { 0.0 };
+                    let k = g.scale_range[0] + (g.scale_range[1] - g.scale_range[0]) * rng.next_f32();
+                    let at = g.origin_m
+                        + Vec3::new(
+                            i as f32 * g.spacing_m[0] + jx * g.jitter_m,
+                            0.0,
+                            j as f32 * g.spacing_m[1] + jz * g.jitter_m,
+                        );
+                    out.push(
+                        Mat4::from_scale_rotation_translation(Vec3::splat(k), Quat::from_rotation_y(yaw), at) * own,
+                    );
+                }
+            }
+        }
+        if out.is_empty() {
+            return Err("give `transforms` or `grid`".into());
+        }
+        if out.len() > MAX_INSTANCES {
+            return Err(format!("{} copies is more than {MAX_INSTANCES}", out.len()));
+        }
+        out.into_iter().map(placement).collect()
+    }
 }
 
 impl MeshRef {
@@ -206,18 +367,42 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
     let toml_err = |message: String| SceneError::Toml { path: path.to_path_buf(), message };
     let file: SceneFile = toml::from_str(text).map_err(|e| toml_err(e.to_string()))?;
     let mut scene = Scene { name: path.display().to_string(), ..Default::default() };
-    if file.meshes.is_empty() && file.objects.is_empty() {
-        return Err(toml_err("no [[meshes]] or [[objects]] entries".into()));
+    if file.meshes.is_empty() && file.objects.is_empty() && file.instances.is_empty() {
+        return Err(toml_err("no [[meshes]], [[instances]] or [[objects]] entries".into()));
     }
     for (i, m) in file.meshes.iter().enumerate() {
         let xf = placement(m.world_from_local()).map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
         let mut sub = load_sub_scene(&m.path, base_dir)?;
+        m.normals.apply(&mut sub, m.crease_angle_deg).map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
         sub.mesh.transform(xf);
         for o in &mut sub.objects {
             o.placement = xf * o.placement;
         }
         scene.warnings.append(&mut sub.warnings);
         merge_into(&mut scene, sub);
+    }
+    for (i, entry) in file.instances.iter().enumerate() {
+        let err = |e: String| toml_err(format!("instances[{i}]: {e}"));
+        let placements = entry.placements().map_err(err)?;
+        let mut sub = load_sub_scene(&entry.path, base_dir)?;
+        if sub.has_moving_geometry() {
+            return Err(err(format!("{} is animated; instances are still copies", entry.path)));
+        }
+        if !sub.lights.is_empty() {
+            sub.warnings.push(format!("instances[{i}]: the lights of {} are not copied", entry.path));
+            sub.lights.clear();
+        }
+        entry.normals.apply(&mut sub, entry.crease_angle_deg).map_err(err)?;
+        sub.objects.clear();
+        let mesh = std::mem::take(&mut sub.mesh);
+        let material_offset = scene.materials.len() as u32;
+        scene.warnings.append(&mut sub.warnings);
+        merge_into(&mut scene, sub);
+        for xf in placements {
+            let mut copy = mesh.clone();
+            copy.transform(xf);
+            scene.mesh.append(&copy, material_offset);
+        }
     }
     for (i, o) in file.objects.iter().enumerate() {
         let sub = object_scene(o, base_dir).map_err(|e| match e {
@@ -389,8 +574,7 @@ fn merge_into(scene: &mut Scene, sub: Scene) {
     }));
     scene.mesh.append(&sub.mesh, mat_offset);
     scene.materials.extend(sub.materials.into_iter().map(|mut m| {
-        m.base_color_texture = m.base_color_texture.map(|t| t + tex_offset);
-        m.emissive_texture = m.emissive_texture.map(|t| t + tex_offset);
+        m.offset_textures(tex_offset);
         m
     }));
     scene.textures.extend(sub.textures);
@@ -405,6 +589,38 @@ fn merge_into(scene: &mut Scene, sub: Scene) {
     if scene.sh_probes.is_none() {
         scene.sh_probes = sub.sh_probes;
     }
+}
+
+/// `--set` keys that change the scene itself, for every renderer (the
+/// reference included): `normal_maps=false` drops normal and bump maps,
+/// `alpha_cutouts=false` makes every material opaque.
+pub const SCENE_SETTING_KEYS: [&str; 2] = ["normal_maps", "alpha_cutouts"];
+
+/// Whether `KEY=VALUE` names a scene setting ([`SCENE_SETTING_KEYS`]).
+pub fn is_scene_setting(assignment: &str) -> bool {
+    let key = assignment.split_once('=').map_or(assignment, |(k, _)| k).trim();
+    SCENE_SETTING_KEYS.contains(&key)
+}
+
+/// Applies a scene setting `KEY=true|false` to `scene`.
+pub fn apply_scene_setting(scene: &mut Scene, assignment: &str) -> std::result::Result<(), String> {
+    let (key, value) = assignment.split_once('=').ok_or_else(|| format!("`{assignment}` is not KEY=VALUE"))?;
+    let on = match value.trim() {
+        "true" => true,
+        "false" => false,
+        v => return Err(format!("{key} takes true or false, not `{v}`")),
+    };
+    match key.trim() {
+        "normal_maps" if !on => {
+            scene.materials.iter_mut().for_each(|m| (m.normal_texture, m.bump_texture) = (None, None))
+        }
+        "alpha_cutouts" if !on => {
+            scene.materials.iter_mut().for_each(|m| m.alpha_mode = crate::material::AlphaMode::Opaque)
+        }
+        "normal_maps" | "alpha_cutouts" => {}
+        k => return Err(format!("`{k}` is not a scene setting (those are {})", SCENE_SETTING_KEYS.join(", "))),
+    }
+    Ok(())
 }
 
 /// Every key `--set` and a `[volume]` table accept.

@@ -1,8 +1,10 @@
-//! 8-bit sRGB textures, decoded to linear on lookup, sampled bilinearly with
-//! wrap (repeat) addressing.
+//! 8-bit textures sampled bilinearly with wrap (repeat) addressing: colour
+//! lookups decode sRGB to linear; data lookups (normal maps, height maps,
+//! alpha) read the stored values as unorm without decoding.
 //!
-//! Layout: `texels` is row-major RGB8, row 0 at the top of the image; texture
-//! coordinate `v = 0` is the top row (glTF convention; the OBJ loader flips `v`).
+//! Layout: `texels` is row-major RGB8, row 0 at the top of the image, with an
+//! optional alpha plane beside it; texture coordinate `v = 0` is the top row
+//! (glTF convention; the OBJ loader flips `v`).
 
 use glam::{Vec2, Vec3};
 use std::path::Path;
@@ -18,12 +20,15 @@ pub struct Texture {
     pub height: u32,
     /// Row-major sRGB-encoded RGB8, row 0 at the top.
     pub texels: Vec<[u8; 3]>,
+    /// The alpha channel, row-major like `texels`; `None` when the image had no
+    /// alpha channel or every texel was opaque.
+    pub alpha: Option<Vec<u8>>,
     /// Where it came from, for messages.
     pub source: String,
 }
 
 impl Texture {
-    /// Decodes a PNG or JPEG file. Alpha is dropped.
+    /// Decodes a PNG or JPEG file, keeping its alpha channel if it has one.
     pub fn load(path: &Path) -> Result<Self> {
         let img = image::ImageReader::open(path)
             .map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?
@@ -35,10 +40,21 @@ impl Texture {
     }
 
     pub fn from_dynamic(img: image::DynamicImage, source: String) -> Self {
+        let alpha = img.color().has_alpha().then(|| img.to_rgba8().pixels().map(|p| p.0[3]).collect::<Vec<u8>>());
         let rgb = img.to_rgb8();
         let (width, height) = rgb.dimensions();
         let texels = rgb.pixels().map(|p| p.0).collect();
-        Self { width, height, texels, source }
+        Self { width, height, texels, alpha: alpha.filter(|a| a.iter().any(|&v| v < 255)), source }
+    }
+
+    /// Attaches an alpha plane (one value per texel); `None` if the count does
+    /// not match. A plane with every texel opaque is dropped.
+    pub fn with_alpha(mut self, alpha: Vec<u8>) -> Option<Self> {
+        if alpha.len() != self.texels.len() {
+            return None;
+        }
+        self.alpha = alpha.iter().any(|&a| a < 255).then_some(alpha);
+        Some(self)
     }
 
     /// A texture from raw RGB8 texels; `None` if the count does not match.
@@ -47,33 +63,56 @@ impl Texture {
             width,
             height,
             texels,
+            alpha: None,
             source,
         })
     }
 
-    fn texel_linear(&self, x: i64, y: i64) -> Vec3 {
-        let xi = x.rem_euclid(self.width as i64) as usize;
-        let yi = y.rem_euclid(self.height as i64) as usize;
-        let t = self.texels[yi * self.width as usize + xi];
-        let lut = &*SRGB8_TO_LINEAR;
-        Vec3::new(lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize])
-    }
-
     /// Bilinear, wrap-addressed, linear-space lookup. Texel centres are at half-integers.
     pub fn sample_bilinear(&self, uv: Vec2) -> Vec3 {
-        if !uv.is_finite() {
-            return self.texel_linear(0, 0);
+        let f = Footprint::at(self.width, self.height, uv);
+        let lut = &*SRGB8_TO_LINEAR;
+        f.blend(|i| {
+            let t = self.texels[i];
+            Vec3::new(lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize])
+        })
+    }
+
+    /// Bilinear lookup of the stored values as unorm in [0, 1], not decoded:
+    /// the lookup for data textures (normal maps, height maps).
+    pub fn sample_raw(&self, uv: Vec2) -> Vec3 {
+        Footprint::at(self.width, self.height, uv).blend(|i| Vec3::from(self.texels[i].map(unorm)))
+    }
+
+    /// Coverage for alpha testing, bilinear: the alpha channel when the texture
+    /// has one, else the stored grey level (an MTL `map_d` saved as a grey image).
+    pub fn sample_coverage(&self, uv: Vec2) -> f32 {
+        let f = Footprint::at(self.width, self.height, uv);
+        match &self.alpha {
+            Some(a) => f.blend(|i| unorm(a[i])),
+            None => f.blend(|i| grey(self.texels[i])),
         }
-        let x = uv.x * self.width as f32 - 0.5;
-        let y = uv.y * self.height as f32 - 0.5;
-        let x0 = x.floor();
-        let y0 = y.floor();
-        let fx = x - x0;
-        let fy = y - y0;
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let top = self.texel_linear(x0, y0).lerp(self.texel_linear(x0 + 1, y0), fx);
-        let bottom = self.texel_linear(x0, y0 + 1).lerp(self.texel_linear(x0 + 1, y0 + 1), fx);
-        top.lerp(bottom, fy)
+    }
+
+    /// The coverage plane [`Texture::sample_coverage`] reads, one byte per texel.
+    pub fn coverage_plane(&self) -> Vec<u8> {
+        match &self.alpha {
+            Some(a) => a.clone(),
+            None => self.texels.iter().map(|t| (grey(*t) * 255.0).round() as u8).collect(),
+        }
+    }
+
+    /// A height-map lookup (the stored grey level, not decoded) and its
+    /// gradient per unit of `u` and `v`: the derivative of the bilinear
+    /// interpolant, as Mitsuba's `bitmap.eval_1_grad` computes it.
+    pub fn sample_height_gradient(&self, uv: Vec2) -> (f32, Vec2) {
+        let f = Footprint::at(self.width, self.height, uv);
+        let h = |k: usize| grey(self.texels[f.texel[k]]);
+        let (h00, h10, h01, h11) = (h(0), h(1), h(2), h(3));
+        let value = f.blend(|i| grey(self.texels[i]));
+        let d_dx = (1.0 - f.fy) * (h10 - h00) + f.fy * (h11 - h01);
+        let d_dy = (1.0 - f.fx) * (h01 - h00) + f.fx * (h11 - h10);
+        (value, Vec2::new(d_dx * self.width as f32, d_dy * self.height as f32))
     }
 
     /// Mean linear colour over all texels (used to weight emissive triangles).
@@ -84,6 +123,57 @@ impl Texture {
             s += glam::DVec3::new(lut[t[0] as usize] as f64, lut[t[1] as usize] as f64, lut[t[2] as usize] as f64);
         }
         (s / self.texels.len().max(1) as f64).as_vec3()
+    }
+}
+
+fn unorm(v: u8) -> f32 {
+    v as f32 * (1.0 / 255.0)
+}
+
+/// The grey level of a texel as unorm: Rec. 709 luminance of the stored values
+/// (MTL's `-imfchan l`, the default channel of `bump` and `map_d`).
+fn grey(t: [u8; 3]) -> f32 {
+    0.2126 * unorm(t[0]) + 0.7152 * unorm(t[1]) + 0.0722 * unorm(t[2])
+}
+
+/// The four texels (wrap addressing) and weights of a bilinear lookup at `uv`;
+/// texel centres at half-integers. A non-finite `uv` reads texel (0, 0).
+#[derive(Clone, Copy, Debug)]
+pub struct Footprint {
+    /// Row-major indices of (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1).
+    pub texel: [usize; 4],
+    pub fx: f32,
+    pub fy: f32,
+}
+
+impl Footprint {
+    pub fn at(width: u32, height: u32, uv: Vec2) -> Self {
+        if !uv.is_finite() {
+            return Self { texel: [0; 4], fx: 0.0, fy: 0.0 };
+        }
+        let x = uv.x * width as f32 - 0.5;
+        let y = uv.y * height as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (w, h) = (width as i64, height as i64);
+        let col = |c: i64| c.rem_euclid(w) as usize;
+        let row = |r: i64| r.rem_euclid(h) as usize * width as usize;
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        Self {
+            texel: [row(y0) + col(x0), row(y0) + col(x0 + 1), row(y0 + 1) + col(x0), row(y0 + 1) + col(x0 + 1)],
+            fx,
+            fy,
+        }
+    }
+
+    /// Bilinear blend of `value` at the four texels.
+    pub fn blend<T>(&self, value: impl Fn(usize) -> T) -> T
+    where
+        T: std::ops::Mul<f32, Output = T> + std::ops::Add<Output = T>,
+    {
+        let [a, b, c, d] = self.texel.map(value);
+        let (fx, fy) = (self.fx, self.fy);
+        (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy
     }
 }
 
