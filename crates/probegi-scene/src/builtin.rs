@@ -1,6 +1,6 @@
 //! Scenes compiled into the binary, named on the command line as `builtin:NAME`.
 //!
-//! `color-bleed`, `door-room`, `flood-room`, `sponza-sun`: the seeds' test scenes,
+//! `color-bleed`, `door-room`, `flood-room`, `sponza-sun`, `forest`: the seeds' test scenes,
 //! defined once as scene files in `scenes/builtin/` and compiled in.
 //!
 //! `cornell-box`: the geometry and materials of McGuire's CornellBox-Original.obj
@@ -20,7 +20,7 @@ use crate::mesh::Mesh;
 use crate::scene::Scene;
 
 pub const BUILTIN_NAMES: &[&str] =
-    &["cornell-box", "furnace-box", "color-bleed", "door-room", "flood-room", "sponza-sun"];
+    &["cornell-box", "furnace-box", "color-bleed", "door-room", "flood-room", "sponza-sun", "forest"];
 
 /// The seeds' test scenes (dynamic-scenes issue), compiled in from the scene files
 /// in `scenes/builtin/`, so `builtin:NAME` and the file are the same scene.
@@ -29,6 +29,7 @@ const SCENE_FILES: &[(&str, &str)] = &[
     ("door-room", include_str!("../../../scenes/builtin/door-room.toml")),
     ("flood-room", include_str!("../../../scenes/builtin/flood-room.toml")),
     ("sponza-sun", include_str!("../../../scenes/builtin/sponza-sun.toml")),
+    ("forest", include_str!("../../../scenes/builtin/forest.toml")),
 ];
 
 pub fn load_builtin(name: &str) -> Result<Scene> {

@@ -424,7 +424,9 @@ fn transformed_bounds(m: &Affine3A, lo: Vec3, hi: Vec3) -> (Vec3, Vec3) {
 }
 
 fn to_obvhs(ray: &Ray) -> ObRay {
-    ObRay::new(ray.origin.into(), ray.dir.into(), ray.t_min, ray.t_max)
+    // + 0.0 turns negative zeros positive: obvhs misses boxes along a direction
+    // such as (-1, -0, -0) (seen on a unit cube), which `-Vec3::X` produces.
+    ObRay::new(ray.origin.into(), (ray.dir + Vec3::ZERO).into(), ray.t_min, ray.t_max)
 }
 
 /// A tracer with its moving objects placed for one frame.
@@ -602,6 +604,19 @@ mod tests {
         let framed = stale.at_frame(&posed, 10.0).expect("rebuilt");
         let h = framed.closest_hit(&ray).expect("hit");
         assert!((h.t - (5.0 - 1.75)).abs() < 1e-4, "{}", h.t);
+    }
+
+    #[test]
+    fn directions_with_negative_zeros_hit() {
+        let mut mesh = Mesh::default();
+        crate::builtin::add_box(&mut mesh, Vec3::ZERO, Vec3::ONE, 0);
+        let bvh = BvhTracer::build(&mesh, BvhSettings::default());
+        for a in [Vec3::X, Vec3::Y, Vec3::Z, Vec3::NEG_X, Vec3::NEG_Y, Vec3::NEG_Z] {
+            let origin = Vec3::splat(0.5) + a * 3.0 + Vec3::new(0.13, 0.21, 0.17) * (Vec3::ONE - a.abs());
+            let hit = bvh.closest_hit(&Ray::new(origin, -a)).expect("the box");
+            assert!((hit.t - 2.5).abs() < 1e-5, "{a}: t {}", hit.t);
+            assert!(bvh.occluded(&Ray::segment(origin, -a, 3.0)));
+        }
     }
 
     #[test]
