@@ -24,6 +24,9 @@ pub struct Mesh {
     pub tangents: Vec<Vec4>,
 }
 
+/// A position (its coordinates' bits) within a smoothing group.
+type PositionInGroup = ([u32; 3], u32);
+
 /// How the shading normals of a triangle's corners are derived by
 /// [`Mesh::derive_normals`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -122,7 +125,7 @@ impl Mesh {
             ([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()], group)
         };
         // Faces around each (position, group), for the smoothed corners.
-        let mut around: HashMap<([u32; 3], u32), Vec<(u32, f32)>> = HashMap::new();
+        let mut around: HashMap<PositionInGroup, Vec<(u32, f32)>> = HashMap::new();
         for (t, tri) in self.triangles.iter().enumerate() {
             if let NormalSource::Smooth(g) = sources[t] {
                 if face[t] == Vec3::ZERO {

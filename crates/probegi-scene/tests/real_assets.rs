@@ -165,9 +165,12 @@ fn gltf_without_normal_is_flat_and_ignores_its_tangents() {
     std::fs::remove_dir_all(&d).ok();
 }
 
+/// Positions, normals, UVs, tangents and indices.
+type SphereArrays = (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<u32>);
+
 /// A UV sphere (longitude → u, latitude → v) with analytic normals and
 /// tangents (∂p/∂u), outward counter-clockwise triangles.
-fn uv_sphere(n_lon: usize, n_lat: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Vec<u32>) {
+fn uv_sphere(n_lon: usize, n_lat: usize) -> SphereArrays {
     let (mut p, mut n, mut uv, mut t, mut idx) = (vec![], vec![], vec![], vec![], vec![]);
     for j in 0..=n_lat {
         for i in 0..=n_lon {
