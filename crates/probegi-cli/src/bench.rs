@@ -85,7 +85,9 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
     }
     Ok(json!({
         "scene": args.scene,
-        "triangles": scene.mesh.triangle_count(),
+        "triangles": scene.mesh.triangle_count() + scene.instanced_triangle_count(),
+        "stored_triangles": scene.stored_triangle_count(),
+        "instances": scene.instances.len(),
         "threads": rayon::current_num_threads(),
         "frames": args.frames + 1,
         "note": "update ms are means over all frames of the run, the first included",
@@ -163,7 +165,9 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     }
     Ok(json!({
         "scene": args.scene,
-        "triangles": scene.mesh.triangle_count(),
+        "triangles": scene.mesh.triangle_count() + scene.instanced_triangle_count(),
+        "stored_triangles": scene.stored_triangle_count(),
+        "instances": scene.instances.len(),
         "threads": rayon::current_num_threads(),
         "frames_timed": args.frames,
         "peak_rss_mib": peak_rss_mib(),
@@ -264,7 +268,10 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     let n = rays.len() as f64;
     // Alpha testing's cost: the same rays through the same triangles, all opaque.
     let cutouts = if bvh.cutout_triangle_count() > 0 {
-        let opaque = BvhTracer::build(&scene.mesh, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
+        let mut opaque_scene = scene.clone();
+        probegi_scene::scene_file::apply_scene_setting(&mut opaque_scene, "alpha_cutouts=false")
+            .map_err(anyhow::Error::msg)?;
+        let opaque = BvhTracer::for_scene(&opaque_scene, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
         let (c_s, c_hits, a_s, a_hits) = rates(&opaque);
         json!({
             "cutout_triangles": bvh.cutout_triangle_count(),
@@ -280,7 +287,9 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     };
     Ok(json!({
         "scene": args.scene,
-        "triangles": scene.mesh.triangle_count(),
+        "triangles": scene.mesh.triangle_count() + scene.instanced_triangle_count(),
+        "stored_triangles": scene.stored_triangle_count(),
+        "instances": scene.instances.len(),
         "threads": rayon::current_num_threads(),
         "load_ms": load_ms,
         "bvh_build_ms": build_ms,

@@ -8,7 +8,10 @@
 //!
 //! Moving geometry is instanced (dynamic-scenes issue): a BVH per moving object in
 //! its rest space, built once, under a top-level BVH over the instances' bounds
-//! that is rebuilt every frame; the static part keeps its one BVH.
+//! that is rebuilt every frame; the static part keeps its one BVH. Instanced
+//! meshes (`Scene::prototypes`) get one BVH each in their local space, placed
+//! under the same top-level BVH once per `Scene::instances` entry, so a copy
+//! costs a top-level leaf, not its triangles.
 //!
 //! Alpha cutouts (`material.rs`) are tested inside traversal: the intersection
 //! closure of a cut-out triangle interpolates its UVs at the hit and reports a
@@ -80,7 +83,9 @@ struct Cutouts {
 }
 
 impl Cutouts {
-    fn of_scene(scene: &Scene) -> Self {
+    /// The masks of the scene's materials (in material order, cut-out ones only)
+    /// and, per material, its mask's index or `u32::MAX`.
+    fn masks_of(scene: &Scene) -> (Vec<CoverageMask>, Vec<u32>) {
         let mut masks = vec![];
         let material_mask: Vec<u32> = scene
             .materials
@@ -101,6 +106,15 @@ impl Cutouts {
                 (masks.len() - 1) as u32
             })
             .collect();
+        (masks, material_mask)
+    }
+
+    fn material_masks(scene: &Scene) -> Vec<u32> {
+        Self::masks_of(scene).1
+    }
+
+    fn of_scene(scene: &Scene) -> Self {
+        let (masks, material_mask) = Self::masks_of(scene);
         if masks.is_empty() {
             return Self::default();
         }
@@ -217,7 +231,13 @@ impl Blas {
         // RtTriangle::ng is the negated counter-clockwise normal. Instance transforms
         // have positive scale, so the side is the same in rest and world space.
         let backface = tri.ng.dot(r.direction) < 0.0;
-        RayHit { t, triangle: self.triangle_ids[leaf as usize], barycentric: Vec2::new(bary.x, bary.y), backface }
+        RayHit {
+            t,
+            triangle: self.triangle_ids[leaf as usize],
+            barycentric: Vec2::new(bary.x, bary.y),
+            backface,
+            instance: u32::MAX,
+        }
     }
 }
 
@@ -227,6 +247,8 @@ struct Instance {
     blas: usize,
     /// `None` for the identity (the static part).
     local_from_world: Option<Affine3A>,
+    /// Index into `Scene::instances`, `u32::MAX` for the scene's own mesh.
+    scene_instance: u32,
 }
 
 impl Instance {
@@ -250,12 +272,18 @@ struct Tlas {
 /// [`RayTracer::at_frame`] places them with a top-level BVH over the instances,
 /// rebuilt every frame. With no moving objects, rays go straight to the static BVH.
 pub struct BvhTracer {
-    /// `blases[0]` is the static part; then one per moving object.
+    /// `blases[0]` is the static part; then one per moving object; then one per
+    /// scene prototype.
     blases: Vec<Blas>,
     /// Scene object index of `blases[k + 1]`.
     object_ids: Vec<usize>,
+    /// Still instances: BLAS index, world from local, `Scene::instances` index.
+    placed: Vec<(usize, Affine3A, u32)>,
     /// The instances in their rest pose (what this tracer traces by itself).
     rest: Option<Tlas>,
+    /// The static BLAS and the still instances, without moving objects: the
+    /// static part when both exist.
+    static_tlas: Option<Tlas>,
     pad_rel: f32,
     cutouts: Cutouts,
     pub build_time: Duration,
@@ -275,7 +303,9 @@ impl BvhTracer {
         Self {
             blases,
             object_ids: vec![],
+            placed: vec![],
             rest: None,
+            static_tlas: None,
             pad_rel: settings.bvh_aabb_pad_rel,
             cutouts,
             build_time: start.elapsed(),
@@ -283,11 +313,12 @@ impl BvhTracer {
     }
 
     /// A static BVH over everything that does not move, plus one per moving object
-    /// of `scene` (in the pose `scene` is in, which the loaders leave at rest), with
-    /// the alpha cutouts of the scene's materials.
+    /// of `scene` (in the pose `scene` is in, which the loaders leave at rest) and
+    /// one per prototype, placed once per instance; with the alpha cutouts of the
+    /// scene's materials.
     pub fn for_scene(scene: &Scene, settings: BvhSettings) -> Self {
         let cutouts = Cutouts::of_scene(scene);
-        if !scene.has_moving_geometry() {
+        if !scene.has_moving_geometry() && scene.instances.is_empty() {
             return Self::build_static(&scene.mesh, cutouts, settings);
         }
         let start = Instant::now();
@@ -304,16 +335,42 @@ impl BvhTracer {
         }
         let static_ids: Vec<u32> = (0..mesh.triangle_count() as u32).filter(|&t| !moving[t as usize]).collect();
         blases.insert(0, Blas::build(mesh, &static_ids, pad, &cutouts));
+        let first_prototype = blases.len();
+        for proto in &scene.prototypes {
+            let m = &proto.mesh;
+            let ids: Vec<u32> = (0..m.triangle_count() as u32).collect();
+            let proto_cutouts = Cutouts {
+                masks: cutouts.masks.clone(),
+                triangle_mask: if cutouts.masks.is_empty() {
+                    vec![]
+                } else {
+                    let by_material = Cutouts::material_masks(scene);
+                    m.triangle_materials.iter().map(|&mat| by_material[mat as usize]).collect()
+                },
+            };
+            blases.push(Blas::build(m, &ids, pad_m(m.bounds(), settings), &proto_cutouts));
+        }
+        let placed = scene
+            .instances
+            .iter()
+            .enumerate()
+            .map(|(i, inst)| (first_prototype + inst.prototype as usize, inst.world_from_local, i as u32))
+            .collect();
         let mut tracer = Self {
             blases,
             object_ids,
+            placed,
             rest: None,
+            static_tlas: None,
             pad_rel: settings.bvh_aabb_pad_rel,
             cutouts,
             build_time: Duration::ZERO,
         };
         let rest = vec![None; tracer.object_ids.len()];
-        tracer.rest = Some(tracer.build_tlas(&rest));
+        tracer.rest = Some(tracer.build_tlas(Some(&rest)));
+        if !tracer.object_ids.is_empty() && !tracer.placed.is_empty() {
+            tracer.static_tlas = Some(tracer.build_tlas(None));
+        }
         tracer.build_time = start.elapsed();
         tracer
     }
@@ -332,21 +389,36 @@ impl BvhTracer {
         self.object_ids.len()
     }
 
-    /// The top-level BVH for objects placed by `world_from_rest` (`None`: at rest).
-    fn build_tlas(&self, world_from_rest: &[Option<Affine3A>]) -> Tlas {
+    /// Instanced triangles the tracer places (each copy counted).
+    pub fn instanced_triangle_count(&self) -> usize {
+        self.placed.iter().map(|&(b, _, _)| self.blases[b].triangles.len()).sum()
+    }
+
+    /// The top-level BVH over the static part, the moving objects placed by
+    /// `moving` (`None` entries: at rest; `None` altogether: left out) and the
+    /// still instances.
+    fn build_tlas(&self, moving: Option<&[Option<Affine3A>]>) -> Tlas {
         let mut instances = vec![];
         let mut aabbs = vec![];
         let pad = Vec3A::splat(self.pad_rel.max(0.0));
-        for (k, blas) in self.blases.iter().enumerate() {
-            let Some((lo, hi)) = blas.bounds else { continue };
-            let xf = if k == 0 { None } else { world_from_rest[k - 1] };
+        let mut add = |blas: usize, xf: Option<Affine3A>, scene_instance: u32| {
+            let Some((lo, hi)) = self.blases[blas].bounds else { return };
             let (lo, hi) = match xf {
                 None => (lo, hi),
                 Some(m) => transformed_bounds(&m, lo, hi),
             };
             let extent = (hi - lo).max_element().max(1e-6);
             aabbs.push(Aabb::new(Vec3A::from(lo) - pad * extent, Vec3A::from(hi) + pad * extent));
-            instances.push(Instance { blas: k, local_from_world: xf.map(|m| m.inverse()) });
+            instances.push(Instance { blas, local_from_world: xf.map(|m| m.inverse()), scene_instance });
+        };
+        add(0, None, u32::MAX);
+        if let Some(moving) = moving {
+            for (k, &xf) in moving.iter().enumerate().take(self.object_ids.len()) {
+                add(k + 1, xf, u32::MAX);
+            }
+        }
+        for &(blas, xf, i) in &self.placed {
+            add(blas, Some(xf), i);
         }
         let bvh = if aabbs.is_empty() {
             CwBvh::default()
@@ -372,21 +444,21 @@ impl BvhTracer {
         if tlas.instances.is_empty() {
             return None;
         }
-        let mut best: Option<(usize, u32, ObRay, f32)> = None;
+        let mut best: Option<(&Instance, u32, ObRay, f32)> = None;
         let mut hit = ObRayHit::none();
         tlas.bvh.ray_traverse(r, &mut hit, |r, id| {
             let inst = &tlas.instances[id];
             let local = inst.to_local(r);
             match self.blases[inst.blas].closest(masks, local) {
                 Some((leaf, t)) => {
-                    best = Some((inst.blas, leaf, local, t));
+                    best = Some((inst, leaf, local, t));
                     t
                 }
                 None => f32::INFINITY,
             }
         });
-        let (blas, leaf, local, t) = best?;
-        Some(self.blases[blas].hit(leaf, &local, t))
+        let (inst, leaf, local, t) = best?;
+        Some(RayHit { instance: inst.scene_instance, ..self.blases[inst.blas].hit(leaf, &local, t) })
     }
 
     fn occluded_in(&self, tlas: Option<&Tlas>, ray: &Ray) -> bool {
@@ -409,7 +481,7 @@ fn pad_m(bounds: Option<(Vec3, Vec3)>, settings: BvhSettings) -> f32 {
 }
 
 /// Bounds of the box `[lo, hi]` after an affine transform (its 8 corners).
-fn transformed_bounds(m: &Affine3A, lo: Vec3, hi: Vec3) -> (Vec3, Vec3) {
+pub(crate) fn transformed_bounds(m: &Affine3A, lo: Vec3, hi: Vec3) -> (Vec3, Vec3) {
     let mut out = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
     for c in 0..8 {
         let p = Vec3::new(
@@ -449,16 +521,16 @@ impl RayTracer for FrameTracer<'_> {
     }
 }
 
-/// The static BVH alone.
+/// The static BVH and the still instances, without the moving objects.
 struct StaticPart<'a>(&'a BvhTracer);
 
 impl RayTracer for StaticPart<'_> {
     fn closest_hit(&self, ray: &Ray) -> Option<RayHit> {
-        self.0.closest_in(None, ray)
+        self.0.closest_in(self.0.static_tlas.as_ref(), ray)
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        self.0.occluded_in(None, ray)
+        self.0.occluded_in(self.0.static_tlas.as_ref(), ray)
     }
 }
 
@@ -483,11 +555,17 @@ impl RayTracer for BvhTracer {
             && self.object_ids.iter().all(|&i| posed.objects.get(i).is_some_and(|o| o.is_animated()));
         if !follows {
             let settings = BvhSettings { bvh_aabb_pad_rel: self.pad_rel };
+            if !posed.instances.is_empty() {
+                // A tracer built from the mesh alone never knew the instances: rebuild all.
+                let mut at_rest = posed.clone();
+                at_rest.objects.clear();
+                return Some(Box::new(BvhTracer::for_scene(&at_rest, settings)));
+            }
             return Some(Box::new(BvhTracer::build_static(&posed.mesh, self.cutouts.clone(), settings)));
         }
         let xfs: Vec<Option<Affine3A>> =
             self.object_ids.iter().map(|&i| Some(posed.objects[i].world_from_rest(frame))).collect();
-        Some(Box::new(FrameTracer { base: self, tlas: self.build_tlas(&xfs) }))
+        Some(Box::new(FrameTracer { base: self, tlas: self.build_tlas(Some(&xfs)) }))
     }
 
     fn static_part<'a>(&'a self) -> Option<Box<dyn RayTracer + 'a>> {

@@ -4,6 +4,14 @@
 //! mesh that move over frames; [`Scene::set_frame_from`] poses them (and the
 //! lights) for a frame, and a tracer built with `BvhTracer::for_scene` follows
 //! them through its per-frame top-level structure.
+//!
+//! Instancing: a [`MeshPrototype`] is a mesh in its own local space, drawn by
+//! any number of [`MeshInstance`]s (still copies placed by a transform). The
+//! tracer keeps one BVH per prototype under its top-level structure, so a
+//! forest of thousands of pines stores one pine. `Scene::mesh` holds the
+//! world geometry only; hits on an instance carry its index and are moved to
+//! world space by [`Scene::surface_point`]. Prototypes may not emit (area
+//! lights are sampled from `Scene::mesh`) and placements may not mirror.
 
 use glam::{Vec2, Vec3};
 use probegi_core::camera::Camera;
@@ -25,6 +33,10 @@ pub struct Scene {
     pub lights: Vec<PunctualLight>,
     /// Named mesh ranges, animated or not; ranges do not overlap.
     pub objects: Vec<SceneObject>,
+    /// Meshes drawn by `instances`, each in its own local space.
+    pub prototypes: Vec<MeshPrototype>,
+    /// Still copies of prototypes.
+    pub instances: Vec<MeshInstance>,
     /// Frames per second of the animation clock, for animations authored in
     /// seconds (glTF); frame `f` is at `f / frames_per_second` seconds.
     pub frames_per_second: f32,
@@ -40,6 +52,70 @@ pub struct Scene {
     pub warnings: Vec<String>,
 }
 
+/// A mesh drawn by instances, in its local space; its triangles' material ids
+/// index `Scene::materials`.
+#[derive(Clone, Debug, Default)]
+pub struct MeshPrototype {
+    pub name: String,
+    pub mesh: Mesh,
+}
+
+/// One still copy of a prototype.
+#[derive(Clone, Copy, Debug)]
+pub struct MeshInstance {
+    /// Index into `Scene::prototypes`.
+    pub prototype: u32,
+    pub world_from_local: glam::Affine3A,
+    /// Inverse transpose of the linear part, for normals.
+    pub normal_from_local: glam::Mat3A,
+}
+
+impl MeshInstance {
+    /// A copy of `prototype` placed by `world_from_local`, which must be finite
+    /// and must not mirror or collapse.
+    pub fn new(prototype: u32, world_from_local: glam::Mat4) -> Result<Self, String> {
+        let det = world_from_local.determinant();
+        if !world_from_local.is_finite() || det.is_nan() || det <= 1e-18 {
+            return Err(format!(
+                "an instance transform must be finite and keep handedness (determinant {det}); mirrored instances are not supported"
+            ));
+        }
+        let world_from_local = glam::Affine3A::from_mat4(world_from_local);
+        Ok(Self { prototype, world_from_local, normal_from_local: world_from_local.matrix3.inverse().transpose() })
+    }
+}
+
+/// The corners of a hit triangle in world space.
+struct Corners {
+    p: [Vec3; 3],
+    n: [Vec3; 3],
+    uv: [Vec2; 3],
+    /// Tangent (xyz, world) and bitangent sign (w); zero when none.
+    t: [glam::Vec4; 3],
+}
+
+impl Corners {
+    fn of(mesh: &Mesh, tri: usize) -> Self {
+        let v = mesh.triangles[tri].map(|i| i as usize);
+        Self {
+            p: v.map(|i| mesh.positions[i]),
+            n: v.map(|i| mesh.normals[i]),
+            uv: v.map(|i| mesh.uvs[i]),
+            t: v.map(|i| mesh.tangents.get(i).copied().unwrap_or(glam::Vec4::ZERO)),
+        }
+    }
+
+    fn placed(mut self, inst: &MeshInstance) -> Self {
+        self.p = self.p.map(|p| inst.world_from_local.transform_point3(p));
+        self.n = self.n.map(|n| Vec3::from(inst.normal_from_local * glam::Vec3A::from(n)));
+        self.t = self.t.map(|t| {
+            let v = inst.world_from_local.transform_vector3(t.truncate()).normalize_or_zero();
+            v.extend(t.w)
+        });
+        self
+    }
+}
+
 /// Everything a shader needs about a ray-surface intersection.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfacePoint {
@@ -50,7 +126,11 @@ pub struct SurfacePoint {
     pub shading_normal: Vec3,
     pub uv: Vec2,
     pub material: u32,
+    /// Index of the triangle in `Scene::mesh`, or in its prototype's mesh when
+    /// `instance` is set.
     pub triangle: u32,
+    /// Index into `Scene::instances`, or `u32::MAX` for the scene's own mesh.
+    pub instance: u32,
     /// The ray arrived on the front (counter-clockwise) side.
     pub front_face: bool,
 }
@@ -86,6 +166,8 @@ impl Default for Scene {
             textures: Vec::new(),
             lights: Vec::new(),
             objects: Vec::new(),
+            prototypes: Vec::new(),
+            instances: Vec::new(),
             frames_per_second: 30.0,
             sky_radiance: Vec3::ZERO,
             camera: None,
@@ -115,27 +197,33 @@ fn uv_derivatives(p: [Vec3; 3], uv: [Vec2; 3]) -> Option<(Vec3, Vec3)> {
 pub const MAX_COORDINATE_M: f32 = 1e15;
 
 impl Scene {
-    /// Reconstructs the surface at a hit reported by a tracer.
+    /// Reconstructs the surface at a hit reported by a tracer, in world space.
     pub fn surface_point(&self, hit: &RayHit) -> SurfacePoint {
         let tri = hit.triangle as usize;
-        let [ia, ib, ic] = self.mesh.triangles[tri];
-        let (ia, ib, ic) = (ia as usize, ib as usize, ic as usize);
+        let (mesh, corners) = match self.instances.get(hit.instance as usize) {
+            Some(inst) => {
+                let mesh = &self.prototypes[inst.prototype as usize].mesh;
+                (mesh, Corners::of(mesh, tri).placed(inst))
+            }
+            None => (&self.mesh, Corners::of(&self.mesh, tri)),
+        };
         let b = hit.barycentric;
-        let w = 1.0 - b.x - b.y;
-        let p = [self.mesh.positions[ia], self.mesh.positions[ib], self.mesh.positions[ic]];
-        let position = p[0] * w + p[1] * b.x + p[2] * b.y;
+        let bary = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
+        let mix3 = |v: [Vec3; 3]| v[0] * bary.x + v[1] * bary.y + v[2] * bary.z;
+        let p = corners.p;
+        let position = mix3(p);
         let geometric_normal = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-        let n = self.mesh.normals[ia] * w + self.mesh.normals[ib] * b.x + self.mesh.normals[ic] * b.y;
-        let mut shading_normal = n.normalize_or_zero();
+        let mut shading_normal = mix3(corners.n).normalize_or_zero();
         if shading_normal == Vec3::ZERO {
             shading_normal = geometric_normal;
         } else if shading_normal.dot(geometric_normal) < 0.0 {
             shading_normal = -shading_normal;
         }
-        let uv = self.mesh.uvs[ia] * w + self.mesh.uvs[ib] * b.x + self.mesh.uvs[ic] * b.y;
-        let material = &self.materials[self.mesh.triangle_materials[tri] as usize];
+        let uv = corners.uv[0] * bary.x + corners.uv[1] * bary.y + corners.uv[2] * bary.z;
+        let material_id = mesh.triangle_materials[tri];
+        let material = &self.materials[material_id as usize];
         if material.perturbs_normals() {
-            let perturbed = self.perturbed_normal(material, [ia, ib, ic], Vec3::new(w, b.x, b.y), shading_normal, uv);
+            let perturbed = self.perturbed_normal(material, &corners, bary, shading_normal, uv);
             // A perturbed normal below the surface would shade light from inside it.
             if perturbed.dot(geometric_normal) > 1e-3 {
                 shading_normal = perturbed;
@@ -146,8 +234,9 @@ impl Scene {
             geometric_normal,
             shading_normal,
             uv,
-            material: self.mesh.triangle_materials[tri],
+            material: material_id,
             triangle: hit.triangle,
+            instance: hit.instance,
             front_face: !hit.backface,
         }
     }
@@ -158,11 +247,9 @@ impl Scene {
     /// surface displaced by `bump_multiplier × height` along `n`, with
     /// ∂p/∂u and ∂p/∂v from the triangle's UV mapping, as pbrt and Mitsuba's
     /// `bumpmap` do). Returns `n` where the frame is degenerate.
-    fn perturbed_normal(&self, material: &Material, v: [usize; 3], bary: Vec3, n: Vec3, uv: Vec2) -> Vec3 {
-        let m = &self.mesh;
-        let [a, b, c] = v;
+    fn perturbed_normal(&self, material: &Material, corners: &Corners, bary: Vec3, n: Vec3, uv: Vec2) -> Vec3 {
         if let Some(t) = material.normal_texture.and_then(|t| self.textures.get(t)) {
-            let tangents = [a, b, c].map(|i| m.tangents.get(i).copied().unwrap_or(glam::Vec4::ZERO));
+            let tangents = corners.t;
             let tan =
                 tangents[0].truncate() * bary.x + tangents[1].truncate() * bary.y + tangents[2].truncate() * bary.z;
             let tan = (tan - n * n.dot(tan)).normalize_or_zero();
@@ -176,9 +263,7 @@ impl Scene {
             return (tan * local.x + bitangent * local.y + n * local.z).normalize_or(n);
         }
         if let Some(t) = material.bump_texture.and_then(|t| self.textures.get(t)) {
-            let Some((dpdu, dpdv)) =
-                uv_derivatives([m.positions[a], m.positions[b], m.positions[c]], [m.uvs[a], m.uvs[b], m.uvs[c]])
-            else {
+            let Some((dpdu, dpdv)) = uv_derivatives(corners.p, corners.uv) else {
                 return n;
             };
             let (_, grad) = t.sample_height_gradient(uv);
@@ -315,9 +400,37 @@ impl Scene {
             .collect()
     }
 
-    /// Axis-aligned bounds of the geometry.
+    /// Tight axis-aligned bounds of the geometry, instances included (each
+    /// copy's vertices, transformed: the same box the copies merged would have).
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        self.mesh.bounds()
+        let placed = self.instances.iter().filter_map(|i| {
+            let m = &self.prototypes.get(i.prototype as usize)?.mesh;
+            let mut points = m.positions.iter().map(|&p| i.world_from_local.transform_point3(p));
+            let first = points.next()?;
+            Some(points.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p))))
+        });
+        self.mesh.bounds().into_iter().chain(placed).reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+    }
+
+    /// Adds `mesh` (local space; material ids already index `materials`) as a
+    /// prototype drawn at each of `placements`. Returns the prototype's index.
+    pub fn add_instanced_mesh(&mut self, name: &str, mesh: Mesh, placements: &[glam::Mat4]) -> Result<u32, String> {
+        let prototype = self.prototypes.len() as u32;
+        let instances: Vec<MeshInstance> =
+            placements.iter().map(|&m| MeshInstance::new(prototype, m)).collect::<Result<_, _>>()?;
+        self.prototypes.push(MeshPrototype { name: name.to_string(), mesh });
+        self.instances.extend(instances);
+        Ok(prototype)
+    }
+
+    /// Triangles stored: the scene's mesh and each prototype once.
+    pub fn stored_triangle_count(&self) -> usize {
+        self.mesh.triangle_count() + self.prototypes.iter().map(|p| p.mesh.triangle_count()).sum::<usize>()
+    }
+
+    /// Triangles drawn by instances (each copy counted).
+    pub fn instanced_triangle_count(&self) -> usize {
+        self.instances.iter().map(|i| self.prototypes[i.prototype as usize].mesh.triangle_count()).sum()
     }
 
     /// The camera to use: the file's, else one that frames the scene bounds from +Z.
@@ -424,6 +537,46 @@ impl Scene {
             loose.into_iter().find(|&t| m.triangles[t].iter().any(|&v| vertex_owner[v as usize] != u32::MAX))
         {
             return Err(format!("triangle {t} is in no object but uses an object's vertices"));
+        }
+        for (k, proto) in self.prototypes.iter().enumerate() {
+            let pm = &proto.mesh;
+            let name = &proto.name;
+            if pm.normals.len() != pm.positions.len()
+                || pm.uvs.len() != pm.positions.len()
+                || pm.triangle_materials.len() != pm.triangles.len()
+                || !(pm.tangents.is_empty() || pm.tangents.len() == pm.positions.len())
+            {
+                return Err(format!("prototype {k} (`{name}`): per-vertex or per-triangle arrays differ in length"));
+            }
+            if pm.positions.iter().any(|p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE_M) {
+                return Err(format!("prototype {k} (`{name}`) has a non-finite or absurd vertex"));
+            }
+            if pm.triangles.iter().any(|t| t.iter().any(|&v| v as usize >= pm.positions.len())) {
+                return Err(format!("prototype {k} (`{name}`) has a triangle past its vertex array"));
+            }
+            match pm
+                .triangle_materials
+                .iter()
+                .find(|&&m| self.materials.get(m as usize).is_none_or(|m| m.is_emissive()))
+            {
+                Some(&m) if (m as usize) < self.materials.len() => {
+                    return Err(format!(
+                        "prototype {k} (`{name}`): material `{}` emits, and instanced meshes may not \
+                         (area lights are sampled from the scene's own mesh)",
+                        self.materials[m as usize].name
+                    ));
+                }
+                Some(_) => return Err(format!("prototype {k} (`{name}`) has an unknown material")),
+                None => {}
+            }
+        }
+        if let Some(i) = self.instances.iter().position(|i| i.prototype as usize >= self.prototypes.len()) {
+            return Err(format!("instance {i} names a missing prototype"));
+        }
+        if let Some(i) =
+            self.instances.iter().position(|i| !(i.world_from_local.is_finite() && i.normal_from_local.is_finite()))
+        {
+            return Err(format!("instance {i} has a non-finite transform"));
         }
         if !(self.frames_per_second.is_finite() && self.frames_per_second > 0.0) {
             return Err(format!("frames_per_second must be positive, got {}", self.frames_per_second));

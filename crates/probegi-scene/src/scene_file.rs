@@ -375,6 +375,10 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
         let mut sub = load_sub_scene(&m.path, base_dir)?;
         m.normals.apply(&mut sub, m.crease_angle_deg).map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
         sub.mesh.transform(xf);
+        for inst in &mut sub.instances {
+            *inst = crate::scene::MeshInstance::new(inst.prototype, xf * Mat4::from(inst.world_from_local))
+                .map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
+        }
         for o in &mut sub.objects {
             o.placement = xf * o.placement;
         }
@@ -392,17 +396,21 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
             sub.warnings.push(format!("instances[{i}]: the lights of {} are not copied", entry.path));
             sub.lights.clear();
         }
+        if !sub.instances.is_empty() {
+            return Err(err(format!(
+                "{} has [[instances]] itself; instances of instances are not supported",
+                entry.path
+            )));
+        }
         entry.normals.apply(&mut sub, entry.crease_angle_deg).map_err(err)?;
         sub.objects.clear();
-        let mesh = std::mem::take(&mut sub.mesh);
+        let mut mesh = std::mem::take(&mut sub.mesh);
         let material_offset = scene.materials.len() as u32;
+        mesh.triangle_materials.iter_mut().for_each(|m| *m += material_offset);
         scene.warnings.append(&mut sub.warnings);
         merge_into(&mut scene, sub);
-        for xf in placements {
-            let mut copy = mesh.clone();
-            copy.transform(xf);
-            scene.mesh.append(&copy, material_offset);
-        }
+        // One prototype, drawn once per placement: the tracer shares its BVH.
+        scene.add_instanced_mesh(&entry.path, mesh, &placements).map_err(err)?;
     }
     for (i, o) in file.objects.iter().enumerate() {
         let sub = object_scene(o, base_dir).map_err(|e| match e {
@@ -493,6 +501,9 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
                 .into());
         }
         let mut sub = load_sub_scene(spec, base_dir).map_err(ObjectError::Scene)?;
+        if !sub.instances.is_empty() {
+            return Err(format!("{spec} has [[instances]]; place it with [[meshes]] instead").into());
+        }
         if sub.has_moving_geometry() {
             return Err(format!("{spec} is animated itself; place it with [[meshes]] instead").into());
         }
@@ -573,6 +584,15 @@ fn merge_into(scene: &mut Scene, sub: Scene) {
         o
     }));
     scene.mesh.append(&sub.mesh, mat_offset);
+    let prototype_offset = scene.prototypes.len() as u32;
+    scene.prototypes.extend(sub.prototypes.into_iter().map(|mut p| {
+        p.mesh.triangle_materials.iter_mut().for_each(|m| *m += mat_offset);
+        p
+    }));
+    scene.instances.extend(sub.instances.into_iter().map(|mut i| {
+        i.prototype += prototype_offset;
+        i
+    }));
     scene.materials.extend(sub.materials.into_iter().map(|mut m| {
         m.offset_textures(tex_offset);
         m

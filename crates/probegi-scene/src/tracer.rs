@@ -36,6 +36,9 @@ pub struct RayHit {
     /// The ray hit the back (clockwise) side: geometric normal · ray direction > 0.
     /// DDGI shortens and zeroes such samples (seed 004 §4.1).
     pub backface: bool,
+    /// Index into `Scene::instances` when the hit is on an instance (then
+    /// `triangle` indexes its prototype's mesh); `u32::MAX` otherwise.
+    pub instance: u32,
 }
 
 /// Closest-hit and any-hit queries over a fixed set of triangles.

@@ -356,7 +356,8 @@ fn scene_files_override_normals_and_place_instances() {
                 [[instances]]\npath = \"cube.obj\"\ngrid = { count = [3, 2], spacing_m = [3.0, 3.0], origin_m = [0.0, 0.0, 10.0] }\n";
     std::fs::write(d.join("s.toml"), toml).expect("toml");
     let s = load_scene(&d.join("s.toml").to_string_lossy()).expect("loads");
-    assert_eq!(s.mesh.triangle_count(), 12 * (1 + 2 + 6));
+    assert_eq!(s.mesh.triangle_count(), 12, "instances are not copied into the mesh");
+    assert_eq!((s.prototypes.len(), s.instances.len(), s.instanced_triangle_count()), (2, 8, 12 * 8));
     assert_eq!(s.materials.len(), 3, "one set of materials per entry, not per copy");
     let (lo, hi) = s.bounds().expect("bounds");
     assert_eq!((lo, hi), (Vec3::ZERO, Vec3::new(10.0, 2.0, 14.0)));
@@ -370,5 +371,93 @@ fn scene_files_override_normals_and_place_instances() {
     std::fs::write(d.join("none.toml"), "[[instances]]\npath = \"cube.obj\"\n").expect("toml");
     let e = load_scene(&d.join("none.toml").to_string_lossy()).expect_err("no copies").to_string();
     assert!(e.contains("instances[0]") && e.contains("transforms"), "{e}");
+    std::fs::remove_dir_all(&d).ok();
+}
+
+fn shared_scene(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes").join(rel)
+}
+
+#[test]
+fn instanced_pines_trace_and_shade_like_copies_merged_into_the_mesh() {
+    let pine = shared_scene("scrub-pine/scrubPine.obj");
+    let d = dir("instances");
+    let toml = format!(
+        "[[instances]]\npath = \"{}\"\nscale = [0.01, 0.01, 0.01]\n\
+         grid = {{ count = [3, 3], spacing_m = [4.0, 4.0], origin_m = [-4.0, 0.0, -4.0], jitter_m = 1.0, random_yaw = true, scale_range = [0.7, 1.3], seed = 3 }}\n",
+        pine.display()
+    );
+    std::fs::write(d.join("f.toml"), toml).expect("toml");
+    let instanced = load_scene(&d.join("f.toml").to_string_lossy()).expect("loads");
+    assert_eq!(instanced.instances.len(), 9);
+    // The same copies, merged into one mesh by hand.
+    let mut merged = instanced.clone();
+    (merged.prototypes, merged.instances) = (vec![], vec![]);
+    for inst in &instanced.instances {
+        let mut copy = instanced.prototypes[inst.prototype as usize].mesh.clone();
+        copy.transform(glam::Mat4::from(inst.world_from_local));
+        merged.mesh.append(&copy, 0);
+    }
+    merged.validate().expect("valid");
+    assert_eq!(instanced.bounds(), merged.bounds());
+    let (a, b) = (
+        BvhTracer::for_scene(&instanced, BvhSettings::default()),
+        BvhTracer::for_scene(&merged, BvhSettings::default()),
+    );
+    assert_eq!(a.triangle_count() * 9, b.triangle_count(), "one pine stored, nine drawn");
+    assert!(a.cutout_triangle_count() > 0 && a.cutout_triangle_count() * 9 == b.cutout_triangle_count());
+    let mut rng = probegi_core::rng::Pcg32::new(5, 2);
+    let (mut hits, mut cut_hits, mut mismatches, mut edge_cases) = (0, 0, 0, 0);
+    for _ in 0..20_000 {
+        let o = Vec3::new(rng.next_f32() * 12.0 - 6.0, rng.next_f32() * 10.0, rng.next_f32() * 12.0 - 6.0);
+        let dir = probegi_core::sampling::sample_uniform_sphere(rng.next_vec2());
+        let ray = Ray::segment(o, dir, 20.0);
+        let (ha, hb) = (a.closest_hit(&ray), b.closest_hit(&ray));
+        // Local-space and world-space barycentrics differ in the last bits, so a
+        // point on a cutout's edge (coverage within 1e-3 of the cutoff) may go
+        // either way: count, do not fail.
+        edge_cases += (ha.is_some() != hb.is_some()) as u32 + (a.occluded(&ray) != b.occluded(&ray)) as u32;
+        let (Some(ha), Some(hb)) = (ha, hb) else { continue };
+        hits += 1;
+        if (ha.t - hb.t).abs() > 1e-3 * ha.t.max(1.0) {
+            edge_cases += 1;
+            continue;
+        }
+        let (pa, pb) = (instanced.surface_point(&ha), merged.surface_point(&hb));
+        assert!(ha.instance < 9 && hb.instance == u32::MAX);
+        assert!((pa.position - pb.position).length() < 1e-3, "{} vs {}", pa.position, pb.position);
+        // The pine's two levels of detail share coincident bark triangles, so the two
+        // BVHs may pick different ones at the same distance: count those, do not fail.
+        let same = pa.material == pb.material
+            && pa.front_face == pb.front_face
+            && pa.shading_normal.dot(pb.shading_normal) > 0.999
+            && pa.geometric_normal.dot(pb.geometric_normal) > 0.999
+            && (pa.uv - pb.uv).length() < 1e-4;
+        mismatches += !same as u32;
+        cut_hits += instanced.materials[pa.material as usize].has_cutout() as u32;
+    }
+    assert!(hits > 2000 && cut_hits > 500, "{hits} hits, {cut_hits} on needles");
+    assert!(mismatches * 100 <= hits, "{mismatches} of {hits} hits shade differently");
+    assert!(edge_cases <= 20, "{edge_cases} of 20000 rays disagree on hit or occlusion");
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn mirrored_or_emissive_instances_are_errors() {
+    let d = dir("bad-instances");
+    std::fs::write(d.join("cube.obj"), format!("mtllib c.mtl\nusemtl lamp\n{CUBE_V}{}", CUBE_F.join("\n")))
+        .expect("obj");
+    std::fs::write(d.join("c.mtl"), "newmtl lamp\nKe 1 1 1\n").expect("mtl");
+    std::fs::write(d.join("plain.obj"), format!("{CUBE_V}{}", CUBE_F.join("\n"))).expect("obj");
+    let cases = [
+        ("[[instances]]\npath = \"cube.obj\"\ntransforms = [{}]\n", "emits"),
+        ("[[instances]]\npath = \"plain.obj\"\ntransforms = [{ scale = [-1.0, 1.0, 1.0] }]\n", "mirrored"),
+    ];
+    for (k, (toml, why)) in cases.iter().enumerate() {
+        let p = d.join(format!("bad{k}.toml"));
+        std::fs::write(&p, toml).expect("toml");
+        let e = load_scene(&p.to_string_lossy()).expect_err(why).to_string();
+        assert!(e.contains(&format!("bad{k}.toml")) && e.contains(why), "{e}");
+    }
     std::fs::remove_dir_all(&d).ok();
 }
