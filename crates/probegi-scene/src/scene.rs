@@ -243,10 +243,11 @@ impl Scene {
 
     /// The shading normal `n` at `uv` perturbed by the material's normal map
     /// (tangent space: the interpolated tangent, made orthogonal to `n`, and
-    /// bitangent = sign · n × tangent, glTF's convention) or height map (the
-    /// surface displaced by `bump_multiplier × height` along `n`, with
-    /// ∂p/∂u and ∂p/∂v from the triangle's UV mapping, as pbrt and Mitsuba's
-    /// `bumpmap` do). Returns `n` where the frame is degenerate.
+    /// bitangent = sign · n × tangent, glTF's convention) or height map (see
+    /// [`crate::material::BUMP_WHITE_HEIGHT_REL`]: the map's slopes in texel
+    /// space tilt `n` against the directions of ∂p/∂u and ∂p/∂v, which come
+    /// from the triangle's UV mapping as in pbrt). Returns `n` where the frame
+    /// is degenerate.
     fn perturbed_normal(&self, material: &Material, corners: &Corners, bary: Vec3, n: Vec3, uv: Vec2) -> Vec3 {
         if let Some(t) = material.normal_texture.and_then(|t| self.textures.get(t)) {
             let tangents = corners.t;
@@ -266,16 +267,15 @@ impl Scene {
             let Some((dpdu, dpdv)) = uv_derivatives(corners.p, corners.uv) else {
                 return n;
             };
-            let (_, grad) = t.sample_height_gradient(uv);
-            let grad = grad * material.bump_multiplier;
-            // Mitsuba's bumpmap: replace the normal component of each derivative by the height's slope.
-            let dpdu = dpdu + n * (grad.x - n.dot(dpdu));
-            let dpdv = dpdv + n * (grad.y - n.dot(dpdv));
-            let bumped = dpdu.cross(dpdv).normalize_or_zero();
-            if bumped == Vec3::ZERO {
-                return n;
-            }
-            return if bumped.dot(n) < 0.0 { -bumped } else { bumped };
+            let (_, grad_uv) = t.sample_height_gradient(uv);
+            // Height per texel, times the white height in texels: rise over run in texel space.
+            let white_texels = crate::material::BUMP_WHITE_HEIGHT_REL * t.width.max(t.height) as f32;
+            let texels = Vec2::new(t.width as f32, t.height as f32);
+            let slope = grad_uv / texels * white_texels * material.bump_multiplier;
+            let along_u = (dpdu - n * n.dot(dpdu)).normalize_or_zero();
+            let along_v = (dpdv - n * n.dot(dpdv)).normalize_or_zero();
+            // Rising height along a direction leans the normal away from it.
+            return (n - along_u * slope.x - along_v * slope.y).normalize_or(n);
         }
         n
     }

@@ -284,12 +284,13 @@ fn a_height_ramp_tilts_the_shading_normal_by_the_expected_angle() {
     // Grey ramp along u: texel i holds i, so height rises 1/255 per texel.
     let img = image::GrayImage::from_fn(256, 4, |x, _| image::Luma([x as u8]));
     img.save(d.join("ramp.png")).expect("png");
-    for bm in [0.05f32, 1.0] {
+    for bm in [1.0f32, 20.0] {
         let s = mtl_plane(&d, &format!("bm{}", (bm * 100.0) as u32), &format!("bump -bm {bm} ramp.png"));
         assert_eq!(s.materials[0].bump_multiplier, bm);
         let n = normal_at(&s, 0.1, 0.2).expect("hit");
-        // dh/du = 256 / 255 per unit u, displacement = bm · h, and ∂p/∂u = 2 m along +x.
-        let slope = bm * (256.0 / 255.0) / 2.0;
+        // 1/255 of height per texel; white stands 0.02 × 256 texels high: the slope
+        // in texel space, whatever the plane's size (2 m) or UV density.
+        let slope = bm * (0.02 * 256.0) / 255.0;
         let expected = slope.atan();
         let tilt = n.dot(Vec3::Y).clamp(-1.0, 1.0).acos();
         assert!((tilt - expected).abs() < 1e-3, "bm {bm}: tilt {}° vs {}°", tilt.to_degrees(), expected.to_degrees());
