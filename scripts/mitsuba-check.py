@@ -65,15 +65,27 @@ How probegi's semantics are mapped
     Python `mi.BSDF` (`ProbegiBSDF`) that evaluates probegi's BSDF exactly
     (diffuse × (1 − max F0)/π + GGX D · height-correlated Smith G2 · Schlick
     F(F0 = Ks) / (4 cos cos), α = r², r = (2 / (Ns + 2))^¼) in probegi's shading
-    frame (shading normal flipped into the geometric hemisphere; bump: the
-    height's bilinear gradient from Mitsuba's `eval_1_grad` × `-bm`, ∂p/∂u and
-    ∂p/∂v from Mitsuba's interaction, rejected unless 1e-3 above the geometric
-    plane; sides chosen by the geometric normal; viewer clamped just above the
+    frame (shading normal flipped into the geometric hemisphere; bump, see
+    below; sides chosen by the geometric normal; viewer clamped just above the
     shading horizon; light only above both planes), sampled with probegi's
     lobe mixture (VNDF + cosine). Mitsuba still does everything else: ray
     casting, UV interpolation, texture filtering, light sampling, MIS,
     Russian roulette. `--shading-model mitsuba` uses Mitsuba's own `bumpmap`
-    and `twosided(diffuse)` rules instead (see "Known mismatches").
+    and `twosided(diffuse)` rules instead: not equivalent (see "Known
+    mismatches").
+  * Bump maps (MTL `bump`/`map_bump`, `Scene::perturbed_normal` with
+    `material::BUMP_WHITE_HEIGHT_REL`, G3D's reading): height = Rec. 709 grey
+    of the stored unorm values (not sRGB-decoded), bilinear, repeat; grad =
+    its analytic gradient per unit u and v (Mitsuba's `eval_1_grad`, in
+    probegi's UV convention); for a W×H map, white_texels = 0.02 · max(W, H)
+    and slope = (grad.u / W, grad.v / H) · white_texels · bm (`-bm`, else 1),
+    the rise over run in texel space. With n the facing shading normal and
+    ∂p/∂u, ∂p/∂v from Mitsuba's interaction (pbrt's formula, as probegi's
+    `uv_derivatives`): along_u/v = normalize(∂p/∂u|v − n (n·∂p/∂u|v)) (zero
+    where degenerate), n' = normalize(n − along_u slope.u − along_v slope.v)
+    (n where degenerate), dropped unless n'·n_g > 1e-3. Triangles whose UV
+    mapping is degenerate (|det| < 1e-12) get the material without its bump
+    map, as probegi leaves them unbumped.
   * Emission: Ke (× map_Ke) through a Mitsuba `area` emitter on a mesh without
     vertex normals, so it emits from the counter-clockwise (front) face only,
     as probegi does. A constant Ke is given as an `rgb` radiance so that Mitsuba
@@ -108,15 +120,17 @@ How probegi's semantics are mapped
 
 Known mismatches / limits
 -------------------------
-  * Bump maps under Mitsuba's own `bumpmap` (`--shading-model mitsuba`) differ
-    from probegi by design: where the bumped normal turns away from the viewer
-    probegi clamps the viewer onto the horizon and shades the point, Mitsuba's
-    `twosided` flip then evaluates the back side (black, or lit from below).
-    Sponza's MTL gives no `-bm`, so its heights displace 1 scene unit (1 m) per
-    unit and bumped normals tilt tens of degrees; there probegi's image is
-    12–15 % brighter (per channel) than with Mitsuba's `bumpmap` (FLIP 0.18 against a
-    0.07 floor at 160×120, 128 spp), and matches within noise under the default
-    `--shading-model probegi` (and with `--no-bump`).
+  * `--shading-model mitsuba` is NOT equivalent to probegi's bump rule; it is
+    kept to show the pbrt/Mitsuba reading probegi deliberately departs from.
+    Mitsuba's `bumpmap` displaces by scale × height in scene units, which for
+    orthogonal ∂p/∂u, ∂p/∂v tilts n by slope = scale · grad.u / |∂p/∂u| (and
+    likewise in v): matching probegi would need scale = 0.02 · max(W, H) / W ·
+    bm · |∂p/∂u| per axis, which varies with the UV density of every triangle
+    and differs between u and v, so no constant `scale` reproduces it. This
+    checker passes `scale = bm` (1 scene unit per unit of grey). Besides,
+    where the bumped normal turns away from the viewer probegi clamps the
+    viewer onto the horizon and shades the point, while Mitsuba's `twosided`
+    flip evaluates the back side (black, or lit from below).
   * Alpha cutouts in the forest (`scenes/builtin/forest.toml`): FLIP at the noise
     floor, but probegi's mean is 0.5 % below Mitsuba's at 128 spp, about as much as
     the cut-edge approximation moves it (`--cutout-supersample 1` gives +0.5 %).
@@ -132,6 +146,7 @@ Known mismatches / limits
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import glob
 import math
 import os
@@ -1015,7 +1030,7 @@ def define_plugins(mi):
         horizon; light accepted only above both the shading and the geometric plane
         (`lambert_cos`). Sampling is probegi's mixture (VNDF + cosine)."""
 
-        def __init__(self, props, diffuse=None, f0=(0.0, 0.0, 0.0), alpha=1.0, bump=None, bump_scale=1.0):
+        def __init__(self, props, diffuse=None, f0=(0.0, 0.0, 0.0), alpha=1.0, bump=None, bump_slope=(1.0, 1.0)):
             mi.BSDF.__init__(self, props)
             self.diffuse = diffuse
             self.f0 = mi.Color3f(*[float(x) for x in f0])
@@ -1024,7 +1039,8 @@ def define_plugins(mi):
             self.kdiff = 1.0 - min(max(float(x) for x in f0), 1.0)
             self.alpha = max(float(alpha), MIN_ALPHA)
             self.bump = bump
-            self.bump_scale = float(bump_scale)
+            # slope = grad_uv × bump_slope: (white_texels / W, white_texels / H) × bm.
+            self.bump_slope = (float(bump_slope[0]), float(bump_slope[1]))
             both = mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
             self.m_components = [mi.BSDFFlags.DiffuseReflection | both]
             if self.has_spec:
@@ -1040,15 +1056,24 @@ def define_plugins(mi):
             ns = si.sh_frame.n
             ns = dr.select(dr.dot(ns, ng) < 0, -ns, ns)
             if self.bump is not None:
-                grad = self.bump.eval_1_grad(si, active) * self.bump_scale
-                dpdu = si.dp_du + ns * (grad.x - dr.dot(ns, si.dp_du))
-                dpdv = si.dp_dv + ns * (grad.y - dr.dot(ns, si.dp_dv))
-                b = dr.cross(dpdu, dpdv)
-                lb = dr.norm(b)
-                b = b / dr.select(lb > 0, lb, 1.0)
-                b = dr.select(dr.dot(b, ns) < 0, -b, b)
-                use = (lb > 0) & dr.isfinite(lb) & (dr.dot(b, ng) > 1e-3)
-                ns = dr.select(use, b, ns)
+                # `Scene::perturbed_normal` (height map): the bilinear gradient per unit u and v,
+                # over the texel counts, times the white height in texels and `-bm`, is the
+                # rise over run in texel space; it tilts ns against the directions of ∂p/∂u and
+                # ∂p/∂v (made orthogonal to ns). glam's `normalize_or_zero` / `normalize_or(n)`
+                # on degenerate vectors; dropped unless 1e-3 above the geometric plane.
+                grad = self.bump.eval_1_grad(si, active)
+                slope = mi.Vector2f(grad.x * self.bump_slope[0], grad.y * self.bump_slope[1])
+
+                def normalize_or_zero(v):
+                    ln = dr.norm(v)
+                    ok = (ln > 0) & dr.isfinite(ln)
+                    return dr.select(ok, v / dr.select(ok, ln, 1.0), 0.0), ok
+
+                along_u, _ = normalize_or_zero(si.dp_du - ns * dr.dot(ns, si.dp_du))
+                along_v, _ = normalize_or_zero(si.dp_dv - ns * dr.dot(ns, si.dp_dv))
+                b, ok = normalize_or_zero(ns - along_u * slope.x - along_v * slope.y)
+                b = dr.select(ok, b, ns)
+                ns = dr.select(dr.dot(b, ng) > 1e-3, b, ns)
             wv_world = si.to_world(si.wi)
             front = dr.dot(wv_world, ng) > 0
             nf = dr.select(front, ns, -ns)
@@ -1231,10 +1256,24 @@ def thresholded_coverage(tex: Texture, factor: float, max_res: int = 4096) -> np
     return (factor * up >= ALPHA_CUTOFF).astype(np.float32)
 
 
+# probegi-scene `material::BUMP_WHITE_HEIGHT_REL`: a white texel of a height map rises
+# 0.02 · max(W, H) texels (G3D's default `zExtentPixels` of −0.02), times MTL `-bm`.
+BUMP_WHITE_HEIGHT_REL = 0.02
+
+
+def bump_slope(m: Material) -> tuple[float, float]:
+    """Factors from the height's gradient per unit (u, v) to probegi's texel-space slope:
+    white_texels / W and white_texels / H, times `-bm` (`Scene::perturbed_normal`)."""
+    h, w = m.bump_tex.rgb8.shape[:2]
+    white_texels = BUMP_WHITE_HEIGHT_REL * max(w, h)
+    return (white_texels / w * m.bump_multiplier, white_texels / h * m.bump_multiplier)
+
+
 def material_bsdf(mi, ProbegiBSDF, m: Material, cache: dict, smooth: bool, model: str):
     """The Mitsuba BSDF of a material. model = "probegi": specular, bump-mapped and
     smooth-shaded materials use ProbegiBSDF (probegi's BSDF and shading-frame rules);
-    "mitsuba": only specular ones do, bump maps go through Mitsuba's `bumpmap`."""
+    "mitsuba": only specular ones do, bump maps go through Mitsuba's `bumpmap` with
+    scale = bm (the pbrt/Mitsuba reading, not probegi's: see the module docstring)."""
     if m.kd_tex is not None:
         key = (id(m.kd_tex), tuple(m.kd))
         if key not in cache:
@@ -1251,9 +1290,8 @@ def material_bsdf(mi, ProbegiBSDF, m: Material, cache: dict, smooth: bool, model
     alpha = min(max(m.roughness * m.roughness, MIN_ALPHA), 1.0)
     f0 = tuple(float(x) for x in m.ks) if m.has_specular() else (0.0, 0.0, 0.0)
     if model == "probegi" and (m.has_specular() or height is not None or smooth):
-        bsdf = ProbegiBSDF(
-            mi.Properties(), diffuse=diffuse, f0=f0, alpha=alpha, bump=height, bump_scale=m.bump_multiplier
-        )
+        slope = bump_slope(m) if height is not None else (0.0, 0.0)
+        bsdf = ProbegiBSDF(mi.Properties(), diffuse=diffuse, f0=f0, alpha=alpha, bump=height, bump_slope=slope)
     else:
         if m.has_specular():
             bsdf = ProbegiBSDF(mi.Properties(), diffuse=diffuse, f0=f0, alpha=alpha)
@@ -1270,6 +1308,22 @@ def material_bsdf(mi, ProbegiBSDF, m: Material, cache: dict, smooth: bool, model
             opacity = mi.load_dict({"type": "rgb", "value": [0.0, 0.0, 0.0]})
         bsdf = mi.load_dict({"type": "mask", "opacity": opacity, "bsdf": bsdf})
     return bsdf
+
+
+def uv_derivatives_ok(P: np.ndarray, UV: np.ndarray) -> np.ndarray:
+    """Per triangle: whether probegi's `uv_derivatives` (pbrt's ∂p/∂u, ∂p/∂v) exists,
+    i.e. |det| ≥ 1e-12 of the UV edges (f32, as probegi) and finite derivatives."""
+    uv = UV.astype(np.float32)
+    p = P.astype(np.float32)
+    duv02, duv12 = uv[:, 0] - uv[:, 2], uv[:, 1] - uv[:, 2]
+    dp02, dp12 = p[:, 0] - p[:, 2], p[:, 1] - p[:, 2]
+    det = duv02[:, 0] * duv12[:, 1] - duv02[:, 1] * duv12[:, 0]
+    ok = np.abs(det) >= np.float32(1e-12)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        inv = np.float32(1.0) / np.where(ok, det, np.float32(1.0))
+        dpdu = (dp02 * duv12[:, 1:2] - dp12 * duv02[:, 1:2]) * inv[:, None]
+        dpdv = (dp12 * duv02[:, 0:1] - dp02 * duv12[:, 0:1]) * inv[:, None]
+    return ok & np.isfinite(dpdu).all(axis=1) & np.isfinite(dpdv).all(axis=1)
 
 
 def make_mesh(mi, name: str, P, N, UV, flat: bool, bsdf, emitter):
@@ -1351,14 +1405,25 @@ def build_mitsuba_scene(mi, ProbegiBSDF, GltfPunctual, scene: Scene, cam: Camera
                 )
             if m.has_cutout():
                 notes.append(f"material {m.name}: emissive with a cutout; Mitsuba emits where probegi cuts")
-        for flat in (True, False):
-            s = sel & (g.flat == flat)
-            if emitter is not None:
-                s = sel if flat else np.zeros_like(sel)  # emitters: face normals (front face emits)
-            if not s.any():
-                continue
-            key = f"mesh_{int(mi_idx)}_{'flat' if flat else 'smooth'}"
-            d[key] = make_mesh(mi, key, g.P[s], g.N[s], g.UV[s], flat, bsdf, emitter)
+        # probegi leaves the normal unbumped on triangles whose UV mapping is degenerate
+        # (`uv_derivatives` → None); Mitsuba would fall back to an arbitrary ∂p/∂u frame there.
+        parts = [(sel, bsdf, "")]
+        if m.bump_tex is not None and args.shading_model == "probegi":
+            bad = sel & ~uv_derivatives_ok(g.P, g.UV)
+            if bad.any():
+                plain = dataclasses.replace(m, bump_tex=None)
+                plain_bsdf = material_bsdf(mi, ProbegiBSDF, plain, tex_cache, smooth, "probegi")
+                parts = [(sel & ~bad, bsdf, ""), (bad, plain_bsdf, "_nobump")]
+                notes.append(f"material {m.name}: {int(bad.sum())} triangle(s) with degenerate UVs left unbumped")
+        for part, part_bsdf, suffix in parts:
+            for flat in (True, False):
+                s = part & (g.flat == flat)
+                if emitter is not None:
+                    s = part if flat else np.zeros_like(part)  # emitters: face normals (front face emits)
+                if not s.any():
+                    continue
+                key = f"mesh_{int(mi_idx)}_{'flat' if flat else 'smooth'}{suffix}"
+                d[key] = make_mesh(mi, key, g.P[s], g.N[s], g.UV[s], flat, part_bsdf, emitter)
     if n_spec:
         notes.append(f"{n_spec} material(s) with Ks > 0 (GGX lobe)")
     if n_bump:
@@ -1479,7 +1544,8 @@ def main() -> int:
         choices=["probegi", "mitsuba"],
         default="probegi",
         help="probegi: bump-mapped, glossy and smooth-shaded materials use the Python ProbegiBSDF with\n"
-        "probegi's shading-frame rules; mitsuba: Mitsuba's bumpmap and twosided(diffuse) rules",
+        "probegi's shading-frame and bump rules; mitsuba: Mitsuba's bumpmap (scale = -bm, scene units;\n"
+        "NOT equivalent to probegi's texel-space bump rule) and twosided(diffuse) rules",
     )
     ap.add_argument(
         "--no-cutouts", action="store_true", help="every material opaque (probegi gets --set alpha_cutouts=false)"
