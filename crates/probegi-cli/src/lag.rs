@@ -119,6 +119,14 @@ fn settled_from(flip: &[f32], threshold: f32) -> Option<usize> {
 
 pub fn run(args: &LagArgs) -> Result<()> {
     anyhow::ensure!(args.size > 0 && args.frames_after > 0, "--size and --frames-after must be positive");
+    anyhow::ensure!(args.size <= 4096, "--size {} is more than 4096 pixels a side", args.size);
+    anyhow::ensure!(
+        args.frames_before as u64 + args.frames_after as u64 <= 100_000 && args.target_frames <= 100_000,
+        "--frames-before, --frames-after and --target-frames must stay within 100000 frames"
+    );
+    // Each rendered frame of the sequence is kept (RGB f32) for the FLIP curve.
+    let frames = args.frames_before as u64 + args.frames_after as u64 + 1;
+    crate::check_memory(frames * args.size as u64 * args.size as u64 * 12 * 2, "the lag sequences")?;
     anyhow::ensure!(args.hysteresis.iter().all(|h| (0.0..1.0).contains(h)), "--hysteresis values must lie in [0, 1)");
     let mut volume = load_scene("builtin:door-room")?.volume.context("door room volume")?;
     volume.probe_rays_per_probe = args.rays_per_probe;

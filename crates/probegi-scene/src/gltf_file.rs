@@ -41,7 +41,8 @@ use crate::texture::Texture;
 struct Loader<'a> {
     path: &'a Path,
     buffers: Vec<gltf::buffer::Data>,
-    images: Vec<gltf::image::Data>,
+    /// `None` where the image could not be read (a warning says which).
+    images: Vec<Option<gltf::image::Data>>,
     scene: Scene,
     material_ids: HashMap<Option<usize>, u32>,
     texture_ids: HashMap<usize, Option<usize>>,
@@ -149,11 +150,8 @@ fn check_external_files(path: &Path) -> Result<()> {
         gltf::buffer::Source::Uri(uri) => Some(("buffer", b.index(), uri.to_string())),
         gltf::buffer::Source::Bin => None,
     });
-    let images = doc.images().filter_map(|im| match im.source() {
-        gltf::image::Source::Uri { uri, .. } => Some(("image", im.index(), uri.to_string())),
-        gltf::image::Source::View { .. } => None,
-    });
-    for (what, i, uri) in buffers.chain(images) {
+    // Images are checked as they load: a missing one is a warning (as for OBJ).
+    for (what, i, uri) in buffers {
         if uri.starts_with("data:") {
             continue;
         }
@@ -322,14 +320,37 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene> {
     }
     check_glb_header(path)?;
     check_external_files(path)?;
-    let (doc, buffers, images) =
-        gltf::import(path).map_err(|e| SceneError::Gltf { path: path.to_path_buf(), message: e.to_string() })?;
+    let gltf_err = |e: gltf::Error| SceneError::Gltf { path: path.to_path_buf(), message: e.to_string() };
+    let gltf::Gltf { document: doc, blob } = gltf::Gltf::open(path).map_err(gltf_err)?;
+    let base = path.parent();
+    let buffers = gltf::import_buffers(&doc, base, blob).map_err(gltf_err)?;
+    let mut warnings = vec![];
+    let images: Vec<Option<gltf::image::Data>> = doc
+        .images()
+        .map(|im| {
+            let name = match im.source() {
+                gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => {
+                    format!("`{}`", base.unwrap_or(Path::new(".")).join(decode_uri(uri)).display())
+                }
+                _ => "(embedded)".to_string(),
+            };
+            gltf::image::Data::from_source(im.source(), base, &buffers)
+                .map_err(|e| {
+                    warnings.push(format!(
+                        "{}: image {} {name} could not be read ({e}); textures using it are ignored",
+                        path.display(),
+                        im.index()
+                    ))
+                })
+                .ok()
+        })
+        .collect();
     check_json_indices(path, doc.as_json())?;
     let mut loader = Loader {
         path,
         buffers,
         images,
-        scene: Scene { name: path.display().to_string(), ..Default::default() },
+        scene: Scene { name: path.display().to_string(), warnings, ..Default::default() },
         material_ids: HashMap::new(),
         texture_ids: HashMap::new(),
         channels: HashMap::new(),
@@ -707,20 +728,48 @@ impl Loader<'_> {
             Some(info) => self.texture(info.texture(), info.tex_coord())?,
             None => None,
         };
+        // Out-of-spec factors (glTF 2.0 §5.22: roughness, metallic, alpha in [0, 1];
+        // alphaCutoff ≥ 0) are clamped with a warning.
+        let name = mat.name().unwrap_or("gltf-default").to_string();
+        let mut unit = |v: f32, what: &str| {
+            if (0.0..=1.0).contains(&v) {
+                return v;
+            }
+            let clamped = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+            self.scene.warnings.push(format!(
+                "{}: material `{name}`: {what} {v} is outside [0, 1]; using {clamped}",
+                self.path.display()
+            ));
+            clamped
+        };
+        let (roughness, metallic, alpha) = (
+            unit(pbr.roughness_factor(), "roughnessFactor"),
+            unit(pbr.metallic_factor(), "metallicFactor"),
+            unit(bc[3], "baseColorFactor alpha"),
+        );
+        let alpha_mode = match alpha_mode {
+            AlphaMode::Mask { cutoff } if cutoff.is_nan() || cutoff < 0.0 => {
+                return Err(self.err(format!("material `{name}`: alphaCutoff {cutoff} must be ≥ 0")));
+            }
+            m => m,
+        };
+        if !normal_scale.is_finite() {
+            return Err(self.err(format!("material `{name}`: normalTexture.scale {normal_scale} is not finite")));
+        }
         let m = Material {
-            name: mat.name().unwrap_or("gltf-default").to_string(),
+            name,
             base_color_factor: Vec3::new(bc[0], bc[1], bc[2]),
             base_color_texture,
             emissive_factor: Vec3::from(mat.emissive_factor()),
             emissive_texture,
             emissive_strength: mat.emissive_strength().unwrap_or(1.0),
-            roughness: pbr.roughness_factor(),
-            metallic: pbr.metallic_factor(),
+            roughness,
+            metallic,
             specular_color: Vec3::ZERO,
             specular_exponent: 0.0,
             specular_model: crate::material::SpecularModel::MetallicRoughness,
             alpha_mode,
-            alpha_factor: bc[3],
+            alpha_factor: alpha,
             alpha_texture: base_color_texture.filter(|&t| self.scene.textures[t].alpha.is_some()),
             normal_texture,
             normal_scale,
@@ -745,7 +794,11 @@ impl Loader<'_> {
         if let Some(&id) = self.texture_ids.get(&img_index) {
             return Ok(id);
         }
-        let data = self.images.get(img_index).ok_or_else(|| self.err(format!("image {img_index} missing")))?;
+        let Some(data) = self.images.get(img_index).ok_or_else(|| self.err(format!("image {img_index} missing")))?
+        else {
+            self.texture_ids.insert(img_index, None);
+            return Ok(None);
+        };
         use gltf::image::Format;
         let channels = match data.format {
             Format::R8 => 1,

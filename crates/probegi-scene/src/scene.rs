@@ -193,6 +193,16 @@ fn uv_derivatives(p: [Vec3; 3], uv: [Vec2; 3]) -> Option<(Vec3, Vec3)> {
     (dpdu.is_finite() && dpdv.is_finite()).then_some((dpdu, dpdv))
 }
 
+/// Instanced vertices up to which [`Scene::bounds`] transforms every one.
+pub const MAX_TIGHT_BOUND_VERTICES: usize = 50_000_000;
+
+/// The largest diffuse colour factor a material may have (above 1 loads with a
+/// warning: energy gain).
+pub const MAX_ALBEDO: f32 = 1e3;
+
+/// The largest emitted radiance a material may have, W·sr⁻¹·m⁻² per channel.
+pub const MAX_EMISSION: f32 = 1e15;
+
 /// The largest vertex coordinate a scene may have, metres.
 pub const MAX_COORDINATE_M: f32 = 1e15;
 
@@ -400,10 +410,24 @@ impl Scene {
             .collect()
     }
 
-    /// Tight axis-aligned bounds of the geometry, instances included (each
-    /// copy's vertices, transformed: the same box the copies merged would have).
+    /// Axis-aligned bounds of the geometry, instances included: tight (each
+    /// copy's vertices, transformed: the box the copies merged would have) up to
+    /// [`MAX_TIGHT_BOUND_VERTICES`] instanced vertices, each copy's transformed
+    /// prototype box beyond (conservative, and bounded in time).
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let instanced_vertices: usize = self
+            .instances
+            .iter()
+            .filter_map(|i| self.prototypes.get(i.prototype as usize))
+            .map(|p| p.mesh.positions.len())
+            .sum();
+        let tight = instanced_vertices <= MAX_TIGHT_BOUND_VERTICES;
+        let boxes: Vec<Option<(Vec3, Vec3)>> = self.prototypes.iter().map(|p| p.mesh.bounds()).collect();
         let placed = self.instances.iter().filter_map(|i| {
+            if !tight {
+                let (lo, hi) = boxes.get(i.prototype as usize).copied().flatten()?;
+                return Some(crate::bvh::transformed_bounds(&i.world_from_local, lo, hi));
+            }
             let m = &self.prototypes.get(i.prototype as usize)?.mesh;
             let mut points = m.positions.iter().map(|&p| i.world_from_local.transform_point3(p));
             let first = points.next()?;
@@ -508,6 +532,31 @@ impl Scene {
             let vals = [mat.base_color_factor, mat.emissive_factor * mat.emissive_strength];
             if vals.iter().any(|v| !v.is_finite() || v.min_element() < 0.0) {
                 return Err(format!("material `{}` has a negative or non-finite colour", mat.name));
+            }
+            // Beyond these, products along a path overflow f32 to infinite radiance.
+            if mat.base_color_factor.max_element() > MAX_ALBEDO {
+                return Err(format!(
+                    "material `{}`: diffuse colour {} is absurd (above {MAX_ALBEDO}); reflectances lie in [0, 1]",
+                    mat.name, mat.base_color_factor
+                ));
+            }
+            if vals[1].max_element() > MAX_EMISSION {
+                return Err(format!(
+                    "material `{}`: emission {} is absurd (above {MAX_EMISSION:e} W·sr⁻¹·m⁻²)",
+                    mat.name, vals[1]
+                ));
+            }
+            let factors = [mat.alpha_factor, mat.normal_scale, mat.bump_multiplier, mat.roughness, mat.metallic];
+            if factors.iter().any(|f| !f.is_finite()) {
+                return Err(format!(
+                    "material `{}` has a non-finite alpha, normal, bump, roughness or metallic factor",
+                    mat.name
+                ));
+            }
+            if let crate::material::AlphaMode::Mask { cutoff } = mat.alpha_mode
+                && !cutoff.is_finite()
+            {
+                return Err(format!("material `{}`: alpha cutoff {cutoff} is not finite", mat.name));
             }
         }
         if let Some(c) = &self.camera {

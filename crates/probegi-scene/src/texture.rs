@@ -151,6 +151,8 @@ impl Footprint {
         if !uv.is_finite() {
             return Self { texel: [0; 4], fx: 0.0, fy: 0.0 };
         }
+        // Wrap first: a huge but finite coordinate (`vt 3e38`) times the width would overflow.
+        let uv = Vec2::new(uv.x.rem_euclid(1.0), uv.y.rem_euclid(1.0));
         let x = uv.x * width as f32 - 0.5;
         let y = uv.y * height as f32 - 0.5;
         let (x0, y0) = (x.floor(), y.floor());
@@ -205,6 +207,15 @@ mod tests {
         assert!((w - Vec3::splat(0.5)).length() < 1e-6);
         // Repeat: shifting by whole periods changes nothing.
         assert_eq!(t.sample_bilinear(Vec2::new(3.75, -1.75)), t.sample_bilinear(Vec2::new(0.75, 0.25)));
+    }
+
+    #[test]
+    fn huge_texture_coordinates_stay_finite() {
+        let t = checker();
+        for uv in [Vec2::new(3e38, -3e38), Vec2::new(-1e-9, 1e20), Vec2::new(f32::MAX, 0.25)] {
+            assert!(t.sample_bilinear(uv).is_finite() && t.sample_coverage(uv).is_finite(), "{uv}");
+            assert!(t.sample_height_gradient(uv).1.is_finite());
+        }
     }
 
     #[test]

@@ -297,3 +297,35 @@ fn volume_settings_from_toml_and_set_overrides() {
     assert!(e.contains("volume.probe_counts") && e.contains("v.toml"), "{e}");
     std::fs::remove_dir_all(dir).ok();
 }
+
+#[test]
+fn a_missing_gltf_image_and_out_of_spec_factors_warn_and_load() {
+    let buf = quad_buffer();
+    let json = gltf_json(Some(format!("data:application/octet-stream;base64,{}", base64(&buf))), buf.len())
+        .replace(
+            r#""baseColorFactor": [0.2, 0.4, 0.6, 1]"#,
+            r#""baseColorFactor": [0.2, 0.4, 0.6, 1], "baseColorTexture": {"index": 0}"#,
+        )
+        .replace(r#""roughnessFactor": 0.3"#, r#""roughnessFactor": 7.0"#)
+        .replace(r#""buffers":"#, r#""textures": [{"source": 0}], "images": [{"uri": "gone%20away.png"}], "buffers":"#);
+    let dir = tmp_dir("gltf-noimage");
+    let path = dir.join("noimage.gltf");
+    std::fs::write(&path, &json).expect("write");
+    let s = load_scene(&path.to_string_lossy()).expect("a missing image is recoverable");
+    assert!(s.warnings.iter().any(|w| w.contains("gone away.png")), "{:?}", s.warnings);
+    assert!(s.warnings.iter().any(|w| w.contains("roughnessFactor 7")), "{:?}", s.warnings);
+    assert_eq!((s.materials[0].base_color_texture, s.materials[0].roughness), (None, 1.0));
+    // A negative alpha cutoff has no sensible reading: an error naming the material.
+    let bad = json.replace(r#""name": "glow","#, r#""name": "glow", "alphaMode": "MASK", "alphaCutoff": -1,"#);
+    assert_ne!(bad, json);
+    std::fs::write(&path, bad).expect("write");
+    let e = load_scene(&path.to_string_lossy()).expect_err("negative cutoff").to_string();
+    assert!(e.contains("noimage.gltf") && e.contains("alphaCutoff"), "{e}");
+    // An absurd diffuse colour would overflow radiance: an error naming the material.
+    std::fs::write(dir.join("hot.mtl"), "newmtl blinding\nKd 1e30 1 1\n").expect("write");
+    std::fs::write(dir.join("hot.obj"), "mtllib hot.mtl\nusemtl blinding\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+        .expect("write");
+    let e = load_scene(&dir.join("hot.obj").to_string_lossy()).expect_err("absurd Kd").to_string();
+    assert!(e.contains("hot.obj") && e.contains("blinding") && e.contains("absurd"), "{e}");
+    std::fs::remove_dir_all(dir).ok();
+}
