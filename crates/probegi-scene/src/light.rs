@@ -111,6 +111,8 @@ impl PunctualLight {
     }
 
     /// Why this light is unusable, if it is (checked on load).
+    ///
+    /// Intensities above [`MAX_LIGHT_INTENSITY`] are refused.
     pub fn validate(&self) -> Result<(), String> {
         if !(self.position.is_finite() && self.direction.is_finite() && self.color.is_finite()) {
             return Err("light position, direction and color must be finite".into());
@@ -120,6 +122,18 @@ impl PunctualLight {
         }
         if self.color.min_element() < 0.0 {
             return Err("light color must be non-negative".into());
+        }
+        // Beyond this, intensity × colour ÷ a small squared distance overflows f32.
+        let peak = self.intensity * self.color.max_element();
+        if peak > MAX_LIGHT_INTENSITY
+            || self
+                .keyframes
+                .iter()
+                .any(|k| k.intensity.is_some_and(|i| i * self.color.max_element() > MAX_LIGHT_INTENSITY))
+        {
+            return Err(format!(
+                "light intensity × colour {peak:e} is absurd (above {MAX_LIGHT_INTENSITY:e} W/sr or W/m²)"
+            ));
         }
         if self.kind != LightKind::Point && self.direction.length_squared() < 1e-12 {
             return Err("light direction must be non-zero".into());
@@ -183,3 +197,8 @@ mod tests {
         assert!(l.validate().is_err_and(|e| e.contains("keyframe 2")));
     }
 }
+
+/// The largest intensity × colour a punctual light may have (W/sr, or W/m² for
+/// directional lights); above it, intensity over a small squared distance and
+/// the products along a path approach the f32 range.
+pub const MAX_LIGHT_INTENSITY: f32 = 1e20;

@@ -15,9 +15,11 @@ use probegi_scene::load_scene;
 const OBJ: &str = "mtllib m.mtl\nusemtl red\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\n\
 vn 0 0 1\nf 1/1/1 2/2/1 3/3/1\nf 1 3 4\ng box\no thing\ns 1\nf -4 -3 -2 -1\n";
 const MTL: &str = "newmtl red\nKd 0.8 0.1 0.1\nKs 0.5 0.5 0.5\nNs 40\nKe 0 0 0\nmap_Kd -bm 1 tex.png\n\
-newmtl light\nKe 10 10 10\n";
+newmtl light\nKe 10 10 10\nnewmtl leaf\nd 0.9\nmap_d tex.png\nbump -bm 0.5 tex.png\n";
 const TOML: &str = "sky_radiance = [0.2, 0.2, 0.25]\nframes_per_second = 30\n[[meshes]]\npath = \"q.obj\"\n\
-translation = [0, 1, 0]\nrotation_deg = [0, 45, 0]\nscale = [1, 2, 1]\n[[objects]]\nbox_min_m = [0, 0, 0]\n\
+translation = [0, 1, 0]\nrotation_deg = [0, 45, 0]\nscale = [1, 2, 1]\nnormals = \"smooth\"\ncrease_angle_deg = 40\n\
+[[instances]]\npath = \"q.obj\"\nscale = [0.5, 0.5, 0.5]\ntransforms = [{ translation = [3, 0, 0] }]\n\
+grid = { count = [3, 2], spacing_m = [2, 2], jitter_m = 0.5, random_yaw = true, scale_range = [0.5, 1.5], seed = 4 }\n[[objects]]\nbox_min_m = [0, 0, 0]\n\
 box_max_m = [1, 1, 1]\nalbedo = [0.5, 0.5, 0.5]\nkeyframes = [{ frame = 0, translation = [0, 0, 0] }, \
 { frame = 10, translation = [1, 0, 0], rotation_deg = [0, 90, 0] }]\n[[lights]]\nkind = \"point\"\n\
 position = [0, 2, 0]\nintensity = 5.0\nkeyframes = [{ frame = 0, intensity = 5.0 }, { frame = 5, intensity = 0.0 }]\n\
@@ -40,7 +42,7 @@ fn gltf_json(uri: Option<&str>) -> String {
         r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}],
 "nodes": [{{"children": [1], "translation": [0, 1, 0]}}, {{"mesh": 0, "scale": [2, 2, 2], "rotation": [0, 0, 0, 1]}}],
 "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1, "material": 0}}]}}],
-"materials": [{{"pbrMetallicRoughness": {{"baseColorFactor": [0.2, 0.4, 0.6, 1], "metallicFactor": 0.5, "roughnessFactor": 0.3}}, "emissiveFactor": [1, 1, 1]}}],
+"materials": [{{"pbrMetallicRoughness": {{"baseColorFactor": [0.2, 0.4, 0.6, 1], "metallicFactor": 0.5, "roughnessFactor": 0.3}}, "emissiveFactor": [1, 1, 1], "alphaMode": "MASK", "alphaCutoff": 0.4}}],
 "animations": [{{"channels": [{{"sampler": 0, "target": {{"node": 0, "path": "translation"}}}}],
   "samplers": [{{"input": 2, "output": 3, "interpolation": "LINEAR"}}]}}],
 "buffers": [{{{uri}"byteLength": 92}}],
