@@ -169,6 +169,11 @@ impl PunctualLight {
     }
 }
 
+/// The largest intensity × colour a punctual light may have (W/sr, or W/m² for
+/// directional lights); above it, intensity over a small squared distance and
+/// the products along a path approach the f32 range.
+pub const MAX_LIGHT_INTENSITY: f32 = 1e20;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -197,8 +202,3 @@ mod tests {
         assert!(l.validate().is_err_and(|e| e.contains("keyframe 2")));
     }
 }
-
-/// The largest intensity × colour a punctual light may have (W/sr, or W/m² for
-/// directional lights); above it, intensity over a small squared distance and
-/// the products along a path approach the f32 range.
-pub const MAX_LIGHT_INTENSITY: f32 = 1e20;
