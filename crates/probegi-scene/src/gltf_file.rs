@@ -97,10 +97,12 @@ pub const MAX_NODE_DEPTH: usize = 256;
 fn check_glb_header(path: &Path) -> Result<()> {
     use std::io::Read;
     let err = |message: String| SceneError::Gltf { path: path.to_path_buf(), message };
-    let size = std::fs::metadata(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?.len();
+    let size =
+        std::fs::metadata(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), cause: source })?.len();
     let mut head = [0u8; 20];
-    let mut f = std::fs::File::open(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
-    let n = f.read(&mut head).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let mut f =
+        std::fs::File::open(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), cause: source })?;
+    let n = f.read(&mut head).map_err(|source| SceneError::Io { path: path.to_path_buf(), cause: source })?;
     if n < 4 || &head[..4] != b"glTF" {
         return Ok(()); // JSON glTF, or the library's own error.
     }
@@ -315,7 +317,7 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene> {
     if !path.exists() {
         return Err(SceneError::Io {
             path: path.to_path_buf(),
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "file not found"),
+            cause: std::io::Error::new(std::io::ErrorKind::NotFound, "file not found"),
         });
     }
     check_glb_header(path)?;

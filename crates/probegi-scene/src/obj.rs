@@ -98,7 +98,7 @@ impl TextureCache {
 /// A text file as UTF-8, leniently: a leading byte-order mark is dropped and bytes
 /// that are not UTF-8 (Latin-1 comments and names in old exports) are replaced.
 fn read_text_lossy(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), cause: source })?;
     let bytes = bytes.strip_prefix(&[0xEF, 0xBB, 0xBF][..]).unwrap_or(&bytes);
     Ok(String::from_utf8_lossy(bytes).into_owned())
 }

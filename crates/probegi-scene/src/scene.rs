@@ -627,6 +627,17 @@ impl Scene {
         {
             return Err(format!("instance {i} has a non-finite transform"));
         }
+        // The placed copies obey the same extent limit as the scene's own vertices.
+        if let Some(i) = self.instances.iter().position(|i| {
+            let m = i.world_from_local;
+            m.translation.abs().max_element() > MAX_COORDINATE_M
+                || [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis].iter().any(|c| c.abs().max_element() > 1e6)
+        }) {
+            return Err(format!(
+                "instance {i} is placed beyond ±{MAX_COORDINATE_M:e} m or scaled by more than 1e6: \
+                 the scene's extent is absurd (wrong units?)"
+            ));
+        }
         if !(self.frames_per_second.is_finite() && self.frames_per_second > 0.0) {
             return Err(format!("frames_per_second must be positive, got {}", self.frames_per_second));
         }

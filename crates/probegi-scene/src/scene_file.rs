@@ -338,7 +338,8 @@ impl Drop for IncludeGuard {
 }
 
 pub fn load_scene_file(path: &Path) -> Result<Scene> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?;
+    let text =
+        std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), cause: source })?;
     let key = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
     let chain = INCLUDE_STACK.with(|s| {
         let s = s.borrow();

@@ -31,9 +31,9 @@ impl Texture {
     /// Decodes a PNG or JPEG file, keeping its alpha channel if it has one.
     pub fn load(path: &Path) -> Result<Self> {
         let img = image::ImageReader::open(path)
-            .map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?
+            .map_err(|source| SceneError::Io { path: path.to_path_buf(), cause: source })?
             .with_guessed_format()
-            .map_err(|source| SceneError::Io { path: path.to_path_buf(), source })?
+            .map_err(|source| SceneError::Io { path: path.to_path_buf(), cause: source })?
             .decode()
             .map_err(|e| SceneError::Texture { path: path.to_path_buf(), message: e.to_string() })?;
         Ok(Self::from_dynamic(img, path.display().to_string()))
