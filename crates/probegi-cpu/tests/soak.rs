@@ -105,13 +105,15 @@ fn a_light_toggled_for_2_000_frames_leaves_no_trace() {
 
 #[test]
 fn a_poisoned_emitter_never_puts_nan_or_inf_into_the_atlases() {
-    // Emission 3e38 is finite (the scene validates) but overflows to Inf in any
-    // product: the shade pass yields non-finite ray radiance, which the blend drops.
+    // Emission 3e38 is finite but overflows to Inf in any product: the shade pass
+    // yields non-finite ray radiance, which the blend drops. Loaders refuse such
+    // values (`Scene::validate`); the field must survive a scene built past them.
     let mut scene = cornell_box();
     let light = scene.materials.iter_mut().find(|m| m.emissive_factor.max_element() > 0.0).expect("an emitter");
     light.emissive_factor = Vec3::splat(3e38);
     scene.lights.push(PunctualLight::point(Vec3::new(0.0, 1.0, 0.0), Vec3::ONE, 3e38));
-    assert!(scene.validate().is_ok());
+    let why = scene.validate().expect_err("absurd emission and intensity are refused on load");
+    assert!(why.contains("absurd"), "{why}");
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let mut v = tiny_volume(scene.bounds().expect("bounds"));
