@@ -279,7 +279,8 @@ pub struct BenchArgs {
     #[arg(long)]
     pub rays: Vec<u32>,
     /// DDGI sweep: override a volume setting for every configuration (repeatable),
-    /// e.g. `--set probe_states=all-active`.
+    /// e.g. `--set probe_states=all-active`. Scene settings apply to every bench:
+    /// `--set alpha_cutouts=false`, `--set normal_maps=false`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
 }

@@ -85,7 +85,7 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
     }
     Ok(json!({
         "scene": args.scene,
-        "triangles": scene.mesh.triangle_count() + scene.instanced_triangle_count(),
+        "triangles": scene.drawn_triangle_count(),
         "stored_triangles": scene.stored_triangle_count(),
         "instances": scene.instances.len(),
         "threads": rayon::current_num_threads(),
@@ -165,7 +165,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     }
     Ok(json!({
         "scene": args.scene,
-        "triangles": scene.mesh.triangle_count() + scene.instanced_triangle_count(),
+        "triangles": scene.drawn_triangle_count(),
         "stored_triangles": scene.stored_triangle_count(),
         "instances": scene.instances.len(),
         "threads": rayon::current_num_threads(),
@@ -287,7 +287,7 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     };
     Ok(json!({
         "scene": args.scene,
-        "triangles": scene.mesh.triangle_count() + scene.instanced_triangle_count(),
+        "triangles": scene.drawn_triangle_count(),
         "stored_triangles": scene.stored_triangle_count(),
         "instances": scene.instances.len(),
         "threads": rayon::current_num_threads(),

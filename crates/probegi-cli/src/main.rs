@@ -291,7 +291,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             "rays_traced": stats.rays_traced,
             "width": image.width,
             "height": image.height,
-            "triangles": scene.mesh.triangle_count() + scene.instanced_triangle_count(),
+            "triangles": scene.drawn_triangle_count(),
             "stored_triangles": scene.stored_triangle_count(),
             "instances": scene.instances.len(),
             "bvh_build_ms": bvh.build_time.as_secs_f64() * 1e3,

@@ -49,9 +49,9 @@ impl Default for BvhSettings {
     }
 }
 
-/// A material's coverage for alpha testing, copied out of its texture so that
-/// the tracer needs no scene: the same bilinear filter and rule as
-/// `Material::opaque_at`.
+/// A material's coverage for alpha testing (the rule in `material.rs`), copied
+/// out of its texture so that the tracer needs no scene: `factor` × the
+/// bilinear coverage ≥ `cutoff`.
 #[derive(Clone, Debug)]
 struct CoverageMask {
     width: u32,
@@ -74,18 +74,18 @@ impl CoverageMask {
     }
 }
 
-/// The cut-out triangles of a scene.
+/// The cut-out materials of a scene: one mask per cut-out material, looked up
+/// through each mesh's own per-triangle material ids (the scene's mesh and the
+/// prototypes alike).
 #[derive(Clone, Debug, Default)]
 struct Cutouts {
     masks: Vec<CoverageMask>,
-    /// Per mesh triangle: index into `masks`, or `u32::MAX` for opaque. Empty: all opaque.
-    triangle_mask: Vec<u32>,
+    /// Per material: index into `masks`, or `u32::MAX` for opaque. Empty: all opaque.
+    material_mask: Vec<u32>,
 }
 
 impl Cutouts {
-    /// The masks of the scene's materials (in material order, cut-out ones only)
-    /// and, per material, its mask's index or `u32::MAX`.
-    fn masks_of(scene: &Scene) -> (Vec<CoverageMask>, Vec<u32>) {
+    fn of_scene(scene: &Scene) -> Self {
         let mut masks = vec![];
         let material_mask: Vec<u32> = scene
             .materials
@@ -106,24 +106,13 @@ impl Cutouts {
                 (masks.len() - 1) as u32
             })
             .collect();
-        (masks, material_mask)
+        if masks.is_empty() { Self::default() } else { Self { masks, material_mask } }
     }
 
-    fn material_masks(scene: &Scene) -> Vec<u32> {
-        Self::masks_of(scene).1
-    }
-
-    fn of_scene(scene: &Scene) -> Self {
-        let (masks, material_mask) = Self::masks_of(scene);
-        if masks.is_empty() {
-            return Self::default();
-        }
-        let triangle_mask = scene.mesh.triangle_materials.iter().map(|&m| material_mask[m as usize]).collect();
-        Self { masks, triangle_mask }
-    }
-
-    fn mask_of(&self, triangle: u32) -> u32 {
-        self.triangle_mask.get(triangle as usize).copied().unwrap_or(u32::MAX)
+    /// The mask of `mesh`'s triangle `triangle`, or `u32::MAX` when it is opaque.
+    fn mask_of(&self, mesh: &Mesh, triangle: u32) -> u32 {
+        let material = mesh.triangle_materials.get(triangle as usize);
+        material.and_then(|&m| self.material_mask.get(m as usize)).copied().unwrap_or(u32::MAX)
     }
 }
 
@@ -181,10 +170,10 @@ impl Blas {
         let triangles = bvh.primitive_indices.iter().map(|&i| tris[i as usize]).collect();
         let triangle_ids: Vec<u32> = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
         let (mut leaf_cut, mut cut) = (vec![], vec![]);
-        if triangle_ids.iter().any(|&t| cutouts.mask_of(t) != u32::MAX) {
+        if triangle_ids.iter().any(|&t| cutouts.mask_of(mesh, t) != u32::MAX) {
             leaf_cut = triangle_ids
                 .iter()
-                .map(|&t| match cutouts.mask_of(t) {
+                .map(|&t| match cutouts.mask_of(mesh, t) {
                     u32::MAX => u32::MAX,
                     mask => {
                         let uv = mesh.triangles[t as usize].map(|v| mesh.uvs[v as usize]);
@@ -256,7 +245,11 @@ impl Instance {
         match &self.local_from_world {
             None => *r,
             // Unnormalised direction: the ray parameter t is the same in both spaces.
-            Some(m) => ObRay::new(m.transform_point3a(r.origin), m.transform_vector3a(r.direction), r.tmin, r.tmax),
+            // + 0.0 clears negative zeros a rotation can produce (see `to_obvhs`).
+            Some(m) => {
+                let dir = m.transform_vector3a(r.direction) + Vec3A::ZERO;
+                ObRay::new(m.transform_point3a(r.origin), dir, r.tmin, r.tmax)
+            }
         }
     }
 }
@@ -339,16 +332,7 @@ impl BvhTracer {
         for proto in &scene.prototypes {
             let m = &proto.mesh;
             let ids: Vec<u32> = (0..m.triangle_count() as u32).collect();
-            let proto_cutouts = Cutouts {
-                masks: cutouts.masks.clone(),
-                triangle_mask: if cutouts.masks.is_empty() {
-                    vec![]
-                } else {
-                    let by_material = Cutouts::material_masks(scene);
-                    m.triangle_materials.iter().map(|&mat| by_material[mat as usize]).collect()
-                },
-            };
-            blases.push(Blas::build(m, &ids, pad_m(m.bounds(), settings), &proto_cutouts));
+            blases.push(Blas::build(m, &ids, pad_m(m.bounds(), settings), &cutouts));
         }
         let placed = scene
             .instances
@@ -387,11 +371,6 @@ impl BvhTracer {
     /// Moving objects this tracer instances.
     pub fn instanced_object_count(&self) -> usize {
         self.object_ids.len()
-    }
-
-    /// Instanced triangles the tracer places (each copy counted).
-    pub fn instanced_triangle_count(&self) -> usize {
-        self.placed.iter().map(|&(b, _, _)| self.blases[b].triangles.len()).sum()
     }
 
     /// The top-level BVH over the static part, the moving objects placed by

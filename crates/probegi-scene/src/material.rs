@@ -147,20 +147,6 @@ impl Material {
         }
     }
 
-    /// Whether the point at `uv` is opaque (see the module docs).
-    pub fn opaque_at(&self, textures: &[Texture], uv: Vec2) -> bool {
-        match self.alpha_mode {
-            AlphaMode::Opaque => true,
-            AlphaMode::Mask { cutoff } => {
-                let coverage = match self.alpha_texture.and_then(|t| textures.get(t)) {
-                    Some(t) => t.sample_coverage(uv),
-                    None => 1.0,
-                };
-                self.alpha_factor * coverage >= cutoff
-            }
-        }
-    }
-
     /// Whether a normal or bump map perturbs this material's shading normals.
     pub fn perturbs_normals(&self) -> bool {
         self.normal_texture.is_some() || self.bump_texture.is_some()

@@ -447,6 +447,11 @@ impl Scene {
         Ok(prototype)
     }
 
+    /// Triangles drawn: the scene's mesh and every instance's copy.
+    pub fn drawn_triangle_count(&self) -> usize {
+        self.mesh.triangle_count() + self.instanced_triangle_count()
+    }
+
     /// Triangles stored: the scene's mesh and each prototype once.
     pub fn stored_triangle_count(&self) -> usize {
         self.mesh.triangle_count() + self.prototypes.iter().map(|p| p.mesh.triangle_count()).sum::<usize>()

@@ -84,17 +84,9 @@ impl Texture {
         Footprint::at(self.width, self.height, uv).blend(|i| Vec3::from(self.texels[i].map(unorm)))
     }
 
-    /// Coverage for alpha testing, bilinear: the alpha channel when the texture
-    /// has one, else the stored grey level (an MTL `map_d` saved as a grey image).
-    pub fn sample_coverage(&self, uv: Vec2) -> f32 {
-        let f = Footprint::at(self.width, self.height, uv);
-        match &self.alpha {
-            Some(a) => f.blend(|i| unorm(a[i])),
-            None => f.blend(|i| grey(self.texels[i])),
-        }
-    }
-
-    /// The coverage plane [`Texture::sample_coverage`] reads, one byte per texel.
+    /// Coverage for alpha testing, one byte per texel: the alpha channel when
+    /// the texture has one, else the stored grey level (an MTL `map_d` saved as
+    /// a grey image). The tracer filters it bilinearly (`bvh.rs`).
     pub fn coverage_plane(&self) -> Vec<u8> {
         match &self.alpha {
             Some(a) => a.clone(),
@@ -213,7 +205,7 @@ mod tests {
     fn huge_texture_coordinates_stay_finite() {
         let t = checker();
         for uv in [Vec2::new(3e38, -3e38), Vec2::new(-1e-9, 1e20), Vec2::new(f32::MAX, 0.25)] {
-            assert!(t.sample_bilinear(uv).is_finite() && t.sample_coverage(uv).is_finite(), "{uv}");
+            assert!(t.sample_bilinear(uv).is_finite() && t.sample_raw(uv).is_finite(), "{uv}");
             assert!(t.sample_height_gradient(uv).1.is_finite());
         }
     }
