@@ -152,9 +152,20 @@ pub enum GiArg {
 /// DDGI volume options shared by `render` and `bench`.
 #[derive(Args, Debug, Clone, Default)]
 pub struct VolumeArgs {
-    /// Probe grid NX,NY,NZ fitted to the scene bounds (overrides the scene file's volume).
+    /// Probe grid NX,NY,NZ fitted to the scene bounds (overrides the scene file's
+    /// volume); with --cascades, every cascade's counts.
     #[arg(long, value_parser = parse_uvec3)]
     pub probes: Option<[u32; 3]>,
+    /// Camera-centred DDGI cascades (seed 003 §6.2): N nested tracking windows, each
+    /// --cascade-ratio times the spacing of the one inside it. The innermost spacing
+    /// is `--set probe_spacing_m=S` (a scalar or X,Y,Z), else fitted so that the
+    /// coarsest cascade spans the scene bounds. Without it, one volume as before
+    /// (or the scene file's `[[volumes]]`).
+    #[arg(long)]
+    pub cascades: Option<u32>,
+    /// Spacing ratio between neighbouring cascades.
+    #[arg(long, default_value_t = probegi_core::ddgi_settings::DEFAULT_CASCADE_SPACING_RATIO)]
+    pub cascade_ratio: f32,
     /// Rays per probe per frame.
     #[arg(long)]
     pub rays_per_probe: Option<u32>,

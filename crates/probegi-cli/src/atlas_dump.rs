@@ -9,7 +9,8 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use glam::{Vec2, Vec3};
 use probegi_core::image::Image;
-use probegi_core::probe_atlas::ProbeAtlas;
+use probegi_core::irradiance_encoding::decode_irradiance;
+use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_index};
 use probegi_cpu::ddgi::DdgiVolume;
 
 fn atlas_image<T: probegi_core::probe_atlas::Texel>(
@@ -25,7 +26,7 @@ fn atlas_image<T: probegi_core::probe_atlas::Texel>(
         for y in 0..t {
             for x in 0..t {
                 let pos = atlas.atlas_texel_position(p, x, y, probes_per_row);
-                img.set(pos.x, pos.y, to_rgb(tile[(y * t + x) as usize]));
+                img.set(pos.x, pos.y, to_rgb(tile[tile_texel_index(atlas.interior, x, y)]));
             }
         }
     }
@@ -36,9 +37,7 @@ pub fn dump_atlases(dir: &Path, volume: &DdgiVolume) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let per_row = volume.grid.probe_counts.x;
     let gamma = volume.settings.probe_irradiance_gamma;
-    let irr = atlas_image(&volume.irradiance, per_row, |e: Vec3| {
-        Vec3::new(e.x.powf(gamma), e.y.powf(gamma), e.z.powf(gamma))
-    });
+    let irr = atlas_image(&volume.irradiance, per_row, |e: Vec3| decode_irradiance(e, gamma));
     let clamp = volume.distance_clamp_m();
     let dist = atlas_image(&volume.distance, per_row, |m: Vec2| Vec3::new(m.x, m.y, 0.0));
     let dist_grey = atlas_image(&volume.distance, per_row, |m: Vec2| Vec3::splat(m.x / clamp));

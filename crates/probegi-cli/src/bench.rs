@@ -51,6 +51,7 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
             gi,
             direct: DirectSettings::default(),
             show_probes: false,
+            camera_path: Vec::new(),
         };
         render_frames(&scene, &bvh, &camera, &settings, |_, _| {}).stats
     };
@@ -101,6 +102,7 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
 /// in the same run.
 fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     use probegi_cpu::ddgi::{DdgiVolume, ddgi_volume_bytes};
+    use probegi_cpu::ddgi_field_set::DdgiFieldSet;
     use probegi_cpu::frame_loop::FIELD_UPDATE_PASSES;
     use probegi_cpu::probe_ray_gen::probe_ray_directions;
     use probegi_cpu::{DirectLighting, DirectSettings};
@@ -119,14 +121,15 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     for grid in &grids {
         for &rays in &ray_counts {
             let settings = bench_volume_settings(args, *grid, rays)?;
-            let mut volume = DdgiVolume::new(settings.clone(), bounds);
+            let mut set = DdgiFieldSet::single(DdgiVolume::new(settings.clone(), bounds));
             let mut warmup = BTreeMap::new();
-            volume.update(&scene, &bvh, &direct, args.seed, 0, &mut warmup);
+            set.update(&scene, &bvh, &direct, args.seed, 0, &mut warmup);
             let init_ms = warmup.get("probe_init").copied().unwrap_or(0.0);
             let mut pass_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
             for f in 1..=args.frames {
-                volume.update(&scene, &bvh, &direct, args.seed, f, &mut pass_ms);
+                set.update(&scene, &bvh, &direct, args.seed, f, &mut pass_ms);
             }
+            let volume = &set.volumes[0];
             for v in pass_ms.values_mut() {
                 *v /= args.frames as f64;
             }

@@ -97,6 +97,7 @@ fn render_sequence(
         gi: GiMethod::Ddgi(Box::new(volume.clone())),
         direct: DirectSettings::default(),
         show_probes: false,
+        camera_path: Vec::new(),
     };
     let mut out = vec![];
     render_frames(scene, &bvh, &rays, &settings, |f, image| {

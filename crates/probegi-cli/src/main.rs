@@ -19,7 +19,7 @@ use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 
 use args::{Cli, Command, GiArg, ReferenceArgs, RenderArgs, SceneArgs, VolumeArgs};
-use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_core::sh_settings::ShProbeSettings;
 use probegi_cpu::ddgi::ddgi_volume_bytes;
 
@@ -197,17 +197,21 @@ fn render(args: &RenderArgs) -> Result<()> {
     {
         bail!("--probes, --rays-per-probe and --set configure probes: they need --gi ddgi or --gi sh");
     }
+    if args.gi != GiArg::Ddgi && v.cascades.is_some() {
+        bail!("--cascades configures DDGI volumes: it needs --gi ddgi");
+    }
     let gi = match args.gi {
         GiArg::None => GiMethod::None,
-        GiArg::Ddgi => GiMethod::Ddgi(Box::new(volume_settings(&scene, &args.volume)?)),
+        GiArg::Ddgi => ddgi_method(&scene, &args.volume)?,
         GiArg::Sh => GiMethod::Sh(Box::new(sh_settings(&scene, &args.volume)?)),
     };
-    if !matches!(gi, GiMethod::Ddgi(_)) && (args.dump_atlases.is_some() || args.show_probes) {
+    if !matches!(gi, GiMethod::Ddgi(_) | GiMethod::DdgiSet(_)) && (args.dump_atlases.is_some() || args.show_probes) {
         bail!("--dump-atlases and --show-probes need --gi ddgi");
     }
     // Static geometry in one BVH, moving objects instanced (see probegi_scene::bvh).
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
+    let camera_path = camera_path(&scene, &args.scene, args.frames);
     let settings = RenderSettings {
         width: args.scene.width,
         height: args.scene.height,
@@ -216,6 +220,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         gi,
         direct: DirectSettings { direct_area_samples: args.area_samples, ..Default::default() },
         show_probes: args.show_probes,
+        camera_path,
     };
     let bar = progress(args.frames as u64, "render");
     let start = Instant::now();
@@ -270,8 +275,12 @@ fn render(args: &RenderArgs) -> Result<()> {
     bar.finish_and_clear();
     let elapsed = start.elapsed();
     write_radiance(&args.out, &image)?;
-    if let (Some(dir), Some(volume)) = (&args.dump_atlases, &out.ddgi) {
-        atlas_dump::dump_atlases(dir, volume)?;
+    if let (Some(dir), Some(set)) = (&args.dump_atlases, &out.ddgi) {
+        for (i, volume) in set.volumes.iter().enumerate() {
+            // One volume: its atlases in DIR as before; several: DIR/volume-I each.
+            let d = if set.volumes.len() == 1 { dir.clone() } else { dir.join(format!("volume-{i}")) };
+            atlas_dump::dump_atlases(&d, volume)?;
+        }
         eprintln!("wrote atlases to {}", dir.display());
     }
     eprintln!(
@@ -301,6 +310,11 @@ fn render(args: &RenderArgs) -> Result<()> {
             "field_update_mrays_per_s": stats.field_update_mrays_per_s,
             "probe_states": stats.probe_states,
             "active_probes": stats.active_probes,
+            "volumes": stats.volumes,
+            "batch_rays": stats.batch_rays,
+            "batch_rays_per_volume": stats.batch_rays_per_volume,
+            "probes_scrolled_in": stats.probes_scrolled_in,
+            "probes_woken": stats.probes_woken,
         });
         write_text(path, &serde_json::to_string_pretty(&json)?)?;
     }
@@ -322,10 +336,59 @@ pub fn probe_settings(set: &[String]) -> impl Iterator<Item = &String> {
     set.iter().filter(|a| !probegi_scene::scene_file::is_scene_setting(a))
 }
 
-/// Volume settings: the papers' defaults, then the scene file's `[volume]`, then
-/// `--probes`, `--rays-per-probe` and each `--set` in order.
-pub fn volume_settings(scene: &Scene, args: &VolumeArgs) -> Result<DdgiVolumeSettings> {
-    let mut s = scene.volume.clone().unwrap_or_default();
+/// The DDGI of `render --gi ddgi`: `--cascades`, else the scene file's
+/// `[[volumes]]`, else one volume (the file's `[volume]` or the defaults).
+pub fn ddgi_method(scene: &Scene, args: &VolumeArgs) -> Result<GiMethod> {
+    if let Some(n) = args.cascades {
+        if n == 0 || n > 16 {
+            bail!("--cascades {n}: must be in 1..=16");
+        }
+        let r = args.cascade_ratio;
+        if !(r.is_finite() && r >= 1.0 && r <= 16.0) {
+            bail!("--cascade-ratio {r}: must be in [1, 16]");
+        }
+        let base = volume_settings(scene, args)?;
+        let spacing = match base.probe_spacing_m {
+            Some(s) => s,
+            None => {
+                // The coarsest cascade's probe box spans the scene bounds.
+                let (lo, hi) = scene.bounds().unwrap_or((glam::Vec3::splat(-1.0), glam::Vec3::ONE));
+                let cells = (base.probe_counts.as_vec3() - glam::Vec3::ONE).max(glam::Vec3::ONE);
+                ((hi - lo) / cells / r.powi(n as i32 - 1)).max(glam::Vec3::splat(1e-3))
+            }
+        };
+        let set = DdgiFieldSetSettings::cascades(n, &base, spacing, r);
+        set.validate().map_err(|(i, f, why)| anyhow::anyhow!("cascade {i}: volume setting {f}: {why}"))?;
+        check_memory(set.volumes.iter().map(ddgi_volume_bytes).sum(), "the DDGI cascades")?;
+        return Ok(GiMethod::DdgiSet(Box::new(set)));
+    }
+    if !scene.volumes.is_empty() {
+        let mut volumes = Vec::new();
+        for v in &scene.volumes {
+            volumes.push(apply_volume_args(v.clone(), args)?);
+        }
+        let set = DdgiFieldSetSettings { volumes, blending: probegi_core::ddgi_volume_blend::VolumeBlending::Density };
+        check_memory(set.volumes.iter().map(ddgi_volume_bytes).sum(), "the DDGI volumes")?;
+        return Ok(GiMethod::DdgiSet(Box::new(set)));
+    }
+    Ok(GiMethod::Ddgi(Box::new(volume_settings(scene, args)?)))
+}
+
+/// The camera of every frame when the scene's camera is keyframed and no
+/// `--camera-*` option fixes it; empty otherwise.
+fn camera_path(scene: &Scene, args: &SceneArgs, frames: u32) -> Vec<CameraRays> {
+    let fixed = args.camera_pos.is_some() || args.camera_target.is_some() || args.fov_y.is_some();
+    if fixed || !scene.has_camera_animation() {
+        return Vec::new();
+    }
+    (0..frames)
+        .filter_map(|f| scene.camera_at(f as f32))
+        .map(|c| CameraRays::new(&c, args.width, args.height))
+        .collect()
+}
+
+/// `--probes`, `--rays-per-probe` and each `--set`, in order, over `s`.
+fn apply_volume_args(mut s: DdgiVolumeSettings, args: &VolumeArgs) -> Result<DdgiVolumeSettings> {
     if let Some(p) = args.probes {
         s.probe_counts = glam::UVec3::from(p);
         s.probe_origin_m = None;
@@ -342,6 +405,12 @@ pub fn volume_settings(scene: &Scene, args: &VolumeArgs) -> Result<DdgiVolumeSet
     s.validate().map_err(|(field, why)| anyhow::anyhow!("volume setting {field}: {why}"))?;
     check_memory(ddgi_volume_bytes(&s), "the DDGI volume")?;
     Ok(s)
+}
+
+/// Volume settings: the papers' defaults, then the scene file's `[volume]`, then
+/// `--probes`, `--rays-per-probe` and each `--set` in order.
+pub fn volume_settings(scene: &Scene, args: &VolumeArgs) -> Result<DdgiVolumeSettings> {
+    apply_volume_args(scene.volume.clone().unwrap_or_default(), args)
 }
 
 /// SH probe settings: the paper's defaults, then the scene file's `[sh]`, then each

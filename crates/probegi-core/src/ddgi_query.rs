@@ -28,6 +28,7 @@ use glam::{IVec3, UVec3, Vec2, Vec3};
 use std::f32::consts::PI;
 
 use crate::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
+use crate::irradiance_encoding::{decode_irradiance_half, finish_half_decode};
 use crate::octahedral::oct_encode;
 use crate::probe_atlas::{BilinearFootprint, ProbeAtlas};
 use crate::probe_grid::ProbeGrid;
@@ -124,16 +125,6 @@ pub fn backface_weight(dir_to_probe: Vec3, normal: Vec3) -> f32 {
     wrap * wrap + 0.2
 }
 
-/// `e^(γ/2)` per channel: the partial decode of seed 004 Listing 2. γ = 5 (the
-/// default) takes the exact `e²·√e` path instead of `powf`.
-fn decode_half(e: Vec3, half_gamma: f32) -> Vec3 {
-    if half_gamma == 2.5 {
-        e * e * Vec3::new(e.x.sqrt(), e.y.sqrt(), e.z.sqrt())
-    } else {
-        Vec3::new(e.x.powf(half_gamma), e.y.powf(half_gamma), e.z.powf(half_gamma))
-    }
-}
-
 /// Irradiance (W·m⁻²) arriving at `position` on a surface with unit `normal`.
 pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_dir: Vec3) -> Vec3 {
     let s = field.settings;
@@ -141,7 +132,7 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
     let biased = position + surface_bias(s, g, normal, view_dir);
     let cage = g.cage(biased);
     let normal_texels = BilinearFootprint::new(field.irradiance.interior, oct_encode(normal));
-    let half_gamma = s.probe_irradiance_gamma * 0.5;
+    let gamma = s.probe_irradiance_gamma;
 
     // One cage probe's (weight, decoded irradiance) for corner `i`; `probe` (at grid
     // coordinates `coords`) may be the corner's fallback, weighted like the corner.
@@ -170,7 +161,7 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
             weight *= t.x * t.y * t.z;
         }
         let e = normal_texels.sample(field.irradiance.tile(probe)).max(Vec3::ZERO);
-        (weight, decode_half(e, half_gamma))
+        (weight, decode_irradiance_half(e, gamma))
     };
 
     let mut sum = Vec3::ZERO;
@@ -201,14 +192,14 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
     if !(wsum.is_finite() && wsum > 0.0) {
         return Vec3::ZERO;
     }
-    let m = sum / wsum;
-    let e = m * m * PI * s.probe_energy_conservation;
+    let e = finish_half_decode(sum / wsum) * PI * s.probe_energy_conservation;
     if e.is_finite() { e } else { Vec3::ZERO }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::irradiance_encoding::encode_irradiance;
 
     /// A view with no relocation offsets, every probe usable and no fallback table.
     fn bare_view<'a>(
@@ -233,12 +224,12 @@ mod tests {
         distance: f32,
         counts: UVec3,
     ) -> (ProbeGrid, DdgiVolumeSettings, ProbeAtlas<Vec3>, ProbeAtlas<Vec2>) {
-        let grid = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: counts, spacing_m: Vec3::ONE };
+        let grid = ProbeGrid::new(Vec3::ZERO, counts, Vec3::ONE);
         let settings = DdgiVolumeSettings::default();
         let n = grid.probe_count();
         let mut irr = ProbeAtlas::new(n, settings.probe_irradiance_texels);
         let mut dist = ProbeAtlas::new(n, settings.probe_distance_texels);
-        irr.texels.fill(Vec3::splat(mean_radiance.powf(1.0 / settings.probe_irradiance_gamma)));
+        irr.texels.fill(encode_irradiance(Vec3::splat(mean_radiance), settings.probe_irradiance_gamma));
         dist.texels.fill(Vec2::new(distance, distance * distance));
         (grid, settings, irr, dist)
     }
@@ -273,7 +264,7 @@ mod tests {
         assert!((backface_weight(Vec3::NEG_Y, n) - 0.2).abs() < 1e-6);
         // Through a real query: two probes, one above and one below a floor at y = 0.5,
         // the lower one seeing the floor's underside at 0.5 m (and dark).
-        let grid = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(1, 2, 1), spacing_m: Vec3::ONE };
+        let grid = ProbeGrid::new(Vec3::ZERO, UVec3::new(1, 2, 1), Vec3::ONE);
         let settings = DdgiVolumeSettings::default();
         let mut irr = ProbeAtlas::new(2, settings.probe_irradiance_texels);
         let mut dist = ProbeAtlas::new(2, settings.probe_distance_texels);
@@ -301,11 +292,11 @@ mod tests {
     #[test]
     fn a_cage_without_usable_probes_reads_the_nearest_usable_probe_not_black() {
         // 5 × 1 × 1 probes; only the last one (x = 4) is usable and lit.
-        let grid = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(5, 1, 1), spacing_m: Vec3::ONE };
+        let grid = ProbeGrid::new(Vec3::ZERO, UVec3::new(5, 1, 1), Vec3::ONE);
         let settings = DdgiVolumeSettings::default();
         let mut irr = ProbeAtlas::new(5, settings.probe_irradiance_texels);
         let mut dist = ProbeAtlas::new(5, settings.probe_distance_texels);
-        irr.tile_mut(4).fill(Vec3::splat(3.0f32.powf(1.0 / settings.probe_irradiance_gamma)));
+        irr.tile_mut(4).fill(encode_irradiance(Vec3::splat(3.0), settings.probe_irradiance_gamma));
         dist.texels.fill(Vec2::new(5.0, 25.0));
         let usable = [false, false, false, false, true];
         let fallback = nearest_usable_probes(&grid, &usable);
@@ -325,7 +316,7 @@ mod tests {
         assert_eq!(nearest_usable_probes(&grid, &[false; 5]), vec![u32::MAX; 5]);
         // Ties and distances on a 3-D grid: every probe gets a usable probe no farther
         // (in grid steps) than any other usable probe.
-        let g3 = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(4, 3, 5), spacing_m: Vec3::ONE };
+        let g3 = ProbeGrid::new(Vec3::ZERO, UVec3::new(4, 3, 5), Vec3::ONE);
         let u3: Vec<bool> = (0..g3.probe_count()).map(|i| i % 7 == 3).collect();
         let n3 = nearest_usable_probes(&g3, &u3);
         let steps =

@@ -26,8 +26,16 @@ pub struct DdgiVolumeSettings {
     pub probe_counts: UVec3,
     /// World position of probe (0,0,0); absent = fit the grid to the scene bounds.
     pub probe_origin_m: Option<Vec3>,
-    /// Spacing per axis in metres; absent = fit the grid to the scene bounds.
+    /// Spacing per axis in metres; absent = fit the grid to the scene bounds
+    /// (or to `volume_bounds_m`). `--set probe_spacing_m=S` takes a scalar for all axes.
     pub probe_spacing_m: Option<Vec3>,
+    /// The box `[lo, hi]` the grid is fitted to when no origin or spacing is given;
+    /// absent = the scene bounds. A `[[volumes]]` entry places a volume this way.
+    pub volume_bounds_m: Option<[Vec3; 2]>,
+    /// A tracking window (seed 004 §7.3): the volume starts centred on the camera
+    /// and moves with it in whole-cell steps over a circular buffer; planes that
+    /// scroll in are reset and re-initialised. Blended camera-aware (§7.4).
+    pub volume_tracks_camera: bool,
     /// Rays traced per probe per frame (RTXGI default 256; seed 000 Table 2 sweeps 32–256).
     pub probe_rays_per_probe: u32,
     /// Interior irradiance texels per side (seed 004 Table 2: 8×8 with the 1-texel border).
@@ -104,6 +112,8 @@ impl Default for DdgiVolumeSettings {
             probe_counts: UVec3::splat(8),
             probe_origin_m: None,
             probe_spacing_m: None,
+            volume_bounds_m: None,
+            volume_tracks_camera: false,
             probe_rays_per_probe: 256,
             probe_irradiance_texels: 6,
             probe_distance_texels: 14,
@@ -156,6 +166,16 @@ impl DdgiVolumeSettings {
             && !o.is_finite()
         {
             return Err(("probe_origin_m", format!("{o} must be finite")));
+        }
+        if let Some([lo, hi]) = self.volume_bounds_m
+            && !(lo.is_finite() && hi.is_finite() && hi.cmpgt(lo).all())
+        {
+            return Err(("volume_bounds_m", format!("[{lo}, {hi}] must be finite with hi > lo on every axis")));
+        }
+        if let Some(s) = self.probe_spacing_m
+            && !(self.probe_origin_m.unwrap_or(Vec3::ZERO) + s * self.probe_counts.as_vec3()).is_finite()
+        {
+            return Err(("probe_spacing_m", format!("{s} × the probe counts overflows")));
         }
         if self.probe_rays_per_probe == 0 || self.probe_rays_per_probe > 65_536 {
             return Err(("probe_rays_per_probe", format!("{} must be in 1..=65536", self.probe_rays_per_probe)));
@@ -215,6 +235,55 @@ impl DdgiVolumeSettings {
 
     pub fn probe_count(&self) -> u64 {
         self.probe_counts.as_u64vec3().element_product()
+    }
+}
+
+/// A set of DDGI volumes (`probegi_cpu::ddgi_field_set::DdgiFieldSet`): the volumes
+/// in any order (the set samples them densest or finest first) and how they blend.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct DdgiFieldSetSettings {
+    pub volumes: Vec<DdgiVolumeSettings>,
+    pub blending: crate::ddgi_volume_blend::VolumeBlending,
+}
+
+/// Spacing ratio between neighbouring cascades (seed 003 §6.2: each coarser
+/// cascade has half the probe density per axis).
+pub const DEFAULT_CASCADE_SPACING_RATIO: f32 = 2.0;
+
+impl DdgiFieldSetSettings {
+    /// One volume: today's single grid.
+    pub fn single(volume: DdgiVolumeSettings) -> Self {
+        Self { volumes: vec![volume], blending: Default::default() }
+    }
+
+    /// Seed 003 §6.2: `count` camera-centred cascades with `base`'s settings (its
+    /// probe counts in every cascade), the innermost `innermost_spacing_m` apart and
+    /// each next one `ratio` × farther apart. Every cascade is a tracking window.
+    pub fn cascades(count: u32, base: &DdgiVolumeSettings, innermost_spacing_m: Vec3, ratio: f32) -> Self {
+        let volumes = (0..count)
+            .map(|i| DdgiVolumeSettings {
+                probe_origin_m: None,
+                probe_spacing_m: Some(innermost_spacing_m * ratio.powi(i as i32)),
+                volume_bounds_m: None,
+                volume_tracks_camera: true,
+                ..base.clone()
+            })
+            .collect();
+        Self { volumes, blending: crate::ddgi_volume_blend::VolumeBlending::Cascades }
+    }
+
+    /// The first volume setting that makes no sense, as `(volume index, field, reason)`.
+    pub fn validate(&self) -> Result<(), (usize, &'static str, String)> {
+        if self.volumes.is_empty() {
+            return Err((0, "volumes", "a set needs at least one volume".into()));
+        }
+        if self.volumes.len() > 64 {
+            return Err((64, "volumes", format!("{} volumes: at most 64", self.volumes.len())));
+        }
+        for (i, v) in self.volumes.iter().enumerate() {
+            v.validate().map_err(|(f, why)| (i, f, why))?;
+        }
+        Ok(())
     }
 }
 

@@ -15,6 +15,28 @@
 
 use glam::{UVec2, Vec2};
 
+/// Texels per tile side for `interior` interior texels: the interior plus a
+/// one-texel guard border on each side.
+pub const fn tile_side(interior: u32) -> u32 {
+    interior + 2
+}
+
+/// Texels in one tile, border included.
+pub const fn tile_texel_count(interior: u32) -> usize {
+    let s = tile_side(interior) as usize;
+    s * s
+}
+
+/// Tile-local index of tile texel `(x, y)` (border coordinates: 0 and `interior + 1` are the border).
+pub const fn tile_texel_index(interior: u32, x: u32, y: u32) -> usize {
+    y as usize * tile_side(interior) as usize + x as usize
+}
+
+/// Tile-local index of interior texel `(i, j)`, `0 ≤ i, j < interior`.
+pub const fn interior_texel_index(interior: u32, i: u32, j: u32) -> usize {
+    tile_texel_index(interior, i + 1, j + 1)
+}
+
 /// Values a tile can hold and bilinearly filter.
 pub trait Texel: Copy + Default + std::ops::Add<Output = Self> + std::ops::Mul<f32, Output = Self> {}
 impl Texel for glam::Vec2 {}
@@ -31,18 +53,21 @@ pub struct ProbeAtlas<T> {
 
 impl<T: Texel> ProbeAtlas<T> {
     pub fn new(probe_count: usize, interior: u32) -> Self {
-        let tile = (interior + 2) as usize;
-        Self { probe_count, interior, texels: vec![T::default(); probe_count * tile * tile] }
+        Self { probe_count, interior, texels: vec![T::default(); probe_count * tile_texel_count(interior)] }
     }
 
     /// Texels per tile side, border included.
     pub fn tile_size(&self) -> u32 {
-        self.interior + 2
+        tile_side(self.interior)
     }
 
     pub fn tile_len(&self) -> usize {
-        let t = self.tile_size() as usize;
-        t * t
+        tile_texel_count(self.interior)
+    }
+
+    /// Bytes one probe's tile occupies.
+    pub fn tile_bytes(interior: u32) -> usize {
+        tile_texel_count(interior) * std::mem::size_of::<T>()
     }
 
     pub fn tile(&self, probe: usize) -> &[T] {
@@ -82,7 +107,7 @@ pub struct BilinearFootprint {
 
 impl BilinearFootprint {
     pub fn new(interior: u32, uv: Vec2) -> Self {
-        let size = interior + 2;
+        let size = tile_side(interior);
         let n = interior as f32;
         // Continuous tile coordinates: interior texel i covers [i + 1, i + 2); centres at i + 1.5.
         let c = (uv.clamp(Vec2::splat(-1.0), Vec2::ONE) * 0.5 + Vec2::splat(0.5)) * n + Vec2::splat(0.5);
@@ -92,7 +117,7 @@ impl BilinearFootprint {
         let fx = (c.x - x0 as f32).clamp(0.0, 1.0);
         let fy = (c.y - y0 as f32).clamp(0.0, 1.0);
         let s = size as usize;
-        let i00 = y0 as usize * s + x0 as usize;
+        let i00 = tile_texel_index(interior, x0, y0);
         Self {
             indices: [i00, i00 + 1, i00 + s, i00 + s + 1],
             weights: [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy],
@@ -125,7 +150,8 @@ mod tests {
         }
         for j in 0..6 {
             for i in 0..6 {
-                let want = a.tile(1)[((j + 1) * 8 + i + 1) as usize];
+                let want = a.tile(1)[interior_texel_index(6, i, j)];
+                assert_eq!(interior_texel_index(6, i, j), ((j + 1) * 8 + i + 1) as usize);
                 assert_eq!(a.sample_bilinear(1, texel_center_uv(i, j, 6)), want);
             }
         }

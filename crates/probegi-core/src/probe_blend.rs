@@ -18,7 +18,9 @@
 
 use glam::{Vec2, Vec3};
 
+use crate::irradiance_encoding::encode_irradiance;
 use crate::octahedral::{oct_decode, texel_center_uv};
+use crate::probe_atlas::interior_texel_index;
 
 /// Weights below this are dropped from the sparse tables. `max(0, cos)^50 < 1e-6`
 /// beyond 40° from the texel direction; the dropped mass is below float precision
@@ -65,9 +67,9 @@ impl BlendWeights {
     }
 }
 
+/// Tile index of interior texel number `t` (row-major over the interior).
 fn interior_index(t: usize, interior: u32) -> usize {
-    let (i, j) = (t as u32 % interior, t as u32 / interior);
-    ((j + 1) * (interior + 2) + i + 1) as usize
+    interior_texel_index(interior, t as u32 % interior, t as u32 / interior)
 }
 
 /// Seed 004 §4.3 Listing 3's per-texel thresholds on the change of the encoded
@@ -116,8 +118,7 @@ pub fn blend_irradiance_tile(
         if wsum <= 0.0 {
             continue;
         }
-        let mean = (sum / wsum).max(Vec3::ZERO);
-        let encoded = Vec3::new(mean.x.powf(1.0 / gamma), mean.y.powf(1.0 / gamma), mean.z.powf(1.0 / gamma));
+        let encoded = encode_irradiance(sum / wsum, gamma);
         let dst = &mut tile[interior_index(t, interior)];
         let h = match thresholds {
             Some(th) => adjusted_hysteresis(hysteresis, (encoded - *dst).max_element(), th),

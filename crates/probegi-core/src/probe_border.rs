@@ -9,7 +9,7 @@
 //!
 //! (`n` interior texels, tile coordinates with the border at 0 and n + 1.)
 
-use crate::probe_atlas::Texel;
+use crate::probe_atlas::{Texel, tile_texel_index};
 
 /// The interior tile texel each border texel copies, as `((dst_x, dst_y), (src_x, src_y))`.
 pub fn border_sources(interior: u32) -> Vec<((u32, u32), (u32, u32))> {
@@ -32,9 +32,8 @@ pub fn border_sources(interior: u32) -> Vec<((u32, u32), (u32, u32))> {
 
 /// Copies the guard border of one tile from its interior.
 pub fn update_tile_border<T: Texel>(tile: &mut [T], interior: u32) {
-    let s = (interior + 2) as usize;
     let n = interior;
-    let idx = |x: u32, y: u32| y as usize * s + x as usize;
+    let idx = |x: u32, y: u32| tile_texel_index(n, x, y);
     for x in 1..=n {
         tile[idx(x, 0)] = tile[idx(n + 1 - x, 1)];
         tile[idx(x, n + 1)] = tile[idx(n + 1 - x, n)];

@@ -1,6 +1,16 @@
 //! The uniform probe grid of a DDGI volume (seed 003 §4.1): any probe count per
-//! axis (not only powers of two), per-axis spacing. Probe `(x, y, z)` sits at
-//! `origin + spacing · (x, y, z)`; its linear index is `x + nx·(y + ny·z)`.
+//! axis (not only powers of two), per-axis spacing. Logical probe `(x, y, z)` sits
+//! at `origin + spacing · (x, y, z)`.
+//!
+//! Storage is a circular buffer (seed 004 §7.3, Fig. 10; RTXGI's
+//! `probeScrollOffsets`): logical coordinates `c` are stored at
+//! `s = (c + probe_scroll_offsets) mod counts`, linear index `sx + nx·(sy + ny·sz)`.
+//! A tracking window that moves by whole cells ([`ProbeGrid::scroll`]) changes the
+//! origin and the offsets only, so the probes that stay keep their storage slot
+//! (their atlas tile, state and offset) and no atlas data is copied. Every index
+//! goes through [`ProbeGrid::probe_index`] / [`ProbeGrid::probe_coords`], which are
+//! inverses, so code that loops over storage slots and asks for their logical
+//! coordinates is correct for any phase.
 
 use glam::{IVec3, UVec3, Vec3};
 
@@ -11,29 +21,95 @@ pub struct ProbeGrid {
     pub probe_counts: UVec3,
     /// Distance between neighbouring probes per axis, metres.
     pub spacing_m: Vec3,
+    /// Circular-buffer phase per axis, each in `[0, count)`; zero for a grid that never moved.
+    pub probe_scroll_offsets: UVec3,
 }
 
 impl ProbeGrid {
+    /// A grid that has not scrolled.
+    pub fn new(origin_m: Vec3, probe_counts: UVec3, spacing_m: Vec3) -> Self {
+        Self { origin_m, probe_counts, spacing_m, probe_scroll_offsets: UVec3::ZERO }
+    }
+
+    /// Moves the grid by `cells` whole cells per axis: the origin moves and the
+    /// storage phase follows, so logical probes that remain in the window keep
+    /// their slot. The slots of probes that left now hold the planes that entered
+    /// ([`ProbeGrid::scrolled_in`]), whose data the caller must reset.
+    pub fn scroll(&mut self, cells: IVec3) {
+        self.origin_m += self.spacing_m * cells.as_vec3();
+        let n = self.probe_counts.as_ivec3();
+        self.probe_scroll_offsets = (self.probe_scroll_offsets.as_ivec3() + cells).rem_euclid(n).as_uvec3();
+    }
+
+    /// Whether logical probe `coords` of this grid, just moved by `cells`, entered
+    /// the window with that move (its slot holds a probe that left).
+    pub fn scrolled_in(&self, cells: IVec3, coords: UVec3) -> bool {
+        let n = self.probe_counts.as_ivec3();
+        let c = coords.as_ivec3();
+        (0..3).any(|a| {
+            let k = cells[a];
+            if k.abs() >= n[a] {
+                true
+            } else if k > 0 {
+                c[a] >= n[a] - k
+            } else {
+                c[a] < -k
+            }
+        })
+    }
+
     /// A grid of `counts` probes at the centres of `counts` equal cells spanning the
     /// box `[lo, hi]`, so no probe lies on the box's faces (which are usually walls).
     pub fn fit_to_bounds(lo: Vec3, hi: Vec3, counts: UVec3) -> Self {
         let spacing_m = ((hi - lo) / counts.as_vec3()).max(Vec3::splat(1e-4));
-        Self { origin_m: lo + spacing_m * 0.5, probe_counts: counts, spacing_m }
+        Self::new(lo + spacing_m * 0.5, counts, spacing_m)
     }
 
     pub fn probe_count(&self) -> usize {
         self.probe_counts.x as usize * self.probe_counts.y as usize * self.probe_counts.z as usize
     }
 
+    /// Storage index of logical probe `coords` (each coordinate below its count).
     pub fn probe_index(&self, coords: UVec3) -> usize {
         let c = self.probe_counts;
-        coords.x as usize + c.x as usize * (coords.y as usize + c.y as usize * coords.z as usize)
+        let wrap = |v: u32, n: u32| if v >= n { v - n } else { v };
+        let s = coords + self.probe_scroll_offsets;
+        let s = UVec3::new(wrap(s.x, c.x), wrap(s.y, c.y), wrap(s.z, c.z));
+        s.x as usize + c.x as usize * (s.y as usize + c.y as usize * s.z as usize)
     }
 
+    /// Logical coordinates of the probe in storage slot `index`.
     pub fn probe_coords(&self, index: usize) -> UVec3 {
         let c = self.probe_counts;
         let i = index as u32;
-        UVec3::new(i % c.x, (i / c.x) % c.y, i / (c.x * c.y))
+        let s = UVec3::new(i % c.x, (i / c.x) % c.y, i / (c.x * c.y));
+        let unwrap = |v: u32, o: u32, n: u32| if v >= o { v - o } else { v + n - o };
+        let o = self.probe_scroll_offsets;
+        UVec3::new(unwrap(s.x, o.x, c.x), unwrap(s.y, o.y, c.y), unwrap(s.z, o.z, c.z))
+    }
+
+    /// World position of the middle of the probe box.
+    pub fn centre_m(&self) -> Vec3 {
+        self.origin_m + self.spacing_m * (self.probe_counts.as_vec3() - Vec3::ONE) * 0.5
+    }
+
+    /// Cells a tracking window must move so that `target_m` stays within one cell
+    /// of its centre on every axis (seed 004 §7.3: a new plane spawns when the
+    /// target is farther from the centre than one probe spacing). Zero while it is.
+    pub fn tracking_scroll_cells(&self, target_m: Vec3) -> IVec3 {
+        let d = (target_m - self.centre_m()) / self.spacing_m;
+        let step = |d: f32| if d.abs() > 1.0 { d.trunc() as i32 } else { 0 };
+        IVec3::new(step(d.x), step(d.y), step(d.z))
+    }
+
+    /// A grid of `counts` probes `spacing_m` apart, centred on `target_m` and
+    /// snapped to the lattice of whole cells from `anchor_m` (so windows that start
+    /// anywhere land on the same world lattice, and nested cascades whose spacings
+    /// are multiples of each other share probe planes).
+    pub fn centred_on(target_m: Vec3, anchor_m: Vec3, counts: UVec3, spacing_m: Vec3) -> Self {
+        let half = spacing_m * (counts.as_vec3() - Vec3::ONE) * 0.5;
+        let cell = ((target_m - half - anchor_m) / spacing_m).round();
+        Self::new(anchor_m + cell * spacing_m, counts, spacing_m)
     }
 
     /// Grid-point position of a probe (before any relocation offset).
@@ -99,10 +175,47 @@ mod tests {
 
     #[test]
     fn index_and_coords_round_trip_for_odd_counts() {
-        let g = ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(3, 5, 7), spacing_m: Vec3::ONE };
+        let mut g = ProbeGrid::new(Vec3::ZERO, UVec3::new(3, 5, 7), Vec3::ONE);
         for i in 0..g.probe_count() {
             assert_eq!(g.probe_index(g.probe_coords(i)), i);
         }
+        // Any phase: still inverses, and a probe that stays keeps its slot.
+        let before = g;
+        g.scroll(IVec3::new(1, -2, 9));
+        assert_eq!(g.probe_scroll_offsets, UVec3::new(1, 3, 2));
+        for i in 0..g.probe_count() {
+            assert_eq!(g.probe_index(g.probe_coords(i)), i);
+            let c = g.probe_coords(i);
+            let world = g.probe_position(c);
+            let stayed = !g.scrolled_in(IVec3::new(1, -2, 9), c);
+            // z moved by 9 ≥ 7: the whole window is new.
+            assert!(!stayed);
+            let _ = (world, before);
+        }
+        let mut h = ProbeGrid::new(Vec3::ZERO, UVec3::new(4, 3, 2), Vec3::new(1.0, 2.0, 0.5));
+        let old = h;
+        h.scroll(IVec3::new(1, -1, 0));
+        let mut kept = 0;
+        for i in 0..h.probe_count() {
+            let c = h.probe_coords(i);
+            if h.scrolled_in(IVec3::new(1, -1, 0), c) {
+                continue;
+            }
+            kept += 1;
+            // The same world position was stored in the same slot before the move.
+            let old_c = old.probe_coords(i);
+            assert_eq!(old.probe_position(old_c), h.probe_position(c), "slot {i}");
+        }
+        assert_eq!(kept, 3 * 2 * 2, "x loses one plane, y one plane");
+    }
+
+    #[test]
+    fn tracking_moves_in_whole_cells_once_the_target_is_a_cell_off_centre() {
+        let g = ProbeGrid::centred_on(Vec3::new(10.3, 0.0, -4.0), Vec3::ZERO, UVec3::splat(5), Vec3::splat(2.0));
+        assert_eq!(g.origin_m, Vec3::new(6.0, -4.0, -8.0));
+        assert_eq!(g.tracking_scroll_cells(Vec3::new(11.9, 0.0, -4.0)), IVec3::ZERO);
+        assert_eq!(g.tracking_scroll_cells(Vec3::new(12.5, 0.0, -4.0)), IVec3::new(1, 0, 0));
+        assert_eq!(g.tracking_scroll_cells(Vec3::new(3.0, 0.0, 3.0)), IVec3::new(-3, 0, 3));
     }
 
     #[test]
@@ -117,7 +230,7 @@ mod tests {
     #[test]
     fn cage_weights_sum_to_one_and_clamp_beyond_the_grid() {
         let g =
-            ProbeGrid { origin_m: Vec3::ZERO, probe_counts: UVec3::new(3, 2, 1), spacing_m: Vec3::new(2.0, 1.0, 1.0) };
+            ProbeGrid::new(Vec3::ZERO, UVec3::new(3, 2, 1), Vec3::new(2.0, 1.0, 1.0));
         let c = g.cage(Vec3::new(1.5, 0.25, 0.0));
         assert_eq!((c.base, c.alpha), (IVec3::ZERO, Vec3::new(0.75, 0.25, 0.0)));
         let sum: f32 = (0..8).map(|i| c.trilinear(i).element_product()).sum();

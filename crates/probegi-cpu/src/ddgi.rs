@@ -1,33 +1,33 @@
-//! A DDGI volume on the CPU: the probe grid, its two atlases, and the per-frame
-//! field update of seed 000 §3 / seed 003 §4.2–4.5 as four passes plus the border
-//! refresh, each in its own module:
-//! `probe_ray_gen` → `probe_trace` → `probe_shade` → blend (`probegi_core::probe_blend`)
-//! → border (`probegi_core::probe_border`).
+//! One DDGI volume on the CPU: the persistent field (grid, atlases, relocation
+//! offsets, probe states, hysteresis) and the volume's share of each seam step
+//! (`ddgi_field_set` drives them for every volume of a set):
 //!
-//! Production extensions (seed 004), each switchable in the settings:
-//! - initialisation, against the static geometry (`RayTracer::static_part`):
-//!   `probe_relocation_iterations` distance-only traces with the position
-//!   optimizer (`probegi_core::probe_relocation`), then the state classification
-//!   (`probegi_core::probe_classification`); each frame, probes around moving
-//!   objects wake up (`wake_probes_near`, called by the frame loop);
-//! - per frame only probes whose state traces trace (jcgt: not Off or Sleeping;
-//!   usage: all, then classified from the frame's rays before the blend), and only
-//!   probes whose state updates are shaded and blended; queries skip probes that
-//!   are culled or not yet blended, and fall back to the nearest usable probe when
-//!   a whole cage is unusable (`probegi_core::ddgi_query`);
-//! - fast convergence: Listing 3's per-texel thresholds, and scene events
-//!   ([`SceneEvent`]) that lower the hysteresis of all probes for a few frames.
+//! - `plan_init_round` / `accept_init_round`: initialisation (seed 004 Listing 5,
+//!   first step) as distance-only rounds against the static geometry:
+//!   `probe_relocation_iterations` rounds of the position optimizer
+//!   (`probegi_core::probe_relocation`), then with jcgt states one classification
+//!   round (`probegi_core::probe_classification`). It runs for every probe when
+//!   the volume is created, and for the planes a tracking window scrolls in;
+//! - `plan_update`: the frame's rays (`probe_ray_gen`) for the probes whose state
+//!   traces (jcgt: not Off or Sleeping; usage: all);
+//! - `accept_update_hits`: the usage scheme classifies every probe from the
+//!   frame's hits (seed 003 §6.1); marks the rays whose radiance the blend needs;
+//! - `blend_results`: the backface rule (zero radiance, distance −0.2·t, seed 004
+//!   §4.1), then blend (`probegi_core::probe_blend`, hysteresis with Listing 3's
+//!   thresholds and the scene-event reductions) and border
+//!   (`probegi_core::probe_border`), only for probes that update this frame;
+//! - `scroll_to`: a tracking window's whole-cell move over the circular buffer.
 //!
-//! A probe's first update (and a Newly Awake / Newly Vigilant probe's) replaces
-//! its history, i.e. blends with hysteresis 0. Buffers are sized once.
+//! A probe's first update (and a Newly Awake / Newly Vigilant probe's, and a
+//! scrolled-in probe's) replaces its history, i.e. blends with hysteresis 0; until
+//! then queries skip it, so no stale or empty probe is ever read.
 
 use std::collections::BTreeMap;
-use std::time::Instant;
 
-use glam::{UVec3, Vec2, Vec3};
+use glam::{IVec3, UVec3, Vec2, Vec3};
 use probegi_core::ddgi_query::{DdgiFieldView, max_surface_bias_m, nearest_usable_probes};
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
-use probegi_core::probe_atlas::ProbeAtlas;
+use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_count};
 use probegi_core::probe_blend::{TexelThresholds, blend_distance_tile, blend_irradiance_tile};
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::probe_classification::{
@@ -35,13 +35,11 @@ use probegi_core::probe_classification::{
 };
 use probegi_core::probe_grid::ProbeGrid;
 use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats, relocation_step};
-use probegi_scene::{RayTracer, Scene};
+use probegi_core::rng::hash_combine;
 use rayon::prelude::*;
 
-use crate::direct::DirectLighting;
-use crate::probe_ray_gen::{generate_probe_rays, probe_ray_directions};
-use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
-use crate::probe_trace::{Surfel, signed_distance, trace_probe_rays};
+use crate::ddgi_field_set::{ProbeRayBatch, ProbeRayHit};
+use crate::probe_ray_gen::{ProbeRayDirections, generate_probe_rays, probe_ray_directions};
 
 /// Scene changes the application reports so the field reacts faster (seed 004 §4.3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -61,61 +59,107 @@ struct HysteresisReduction {
     frames_left: u32,
 }
 
+/// The persistent state of one volume. Per-frame scratch (ray directions, blend
+/// weights, which probes trace and update) lives in [`VolumeFrame`].
+#[derive(Clone, Debug)]
 pub struct DdgiVolume {
     pub grid: ProbeGrid,
     pub settings: DdgiVolumeSettings,
-    /// Encoded mean radiance per texel (see `probe_blend`).
+    /// Encoded mean radiance per texel (see `probegi_core::irradiance_encoding`).
     pub irradiance: ProbeAtlas<Vec3>,
     /// (mean distance, mean squared distance) per texel.
     pub distance: ProbeAtlas<Vec2>,
-    /// Probe positions including relocation offsets.
+    /// Probe positions including relocation offsets, per storage slot.
     pub probe_positions: Vec<Vec3>,
     pub probe_offsets: Vec<Vec3>,
     pub probe_states: Vec<ProbeState>,
     pub frames_updated: u32,
+    /// Probes that scrolled into the window, summed over the volume's life.
+    pub probes_scrolled_in: u64,
+    /// The volume's index in its set: decorrelates ray rotations and shading
+    /// streams between volumes (0 keeps a lone volume's streams).
+    pub(crate) stream: u64,
     probe_hysteresis: Vec<f32>,
     probe_usable: Vec<bool>,
     /// Per probe, the nearest usable probe (the query's fallback for empty cages).
     probe_fallback: Vec<u32>,
     /// False until the probe's first blend, and again when its history is stale
-    /// (leaving DEAD): the next blend then replaces the history.
+    /// (leaving DEAD, scrolled in): the next blend then replaces the history.
     probe_has_history: Vec<bool>,
     /// Usage scheme: consecutive frames the probe has been ALIVE.
     probe_alive_frames: Vec<u32>,
-    /// Probes that trace this frame.
-    tracing: Vec<bool>,
-    /// Probes that are shaded and blended this frame.
-    active: Vec<bool>,
+    /// Probes waiting for initialisation (relocation, classification).
+    probe_pending_init: Vec<bool>,
     initialized: bool,
     irradiance_events: Vec<HysteresisReduction>,
     visibility_events: Vec<HysteresisReduction>,
-    surfels: Vec<Surfel>,
-    ray_radiance: Vec<Vec3>,
-    ray_distance: Vec<f32>,
+    traced_probes_last: usize,
+    active_probes_last: usize,
 }
 
-/// Bytes a volume with these settings holds (atlases and per-ray buffers).
+/// One volume's per-frame scratch.
+#[derive(Clone, Debug, Default)]
+pub struct VolumeFrame {
+    /// The frame's update directions and blend weights.
+    pub rays: ProbeRayDirections,
+    /// The current initialisation round's directions.
+    pub init_dirs: Vec<Vec3>,
+    /// Probes that trace this frame.
+    pub tracing: Vec<bool>,
+    /// Probes that are shaded and blended this frame.
+    pub active: Vec<bool>,
+    /// Per probe, its first ray in the current batch (`u32::MAX`: none).
+    pub first_ray: Vec<u32>,
+}
+
+/// What an initialisation round of a volume does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum InitRound {
+    Relocation(u32),
+    Classification,
+}
+
+/// Bytes a volume with these settings holds (atlases, per-probe state and the
+/// per-ray batch and hit buffers of one frame).
 pub fn ddgi_volume_bytes(settings: &DdgiVolumeSettings) -> u64 {
     let probes = settings.probe_count();
     let rays = probes * settings.probe_rays_per_probe as u64;
-    let tile = |n: u32| ((n + 2) * (n + 2)) as u64;
-    rays * (std::mem::size_of::<Surfel>() + std::mem::size_of::<Vec3>() + 4) as u64
-        + probes * (tile(settings.probe_irradiance_texels) * 12 + tile(settings.probe_distance_texels) * 8 + 64)
+    let per_ray = std::mem::size_of::<crate::probe_trace::Surfel>() + 3 * 12 + 4 + 16 + 1;
+    rays * per_ray as u64
+        + probes
+            * (tile_texel_count(settings.probe_irradiance_texels) as u64 * 12
+                + tile_texel_count(settings.probe_distance_texels) as u64 * 8
+                + 64)
+}
+
+/// Pseudo-frames for initialisation rounds, far from real ones, so their
+/// directions differ from frame 0's.
+fn init_frame(round: InitRound) -> u32 {
+    match round {
+        InitRound::Relocation(i) => u32::MAX - i,
+        InitRound::Classification => u32::MAX - 1000,
+    }
 }
 
 impl DdgiVolume {
-    /// A volume over `scene_bounds` (used when the settings give no origin/spacing).
-    /// Probes are placed and classified on the first [`Self::update`].
+    /// A volume over `scene_bounds` (used when the settings give neither an
+    /// origin/spacing nor `volume_bounds_m`). A tracking volume starts centred on
+    /// `camera_m` when given. Probes are placed and classified on the first update.
     pub fn new(settings: DdgiVolumeSettings, scene_bounds: (Vec3, Vec3)) -> Self {
+        Self::placed(settings, scene_bounds, None)
+    }
+
+    /// As [`Self::new`], with the camera position a tracking window starts on.
+    pub fn placed(settings: DdgiVolumeSettings, scene_bounds: (Vec3, Vec3), camera_m: Option<Vec3>) -> Self {
         let counts: UVec3 = settings.probe_counts;
-        let fitted = ProbeGrid::fit_to_bounds(scene_bounds.0, scene_bounds.1, counts);
-        let grid = ProbeGrid {
-            origin_m: settings.probe_origin_m.unwrap_or(fitted.origin_m),
-            probe_counts: counts,
-            spacing_m: settings.probe_spacing_m.unwrap_or(fitted.spacing_m),
+        let (lo, hi) = settings.volume_bounds_m.map_or(scene_bounds, |[lo, hi]| (lo, hi));
+        let fitted = ProbeGrid::fit_to_bounds(lo, hi, counts);
+        let spacing = settings.probe_spacing_m.unwrap_or(fitted.spacing_m);
+        let grid = match (settings.volume_tracks_camera, camera_m) {
+            (true, Some(c)) => ProbeGrid::centred_on(c, settings.probe_origin_m.unwrap_or(Vec3::ZERO), counts, spacing),
+            _ => ProbeGrid::new(settings.probe_origin_m.unwrap_or(fitted.origin_m), counts, spacing),
         };
         let probes = grid.probe_count();
-        let rays = probes * settings.probe_rays_per_probe as usize;
         let probe_positions = (0..probes).map(|i| grid.probe_position(grid.probe_coords(i))).collect();
         Self {
             irradiance: ProbeAtlas::new(probes, settings.probe_irradiance_texels),
@@ -125,19 +169,19 @@ impl DdgiVolume {
             probe_offsets: vec![Vec3::ZERO; probes],
             probe_states: vec![ProbeState::Active; probes],
             frames_updated: 0,
+            probes_scrolled_in: 0,
+            stream: 0,
             probe_hysteresis: vec![settings.probe_hysteresis; probes],
             probe_usable: vec![false; probes],
             probe_fallback: vec![u32::MAX; probes],
             probe_has_history: vec![false; probes],
             probe_alive_frames: vec![0; probes],
-            tracing: vec![true; probes],
-            active: vec![true; probes],
+            probe_pending_init: vec![true; probes],
             initialized: false,
             irradiance_events: Vec::new(),
             visibility_events: Vec::new(),
-            surfels: vec![Surfel::default(); rays],
-            ray_radiance: vec![Vec3::ZERO; rays],
-            ray_distance: vec![0.0; rays],
+            traced_probes_last: 0,
+            active_probes_last: 0,
             settings,
         }
     }
@@ -156,17 +200,32 @@ impl DdgiVolume {
 
     /// Probe rays traced by the last update (tracing probes × rays per probe).
     pub fn rays_per_frame(&self) -> u64 {
-        self.tracing.iter().filter(|a| **a).count() as u64 * self.settings.probe_rays_per_probe as u64
+        self.traced_probes_last as u64 * self.settings.probe_rays_per_probe as u64
     }
 
     /// Probes shaded and blended in the last update.
     pub fn active_probe_count(&self) -> usize {
-        self.active.iter().filter(|a| **a).count()
+        self.active_probes_last
     }
 
     /// Whether queries may read probe `p` now.
     pub fn probe_usable(&self, p: usize) -> bool {
         self.probe_usable[p]
+    }
+
+    /// Whether probe `p` has been blended since it was created or last reset.
+    pub fn probe_has_history(&self, p: usize) -> bool {
+        self.probe_has_history[p]
+    }
+
+    /// Whether every probe is initialised (relocated and classified).
+    pub fn is_initialized(&self) -> bool {
+        self.initialized && !self.probe_pending_init.iter().any(|p| *p)
+    }
+
+    /// The per-ray RNG seed of this volume for `seed` (the seed itself for volume 0).
+    pub fn stream_seed(&self, seed: u64) -> u64 {
+        if self.stream == 0 { seed } else { hash_combine(&[seed, self.stream, 0x766f_6c75]) }
     }
 
     /// Recomputes which probes queries may read, and the fallback table if that changed.
@@ -249,98 +308,267 @@ impl DdgiVolume {
         woken
     }
 
-    /// Distance-only trace from every probe with directions of pseudo-frame `frame`;
-    /// returns signed true distances per ray (probe-major).
-    fn trace_distances(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64, frame: u32) -> (Vec<Vec3>, u64) {
-        let dirs = probe_ray_directions(&self.settings, seed, frame);
-        let max = self.settings.probe_max_ray_distance_m;
-        let n = trace_probe_rays(scene, tracer, &self.probe_positions, &[], &dirs, max, &mut self.surfels);
-        (dirs, n)
+    /// Moves a tracking window so that `target_m` stays within a cell of its
+    /// centre (seed 004 §7.3). Only the grid origin and the circular buffer's phase
+    /// change; the probes of the planes that enter are reset (atlas tiles cleared,
+    /// offset 0, no history, so they blend with hysteresis 0 and are not read
+    /// before that) and queued for initialisation. Returns the probes reset.
+    pub fn scroll_to(&mut self, target_m: Vec3) -> usize {
+        if !self.settings.volume_tracks_camera || !target_m.is_finite() {
+            return 0;
+        }
+        let cells = self.grid.tracking_scroll_cells(target_m);
+        if cells == IVec3::ZERO {
+            return 0;
+        }
+        self.grid.scroll(cells);
+        let mut reset = 0;
+        for p in 0..self.grid.probe_count() {
+            let coords = self.grid.probe_coords(p);
+            if self.grid.scrolled_in(cells, coords) {
+                self.reset_probe(p);
+                reset += 1;
+            }
+            self.probe_positions[p] = self.grid.probe_position(coords) + self.probe_offsets[p];
+        }
+        self.probes_scrolled_in += reset as u64;
+        self.refresh_usable();
+        reset
     }
 
-    /// Relocation and classification (seed 004 Listing 5, first step). Returns rays traced.
-    fn initialize(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64) -> u64 {
-        // Against static geometry only: moving objects wake probes instead.
-        let static_part = tracer.static_part();
-        let tracer = static_part.as_deref().unwrap_or(tracer);
-        let n = self.settings.probe_rays_per_probe as usize;
-        let mut traced = 0;
-        // Pseudo-frames far from real ones, so initialisation directions differ from frame 0's.
-        let init_frame = |i: u32| u32::MAX - i;
+    /// Forgets everything probe `p` knew: it is a new probe at its grid point.
+    fn reset_probe(&mut self, p: usize) {
+        self.irradiance.tile_mut(p).fill(Vec3::ZERO);
+        self.distance.tile_mut(p).fill(Vec2::ZERO);
+        self.probe_offsets[p] = Vec3::ZERO;
+        self.probe_states[p] = ProbeState::Active;
+        self.probe_hysteresis[p] = self.settings.probe_hysteresis;
+        self.probe_has_history[p] = false;
+        self.probe_alive_frames[p] = 0;
+        self.probe_pending_init[p] = true;
+    }
+
+    /// The initialisation rounds this volume runs for its pending probes.
+    fn init_rounds(&self) -> Vec<InitRound> {
+        let mut rounds = Vec::new();
         if self.settings.probe_relocation {
-            for it in 0..self.settings.probe_relocation_iterations {
-                let (dirs, k) = self.trace_distances(scene, tracer, seed, init_frame(it));
-                traced += k;
+            rounds.extend((0..self.settings.probe_relocation_iterations).map(InitRound::Relocation));
+        }
+        if self.settings.probe_states == ProbeStatesMode::Jcgt {
+            rounds.push(InitRound::Classification);
+        }
+        rounds
+    }
+
+    /// Whether the volume has probes waiting for initialisation.
+    pub(crate) fn needs_init(&self) -> bool {
+        self.probe_pending_init.iter().any(|p| *p)
+    }
+
+    /// Adds this volume's rays for initialisation round `round` to `batch`, for its
+    /// pending probes. Returns false when the volume has no such round (it then
+    /// finishes its initialisation at once).
+    pub(crate) fn plan_init_round(
+        &self,
+        frame: &mut VolumeFrame,
+        round: usize,
+        seed: u64,
+        volume: u32,
+        batch: &mut ProbeRayBatch,
+    ) -> bool {
+        let Some(&kind) = self.init_rounds().get(round) else {
+            return false;
+        };
+        frame.init_dirs = probe_ray_directions(&self.settings, self.stream_seed(seed), init_frame(kind));
+        frame.first_ray = vec![u32::MAX; self.grid.probe_count()];
+        for p in 0..self.grid.probe_count() {
+            if self.probe_pending_init[p] {
+                frame.first_ray[p] = batch.push_probe(
+                    volume,
+                    p as u32,
+                    self.probe_positions[p],
+                    &frame.init_dirs,
+                    self.settings.probe_max_ray_distance_m,
+                );
+            }
+        }
+        true
+    }
+
+    /// Applies the hits of initialisation round `round` (see [`Self::plan_init_round`]).
+    pub(crate) fn accept_init_round(&mut self, frame: &VolumeFrame, round: usize, batch: &ProbeRayBatch, hits: &[ProbeRayHit]) {
+        let Some(&kind) = self.init_rounds().get(round) else {
+            return;
+        };
+        let n = self.settings.probe_rays_per_probe as usize;
+        let dirs = &frame.init_dirs;
+        let rays_of = |p: usize| {
+            let first = frame.first_ray[p] as usize;
+            first..first + n
+        };
+        match kind {
+            InitRound::Relocation(_) => {
                 let spacing = self.grid.spacing_m;
                 let settings = &self.settings;
-                let surfels = &self.surfels;
+                let pending = &self.probe_pending_init;
                 self.probe_offsets.par_iter_mut().enumerate().for_each(|(p, offset)| {
-                    let d: Vec<f32> = surfels[p * n..(p + 1) * n].iter().map(signed_distance).collect();
-                    *offset = relocation_step(*offset, &probe_ray_stats(&dirs, &d), spacing, settings);
-                });
-                for (p, pos) in self.probe_positions.iter_mut().enumerate() {
-                    *pos = self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
-                }
-            }
-        }
-        match self.settings.probe_states {
-            ProbeStatesMode::AllActive => self.probe_states.fill(ProbeState::Active),
-            ProbeStatesMode::Usage => self.probe_states.fill(ProbeState::Alive),
-            ProbeStatesMode::Jcgt => {
-                let (dirs, k) = self.trace_distances(scene, tracer, seed, init_frame(1000));
-                traced += k;
-                let bias = max_surface_bias_m(&self.settings, &self.grid);
-                let reach = self.settings.probe_classification_reach_rel;
-                let (grid, surfels) = (&self.grid, &self.surfels);
-                let front_hits = |p: usize| {
-                    surfels[p * n..(p + 1) * n].iter().filter_map(|s| s.surface.as_ref().filter(|sp| sp.front_face))
-                };
-                let first: Vec<(bool, bool)> = (0..grid.probe_count())
-                    .into_par_iter()
-                    .map(|p| {
-                        let d: Vec<f32> = surfels[p * n..(p + 1) * n].iter().map(signed_distance).collect();
-                        let coords = grid.probe_coords(p);
-                        let grid_point = grid.probe_position(coords);
-                        let watches =
-                            front_hits(p).any(|sp| probe_watches(grid, coords, sp.position - grid_point, reach, bias));
-                        (is_inside_geometry(&probe_ray_stats(&dirs, &d)), watches)
-                    })
-                    .collect();
-                let eligible: Vec<bool> = first.iter().map(|(inside, _)| !inside).collect();
-                let mut kept: Vec<bool> = first.iter().map(|&(inside, watches)| !inside && watches).collect();
-                // Second pass, in probe and ray order (sequential, so deterministic and
-                // greedy: a probe added for one point covers the points after it):
-                // every seen surface point keeps a front-side cage probe.
-                let positions = &self.probe_positions;
-                for p in 0..grid.probe_count() {
-                    for sp in front_hits(p) {
-                        let add =
-                            uncovered_point_probe(grid, positions, &kept, &eligible, sp.position, sp.facing_normal());
-                        if let Some(q) = add {
-                            kept[q] = true;
-                        }
+                    if !pending[p] {
+                        return;
                     }
-                }
-                for (p, state) in self.probe_states.iter_mut().enumerate() {
-                    *state = classify_jcgt(first[p].0, kept[p]);
+                    let d: Vec<f32> = hits[rays_of(p)].iter().map(|h| h.distance_m).collect();
+                    *offset = relocation_step(*offset, &probe_ray_stats(dirs, &d), spacing, settings);
+                });
+                for p in 0..self.grid.probe_count() {
+                    self.probe_positions[p] = self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
                 }
             }
+            InitRound::Classification => self.classify_jcgt_pending(frame, batch, hits),
         }
-        self.refresh_usable();
-        self.initialized = true;
-        traced
     }
 
-    /// Usage scheme (seed 003 §6.1): every probe's state from this frame's rays, and
+    /// Seed 004 Listing 5's classification of the pending probes from one
+    /// distance round (see `probegi_core::probe_classification`): a first pass per
+    /// probe (inside geometry → Off; watching a front face → kept), then a covering
+    /// pass in probe and ray order (sequential, so deterministic and greedy) that
+    /// keeps a front-side cage probe for every surface point a pending probe saw.
+    /// Probes that are not pending keep their states and count as covering when
+    /// they are kept already (they trace: not Off or Sleeping).
+    fn classify_jcgt_pending(&mut self, frame: &VolumeFrame, batch: &ProbeRayBatch, hits: &[ProbeRayHit]) {
+        let n = self.settings.probe_rays_per_probe as usize;
+        let bias = max_surface_bias_m(&self.settings, &self.grid);
+        let reach = self.settings.probe_classification_reach_rel;
+        let (grid, pending) = (&self.grid, &self.probe_pending_init);
+        let dirs = &frame.init_dirs;
+        // Front-face hits of probe p as (position, facing normal).
+        let front_hits = |p: usize| {
+            let first = frame.first_ray[p] as usize;
+            (first..first + n).filter_map(move |r| {
+                let h = hits[r];
+                (h.distance_m > 0.0 && h.distance_m.is_finite())
+                    .then(|| (batch.origins_m[r] + batch.directions[r] * h.distance_m, h.normal))
+            })
+        };
+        let first: Vec<(bool, bool)> = (0..grid.probe_count())
+            .into_par_iter()
+            .map(|p| {
+                if !pending[p] {
+                    return (false, false);
+                }
+                let f = frame.first_ray[p] as usize;
+                let d: Vec<f32> = hits[f..f + n].iter().map(|h| h.distance_m).collect();
+                let coords = grid.probe_coords(p);
+                let grid_point = grid.probe_position(coords);
+                let watches = front_hits(p).any(|(pos, _)| probe_watches(grid, coords, pos - grid_point, reach, bias));
+                (is_inside_geometry(&probe_ray_stats(dirs, &d)), watches)
+            })
+            .collect();
+        let eligible: Vec<bool> = (0..grid.probe_count()).map(|p| pending[p] && !first[p].0).collect();
+        let mut kept: Vec<bool> = (0..grid.probe_count())
+            .map(|p| if pending[p] { !first[p].0 && first[p].1 } else { self.probe_states[p].traces() })
+            .collect();
+        let positions = &self.probe_positions;
+        for p in (0..grid.probe_count()).filter(|&p| pending[p]) {
+            for (pos, normal) in front_hits(p) {
+                if let Some(q) = uncovered_point_probe(grid, positions, &kept, &eligible, pos, normal) {
+                    kept[q] = true;
+                }
+            }
+        }
+        for p in 0..grid.probe_count() {
+            if pending[p] {
+                self.probe_states[p] = classify_jcgt(first[p].0, kept[p]);
+            }
+        }
+    }
+
+    /// Ends initialisation: pending probes take their starting state (jcgt: set by
+    /// the classification round).
+    pub(crate) fn finish_init(&mut self) {
+        for p in 0..self.grid.probe_count() {
+            if !self.probe_pending_init[p] {
+                continue;
+            }
+            match self.settings.probe_states {
+                ProbeStatesMode::AllActive => self.probe_states[p] = ProbeState::Active,
+                ProbeStatesMode::Usage => self.probe_states[p] = ProbeState::Alive,
+                ProbeStatesMode::Jcgt => {}
+            }
+            self.probe_pending_init[p] = false;
+        }
+        self.initialized = true;
+        self.refresh_usable();
+    }
+
+    /// Adds the frame's update rays (seed 003 §4.2) of the probes whose state
+    /// traces, and decides which probes update this frame.
+    pub(crate) fn plan_update(
+        &mut self,
+        frame: &mut VolumeFrame,
+        seed: u64,
+        frame_index: u32,
+        volume: u32,
+        batch: &mut ProbeRayBatch,
+    ) {
+        let probes = self.grid.probe_count();
+        let interval = self.settings.probe_sleeping_update_interval;
+        frame.tracing = self.probe_states.iter().map(|s| s.traces()).collect();
+        frame.active = self.probe_states.iter().map(|s| s.updates_in_frame(frame_index, interval)).collect();
+        frame.rays = generate_probe_rays(&self.settings, self.stream_seed(seed), frame_index);
+        frame.first_ray = vec![u32::MAX; probes];
+        for p in 0..probes {
+            if frame.tracing[p] {
+                frame.first_ray[p] = batch.push_probe(
+                    volume,
+                    p as u32,
+                    self.probe_positions[p],
+                    &frame.rays.dirs,
+                    self.settings.probe_max_ray_distance_m,
+                );
+            }
+        }
+        self.traced_probes_last = frame.tracing.iter().filter(|t| **t).count();
+    }
+
+    /// After the trace: the usage scheme's classification from the hits (seed 003
+    /// §6.1), then which rays the caller must shade (those of probes that update
+    /// this frame, except backface hits, whose radiance is zero by rule).
+    pub(crate) fn accept_update_hits(
+        &mut self,
+        frame: &mut VolumeFrame,
+        frame_index: u32,
+        hits: &[ProbeRayHit],
+        needs_radiance: &mut [bool],
+    ) {
+        let n = self.settings.probe_rays_per_probe as usize;
+        if self.settings.probe_states == ProbeStatesMode::Usage {
+            self.classify_usage_from_hits(frame, frame_index, hits);
+        }
+        for p in 0..self.grid.probe_count() {
+            let first = frame.first_ray[p];
+            if first == u32::MAX || !frame.active[p] {
+                continue;
+            }
+            let first = first as usize;
+            for r in first..first + n {
+                needs_radiance[r] = !(hits[r].distance_m < 0.0);
+            }
+        }
+    }
+
+    /// Usage scheme (seed 003 §6.1): every probe's state from this frame's hits, and
     /// which probes blend this frame (see `probegi_core::probe_classification`).
-    fn classify_usage_from_rays(&mut self, frame: u32) {
+    fn classify_usage_from_hits(&mut self, frame: &mut VolumeFrame, frame_index: u32, hits: &[ProbeRayHit]) {
         let n = self.settings.probe_rays_per_probe as usize;
         let cage_diagonal = self.grid.spacing_m.length();
         let (interval, min_alive) =
             (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
         for p in 0..self.grid.probe_count() {
-            let rays = &self.surfels[p * n..(p + 1) * n];
-            let (usage, relevant, backfaces) = probe_usage(rays.iter().map(signed_distance), cage_diagonal);
+            let first = frame.first_ray[p];
+            if first == u32::MAX {
+                continue;
+            }
+            let rays = &hits[first as usize..first as usize + n];
+            let (usage, relevant, backfaces) = probe_usage(rays.iter().map(|h| h.distance_m), cage_diagonal);
             let prev = self.probe_states[p];
             let mut next = classify_usage(usage, relevant, backfaces);
             if prev == ProbeState::Alive && next == ProbeState::UsageSleeping && self.probe_alive_frames[p] < min_alive
@@ -352,93 +580,26 @@ impl DdgiVolume {
                 // Uncovered: the atlas holds light from before, so start over.
                 self.probe_has_history[p] = false;
             }
-            self.active[p] = match next {
+            frame.active[p] = match next {
                 ProbeState::Dead => prev != ProbeState::Dead,
-                s => s.updates_in_frame(frame, interval) || !self.probe_has_history[p],
+                s => s.updates_in_frame(frame_index, interval) || !self.probe_has_history[p],
             };
             self.probe_states[p] = next;
         }
     }
 
-    /// Probes inside geometry by their rays (> 25 % backfaces), from a fresh trace.
-    pub fn count_probes_inside_geometry(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64) -> usize {
-        let n = self.settings.probe_rays_per_probe as usize;
-        let (dirs, _) = self.trace_distances(scene, tracer, seed, u32::MAX - 2000);
-        (0..self.grid.probe_count())
-            .filter(|&p| {
-                let d: Vec<f32> = self.surfels[p * n..(p + 1) * n].iter().map(signed_distance).collect();
-                is_inside_geometry(&probe_ray_stats(&dirs, &d))
-            })
-            .count()
-    }
-
-    /// One field update. Adds per-pass milliseconds to `pass_ms` and returns the
-    /// rays traced (probe rays plus shading shadow rays).
-    pub fn update(
+    /// Blend and border (seed 003 §4.5, seed 004 §2.3–4.3) for the probes that
+    /// update this frame, from the batch's hits and the caller's radiance. Adds
+    /// milliseconds to `pass_ms` under `blend` and `border`.
+    pub(crate) fn blend_results(
         &mut self,
-        scene: &Scene,
-        tracer: &dyn RayTracer,
-        direct: &DirectLighting<'_>,
-        seed: u64,
-        frame: u32,
+        frame: &VolumeFrame,
+        hits: &[ProbeRayHit],
+        radiance: &[Vec3],
         pass_ms: &mut BTreeMap<&'static str, f64>,
-    ) -> u64 {
-        let mut traced = 0;
-        if !self.initialized {
-            let t = Instant::now();
-            traced += self.initialize(scene, tracer, seed);
-            *pass_ms.entry("probe_init").or_default() += t.elapsed().as_secs_f64() * 1e3;
-        }
-        let mut time =
-            |name: &'static str, t: Instant| *pass_ms.entry(name).or_default() += t.elapsed().as_secs_f64() * 1e3;
-        let interval = self.settings.probe_sleeping_update_interval;
-        for ((t, a), s) in self.tracing.iter_mut().zip(self.active.iter_mut()).zip(&self.probe_states) {
-            *t = s.traces();
-            *a = s.updates_in_frame(frame, interval);
-        }
-
-        let t = Instant::now();
-        let rays = generate_probe_rays(&self.settings, seed, frame);
-        time("ray_gen", t);
-
-        let t = Instant::now();
-        traced += trace_probe_rays(
-            scene,
-            tracer,
-            &self.probe_positions,
-            &self.tracing,
-            &rays.dirs,
-            self.settings.probe_max_ray_distance_m,
-            &mut self.surfels,
-        );
-        if self.settings.probe_states == ProbeStatesMode::Usage {
-            self.classify_usage_from_rays(frame);
-        }
-        time("trace", t);
-
-        let t = Instant::now();
-        let inputs = ProbeShadeInputs {
-            scene,
-            direct,
-            field: DdgiFieldView {
-                grid: &self.grid,
-                settings: &self.settings,
-                irradiance: &self.irradiance,
-                distance: &self.distance,
-                probe_offsets_m: &self.probe_offsets,
-                probe_usable: &self.probe_usable,
-                probe_fallback: &self.probe_fallback,
-            },
-            dirs: &rays.dirs,
-            surfels: &self.surfels,
-            active: &self.active,
-            seed,
-            frame,
-        };
-        traced += shade_probe_rays(&inputs, &mut self.ray_radiance, &mut self.ray_distance);
-        time("shade", t);
-
-        let t = Instant::now();
+    ) {
+        let t = std::time::Instant::now();
+        let n = self.settings.probe_rays_per_probe as usize;
         let event_scale = |events: &[HysteresisReduction]| events.iter().map(|e| e.scale).product::<f32>();
         let (irr_scale, vis_scale) = if self.settings.probe_fast_convergence {
             (event_scale(&self.irradiance_events), event_scale(&self.visibility_events))
@@ -449,79 +610,88 @@ impl DdgiVolume {
             significant: self.settings.probe_significant_change_threshold,
             new_distribution: self.settings.probe_new_distribution_threshold,
         });
-        let n = rays.dirs.len();
         let (irr_n, dist_n) = (self.irradiance.interior, self.distance.interior);
         let gamma = self.settings.probe_irradiance_gamma;
         let clamp = self.distance_clamp_m();
+        let max_distance = self.settings.probe_max_ray_distance_m;
         let irr_len = self.irradiance.tile_len();
         let dist_len = self.distance.tile_len();
-        let base: Vec<Option<f32>> = (0..self.grid.probe_count())
+        // Per updating probe: its first ray and the hysteresis of its blend.
+        let base: Vec<Option<(usize, f32)>> = (0..self.grid.probe_count())
             .map(|p| {
-                self.active[p].then(|| {
-                    if !self.probe_has_history[p] || self.probe_states[p].is_new() {
+                let first = frame.first_ray[p];
+                (frame.active[p] && first != u32::MAX).then(|| {
+                    let h = if !self.probe_has_history[p] || self.probe_states[p].is_new() {
                         0.0
                     } else {
                         self.probe_hysteresis[p]
-                    }
+                    };
+                    (first as usize, h)
                 })
             })
             .collect();
-        self.irradiance
-            .texels
-            .par_chunks_mut(irr_len)
-            .zip(self.ray_radiance.par_chunks(n))
-            .zip(base.par_iter())
-            .for_each(|((tile, radiance), h)| {
-                if let Some(h) = h {
-                    blend_irradiance_tile(
-                        tile,
-                        irr_n,
-                        &rays.irradiance_weights,
-                        radiance,
-                        h * irr_scale,
-                        gamma,
-                        thresholds.as_ref(),
-                    );
-                }
-            });
-        self.distance
-            .texels
-            .par_chunks_mut(dist_len)
-            .zip(self.ray_distance.par_chunks(n))
-            .zip(base.par_iter())
-            .for_each(|((tile, distance), h)| {
-                if let Some(h) = h {
-                    blend_distance_tile(tile, dist_n, &rays.distance_weights, distance, h * vis_scale, clamp);
-                }
-            });
-        time("blend", t);
+        // The backface rule (seed 004 §4.1; RTXGI stores −0.2·t): zero radiance and a
+        // short negative distance, so the probe reads as shadowed there. Misses keep
+        // the caller's radiance (the sky) and the trace limit as their distance.
+        let ray_radiance = |r: usize| if hits[r].distance_m < 0.0 { Vec3::ZERO } else { radiance[r] };
+        let ray_distance = |r: usize| {
+            let d = hits[r].distance_m;
+            if d < 0.0 {
+                0.2 * d
+            } else if d.is_finite() {
+                d
+            } else {
+                max_distance
+            }
+        };
+        let weights = &frame.rays;
+        self.irradiance.texels.par_chunks_mut(irr_len).zip(base.par_iter()).for_each(|(tile, b)| {
+            if let Some((first, h)) = *b {
+                let rad: Vec<Vec3> = (first..first + n).map(ray_radiance).collect();
+                blend_irradiance_tile(
+                    tile,
+                    irr_n,
+                    &weights.irradiance_weights,
+                    &rad,
+                    h * irr_scale,
+                    gamma,
+                    thresholds.as_ref(),
+                );
+            }
+        });
+        self.distance.texels.par_chunks_mut(dist_len).zip(base.par_iter()).for_each(|(tile, b)| {
+            if let Some((first, h)) = *b {
+                let dist: Vec<f32> = (first..first + n).map(ray_distance).collect();
+                blend_distance_tile(tile, dist_n, &weights.distance_weights, &dist, h * vis_scale, clamp);
+            }
+        });
+        *pass_ms.entry("blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
 
-        let t = Instant::now();
-        let active = &self.active;
-        self.irradiance.texels.par_chunks_mut(irr_len).zip(active.par_iter()).for_each(|(tile, a)| {
+        let t = std::time::Instant::now();
+        let updated: Vec<bool> = base.iter().map(|b| b.is_some()).collect();
+        self.irradiance.texels.par_chunks_mut(irr_len).zip(updated.par_iter()).for_each(|(tile, a)| {
             if *a {
                 update_tile_border(tile, irr_n)
             }
         });
-        self.distance.texels.par_chunks_mut(dist_len).zip(active.par_iter()).for_each(|(tile, a)| {
+        self.distance.texels.par_chunks_mut(dist_len).zip(updated.par_iter()).for_each(|(tile, a)| {
             if *a {
                 update_tile_border(tile, dist_n)
             }
         });
-        time("border", t);
-
-        self.after_update();
+        *pass_ms.entry("border").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        self.after_update(&updated);
         self.frames_updated += 1;
         #[cfg(debug_assertions)]
         self.validate();
-        traced
     }
 
     /// State transitions and hysteresis ramps after a blend.
-    fn after_update(&mut self) {
+    fn after_update(&mut self, updated: &[bool]) {
         let max_h = self.settings.probe_hysteresis;
+        self.active_probes_last = updated.iter().filter(|a| **a).count();
         for p in 0..self.grid.probe_count() {
-            if !self.active[p] {
+            if !updated[p] {
                 continue;
             }
             self.probe_has_history[p] = true;
@@ -542,21 +712,22 @@ impl DdgiVolume {
     }
 
     /// Atlas invariants: every texel finite and non-negative, every border equal to
-    /// its source texel.
+    /// its source texel, and no probe readable before its first blend.
     pub fn validate(&self) {
         assert!(self.irradiance.texels.iter().all(|t| t.is_finite() && t.min_element() >= 0.0), "irradiance atlas");
         assert!(self.distance.texels.iter().all(|t| t.is_finite() && t.min_element() >= 0.0), "distance atlas");
         for p in 0..self.grid.probe_count() {
             check_borders(self.irradiance.tile(p), self.irradiance.interior);
             check_borders(self.distance.tile(p), self.distance.interior);
+            assert!(!self.probe_usable[p] || self.probe_has_history[p], "probe {p} is readable before its first blend");
         }
     }
 }
 
 fn check_borders<T: PartialEq + Copy + std::fmt::Debug>(tile: &[T], interior: u32) {
-    let s = (interior + 2) as usize;
+    use probegi_core::probe_atlas::tile_texel_index;
     for ((dx, dy), (sx, sy)) in probegi_core::probe_border::border_sources(interior) {
-        assert_eq!(tile[dy as usize * s + dx as usize], tile[sy as usize * s + sx as usize], "border texel");
+        assert_eq!(tile[tile_texel_index(interior, dx, dy)], tile[tile_texel_index(interior, sx, sy)], "border texel");
     }
 }
 

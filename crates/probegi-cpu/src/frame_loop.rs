@@ -14,19 +14,19 @@ use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 use probegi_core::camera::CameraRays;
-use probegi_core::ddgi_query::irradiance;
-use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
+use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance};
 use probegi_core::image::Image;
 use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_scene::{Ray, RayTracer, Scene};
 use std::f32::consts::FRAC_1_PI;
 
-use crate::ddgi::DdgiVolume;
+use crate::ddgi_field_set::DdgiFieldSet;
 use crate::direct::{DirectLighting, DirectSettings};
 use crate::gbuffer::{GBuffer, trace_gbuffer};
 use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
+use crate::scene_events::SceneChangeDetector;
 use crate::shading::{ShadingContext, lambert_cos};
-use probegi_core::ddgi_query::DdgiFieldView;
 use probegi_core::sh_cascades::ShCascades;
 use probegi_core::sh_settings::ShProbeSettings;
 
@@ -37,20 +37,22 @@ pub enum GiMethod {
     None,
     /// Dynamic diffuse global illumination with one probe volume.
     Ddgi(Box<DdgiVolumeSettings>),
+    /// DDGI with a set of volumes: `[[volumes]]` or camera-centred cascades.
+    DdgiSet(Box<DdgiFieldSetSettings>),
     /// Screen-space GI with progressive SH probes (seed 001).
     Sh(Box<ShProbeSettings>),
 }
 
 /// Where the camera pass reads indirect irradiance.
 enum IndirectField<'a> {
-    Ddgi(DdgiFieldView<'a>),
+    Ddgi(DdgiFieldSetView<'a>),
     Sh(&'a ShCascades),
 }
 
 impl IndirectField<'_> {
     fn irradiance(&self, position: Vec3, normal: Vec3, view_dir: Vec3) -> Vec3 {
         match self {
-            IndirectField::Ddgi(f) => irradiance(f, position, normal, view_dir),
+            IndirectField::Ddgi(f) => field_set_irradiance(f, position, normal, view_dir),
             IndirectField::Sh(c) => c.irradiance(position, normal),
         }
     }
@@ -66,6 +68,9 @@ pub struct RenderSettings {
     pub direct: DirectSettings,
     /// Draw DDGI probes as spheres in the final image.
     pub show_probes: bool,
+    /// The camera of each frame (a keyframed flythrough); empty = the fixed camera
+    /// passed to [`render_frames`]. Frames past the end hold the last entry.
+    pub camera_path: Vec<CameraRays>,
 }
 
 /// Measurements of a render; serialised by the CLI's `--stats`.
@@ -87,13 +92,19 @@ pub struct RenderStats {
     pub active_probes: Option<usize>,
     /// DDGI with moving objects: Sleeping probes woken around them, summed over frames.
     pub probes_woken: u64,
+    /// DDGI: volumes in the set, the last frame's ray batch (all volumes, one
+    /// trace) and its split per volume, and probes scrolled into tracking windows.
+    pub volumes: Option<usize>,
+    pub batch_rays: Option<u64>,
+    pub batch_rays_per_volume: Option<Vec<u64>>,
+    pub probes_scrolled_in: u64,
 }
 
 pub struct RenderOutput {
     pub image: Image,
     pub stats: RenderStats,
-    /// The DDGI volume after the last update (for atlas dumps).
-    pub ddgi: Option<DdgiVolume>,
+    /// The DDGI volumes after the last update (for atlas dumps).
+    pub ddgi: Option<DdgiFieldSet>,
     /// The SH probes after the last update.
     pub sh: Option<ShProbes>,
 }
@@ -101,16 +112,61 @@ pub struct RenderOutput {
 /// Names of the passes that make up a DDGI field update.
 pub const FIELD_UPDATE_PASSES: [&str; 5] = ["ray_gen", "trace", "shade", "blend", "border"];
 
+/// The render's running sums between frames.
+struct Accumulation {
+    direct_sum: Vec<DVec3>,
+    frame_direct: Vec<Vec3>,
+    indirect: Vec<Vec3>,
+    accumulated: u32,
+}
+
+impl Accumulation {
+    fn new(pixels: usize) -> Self {
+        Self {
+            direct_sum: vec![DVec3::ZERO; pixels],
+            frame_direct: vec![Vec3::ZERO; pixels],
+            indirect: vec![Vec3::ZERO; pixels],
+            accumulated: 0,
+        }
+    }
+
+    /// Adds the frame's direct term; an animated scene (or camera) restarts the mean.
+    fn add_frame(&mut self, restart: bool) {
+        if restart {
+            self.accumulated = 0;
+            self.direct_sum.iter_mut().for_each(|a| *a = DVec3::ZERO);
+        }
+        for (a, p) in self.direct_sum.iter_mut().zip(&self.frame_direct) {
+            *a += p.as_dvec3();
+        }
+        self.accumulated += 1;
+    }
+
+    fn pixels(&self) -> Vec<Vec3> {
+        compose_pixels(&self.direct_sum, self.accumulated, &self.indirect)
+    }
+}
+
+/// The DDGI field set a render's settings ask for.
+fn make_field_set(gi: &GiMethod, scene: &Scene, camera_m: Vec3) -> Option<DdgiFieldSet> {
+    let bounds = scene.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
+    match gi {
+        GiMethod::Ddgi(s) => Some(DdgiFieldSet::new(&DdgiFieldSetSettings::single((**s).clone()), bounds, Some(camera_m))),
+        GiMethod::DdgiSet(s) => Some(DdgiFieldSet::new(s, bounds, Some(camera_m))),
+        _ => None,
+    }
+}
+
 /// Renders `settings.frames` frames and returns the final image. After each frame
 /// `on_frame_done(f, image)` is called; `image()` composes that frame's image
 /// (for `--sequence`), at a cost only when called.
 ///
 /// An animated scene (`Scene::is_animated`) is set to each frame's state before
-/// the frame, and its direct term is that frame's alone (no accumulation). A
-/// light switching on or off notifies the DDGI volume of a large light change.
-/// Moving objects are placed by `tracer.at_frame` (pass `instances`), DDGI
-/// probes around them are woken each frame, and an object that jumps by more than
-/// a probe cell between frames notifies a large object change.
+/// the frame, and its direct term is that frame's alone (no accumulation), as is a
+/// moving camera's (`settings.camera_path`). Scene changes reach the DDGI set
+/// through `scene_events::SceneChangeDetector` (light toggles, object jumps,
+/// probes woken around movers). Moving objects are placed by `tracer.at_frame`
+/// (pass `instances`). Tracking windows follow the frame's camera.
 pub fn render_frames(
     base_scene: &Scene,
     tracer: &dyn RayTracer,
@@ -118,48 +174,33 @@ pub fn render_frames(
     settings: &RenderSettings,
     mut on_frame_done: impl FnMut(u32, &dyn Fn() -> Image),
 ) -> RenderOutput {
-    let scene = base_scene;
-    let animated = scene.is_animated();
-    let mut frame_scene = animated.then(|| scene.clone());
-    let static_direct = DirectLighting::new(scene, tracer, settings.direct);
-    let mut volume = match &settings.gi {
-        GiMethod::Ddgi(s) => {
-            let bounds = scene.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
-            Some(DdgiVolume::new((**s).clone(), bounds))
-        }
-        _ => None,
-    };
+    let animated = base_scene.is_animated();
+    let moving_camera = settings.camera_path.len() > 1;
+    let camera_at = |f: u32| settings.camera_path.get(f as usize).or(settings.camera_path.last()).unwrap_or(camera);
+    let mut frame_scene = animated.then(|| base_scene.clone());
+    let static_direct = DirectLighting::new(base_scene, tracer, settings.direct);
+    let mut field = make_field_set(&settings.gi, base_scene, camera_at(0).origin_world);
     let mut sh = match &settings.gi {
-        GiMethod::Sh(s) => Some(ShProbes::new((**s).clone(), scene, camera.origin_world)),
+        GiMethod::Sh(s) => Some(ShProbes::new((**s).clone(), base_scene, camera_at(0).origin_world)),
         _ => None,
     };
     // The field carries the sky under DDGI (see `probe_shade`); SH probes carry
     // emitters and sky with light injection; direct-only renders sample both.
-    let camera_direct = match (&volume, &sh) {
+    let camera_direct = match (&field, &sh) {
         (Some(_), _) => DirectSettings { direct_sky_samples: 0, ..settings.direct },
         (_, Some(p)) => p.camera_direct_settings(settings.direct),
         _ => settings.direct,
     };
-    let n = settings.width as usize * settings.height as usize;
-    let mut direct_sum = vec![DVec3::ZERO; n];
-    let mut frame_direct = vec![Vec3::ZERO; n];
-    let mut indirect = vec![Vec3::ZERO; n];
+    let mut acc = Accumulation::new(settings.width as usize * settings.height as usize);
     let mut stats = RenderStats::default();
     let mut pass_totals: BTreeMap<&'static str, f64> = BTreeMap::new();
     let frames = settings.frames.max(1);
     let mut last_gbuffer: Option<GBuffer> = None;
-    let mut accumulated = 0u32;
-    let mut prev_object_bounds: Vec<(Vec3, Vec3)> = Vec::new();
+    let mut detector = SceneChangeDetector::new();
     for f in 0..frames {
+        let camera = camera_at(f);
         if let Some(fs) = frame_scene.as_mut() {
-            let was_on: Vec<bool> = fs.lights.iter().map(|l| l.intensity > 0.0).collect();
             fs.set_frame_from(base_scene, f as f32);
-            // A light switching on or off is a large light change (seed 004 §4.3):
-            // the frame loop reports it as an application would.
-            let toggled = fs.lights.iter().zip(&was_on).any(|(l, &on)| (l.intensity > 0.0) != on);
-            if let (true, true, Some(v)) = (toggled, f > 0, volume.as_mut()) {
-                v.notify_scene_event(crate::ddgi::SceneEvent::LargeLightChange);
-            }
         }
         let scene: &Scene = frame_scene.as_ref().unwrap_or(base_scene);
         // Moving geometry: place the instances for this frame (TLAS rebuild).
@@ -171,29 +212,12 @@ pub fn render_frames(
         }
         let frame_direct_lighting = animated.then(|| static_direct.for_frame(scene, tracer));
         let direct = frame_direct_lighting.as_ref().unwrap_or(&static_direct);
-        if let Some(v) = volume.as_mut() {
-            if scene.has_moving_geometry() {
-                // Seed 004 Listing 5: sleeping probes around dynamic objects wake up.
-                let bounds = scene.moving_object_bounds();
-                stats.probes_woken += v.wake_probes_near(&bounds) as u64;
-                // An object that jumps by more than a probe cell in one frame (an
-                // occluder put in place) inside the volume (grown by a cell) is a
-                // large object change (seed 004 §4.3), reported as an application would.
-                let g = &v.grid;
-                let (lo, hi) = (g.probe_position(glam::UVec3::ZERO), g.probe_position(g.probe_counts - 1));
-                let near = |b: &(Vec3, Vec3)| b.0.cmple(hi + g.spacing_m).all() && b.1.cmpge(lo - g.spacing_m).all();
-                let centre = |b: &(Vec3, Vec3)| (b.0 + b.1) * 0.5;
-                let jumped = prev_object_bounds.len() == bounds.len()
-                    && prev_object_bounds
-                        .iter()
-                        .zip(&bounds)
-                        .any(|(a, b)| (near(a) || near(b)) && centre(a).distance(centre(b)) > g.min_spacing_m());
-                if jumped {
-                    v.notify_scene_event(crate::ddgi::SceneEvent::LargeObjectChange);
-                }
-                prev_object_bounds = bounds;
+        if let Some(set) = field.as_mut() {
+            stats.probes_scrolled_in += set.set_tracking_target(camera.origin_world) as u64;
+            if animated {
+                stats.probes_woken += detector.observe(scene, set).probes_woken as u64;
             }
-            stats.rays_traced += v.update(scene, tracer, direct, settings.seed, f, &mut pass_totals);
+            stats.rays_traced += set.update(scene, tracer, direct, settings.seed, f, &mut pass_totals);
         }
 
         let t = Instant::now();
@@ -204,67 +228,62 @@ pub fn render_frames(
         if let Some(p) = sh.as_mut() {
             p.recentre(camera.origin_world, camera.forward_world());
         }
-        let field = match (&volume, &sh) {
-            (Some(v), _) => Some(IndirectField::Ddgi(v.view())),
+        let indirect_field = match (&field, &sh) {
+            (Some(set), _) => Some(IndirectField::Ddgi(set.view())),
             (_, Some(p)) => Some(IndirectField::Sh(&p.cascades)),
             _ => None,
         };
+        let second_order = field.as_ref().is_some_and(|s| s.volumes.iter().any(|v| v.settings.glossy_second_order));
         let t = Instant::now();
-        stats.rays_traced += shade_camera(
-            scene,
-            tracer,
-            direct,
-            camera_direct,
-            field,
-            volume.as_ref().is_some_and(|v| v.settings.glossy_second_order),
-            &gbuffer,
-            f,
-            settings.seed,
-            &mut frame_direct,
-            &mut indirect,
-        );
-        if animated {
-            accumulated = 0;
-            direct_sum.iter_mut().for_each(|a| *a = DVec3::ZERO);
-        }
-        for (a, p) in direct_sum.iter_mut().zip(&frame_direct) {
-            *a += p.as_dvec3();
-        }
-        accumulated += 1;
+        let passes = CameraPasses { scene, tracer, direct, direct_settings: camera_direct, second_order };
+        stats.rays_traced += shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut acc);
+        acc.add_frame(animated || moving_camera);
         *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
         if let Some(p) = sh.as_mut() {
             stats.rays_traced +=
                 p.update(scene, tracer, direct, settings.direct, camera, &gbuffer, settings.seed, f, &mut pass_totals);
         }
         last_gbuffer = Some(gbuffer);
-        let compose = || Image {
-            width: settings.width,
-            height: settings.height,
-            pixels: compose_pixels(&direct_sum, accumulated, &indirect),
-        };
+        let compose = || Image { width: settings.width, height: settings.height, pixels: acc.pixels() };
         on_frame_done(f, &compose);
     }
     stats.frames = frames;
     stats.pass_ms = pass_totals.into_iter().map(|(k, v)| (k, v / frames as f64)).collect();
-    if let Some(v) = &volume {
-        let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| stats.pass_ms.get(p)).sum();
-        stats.probes = Some(v.grid.probe_count());
-        stats.rays_per_frame = Some(v.rays_per_frame());
-        stats.field_update_ms = Some(update_ms);
-        stats.field_update_mrays_per_s = Some(v.rays_per_frame() as f64 / (update_ms * 1e-3) / 1e6);
-        stats.probe_states = Some(v.state_counts());
-        stats.active_probes = Some(v.active_probe_count());
+    if let Some(set) = &field {
+        field_stats(set, &mut stats);
     }
     if let Some(p) = &sh {
         stats.probes = Some(p.cascades.probe_count());
         stats.field_update_ms = Some(SH_UPDATE_PASSES.iter().filter_map(|k| stats.pass_ms.get(k)).sum());
     }
-    let mut pixels = compose_pixels(&direct_sum, accumulated, &indirect);
-    if let (true, Some(v), Some(g)) = (settings.show_probes, &volume, &last_gbuffer) {
-        crate::probe_vis::draw_probes(v, camera, g, &mut pixels);
+    let mut pixels = acc.pixels();
+    if let (true, Some(set), Some(g)) = (settings.show_probes, &field, &last_gbuffer) {
+        for v in &set.volumes {
+            crate::probe_vis::draw_probes(v, camera_at(frames - 1), g, &mut pixels);
+        }
     }
     let image = Image { width: settings.width, height: settings.height, pixels };
-    RenderOutput { image, stats, ddgi: volume, sh }
+    RenderOutput { image, stats, ddgi: field, sh }
+}
+
+/// The DDGI figures of `--stats` after the last frame.
+fn field_stats(set: &DdgiFieldSet, stats: &mut RenderStats) {
+    let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| stats.pass_ms.get(p)).sum();
+    stats.probes = Some(set.probe_count());
+    stats.rays_per_frame = Some(set.rays_per_frame());
+    stats.field_update_ms = Some(update_ms);
+    stats.field_update_mrays_per_s = Some(set.rays_per_frame() as f64 / (update_ms * 1e-3) / 1e6);
+    let mut states = BTreeMap::new();
+    for v in &set.volumes {
+        for (k, n) in v.state_counts() {
+            *states.entry(k).or_default() += n;
+        }
+    }
+    stats.probe_states = Some(states);
+    stats.active_probes = Some(set.volumes.iter().map(|v| v.active_probe_count()).sum());
+    stats.volumes = Some(set.volumes.len());
+    stats.batch_rays = Some(set.last_batch_rays);
+    stats.batch_rays_per_volume = Some(set.last_batch_rays_per_volume.clone());
 }
 
 /// Mean direct term over the accumulated frames plus the last frame's indirect term.
@@ -282,20 +301,26 @@ fn compose_pixels(direct_sum: &[DVec3], accumulated: u32, indirect: &[Vec3]) -> 
 /// Area lights' specular highlights then come from reflected rays that hit the
 /// emitter, so the direct NEE uses the diffuse lobe only for them (no double count).
 /// Pixels that see nothing get the sky. Returns rays traced.
-#[allow(clippy::too_many_arguments)]
-fn shade_camera(
-    scene: &Scene,
-    tracer: &dyn RayTracer,
-    direct: &DirectLighting<'_>,
+/// What the camera pass shades with.
+struct CameraPasses<'a> {
+    scene: &'a Scene,
+    tracer: &'a dyn RayTracer,
+    direct: &'a DirectLighting<'a>,
     direct_settings: DirectSettings,
-    field: Option<IndirectField<'_>>,
+    /// Second-order glossy from probes on glossy rays' hits.
     second_order: bool,
+}
+
+fn shade_camera(
+    passes: &CameraPasses<'_>,
+    field: Option<IndirectField<'_>>,
     gbuffer: &GBuffer,
     frame: u32,
     seed: u64,
-    direct_out: &mut [Vec3],
-    indirect_out: &mut [Vec3],
+    acc: &mut Accumulation,
 ) -> u64 {
+    let CameraPasses { scene, tracer, direct, direct_settings, second_order } = *passes;
+    let (direct_out, indirect_out) = (&mut acc.frame_direct, &mut acc.indirect);
     use rayon::prelude::*;
     let w = gbuffer.width as usize;
     let ddgi = match &field {
@@ -372,7 +397,7 @@ fn shade_glossy_hit(
     scene: &Scene,
     direct: &DirectLighting<'_>,
     direct_settings: DirectSettings,
-    field: &probegi_core::ddgi_query::DdgiFieldView<'_>,
+    field: &DdgiFieldSetView<'_>,
     sp: &probegi_scene::SurfacePoint,
     ray_dir: Vec3,
     second_order: bool,
@@ -380,7 +405,7 @@ fn shade_glossy_hit(
 ) -> (Vec3, u64) {
     let ctx = ShadingContext::new(scene, sp, -ray_dir);
     let (l, rays) = direct.reflected(sp, &ctx, direct_settings, true, rng);
-    let e = irradiance(field, sp.position, sp.facing_normal(), -ray_dir);
+    let e = field_set_irradiance(field, sp.position, sp.facing_normal(), -ray_dir);
     let mut out = scene.emitted(sp) + l + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e;
     if second_order {
         out += crate::glossy::second_order_specular(field, sp, &ctx, ray_dir);

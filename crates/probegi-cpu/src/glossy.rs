@@ -11,7 +11,7 @@
 
 use glam::Vec3;
 use probegi_core::bsdf::specular_directional_albedo;
-use probegi_core::ddgi_query::{DdgiFieldView, irradiance};
+use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance};
 use probegi_scene::SurfacePoint;
 use std::f32::consts::FRAC_1_PI;
 
@@ -19,7 +19,7 @@ use crate::shading::ShadingContext;
 
 /// Specular radiance the surface at `sp` reflects back along `-ray_dir`, from the field.
 pub fn second_order_specular(
-    field: &DdgiFieldView<'_>,
+    field: &DdgiFieldSetView<'_>,
     sp: &SurfacePoint,
     ctx: &ShadingContext,
     ray_dir: Vec3,
@@ -29,7 +29,7 @@ pub fn second_order_specular(
     }
     let n = sp.facing_normal();
     let mirror = ray_dir - n * (2.0 * ray_dir.dot(n));
-    let e_mirror = irradiance(field, sp.position, mirror, -ray_dir);
+    let e_mirror = field_set_irradiance(field, sp.position, mirror, -ray_dir);
     let b = &ctx.bsdf;
     specular_directional_albedo(b.specular_f0, (-ray_dir).dot(n).max(0.0), b.alpha) * e_mirror * FRAC_1_PI
 }

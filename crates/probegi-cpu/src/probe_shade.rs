@@ -1,12 +1,12 @@
 //! Shade pass (seed 000 §3, seed 003 §4.4, seed 004 §4.1): the radiance each
-//! probe ray carries back to its probe.
+//! probe ray of the batch carries back to its probe, for the rays the field set
+//! asks for (`ProbeRayBatch::needs_radiance`: rays of probes that update this
+//! frame; backface hits are zero by the set's rule and not shaded here).
 //!
 //! - Miss: the sky radiance.
-//! - Backface hit: zero radiance, distance shortened to 20 % and marked negative
-//!   (seed 004 §4.1; RTXGI stores `-0.2·t`), so the probe reads as shadowed there.
 //! - Front hit: direct light reflected toward the probe with the hit's full BSDF
 //!   (punctual lights exactly, area lights with `probe_area_light_samples` NEE
-//!   samples, shadow rays) plus diffuse albedo/π × the field's own previous
+//!   samples, shadow rays) plus diffuse albedo/π × the set's own previous
 //!   irradiance at the hit — the recursion that accumulates one more bounce per
 //!   frame — plus, with `glossy_second_order`, the hit's specular reflection of the
 //!   field (`glossy`), so light bouncing off glossy objects reaches the field.
@@ -23,12 +23,14 @@
 //!   separate sky term.
 
 use glam::Vec3;
-use probegi_core::ddgi_query::{DdgiFieldView, irradiance};
+use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance};
 use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_scene::Scene;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
 
+use crate::ddgi::DdgiVolume;
+use crate::ddgi_field_set::ProbeRayBatch;
 use crate::direct::{DirectLighting, DirectSettings};
 use crate::probe_trace::Surfel;
 use crate::shading::ShadingContext;
@@ -36,56 +38,64 @@ use crate::shading::ShadingContext;
 pub struct ProbeShadeInputs<'a> {
     pub scene: &'a Scene,
     pub direct: &'a DirectLighting<'a>,
-    pub field: DdgiFieldView<'a>,
-    pub dirs: &'a [Vec3],
+    /// The set as queries read it (the previous frame's field).
+    pub field: &'a DdgiFieldSetView<'a>,
+    /// The set's volumes, for per-volume settings and RNG streams.
+    pub volumes: &'a [DdgiVolume],
+    pub batch: &'a ProbeRayBatch,
     pub surfels: &'a [Surfel],
-    /// Probes to shade this frame; empty = all.
-    pub active: &'a [bool],
     pub seed: u64,
     pub frame: u32,
 }
 
-/// Fills `radiance` and signed `distance` (probe-major, like `surfels`). Returns
-/// the shadow rays traced.
-pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut [Vec3], distance: &mut [f32]) -> u64 {
-    let n = inputs.dirs.len();
-    let area =
-        DirectSettings { direct_area_samples: inputs.field.settings.probe_area_light_samples, direct_sky_samples: 0 };
-    radiance
-        .par_chunks_mut(n)
-        .zip(distance.par_chunks_mut(n))
-        .zip(inputs.surfels.par_chunks(n))
-        .enumerate()
-        .map(|(probe, ((rad, dist), surfels))| {
+/// Fills `radiance` (one per batch ray; rays not asked for get zero). Returns the
+/// shadow rays traced. Each probe's rays draw from their own PCG stream, seeded
+/// from (volume's seed, frame, probe), so results do not depend on threads.
+pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>) -> u64 {
+    let batch = inputs.batch;
+    radiance.clear();
+    radiance.resize(batch.len(), Vec3::ZERO);
+    // Split the output per batch probe (contiguous, in order).
+    let mut chunks: Vec<&mut [Vec3]> = Vec::with_capacity(batch.probes.len());
+    let mut rest: &mut [Vec3] = radiance;
+    for bp in &batch.probes {
+        let (a, b) = rest.split_at_mut(bp.ray_count as usize);
+        chunks.push(a);
+        rest = b;
+    }
+    chunks
+        .into_par_iter()
+        .zip(batch.probes.par_iter())
+        .map(|(out, bp)| {
+            let volume = &inputs.volumes[bp.volume as usize];
+            let settings = &volume.settings;
+            let area = DirectSettings { direct_area_samples: settings.probe_area_light_samples, direct_sky_samples: 0 };
+            let probe = bp.probe as u64;
+            let seed = volume.stream_seed(inputs.seed);
+            let mut rng = Pcg32::new(hash_combine(&[seed, inputs.frame as u64, probe, 0x5ade]), probe);
             let mut rays = 0u64;
-            if inputs.active.get(probe).is_some_and(|a| !a) {
-                return 0;
-            }
-            let mut rng =
-                Pcg32::new(hash_combine(&[inputs.seed, inputs.frame as u64, probe as u64, 0x5ade]), probe as u64);
-            for ((r, d), (s, &dir)) in rad.iter_mut().zip(dist.iter_mut()).zip(surfels.iter().zip(inputs.dirs)) {
-                match &s.surface {
-                    None => {
-                        *r = inputs.scene.sky_radiance;
-                        *d = s.distance;
-                    }
-                    Some(sp) if !sp.front_face => {
-                        *r = Vec3::ZERO;
-                        *d = -0.2 * s.distance;
-                    }
+            for (k, r) in out.iter_mut().enumerate() {
+                let i = bp.first_ray as usize + k;
+                if !batch.needs_radiance[i] {
+                    continue;
+                }
+                let dir = batch.directions[i];
+                let s = &inputs.surfels[i];
+                *r = match &s.surface {
+                    None => inputs.scene.sky_radiance,
+                    Some(sp) if !sp.front_face => Vec3::ZERO,
                     Some(sp) => {
                         let ctx = ShadingContext::new(inputs.scene, sp, -dir);
                         let (direct, k) = inputs.direct.reflected(sp, &ctx, area, true, &mut rng);
                         rays += k;
-                        let e = irradiance(&inputs.field, sp.position, sp.facing_normal(), -dir);
+                        let e = field_set_irradiance(inputs.field, sp.position, sp.facing_normal(), -dir);
                         let mut l = direct + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e;
-                        if inputs.field.settings.glossy_second_order {
-                            l += crate::glossy::second_order_specular(&inputs.field, sp, &ctx, dir);
+                        if settings.glossy_second_order {
+                            l += crate::glossy::second_order_specular(inputs.field, sp, &ctx, dir);
                         }
-                        *r = if l.is_finite() { l } else { Vec3::NAN };
-                        *d = s.distance;
+                        if l.is_finite() { l } else { Vec3::NAN }
                     }
-                }
+                };
             }
             rays
         })

@@ -1,11 +1,15 @@
-//! Trace pass (seed 003 §4.3): every probe ray finds its closest hit, both faces
-//! (backface culling off, so probes inside geometry notice), and writes a surfel:
-//! the surface it hit (position, normal, material, which face) and the distance.
-//! Rays that travel beyond `probe_max_ray_distance_m` are misses.
+//! Trace pass (seed 003 §4.3): every ray of the frame's probe ray batch finds its
+//! closest hit, both faces (backface culling off, so probes inside geometry
+//! notice), and writes a surfel: the surface it hit (position, normal, material,
+//! which face) and the distance. Rays that travel beyond their max distance are
+//! misses. The surfels become the seam's hits ([`surfel_hit`]) and feed the shade
+//! pass.
 
 use glam::Vec3;
 use probegi_scene::{Ray, RayTracer, Scene, SurfacePoint};
 use rayon::prelude::*;
+
+use crate::ddgi_field_set::{ProbeRayBatch, ProbeRayHit};
 
 /// One probe ray's hit record (the surfel buffer of seed 003 §4.3).
 #[derive(Clone, Copy, Debug, Default)]
@@ -16,41 +20,53 @@ pub struct Surfel {
     pub distance: f32,
 }
 
-/// Traces `dirs` from every active probe position into `surfels` (`probes × rays`,
-/// probe-major); inactive probes' surfels are left as they were. `active` empty
-/// means all. Returns the number of rays traced.
-pub fn trace_probe_rays(
-    scene: &Scene,
-    tracer: &dyn RayTracer,
-    probe_positions: &[Vec3],
-    active: &[bool],
-    dirs: &[Vec3],
-    max_distance_m: f32,
-    surfels: &mut [Surfel],
-) -> u64 {
-    let n = dirs.len();
-    surfels.par_chunks_mut(n).zip(probe_positions.par_iter()).enumerate().for_each(|(p, (out, &origin))| {
-        if active.get(p).is_some_and(|a| !a) {
-            return;
-        }
-        for (s, &dir) in out.iter_mut().zip(dirs) {
-            let ray = Ray::segment(origin, dir, max_distance_m);
+/// Traces every ray of `batch` into `surfels` (resized to the batch). Returns the
+/// number of rays traced.
+pub fn trace_probe_batch(scene: &Scene, tracer: &dyn RayTracer, batch: &ProbeRayBatch, surfels: &mut Vec<Surfel>) -> u64 {
+    surfels.clear();
+    surfels.resize(batch.len(), Surfel::default());
+    surfels.par_chunks_mut(256).enumerate().for_each(|(c, out)| {
+        for (k, s) in out.iter_mut().enumerate() {
+            let r = c * 256 + k;
+            let max = batch.max_distances_m[r];
+            let ray = Ray::segment(batch.origins_m[r], batch.directions[r], max);
             *s = match tracer.closest_hit(&ray) {
                 Some(hit) => Surfel { surface: Some(scene.surface_point(&hit)), distance: hit.t },
-                None => Surfel { surface: None, distance: max_distance_m },
+                None => Surfel { surface: None, distance: max },
             };
         }
     });
-    let count = if active.is_empty() { probe_positions.len() } else { active.iter().filter(|a| **a).count() };
-    (count * n) as u64
+    batch.len() as u64
 }
 
-/// Signed true distance of a surfel: positive for a front-face hit, negative for a
-/// backface hit, infinite for a miss (the input of relocation and classification).
-pub fn signed_distance(s: &Surfel) -> f32 {
+/// The seam's record of a surfel: signed distance and facing normal.
+pub fn surfel_hit(s: &Surfel) -> ProbeRayHit {
     match &s.surface {
-        None => f32::INFINITY,
-        Some(sp) if !sp.front_face => -s.distance,
-        Some(_) => s.distance,
+        None => ProbeRayHit::MISS,
+        Some(sp) if !sp.front_face => ProbeRayHit::back(s.distance, sp.facing_normal()),
+        Some(sp) => ProbeRayHit::front(s.distance, sp.facing_normal()),
     }
+}
+
+/// Traces `dirs` from every probe position (distance only); returns signed
+/// true distances per ray, probe-major (positive front, negative back, ∞ miss).
+pub fn trace_probe_distances(
+    scene: &Scene,
+    tracer: &dyn RayTracer,
+    probe_positions: &[Vec3],
+    dirs: &[Vec3],
+    max_distance_m: f32,
+) -> Vec<f32> {
+    let n = dirs.len();
+    let mut out = vec![0.0f32; probe_positions.len() * n];
+    out.par_chunks_mut(n).zip(probe_positions.par_iter()).for_each(|(d, &origin)| {
+        for (o, &dir) in d.iter_mut().zip(dirs) {
+            let hit = tracer.closest_hit(&Ray::segment(origin, dir, max_distance_m)).map(|h| {
+                let s = Surfel { surface: Some(scene.surface_point(&h)), distance: h.t };
+                surfel_hit(&s)
+            });
+            *o = hit.unwrap_or(ProbeRayHit::MISS).distance_m;
+        }
+    });
+    out
 }

@@ -13,6 +13,7 @@ use probegi_core::octahedral::oct_encode;
 use probegi_core::probe_classification::ProbeState;
 
 use crate::ddgi::DdgiVolume;
+use probegi_core::irradiance_encoding::decode_irradiance;
 use crate::gbuffer::GBuffer;
 
 /// Sphere radius as a fraction of the smallest probe spacing.
@@ -73,7 +74,7 @@ pub fn draw_probes(volume: &DdgiVolume, camera: &CameraRays, gbuffer: &GBuffer, 
                     ProbeState::Sleeping => Vec3::new(0.05, 0.1, 0.5),
                     state => {
                         let e = volume.irradiance.sample_bilinear(probe, oct_encode(n));
-                        let l = Vec3::new(e.x.powf(gamma), e.y.powf(gamma), e.z.powf(gamma));
+                        let l = decode_irradiance(e, gamma);
                         if state == ProbeState::UsageSleeping { l * Vec3::new(0.3, 0.5, 1.0) } else { l }
                     }
                 };

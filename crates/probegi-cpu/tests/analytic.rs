@@ -27,6 +27,7 @@ fn direct(scene: &Scene, camera: &Camera, size: u32, frames: u32) -> Image {
         gi: GiMethod::None,
         direct: DirectSettings::default(),
         show_probes: false,
+        camera_path: Vec::new(),
     };
     render_frames(scene, &bvh, &rays, &settings, |_, _| {}).image
 }

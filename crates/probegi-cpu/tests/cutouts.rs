@@ -49,6 +49,7 @@ fn frames(scene: &Scene, gi: GiMethod, n: u32) -> Image {
         gi,
         direct: DirectSettings::default(),
         show_probes: false,
+        camera_path: Vec::new(),
     };
     render_frames(scene, &bvh, &rays, &settings, |_, _| {}).image
 }

@@ -29,6 +29,7 @@ fn ddgi_render(scene: &Scene, frames: u32, rays: u32, sequence: &mut Vec<Image>)
         gi: GiMethod::Ddgi(Box::new(volume)),
         direct: DirectSettings::default(),
         show_probes: false,
+        camera_path: Vec::new(),
     };
     render_frames(scene, &bvh, &camera, &settings, |_, image| sequence.push(image())).image
 }

@@ -63,6 +63,7 @@ fn second_order_glossy_brings_the_glossy_box_closer_to_the_reference() {
             gi,
             direct: DirectSettings::default(),
             show_probes: false,
+            camera_path: Vec::new(),
         };
         render_frames(&scene, &bvh, &cam, &rs, |_, _| {}).image
     };

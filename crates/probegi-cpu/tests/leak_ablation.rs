@@ -69,6 +69,7 @@ fn leak_weights_bring_the_interior_monotonically_closer_to_the_reference() {
             gi: GiMethod::Ddgi(Box::new(settings)),
             direct: DirectSettings::default(),
             show_probes: false,
+            camera_path: Vec::new(),
         };
         let img = render_frames(&scene, &bvh, &camera, &rs, |_, _| {}).image;
         let f = flip(&reference, &img);

@@ -26,6 +26,7 @@ fn render(scene: &Scene, frames: u32, volume: DdgiVolumeSettings, mut each: impl
         gi: GiMethod::Ddgi(Box::new(volume)),
         direct: DirectSettings::default(),
         show_probes: false,
+        camera_path: Vec::new(),
     };
     render_frames(scene, &bvh, &camera, &settings, |f, image| each(f, image()))
 }

@@ -24,6 +24,7 @@ fn render_with(scene: &Scene, camera: &Camera, size: u32, frames: u32, gi: GiMet
         gi,
         direct: DirectSettings::default(),
         show_probes: false,
+        camera_path: Vec::new(),
     };
     render_frames(scene, &bvh, &rays, &settings, |_, _| {})
 }

@@ -26,5 +26,5 @@ pub use error::SceneError;
 pub use light::{LightKind, PunctualLight};
 pub use load::load_scene;
 pub use material::Material;
-pub use scene::{Scene, SurfacePoint};
+pub use scene::{CameraKeyframe, Scene, SurfacePoint};
 pub use tracer::{Ray, RayHit, RayTracer};

@@ -42,14 +42,44 @@ pub struct Scene {
     pub frames_per_second: f32,
     /// Constant radiance of rays that leave the scene, W·sr⁻¹·m⁻² per channel.
     pub sky_radiance: Vec3,
-    /// The camera the file asked for, if any.
+    /// The camera the file asked for, if any; when the camera is animated, the
+    /// first key's camera.
     pub camera: Option<Camera>,
+    /// The camera's animation over frames, in strictly increasing frame order;
+    /// empty when the camera does not move. See [`Scene::camera_at`].
+    pub camera_keyframes: Vec<CameraKeyframe>,
     /// The DDGI volume the file asked for, if any.
     pub volume: Option<probegi_core::ddgi_settings::DdgiVolumeSettings>,
+    /// The DDGI volumes of a file's `[[volumes]]` (empty: one volume, `volume`).
+    pub volumes: Vec<probegi_core::ddgi_settings::DdgiVolumeSettings>,
     /// SH probe settings from a scene file's `[sh]` table.
     pub sh_probes: Option<probegi_core::sh_settings::ShProbeSettings>,
     /// Things the loader recovered from (missing .mtl or texture, unknown material).
     pub warnings: Vec<String>,
+}
+
+/// One key of the camera's animation, fully resolved (a scene file's omitted
+/// fields are already filled in from earlier keys).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraKeyframe {
+    /// Frame number (fractional frames allowed), finite and ≥ 0.
+    pub frame: f32,
+    pub camera: Camera,
+}
+
+/// The first unusable key of a camera animation, by index, and why: frames must
+/// be finite, non-negative and strictly increasing, and every key's camera must
+/// pass [`Camera::validate`].
+pub(crate) fn camera_keyframe_error(keys: &[CameraKeyframe]) -> Option<(usize, String)> {
+    keys.iter().enumerate().find_map(|(i, k)| {
+        if !(k.frame.is_finite() && k.frame >= 0.0) {
+            return Some((i, format!("frame {} must be a finite number ≥ 0", k.frame)));
+        }
+        if i > 0 && k.frame <= keys[i - 1].frame {
+            return Some((i, format!("frame {} must be after the previous key's ({})", k.frame, keys[i - 1].frame)));
+        }
+        k.camera.validate().err().map(|e| (i, e))
+    })
 }
 
 /// A mesh drawn by instances, in its local space; its triangles' material ids
@@ -171,7 +201,9 @@ impl Default for Scene {
             frames_per_second: 30.0,
             sky_radiance: Vec3::ZERO,
             camera: None,
+            camera_keyframes: Vec::new(),
             volume: None,
+            volumes: Vec::new(),
             sh_probes: None,
             warnings: Vec::new(),
         }
@@ -479,6 +511,42 @@ impl Scene {
         }
     }
 
+    /// Whether the camera is animated: it has keyframes (then
+    /// [`Scene::camera_at`] gives its camera for every frame).
+    pub fn has_camera_animation(&self) -> bool {
+        !self.camera_keyframes.is_empty()
+    }
+
+    /// The animated camera at `frame` (fractional frames allowed); `None` when
+    /// the camera has no keyframes. Between two keys, position, target, up and
+    /// fov_y_deg interpolate linearly (up normalised afterwards, or the earlier
+    /// key's up where the blend vanishes); before the first key and after the
+    /// last the camera holds, and at a key it is that key's camera exactly.
+    /// Keys that move the eye through the target can give a degenerate camera
+    /// in between; each key itself is valid.
+    pub fn camera_at(&self, frame: f32) -> Option<Camera> {
+        let keys = &self.camera_keyframes;
+        let first = keys.first()?;
+        // Keys at or before `frame`; a NaN frame counts as before the first.
+        let after = keys.partition_point(|k| k.frame <= frame);
+        if after == 0 {
+            return Some(first.camera);
+        }
+        let a = &keys[after - 1];
+        let Some(b) = keys.get(after) else { return Some(a.camera) };
+        let t = (frame - a.frame) / (b.frame - a.frame);
+        if t <= 0.0 {
+            return Some(a.camera);
+        }
+        let (ca, cb) = (a.camera, b.camera);
+        Some(Camera {
+            position: ca.position.lerp(cb.position, t),
+            target: ca.target.lerp(cb.target, t),
+            up: ca.up.lerp(cb.up, t).try_normalize().unwrap_or(ca.up),
+            fov_y_deg: ca.fov_y_deg + (cb.fov_y_deg - ca.fov_y_deg) * t,
+        })
+    }
+
     /// Invariants every loader must establish; returns the first broken one.
     /// Warnings about values that are valid but physically suspect: a diffuse
     /// colour above 1 reflects more energy than it receives.
@@ -566,6 +634,9 @@ impl Scene {
         }
         if let Some(c) = &self.camera {
             c.validate()?;
+        }
+        if let Some((i, why)) = camera_keyframe_error(&self.camera_keyframes) {
+            return Err(format!("camera.keyframes[{i}]: {why}"));
         }
         let mut claimed = vec![false; m.triangles.len()];
         for o in &self.objects {

@@ -45,10 +45,32 @@
 //! [camera]
 //! position = [-10.0, 2.0, 0.0]
 //! target = [0.0, 2.0, 0.0]
+//! up = [0.0, 1.0, 0.0]          # optional, default +Y
 //! fov_y_deg = 60.0
+//! # Optional animation: keys in strictly increasing frame order (frames ≥ 0).
+//! # A key may omit any field but `frame`: it holds the previous key's value (the
+//! # first key's come from the table above, which may then leave them out).
+//! # Between keys position, target, up and fov_y_deg interpolate linearly; the
+//! # camera holds before the first key and after the last.
+//! keyframes = [
+//!     { frame = 0, position = [-10.0, 2.0, 0.0] },
+//!     { frame = 60, position = [0.0, 2.0, -10.0], fov_y_deg = 45.0 },
+//!     { frame = 90.5, target = [0.0, 1.0, 0.0], up = [0.0, 1.0, 0.1] },
+//! ]
 //!
 //! [volume]                      # DDGI: DdgiVolumeSettings field names
 //! probe_counts = [16, 8, 16]
+//!
+//! # Or several volumes (seed 004 §7.4), each with every [volume] key: placed by
+//! # origin and spacing, or fitted to volume_bounds_m; a tracking window follows
+//! # the camera. A file with [[volumes]] may not also have [volume].
+//! [[volumes]]
+//! probe_counts = [8, 4, 8]
+//! volume_bounds_m = [[-20.0, 0.0, -10.0], [20.0, 15.0, 10.0]]
+//! [[volumes]]
+//! probe_counts = [8, 8, 8]
+//! probe_spacing_m = [0.5, 0.5, 0.5]
+//! volume_tracks_camera = true
 //!
 //! [sh]                          # --gi sh: ShProbeSettings field names
 //! sh_occlusion = true
@@ -61,11 +83,12 @@ use probegi_core::camera::Camera;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::sh_settings::ShProbeSettings;
 use serde::Deserialize;
+use toml::Spanned;
 
 use crate::animation::{KeyClock, MotionPath, ObjectAnimation, SceneObject, TransformKeyframe};
 use crate::error::{Result, SceneError};
 use crate::light::PunctualLight;
-use crate::scene::Scene;
+use crate::scene::{CameraKeyframe, Scene};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -79,11 +102,15 @@ pub struct SceneFile {
     pub lights: Vec<PunctualLight>,
     #[serde(default)]
     pub sky_radiance: Option<Vec3>,
+    /// `[camera]`, with its span for error lines.
     #[serde(default)]
-    pub camera: Option<Camera>,
+    pub camera: Option<Spanned<CameraEntry>>,
     /// The DDGI volume (`probegi_core::ddgi_settings::DdgiVolumeSettings` field names).
     #[serde(default)]
     pub volume: Option<DdgiVolumeSettings>,
+    /// Several DDGI volumes, blended by density (the same field names each).
+    #[serde(default)]
+    pub volumes: Vec<DdgiVolumeSettings>,
     /// The SH probes of `--gi sh` (`probegi_core::sh_settings::ShProbeSettings` field names).
     #[serde(default)]
     pub sh: Option<ShProbeSettings>,
@@ -92,6 +119,94 @@ pub struct SceneFile {
     /// The animation clock for animations authored in seconds (glTF).
     #[serde(default)]
     pub frames_per_second: Option<f32>,
+}
+
+/// The `[camera]` table: a [`Camera`]'s fields, optionally animated by
+/// `keyframes`. Without keyframes, position, target and fov_y_deg are required;
+/// with them, these are only the first key's fallbacks.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraEntry {
+    #[serde(default)]
+    pub position: Option<Vec3>,
+    #[serde(default)]
+    pub target: Option<Vec3>,
+    /// Default +Y.
+    #[serde(default)]
+    pub up: Option<Vec3>,
+    #[serde(default)]
+    pub fov_y_deg: Option<f32>,
+    #[serde(default)]
+    pub keyframes: Vec<Spanned<CameraKeyEntry>>,
+}
+
+/// A key of `[camera].keyframes`; an omitted field holds the previous key's
+/// value (the first key's: the table's).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraKeyEntry {
+    /// Frame number, ≥ 0 (fractional frames allowed).
+    pub frame: f32,
+    #[serde(default)]
+    pub position: Option<Vec3>,
+    #[serde(default)]
+    pub target: Option<Vec3>,
+    #[serde(default)]
+    pub up: Option<Vec3>,
+    #[serde(default)]
+    pub fov_y_deg: Option<f32>,
+}
+
+/// Why a `[camera]` table cannot be used: the byte offset it concerns and the message.
+type CameraError = (usize, String);
+
+impl CameraEntry {
+    /// The camera (the first key's, when animated) and the resolved keys; the
+    /// table starts at byte `at` of the file.
+    fn resolve(&self, at: usize) -> std::result::Result<(Camera, Vec<CameraKeyframe>), CameraError> {
+        let up = self.up.unwrap_or(Vec3::Y);
+        if self.keyframes.is_empty() {
+            let missing = |field: &str| (at, format!("camera: missing field `{field}`"));
+            let camera = Camera {
+                position: self.position.ok_or_else(|| missing("position"))?,
+                target: self.target.ok_or_else(|| missing("target"))?,
+                up,
+                fov_y_deg: self.fov_y_deg.ok_or_else(|| missing("fov_y_deg"))?,
+            };
+            camera.validate().map_err(|e| (at, format!("camera: {e}")))?;
+            return Ok((camera, Vec::new()));
+        }
+        let (mut position, mut target, mut up, mut fov_y_deg) = (self.position, self.target, up, self.fov_y_deg);
+        let mut keys = Vec::with_capacity(self.keyframes.len());
+        for (i, key) in self.keyframes.iter().enumerate() {
+            let k = key.get_ref();
+            position = k.position.or(position);
+            target = k.target.or(target);
+            up = k.up.unwrap_or(up);
+            fov_y_deg = k.fov_y_deg.or(fov_y_deg);
+            let missing = |field: &str| {
+                let why =
+                    format!("camera.keyframes[{i}]: no `{field}`: give it in this key, an earlier one or [camera]");
+                (key.span().start, why)
+            };
+            let camera = Camera {
+                position: position.ok_or_else(|| missing("position"))?,
+                target: target.ok_or_else(|| missing("target"))?,
+                up,
+                fov_y_deg: fov_y_deg.ok_or_else(|| missing("fov_y_deg"))?,
+            };
+            keys.push(CameraKeyframe { frame: k.frame, camera });
+        }
+        if let Some((i, why)) = crate::scene::camera_keyframe_error(&keys) {
+            return Err((self.keyframes[i].span().start, format!("camera.keyframes[{i}]: {why}")));
+        }
+        Ok((keys[0].camera, keys))
+    }
+}
+
+/// The 1-based line of byte `offset` in `text`.
+fn line_of(text: &str, offset: usize) -> usize {
+    text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
 }
 
 /// One `[[objects]]` entry: exactly one of a box, a polygon or a file.
@@ -427,12 +542,28 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
     if let Some(sky) = file.sky_radiance {
         scene.sky_radiance = sky;
     }
-    if file.camera.is_some() {
-        scene.camera = file.camera;
+    if let Some(entry) = &file.camera {
+        let (camera, keys) = entry.get_ref().resolve(entry.span().start).map_err(|(at, message)| {
+            SceneError::Parse { path: path.to_path_buf(), line: line_of(text, at), message }
+        })?;
+        scene.camera = Some(camera);
+        scene.camera_keyframes = keys;
+    }
+    if file.volume.is_some() && !file.volumes.is_empty() {
+        return Err(toml_err("both [volume] and [[volumes]]: use [[volumes]] entries only".into()));
     }
     if let Some(v) = file.volume {
         v.validate().map_err(|(field, why)| toml_err(format!("volume.{field}: {why}")))?;
         scene.volume = Some(v);
+    }
+    if file.volumes.len() > 64 {
+        return Err(toml_err(format!("{} [[volumes]]: at most 64", file.volumes.len())));
+    }
+    for (i, v) in file.volumes.iter().enumerate() {
+        v.validate().map_err(|(field, why)| toml_err(format!("volumes[{i}].{field}: {why}")))?;
+    }
+    if !file.volumes.is_empty() {
+        scene.volumes = file.volumes;
     }
     if let Some(v) = file.sh {
         v.validate().map_err(|(field, why)| toml_err(format!("sh.{field}: {why}")))?;
@@ -574,7 +705,8 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
     Ok(sub)
 }
 
-/// Appends `sub`'s geometry, materials, textures and lights; keeps the first camera.
+/// Appends `sub`'s geometry, materials, textures and lights; keeps the first
+/// camera (with its animation).
 fn merge_into(scene: &mut Scene, sub: Scene) {
     let mat_offset = scene.materials.len() as u32;
     let tex_offset = scene.textures.len();
@@ -603,9 +735,11 @@ fn merge_into(scene: &mut Scene, sub: Scene) {
     scene.sky_radiance = scene.sky_radiance.max(sub.sky_radiance);
     if scene.camera.is_none() {
         scene.camera = sub.camera;
+        scene.camera_keyframes = sub.camera_keyframes;
     }
-    if scene.volume.is_none() {
+    if scene.volume.is_none() && scene.volumes.is_empty() {
         scene.volume = sub.volume;
+        scene.volumes = sub.volumes;
     }
     if scene.sh_probes.is_none() {
         scene.sh_probes = sub.sh_probes;
@@ -701,10 +835,22 @@ fn apply_override<T: serde::Serialize + serde::de::DeserializeOwned>(
     } else {
         return Err(format!("unknown setting `{key}`; valid keys: {}", keys.join(", ")));
     };
-    let parsed: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
+    let mut parsed: toml::Value = match toml::from_str::<toml::Table>(&format!("v = {value}")) {
         Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.to_string())),
         Err(_) => toml::Value::String(value.to_string()),
     };
+    // A scalar for a per-axis metre setting means the same on every axis
+    // (`probe_spacing_m=0.5`); `X,Y,Z` without brackets is accepted too.
+    if matches!(canonical.as_str(), "probe_spacing_m" | "probe_origin_m") {
+        if matches!(parsed, toml::Value::Float(_) | toml::Value::Integer(_)) {
+            parsed = toml::Value::Array(vec![parsed.clone(), parsed.clone(), parsed]);
+        } else if let Ok(mut t) = toml::from_str::<toml::Table>(&format!("v = [{value}]"))
+            && let Some(v @ toml::Value::Array(_)) = t.remove("v")
+            && value.contains(',')
+        {
+            parsed = v;
+        }
+    }
     let mut table = toml::Table::try_from(settings).map_err(|e| e.to_string())?;
     table.insert(canonical.clone(), parsed);
     table.try_into().map_err(|e: toml::de::Error| format!("{canonical} = {value}: {}", e.message()))

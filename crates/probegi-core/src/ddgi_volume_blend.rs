@@ -1,0 +1,194 @@
+//! Sampling a set of DDGI volumes: which volumes shade a point, and how much.
+//!
+//! Two schemes, one per kind of set:
+//! - [`VolumeBlending::Density`] (seed 004 §7.4), for hand-placed volumes: volumes
+//!   are visited from most to least dense (smallest cell volume first); each has a
+//!   weight of 1 over its probe box, falling linearly to 0 over one cell on every
+//!   axis ([`volume_blend_weight`]); a volume's weight is scaled by what the denser
+//!   ones left, `w·(1 − Σw)`, and once Σw reaches 1 the rest are skipped. The sum
+//!   is normalised by Σw (as Algorithm 2 of seed 003 does), so a point inside one
+//!   volume's falloff band alone reads that volume unattenuated.
+//!   *Deviation:* seed 004 places the falloff inside the last cell (from the
+//!   second-to-last plane of probes); we place it over the cell outside the probe
+//!   box, as RTXGI's `DDGIGetVolumeBlendWeight` does, so the outermost probes keep
+//!   full weight and a volume fitted to the scene bounds (probes at cell centres,
+//!   half a cell in from the bounds) covers all of it: a single volume shades
+//!   exactly as it did before sets existed. A point farther than one cell outside
+//!   every volume's probe box gets **no** field contribution (zero irradiance).
+//!   *Camera-aware blending* (seed 004 §7.4, Fig. 13) for volumes that track the
+//!   camera: the full-weight box is the probe box tightened by one cell per axis
+//!   and centred on the camera, so a plane that leapfrogs in front of the camera
+//!   fades in as the camera approaches instead of popping.
+//! - [`VolumeBlending::Cascades`] (seed 003 §6.2.2): nested camera-centred
+//!   cascades, finest first, each weighted by Algorithm 1 ([`cascade_field_weight`])
+//!   and accumulated by Algorithm 2 until the weight reaches 1. The coarsest cascade
+//!   takes weight 1 wherever the finer ones left less than 0.9 (Algorithm 2's
+//!   `f < N or wsum > 0.9` test), so it covers the whole scene as the thesis's
+//!   enveloping top cascade does.
+//!   *Deviation:* Algorithm 1 as printed ramps the weight up over the first cell but
+//!   tests `a > R − 1` at the far end, where `R − 1 − a` is always negative, so the
+//!   far ramp would be a hard zero; we use `R − 2`, the symmetric ramp over the last
+//!   cell that the text ("weights fall off ... at the edges") describes, written as
+//!   `clamp(min(a, R − 1 − a), 0, 1)` per axis. The per-axis factors multiply (the
+//!   algorithm's loop), not a geometric mean as the prose says.
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::ddgi_query::{DdgiFieldView, irradiance};
+use crate::probe_grid::ProbeGrid;
+
+/// How a set of volumes is sampled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum VolumeBlending {
+    /// Seed 004 §7.4: densest first, one-cell falloff, camera-aware for tracking volumes.
+    #[default]
+    Density,
+    /// Seed 003 §6.2 Algorithms 1–2: nested cascades, finest first.
+    Cascades,
+}
+
+/// Seed 004 §7.4 weight of `point` for one volume: 1 inside the full-weight box,
+/// falling linearly to 0 one cell outside it on each axis (the axes' factors
+/// multiply). The box is the probe box, or with `camera_m` (a volume that tracks
+/// the camera) the probe box tightened by one cell and centred on the camera.
+pub fn volume_blend_weight(grid: &ProbeGrid, point: Vec3, camera_m: Option<Vec3>) -> f32 {
+    let half = grid.spacing_m * (grid.probe_counts.as_vec3() - Vec3::ONE) * 0.5;
+    let (centre, half) = match camera_m {
+        Some(c) => (c, (half - grid.spacing_m).max(Vec3::ZERO)),
+        None => (grid.origin_m + half, half),
+    };
+    let outside = ((point - centre).abs() - half).max(Vec3::ZERO) / grid.spacing_m;
+    let w = (Vec3::ONE - outside).clamp(Vec3::ZERO, Vec3::ONE);
+    w.x * w.y * w.z
+}
+
+/// Seed 003 Algorithm 1 (with the far-edge fix in the module docs): per axis, the
+/// point's grid coordinate `a` gives `clamp(min(a, R − 1 − a), 0, 1)`; the product.
+pub fn cascade_field_weight(grid: &ProbeGrid, point: Vec3) -> f32 {
+    let a = (point - grid.origin_m) / grid.spacing_m;
+    let r = grid.probe_counts.as_vec3() - Vec3::ONE;
+    let w = a.min(r - a).clamp(Vec3::ZERO, Vec3::ONE);
+    w.x * w.y * w.z
+}
+
+/// One volume of a set as the set query reads it.
+#[derive(Clone, Copy)]
+pub struct SetMember<'a> {
+    pub field: DdgiFieldView<'a>,
+    /// The volume tracks the camera (camera-aware blending under `Density`).
+    pub tracks_camera: bool,
+}
+
+/// Everything the set query reads: the members in sampling order (densest or
+/// finest first), the scheme, and the camera position for camera-aware blending.
+pub struct DdgiFieldSetView<'a> {
+    pub members: Vec<SetMember<'a>>,
+    pub blending: VolumeBlending,
+    pub camera_m: Option<Vec3>,
+}
+
+/// The weight each member gets at `point`, in member order, by the set's scheme
+/// (before normalisation; zero for skipped members).
+pub fn member_weights(set: &DdgiFieldSetView<'_>, point: Vec3, out: &mut Vec<f32>) {
+    out.clear();
+    let n = set.members.len();
+    let mut wsum = 0.0f32;
+    for (f, m) in set.members.iter().enumerate() {
+        if wsum >= 1.0 {
+            out.push(0.0);
+            continue;
+        }
+        let w = match set.blending {
+            VolumeBlending::Density => {
+                let camera = if m.tracks_camera { set.camera_m } else { None };
+                volume_blend_weight(m.field.grid, point, camera)
+            }
+            VolumeBlending::Cascades => {
+                if f + 1 < n || wsum > 0.9 {
+                    cascade_field_weight(m.field.grid, point)
+                } else {
+                    1.0
+                }
+            }
+        };
+        let w = if w > 0.0 { w * (1.0 - wsum).clamp(0.0, 1.0) } else { 0.0 };
+        wsum += w;
+        out.push(w);
+    }
+}
+
+/// Irradiance at `position` over the whole set (see the module docs). A point that
+/// no member weighs gets zero. When one member alone contributes, its value is
+/// returned as is (bit-identical to querying that volume).
+pub fn field_set_irradiance(set: &DdgiFieldSetView<'_>, position: Vec3, normal: Vec3, view_dir: Vec3) -> Vec3 {
+    if set.members.len() == 1 {
+        let w = match set.blending {
+            VolumeBlending::Cascades => 1.0,
+            VolumeBlending::Density => {
+                let m = &set.members[0];
+                volume_blend_weight(m.field.grid, position, if m.tracks_camera { set.camera_m } else { None })
+            }
+        };
+        return if w > 0.0 { irradiance(&set.members[0].field, position, normal, view_dir) } else { Vec3::ZERO };
+    }
+    let mut weights = Vec::with_capacity(set.members.len());
+    member_weights(set, position, &mut weights);
+    let mut sum = Vec3::ZERO;
+    let mut wsum = 0.0f32;
+    let mut only: Option<Vec3> = None;
+    let mut contributors = 0;
+    for (m, &w) in set.members.iter().zip(&weights) {
+        if w <= 0.0 {
+            continue;
+        }
+        let e = irradiance(&m.field, position, normal, view_dir);
+        sum += e * w;
+        wsum += w;
+        contributors += 1;
+        only = Some(e);
+    }
+    match (contributors, only) {
+        (0, _) => Vec3::ZERO,
+        (1, Some(e)) => e,
+        _ => sum / wsum,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::UVec3;
+
+    fn grid(origin: f32, counts: u32, spacing: f32) -> ProbeGrid {
+        ProbeGrid::new(Vec3::splat(origin), UVec3::splat(counts), Vec3::splat(spacing))
+    }
+
+    #[test]
+    fn volume_weight_is_one_on_the_probe_box_and_falls_over_one_cell_outside() {
+        let g = grid(0.0, 5, 1.0); // probe box [0, 4]³
+        assert_eq!(volume_blend_weight(&g, Vec3::splat(2.0), None), 1.0);
+        assert_eq!(volume_blend_weight(&g, Vec3::new(4.0, 0.0, 2.0), None), 1.0);
+        assert!((volume_blend_weight(&g, Vec3::new(4.25, 2.0, 2.0), None) - 0.75).abs() < 1e-6);
+        assert!((volume_blend_weight(&g, Vec3::new(4.5, -0.5, 2.0), None) - 0.25).abs() < 1e-6);
+        assert_eq!(volume_blend_weight(&g, Vec3::new(5.0, 2.0, 2.0), None), 0.0);
+        // Camera-aware: the full box is [1, 3]³ around a centred camera, and follows it.
+        let cam = Some(Vec3::splat(2.0));
+        assert!((volume_blend_weight(&g, Vec3::new(3.5, 2.0, 2.0), cam) - 0.5).abs() < 1e-6);
+        let moved = Some(Vec3::new(2.6, 2.0, 2.0));
+        assert!((volume_blend_weight(&g, Vec3::new(3.5, 2.0, 2.0), moved) - 1.0).abs() < 1e-6);
+        assert!((volume_blend_weight(&g, Vec3::new(1.1, 2.0, 2.0), moved) - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn cascade_weight_ramps_over_the_first_and_last_cell() {
+        let g = grid(0.0, 5, 2.0); // a = x / 2, R − 1 = 4
+        assert_eq!(cascade_field_weight(&g, Vec3::splat(4.0)), 1.0);
+        assert!((cascade_field_weight(&g, Vec3::new(1.0, 4.0, 4.0)) - 0.5).abs() < 1e-6);
+        assert!((cascade_field_weight(&g, Vec3::new(7.0, 4.0, 4.0)) - 0.5).abs() < 1e-6);
+        assert_eq!(cascade_field_weight(&g, Vec3::new(8.0, 4.0, 4.0)), 0.0);
+        assert_eq!(cascade_field_weight(&g, Vec3::new(-1.0, 4.0, 4.0)), 0.0);
+        assert!((cascade_field_weight(&g, Vec3::new(1.0, 1.0, 4.0)) - 0.25).abs() < 1e-6, "axes multiply");
+    }
+}

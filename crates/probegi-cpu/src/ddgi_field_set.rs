@@ -1,0 +1,446 @@
+//! A set of DDGI volumes and the seam an engine drives it through.
+//!
+//! The split is RTXGI's integration model: the application owns the acceleration
+//! structure and the hit shading; the set owns the probes. One frame's update is a
+//! short exchange, the same for one volume or many:
+//!
+//! ```text
+//! set.set_tracking_target(camera)        // tracking windows scroll (seed 004 §7.3)
+//! let mut step = set.begin_update(seed, frame);
+//! loop {
+//!     match step {
+//!         UpdateStep::TraceRays => {      // set.ray_batch(): origins, directions, max distances
+//!             hits = trace(set.ray_batch());          // signed distance + facing normal per ray
+//!             step = set.submit_hits(&hits)?;
+//!         }
+//!         UpdateStep::ShadeRays => {      // rays with ray_batch().needs_radiance[i]
+//!             radiance = shade(set.ray_batch(), &hits, |p, n, v| set.irradiance(p, n, v));
+//!             step = set.submit_radiance(&radiance)?;
+//!         }
+//!         UpdateStep::Done => break,
+//!     }
+//! }
+//! ```
+//!
+//! A steady frame is one `TraceRays` and one `ShadeRays`: **one ray batch** holds
+//! every volume's and every cascade's probe rays (seed 003 §3.3 and §6.2.1, seed
+//! 004 Fig. 11), laid out probe by probe. Initialisation (relocation and
+//! classification, seed 004 Listings 4–5) adds distance-only `TraceRays` rounds
+//! before it, against static geometry only (`ray_batch().static_geometry_only`),
+//! on the first frame and when a tracking window scrolls planes in. The set then
+//! blends, borders and classifies every volume.
+//!
+//! The caller's hits are signed distances (front face `t`, back face `−t`, miss
+//! `+∞`) and the facing unit normal at the hit. The set applies the backface rule
+//! itself (zero radiance, distance −0.2·t), so a caller shades only front hits and
+//! misses (misses: the sky or environment). Shading a front hit is direct light
+//! plus albedo/π × [`DdgiFieldSet::irradiance`] at the hit, the previous frame's
+//! field (so bounces accumulate; seed 000 §3).
+//!
+//! *Deviation:* seed 003 §6.2.1 updates each cascade "with no knowledge about other
+//! cascades". Here a probe ray's hit reads the whole set, so a hit outside a small
+//! window reads the coarser volume around it rather than the window's clamped
+//! edge probes; for one volume the two are the same.
+//!
+//! [`DdgiFieldSet::update`] (in `ddgi_scene_update`) is the convenience that plays
+//! both caller roles with probegi's own scene, tracer and shading.
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+use probegi_core::ddgi_settings::DdgiFieldSetSettings;
+use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, SetMember, VolumeBlending, field_set_irradiance};
+
+use crate::ddgi::{DdgiVolume, SceneEvent, VolumeFrame};
+
+/// Which seam call comes next.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UpdateStep {
+    /// Trace [`DdgiFieldSet::ray_batch`] and call [`DdgiFieldSet::submit_hits`].
+    TraceRays,
+    /// Shade the rays with `needs_radiance` and call [`DdgiFieldSet::submit_radiance`].
+    ShadeRays,
+    /// The frame's update is complete.
+    Done,
+}
+
+/// What a batch is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum ProbeRayBatchKind {
+    /// Distance-only rays of initialisation (relocation, classification) against
+    /// static geometry; no shading follows.
+    Initialization,
+    /// The frame's update rays of every volume.
+    #[default]
+    Update,
+}
+
+/// One probe's rays in a batch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BatchProbe {
+    pub volume: u32,
+    /// The probe's storage index in its volume.
+    pub probe: u32,
+    pub first_ray: u32,
+    pub ray_count: u32,
+}
+
+/// One frame's probe rays for every volume: structure of arrays, probe-major.
+#[derive(Clone, Debug, Default)]
+pub struct ProbeRayBatch {
+    pub kind: ProbeRayBatchKind,
+    pub origins_m: Vec<Vec3>,
+    /// Unit directions.
+    pub directions: Vec<Vec3>,
+    /// Hits beyond this distance are misses.
+    pub max_distances_m: Vec<f32>,
+    /// Set by [`DdgiFieldSet::submit_hits`] on update batches: the rays whose
+    /// radiance the caller must supply (others are ignored).
+    pub needs_radiance: Vec<bool>,
+    pub probes: Vec<BatchProbe>,
+}
+
+impl ProbeRayBatch {
+    pub fn len(&self) -> usize {
+        self.origins_m.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.origins_m.is_empty()
+    }
+
+    /// Initialisation rays see static geometry only (moving objects wake probes instead).
+    pub fn static_geometry_only(&self) -> bool {
+        self.kind == ProbeRayBatchKind::Initialization
+    }
+
+    /// Rays per volume (`volumes` entries).
+    pub fn rays_per_volume(&self, volumes: usize) -> Vec<u64> {
+        let mut v = vec![0u64; volumes];
+        for p in &self.probes {
+            v[p.volume as usize] += p.ray_count as u64;
+        }
+        v
+    }
+
+    fn clear(&mut self, kind: ProbeRayBatchKind) {
+        self.kind = kind;
+        self.origins_m.clear();
+        self.directions.clear();
+        self.max_distances_m.clear();
+        self.needs_radiance.clear();
+        self.probes.clear();
+    }
+
+    /// Appends one probe's rays; returns its first ray index.
+    pub(crate) fn push_probe(&mut self, volume: u32, probe: u32, origin: Vec3, dirs: &[Vec3], max_m: f32) -> u32 {
+        let first = self.origins_m.len() as u32;
+        self.origins_m.extend(std::iter::repeat_n(origin, dirs.len()));
+        self.directions.extend_from_slice(dirs);
+        self.max_distances_m.extend(std::iter::repeat_n(max_m, dirs.len()));
+        self.probes.push(BatchProbe { volume, probe, first_ray: first, ray_count: dirs.len() as u32 });
+        first
+    }
+}
+
+/// One traced probe ray, as the caller reports it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProbeRayHit {
+    /// Signed hit distance in metres: `t` on a front face, `−t` on a back face,
+    /// `+∞` for a miss (nothing within the ray's max distance).
+    pub distance_m: f32,
+    /// Unit normal at the hit on the side facing the ray's origin (read by the
+    /// jcgt classification); anything for a miss.
+    pub normal: Vec3,
+}
+
+impl ProbeRayHit {
+    pub const MISS: Self = Self { distance_m: f32::INFINITY, normal: Vec3::ZERO };
+
+    /// A front-face hit at `t` with facing normal `normal`.
+    pub fn front(t: f32, normal: Vec3) -> Self {
+        Self { distance_m: t, normal }
+    }
+
+    /// A back-face hit at `t` (the ray's origin is behind the surface).
+    pub fn back(t: f32, normal: Vec3) -> Self {
+        Self { distance_m: -t, normal }
+    }
+}
+
+/// A seam call that does not fit the exchange.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum SeamError {
+    /// The call does not follow the step the set asked for.
+    OutOfOrder { expected: UpdateStep, called: &'static str },
+    /// A results buffer does not have one entry per batch ray.
+    WrongLength { what: &'static str, expected: usize, got: usize },
+}
+
+impl std::fmt::Display for SeamError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SeamError::OutOfOrder { expected, called } => {
+                write!(f, "{called} called while the field set expects {expected:?}")
+            }
+            SeamError::WrongLength { what, expected, got } => {
+                write!(f, "{what} has {got} entries but the ray batch has {expected} rays")
+            }
+        }
+    }
+}
+
+impl std::error::Error for SeamError {}
+
+/// Any number of DDGI volumes, sampled together (see
+/// `probegi_core::ddgi_volume_blend`), updated through one ray batch per frame.
+#[derive(Clone, Debug)]
+pub struct DdgiFieldSet {
+    pub volumes: Vec<DdgiVolume>,
+    pub blending: VolumeBlending,
+    /// Volume indices in sampling order: densest (or finest) first.
+    order: Vec<usize>,
+    /// The point tracking windows follow (the camera), for camera-aware blending.
+    tracking_target_m: Option<Vec3>,
+    batch: ProbeRayBatch,
+    hits: Vec<ProbeRayHit>,
+    frames: Vec<VolumeFrame>,
+    expected: UpdateStep,
+    init_round: usize,
+    seed: u64,
+    frame: u32,
+    /// Milliseconds of the set's own work in the last update, by pass.
+    pub last_pass_ms: BTreeMap<&'static str, f64>,
+    /// Rays in the last update batch, and per volume.
+    pub last_batch_rays: u64,
+    pub last_batch_rays_per_volume: Vec<u64>,
+    /// Initialisation rays in the last update.
+    pub last_init_rays: u64,
+}
+
+impl DdgiFieldSet {
+    /// A set from its settings; volumes without an origin, spacing or
+    /// `volume_bounds_m` are fitted to `scene_bounds`; tracking volumes start
+    /// centred on `camera_m` when given.
+    pub fn new(settings: &DdgiFieldSetSettings, scene_bounds: (Vec3, Vec3), camera_m: Option<Vec3>) -> Self {
+        let volumes = settings
+            .volumes
+            .iter()
+            .map(|v| DdgiVolume::placed(v.clone(), scene_bounds, camera_m))
+            .collect();
+        Self::from_volumes(volumes, settings.blending, camera_m)
+    }
+
+    /// A set of volumes made elsewhere.
+    pub fn from_volumes(mut volumes: Vec<DdgiVolume>, blending: VolumeBlending, camera_m: Option<Vec3>) -> Self {
+        for (i, v) in volumes.iter_mut().enumerate() {
+            v.stream = i as u64;
+        }
+        let mut order: Vec<usize> = (0..volumes.len()).collect();
+        // Densest (smallest cell) first; a stable sort keeps the given order on ties.
+        let cell = |v: &DdgiVolume| v.grid.spacing_m.element_product();
+        order.sort_by(|&a, &b| cell(&volumes[a]).total_cmp(&cell(&volumes[b])));
+        let n = volumes.len();
+        Self {
+            volumes,
+            blending,
+            order,
+            tracking_target_m: camera_m,
+            batch: ProbeRayBatch::default(),
+            hits: Vec::new(),
+            frames: vec![VolumeFrame::default(); n],
+            expected: UpdateStep::Done,
+            init_round: 0,
+            seed: 0,
+            frame: 0,
+            last_pass_ms: BTreeMap::new(),
+            last_batch_rays: 0,
+            last_batch_rays_per_volume: vec![0; n],
+            last_init_rays: 0,
+        }
+    }
+
+    /// A set of one volume.
+    pub fn single(volume: DdgiVolume) -> Self {
+        Self::from_volumes(vec![volume], VolumeBlending::Density, None)
+    }
+
+    /// The query's view of the set.
+    pub fn view(&self) -> DdgiFieldSetView<'_> {
+        DdgiFieldSetView {
+            members: self
+                .order
+                .iter()
+                .map(|&i| {
+                    let v = &self.volumes[i];
+                    SetMember { field: v.view(), tracks_camera: v.settings.volume_tracks_camera }
+                })
+                .collect(),
+            blending: self.blending,
+            camera_m: self.tracking_target_m,
+        }
+    }
+
+    /// Irradiance (W·m⁻²) at `position` on a surface with unit `normal` seen along
+    /// `view_dir` (toward the viewer), over every volume. Zero where no volume reaches.
+    /// For many queries, build [`Self::view`] once and call `field_set_irradiance`.
+    pub fn irradiance(&self, position: Vec3, normal: Vec3, view_dir: Vec3) -> Vec3 {
+        field_set_irradiance(&self.view(), position, normal, view_dir)
+    }
+
+    /// Moves every tracking window toward `target_m` (whole cells; seed 004 §7.3)
+    /// and remembers it for camera-aware blending. Returns the probes scrolled in.
+    pub fn set_tracking_target(&mut self, target_m: Vec3) -> usize {
+        if !target_m.is_finite() {
+            return 0;
+        }
+        self.tracking_target_m = Some(target_m);
+        self.volumes.iter_mut().map(|v| v.scroll_to(target_m)).sum()
+    }
+
+    pub fn tracking_target(&self) -> Option<Vec3> {
+        self.tracking_target_m
+    }
+
+    /// Reports a scene change to every volume (seed 004 §4.3).
+    pub fn notify_scene_event(&mut self, event: SceneEvent) {
+        self.volumes.iter_mut().for_each(|v| v.notify_scene_event(event));
+    }
+
+    /// Wakes Sleeping probes around moving objects in every volume; returns the count.
+    pub fn wake_probes_near(&mut self, dynamic_aabbs: &[(Vec3, Vec3)]) -> usize {
+        self.volumes.iter_mut().map(|v| v.wake_probes_near(dynamic_aabbs)).sum()
+    }
+
+    /// The current batch (valid after `begin_update` / `submit_hits` ask for a trace or shade).
+    pub fn ray_batch(&self) -> &ProbeRayBatch {
+        &self.batch
+    }
+
+    /// Total probes over every volume.
+    pub fn probe_count(&self) -> usize {
+        self.volumes.iter().map(|v| v.grid.probe_count()).sum()
+    }
+
+    /// Probe rays of the last update (every volume's tracing probes).
+    pub fn rays_per_frame(&self) -> u64 {
+        self.volumes.iter().map(|v| v.rays_per_frame()).sum()
+    }
+
+    /// Starts frame `frame`'s update: the first batch to trace.
+    pub fn begin_update(&mut self, seed: u64, frame: u32) -> UpdateStep {
+        self.seed = seed;
+        self.frame = frame;
+        self.init_round = 0;
+        self.last_pass_ms.clear();
+        self.last_init_rays = 0;
+        let t = std::time::Instant::now();
+        let step = self.plan_init_or_update();
+        self.time("ray_gen", t);
+        step
+    }
+
+    fn time(&mut self, pass: &'static str, t: std::time::Instant) {
+        *self.last_pass_ms.entry(pass).or_default() += t.elapsed().as_secs_f64() * 1e3;
+    }
+
+    /// Plans the next initialisation round of the volumes still initialising, or
+    /// (once none is) the update batch.
+    fn plan_init_or_update(&mut self) -> UpdateStep {
+        loop {
+            let pending: Vec<usize> = (0..self.volumes.len()).filter(|&i| self.volumes[i].needs_init()).collect();
+            if pending.is_empty() {
+                break;
+            }
+            self.batch.clear(ProbeRayBatchKind::Initialization);
+            for &i in &pending {
+                let has_round =
+                    self.volumes[i].plan_init_round(&mut self.frames[i], self.init_round, self.seed, i as u32, &mut self.batch);
+                if !has_round {
+                    self.volumes[i].finish_init();
+                }
+            }
+            if !self.batch.is_empty() {
+                self.expected = UpdateStep::TraceRays;
+                return UpdateStep::TraceRays;
+            }
+        }
+        self.batch.clear(ProbeRayBatchKind::Update);
+        for i in 0..self.volumes.len() {
+            self.volumes[i].plan_update(&mut self.frames[i], self.seed, self.frame, i as u32, &mut self.batch);
+        }
+        self.last_batch_rays = self.batch.len() as u64;
+        self.last_batch_rays_per_volume = self.batch.rays_per_volume(self.volumes.len());
+        self.expected = UpdateStep::TraceRays;
+        UpdateStep::TraceRays
+    }
+
+    fn expect(&self, step: UpdateStep, called: &'static str) -> Result<(), SeamError> {
+        if self.expected == step { Ok(()) } else { Err(SeamError::OutOfOrder { expected: self.expected, called }) }
+    }
+
+    /// Takes the batch's hits (one per ray, in batch order). After an
+    /// initialisation round the next batch is traced again; after the update batch
+    /// the rays in `ray_batch().needs_radiance` must be shaded. Non-finite
+    /// distances other than `+∞`, and NaN normals, count as misses.
+    pub fn submit_hits(&mut self, hits: &[ProbeRayHit]) -> Result<UpdateStep, SeamError> {
+        self.expect(UpdateStep::TraceRays, "submit_hits")?;
+        if hits.len() != self.batch.len() {
+            return Err(SeamError::WrongLength { what: "hits", expected: self.batch.len(), got: hits.len() });
+        }
+        self.hits.clear();
+        self.hits.extend(hits.iter().map(|h| {
+            if h.distance_m.is_nan() || h.distance_m == f32::NEG_INFINITY || !h.normal.is_finite() {
+                ProbeRayHit::MISS
+            } else {
+                *h
+            }
+        }));
+        let t = std::time::Instant::now();
+        match self.batch.kind {
+            ProbeRayBatchKind::Initialization => {
+                self.last_init_rays += self.batch.len() as u64;
+                for i in 0..self.volumes.len() {
+                    if self.volumes[i].needs_init() {
+                        self.volumes[i].accept_init_round(&self.frames[i], self.init_round, &self.batch, &self.hits);
+                    }
+                }
+                self.init_round += 1;
+                let step = self.plan_init_or_update();
+                self.time("probe_init", t);
+                Ok(step)
+            }
+            ProbeRayBatchKind::Update => {
+                self.batch.needs_radiance = vec![false; self.batch.len()];
+                for i in 0..self.volumes.len() {
+                    let (frames, volumes) = (&mut self.frames, &mut self.volumes);
+                    volumes[i].accept_update_hits(&mut frames[i], self.frame, &self.hits, &mut self.batch.needs_radiance);
+                }
+                self.time("classify", t);
+                self.expected = UpdateStep::ShadeRays;
+                Ok(UpdateStep::ShadeRays)
+            }
+        }
+    }
+
+    /// Takes the shaded radiance (one per batch ray; only the rays with
+    /// `needs_radiance` are read) and blends, borders and classifies every volume.
+    pub fn submit_radiance(&mut self, radiance: &[Vec3]) -> Result<UpdateStep, SeamError> {
+        self.expect(UpdateStep::ShadeRays, "submit_radiance")?;
+        if radiance.len() != self.batch.len() {
+            return Err(SeamError::WrongLength { what: "radiance", expected: self.batch.len(), got: radiance.len() });
+        }
+        let mut pass_ms = std::mem::take(&mut self.last_pass_ms);
+        for i in 0..self.volumes.len() {
+            self.volumes[i].blend_results(&self.frames[i], &self.hits, radiance, &mut pass_ms);
+        }
+        self.last_pass_ms = pass_ms;
+        self.expected = UpdateStep::Done;
+        Ok(UpdateStep::Done)
+    }
+
+    /// The hits of the current batch, as submitted (sanitised).
+    pub fn batch_hits(&self) -> &[ProbeRayHit] {
+        &self.hits
+    }
+}

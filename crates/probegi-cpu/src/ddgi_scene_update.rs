@@ -1,0 +1,132 @@
+//! The convenience update: the field set's seam (`ddgi_field_set`) driven with
+//! probegi's own scene, ray tracer and shading, the way an engine would drive it
+//! with its own. One call per frame; per-pass milliseconds go to `pass_ms` under
+//! `ray_gen`, `probe_init` (initialisation rounds: trace and apply), `trace`
+//! (update rays, plus the usage classification), `shade`, `blend` and `border`.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use glam::Vec3;
+use probegi_scene::{RayTracer, Scene};
+
+use crate::ddgi::DdgiVolume;
+use crate::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, UpdateStep};
+use crate::direct::DirectLighting;
+use crate::probe_ray_gen::probe_ray_directions;
+use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
+use crate::probe_trace::{Surfel, surfel_hit, trace_probe_batch, trace_probe_distances};
+
+impl DdgiFieldSet {
+    /// One field update of every volume through the seam. Returns the rays traced
+    /// (probe rays plus shading shadow rays).
+    pub fn update(
+        &mut self,
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        direct: &DirectLighting<'_>,
+        seed: u64,
+        frame: u32,
+        pass_ms: &mut BTreeMap<&'static str, f64>,
+    ) -> u64 {
+        let mut traced = 0;
+        let mut surfels: Vec<Surfel> = Vec::new();
+        let mut hits: Vec<ProbeRayHit> = Vec::new();
+        let mut radiance: Vec<Vec3> = Vec::new();
+        let mut own_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
+        let time = |name: &'static str, t: Instant, ms: &mut BTreeMap<&'static str, f64>| {
+            *ms.entry(name).or_default() += t.elapsed().as_secs_f64() * 1e3
+        };
+        let static_part = tracer.static_part();
+        let mut step = self.begin_update(seed, frame);
+        // Any seam error here is a bug of this driver, not of the caller's input.
+        let fail = |e: crate::ddgi_field_set::SeamError| -> UpdateStep {
+            debug_assert!(false, "field set seam: {e}");
+            UpdateStep::Done
+        };
+        loop {
+            match step {
+                UpdateStep::TraceRays => {
+                    let t = Instant::now();
+                    let init = self.ray_batch().static_geometry_only();
+                    // Initialisation sees static geometry only: moving objects wake probes instead.
+                    let tr: &dyn RayTracer = if init { static_part.as_deref().unwrap_or(tracer) } else { tracer };
+                    traced += trace_probe_batch(scene, tr, self.ray_batch(), &mut surfels);
+                    hits.clear();
+                    hits.extend(surfels.iter().map(surfel_hit));
+                    step = self.submit_hits(&hits).unwrap_or_else(fail);
+                    time(if init { "probe_init" } else { "trace" }, t, &mut own_ms);
+                }
+                UpdateStep::ShadeRays => {
+                    let t = Instant::now();
+                    let view = self.view();
+                    let inputs = ProbeShadeInputs {
+                        scene,
+                        direct,
+                        field: &view,
+                        volumes: &self.volumes,
+                        batch: self.ray_batch(),
+                        surfels: &surfels,
+                        seed,
+                        frame,
+                    };
+                    traced += shade_probe_rays(&inputs, &mut radiance);
+                    drop(view);
+                    time("shade", t, &mut own_ms);
+                    step = self.submit_radiance(&radiance).unwrap_or_else(fail);
+                }
+                UpdateStep::Done => break,
+            }
+        }
+        // The set's own passes (ray_gen, blend, border; init and classify bookkeeping
+        // are inside the timed trace steps above).
+        for (k, v) in &self.last_pass_ms {
+            if !matches!(*k, "probe_init" | "classify") {
+                *pass_ms.entry(k).or_default() += v;
+            }
+        }
+        for (k, v) in own_ms {
+            *pass_ms.entry(k).or_default() += v;
+        }
+        traced
+    }
+}
+
+impl DdgiVolume {
+    /// One field update of this volume alone (a set of one; see [`DdgiFieldSet::update`]).
+    pub fn update(
+        &mut self,
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        direct: &DirectLighting<'_>,
+        seed: u64,
+        frame: u32,
+        pass_ms: &mut BTreeMap<&'static str, f64>,
+    ) -> u64 {
+        let placeholder = DdgiVolume::new(
+            probegi_core::ddgi_settings::DdgiVolumeSettings {
+                probe_counts: glam::UVec3::ONE,
+                probe_rays_per_probe: 1,
+                ..Default::default()
+            },
+            (Vec3::ZERO, Vec3::ONE),
+        );
+        let mut set = DdgiFieldSet::single(std::mem::replace(self, placeholder));
+        let traced = set.update(scene, tracer, direct, seed, frame, pass_ms);
+        if let Some(v) = set.volumes.pop() {
+            *self = v;
+        }
+        traced
+    }
+
+    /// Probes inside geometry by their rays (> 25 % backfaces), from a fresh trace.
+    pub fn count_probes_inside_geometry(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64) -> usize {
+        use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats};
+        let n = self.settings.probe_rays_per_probe as usize;
+        let dirs = probe_ray_directions(&self.settings, seed, u32::MAX - 2000);
+        let d = trace_probe_distances(scene, tracer, &self.probe_positions, &dirs, self.settings.probe_max_ray_distance_m);
+        (0..self.grid.probe_count())
+            .filter(|&p| is_inside_geometry(&probe_ray_stats(&dirs, &d[p * n..(p + 1) * n])))
+            .count()
+    }
+}
