@@ -229,7 +229,7 @@ pub struct ReferenceArgs {
     /// Maximum path length in surface interactions (Russian roulette ends most paths sooner).
     #[arg(long, default_value_t = 64)]
     pub max_depth: u32,
-    /// Render the scene as it is at this frame of its animation (light keyframes).
+    /// Render the scene as it is at this frame of its animation (light, object and camera keyframes).
     #[arg(long, default_value_t = 0.0)]
     pub frame: f32,
     /// Output image: .exr (linear radiance, recommended) or .png (tone-mapped).

@@ -453,6 +453,12 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
     let base = scene.clone();
     scene.set_frame_from(&base, args.frame);
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    // A keyframed camera is where it is at --frame, unless --camera-* fixes it.
+    let fixed = args.scene.camera_pos.is_some() || args.scene.camera_target.is_some() || args.scene.fov_y.is_some();
+    let camera = match scene.camera_at(args.frame) {
+        Some(c) if !fixed => c,
+        _ => camera,
+    };
     let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
     let settings = PathTracerSettings {
         pt_spp: args.spp,

@@ -1,0 +1,83 @@
+#!/usr/bin/env bash
+# Issue "World-scale DDGI" measurements: worlds of N×N side-by-side copies of the
+# shared Dabrovic Sponza (1×1, 2×2, 4×4; 66 450 triangles each, merged into one
+# BVH), the camera inside copy (0, 0).
+#   - field-update cost with the same three cascades on every world, against one
+#     fitted volume of a similar probe count;
+#   - the image inside the copy against the single Sponza's (HDR-FLIP), and both
+#     methods against the path-traced reference;
+#   - a 300-frame flythrough of the 4×4 world (camera keyframes) with per-frame
+#     mean changes and FLIP against `probegi reference --frame K` at three frames.
+# Writes out/world/*.json, out/world/table.md. A benchmark, not a test: ~10 min on 2 cores.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${OUT:-out/world}
+FRAMES=${FRAMES:-24}
+FLY_FRAMES=${FLY_FRAMES:-300}
+W=${W:-160}; H=${H:-120}; SPP=${SPP:-256}
+mkdir -p "$OUT"
+cargo build --release --locked -q
+BIN=./target/release/probegi
+
+world() { # N [flythrough]
+  local n=$1 f="$OUT/sponza-$1x$1${2:+-fly}.toml"
+  {
+    echo "# $n×$n copies of Dabrovic Sponza (CC BY-NC, © 2002 Marko Dabrovic; ../shared/scenes), 35 m × 16 m apart."
+    echo 'sky_radiance = [0.15, 0.18, 0.25]'
+    for ((i = 0; i < n; i++)); do for ((j = 0; j < n; j++)); do
+      printf '[[meshes]]\npath = "shared:scenes/dabrovic-sponza/sponza.obj"\ntranslation = [%s, 0.0, %s]\n' $((i * 35)) $((j * 16))
+    done; done
+    printf '[[lights]]\nkind = "directional"\ndirection = [0.25, -1.0, 0.15]\ncolor = [1.0, 0.92, 0.8]\nintensity = 12.0\n'
+    printf '[camera]\nposition = [-12.0, 2.5, -1.0]\ntarget = [4.0, 4.5, 0.5]\nfov_y_deg = 65.0\n'
+    if [ -n "${2:-}" ]; then
+      # Along the atrium and back up through the open roof over the next copies.
+      printf 'keyframes = [\n'
+      printf '  { frame = 0, position = [-13.0, 3.0, 0.0], target = [0.0, 4.0, 0.0] },\n'
+      printf '  { frame = 120, position = [11.0, 3.0, 0.0], target = [20.0, 4.0, 0.0] },\n'
+      printf '  { frame = 200, position = [12.0, 12.0, 0.5], target = [30.0, 6.0, 8.0] },\n'
+      printf '  { frame = 299, position = [45.0, 14.0, 8.0], target = [60.0, 4.0, 8.0] },\n'
+      printf ']\n'
+    fi
+  } > "$f"
+  echo "$f"
+}
+
+CASCADES=(--gi ddgi --cascades 3 --probes 12,6,12 --set probe_spacing_m=1.0 --rays-per-probe 128)
+FITTED=(--gi ddgi --probes 16,8,16 --rays-per-probe 128)
+for n in 1 2 4; do
+  s=$(world $n)
+  $BIN render --scene "$s" "${CASCADES[@]}" --frames "$FRAMES" --width $W --height $H \
+    --out "$OUT/cascades-$n.exr" --stats "$OUT/cascades-$n.json" 2>/dev/null
+  $BIN render --scene "$s" "${FITTED[@]}" --frames "$FRAMES" --width $W --height $H \
+    --out "$OUT/fitted-$n.exr" --stats "$OUT/fitted-$n.json" 2>/dev/null
+  if [ "$n" != 2 ]; then
+    $BIN reference --scene "$s" --width $W --height $H --spp "$SPP" --out "$OUT/reference-$n.exr" 2>/dev/null
+  fi
+done
+
+fly=$(world 4 fly)
+$BIN render --scene "$fly" "${CASCADES[@]}" --frames "$FLY_FRAMES" --width $W --height $H \
+  --sequence "$OUT/fly" --sequence-exr --out "$OUT/fly.exr" --stats "$OUT/fly.json" --gif "$OUT/fly.gif" 2>/dev/null
+for k in 0 150 $((FLY_FRAMES - 1)); do
+  $BIN reference --scene "$fly" --frame $k --width $W --height $H --spp "$SPP" --out "$OUT/fly-reference-$k.exr" 2>/dev/null
+done
+
+flip() { $BIN compare "$1" "$2" | awk '{print $2}'; }
+{
+  echo "| world | triangles | cascades field update ms | ratio to 1×1 | fitted 16×8×16 ms | cascades FLIP vs 1×1 image | cascades FLIP vs reference | fitted FLIP vs reference |"
+  echo "|---|---|---|---|---|---|---|---|"
+  base=$(jq .field_update_ms "$OUT/cascades-1.json")
+  for n in 1 2 4; do
+    c=$(jq .field_update_ms "$OUT/cascades-$n.json"); fi_=$(jq .field_update_ms "$OUT/fitted-$n.json")
+    tri=$(jq .triangles "$OUT/cascades-$n.json")
+    ref="$OUT/reference-$n.exr"; [ -f "$ref" ] || ref=""
+    printf '| %s×%s | %s | %.0f | %.2f | %.0f | %s | %s | %s |\n' $n $n "$tri" "$c" "$(echo "$c / $base" | bc -l)" "$fi_" \
+      "$(flip "$OUT/cascades-1.exr" "$OUT/cascades-$n.exr")" \
+      "${ref:+$(flip "$ref" "$OUT/cascades-$n.exr")}" "${ref:+$(flip "$ref" "$OUT/fitted-$n.exr")}"
+  done
+  echo
+  echo "Flythrough, 4×4 world, $FLY_FRAMES frames: FLIP against the reference at frames"
+  for k in 0 150 $((FLY_FRAMES - 1)); do
+    printf -- '- %s: %s\n' $k "$(flip "$OUT/fly-reference-$k.exr" "$(printf '%s/fly/frame-%04d.exr' "$OUT" $k)")"
+  done
+} | tee "$OUT/table.md"
