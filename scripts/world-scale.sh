@@ -12,7 +12,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-out/world}
-FRAMES=${FRAMES:-24}
+FRAMES=${FRAMES:-48}
 FLY_FRAMES=${FLY_FRAMES:-300}
 W=${W:-160}; H=${H:-120}; SPP=${SPP:-256}
 mkdir -p "$OUT"
@@ -30,20 +30,24 @@ world() { # N [flythrough]
     printf '[[lights]]\nkind = "directional"\ndirection = [0.25, -1.0, 0.15]\ncolor = [1.0, 0.92, 0.8]\nintensity = 12.0\n'
     printf '[camera]\nposition = [-12.0, 2.5, -1.0]\ntarget = [4.0, 4.5, 0.5]\nfov_y_deg = 65.0\n'
     if [ -n "${2:-}" ]; then
-      # Along the atrium and back up through the open roof over the next copies.
+      # Along copy (0, 0)'s atrium, up through its open roof, over the roofs to
+      # copy (1, 0) and down into its atrium.
       printf 'keyframes = [\n'
       printf '  { frame = 0, position = [-13.0, 3.0, 0.0], target = [0.0, 4.0, 0.0] },\n'
-      printf '  { frame = 120, position = [11.0, 3.0, 0.0], target = [20.0, 4.0, 0.0] },\n'
-      printf '  { frame = 200, position = [12.0, 12.0, 0.5], target = [30.0, 6.0, 8.0] },\n'
-      printf '  { frame = 299, position = [45.0, 14.0, 8.0], target = [60.0, 4.0, 8.0] },\n'
+      printf '  { frame = 100, position = [9.0, 3.0, 0.0], target = [20.0, 5.0, 0.0] },\n'
+      printf '  { frame = 160, position = [0.0, 22.0, 0.0], target = [10.0, 0.0, 0.0] },\n'
+      printf '  { frame = 230, position = [35.0, 22.0, 0.0], target = [45.0, 0.0, 0.0] },\n'
+      printf '  { frame = 299, position = [35.0, 6.0, 0.0], target = [45.0, 5.0, 0.0] },\n'
       printf ']\n'
     fi
   } > "$f"
   echo "$f"
 }
 
-CASCADES=(--gi ddgi --cascades 3 --probes 12,6,12 --set probe_spacing_m=1.0 --rays-per-probe 128)
-FITTED=(--gi ddgi --probes 16,8,16 --rays-per-probe 128)
+# Four cascades of 12×6×12 probes, 1, 2, 4 and 8 m apart (the coarsest spans ±44 m around
+# the camera, so a whole copy seen from inside it); a fitted volume of about as many probes.
+CASCADES=(--gi ddgi --cascades 4 --probes 12,6,12 --set probe_spacing_m=1.0 --rays-per-probe 128)
+FITTED=(--gi ddgi --probes 20,8,20 --rays-per-probe 128)
 for n in 1 2 4; do
   s=$(world $n)
   $BIN render --scene "$s" "${CASCADES[@]}" --frames "$FRAMES" --width $W --height $H \
@@ -64,7 +68,7 @@ done
 
 flip() { $BIN compare "$1" "$2" | awk '{print $2}'; }
 {
-  echo "| world | triangles | cascades field update ms | ratio to 1×1 | fitted 16×8×16 ms | cascades FLIP vs 1×1 image | cascades FLIP vs reference | fitted FLIP vs reference |"
+  echo "| world | triangles | cascades field update ms | ratio to 1×1 | fitted 20×8×20 ms | cascades FLIP vs 1×1 image | cascades FLIP vs reference | fitted FLIP vs reference |"
   echo "|---|---|---|---|---|---|---|---|"
   base=$(jq .field_update_ms "$OUT/cascades-1.json")
   for n in 1 2 4; do
@@ -76,7 +80,12 @@ flip() { $BIN compare "$1" "$2" | awk '{print $2}'; }
       "${ref:+$(flip "$ref" "$OUT/cascades-$n.exr")}" "${ref:+$(flip "$ref" "$OUT/fitted-$n.exr")}"
   done
   echo
-  echo "Flythrough, 4×4 world, $FLY_FRAMES frames: FLIP against the reference at frames"
+  echo "Cascade costs (4×4 world): rays per cascade in the batch $(jq -c .batch_rays_per_volume "$OUT/cascades-4.json"), probes $(jq .probes "$OUT/cascades-4.json"), states $(jq -c .probe_states "$OUT/cascades-4.json")"
+  echo
+  echo "Flythrough, 4×4 world, $FLY_FRAMES frames ($(jq .probes_scrolled_in "$OUT/fly.json") probes scrolled in):"
+  echo "- per-frame change of the image mean (luminance-free, mean of RGB): $(jq -r '[.frame_means | map(add/3) | . as $m | range(1; length) | (($m[.] - $m[.-1]) / $m[.-1] | fabs)] | "median \(sort | .[length/2|floor] * 1000 | round / 10) %, max \(max * 1000 | round / 10) %"' "$OUT/fly.json")"
+  echo "- surface pixels without indirect light per frame: max $(jq '.frame_unlit_fraction | max' "$OUT/fly.json")"
+  echo "- FLIP against the reference at frames:"
   for k in 0 150 $((FLY_FRAMES - 1)); do
     printf -- '- %s: %s\n' $k "$(flip "$OUT/fly-reference-$k.exr" "$(printf '%s/fly/frame-%04d.exr' "$OUT" $k)")"
   done

@@ -315,6 +315,8 @@ fn render(args: &RenderArgs) -> Result<()> {
             "batch_rays_per_volume": stats.batch_rays_per_volume,
             "probes_scrolled_in": stats.probes_scrolled_in,
             "probes_woken": stats.probes_woken,
+            "frame_means": stats.frame_means.iter().map(|m| [m.x, m.y, m.z]).collect::<Vec<_>>(),
+            "frame_unlit_fraction": stats.frame_unlit_fraction,
         });
         write_text(path, &serde_json::to_string_pretty(&json)?)?;
     }
@@ -344,7 +346,7 @@ pub fn ddgi_method(scene: &Scene, args: &VolumeArgs) -> Result<GiMethod> {
             bail!("--cascades {n}: must be in 1..=16");
         }
         let r = args.cascade_ratio;
-        if !(r.is_finite() && r >= 1.0 && r <= 16.0) {
+        if !(1.0..=16.0).contains(&r) {
             bail!("--cascade-ratio {r}: must be in [1, 16]");
         }
         let base = volume_settings(scene, args)?;

@@ -338,3 +338,100 @@ fn gif_preview_and_builtin_seed_scenes() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("PROBEGI_SHARED_DIR"), "{}", stderr(&o));
 }
+
+#[test]
+fn cascades_volumes_and_a_keyframed_camera_from_the_command_line() {
+    let s = |p: &PathBuf| p.to_string_lossy().into_owned();
+    // --cascades N: N tracking windows in one batch, split reported per volume.
+    let stats = tmp("cascades.json");
+    let o = probegi(&[
+        "render",
+        "--gi",
+        "ddgi",
+        "--cascades",
+        "2",
+        "--probes",
+        "3,3,3",
+        "--set",
+        "probe_spacing_m=0.5",
+        "--rays-per-probe",
+        "16",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--frames",
+        "2",
+        "--out",
+        &s(&tmp("c.exr")),
+        "--stats",
+        &s(&stats),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    assert_eq!(json["volumes"], 2);
+    assert_eq!(json["probes"], 54);
+    let split: Vec<u64> =
+        json["batch_rays_per_volume"].as_array().expect("split").iter().map(|v| v.as_u64().expect("n")).collect();
+    assert_eq!(split.iter().sum::<u64>(), json["batch_rays"].as_u64().expect("batch"));
+    fails_with(&["render", "--cascades", "2", "--out", &s(&tmp("x.png"))], "--gi ddgi");
+    fails_with(&["render", "--gi", "ddgi", "--cascades", "0", "--out", &s(&tmp("x.png"))], "--cascades 0");
+    fails_with(
+        &["render", "--gi", "ddgi", "--set", "probe_spacing_m=-1", "--out", &s(&tmp("x.png"))],
+        "probe_spacing_m",
+    );
+
+    // [[volumes]] in a scene file, and a camera that moves between keyframes.
+    let scene = tmp("world.toml");
+    std::fs::write(
+        &scene,
+        r#"
+[[meshes]]
+path = "builtin:cornell-box"
+[camera]
+position = [0.0, 1.0, 3.0]
+target = [0.0, 1.0, 0.0]
+fov_y_deg = 50.0
+keyframes = [{ frame = 0 }, { frame = 2, position = [0.5, 1.2, 2.5] }]
+[[volumes]]
+probe_counts = [3, 3, 3]
+[[volumes]]
+probe_counts = [4, 4, 4]
+probe_spacing_m = [0.3, 0.3, 0.3]
+volume_tracks_camera = true
+"#,
+    )
+    .expect("write scene");
+    let seq = tmp("seq");
+    let o = probegi(&[
+        "render",
+        "--scene",
+        &s(&scene),
+        "--gi",
+        "ddgi",
+        "--rays-per-probe",
+        "16",
+        "--width",
+        "16",
+        "--height",
+        "16",
+        "--frames",
+        "3",
+        "--sequence",
+        &s(&seq),
+        "--out",
+        &s(&tmp("v.exr")),
+        "--stats",
+        &s(&stats),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    assert_eq!(json["volumes"], 2);
+    let a = std::fs::read(seq.join("frame-0000.png")).expect("frame 0");
+    let b = std::fs::read(seq.join("frame-0002.png")).expect("frame 2");
+    assert_ne!(a, b, "the camera moved");
+    // Both [volume] and [[volumes]] is an error naming the file.
+    let both = "[[meshes]]\npath = \"builtin:cornell-box\"\n[volume]\nprobe_counts = [2, 2, 2]\n[[volumes]]\nprobe_counts = [2, 2, 2]\n";
+    std::fs::write(&scene, both).expect("write");
+    fails_with(&["render", "--scene", &s(&scene), "--out", &s(&tmp("x.png"))], "[[volumes]]");
+}

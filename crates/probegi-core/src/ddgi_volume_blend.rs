@@ -181,6 +181,66 @@ mod tests {
         assert!((volume_blend_weight(&g, Vec3::new(1.1, 2.0, 2.0), moved) - 0.5).abs() < 1e-6);
     }
 
+    /// A view of a uniform field: every probe sees mean radiance `mean`.
+    struct Uniform {
+        grid: ProbeGrid,
+        settings: crate::ddgi_settings::DdgiVolumeSettings,
+        irr: crate::probe_atlas::ProbeAtlas<Vec3>,
+        dist: crate::probe_atlas::ProbeAtlas<glam::Vec2>,
+    }
+
+    impl Uniform {
+        fn new(grid: ProbeGrid, mean: f32) -> Self {
+            let settings = crate::ddgi_settings::DdgiVolumeSettings::default();
+            let n = grid.probe_count();
+            let mut irr = crate::probe_atlas::ProbeAtlas::new(n, settings.probe_irradiance_texels);
+            let mut dist = crate::probe_atlas::ProbeAtlas::new(n, settings.probe_distance_texels);
+            irr.texels.fill(crate::irradiance_encoding::encode_irradiance(Vec3::splat(mean), 5.0));
+            dist.texels.fill(glam::Vec2::new(100.0, 1e4));
+            Self { grid, settings, irr, dist }
+        }
+
+        fn member(&self, tracks_camera: bool) -> SetMember<'_> {
+            SetMember {
+                field: DdgiFieldView {
+                    grid: &self.grid,
+                    settings: &self.settings,
+                    irradiance: &self.irr,
+                    distance: &self.dist,
+                    probe_offsets_m: &[],
+                    probe_usable: &[],
+                    probe_fallback: &[],
+                },
+                tracks_camera,
+            }
+        }
+    }
+
+    #[test]
+    fn a_set_blends_dense_into_sparse_over_one_cell_and_is_zero_beyond_every_volume() {
+        let pi = std::f32::consts::PI;
+        let dense = Uniform::new(grid(0.0, 5, 1.0), 1.0); // probe box [0, 4]³, E = π
+        let sparse = Uniform::new(grid(-8.0, 5, 5.0), 3.0); // [-8, 12]³, E = 3π
+        let set = DdgiFieldSetView {
+            members: vec![dense.member(false), sparse.member(false)],
+            blending: VolumeBlending::Density,
+            camera_m: None,
+        };
+        let at = |x: f32| field_set_irradiance(&set, Vec3::new(x, 2.0, 2.0), Vec3::Y, Vec3::Y).x / pi;
+        assert!((at(2.0) - 1.0).abs() < 1e-4, "inside the dense box: dense alone");
+        // 0.25 cells outside the dense box: 0.75 dense + 0.25 sparse.
+        assert!((at(4.25) - (0.75 + 0.25 * 3.0)).abs() < 1e-3, "{}", at(4.25));
+        assert!((at(8.0) - 3.0).abs() < 1e-4, "beyond the dense falloff: sparse alone");
+        assert_eq!(at(30.0), 0.0, "outside every volume");
+        // Cascades (Algorithm 2): the coarsest covers everything the finer leave.
+        let cascades = DdgiFieldSetView { blending: VolumeBlending::Cascades, ..set };
+        let at = |x: f32| field_set_irradiance(&cascades, Vec3::new(x, 2.0, 2.0), Vec3::Y, Vec3::Y).x / pi;
+        assert!((at(2.0) - 1.0).abs() < 1e-4);
+        // x = 3.5: Algorithm 1 gives the fine field 0.5 (last cell), the rest is coarse.
+        assert!((at(3.5) - (0.5 + 0.5 * 3.0)).abs() < 1e-3, "{}", at(3.5));
+        assert!((at(30.0) - 3.0).abs() < 1e-4, "the coarsest cascade covers the world");
+    }
+
     #[test]
     fn cascade_weight_ramps_over_the_first_and_last_cell() {
         let g = grid(0.0, 5, 2.0); // a = x / 2, R − 1 = 4

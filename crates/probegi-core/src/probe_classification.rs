@@ -247,8 +247,7 @@ mod tests {
     #[test]
     fn jcgt_classification_keeps_probes_that_watch_a_surface_per_axis() {
         // Cells 4 × 1 × 1 m: a probe watches 2 m in x and 0.5 m in y and z (plus bias).
-        let grid =
-            ProbeGrid::new(Vec3::ZERO, UVec3::splat(3), Vec3::new(4.0, 1.0, 1.0));
+        let grid = ProbeGrid::new(Vec3::ZERO, UVec3::splat(3), Vec3::new(4.0, 1.0, 1.0));
         let inner = UVec3::ONE;
         let watches = |o: Vec3| probe_watches(&grid, inner, o, 0.5, 0.1);
         // 1.9 m away in x: beyond the minimum spacing (Listing 5 would sleep the probe),

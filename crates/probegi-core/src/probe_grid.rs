@@ -229,8 +229,7 @@ mod tests {
 
     #[test]
     fn cage_weights_sum_to_one_and_clamp_beyond_the_grid() {
-        let g =
-            ProbeGrid::new(Vec3::ZERO, UVec3::new(3, 2, 1), Vec3::new(2.0, 1.0, 1.0));
+        let g = ProbeGrid::new(Vec3::ZERO, UVec3::new(3, 2, 1), Vec3::new(2.0, 1.0, 1.0));
         let c = g.cage(Vec3::new(1.5, 0.25, 0.0));
         assert_eq!((c.base, c.alpha), (IVec3::ZERO, Vec3::new(0.75, 0.25, 0.0)));
         let sum: f32 = (0..8).map(|i| c.trilinear(i).element_product()).sum();

@@ -22,9 +22,7 @@ struct Triangle {
 
 /// A cube's twelve triangles, wound so that their normals face inward.
 fn cube(lo: Vec3, hi: Vec3) -> Vec<Triangle> {
-    let c = |x: usize, y: usize, z: usize| {
-        Vec3::new([lo.x, hi.x][x], [lo.y, hi.y][y], [lo.z, hi.z][z])
-    };
+    let c = |x: usize, y: usize, z: usize| Vec3::new([lo.x, hi.x][x], [lo.y, hi.y][y], [lo.z, hi.z][z]);
     let quads = [
         [c(0, 0, 0), c(1, 0, 0), c(1, 0, 1), c(0, 0, 1)], // floor
         [c(0, 1, 0), c(0, 1, 1), c(1, 1, 1), c(1, 1, 0)], // ceiling
@@ -115,8 +113,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     let batch = set.ray_batch();
                     let view = set.view();
                     radiance.clear();
-                    for i in 0..batch.len() {
-                        let h = hits[i];
+                    for (i, &h) in hits.iter().enumerate() {
                         radiance.push(if !batch.needs_radiance[i] || !h.distance_m.is_finite() {
                             Vec3::ZERO // no sky: the box is closed
                         } else {

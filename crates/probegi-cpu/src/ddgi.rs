@@ -396,7 +396,13 @@ impl DdgiVolume {
     }
 
     /// Applies the hits of initialisation round `round` (see [`Self::plan_init_round`]).
-    pub(crate) fn accept_init_round(&mut self, frame: &VolumeFrame, round: usize, batch: &ProbeRayBatch, hits: &[ProbeRayHit]) {
+    pub(crate) fn accept_init_round(
+        &mut self,
+        frame: &VolumeFrame,
+        round: usize,
+        batch: &ProbeRayBatch,
+        hits: &[ProbeRayHit],
+    ) {
         let Some(&kind) = self.init_rounds().get(round) else {
             return;
         };
@@ -419,7 +425,8 @@ impl DdgiVolume {
                     *offset = relocation_step(*offset, &probe_ray_stats(dirs, &d), spacing, settings);
                 });
                 for p in 0..self.grid.probe_count() {
-                    self.probe_positions[p] = self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
+                    self.probe_positions[p] =
+                        self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
                 }
             }
             InitRound::Classification => self.classify_jcgt_pending(frame, batch, hits),
@@ -550,7 +557,7 @@ impl DdgiVolume {
             }
             let first = first as usize;
             for r in first..first + n {
-                needs_radiance[r] = !(hits[r].distance_m < 0.0);
+                needs_radiance[r] = hits[r].distance_m >= 0.0; // hits are sanitised: no NaN
             }
         }
     }
@@ -690,10 +697,7 @@ impl DdgiVolume {
     fn after_update(&mut self, updated: &[bool]) {
         let max_h = self.settings.probe_hysteresis;
         self.active_probes_last = updated.iter().filter(|a| **a).count();
-        for p in 0..self.grid.probe_count() {
-            if !updated[p] {
-                continue;
-            }
+        for (p, _) in updated.iter().enumerate().filter(|(_, u)| **u) {
             self.probe_has_history[p] = true;
             let state = self.probe_states[p].after_update();
             if matches!(state, ProbeState::Alive | ProbeState::UsageSleeping) {

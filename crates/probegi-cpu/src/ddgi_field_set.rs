@@ -223,11 +223,7 @@ impl DdgiFieldSet {
     /// `volume_bounds_m` are fitted to `scene_bounds`; tracking volumes start
     /// centred on `camera_m` when given.
     pub fn new(settings: &DdgiFieldSetSettings, scene_bounds: (Vec3, Vec3), camera_m: Option<Vec3>) -> Self {
-        let volumes = settings
-            .volumes
-            .iter()
-            .map(|v| DdgiVolume::placed(v.clone(), scene_bounds, camera_m))
-            .collect();
+        let volumes = settings.volumes.iter().map(|v| DdgiVolume::placed(v.clone(), scene_bounds, camera_m)).collect();
         Self::from_volumes(volumes, settings.blending, camera_m)
     }
 
@@ -354,8 +350,13 @@ impl DdgiFieldSet {
             }
             self.batch.clear(ProbeRayBatchKind::Initialization);
             for &i in &pending {
-                let has_round =
-                    self.volumes[i].plan_init_round(&mut self.frames[i], self.init_round, self.seed, i as u32, &mut self.batch);
+                let has_round = self.volumes[i].plan_init_round(
+                    &mut self.frames[i],
+                    self.init_round,
+                    self.seed,
+                    i as u32,
+                    &mut self.batch,
+                );
                 if !has_round {
                     self.volumes[i].finish_init();
                 }
@@ -414,7 +415,12 @@ impl DdgiFieldSet {
                 self.batch.needs_radiance = vec![false; self.batch.len()];
                 for i in 0..self.volumes.len() {
                     let (frames, volumes) = (&mut self.frames, &mut self.volumes);
-                    volumes[i].accept_update_hits(&mut frames[i], self.frame, &self.hits, &mut self.batch.needs_radiance);
+                    volumes[i].accept_update_hits(
+                        &mut frames[i],
+                        self.frame,
+                        &self.hits,
+                        &mut self.batch.needs_radiance,
+                    );
                 }
                 self.time("classify", t);
                 self.expected = UpdateStep::ShadeRays;

@@ -124,7 +124,8 @@ impl DdgiVolume {
         use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats};
         let n = self.settings.probe_rays_per_probe as usize;
         let dirs = probe_ray_directions(&self.settings, seed, u32::MAX - 2000);
-        let d = trace_probe_distances(scene, tracer, &self.probe_positions, &dirs, self.settings.probe_max_ray_distance_m);
+        let d =
+            trace_probe_distances(scene, tracer, &self.probe_positions, &dirs, self.settings.probe_max_ray_distance_m);
         (0..self.grid.probe_count())
             .filter(|&p| is_inside_geometry(&probe_ray_stats(&dirs, &d[p * n..(p + 1) * n])))
             .count()

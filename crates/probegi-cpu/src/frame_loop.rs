@@ -24,8 +24,8 @@ use std::f32::consts::FRAC_1_PI;
 use crate::ddgi_field_set::DdgiFieldSet;
 use crate::direct::{DirectLighting, DirectSettings};
 use crate::gbuffer::{GBuffer, trace_gbuffer};
-use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
 use crate::scene_events::SceneChangeDetector;
+use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
 use crate::shading::{ShadingContext, lambert_cos};
 use probegi_core::sh_cascades::ShCascades;
 use probegi_core::sh_settings::ShProbeSettings;
@@ -98,6 +98,12 @@ pub struct RenderStats {
     pub batch_rays: Option<u64>,
     pub batch_rays_per_volume: Option<Vec<u64>>,
     pub probes_scrolled_in: u64,
+    /// Per frame: the mean of that frame's image (what `--sequence` writes).
+    pub frame_means: Vec<Vec3>,
+    /// Per frame, with a DDGI or SH field: the fraction of pixels that see a
+    /// surface whose diffuse albedo is non-zero but get no indirect light from the
+    /// field (a black wall or an unreadable probe shows up here).
+    pub frame_unlit_fraction: Vec<f32>,
 }
 
 pub struct RenderOutput {
@@ -145,13 +151,38 @@ impl Accumulation {
     fn pixels(&self) -> Vec<Vec3> {
         compose_pixels(&self.direct_sum, self.accumulated, &self.indirect)
     }
+
+    /// Mean of the composed image, without composing it.
+    fn mean(&self) -> Vec3 {
+        let k = self.accumulated.max(1) as f64;
+        let sum: DVec3 = self.direct_sum.iter().zip(&self.indirect).map(|(d, i)| *d / k + i.as_dvec3()).sum();
+        (sum / self.direct_sum.len().max(1) as f64).as_vec3()
+    }
+}
+
+/// The share of surface pixels with a diffuse albedo that got no indirect light.
+fn unlit_fraction(scene: &Scene, gbuffer: &GBuffer, indirect: &[Vec3]) -> f32 {
+    let mut surfaces = 0usize;
+    let mut unlit = 0usize;
+    for (t, i) in gbuffer.texels.iter().zip(indirect) {
+        if let Some(sp) = &t.surface {
+            let albedo = ShadingContext::new(scene, sp, t.view_dir_world).bsdf.diffuse_albedo();
+            if albedo.max_element() > 0.0 {
+                surfaces += 1;
+                unlit += (i.max_element() <= 0.0) as usize;
+            }
+        }
+    }
+    unlit as f32 / surfaces.max(1) as f32
 }
 
 /// The DDGI field set a render's settings ask for.
 fn make_field_set(gi: &GiMethod, scene: &Scene, camera_m: Vec3) -> Option<DdgiFieldSet> {
     let bounds = scene.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
     match gi {
-        GiMethod::Ddgi(s) => Some(DdgiFieldSet::new(&DdgiFieldSetSettings::single((**s).clone()), bounds, Some(camera_m))),
+        GiMethod::Ddgi(s) => {
+            Some(DdgiFieldSet::new(&DdgiFieldSetSettings::single((**s).clone()), bounds, Some(camera_m)))
+        }
         GiMethod::DdgiSet(s) => Some(DdgiFieldSet::new(s, bounds, Some(camera_m))),
         _ => None,
     }
@@ -233,11 +264,15 @@ pub fn render_frames(
             (_, Some(p)) => Some(IndirectField::Sh(&p.cascades)),
             _ => None,
         };
+        let indirect_field_used = indirect_field.is_some();
         let second_order = field.as_ref().is_some_and(|s| s.volumes.iter().any(|v| v.settings.glossy_second_order));
         let t = Instant::now();
         let passes = CameraPasses { scene, tracer, direct, direct_settings: camera_direct, second_order };
         stats.rays_traced += shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut acc);
         acc.add_frame(animated || moving_camera);
+        if indirect_field_used {
+            stats.frame_unlit_fraction.push(unlit_fraction(scene, &gbuffer, &acc.indirect));
+        }
         *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
         if let Some(p) = sh.as_mut() {
             stats.rays_traced +=
@@ -245,6 +280,7 @@ pub fn render_frames(
         }
         last_gbuffer = Some(gbuffer);
         let compose = || Image { width: settings.width, height: settings.height, pixels: acc.pixels() };
+        stats.frame_means.push(acc.mean());
         on_frame_done(f, &compose);
     }
     stats.frames = frames;

@@ -22,7 +22,12 @@ pub struct Surfel {
 
 /// Traces every ray of `batch` into `surfels` (resized to the batch). Returns the
 /// number of rays traced.
-pub fn trace_probe_batch(scene: &Scene, tracer: &dyn RayTracer, batch: &ProbeRayBatch, surfels: &mut Vec<Surfel>) -> u64 {
+pub fn trace_probe_batch(
+    scene: &Scene,
+    tracer: &dyn RayTracer,
+    batch: &ProbeRayBatch,
+    surfels: &mut Vec<Surfel>,
+) -> u64 {
     surfels.clear();
     surfels.resize(batch.len(), Surfel::default());
     surfels.par_chunks_mut(256).enumerate().for_each(|(c, out)| {
