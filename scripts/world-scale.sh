@@ -84,6 +84,7 @@ flip() { $BIN compare "$1" "$2" | awk '{print $2}'; }
   echo
   echo "Flythrough, 4×4 world, $FLY_FRAMES frames ($(jq .probes_scrolled_in "$OUT/fly.json") probes scrolled in):"
   echo "- per-frame change of the image mean (luminance-free, mean of RGB): $(jq -r '[.frame_means | map(add/3) | . as $m | range(1; length) | (($m[.] - $m[.-1]) / $m[.-1] | fabs)] | "median \(sort | .[length/2|floor] * 1000 | round / 10) %, max \(max * 1000 | round / 10) %"' "$OUT/fly.json")"
+  echo "- per-frame change of the indirect (field) term's mean: $(jq -r '[.frame_indirect_means | map(add/3) | . as $m | range(1; length) | (($m[.] - $m[.-1]) / $m[.-1] | fabs)] | "median \(sort | .[length/2|floor] * 1000 | round / 10) %, max \(max * 1000 | round / 10) %"' "$OUT/fly.json")"
   echo "- surface pixels without indirect light per frame: max $(jq '.frame_unlit_fraction | max' "$OUT/fly.json")"
   echo "- FLIP against the reference at frames:"
   for k in 0 150 $((FLY_FRAMES - 1)); do

@@ -316,6 +316,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             "probes_scrolled_in": stats.probes_scrolled_in,
             "probes_woken": stats.probes_woken,
             "frame_means": stats.frame_means.iter().map(|m| [m.x, m.y, m.z]).collect::<Vec<_>>(),
+            "frame_indirect_means": stats.frame_indirect_means.iter().map(|m| [m.x, m.y, m.z]).collect::<Vec<_>>(),
             "frame_unlit_fraction": stats.frame_unlit_fraction,
         });
         write_text(path, &serde_json::to_string_pretty(&json)?)?;

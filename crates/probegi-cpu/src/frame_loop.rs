@@ -98,8 +98,10 @@ pub struct RenderStats {
     pub batch_rays: Option<u64>,
     pub batch_rays_per_volume: Option<Vec<u64>>,
     pub probes_scrolled_in: u64,
-    /// Per frame: the mean of that frame's image (what `--sequence` writes).
+    /// Per frame: the mean of that frame's image (what `--sequence` writes), and
+    /// of its indirect (field) term alone.
     pub frame_means: Vec<Vec3>,
+    pub frame_indirect_means: Vec<Vec3>,
     /// Per frame, with a DDGI or SH field: the fraction of pixels that see a
     /// surface whose diffuse albedo is non-zero but get no indirect light from the
     /// field (a black wall or an unreadable probe shows up here).
@@ -281,6 +283,8 @@ pub fn render_frames(
         last_gbuffer = Some(gbuffer);
         let compose = || Image { width: settings.width, height: settings.height, pixels: acc.pixels() };
         stats.frame_means.push(acc.mean());
+        let indirect_sum: DVec3 = acc.indirect.iter().map(|i| i.as_dvec3()).sum();
+        stats.frame_indirect_means.push((indirect_sum / acc.indirect.len().max(1) as f64).as_vec3());
         on_frame_done(f, &compose);
     }
     stats.frames = frames;
