@@ -844,7 +844,8 @@ fn apply_override<T: serde::Serialize + serde::de::DeserializeOwned>(
     if matches!(canonical.as_str(), "probe_spacing_m" | "probe_origin_m") {
         if matches!(parsed, toml::Value::Float(_) | toml::Value::Integer(_)) {
             parsed = toml::Value::Array(vec![parsed.clone(), parsed.clone(), parsed]);
-        } else if let Ok(mut t) = toml::from_str::<toml::Table>(&format!("v = [{value}]"))
+        } else if matches!(parsed, toml::Value::String(_))
+            && let Ok(mut t) = toml::from_str::<toml::Table>(&format!("v = [{value}]"))
             && let Some(v @ toml::Value::Array(_)) = t.remove("v")
             && value.contains(',')
         {

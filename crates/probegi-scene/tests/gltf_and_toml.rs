@@ -284,6 +284,12 @@ fn volume_settings_from_toml_and_set_overrides() {
     assert_eq!(v3.probe_bias_mode, probegi_core::ddgi_settings::ProbeBiasMode::Normal);
     let v4 = apply_volume_override(&v3, "probe_spacing_m=[0.5, 0.5, 0.5]").expect("optional vector");
     assert_eq!(v4.probe_spacing_m, Some(Vec3::splat(0.5)));
+    let v5 = apply_volume_override(&v3, "probe_spacing_m=0.25").expect("a scalar for every axis");
+    assert_eq!(v5.probe_spacing_m, Some(Vec3::splat(0.25)));
+    let v6 = apply_volume_override(&v3, "probe_origin_m=1,2,3").expect("X,Y,Z without brackets");
+    assert_eq!(v6.probe_origin_m, Some(Vec3::new(1.0, 2.0, 3.0)));
+    let v7 = apply_volume_override(&v3, "probe_max_ray_distance_m=50").expect("scalars stay scalars");
+    assert_eq!(v7.probe_max_ray_distance_m, 50.0);
     let e = apply_volume_override(&v, "hysterisis=0.5").expect_err("typo");
     assert!(e.contains("hysterisis") && e.contains("probe_hysteresis"), "{e}");
     let e = apply_volume_override(&v, "hysteresis=1.5").expect_err("range");
