@@ -1,5 +1,6 @@
 //! `--dump-atlases DIR`: the DDGI atlases as pictures (seed 000 Fig. 1). Tiles are
-//! placed in rows of `probe_counts.x`, borders included.
+//! placed in storage order in rows of `probe_counts.x`, borders included (a
+//! tracking window that has scrolled stores its probes rotated; see `probe_grid`).
 //! - `irradiance.exr`: decoded mean radiance per texel (linear); `irradiance.png` tone-mapped.
 //! - `distance.exr`: R = mean distance, G = mean squared distance, B = 0 (metres);
 //!   `distance.png`: mean distance / the volume's distance clamp, as grey.

@@ -129,7 +129,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
             for f in 1..=args.frames {
                 set.update(&scene, &bvh, &direct, args.seed, f, &mut pass_ms);
             }
-            let volume = &set.volumes[0];
+            let volume = &set.volumes()[0];
             for v in pass_ms.values_mut() {
                 *v /= args.frames as f64;
             }

@@ -276,9 +276,9 @@ fn render(args: &RenderArgs) -> Result<()> {
     let elapsed = start.elapsed();
     write_radiance(&args.out, &image)?;
     if let (Some(dir), Some(set)) = (&args.dump_atlases, &out.ddgi) {
-        for (i, volume) in set.volumes.iter().enumerate() {
+        for (i, volume) in set.volumes().iter().enumerate() {
             // One volume: its atlases in DIR as before; several: DIR/volume-I each.
-            let d = if set.volumes.len() == 1 { dir.clone() } else { dir.join(format!("volume-{i}")) };
+            let d = if set.volumes().len() == 1 { dir.clone() } else { dir.join(format!("volume-{i}")) };
             atlas_dump::dump_atlases(&d, volume)?;
         }
         eprintln!("wrote atlases to {}", dir.display());
@@ -366,6 +366,12 @@ pub fn ddgi_method(scene: &Scene, args: &VolumeArgs) -> Result<GiMethod> {
         return Ok(GiMethod::DdgiSet(Box::new(set)));
     }
     if !scene.volumes.is_empty() {
+        if args.probes.is_some() {
+            bail!(
+                "--probes would refit every one of the scene's [[volumes]] to the scene bounds; change their \
+                 probe_counts in the file, or use --cascades"
+            );
+        }
         let mut volumes = Vec::new();
         for v in &scene.volumes {
             volumes.push(apply_volume_args(v.clone(), args)?);

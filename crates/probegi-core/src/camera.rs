@@ -52,7 +52,7 @@ impl Camera {
 }
 
 /// A camera prepared for one image size: maps continuous pixel coordinates to world rays.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraRays {
     pub origin_world: Vec3,
     forward_world: Vec3,

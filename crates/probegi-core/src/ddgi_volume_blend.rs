@@ -18,7 +18,9 @@
 //!   *Camera-aware blending* (seed 004 §7.4, Fig. 13) for volumes that track the
 //!   camera: the full-weight box is the probe box tightened by one cell per axis
 //!   and centred on the camera, so a plane that leapfrogs in front of the camera
-//!   fades in as the camera approaches instead of popping.
+//!   fades in as the camera approaches instead of popping. It applies only to a
+//!   member with a sparser one after it to blend into; the last member in
+//!   sampling order keeps its whole probe box.
 //! - [`VolumeBlending::Cascades`] (seed 003 §6.2.2): nested camera-centred
 //!   cascades, finest first, each weighted by Algorithm 1 ([`cascade_field_weight`])
 //!   and accumulated by Algorithm 2 until the weight reaches 1. The coarsest cascade
@@ -102,7 +104,9 @@ pub fn member_weights(set: &DdgiFieldSetView<'_>, point: Vec3, out: &mut Vec<f32
         }
         let w = match set.blending {
             VolumeBlending::Density => {
-                let camera = if m.tracks_camera { set.camera_m } else { None };
+                // Camera-aware only where a later (sparser) member can take over the
+                // band the tightened box leaves; the last member keeps its probe box.
+                let camera = if m.tracks_camera && f + 1 < n { set.camera_m } else { None };
                 volume_blend_weight(m.field.grid, point, camera)
             }
             VolumeBlending::Cascades => {
@@ -126,10 +130,7 @@ pub fn field_set_irradiance(set: &DdgiFieldSetView<'_>, position: Vec3, normal: 
     if set.members.len() == 1 {
         let w = match set.blending {
             VolumeBlending::Cascades => 1.0,
-            VolumeBlending::Density => {
-                let m = &set.members[0];
-                volume_blend_weight(m.field.grid, position, if m.tracks_camera { set.camera_m } else { None })
-            }
+            VolumeBlending::Density => volume_blend_weight(set.members[0].field.grid, position, None),
         };
         return if w > 0.0 { irradiance(&set.members[0].field, position, normal, view_dir) } else { Vec3::ZERO };
     }

@@ -98,8 +98,14 @@ impl ProbeGrid {
     /// target is farther from the centre than one probe spacing). Zero while it is.
     pub fn tracking_scroll_cells(&self, target_m: Vec3) -> IVec3 {
         let d = (target_m - self.centre_m()) / self.spacing_m;
-        let step = |d: f32| if d.abs() > 1.0 { d.trunc() as i32 } else { 0 };
-        IVec3::new(step(d.x), step(d.y), step(d.z))
+        // A move of a whole window or more resets every probe alike: clamp there, so
+        // far jumps cannot overflow the phase arithmetic.
+        let step = |d: f32, n: u32| {
+            let n = n as f32;
+            if d.abs() > 1.0 { d.trunc().clamp(-n, n) as i32 } else { 0 }
+        };
+        let c = self.probe_counts;
+        IVec3::new(step(d.x, c.x), step(d.y, c.y), step(d.z, c.z))
     }
 
     /// A grid of `counts` probes `spacing_m` apart, centred on `target_m` and
@@ -216,6 +222,7 @@ mod tests {
         assert_eq!(g.tracking_scroll_cells(Vec3::new(11.9, 0.0, -4.0)), IVec3::ZERO);
         assert_eq!(g.tracking_scroll_cells(Vec3::new(12.5, 0.0, -4.0)), IVec3::new(1, 0, 0));
         assert_eq!(g.tracking_scroll_cells(Vec3::new(3.0, 0.0, 3.0)), IVec3::new(-3, 0, 3));
+        assert_eq!(g.tracking_scroll_cells(Vec3::new(-1e30, 0.0, 1e12)), IVec3::new(-5, 0, 5), "clamped");
     }
 
     #[test]

@@ -110,6 +110,8 @@ pub struct VolumeFrame {
     pub active: Vec<bool>,
     /// Per probe, its first ray in the current batch (`u32::MAX`: none).
     pub first_ray: Vec<u32>,
+    /// Rays per probe when the batch was planned.
+    pub ray_count: usize,
 }
 
 /// What an initialisation round of a volume does.
@@ -313,7 +315,7 @@ impl DdgiVolume {
     /// change; the probes of the planes that enter are reset (atlas tiles cleared,
     /// offset 0, no history, so they blend with hysteresis 0 and are not read
     /// before that) and queued for initialisation. Returns the probes reset.
-    pub fn scroll_to(&mut self, target_m: Vec3) -> usize {
+    pub(crate) fn scroll_to(&mut self, target_m: Vec3) -> usize {
         if !self.settings.volume_tracks_camera || !target_m.is_finite() {
             return 0;
         }
@@ -333,6 +335,9 @@ impl DdgiVolume {
         }
         self.probes_scrolled_in += reset as u64;
         self.refresh_usable();
+        // The slots changed places on the grid: the nearest usable probe of each is
+        // another one now, whether or not the usable set changed.
+        self.probe_fallback = nearest_usable_probes(&self.grid, &self.probe_usable);
         reset
     }
 
@@ -380,6 +385,7 @@ impl DdgiVolume {
             return false;
         };
         frame.init_dirs = probe_ray_directions(&self.settings, self.stream_seed(seed), init_frame(kind));
+        frame.ray_count = frame.init_dirs.len();
         frame.first_ray = vec![u32::MAX; self.grid.probe_count()];
         for p in 0..self.grid.probe_count() {
             if self.probe_pending_init[p] {
@@ -406,7 +412,7 @@ impl DdgiVolume {
         let Some(&kind) = self.init_rounds().get(round) else {
             return;
         };
-        let n = self.settings.probe_rays_per_probe as usize;
+        let n = frame.ray_count;
         let dirs = &frame.init_dirs;
         let rays_of = |p: usize| {
             let first = frame.first_ray[p] as usize;
@@ -417,8 +423,9 @@ impl DdgiVolume {
                 let spacing = self.grid.spacing_m;
                 let settings = &self.settings;
                 let pending = &self.probe_pending_init;
+                let planned = &frame.first_ray;
                 self.probe_offsets.par_iter_mut().enumerate().for_each(|(p, offset)| {
-                    if !pending[p] {
+                    if !pending[p] || planned[p] == u32::MAX {
                         return;
                     }
                     let d: Vec<f32> = hits[rays_of(p)].iter().map(|h| h.distance_m).collect();
@@ -441,7 +448,7 @@ impl DdgiVolume {
     /// Probes that are not pending keep their states and count as covering when
     /// they are kept already (they trace: not Off or Sleeping).
     fn classify_jcgt_pending(&mut self, frame: &VolumeFrame, batch: &ProbeRayBatch, hits: &[ProbeRayHit]) {
-        let n = self.settings.probe_rays_per_probe as usize;
+        let n = frame.ray_count;
         let bias = max_surface_bias_m(&self.settings, &self.grid);
         let reach = self.settings.probe_classification_reach_rel;
         let (grid, pending) = (&self.grid, &self.probe_pending_init);
@@ -458,7 +465,7 @@ impl DdgiVolume {
         let first: Vec<(bool, bool)> = (0..grid.probe_count())
             .into_par_iter()
             .map(|p| {
-                if !pending[p] {
+                if !pending[p] || frame.first_ray[p] == u32::MAX {
                     return (false, false);
                 }
                 let f = frame.first_ray[p] as usize;
@@ -474,7 +481,7 @@ impl DdgiVolume {
             .map(|p| if pending[p] { !first[p].0 && first[p].1 } else { self.probe_states[p].traces() })
             .collect();
         let positions = &self.probe_positions;
-        for p in (0..grid.probe_count()).filter(|&p| pending[p]) {
+        for p in (0..grid.probe_count()).filter(|&p| pending[p] && frame.first_ray[p] != u32::MAX) {
             for (pos, normal) in front_hits(p) {
                 if let Some(q) = uncovered_point_probe(grid, positions, &kept, &eligible, pos, normal) {
                     kept[q] = true;
@@ -521,6 +528,7 @@ impl DdgiVolume {
         frame.tracing = self.probe_states.iter().map(|s| s.traces()).collect();
         frame.active = self.probe_states.iter().map(|s| s.updates_in_frame(frame_index, interval)).collect();
         frame.rays = generate_probe_rays(&self.settings, self.stream_seed(seed), frame_index);
+        frame.ray_count = frame.rays.dirs.len();
         frame.first_ray = vec![u32::MAX; probes];
         for p in 0..probes {
             if frame.tracing[p] {
@@ -546,7 +554,7 @@ impl DdgiVolume {
         hits: &[ProbeRayHit],
         needs_radiance: &mut [bool],
     ) {
-        let n = self.settings.probe_rays_per_probe as usize;
+        let n = frame.ray_count;
         if self.settings.probe_states == ProbeStatesMode::Usage {
             self.classify_usage_from_hits(frame, frame_index, hits);
         }
@@ -565,7 +573,7 @@ impl DdgiVolume {
     /// Usage scheme (seed 003 §6.1): every probe's state from this frame's hits, and
     /// which probes blend this frame (see `probegi_core::probe_classification`).
     fn classify_usage_from_hits(&mut self, frame: &mut VolumeFrame, frame_index: u32, hits: &[ProbeRayHit]) {
-        let n = self.settings.probe_rays_per_probe as usize;
+        let n = frame.ray_count;
         let cage_diagonal = self.grid.spacing_m.length();
         let (interval, min_alive) =
             (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
@@ -606,7 +614,7 @@ impl DdgiVolume {
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) {
         let t = std::time::Instant::now();
-        let n = self.settings.probe_rays_per_probe as usize;
+        let n = frame.ray_count;
         let event_scale = |events: &[HysteresisReduction]| events.iter().map(|e| e.scale).product::<f32>();
         let (irr_scale, vis_scale) = if self.settings.probe_fast_convergence {
             (event_scale(&self.irradiance_events), event_scale(&self.visibility_events))

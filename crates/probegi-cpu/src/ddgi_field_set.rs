@@ -40,7 +40,11 @@
 //! *Deviation:* seed 003 §6.2.1 updates each cascade "with no knowledge about other
 //! cascades". Here a probe ray's hit reads the whole set, so a hit outside a small
 //! window reads the coarser volume around it rather than the window's clamped
-//! edge probes; for one volume the two are the same.
+//! edge probes. (For one volume that is its own field, except that a hit farther
+//! than a cell outside its probe box reads zero, as a camera pixel there does.)
+//!
+//! Tracking targets given while an exchange is under way are applied at the next
+//! `begin_update`, so a batch never refers to probes that moved under it.
 //!
 //! [`DdgiFieldSet::update`] (in `ddgi_scene_update`) is the convenience that plays
 //! both caller roles with probegi's own scene, tracer and shading.
@@ -196,12 +200,18 @@ impl std::error::Error for SeamError {}
 /// `probegi_core::ddgi_volume_blend`), updated through one ray batch per frame.
 #[derive(Clone, Debug)]
 pub struct DdgiFieldSet {
-    pub volumes: Vec<DdgiVolume>,
+    /// Private so that the per-volume scratch and sampling order stay in step;
+    /// see [`Self::volumes`] and [`Self::volumes_mut`].
+    volumes: Vec<DdgiVolume>,
     pub blending: VolumeBlending,
     /// Volume indices in sampling order: densest (or finest) first.
     order: Vec<usize>,
     /// The point tracking windows follow (the camera), for camera-aware blending.
     tracking_target_m: Option<Vec3>,
+    /// A target given during an exchange, applied at the next `begin_update`.
+    pending_target_m: Option<Vec3>,
+    /// Probes scrolled in by targets applied at `begin_update`.
+    pub last_scrolled_in: usize,
     batch: ProbeRayBatch,
     hits: Vec<ProbeRayHit>,
     frames: Vec<VolumeFrame>,
@@ -242,6 +252,8 @@ impl DdgiFieldSet {
             blending,
             order,
             tracking_target_m: camera_m,
+            pending_target_m: None,
+            last_scrolled_in: 0,
             batch: ProbeRayBatch::default(),
             hits: Vec::new(),
             frames: vec![VolumeFrame::default(); n],
@@ -259,6 +271,23 @@ impl DdgiFieldSet {
     /// A set of one volume.
     pub fn single(volume: DdgiVolume) -> Self {
         Self::from_volumes(vec![volume], VolumeBlending::Density, None)
+    }
+
+    /// The volumes, in the order they were given.
+    pub fn volumes(&self) -> &[DdgiVolume] {
+        &self.volumes
+    }
+
+    /// The volumes, to change their settings between updates. Changing a volume
+    /// during an exchange (between `begin_update` and `Done`) takes effect from
+    /// the next update: the current batch keeps the counts it was planned with.
+    pub fn volumes_mut(&mut self) -> &mut [DdgiVolume] {
+        &mut self.volumes
+    }
+
+    /// The volumes, taken out of the set.
+    pub fn into_volumes(self) -> Vec<DdgiVolume> {
+        self.volumes
     }
 
     /// The query's view of the set.
@@ -286,8 +315,13 @@ impl DdgiFieldSet {
 
     /// Moves every tracking window toward `target_m` (whole cells; seed 004 §7.3)
     /// and remembers it for camera-aware blending. Returns the probes scrolled in.
+    /// During an exchange the move waits for the next `begin_update` (and 0 is returned).
     pub fn set_tracking_target(&mut self, target_m: Vec3) -> usize {
         if !target_m.is_finite() {
+            return 0;
+        }
+        if self.expected != UpdateStep::Done {
+            self.pending_target_m = Some(target_m);
             return 0;
         }
         self.tracking_target_m = Some(target_m);
@@ -328,6 +362,11 @@ impl DdgiFieldSet {
         self.seed = seed;
         self.frame = frame;
         self.init_round = 0;
+        self.expected = UpdateStep::Done;
+        self.last_scrolled_in = match self.pending_target_m.take() {
+            Some(t) => self.set_tracking_target(t),
+            None => 0,
+        };
         self.last_pass_ms.clear();
         self.last_init_rays = 0;
         let t = std::time::Instant::now();

@@ -64,7 +64,7 @@ impl DdgiFieldSet {
                         scene,
                         direct,
                         field: &view,
-                        volumes: &self.volumes,
+                        volumes: self.volumes(),
                         batch: self.ray_batch(),
                         surfels: &surfels,
                         seed,
@@ -94,6 +94,8 @@ impl DdgiFieldSet {
 
 impl DdgiVolume {
     /// One field update of this volume alone (a set of one; see [`DdgiFieldSet::update`]).
+    /// A tracking volume does not move here: drive it through a [`DdgiFieldSet`]
+    /// and `set_tracking_target`.
     pub fn update(
         &mut self,
         scene: &Scene,
@@ -113,7 +115,7 @@ impl DdgiVolume {
         );
         let mut set = DdgiFieldSet::single(std::mem::replace(self, placeholder));
         let traced = set.update(scene, tracer, direct, seed, frame, pass_ms);
-        if let Some(v) = set.volumes.pop() {
+        if let Some(v) = set.into_volumes().pop() {
             *self = v;
         }
         traced

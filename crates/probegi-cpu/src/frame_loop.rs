@@ -267,11 +267,14 @@ pub fn render_frames(
             _ => None,
         };
         let indirect_field_used = indirect_field.is_some();
-        let second_order = field.as_ref().is_some_and(|s| s.volumes.iter().any(|v| v.settings.glossy_second_order));
+        let second_order = field.as_ref().is_some_and(|s| s.volumes().iter().any(|v| v.settings.glossy_second_order));
         let t = Instant::now();
         let passes = CameraPasses { scene, tracer, direct, direct_settings: camera_direct, second_order };
         stats.rays_traced += shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut acc);
-        acc.add_frame(animated || moving_camera);
+        // The direct term restarts when the scene or the camera changed since the
+        // last frame (a camera that holds at its last key accumulates again).
+        let camera_moved = moving_camera && f > 0 && camera_at(f - 1) != camera;
+        acc.add_frame(animated || camera_moved);
         if indirect_field_used {
             stats.frame_unlit_fraction.push(unlit_fraction(scene, &gbuffer, &acc.indirect));
         }
@@ -298,7 +301,7 @@ pub fn render_frames(
     }
     let mut pixels = acc.pixels();
     if let (true, Some(set), Some(g)) = (settings.show_probes, &field, &last_gbuffer) {
-        for v in &set.volumes {
+        for v in set.volumes() {
             crate::probe_vis::draw_probes(v, camera_at(frames - 1), g, &mut pixels);
         }
     }
@@ -314,14 +317,14 @@ fn field_stats(set: &DdgiFieldSet, stats: &mut RenderStats) {
     stats.field_update_ms = Some(update_ms);
     stats.field_update_mrays_per_s = Some(set.rays_per_frame() as f64 / (update_ms * 1e-3) / 1e6);
     let mut states = BTreeMap::new();
-    for v in &set.volumes {
+    for v in set.volumes() {
         for (k, n) in v.state_counts() {
             *states.entry(k).or_default() += n;
         }
     }
     stats.probe_states = Some(states);
-    stats.active_probes = Some(set.volumes.iter().map(|v| v.active_probe_count()).sum());
-    stats.volumes = Some(set.volumes.len());
+    stats.active_probes = Some(set.volumes().iter().map(|v| v.active_probe_count()).sum());
+    stats.volumes = Some(set.volumes().len());
     stats.batch_rays = Some(set.last_batch_rays);
     stats.batch_rays_per_volume = Some(set.last_batch_rays_per_volume.clone());
 }

@@ -55,7 +55,7 @@ impl SceneChangeDetector {
             let bounds = scene.moving_object_bounds();
             changes.probes_woken = set.wake_probes_near(&bounds);
             if self.object_bounds.len() == bounds.len() {
-                for (i, v) in set.volumes.iter_mut().enumerate() {
+                for (i, v) in set.volumes_mut().iter_mut().enumerate() {
                     let g = &v.grid;
                     let (lo, hi) = (g.probe_position(UVec3::ZERO), g.probe_position(g.probe_counts - 1));
                     let near =

@@ -54,7 +54,7 @@ fn furnace_box_converges_to_le_over_one_minus_rho() {
     let mean = out.image.mean();
     eprintln!("furnace DDGI mean {mean}");
     assert!((mean.x - 2.0).abs() < 0.04, "furnace DDGI mean {mean}, want 2.0 within 2 %");
-    let v = out.ddgi.expect("volume").volumes.remove(0);
+    let v = out.ddgi.expect("volume").into_volumes().remove(0);
     v.validate();
     assert!(out.image.first_invalid_pixel().is_none());
 }

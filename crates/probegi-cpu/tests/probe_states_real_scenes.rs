@@ -49,7 +49,7 @@ fn black_where_lit(all: &Image, default: &Image) -> f32 {
 fn compare_states(scene: &Scene, volume: DdgiVolumeSettings) -> (f32, f32, f32) {
     let all = render(scene, DdgiVolumeSettings { probe_states: ProbeStatesMode::AllActive, ..volume.clone() });
     let default = render(scene, volume);
-    let v = &default.ddgi.as_ref().expect("ddgi").volumes[0];
+    let v = &default.ddgi.as_ref().expect("ddgi").volumes()[0];
     let idle = 1.0 - v.rays_per_frame() as f32 / (v.grid.probe_count() as f32 * v.settings.probe_rays_per_probe as f32);
     let flip = mean_flip_hdr(&all.image, &default.image).expect("same size");
     let black = black_where_lit(&all.image, &default.image);
