@@ -16,6 +16,27 @@ if [ ! -d ../shared/scenes ]; then
   exit 1
 fi
 
+# GPU tests (crates/probegi-wgpu) run on any Vulkan driver; without one, install
+# Mesa's software Vulkan (lavapipe) when apt is usable, and then require them.
+have_vulkan() { ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json >/dev/null 2>&1; }
+if ! have_vulkan && command -v apt-get >/dev/null 2>&1; then
+  echo "no Vulkan driver found: installing mesa-vulkan-drivers (lavapipe) for the GPU tests" >&2
+  SUDO=""; [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1 && SUDO="sudo -n"
+  { $SUDO apt-get install -y mesa-vulkan-drivers >/dev/null 2>&1 ||
+    { $SUDO apt-get update >/dev/null 2>&1 && $SUDO apt-get install -y mesa-vulkan-drivers >/dev/null 2>&1; }; } ||
+    echo "could not install mesa-vulkan-drivers" >&2
+fi
+if have_vulkan; then
+  export PROBEGI_REQUIRE_GPU=1
+else
+  echo "warning: no Vulkan driver and none could be installed: the GPU tests will SKIP (install mesa-vulkan-drivers)" >&2
+fi
+# wgpu's Vulkan loader wants a runtime dir; give it one instead of a warning per device.
+if [ -z "${XDG_RUNTIME_DIR:-}" ] || [ ! -d "${XDG_RUNTIME_DIR}" ]; then
+  XDG_RUNTIME_DIR=$(mktemp -d)
+  export XDG_RUNTIME_DIR
+fi
+
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets --locked -- -D warnings
 cargo test --workspace --locked

@@ -1,0 +1,83 @@
+//! The device every pass runs on: one the caller provides, or a headless one on
+//! the first adapter wgpu finds (lavapipe's software Vulkan included).
+
+use std::fmt;
+
+/// Why no device could be used.
+#[derive(Debug)]
+pub enum GpuError {
+    /// No adapter: no GPU driver and no software Vulkan (Mesa's lavapipe).
+    NoAdapter(String),
+    /// The adapter refused a device.
+    Device(String),
+    /// A buffer could not be read back.
+    Readback(String),
+    /// Inputs that do not fit the pass (sizes, counts).
+    Input(String),
+}
+
+impl fmt::Display for GpuError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            GpuError::NoAdapter(e) => write!(
+                f,
+                "no GPU adapter ({e}); install a Vulkan driver, or Mesa's software one \
+                 (Debian/Ubuntu: apt-get install mesa-vulkan-drivers)"
+            ),
+            GpuError::Device(e) => write!(f, "the GPU adapter refused a device: {e}"),
+            GpuError::Readback(e) => write!(f, "reading a GPU buffer back failed: {e}"),
+            GpuError::Input(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for GpuError {}
+
+/// A device, its queue and what the adapter says about itself.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    /// The adapter's name and driver, e.g. "llvmpipe (LLVM 15.0.6)".
+    pub adapter_name: String,
+}
+
+impl GpuContext {
+    /// A headless device on the default backends (Vulkan, Metal, DX12, GL).
+    pub fn headless() -> Result<Self, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let info = adapter.get_info();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("probegi"),
+            required_features: wgpu::Features::empty(),
+            // The blend binds six storage buffers; ask for what the adapter has.
+            required_limits: adapter.limits(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(Self { device, queue, adapter_name: format!("{} ({:?}, {})", info.name, info.backend, info.driver) })
+    }
+
+    /// A device and queue the caller owns (an engine's).
+    pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, adapter_name: impl Into<String>) -> Self {
+        Self { device, queue, adapter_name: adapter_name.into() }
+    }
+
+    /// Copies `buffer` (a `MAP_READ | COPY_DST` staging buffer already filled) into a vector.
+    pub(crate) fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+        let slice = buffer.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
+        let bytes = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?.to_vec();
+        buffer.unmap();
+        Ok(bytes)
+    }
+}

@@ -1,0 +1,161 @@
+//! The GPU blend and border passes against the CPU's (`probegi_core::probe_blend`,
+//! `probegi_core::probe_border`), on whatever adapter wgpu finds; CI runs them on
+//! Mesa's lavapipe. Without an adapter the tests say so and pass, unless
+//! `PROBEGI_REQUIRE_GPU=1` (which `scripts/test.sh` sets once lavapipe is installed).
+
+use glam::{Vec2, Vec3};
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::fibonacci::{sample_uniform_rotation, spherical_fibonacci};
+use probegi_core::probe_atlas::ProbeAtlas;
+use probegi_core::probe_blend::{BlendWeights, TexelThresholds, blend_distance_tile, blend_irradiance_tile};
+use probegi_core::probe_border::update_tile_border;
+use probegi_core::rng::Pcg32;
+use probegi_wgpu::GpuContext;
+use probegi_wgpu::probe_blend::{BlendFrame, GpuProbeBlend, GpuVolumeAtlases};
+
+fn context() -> Option<GpuContext> {
+    match GpuContext::headless() {
+        Ok(c) => {
+            eprintln!("adapter: {}", c.adapter_name);
+            Some(c)
+        }
+        Err(e) if std::env::var_os("PROBEGI_REQUIRE_GPU").is_none() => {
+            eprintln!("skipping the GPU test: {e}");
+            None
+        }
+        Err(e) => panic!("PROBEGI_REQUIRE_GPU is set but {e}"),
+    }
+}
+
+struct Frame {
+    dirs: Vec<Vec3>,
+    radiance: Vec<Vec3>,
+    distance: Vec<f32>,
+    hysteresis: Vec<Option<f32>>,
+}
+
+/// A frame of rays: rotated spherical Fibonacci directions, radiance over three
+/// decades with a few NaN/Inf rays, signed distances (backfaces negative, misses
+/// long), probes with and without history and some that do not update.
+fn frame(rng: &mut Pcg32, probes: usize, rays: u32, f: u32) -> Frame {
+    let rot = sample_uniform_rotation(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()));
+    let dirs: Vec<Vec3> = (0..rays).map(|i| (rot * spherical_fibonacci(i, rays)).normalize()).collect();
+    let n = probes * rays as usize;
+    let radiance = (0..n)
+        .map(|k| match k % 97 {
+            13 => Vec3::NAN,
+            41 => Vec3::new(f32::INFINITY, 1.0, 0.0),
+            _ => Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 10f32.powf(3.0 * rng.next_f32() - 2.0),
+        })
+        .collect();
+    let distance = (0..n)
+        .map(|k| {
+            let t = 20.0 * rng.next_f32();
+            if k % 5 == 0 { -0.2 * t } else { t }
+        })
+        .collect();
+    let hysteresis = (0..probes)
+        .map(|p| match (p + f as usize) % 7 {
+            0 => None,
+            1 => Some(0.0),
+            _ => Some(0.97),
+        })
+        .collect();
+    Frame { dirs, radiance, distance, hysteresis }
+}
+
+fn cpu_blend(s: &DdgiVolumeSettings, fr: &Frame, irr: &mut ProbeAtlas<Vec3>, dist: &mut ProbeAtlas<Vec2>, clamp: f32) {
+    let rays = fr.dirs.len();
+    let wi = BlendWeights::new(&fr.dirs, irr.interior, 1.0);
+    let wd = BlendWeights::new(&fr.dirs, dist.interior, s.probe_distance_exponent);
+    let th = TexelThresholds {
+        significant: s.probe_significant_change_threshold,
+        new_distribution: s.probe_new_distribution_threshold,
+    };
+    let (ni, nd) = (irr.interior, dist.interior);
+    for (p, h) in fr.hysteresis.iter().enumerate() {
+        let Some(h) = *h else { continue };
+        let r = p * rays..(p + 1) * rays;
+        blend_irradiance_tile(irr.tile_mut(p), ni, &wi, &fr.radiance[r.clone()], h * 0.85, 5.0, Some(&th));
+        blend_distance_tile(dist.tile_mut(p), nd, &wd, &fr.distance[r], h * 0.5, clamp);
+        update_tile_border(irr.tile_mut(p), ni);
+        update_tile_border(dist.tile_mut(p), nd);
+    }
+}
+
+fn gpu_frame<'a>(s: &'a DdgiVolumeSettings, fr: &'a Frame, clamp: f32) -> BlendFrame<'a> {
+    BlendFrame {
+        settings: s,
+        ray_dirs: &fr.dirs,
+        ray_radiance: &fr.radiance,
+        ray_distance: &fr.distance,
+        probe_hysteresis: &fr.hysteresis,
+        irradiance_scale: 0.85,
+        visibility_scale: 0.5,
+        distance_clamp_m: clamp,
+    }
+}
+
+/// Largest |a − b| relative to max(1, |a|) over both atlases.
+fn max_error(a: &(ProbeAtlas<Vec3>, ProbeAtlas<Vec2>), b: &(ProbeAtlas<Vec3>, ProbeAtlas<Vec2>)) -> (f32, f32) {
+    let e3 = a.0.texels.iter().zip(&b.0.texels).map(|(x, y)| ((*x - *y).abs() / x.abs().max(Vec3::ONE)).max_element());
+    let e2 = a.1.texels.iter().zip(&b.1.texels).map(|(x, y)| ((*x - *y).abs() / x.abs().max(Vec2::ONE)).max_element());
+    (e3.fold(0.0, f32::max), e2.fold(0.0, f32::max))
+}
+
+#[test]
+fn gpu_blend_and_border_match_the_cpu_after_1_and_100_frames_and_repeat_bit_for_bit() {
+    let Some(ctx) = context() else { return };
+    let s = DdgiVolumeSettings::default();
+    let (probes, rays, clamp) = (37usize, 96u32, 12.0f32);
+    let mut cpu =
+        (ProbeAtlas::new(probes, s.probe_irradiance_texels), ProbeAtlas::new(probes, s.probe_distance_texels));
+    let blend = GpuProbeBlend::new(&ctx);
+    let gpu = GpuVolumeAtlases::new(&ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
+    let again = GpuVolumeAtlases::new(&ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
+    gpu.upload(&ctx, &cpu.0, &cpu.1);
+    again.upload(&ctx, &cpu.0, &cpu.1);
+    let mut rng = Pcg32::new(7, 1);
+    let mut worst = (0.0f32, 0.0f32);
+    for f in 0..100 {
+        let fr = frame(&mut rng, probes, rays, f);
+        cpu_blend(&s, &fr, &mut cpu.0, &mut cpu.1, clamp);
+        blend.run(&ctx, &gpu, &gpu_frame(&s, &fr, clamp)).expect("blend");
+        blend.run(&ctx, &again, &gpu_frame(&s, &fr, clamp)).expect("blend");
+        if f == 0 || f == 99 {
+            let got = gpu.download(&ctx).expect("download");
+            let (ei, ed) = max_error(&cpu, &got);
+            eprintln!("after {} frame(s): irradiance {ei:.2e}, distance {ed:.2e} (relative, max over texels)", f + 1);
+            worst = (worst.0.max(ei), worst.1.max(ed));
+            assert!(got.0.texels.iter().all(|t| t.is_finite()) && got.1.texels.iter().all(|t| t.is_finite()));
+            assert!(got.0.texels.iter().any(|t| t.max_element() > 0.0), "the blend wrote something");
+            // The same inputs on the same adapter: the same atlases, bit for bit.
+            let twin = again.download(&ctx).expect("download");
+            assert!(got.0 == twin.0 && got.1 == twin.1, "two runs of the same frames differ");
+        }
+    }
+    // f32 sums in the same ray order; pow/sqrt/normalize differ by a few ulps
+    // between the CPU's libm and the shader compiler's, and 100 frames of
+    // hysteresis carry that forward without growing it.
+    assert!(worst.0 < 1e-4 && worst.1 < 1e-4, "GPU vs CPU: {worst:?}");
+}
+
+#[test]
+fn bad_inputs_are_errors() {
+    let Some(ctx) = context() else { return };
+    let s = DdgiVolumeSettings::default();
+    let blend = GpuProbeBlend::new(&ctx);
+    let atlases = GpuVolumeAtlases::new(&ctx, 4, 6, 14);
+    let dirs = vec![Vec3::Z; 8];
+    let frame = BlendFrame {
+        settings: &s,
+        ray_dirs: &dirs,
+        ray_radiance: &[Vec3::ONE; 3],
+        ray_distance: &[1.0; 32],
+        probe_hysteresis: &[None; 4],
+        irradiance_scale: 1.0,
+        visibility_scale: 1.0,
+        distance_clamp_m: 1.0,
+    };
+    assert!(blend.run(&ctx, &atlases, &frame).is_err());
+}
