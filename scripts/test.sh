@@ -40,5 +40,3 @@ fi
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets --locked -- -D warnings
 cargo test --workspace --locked
-# The embedding example drives the seam with its own triangles and ray caster.
-cargo run -p probegi-cpu --example embed_ddgi --locked

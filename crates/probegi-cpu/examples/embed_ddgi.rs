@@ -8,7 +8,8 @@
 //! face to E = π·L ≈ 6.283 W·m⁻². The program prints the field's irradiance at the
 //! middle of the floor and exits with an error if it is more than 3 % off.
 //!
-//! Run: `cargo run -p probegi-cpu --example embed_ddgi` (CI runs it).
+//! Run: `cargo run -p probegi-cpu --example embed_ddgi`. CI runs it as the test
+//! `probegi-cpu/tests/embed_example.rs`, which includes this file.
 
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
@@ -75,7 +76,7 @@ fn closest_hit(tris: &[Triangle], origin: Vec3, dir: Vec3, max_t: f32) -> Option
 const EMISSION: f32 = 1.0;
 const ALBEDO: f32 = 0.5;
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+pub fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (lo, hi) = (Vec3::ZERO, Vec3::splat(4.0));
     let world = cube(lo, hi);
     // One volume of 4³ probes fitted to the box, 64 rays each. A short hysteresis
