@@ -142,7 +142,8 @@ pub struct SceneArgs {
 pub enum GiArg {
     /// Direct light only.
     None,
-    /// Dynamic diffuse global illumination: one probe volume over the scene.
+    /// Dynamic diffuse global illumination: one probe volume over the scene, the
+    /// scene file's `[[volumes]]`, or with --cascades camera-centred cascades.
     Ddgi,
     /// Screen-space GI with progressive spherical-harmonics probes (seed 001):
     /// camera-centred cascades updated from the lit frame, no probe rays.
@@ -153,7 +154,7 @@ pub enum GiArg {
 #[derive(Args, Debug, Clone, Default)]
 pub struct VolumeArgs {
     /// Probe grid NX,NY,NZ fitted to the scene bounds (overrides the scene file's
-    /// volume); with --cascades, every cascade's counts.
+    /// `[volume]`; refused with `[[volumes]]`); with --cascades, every cascade's counts.
     #[arg(long, value_parser = parse_uvec3)]
     pub probes: Option<[u32; 3]>,
     /// Camera-centred DDGI cascades (seed 003 §6.2): N nested tracking windows, each

@@ -91,60 +91,46 @@ pub struct DdgiFieldSetView<'a> {
     pub camera_m: Option<Vec3>,
 }
 
-/// The weight each member gets at `point`, in member order, by the set's scheme
-/// (before normalisation; zero for skipped members).
-pub fn member_weights(set: &DdgiFieldSetView<'_>, point: Vec3, out: &mut Vec<f32>) {
-    out.clear();
-    let n = set.members.len();
-    let mut wsum = 0.0f32;
-    for (f, m) in set.members.iter().enumerate() {
-        if wsum >= 1.0 {
-            out.push(0.0);
-            continue;
-        }
-        let w = match set.blending {
-            VolumeBlending::Density => {
-                // Camera-aware only where a later (sparser) member can take over the
-                // band the tightened box leaves; the last member keeps its probe box.
-                let camera = if m.tracks_camera && f + 1 < n { set.camera_m } else { None };
-                volume_blend_weight(m.field.grid, point, camera)
-            }
-            VolumeBlending::Cascades => {
-                if f + 1 < n || wsum > 0.9 {
-                    cascade_field_weight(m.field.grid, point)
-                } else {
-                    1.0
-                }
-            }
-        };
-        let w = if w > 0.0 { w * (1.0 - wsum).clamp(0.0, 1.0) } else { 0.0 };
-        wsum += w;
-        out.push(w);
+/// Member `f`'s share at `point` by the set's scheme, given the weight `wsum` the
+/// members before it took (zero once they took it all).
+fn member_weight(set: &DdgiFieldSetView<'_>, f: usize, point: Vec3, wsum: f32) -> f32 {
+    if wsum >= 1.0 {
+        return 0.0;
     }
+    let n = set.members.len();
+    let m = &set.members[f];
+    let w = match set.blending {
+        VolumeBlending::Density => {
+            // Camera-aware only where a later (sparser) member can take over the
+            // band the tightened box leaves; the last member keeps its probe box.
+            let camera = if m.tracks_camera && f + 1 < n { set.camera_m } else { None };
+            volume_blend_weight(m.field.grid, point, camera)
+        }
+        VolumeBlending::Cascades => {
+            if f + 1 < n || wsum > 0.9 {
+                cascade_field_weight(m.field.grid, point)
+            } else {
+                1.0
+            }
+        }
+    };
+    if w > 0.0 { w * (1.0 - wsum).clamp(0.0, 1.0) } else { 0.0 }
 }
 
 /// Irradiance at `position` over the whole set (see the module docs). A point that
 /// no member weighs gets zero. When one member alone contributes, its value is
 /// returned as is (bit-identical to querying that volume).
 pub fn field_set_irradiance(set: &DdgiFieldSetView<'_>, position: Vec3, normal: Vec3, view_dir: Vec3) -> Vec3 {
-    if set.members.len() == 1 {
-        let w = match set.blending {
-            VolumeBlending::Cascades => 1.0,
-            VolumeBlending::Density => volume_blend_weight(set.members[0].field.grid, position, None),
-        };
-        return if w > 0.0 { irradiance(&set.members[0].field, position, normal, view_dir) } else { Vec3::ZERO };
-    }
-    let mut weights = Vec::with_capacity(set.members.len());
-    member_weights(set, position, &mut weights);
     let mut sum = Vec3::ZERO;
     let mut wsum = 0.0f32;
     let mut only: Option<Vec3> = None;
     let mut contributors = 0;
-    for (m, &w) in set.members.iter().zip(&weights) {
+    for f in 0..set.members.len() {
+        let w = member_weight(set, f, position, wsum);
         if w <= 0.0 {
             continue;
         }
-        let e = irradiance(&m.field, position, normal, view_dir);
+        let e = irradiance(&set.members[f].field, position, normal, view_dir);
         sum += e * w;
         wsum += w;
         contributors += 1;

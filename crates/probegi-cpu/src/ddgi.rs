@@ -12,8 +12,8 @@
 //!   traces (jcgt: not Off or Sleeping; usage: all);
 //! - `accept_update_hits`: the usage scheme classifies every probe from the
 //!   frame's hits (seed 003 §6.1); marks the rays whose radiance the blend needs;
-//! - `blend_results`: the backface rule (zero radiance, distance −0.2·t, seed 004
-//!   §4.1), then blend (`probegi_core::probe_blend`, hysteresis with Listing 3's
+//! - `blend_inputs` (once per batch): the backface rule (zero radiance, distance
+//!   −0.2·t, seed 004 §4.1); `blend_results`: blend (`probegi_core::probe_blend`, hysteresis with Listing 3's
 //!   thresholds and the scene-event reductions) and border
 //!   (`probegi_core::probe_border`), only for probes that update this frame;
 //! - `scroll_to`: a tracking window's whole-cell move over the circular buffer.
@@ -402,12 +402,14 @@ impl DdgiVolume {
     }
 
     /// Applies the hits of initialisation round `round` (see [`Self::plan_init_round`]).
+    /// `distances` are the hits' signed distances (one per batch ray).
     pub(crate) fn accept_init_round(
         &mut self,
         frame: &VolumeFrame,
         round: usize,
         batch: &ProbeRayBatch,
         hits: &[ProbeRayHit],
+        distances: &[f32],
     ) {
         let Some(&kind) = self.init_rounds().get(round) else {
             return;
@@ -428,15 +430,15 @@ impl DdgiVolume {
                     if !pending[p] || planned[p] == u32::MAX {
                         return;
                     }
-                    let d: Vec<f32> = hits[rays_of(p)].iter().map(|h| h.distance_m).collect();
-                    *offset = relocation_step(*offset, &probe_ray_stats(dirs, &d), spacing, settings);
+                    *offset =
+                        relocation_step(*offset, &probe_ray_stats(dirs, &distances[rays_of(p)]), spacing, settings);
                 });
                 for p in 0..self.grid.probe_count() {
                     self.probe_positions[p] =
                         self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
                 }
             }
-            InitRound::Classification => self.classify_jcgt_pending(frame, batch, hits),
+            InitRound::Classification => self.classify_jcgt_pending(frame, batch, hits, distances),
         }
     }
 
@@ -447,7 +449,13 @@ impl DdgiVolume {
     /// keeps a front-side cage probe for every surface point a pending probe saw.
     /// Probes that are not pending keep their states and count as covering when
     /// they are kept already (they trace: not Off or Sleeping).
-    fn classify_jcgt_pending(&mut self, frame: &VolumeFrame, batch: &ProbeRayBatch, hits: &[ProbeRayHit]) {
+    fn classify_jcgt_pending(
+        &mut self,
+        frame: &VolumeFrame,
+        batch: &ProbeRayBatch,
+        hits: &[ProbeRayHit],
+        distances: &[f32],
+    ) {
         let n = frame.ray_count;
         let bias = max_surface_bias_m(&self.settings, &self.grid);
         let reach = self.settings.probe_classification_reach_rel;
@@ -469,11 +477,11 @@ impl DdgiVolume {
                     return (false, false);
                 }
                 let f = frame.first_ray[p] as usize;
-                let d: Vec<f32> = hits[f..f + n].iter().map(|h| h.distance_m).collect();
+                let d = &distances[f..f + n];
                 let coords = grid.probe_coords(p);
                 let grid_point = grid.probe_position(coords);
                 let watches = front_hits(p).any(|(pos, _)| probe_watches(grid, coords, pos - grid_point, reach, bias));
-                (is_inside_geometry(&probe_ray_stats(dirs, &d)), watches)
+                (is_inside_geometry(&probe_ray_stats(dirs, d)), watches)
             })
             .collect();
         let eligible: Vec<bool> = (0..grid.probe_count()).map(|p| pending[p] && !first[p].0).collect();
@@ -604,13 +612,14 @@ impl DdgiVolume {
     }
 
     /// Blend and border (seed 003 §4.5, seed 004 §2.3–4.3) for the probes that
-    /// update this frame, from the batch's hits and the caller's radiance. Adds
+    /// update this frame, from the batch's per-ray blend inputs (radiance and
+    /// signed distance after the backface rule, [`blend_inputs`]). Adds
     /// milliseconds to `pass_ms` under `blend` and `border`.
     pub(crate) fn blend_results(
         &mut self,
         frame: &VolumeFrame,
-        hits: &[ProbeRayHit],
-        radiance: &[Vec3],
+        ray_radiance: &[Vec3],
+        ray_distance: &[f32],
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) {
         let t = std::time::Instant::now();
@@ -628,7 +637,6 @@ impl DdgiVolume {
         let (irr_n, dist_n) = (self.irradiance.interior, self.distance.interior);
         let gamma = self.settings.probe_irradiance_gamma;
         let clamp = self.distance_clamp_m();
-        let max_distance = self.settings.probe_max_ray_distance_m;
         let irr_len = self.irradiance.tile_len();
         let dist_len = self.distance.tile_len();
         // Per updating probe: its first ray and the hysteresis of its blend.
@@ -645,29 +653,14 @@ impl DdgiVolume {
                 })
             })
             .collect();
-        // The backface rule (seed 004 §4.1; RTXGI stores −0.2·t): zero radiance and a
-        // short negative distance, so the probe reads as shadowed there. Misses keep
-        // the caller's radiance (the sky) and the trace limit as their distance.
-        let ray_radiance = |r: usize| if hits[r].distance_m < 0.0 { Vec3::ZERO } else { radiance[r] };
-        let ray_distance = |r: usize| {
-            let d = hits[r].distance_m;
-            if d < 0.0 {
-                0.2 * d
-            } else if d.is_finite() {
-                d
-            } else {
-                max_distance
-            }
-        };
         let weights = &frame.rays;
         self.irradiance.texels.par_chunks_mut(irr_len).zip(base.par_iter()).for_each(|(tile, b)| {
             if let Some((first, h)) = *b {
-                let rad: Vec<Vec3> = (first..first + n).map(ray_radiance).collect();
                 blend_irradiance_tile(
                     tile,
                     irr_n,
                     &weights.irradiance_weights,
-                    &rad,
+                    &ray_radiance[first..first + n],
                     h * irr_scale,
                     gamma,
                     thresholds.as_ref(),
@@ -676,8 +669,14 @@ impl DdgiVolume {
         });
         self.distance.texels.par_chunks_mut(dist_len).zip(base.par_iter()).for_each(|(tile, b)| {
             if let Some((first, h)) = *b {
-                let dist: Vec<f32> = (first..first + n).map(ray_distance).collect();
-                blend_distance_tile(tile, dist_n, &weights.distance_weights, &dist, h * vis_scale, clamp);
+                blend_distance_tile(
+                    tile,
+                    dist_n,
+                    &weights.distance_weights,
+                    &ray_distance[first..first + n],
+                    h * vis_scale,
+                    clamp,
+                );
             }
         });
         *pass_ms.entry("blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
@@ -733,6 +732,34 @@ impl DdgiVolume {
             check_borders(self.distance.tile(p), self.distance.interior);
             assert!(!self.probe_usable[p] || self.probe_has_history[p], "probe {p} is readable before its first blend");
         }
+    }
+}
+
+/// The blend's per-ray inputs from a batch's hits and the caller's radiance, the
+/// backface rule applied once per ray (seed 004 §4.1; RTXGI stores −0.2·t): a
+/// backface hit gets zero radiance and a short negative distance, so the probe
+/// reads as shadowed there; a miss keeps the caller's radiance (the sky) and the
+/// ray's max distance. Fills `radiance_out` and `distance_out`.
+pub(crate) fn blend_inputs(
+    batch: &ProbeRayBatch,
+    hits: &[ProbeRayHit],
+    radiance: &[Vec3],
+    radiance_out: &mut Vec<Vec3>,
+    distance_out: &mut Vec<f32>,
+) {
+    radiance_out.clear();
+    distance_out.clear();
+    for ((h, &l), &max) in hits.iter().zip(radiance).zip(&batch.max_distances_m) {
+        let d = h.distance_m;
+        let (l, d) = if d < 0.0 {
+            (Vec3::ZERO, 0.2 * d)
+        } else if d.is_finite() {
+            (l, d)
+        } else {
+            (l, max)
+        };
+        radiance_out.push(l);
+        distance_out.push(d);
     }
 }
 

@@ -214,6 +214,10 @@ pub struct DdgiFieldSet {
     pub last_scrolled_in: usize,
     batch: ProbeRayBatch,
     hits: Vec<ProbeRayHit>,
+    /// The hits' signed distances, and the blend's per-ray inputs (backface rule applied).
+    distances: Vec<f32>,
+    blend_radiance: Vec<Vec3>,
+    blend_distance: Vec<f32>,
     frames: Vec<VolumeFrame>,
     expected: UpdateStep,
     init_round: usize,
@@ -256,6 +260,9 @@ impl DdgiFieldSet {
             last_scrolled_in: 0,
             batch: ProbeRayBatch::default(),
             hits: Vec::new(),
+            distances: Vec::new(),
+            blend_radiance: Vec::new(),
+            blend_distance: Vec::new(),
             frames: vec![VolumeFrame::default(); n],
             expected: UpdateStep::Done,
             init_round: 0,
@@ -436,13 +443,21 @@ impl DdgiFieldSet {
                 *h
             }
         }));
+        self.distances.clear();
+        self.distances.extend(self.hits.iter().map(|h| h.distance_m));
         let t = std::time::Instant::now();
         match self.batch.kind {
             ProbeRayBatchKind::Initialization => {
                 self.last_init_rays += self.batch.len() as u64;
                 for i in 0..self.volumes.len() {
                     if self.volumes[i].needs_init() {
-                        self.volumes[i].accept_init_round(&self.frames[i], self.init_round, &self.batch, &self.hits);
+                        self.volumes[i].accept_init_round(
+                            &self.frames[i],
+                            self.init_round,
+                            &self.batch,
+                            &self.hits,
+                            &self.distances,
+                        );
                     }
                 }
                 self.init_round += 1;
@@ -476,8 +491,15 @@ impl DdgiFieldSet {
             return Err(SeamError::WrongLength { what: "radiance", expected: self.batch.len(), got: radiance.len() });
         }
         let mut pass_ms = std::mem::take(&mut self.last_pass_ms);
+        crate::ddgi::blend_inputs(
+            &self.batch,
+            &self.hits,
+            radiance,
+            &mut self.blend_radiance,
+            &mut self.blend_distance,
+        );
         for i in 0..self.volumes.len() {
-            self.volumes[i].blend_results(&self.frames[i], &self.hits, radiance, &mut pass_ms);
+            self.volumes[i].blend_results(&self.frames[i], &self.blend_radiance, &self.blend_distance, &mut pass_ms);
         }
         self.last_pass_ms = pass_ms;
         self.expected = UpdateStep::Done;

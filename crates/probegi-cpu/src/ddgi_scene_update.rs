@@ -122,12 +122,11 @@ impl DdgiVolume {
     }
 
     /// Probes inside geometry by their rays (> 25 % backfaces), from a fresh trace.
-    pub fn count_probes_inside_geometry(&mut self, scene: &Scene, tracer: &dyn RayTracer, seed: u64) -> usize {
+    pub fn count_probes_inside_geometry(&self, tracer: &dyn RayTracer, seed: u64) -> usize {
         use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats};
         let n = self.settings.probe_rays_per_probe as usize;
         let dirs = probe_ray_directions(&self.settings, seed, u32::MAX - 2000);
-        let d =
-            trace_probe_distances(scene, tracer, &self.probe_positions, &dirs, self.settings.probe_max_ray_distance_m);
+        let d = trace_probe_distances(tracer, &self.probe_positions, &dirs, self.settings.probe_max_ray_distance_m);
         (0..self.grid.probe_count())
             .filter(|&p| is_inside_geometry(&probe_ray_stats(&dirs, &d[p * n..(p + 1) * n])))
             .count()

@@ -162,22 +162,6 @@ impl Accumulation {
     }
 }
 
-/// The share of surface pixels with a diffuse albedo that got no indirect light.
-fn unlit_fraction(scene: &Scene, gbuffer: &GBuffer, indirect: &[Vec3]) -> f32 {
-    let mut surfaces = 0usize;
-    let mut unlit = 0usize;
-    for (t, i) in gbuffer.texels.iter().zip(indirect) {
-        if let Some(sp) = &t.surface {
-            let albedo = ShadingContext::new(scene, sp, t.view_dir_world).bsdf.diffuse_albedo();
-            if albedo.max_element() > 0.0 {
-                surfaces += 1;
-                unlit += (i.max_element() <= 0.0) as usize;
-            }
-        }
-    }
-    unlit as f32 / surfaces.max(1) as f32
-}
-
 /// The DDGI field set a render's settings ask for.
 fn make_field_set(gi: &GiMethod, scene: &Scene, camera_m: Vec3) -> Option<DdgiFieldSet> {
     let bounds = scene.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
@@ -270,14 +254,16 @@ pub fn render_frames(
         let second_order = field.as_ref().is_some_and(|s| s.volumes().iter().any(|v| v.settings.glossy_second_order));
         let t = Instant::now();
         let passes = CameraPasses { scene, tracer, direct, direct_settings: camera_direct, second_order };
-        stats.rays_traced += shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut acc);
+        let (rays, surfaces, unlit) = shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut acc);
+        stats.rays_traced += rays;
+        if indirect_field_used {
+            stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
+        }
         // The direct term restarts when the scene or the camera changed since the
         // last frame (a camera that holds at its last key accumulates again).
         let camera_moved = moving_camera && f > 0 && camera_at(f - 1) != camera;
         acc.add_frame(animated || camera_moved);
-        if indirect_field_used {
-            stats.frame_unlit_fraction.push(unlit_fraction(scene, &gbuffer, &acc.indirect));
-        }
+
         *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
         if let Some(p) = sh.as_mut() {
             stats.rays_traced +=
@@ -334,16 +320,6 @@ fn compose_pixels(direct_sum: &[DVec3], accumulated: u32, indirect: &[Vec3]) -> 
     direct_sum.iter().zip(indirect).map(|(d, i)| (*d / accumulated.max(1) as f64).as_vec3() + *i).collect()
 }
 
-/// The camera pass: per pixel, emission + direct light into `direct_out` and, with
-/// a DDGI volume or SH probes, the diffuse albedo/π × the field's irradiance into
-/// `indirect_out`.
-/// Glossy pixels under DDGI also trace one reflected ray per frame (seed 004 §4.4),
-/// importance-sampled from the GGX lobe, whose hit is shaded with direct light plus
-/// probe irradiance (and, with `glossy_second_order`, the hit's own specular
-/// reflection read from the probes); that term accumulates with the direct one.
-/// Area lights' specular highlights then come from reflected rays that hit the
-/// emitter, so the direct NEE uses the diffuse lobe only for them (no double count).
-/// Pixels that see nothing get the sky. Returns rays traced.
 /// What the camera pass shades with.
 struct CameraPasses<'a> {
     scene: &'a Scene,
@@ -354,6 +330,18 @@ struct CameraPasses<'a> {
     second_order: bool,
 }
 
+/// The camera pass: per pixel, emission + direct light into `direct_out` and, with
+/// a DDGI volume or SH probes, the diffuse albedo/π × the field's irradiance into
+/// `indirect_out`.
+/// Glossy pixels under DDGI also trace one reflected ray per frame (seed 004 §4.4),
+/// importance-sampled from the GGX lobe, whose hit is shaded with direct light plus
+/// probe irradiance (and, with `glossy_second_order`, the hit's own specular
+/// reflection read from the probes); that term accumulates with the direct one.
+/// Area lights' specular highlights then come from reflected rays that hit the
+/// emitter, so the direct NEE uses the diffuse lobe only for them (no double count).
+/// Pixels that see nothing get the sky. Returns rays traced and, for the
+/// `frame_unlit_fraction` statistic, (surface pixels with a diffuse albedo, those
+/// of them that got no indirect light).
 fn shade_camera(
     passes: &CameraPasses<'_>,
     field: Option<IndirectField<'_>>,
@@ -361,7 +349,7 @@ fn shade_camera(
     frame: u32,
     seed: u64,
     acc: &mut Accumulation,
-) -> u64 {
+) -> (u64, usize, usize) {
     let CameraPasses { scene, tracer, direct, direct_settings, second_order } = *passes;
     let (direct_out, indirect_out) = (&mut acc.frame_direct, &mut acc.indirect);
     use rayon::prelude::*;
@@ -375,7 +363,7 @@ fn shade_camera(
         .zip(indirect_out.par_chunks_mut(w))
         .enumerate()
         .map(|(y, (drow, irow))| {
-            let mut rays = 0;
+            let (mut rays, mut surfaces, mut unlit) = (0u64, 0usize, 0usize);
             for (x, (d, i)) in drow.iter_mut().zip(irow.iter_mut()).enumerate() {
                 let texel = &gbuffer.texels[y * w + x];
                 let Some(sp) = &texel.surface else {
@@ -421,14 +409,19 @@ fn shade_camera(
                 *i = match &field {
                     Some(f) => {
                         let e = f.irradiance(sp.position, sp.facing_normal(), texel.view_dir_world);
-                        ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e
+                        let albedo = ctx.bsdf.diffuse_albedo();
+                        if albedo.max_element() > 0.0 {
+                            surfaces += 1;
+                            unlit += (e.max_element() <= 0.0) as usize;
+                        }
+                        albedo * FRAC_1_PI * e
                     }
                     None => Vec3::ZERO,
                 };
             }
-            rays
+            (rays, surfaces, unlit)
         })
-        .sum()
+        .reduce(|| (0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
 }
 
 /// Radiance leaving the hit of a camera glossy ray toward the camera surface:

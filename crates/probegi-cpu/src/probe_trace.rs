@@ -53,10 +53,10 @@ pub fn surfel_hit(s: &Surfel) -> ProbeRayHit {
     }
 }
 
-/// Traces `dirs` from every probe position (distance only); returns signed
-/// true distances per ray, probe-major (positive front, negative back, ∞ miss).
+/// Traces `dirs` from every probe position (distance only, no surface point);
+/// returns signed true distances per ray, probe-major (positive front, negative
+/// back, ∞ miss).
 pub fn trace_probe_distances(
-    scene: &Scene,
     tracer: &dyn RayTracer,
     probe_positions: &[Vec3],
     dirs: &[Vec3],
@@ -66,11 +66,11 @@ pub fn trace_probe_distances(
     let mut out = vec![0.0f32; probe_positions.len() * n];
     out.par_chunks_mut(n).zip(probe_positions.par_iter()).for_each(|(d, &origin)| {
         for (o, &dir) in d.iter_mut().zip(dirs) {
-            let hit = tracer.closest_hit(&Ray::segment(origin, dir, max_distance_m)).map(|h| {
-                let s = Surfel { surface: Some(scene.surface_point(&h)), distance: h.t };
-                surfel_hit(&s)
-            });
-            *o = hit.unwrap_or(ProbeRayHit::MISS).distance_m;
+            *o = match tracer.closest_hit(&Ray::segment(origin, dir, max_distance_m)) {
+                Some(h) if h.backface => -h.t,
+                Some(h) => h.t,
+                None => f32::INFINITY,
+            };
         }
     });
     out

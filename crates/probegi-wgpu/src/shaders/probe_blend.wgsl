@@ -71,18 +71,42 @@ fn probe_of(wid: vec3<u32>) -> u32 {
     return wid.y + wid.z * params.probes_per_row;
 }
 
+// One blend thread's texel: its probe, interior texel (i, j) and direction, and
+// the probe's hysteresis; `valid` is false past the grid or for a probe that does
+// not update this frame (hysteresis < 0).
+struct TexelJob {
+    valid: bool,
+    probe: u32,
+    n: u32,
+    i: u32,
+    j: u32,
+    hysteresis: f32,
+    dir: vec3<f32>,
+};
+
+fn interior_job(gid: vec3<u32>, wid: vec3<u32>, n: u32) -> TexelJob {
+    var job: TexelJob;
+    job.probe = probe_of(wid);
+    job.n = n;
+    job.valid = job.probe < params.probe_count && gid.x < n * n;
+    if (!job.valid) { return job; }
+    job.hysteresis = probe_hysteresis[job.probe];
+    job.valid = job.hysteresis >= 0.0;
+    job.i = gid.x % n;
+    job.j = gid.x / n;
+    job.dir = oct_decode(texel_center_uv(job.i, job.j, n));
+    return job;
+}
+
 // probegi_core::probe_blend::blend_irradiance_tile, one thread per interior texel.
 @compute @workgroup_size(64)
 fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
-    let probe = probe_of(wid);
-    let n = params.irradiance_interior;
-    let t = gid.x;
-    if (probe >= params.probe_count || t >= n * n) { return; }
-    let h0 = probe_hysteresis[probe];
-    if (h0 < 0.0) { return; }
-    let i = t % n;
-    let j = t / n;
-    let texel_dir = oct_decode(texel_center_uv(i, j, n));
+    let job = interior_job(gid, wid, params.irradiance_interior);
+    if (!job.valid) { return; }
+    let probe = job.probe;
+    let n = job.n;
+    let h0 = job.hysteresis;
+    let texel_dir = job.dir;
     var sum = vec3<f32>(0.0);
     var wsum = 0.0;
     let first = probe * params.rays_per_probe;
@@ -97,7 +121,7 @@ fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(work
     }
     if (wsum <= 0.0) { return; }
     let encoded = encode_irradiance(sum / wsum, params.gamma);
-    let idx = probe * (n + 2u) * (n + 2u) + interior_texel_index(n, i, j);
+    let idx = probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
     let old = irradiance[idx].xyz;
     var h = h0 * params.irradiance_scale;
     if (params.use_thresholds != 0u) {
@@ -119,15 +143,12 @@ fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(work
 // probegi_core::probe_blend::blend_distance_tile, one thread per interior texel.
 @compute @workgroup_size(64)
 fn blend_distance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
-    let probe = probe_of(wid);
-    let n = params.distance_interior;
-    let t = gid.x;
-    if (probe >= params.probe_count || t >= n * n) { return; }
-    let h0 = probe_hysteresis[probe];
-    if (h0 < 0.0) { return; }
-    let i = t % n;
-    let j = t / n;
-    let texel_dir = oct_decode(texel_center_uv(i, j, n));
+    let job = interior_job(gid, wid, params.distance_interior);
+    if (!job.valid) { return; }
+    let probe = job.probe;
+    let n = job.n;
+    let h0 = job.hysteresis;
+    let texel_dir = job.dir;
     var sum = vec2<f32>(0.0);
     var wsum = 0.0;
     let first = probe * params.rays_per_probe;
@@ -142,7 +163,7 @@ fn blend_distance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgr
         wsum += w;
     }
     if (wsum <= 0.0) { return; }
-    let idx = probe * (n + 2u) * (n + 2u) + interior_texel_index(n, i, j);
+    let idx = probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
     let h = h0 * params.visibility_scale;
     let blended = (sum / wsum) * (1.0 - h) + distance[idx] * h;
     if (all(abs(blended) <= vec2<f32>(3.4028235e38))) {
