@@ -104,7 +104,6 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     use probegi_cpu::ddgi::{DdgiVolume, ddgi_volume_bytes};
     use probegi_cpu::ddgi_field_set::DdgiFieldSet;
     use probegi_cpu::frame_loop::FIELD_UPDATE_PASSES;
-    use probegi_cpu::probe_ray_gen::probe_ray_directions;
     use probegi_cpu::{DirectLighting, DirectSettings};
     use std::collections::BTreeMap;
 
@@ -135,17 +134,20 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
             }
             let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| pass_ms.get(p)).sum();
             let n = volume.rays_per_frame() as f64;
-            // The same rays, bare: closest hit only, no surfel.
-            let dirs = probe_ray_directions(&settings, args.seed, args.frames);
+            // The same rays, bare: the last update batch (its origins, directions and
+            // max distances), closest hit only, no surfel. Both rates divide by the
+            // rays of that batch, so they compare the same work.
+            let batch = set.ray_batch();
             let t = Instant::now();
-            let hits: usize = volume
-                .probe_positions
-                .par_iter()
-                .map(|&o| dirs.iter().filter(|&&d| bvh.closest_hit(&Ray::new(o, d)).is_some()).count())
-                .sum();
+            let hits: usize = (0..batch.len())
+                .into_par_iter()
+                .filter(|&i| {
+                    let ray = Ray::segment(batch.origins_m[i], batch.directions[i], batch.max_distances_m[i]);
+                    bvh.closest_hit(&ray).is_some()
+                })
+                .count();
             let bare_s = t.elapsed().as_secs_f64();
-            // The bare trace covers every probe, sleeping ones too.
-            let bare_rays = (volume.probe_positions.len() * dirs.len()) as f64;
+            let bare_rays = batch.len() as f64;
             let get = |k: &str| pass_ms.get(k).copied().unwrap_or(0.0);
             rows.push(json!({
                 "probes": grid,
@@ -156,6 +158,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
                 "volume_mib": ddgi_volume_bytes(&settings) as f64 / (1u64 << 20) as f64,
                 "rays_per_probe": rays,
                 "rays_per_frame": n as u64,
+                "bare_rays": bare_rays as u64,
                 "pass_ms": pass_ms,
                 "field_update_ms": update_ms,
                 "field_update_mrays_per_s": n / (update_ms * 1e-3) / 1e6,

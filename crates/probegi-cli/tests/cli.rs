@@ -188,6 +188,25 @@ fn bench_prints_json_with_throughput() {
     assert!(json["peak_rss_mib"].as_f64().expect("peak rss") > 0.0);
 }
 
+/// The DDGI sweep's bare rate traces exactly the rays of the field update's batch:
+/// both rates divide by the same ray count (it once divided the bare trace of every
+/// probe by the field's traced probes only).
+#[test]
+fn ddgi_bench_holds_field_and_bare_rates_to_the_same_rays() {
+    let o = probegi(&["bench", "--gi", "ddgi", "--grids", "6,6,6", "--rays", "32", "--frames", "1"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("bench prints JSON");
+    let row = &json["sweep"][0];
+    let rays = row["rays_per_frame"].as_u64().expect("rays_per_frame");
+    assert_eq!(row["bare_rays"].as_u64(), Some(rays), "{row}");
+    // The Cornell box's 6³ grid puts its outer probes inside the walls: fewer
+    // traced than stored, which is where the two counts used to part.
+    let probes = row["probe_count"].as_u64().expect("probe_count");
+    assert!(rays < probes * 32, "every probe traced: {row}");
+    assert!(row["bare_closest_hit_mrays_per_s"].as_f64().expect("bare") > 0.0);
+    assert!(row["field_update_mrays_per_s"].as_f64().expect("field") > 0.0);
+}
+
 #[test]
 fn sh_render_reports_probes_and_rejects_bad_settings_by_name() {
     let stats = tmp("sh.json");
