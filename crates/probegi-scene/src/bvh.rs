@@ -230,6 +230,94 @@ impl Blas {
     }
 }
 
+/// A cut-out material's coverage, as [`BvhExport`] carries it: `factor` × the
+/// bilinear coverage (wrap addressing, texel centres at half-integers) ≥ `cutoff`.
+#[derive(Clone, Debug)]
+pub struct BvhCutoutMask {
+    pub width: u32,
+    pub height: u32,
+    /// One unorm byte per texel, row-major; empty for a constant coverage of 1.
+    pub coverage: Vec<u8>,
+    pub factor: f32,
+    pub cutoff: f32,
+}
+
+/// A cut-out triangle of [`BvhExport`]: its mask and corner UVs.
+#[derive(Clone, Copy, Debug)]
+pub struct BvhCutTriangle {
+    pub mask: u32,
+    pub uv: [Vec2; 3],
+}
+
+/// The static BVH in the flat form a GPU traversal reads (`probegi-wgpu`'s
+/// `bvh.wgsl`): obvhs's compressed-wide BVH nodes (Ylitie et al. 2017), its
+/// triangles in leaf order and their alpha cutouts. The same tree the CPU
+/// traverses, so both backends visit the same nodes in the same order.
+#[derive(Clone, Debug, Default)]
+pub struct BvhExport {
+    /// 20 little-endian words per node: obvhs `CwBvhNode` (`repr(C)`, 80 bytes):
+    /// `p.xyz`, `e[0..3] | imask << 24`, `child_base_idx`, `primitive_base_idx`,
+    /// `child_meta[8]`, then `child_min_x[8]`, `child_max_x[8]`, `child_min_y[8]`,
+    /// `child_max_y[8]`, `child_min_z[8]`, `child_max_z[8]`.
+    pub node_words: Vec<u32>,
+    /// Per leaf, obvhs `RtTriangle`: `v0`, `e1 = v0 − v1`, `e2 = v2 − v0`, `ng = e1 × e2`.
+    pub leaf_triangles: Vec<[Vec3; 4]>,
+    /// Leaf order → `Scene::mesh.triangles` index.
+    pub leaf_triangle_ids: Vec<u32>,
+    /// Per leaf: index into `cut_triangles`, or `u32::MAX`; empty when nothing is cut out.
+    pub leaf_cutouts: Vec<u32>,
+    pub cut_triangles: Vec<BvhCutTriangle>,
+    pub cutout_masks: Vec<BvhCutoutMask>,
+}
+
+impl BvhExport {
+    fn of_blas(blas: &Blas, masks: &[CoverageMask]) -> Self {
+        let mut node_words = Vec::with_capacity(blas.bvh.nodes.len() * 20);
+        let le = |b: &[u8]| u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        for n in &blas.bvh.nodes {
+            node_words.extend([n.p.x.to_bits(), n.p.y.to_bits(), n.p.z.to_bits()]);
+            node_words.push(le(&[n.e[0], n.e[1], n.e[2], n.imask]));
+            node_words.extend([n.child_base_idx, n.primitive_base_idx]);
+            for bytes in [
+                &n.child_meta,
+                &n.child_min_x,
+                &n.child_max_x,
+                &n.child_min_y,
+                &n.child_max_y,
+                &n.child_min_z,
+                &n.child_max_z,
+            ] {
+                node_words.extend([le(&bytes[0..4]), le(&bytes[4..8])]);
+            }
+        }
+        Self {
+            node_words,
+            leaf_triangles: blas
+                .triangles
+                .iter()
+                .map(|t| [t.v0.into(), t.e1.into(), t.e2.into(), t.ng.into()])
+                .collect(),
+            leaf_triangle_ids: blas.triangle_ids.clone(),
+            leaf_cutouts: blas.leaf_cut.clone(),
+            cut_triangles: blas.cut.iter().map(|c| BvhCutTriangle { mask: c.mask, uv: c.uv }).collect(),
+            cutout_masks: masks
+                .iter()
+                .map(|m| BvhCutoutMask {
+                    width: m.width,
+                    height: m.height,
+                    coverage: m.coverage.clone(),
+                    factor: m.factor,
+                    cutoff: m.cutoff,
+                })
+                .collect(),
+        }
+    }
+
+    pub fn node_count(&self) -> usize {
+        self.node_words.len() / 20
+    }
+}
+
 /// One BLAS placed in the world for a frame.
 struct Instance {
     /// Index into `BvhTracer::blases`.
@@ -361,6 +449,20 @@ impl BvhTracer {
 
     pub fn triangle_count(&self) -> usize {
         self.blases.iter().map(|b| b.triangles.len()).sum()
+    }
+
+    /// The BVH for a GPU traversal ([`BvhExport`]). Only a tracer without a
+    /// top-level structure has one: moving objects and instanced meshes are an
+    /// error that says so (the GPU backend does not trace a TLAS yet).
+    pub fn export_static(&self) -> Result<BvhExport, String> {
+        if self.rest.is_some() {
+            return Err(format!(
+                "the GPU trace has no top-level BVH yet: this scene has {} moving objects and {} instances",
+                self.object_ids.len(),
+                self.placed.len()
+            ));
+        }
+        Ok(BvhExport::of_blas(&self.blases[0], &self.cutouts.masks))
     }
 
     /// Triangles whose hits are alpha-tested.

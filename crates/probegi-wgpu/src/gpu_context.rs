@@ -39,6 +39,8 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
     /// The adapter's name and driver, e.g. "llvmpipe (LLVM 15.0.6)".
     pub adapter_name: String,
+    /// Whether the device records GPU timestamps (`Features::TIMESTAMP_QUERY`).
+    pub timestamps: bool,
 }
 
 impl GpuContext {
@@ -51,20 +53,42 @@ impl GpuContext {
         }))
         .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
         let info = adapter.get_info();
+        // Timestamps for `bench --backend wgpu`'s per-pass times, where the adapter has them.
+        let required_features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("probegi"),
-            required_features: wgpu::Features::empty(),
+            required_features,
             // The blend binds six storage buffers; ask for what the adapter has.
             required_limits: adapter.limits(),
             ..Default::default()
         }))
         .map_err(|e| GpuError::Device(e.to_string()))?;
-        Ok(Self { device, queue, adapter_name: format!("{} ({:?}, {})", info.name, info.backend, info.driver) })
+        Ok(Self {
+            device,
+            queue,
+            adapter_name: format!("{} ({:?}, {})", info.name, info.backend, info.driver),
+            timestamps: !required_features.is_empty(),
+        })
     }
 
     /// A device and queue the caller owns (an engine's).
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, adapter_name: impl Into<String>) -> Self {
-        Self { device, queue, adapter_name: adapter_name.into() }
+        let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        Self { device, queue, adapter_name: adapter_name.into(), timestamps }
+    }
+
+    /// Copies a `COPY_SRC` buffer into a staging buffer and reads it back.
+    pub(crate) fn read_back(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: buffer.size(),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, buffer.size());
+        self.queue.submit([encoder.finish()]);
+        self.read_buffer(&staging)
     }
 
     /// Copies `buffer` (a `MAP_READ | COPY_DST` staging buffer already filled) into a vector.

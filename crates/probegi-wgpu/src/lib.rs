@@ -14,6 +14,7 @@
 //! them today. This crate depends on `probegi-core` for settings, layouts and
 //! encodings, and never on the CPU backend.
 
+pub mod bvh_trace;
 pub mod gpu_context;
 pub mod probe_blend;
 

@@ -1,0 +1,379 @@
+//! The trace pass on the GPU: obvhs's compressed-wide BVH (Ylitie et al. 2017),
+//! built on the CPU by `probegi_scene::BvhTracer` and uploaded as it is
+//! ([`probegi_scene::BvhExport`]), traversed in a compute shader
+//! (`shaders/bvh.wgsl`, `shaders/trace_rays.wgsl`), so the trace runs on every
+//! adapter, software ones included, with no ray-query hardware. Closest-hit and
+//! any-hit queries, both faces, alpha cutouts tested inside the traversal as on
+//! the CPU (`probegi_scene::bvh`). The same tree, the same node order, the same
+//! Möller–Trumbore test: hits agree with the CPU's up to float rounding
+//! (`tests/trace_equivalence.rs`).
+//!
+//! Not yet: the top-level BVH of moving objects and instanced meshes
+//! ([`probegi_scene::BvhTracer::export_static`] refuses such scenes by name).
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Vec2, Vec3};
+use probegi_scene::{BvhExport, RayHit};
+use wgpu::util::DeviceExt;
+
+use crate::gpu_context::{GpuContext, GpuError};
+
+/// The trace pass's uniform block; must match `TraceParams` in `trace_rays.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct TraceParams {
+    pub ray_count: u32,
+    pub groups_x: u32,
+    pub any_hit: u32,
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<TraceParams>() == 16);
+
+/// One ray; must match `GpuRay` in `trace_rays.wgsl` (vec3 + f32, twice).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuRay {
+    pub origin: [f32; 3],
+    pub t_min: f32,
+    /// Unit direction.
+    pub dir: [f32; 3],
+    /// Finite: `+∞` is stored as `f32::MAX` ([`GpuRay::new`]).
+    pub t_max: f32,
+}
+const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
+
+impl GpuRay {
+    pub fn new(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Self {
+        Self { origin: origin.into(), t_min, dir: dir.into(), t_max: t_max.min(f32::MAX) }
+    }
+}
+
+/// One ray's result; must match `GpuRayHit` in `trace_rays.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuRayHit {
+    /// Hit distance; the ray's `t_max` for a miss.
+    pub t: f32,
+    /// Scene triangle with bit 31 set on a back face; `u32::MAX` for a miss.
+    pub triangle: u32,
+    /// Weights of vertices 1 and 2.
+    pub bary: [f32; 2],
+}
+const _: () = assert!(std::mem::size_of::<GpuRayHit>() == 16);
+
+impl GpuRayHit {
+    pub fn is_hit(&self) -> bool {
+        self.triangle != u32::MAX
+    }
+
+    /// The CPU tracer's record of the same hit (`instance` is always `u32::MAX`:
+    /// no TLAS on the GPU yet).
+    pub fn ray_hit(&self) -> Option<RayHit> {
+        self.is_hit().then(|| RayHit {
+            t: self.t,
+            triangle: self.triangle & 0x7fff_ffff,
+            barycentric: Vec2::from(self.bary),
+            backface: self.triangle & 0x8000_0000 != 0,
+            instance: u32::MAX,
+        })
+    }
+}
+
+/// Largest workgroup count per dispatch dimension (WebGPU's default limit).
+const MAX_GROUPS: u32 = 65_535;
+const WORKGROUP: u32 = 64;
+
+/// The bind-group layout of `bvh.wgsl` (group 1): three read-only storage buffers.
+pub fn bvh_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("bvh"),
+        entries: &[storage_entry(0, true), storage_entry(1, true), storage_entry(2, true)],
+    })
+}
+
+pub(crate) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+pub(crate) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A scene's BVH on the device, with its bind group (group 1 of `bvh.wgsl`).
+pub struct GpuBvh {
+    pub node_count: usize,
+    pub leaf_count: usize,
+    pub cut_triangle_count: usize,
+    bytes: u64,
+    bind_group: wgpu::BindGroup,
+}
+
+impl GpuBvh {
+    /// Uploads `export` in `bvh.wgsl`'s layout.
+    pub fn upload(ctx: &GpuContext, export: &BvhExport) -> Result<Self, GpuError> {
+        let leaves = export.leaf_triangles.len();
+        if export.leaf_triangle_ids.len() != leaves || (!export.leaf_cutouts.is_empty() && export.leaf_cutouts.len() != leaves)
+        {
+            return Err(GpuError::Input(format!(
+                "BVH export: {leaves} leaf triangles, {} ids, {} cutout entries",
+                export.leaf_triangle_ids.len(),
+                export.leaf_cutouts.len()
+            )));
+        }
+        let mut triangles: Vec<[f32; 4]> = Vec::with_capacity(leaves * 4);
+        for (k, t) in export.leaf_triangles.iter().enumerate() {
+            let id = f32::from_bits(export.leaf_triangle_ids[k]);
+            let cut = f32::from_bits(export.leaf_cutouts.get(k).copied().unwrap_or(u32::MAX));
+            triangles.push([t[0].x, t[0].y, t[0].z, id]);
+            triangles.push([t[1].x, t[1].y, t[1].z, cut]);
+            triangles.push([t[2].x, t[2].y, t[2].z, 0.0]);
+            triangles.push([t[3].x, t[3].y, t[3].z, 0.0]);
+        }
+        let cutouts = pack_cutouts(export);
+        let mut nodes = export.node_words.clone();
+        if nodes.is_empty() {
+            nodes.push(0); // shorter than a node: `bvh_trace` sees an empty tree
+        }
+        if triangles.is_empty() {
+            triangles.push([0.0; 4]);
+        }
+        let device = &ctx.device;
+        let init = |label: &str, contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let buffers = [
+            init("bvh nodes", bytemuck::cast_slice(&nodes)),
+            init("bvh triangles", bytemuck::cast_slice(&triangles)),
+            init("bvh cutouts", bytemuck::cast_slice(&cutouts)),
+        ];
+        let bytes = buffers.iter().map(|b| b.size()).sum();
+        let limit = device.limits().max_storage_buffer_binding_size as u64;
+        if let Some(b) = buffers.iter().find(|b| b.size() > limit) {
+            return Err(GpuError::Input(format!(
+                "the BVH needs a {} MiB buffer; this adapter binds at most {} MiB",
+                b.size() >> 20,
+                limit >> 20
+            )));
+        }
+        let layout = bvh_bind_group_layout(device);
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+            .collect();
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("bvh"), layout: &layout, entries: &entries });
+        Ok(Self {
+            node_count: export.node_count(),
+            leaf_count: export.leaf_triangles.len(),
+            cut_triangle_count: export.cut_triangles.len(),
+            bytes,
+            bind_group,
+        })
+    }
+
+    /// Device memory of the BVH's buffers.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    pub(crate) fn bind_group(&self) -> &wgpu::BindGroup {
+        &self.bind_group
+    }
+}
+
+/// `bvh_cutouts` of `bvh.wgsl`: a header, the masks, the cut triangles, the coverage bytes.
+fn pack_cutouts(export: &BvhExport) -> Vec<u32> {
+    let masks = &export.cutout_masks;
+    let cut_offset = 4 + masks.len() * 6;
+    let coverage_offset = cut_offset + export.cut_triangles.len() * 7;
+    let mut words = vec![masks.len() as u32, cut_offset as u32, coverage_offset as u32, 0];
+    let mut coverage_words = 0usize;
+    for m in masks {
+        let first = if m.coverage.is_empty() { u32::MAX } else { coverage_words as u32 };
+        coverage_words += m.coverage.len().div_ceil(4);
+        words.extend([m.width, m.height, first, m.factor.to_bits(), m.cutoff.to_bits(), 0]);
+    }
+    for c in &export.cut_triangles {
+        words.push(c.mask);
+        for uv in c.uv {
+            words.extend([uv.x.to_bits(), uv.y.to_bits()]);
+        }
+    }
+    for m in masks {
+        for chunk in m.coverage.chunks(4) {
+            let mut b = [0u8; 4];
+            b[..chunk.len()].copy_from_slice(chunk);
+            words.push(u32::from_le_bytes(b));
+        }
+    }
+    words
+}
+
+/// The dispatch shape of `n` threads in workgroups of 64: (x, y) with x ≤ 65535.
+pub(crate) fn dispatch_2d(n: u32) -> (u32, u32) {
+    let groups = n.div_ceil(WORKGROUP).max(1);
+    let x = groups.min(MAX_GROUPS);
+    (x, groups.div_ceil(x))
+}
+
+/// The trace pipeline (`trace_rays.wgsl` over `bvh.wgsl`).
+pub struct GpuRayTrace {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+/// Rays and hits resident on the device, for repeated traces of one batch.
+pub struct GpuRayBatch {
+    pub ray_count: u32,
+    any_hit: bool,
+    rays: wgpu::Buffer,
+    hits: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+}
+
+impl GpuRayBatch {
+    /// Device memory of the rays and hits.
+    pub fn bytes(&self) -> u64 {
+        self.rays.size() + self.hits.size()
+    }
+}
+
+impl GpuRayTrace {
+    pub fn new(ctx: &GpuContext) -> Self {
+        let source = format!("{}\n{}", include_str!("shaders/bvh.wgsl"), include_str!("shaders/trace_rays.wgsl"));
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("trace_rays.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("trace rays"),
+            entries: &[uniform_entry(0), storage_entry(1, true), storage_entry(2, false)],
+        });
+        let bvh_layout = bvh_bind_group_layout(&ctx.device);
+        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("trace rays"),
+            bind_group_layouts: &[Some(&layout), Some(&bvh_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("trace_rays"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("trace_rays"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { layout, pipeline }
+    }
+
+    /// The most rays one batch may hold on this device (its largest storage binding).
+    pub fn max_batch_rays(ctx: &GpuContext) -> usize {
+        let limit = ctx.device.limits().max_storage_buffer_binding_size as usize;
+        (limit / std::mem::size_of::<GpuRay>()).min(u32::MAX as usize)
+    }
+
+    /// Uploads `rays` into a device-resident batch.
+    pub fn batch(&self, ctx: &GpuContext, rays: &[GpuRay], any_hit: bool) -> Result<GpuRayBatch, GpuError> {
+        if rays.len() > Self::max_batch_rays(ctx) {
+            return Err(GpuError::Input(format!(
+                "{} rays exceed this adapter's largest batch of {}",
+                rays.len(),
+                Self::max_batch_rays(ctx)
+            )));
+        }
+        let n = rays.len() as u32;
+        let (groups_x, _) = dispatch_2d(n);
+        let params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, _pad: 0 };
+        let device = &ctx.device;
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("trace params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let ray_bytes: &[u8] = if rays.is_empty() { &[0; 32] } else { bytemuck::cast_slice(rays) };
+        let ray_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("rays"),
+            contents: ray_bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        });
+        let hits = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ray hits"),
+            size: (rays.len().max(1) * std::mem::size_of::<GpuRayHit>()) as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("trace rays"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: ray_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: hits.as_entire_binding() },
+            ],
+        });
+        Ok(GpuRayBatch { ray_count: n, any_hit, rays: ray_buffer, hits, bind_group })
+    }
+
+    /// Records the trace of `batch` into `encoder`, with optional timestamps.
+    pub fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bvh: &GpuBvh,
+        batch: &GpuRayBatch,
+        timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
+    ) {
+        let (x, y) = dispatch_2d(batch.ray_count);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(if batch.any_hit { "trace any hit" } else { "trace closest hit" }),
+            timestamp_writes: timestamps,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &batch.bind_group, &[]);
+        pass.set_bind_group(1, bvh.bind_group(), &[]);
+        if batch.ray_count > 0 {
+            pass.dispatch_workgroups(x, y, 1);
+        }
+    }
+
+    /// Reads a traced batch's hits back.
+    pub fn download(&self, ctx: &GpuContext, batch: &GpuRayBatch) -> Result<Vec<GpuRayHit>, GpuError> {
+        let bytes = ctx.read_back(&batch.hits)?;
+        Ok(bytemuck::cast_slice::<u8, GpuRayHit>(&bytes)[..batch.ray_count as usize].to_vec())
+    }
+
+    /// Traces `rays` (closest hit, or any hit for shadow rays) and reads the hits back,
+    /// in batches that fit the adapter's storage bindings.
+    pub fn trace(&self, ctx: &GpuContext, bvh: &GpuBvh, rays: &[GpuRay], any_hit: bool) -> Result<Vec<GpuRayHit>, GpuError> {
+        let mut out = Vec::with_capacity(rays.len());
+        for chunk in rays.chunks(Self::max_batch_rays(ctx).max(1)) {
+            let batch = self.batch(ctx, chunk, any_hit)?;
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            self.record(&mut encoder, bvh, &batch, None);
+            ctx.queue.submit([encoder.finish()]);
+            out.extend(self.download(ctx, &batch)?);
+        }
+        Ok(out)
+    }
+}

@@ -1,0 +1,266 @@
+// Closest-hit and any-hit traversal of obvhs's compressed-wide BVH (CWBVH, Ylitie
+// et al. 2017, "Efficient Incoherent Ray Traversal on GPUs Through Compressed Wide
+// BVHs"), mirroring what the CPU runs: obvhs 0.4 `CwBvhNode::intersect_ray_basic`,
+// `CwBvh::ray_traverse` / `ray_traverse_miss` (the `traverse!` loop),
+// `RtTriangle::intersect` and `compute_barycentric`, and probegi-scene's alpha
+// cutouts (`bvh.rs` `Blas::intersect`, `texture.rs` `Footprint`).
+// The buffers are `probegi_scene::BvhExport`, uploaded by `probegi_wgpu::bvh_trace::GpuBvh`:
+//   bvh_nodes:     20 words per node (the `CwBvhNode` layout, documented on `BvhExport::node_words`);
+//   bvh_triangles: 4 × vec4 per leaf: (v0, triangle id bits), (e1, cutout index bits), (e2, 0), (ng, 0);
+//   bvh_cutouts:   [mask count, cut-triangle offset, coverage offset, 0,
+//                   per mask: width, height, coverage word offset, factor bits, cutoff bits, 0,
+//                   per cut triangle: mask, uv0.x, uv0.y, uv1.x, uv1.y, uv2.x, uv2.y,
+//                   coverage bytes packed 4 per word, little-endian].
+
+@group(1) @binding(0) var<storage, read> bvh_nodes: array<u32>;
+@group(1) @binding(1) var<storage, read> bvh_triangles: array<vec4<f32>>;
+@group(1) @binding(2) var<storage, read> bvh_cutouts: array<u32>;
+
+const BVH_NODE_WORDS: u32 = 20u;
+// obvhs `cwbvh::node::EPSILON`: the nodes' near plane.
+const BVH_NODE_EPSILON: f32 = 0.0001;
+const BVH_NO_HIT: u32 = 0xffffffffu;
+// A leaf test's miss (hits have t ≥ t_min ≥ 0). Rays carry finite t_max (the
+// host clamps +∞ to f32::MAX), so no shader value is infinite.
+const BVH_MISS: f32 = -1.0;
+// obvhs `CwBvh::validate` keeps trees shallower than this.
+const BVH_STACK_SIZE: u32 = 32u;
+
+struct BvhRay {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    inv_dir: vec3<f32>,
+    t_min: f32,
+    t_max: f32,
+    // obvhs `ray_get_octant_inv4`, one byte (the same in all four).
+    oct_inv: u32,
+};
+
+struct BvhHit {
+    t: f32,
+    // Leaf index (BVH_NO_HIT for a miss).
+    leaf: u32,
+    // Weights of vertices 1 and 2.
+    bary: vec2<f32>,
+};
+
+// obvhs `ray::safe_inverse` (f32::EPSILON); directions carry no negative zeros.
+fn bvh_safe_inverse(x: f32) -> f32 {
+    let eps = 1.1920929e-7;
+    if (abs(x) <= eps) {
+        return select(1.0, -1.0, x < 0.0) / eps;
+    }
+    return 1.0 / x;
+}
+
+fn bvh_make_ray(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32) -> BvhRay {
+    // + 0.0 clears negative zeros, as probegi-scene's `to_obvhs` does.
+    let dir = dir_in + vec3<f32>(0.0);
+    let inv = vec3<f32>(bvh_safe_inverse(dir.x), bvh_safe_inverse(dir.y), bvh_safe_inverse(dir.z));
+    var oct = 0u;
+    if (dir.x >= 0.0) { oct |= 4u; }
+    if (dir.y >= 0.0) { oct |= 2u; }
+    if (dir.z >= 0.0) { oct |= 1u; }
+    return BvhRay(origin, dir, inv, t_min, t_max, oct);
+}
+
+fn bvh_byte(w: u32, b: u32) -> u32 {
+    return (w >> (b * 8u)) & 0xffu;
+}
+
+// Byte `child` of the 8-byte field at word `field` of the node at word `base`.
+fn bvh_node_byte(base: u32, field: u32, child: u32) -> u32 {
+    return bvh_byte(bvh_nodes[base + field + child / 4u], child % 4u);
+}
+
+// obvhs `CwBvhNode::intersect_ray_basic` with `get_child_and_index_bits`: the hit
+// mask (inner children in the high byte, leaf primitives in the low 24 bits).
+fn bvh_intersect_node(node: u32, ray: BvhRay) -> u32 {
+    let base = node * BVH_NODE_WORDS;
+    let p = vec3<f32>(bitcast<f32>(bvh_nodes[base]), bitcast<f32>(bvh_nodes[base + 1u]), bitcast<f32>(bvh_nodes[base + 2u]));
+    let ew = bvh_nodes[base + 3u];
+    let extent = vec3<f32>(
+        bitcast<f32>((ew & 0xffu) << 23u),
+        bitcast<f32>(((ew >> 8u) & 0xffu) << 23u),
+        bitcast<f32>(((ew >> 16u) & 0xffu) << 23u),
+    );
+    let adj_dir_inv = extent * ray.inv_dir;
+    let adj_origin = (p - ray.origin) * ray.inv_dir;
+    let neg = ray.dir < vec3<f32>(0.0);
+    var hit_mask = 0u;
+    for (var child = 0u; child < 8u; child++) {
+        let child_meta = bvh_node_byte(base, 6u, child);
+        if (child_meta == 0u) {
+            continue; // empty slot
+        }
+        let lo = vec3<f32>(f32(bvh_node_byte(base, 8u, child)), f32(bvh_node_byte(base, 12u, child)), f32(bvh_node_byte(base, 16u, child)));
+        let hi = vec3<f32>(f32(bvh_node_byte(base, 10u, child)), f32(bvh_node_byte(base, 14u, child)), f32(bvh_node_byte(base, 18u, child)));
+        let t_lo = select(lo, hi, neg) * adj_dir_inv + adj_origin;
+        let t_hi = select(hi, lo, neg) * adj_dir_inv + adj_origin;
+        let t_near = max(max(max(t_lo.x, t_lo.y), t_lo.z), BVH_NODE_EPSILON);
+        let t_far = min(min(min(t_hi.x, t_hi.y), t_hi.z), ray.t_max);
+        if (t_near <= t_far) {
+            // Inner children have child_meta 24..31: bits 3 and 4 both set.
+            let inner = ((child_meta & (child_meta << 1u)) & 0x10u) != 0u;
+            let bit_index = (child_meta ^ select(0u, ray.oct_inv, inner)) & 0x1fu;
+            let child_bits = (child_meta >> 5u) & 7u;
+            hit_mask |= child_bits << bit_index;
+        }
+    }
+    return hit_mask;
+}
+
+// probegi-scene `texture.rs` `Footprint::at` + `blend` on a coverage plane.
+fn bvh_coverage(mask: u32, uv_in: vec2<f32>) -> f32 {
+    let m = 4u + mask * 6u;
+    let width = bvh_cutouts[m];
+    let height = bvh_cutouts[m + 1u];
+    let words = bvh_cutouts[m + 2u];
+    let factor = bitcast<f32>(bvh_cutouts[m + 3u]);
+    if (words == BVH_NO_HIT) {
+        return factor; // constant coverage 1
+    }
+    var uv = uv_in;
+    var fx = 0.0;
+    var fy = 0.0;
+    var x0 = 0i;
+    var y0 = 0i;
+    if (all(abs(uv) <= vec2<f32>(3.4028235e38))) {
+        uv = uv - floor(uv);
+        let x = uv.x * f32(width) - 0.5;
+        let y = uv.y * f32(height) - 0.5;
+        let fx0 = floor(x);
+        let fy0 = floor(y);
+        fx = x - fx0;
+        fy = y - fy0;
+        x0 = i32(fx0);
+        y0 = i32(fy0);
+    }
+    let w = i32(width);
+    let h = i32(height);
+    let c0 = u32(((x0 % w) + w) % w);
+    let c1 = u32((((x0 + 1) % w) + w) % w);
+    let r0 = u32(((y0 % h) + h) % h) * width;
+    let r1 = u32((((y0 + 1) % h) + h) % h) * width;
+    let base = bvh_cutouts[2] + words;
+    let t = array<u32, 4>(r0 + c0, r0 + c1, r1 + c0, r1 + c1);
+    var v: array<f32, 4>;
+    for (var k = 0u; k < 4u; k++) {
+        v[k] = f32(bvh_byte(bvh_cutouts[base + t[k] / 4u], t[k] % 4u)) * (1.0 / 255.0);
+    }
+    let c = (v[0] * (1.0 - fx) + v[1] * fx) * (1.0 - fy) + (v[2] * (1.0 - fx) + v[3] * fx) * fy;
+    return factor * c;
+}
+
+// Distance to leaf `leaf` along `ray` within [t_min, t_max] (obvhs
+// `RtTriangle::intersect`, both faces), BVH_MISS for a miss or a cut-out point;
+// the barycentrics in `bary`.
+fn bvh_intersect_leaf(leaf: u32, ray: BvhRay, bary: ptr<function, vec2<f32>>) -> f32 {
+    let a = bvh_triangles[leaf * 4u];
+    let b = bvh_triangles[leaf * 4u + 1u];
+    let e2 = bvh_triangles[leaf * 4u + 2u].xyz;
+    let ng = bvh_triangles[leaf * 4u + 3u].xyz;
+    let v0 = a.xyz;
+    let e1 = b.xyz;
+    let det = dot(ng, ray.dir);
+    if (det == 0.0) {
+        return BVH_MISS;
+    }
+    let c = v0 - ray.origin;
+    let r = cross(ray.dir, c);
+    let inv_det = 1.0 / det;
+    let u = dot(r, e2) * inv_det;
+    let v = dot(r, e1) * inv_det;
+    let w = 1.0 - u - v;
+    // Sign bits, so that −0.0 misses as on the CPU.
+    if (((bitcast<u32>(u) | bitcast<u32>(v) | bitcast<u32>(w)) & 0x80000000u) != 0u) {
+        return BVH_MISS;
+    }
+    let t = dot(ng, c) * inv_det;
+    if (!(t >= ray.t_min && t <= ray.t_max)) {
+        return BVH_MISS;
+    }
+    let cut = bitcast<u32>(b.w);
+    if (cut != BVH_NO_HIT) {
+        let o = bvh_cutouts[1] + cut * 7u;
+        let mask = bvh_cutouts[o];
+        let uv0 = vec2<f32>(bitcast<f32>(bvh_cutouts[o + 1u]), bitcast<f32>(bvh_cutouts[o + 2u]));
+        let uv1 = vec2<f32>(bitcast<f32>(bvh_cutouts[o + 3u]), bitcast<f32>(bvh_cutouts[o + 4u]));
+        let uv2 = vec2<f32>(bitcast<f32>(bvh_cutouts[o + 5u]), bitcast<f32>(bvh_cutouts[o + 6u]));
+        let uv = uv0 * (1.0 - u - v) + uv1 * u + uv2 * v;
+        let cutoff = bitcast<f32>(bvh_cutouts[4u + mask * 6u + 4u]);
+        if (!(bvh_coverage(mask, uv) >= cutoff)) {
+            return BVH_MISS;
+        }
+    }
+    *bary = vec2<f32>(u, v);
+    return t;
+}
+
+// The closest hit (`any_hit` false) or the first hit found (`any_hit` true, for
+// shadow rays) of `ray`: obvhs's `traverse!` loop with an explicit stack.
+fn bvh_trace(ray_in: BvhRay, any_hit: bool) -> BvhHit {
+    var ray = ray_in;
+    var hit = BvhHit(ray_in.t_max, BVH_NO_HIT, vec2<f32>(0.0));
+    if (arrayLength(&bvh_nodes) < BVH_NODE_WORDS) {
+        return hit;
+    }
+    var stack: array<vec2<u32>, BVH_STACK_SIZE>;
+    var sp = 0u;
+    var current = vec2<u32>(0u, 0x80000000u);
+    var prims = vec2<u32>(0u, 0u);
+    loop {
+        while (prims.y != 0u) {
+            let local = firstLeadingBit(prims.y);
+            prims.y &= ~(1u << local);
+            let leaf = prims.x + local;
+            var bary = vec2<f32>(0.0);
+            let t = bvh_intersect_leaf(leaf, ray, &bary);
+            if (t >= 0.0 && t < ray.t_max) {
+                hit = BvhHit(t, leaf, bary);
+                ray.t_max = t;
+                if (any_hit) {
+                    return hit;
+                }
+            }
+        }
+        prims = vec2<u32>(0u, 0u);
+        if ((current.y & 0xff000000u) != 0u) {
+            let hits_imask = current.y;
+            let offset = firstLeadingBit(hits_imask);
+            current.y &= ~(1u << offset);
+            if ((current.y & 0xff000000u) != 0u && sp < BVH_STACK_SIZE) {
+                stack[sp] = current;
+                sp++;
+            }
+            let slot = (offset - 24u) ^ ray.oct_inv;
+            let relative = countOneBits(hits_imask & ~(0xffffffffu << slot));
+            let node = current.x + relative;
+            let hitmask = bvh_intersect_node(node, ray);
+            let base = node * BVH_NODE_WORDS;
+            current = vec2<u32>(bvh_nodes[base + 4u], (hitmask & 0xff000000u) | (bvh_nodes[base + 3u] >> 24u));
+            prims = vec2<u32>(bvh_nodes[base + 5u], hitmask & 0x00ffffffu);
+        } else {
+            current = vec2<u32>(0u, 0u);
+        }
+        if (prims.y == 0u && (current.y & 0xff000000u) == 0u) {
+            if (sp == 0u) {
+                break;
+            }
+            sp--;
+            current = stack[sp];
+        }
+    }
+    return hit;
+}
+
+// The scene triangle of a leaf.
+fn bvh_triangle_id(leaf: u32) -> u32 {
+    return bitcast<u32>(bvh_triangles[leaf * 4u].w);
+}
+
+// Whether `ray` meets the back (clockwise) side of leaf `leaf`: geometric normal ·
+// direction > 0, with obvhs's ng the negated counter-clockwise normal.
+fn bvh_backface(leaf: u32, dir: vec3<f32>) -> bool {
+    return dot(bvh_triangles[leaf * 4u + 3u].xyz, dir) < 0.0;
+}
