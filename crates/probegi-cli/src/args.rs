@@ -218,6 +218,11 @@ pub struct RenderArgs {
     /// Playback rate of the --gif preview.
     #[arg(long, default_value_t = 25.0, requires = "gif")]
     pub gif_fps: f32,
+    /// Where the DDGI probe rays are traced: `cpu`, or `wgpu` (the WGSL CWBVH
+    /// traversal on a GPU, or Mesa's lavapipe; static scenes; shading, blend and
+    /// the camera image stay on the CPU for now).
+    #[arg(long, value_enum, default_value_t = crate::gpu_backend::Backend::Cpu)]
+    pub backend: crate::gpu_backend::Backend,
 }
 
 #[derive(Args, Debug)]

@@ -52,6 +52,7 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
             direct: DirectSettings::default(),
             show_probes: false,
             camera_path: Vec::new(),
+            probe_tracer: None,
         };
         render_frames(&scene, &bvh, &camera, &settings, |_, _| {}).stats
     };

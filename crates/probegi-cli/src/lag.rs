@@ -98,6 +98,7 @@ fn render_sequence(
         direct: DirectSettings::default(),
         show_probes: false,
         camera_path: Vec::new(),
+        probe_tracer: None,
     };
     let mut out = vec![];
     render_frames(scene, &bvh, &rays, &settings, |f, image| {

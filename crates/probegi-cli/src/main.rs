@@ -4,6 +4,7 @@
 mod args;
 mod atlas_dump;
 mod bench;
+mod gpu_backend;
 mod lag;
 
 use std::path::Path;
@@ -15,6 +16,7 @@ use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+use probegi_cpu::probe_trace::{ProbeBatchTracer, ProbeTracerHandle};
 use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 
@@ -210,6 +212,17 @@ fn render(args: &RenderArgs) -> Result<()> {
     }
     // Static geometry in one BVH, moving objects instanced (see probegi_scene::bvh).
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let gpu = match args.backend {
+        gpu_backend::Backend::Cpu => None,
+        gpu_backend::Backend::Wgpu => {
+            if !matches!(gi, GiMethod::Ddgi(_) | GiMethod::DdgiSet(_)) {
+                bail!("--backend wgpu traces the DDGI probe rays on the GPU: it needs --gi ddgi");
+            }
+            let g = gpu_backend::WgpuProbeTracer::new(&bvh, &scene.name)?;
+            eprintln!("probe rays traced on {}", g.adapter_name());
+            Some(std::sync::Arc::new(g))
+        }
+    };
     let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
     let camera_path = camera_path(&scene, &args.scene, args.frames);
     let settings = RenderSettings {
@@ -221,6 +234,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         direct: DirectSettings { direct_area_samples: args.area_samples, ..Default::default() },
         show_probes: args.show_probes,
         camera_path,
+        probe_tracer: gpu.clone().map(|g| ProbeTracerHandle(g as std::sync::Arc<dyn ProbeBatchTracer>)),
     };
     let bar = progress(args.frames as u64, "render");
     let start = Instant::now();
@@ -273,6 +287,9 @@ fn render(args: &RenderArgs) -> Result<()> {
     }
     let (image, stats) = (out.image, out.stats);
     bar.finish_and_clear();
+    if let Some(e) = &stats.error {
+        bail!("render stopped: {e}");
+    }
     let elapsed = start.elapsed();
     write_radiance(&args.out, &image)?;
     if let (Some(dir), Some(set)) = (&args.dump_atlases, &out.ddgi) {
@@ -295,6 +312,8 @@ fn render(args: &RenderArgs) -> Result<()> {
     );
     if let Some(path) = &args.stats {
         let json = serde_json::json!({
+            "backend": format!("{:?}", args.backend).to_lowercase(),
+            "adapter": gpu.as_ref().map(|g| g.adapter_name().to_string()),
             "frames": stats.frames,
             "pass_ms": stats.pass_ms,
             "rays_traced": stats.rays_traced,

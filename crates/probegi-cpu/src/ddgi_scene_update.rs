@@ -15,7 +15,9 @@ use crate::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, UpdateStep};
 use crate::direct::DirectLighting;
 use crate::probe_ray_gen::probe_ray_directions;
 use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
-use crate::probe_trace::{Surfel, surfel_hit, trace_probe_batch, trace_probe_distances};
+use crate::probe_trace::{
+    ProbeBatchTracer, Surfel, surfel_hit, surfels_from_hits, trace_probe_batch, trace_probe_distances,
+};
 
 impl DdgiFieldSet {
     /// One field update of every volume through the seam. Returns the rays traced
@@ -29,7 +31,26 @@ impl DdgiFieldSet {
         frame: u32,
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) -> u64 {
+        // The CPU tracer cannot fail.
+        self.update_traced_by(scene, tracer, None, direct, seed, frame, pass_ms).unwrap_or(0)
+    }
+
+    /// [`DdgiFieldSet::update`] with the probe ray batches traced by `batch_tracer`
+    /// when given (a GPU trace); shadow rays of the shading still go to `tracer`
+    /// through `direct`. An error of the batch tracer ends the update with it.
+    #[allow(clippy::too_many_arguments)]
+    pub fn update_traced_by(
+        &mut self,
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        batch_tracer: Option<&dyn ProbeBatchTracer>,
+        direct: &DirectLighting<'_>,
+        seed: u64,
+        frame: u32,
+        pass_ms: &mut BTreeMap<&'static str, f64>,
+    ) -> Result<u64, String> {
         let mut traced = 0;
+        let mut batch_hits = Vec::new();
         let mut surfels: Vec<Surfel> = Vec::new();
         let mut hits: Vec<ProbeRayHit> = Vec::new();
         let mut radiance: Vec<Vec3> = Vec::new();
@@ -51,7 +72,14 @@ impl DdgiFieldSet {
                     let init = self.ray_batch().static_geometry_only();
                     // Initialisation sees static geometry only: moving objects wake probes instead.
                     let tr: &dyn RayTracer = if init { static_part.as_deref().unwrap_or(tracer) } else { tracer };
-                    traced += trace_probe_batch(scene, tr, self.ray_batch(), &mut surfels);
+                    traced += match batch_tracer {
+                        Some(bt) => {
+                            bt.closest_hits(self.ray_batch(), init, &mut batch_hits)?;
+                            surfels_from_hits(scene, self.ray_batch(), &batch_hits, &mut surfels);
+                            self.ray_batch().len() as u64
+                        }
+                        None => trace_probe_batch(scene, tr, self.ray_batch(), &mut surfels),
+                    };
                     hits.clear();
                     hits.extend(surfels.iter().map(surfel_hit));
                     step = self.submit_hits(&hits).unwrap_or_else(fail);
@@ -88,7 +116,7 @@ impl DdgiFieldSet {
         for (k, v) in own_ms {
             *pass_ms.entry(k).or_default() += v;
         }
-        traced
+        Ok(traced)
     }
 }
 

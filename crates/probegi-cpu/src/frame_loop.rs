@@ -71,6 +71,9 @@ pub struct RenderSettings {
     /// The camera of each frame (a keyframed flythrough); empty = the fixed camera
     /// passed to [`render_frames`]. Frames past the end hold the last entry.
     pub camera_path: Vec<CameraRays>,
+    /// Who traces the DDGI probe ray batches: `None` for the CPU tracer, or a
+    /// [`crate::probe_trace::ProbeBatchTracer`] (the CLI's `--backend wgpu`).
+    pub probe_tracer: Option<crate::probe_trace::ProbeTracerHandle>,
 }
 
 /// Measurements of a render; serialised by the CLI's `--stats`.
@@ -106,6 +109,9 @@ pub struct RenderStats {
     /// surface whose diffuse albedo is non-zero but get no indirect light from the
     /// field (a black wall or an unreadable probe shows up here).
     pub frame_unlit_fraction: Vec<f32>,
+    /// Set when the render stopped early: a probe batch tracer failed (a GPU
+    /// device lost, say). The image is then that of the frames before.
+    pub error: Option<String>,
 }
 
 pub struct RenderOutput {
@@ -234,7 +240,14 @@ pub fn render_frames(
             if animated {
                 stats.probes_woken += detector.observe(scene, set).probes_woken as u64;
             }
-            stats.rays_traced += set.update(scene, tracer, direct, settings.seed, f, &mut pass_totals);
+            let batch_tracer = settings.probe_tracer.as_ref().map(|h| &*h.0);
+            match set.update_traced_by(scene, tracer, batch_tracer, direct, settings.seed, f, &mut pass_totals) {
+                Ok(rays) => stats.rays_traced += rays,
+                Err(e) => {
+                    stats.error = Some(format!("frame {f}: probe trace: {e}"));
+                    break;
+                }
+            }
         }
 
         let t = Instant::now();

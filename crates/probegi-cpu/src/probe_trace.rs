@@ -6,7 +6,7 @@
 //! pass.
 
 use glam::Vec3;
-use probegi_scene::{Ray, RayTracer, Scene, SurfacePoint};
+use probegi_scene::{Ray, RayHit, RayTracer, Scene, SurfacePoint};
 use rayon::prelude::*;
 
 use crate::ddgi_field_set::{ProbeRayBatch, ProbeRayHit};
@@ -42,6 +42,41 @@ pub fn trace_probe_batch(
         }
     });
     batch.len() as u64
+}
+
+/// Traces a whole probe ray batch somewhere else than the CPU tracer: the CLI's
+/// `--backend wgpu` plugs in `probegi-wgpu`'s compute-shader CWBVH traversal
+/// here. The hits must be what [`RayTracer::closest_hit`] returns for the ray
+/// `Ray::segment(origin, direction, max_distance)` (both faces).
+pub trait ProbeBatchTracer: Sync {
+    /// Closest hits of every ray of `batch`, in batch order, into `hits` (resized).
+    /// `static_only`: an initialisation round, which must see static geometry only.
+    fn closest_hits(&self, batch: &ProbeRayBatch, static_only: bool, hits: &mut Vec<Option<RayHit>>) -> Result<(), String>;
+}
+
+/// Shareable handle of a [`ProbeBatchTracer`] for render settings.
+#[derive(Clone)]
+pub struct ProbeTracerHandle(pub std::sync::Arc<dyn ProbeBatchTracer>);
+
+impl std::fmt::Debug for ProbeTracerHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ProbeTracerHandle")
+    }
+}
+
+/// The surfels of `hits` (one per batch ray, as a [`ProbeBatchTracer`] returns them).
+pub fn surfels_from_hits(scene: &Scene, batch: &ProbeRayBatch, hits: &[Option<RayHit>], surfels: &mut Vec<Surfel>) {
+    surfels.clear();
+    surfels.resize(batch.len(), Surfel::default());
+    surfels.par_chunks_mut(256).enumerate().for_each(|(c, out)| {
+        for (k, s) in out.iter_mut().enumerate() {
+            let r = c * 256 + k;
+            *s = match hits[r] {
+                Some(hit) => Surfel { surface: Some(scene.surface_point(&hit)), distance: hit.t },
+                None => Surfel { surface: None, distance: batch.max_distances_m[r] },
+            };
+        }
+    });
 }
 
 /// The seam's record of a surfel: signed distance and facing normal.

@@ -28,6 +28,7 @@ fn direct(scene: &Scene, camera: &Camera, size: u32, frames: u32) -> Image {
         direct: DirectSettings::default(),
         show_probes: false,
         camera_path: Vec::new(),
+        probe_tracer: None,
     };
     render_frames(scene, &bvh, &rays, &settings, |_, _| {}).image
 }

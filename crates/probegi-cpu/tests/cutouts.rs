@@ -50,6 +50,7 @@ fn frames(scene: &Scene, gi: GiMethod, n: u32) -> Image {
         direct: DirectSettings::default(),
         show_probes: false,
         camera_path: Vec::new(),
+        probe_tracer: None,
     };
     render_frames(scene, &bvh, &rays, &settings, |_, _| {}).image
 }

@@ -28,6 +28,7 @@ fn render(scene: &Scene, size: u32, frames: u32, gi: GiMethod) -> RenderOutput {
         direct: DirectSettings::default(),
         show_probes: false,
         camera_path: Vec::new(),
+        probe_tracer: None,
     };
     render_frames(scene, &bvh, &camera, &settings, |_, _| {})
 }

@@ -30,6 +30,7 @@ fn ddgi_render(scene: &Scene, frames: u32, rays: u32, sequence: &mut Vec<Image>)
         direct: DirectSettings::default(),
         show_probes: false,
         camera_path: Vec::new(),
+        probe_tracer: None,
     };
     render_frames(scene, &bvh, &camera, &settings, |_, image| sequence.push(image())).image
 }

@@ -64,6 +64,7 @@ fn second_order_glossy_brings_the_glossy_box_closer_to_the_reference() {
             direct: DirectSettings::default(),
             show_probes: false,
             camera_path: Vec::new(),
+            probe_tracer: None,
         };
         render_frames(&scene, &bvh, &cam, &rs, |_, _| {}).image
     };

@@ -70,6 +70,7 @@ fn leak_weights_bring_the_interior_monotonically_closer_to_the_reference() {
             direct: DirectSettings::default(),
             show_probes: false,
             camera_path: Vec::new(),
+            probe_tracer: None,
         };
         let img = render_frames(&scene, &bvh, &camera, &rs, |_, _| {}).image;
         let f = flip(&reference, &img);

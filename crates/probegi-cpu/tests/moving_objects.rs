@@ -27,6 +27,7 @@ fn render(scene: &Scene, frames: u32, volume: DdgiVolumeSettings, mut each: impl
         direct: DirectSettings::default(),
         show_probes: false,
         camera_path: Vec::new(),
+        probe_tracer: None,
     };
     render_frames(scene, &bvh, &camera, &settings, |f, image| each(f, image()))
 }

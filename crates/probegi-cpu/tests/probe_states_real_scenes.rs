@@ -32,6 +32,7 @@ fn render(scene: &Scene, volume: DdgiVolumeSettings) -> RenderOutput {
         direct: DirectSettings::default(),
         show_probes: false,
         camera_path: Vec::new(),
+        probe_tracer: None,
     };
     render_frames(scene, &bvh, &camera, &settings, |_, _| {})
 }

@@ -25,6 +25,7 @@ fn render_with(scene: &Scene, camera: &Camera, size: u32, frames: u32, gi: GiMet
         direct: DirectSettings::default(),
         show_probes: false,
         camera_path: Vec::new(),
+        probe_tracer: None,
     };
     render_frames(scene, &bvh, &rays, &settings, |_, _| {})
 }

@@ -269,6 +269,7 @@ fn cascades_converge_in_the_furnace_and_trace_in_one_batch() {
         direct: DirectSettings::default(),
         show_probes: false,
         camera_path: Vec::new(),
+        probe_tracer: None,
     };
     let out = render_frames(&scene, &bvh, &rays, &settings, |_, _| {});
     let mean = out.image.mean();

@@ -169,7 +169,7 @@ impl GpuBvh {
             init("bvh cutouts", bytemuck::cast_slice(&cutouts)),
         ];
         let bytes = buffers.iter().map(|b| b.size()).sum();
-        let limit = device.limits().max_storage_buffer_binding_size as u64;
+        let limit = device.limits().max_storage_buffer_binding_size;
         if let Some(b) = buffers.iter().find(|b| b.size() > limit) {
             return Err(GpuError::Input(format!(
                 "the BVH needs a {} MiB buffer; this adapter binds at most {} MiB",
