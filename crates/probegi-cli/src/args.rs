@@ -286,6 +286,11 @@ pub struct BenchArgs {
     /// DDGI field update at the same probe count (`--rays`, default 256) on the scene's camera.
     #[arg(long, value_enum, default_value_t = GiArg::None)]
     pub gi: GiArg,
+    /// DDGI sweep: `wgpu` traces the probe rays on the GPU (the field update's
+    /// trace through the seam) and times the GPU passes alone (trace, blend,
+    /// border) with timestamp queries; `cpu` runs everything on the CPU.
+    #[arg(long, value_enum, default_value_t = crate::gpu_backend::Backend::Cpu)]
+    pub backend: crate::gpu_backend::Backend,
     /// DDGI sweep: frames timed per configuration (after one warm-up frame).
     #[arg(long, default_value_t = 2)]
     pub frames: u32,

@@ -117,17 +117,24 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     let bounds = scene.bounds().context("scene has no geometry")?;
     let bvh = BvhTracer::for_scene(&scene, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let gpu = match args.backend {
+        crate::gpu_backend::Backend::Cpu => None,
+        crate::gpu_backend::Backend::Wgpu => Some(crate::gpu_backend::WgpuProbeTracer::new(&bvh, &scene.name)?),
+    };
+    let batch_tracer = gpu.as_ref().map(|g| g as &dyn probegi_cpu::probe_trace::ProbeBatchTracer);
     let mut rows = Vec::new();
     for grid in &grids {
         for &rays in &ray_counts {
             let settings = bench_volume_settings(args, *grid, rays)?;
             let mut set = DdgiFieldSet::single(DdgiVolume::new(settings.clone(), bounds));
             let mut warmup = BTreeMap::new();
-            set.update(&scene, &bvh, &direct, args.seed, 0, &mut warmup);
+            set.update_traced_by(&scene, &bvh, batch_tracer, &direct, args.seed, 0, &mut warmup)
+                .map_err(anyhow::Error::msg)?;
             let init_ms = warmup.get("probe_init").copied().unwrap_or(0.0);
             let mut pass_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
             for f in 1..=args.frames {
-                set.update(&scene, &bvh, &direct, args.seed, f, &mut pass_ms);
+                set.update_traced_by(&scene, &bvh, batch_tracer, &direct, args.seed, f, &mut pass_ms)
+                    .map_err(anyhow::Error::msg)?;
             }
             let volume = &set.volumes()[0];
             for v in pass_ms.values_mut() {
@@ -150,6 +157,10 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
             let bare_s = t.elapsed().as_secs_f64();
             let bare_rays = batch.len() as f64;
             let get = |k: &str| pass_ms.get(k).copied().unwrap_or(0.0);
+            let gpu_row = match &gpu {
+                Some(g) => crate::gpu_backend::time_gpu_passes(g, volume, batch, args.repeat.max(1))?,
+                None => json!(null),
+            };
             rows.push(json!({
                 "probes": grid,
                 "probe_count": volume.grid.probe_count(),
@@ -167,11 +178,14 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
                 "bare_hit_fraction": hits as f64 / bare_rays,
                 "trace_mrays_per_s": n / (get("trace") * 1e-3) / 1e6,
                 "shade_blend_border_over_trace": (get("shade") + get("blend") + get("border")) / get("trace"),
+                "gpu": gpu_row,
             }));
         }
     }
     Ok(json!({
         "scene": args.scene,
+        "backend": format!("{:?}", args.backend).to_lowercase(),
+        "adapter": gpu.as_ref().map(|g| g.adapter_name().to_string()),
         "triangles": scene.drawn_triangle_count(),
         "stored_triangles": scene.stored_triangle_count(),
         "instances": scene.instances.len(),

@@ -41,17 +41,89 @@ impl WgpuProbeTracer {
         &self.ctx.adapter_name
     }
 
-    pub fn context(&self) -> &GpuContext {
-        &self.ctx
-    }
+}
 
-    pub fn gpu_bvh(&self) -> &GpuBvh {
-        &self.bvh
+/// `bench --backend wgpu`: the GPU passes alone on one volume's last update batch,
+/// best of `repeat` submits: the trace (closest hit of every batch ray), then
+/// blend and border over every probe of the volume (an upper bound: sleeping
+/// probes would skip theirs), with per-pass times from timestamp queries where
+/// the adapter has them (wall-clock around the submit otherwise), device memory
+/// per probe and per probe ray.
+pub fn time_gpu_passes(
+    gpu: &WgpuProbeTracer,
+    volume: &probegi_cpu::ddgi::DdgiVolume,
+    batch: &ProbeRayBatch,
+    repeat: u32,
+) -> Result<serde_json::Value> {
+    use probegi_wgpu::gpu_timer::GpuTimer;
+    use probegi_wgpu::probe_blend::{BlendFrame, GpuProbeBlend, GpuVolumeAtlases, PASS_NAMES};
+    let ctx = &gpu.ctx;
+    let s = &volume.settings;
+    let probes = volume.grid.probe_count();
+    let n = s.probe_rays_per_probe as usize;
+    let rays = batch_rays(batch);
+    let traced = gpu.trace.batch(ctx, &rays, false)?;
+    let atlases = GpuVolumeAtlases::new(ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
+    atlases.upload(ctx, &volume.irradiance, &volume.distance);
+    let dirs: Vec<glam::Vec3> = batch.directions.iter().take(n).copied().collect();
+    let radiance = vec![glam::Vec3::splat(0.5); probes * n];
+    let distance: Vec<f32> = (0..probes * n).map(|i| 1.0 + (i % 7) as f32).collect();
+    let hysteresis = vec![Some(s.probe_hysteresis); probes];
+    let frame = BlendFrame {
+        settings: s,
+        ray_dirs: &dirs,
+        ray_radiance: &radiance,
+        ray_distance: &distance,
+        probe_hysteresis: &hysteresis,
+        irradiance_scale: 1.0,
+        visibility_scale: 1.0,
+        distance_clamp_m: volume.distance_clamp_m(),
+    };
+    let blend = GpuProbeBlend::new(ctx);
+    let bindings = blend.prepare(ctx, &atlases, &frame)?;
+    let timer = GpuTimer::new(ctx, 5);
+    let names = ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], PASS_NAMES[3]];
+    let mut best: Option<Vec<f64>> = None;
+    let mut wall_trace_ms = f64::INFINITY;
+    for _ in 0..repeat {
+        let t = std::time::Instant::now();
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        gpu.trace.record(&mut encoder, &gpu.bvh, &traced, timer.writes(0));
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait()?;
+        wall_trace_ms = wall_trace_ms.min(t.elapsed().as_secs_f64() * 1e3);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        blend.record(&mut encoder, &bindings, Some((&timer, 1)));
+        timer.resolve(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait()?;
+        if let Some(ms) = timer.read_ms(ctx)? {
+            best = Some(match best {
+                None => ms,
+                Some(b) => b.iter().zip(&ms).map(|(a, b)| a.min(*b)).collect(),
+            });
+        }
     }
-
-    pub fn ray_trace(&self) -> &GpuRayTrace {
-        &self.trace
-    }
+    let ray_count = rays.len() as f64;
+    let (pass_ms, source) = match &best {
+        Some(ms) => (names.iter().zip(ms).map(|(k, v)| (k.to_string(), *v)).collect(), "timestamp queries"),
+        None => (std::collections::BTreeMap::from([("trace".to_string(), wall_trace_ms)]), "wall clock (no timestamps)"),
+    };
+    let trace_ms = pass_ms["trace"];
+    let all_ms: f64 = pass_ms.values().sum();
+    let atlas_bytes_per_probe = (probegi_core::probe_atlas::tile_texel_count(s.probe_irradiance_texels) * 16
+        + probegi_core::probe_atlas::tile_texel_count(s.probe_distance_texels) * 8) as f64;
+    Ok(serde_json::json!({
+        "adapter": gpu.adapter_name(),
+        "pass_ms": pass_ms,
+        "pass_ms_source": source,
+        "trace_mrays_per_s": ray_count / (trace_ms * 1e-3) / 1e6,
+        "trace_blend_border_mrays_per_s": ray_count / (all_ms * 1e-3) / 1e6,
+        "not_on_gpu": ["shade (CPU)", "classification and relocation (CPU)"],
+        "bvh_mib": gpu.bvh.bytes() as f64 / (1u64 << 20) as f64,
+        "device_bytes_per_probe": atlas_bytes_per_probe,
+        "device_bytes_per_probe_ray": traced.bytes() as f64 / ray_count.max(1.0),
+    }))
 }
 
 /// A batch's rays as the GPU trace reads them.

@@ -77,6 +77,11 @@ impl GpuContext {
         Self { device, queue, adapter_name: adapter_name.into(), timestamps }
     }
 
+    /// Waits until every submitted command has run.
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Device(e.to_string()))
+    }
+
     /// Copies a `COPY_SRC` buffer into a staging buffer and reads it back.
     pub(crate) fn read_back(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
         let staging = self.device.create_buffer(&wgpu::BufferDescriptor {

@@ -16,6 +16,7 @@
 
 pub mod bvh_trace;
 pub mod gpu_context;
+pub mod gpu_timer;
 pub mod probe_blend;
 
 pub use gpu_context::{GpuContext, GpuError};

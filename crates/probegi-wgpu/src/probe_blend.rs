@@ -198,6 +198,21 @@ impl GpuProbeBlend {
 
     /// Blends `frame` into `atlases` and refreshes the borders of the probes that updated.
     pub fn run(&self, ctx: &GpuContext, atlases: &GpuVolumeAtlases, frame: &BlendFrame<'_>) -> Result<(), GpuError> {
+        let bindings = self.prepare(ctx, atlases, frame)?;
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        self.record(&mut encoder, &bindings, None);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(())
+    }
+
+    /// Uploads `frame`'s inputs and binds them with `atlases`.
+    pub fn prepare(
+        &self,
+        ctx: &GpuContext,
+        atlases: &GpuVolumeAtlases,
+        frame: &BlendFrame<'_>,
+    ) -> Result<BlendBindings, GpuError> {
         let probes = atlases.probe_count;
         let rays = frame.ray_dirs.len();
         if frame.ray_radiance.len() != probes * rays || frame.ray_distance.len() != probes * rays {
@@ -261,16 +276,38 @@ impl GpuProbeBlend {
         let groups = |texels: u32| texels.div_ceil(WORKGROUP);
         let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
         let dispatches = [groups(ni * ni), groups(nd * nd), groups((ni + 2) * (ni + 2)), groups((nd + 2) * (nd + 2))];
-        let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        for (pipeline, x) in self.pipelines.iter().zip(dispatches) {
-            // One pass per dispatch: the borders read what the blends wrote.
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(x, per_row, rows);
-        }
-        ctx.queue.submit([encoder.finish()]);
-        ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Device(e.to_string()))?;
-        Ok(())
+        Ok(BlendBindings { bind_group, dispatches, per_row, rows })
     }
+
+    /// Records the four passes (blend irradiance, blend distance, border
+    /// irradiance, border distance); with `timer`, pass k writes its timestamps
+    /// at `timer.1 + k`.
+    pub fn record(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bindings: &BlendBindings,
+        timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
+    ) {
+        for (k, (pipeline, x)) in self.pipelines.iter().zip(bindings.dispatches).enumerate() {
+            // One pass per dispatch: the borders read what the blends wrote.
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(PASS_NAMES[k]),
+                timestamp_writes: timer.and_then(|(t, first)| t.writes(first + k as u32)),
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bindings.bind_group, &[]);
+            pass.dispatch_workgroups(x, bindings.per_row, bindings.rows);
+        }
+    }
+}
+
+/// The names of [`GpuProbeBlend::record`]'s passes, in order.
+pub const PASS_NAMES: [&str; 4] = ["blend_irradiance", "blend_distance", "border_irradiance", "border_distance"];
+
+/// One frame's blend inputs on the device, bound to a volume's atlases.
+pub struct BlendBindings {
+    bind_group: wgpu::BindGroup,
+    dispatches: [u32; 4],
+    per_row: u32,
+    rows: u32,
 }
