@@ -68,13 +68,10 @@ fn bvh_byte(w: u32, b: u32) -> u32 {
     return (w >> (b * 8u)) & 0xffu;
 }
 
-// Byte `child` of the 8-byte field at word `field` of the node at word `base`.
-fn bvh_node_byte(base: u32, field: u32, child: u32) -> u32 {
-    return bvh_byte(bvh_nodes[base + field + child / 4u], child % 4u);
-}
-
 // obvhs `CwBvhNode::intersect_ray_basic` with `get_child_and_index_bits`: the hit
 // mask (inner children in the high byte, leaf primitives in the low 24 bits).
+// Each node word is read once: the eight children in two halves of four, whose
+// bytes share a word in every 8-byte field.
 fn bvh_intersect_node(node: u32, ray: BvhRay) -> u32 {
     let base = node * BVH_NODE_WORDS;
     let p = vec3<f32>(bitcast<f32>(bvh_nodes[base]), bitcast<f32>(bvh_nodes[base + 1u]), bitcast<f32>(bvh_nodes[base + 2u]));
@@ -88,23 +85,40 @@ fn bvh_intersect_node(node: u32, ray: BvhRay) -> u32 {
     let adj_origin = (p - ray.origin) * ray.inv_dir;
     let neg = ray.dir < vec3<f32>(0.0);
     var hit_mask = 0u;
-    for (var child = 0u; child < 8u; child++) {
-        let child_meta = bvh_node_byte(base, 6u, child);
-        if (child_meta == 0u) {
-            continue; // empty slot
+    for (var half = 0u; half < 2u; half++) {
+        let w = base + half;
+        let metas = bvh_nodes[w + 6u];
+        if (metas == 0u) {
+            continue; // four empty slots
         }
-        let lo = vec3<f32>(f32(bvh_node_byte(base, 8u, child)), f32(bvh_node_byte(base, 12u, child)), f32(bvh_node_byte(base, 16u, child)));
-        let hi = vec3<f32>(f32(bvh_node_byte(base, 10u, child)), f32(bvh_node_byte(base, 14u, child)), f32(bvh_node_byte(base, 18u, child)));
-        let t_lo = select(lo, hi, neg) * adj_dir_inv + adj_origin;
-        let t_hi = select(hi, lo, neg) * adj_dir_inv + adj_origin;
-        let t_near = max(max(max(t_lo.x, t_lo.y), t_lo.z), BVH_NODE_EPSILON);
-        let t_far = min(min(min(t_hi.x, t_hi.y), t_hi.z), ray.t_max);
-        if (t_near <= t_far) {
-            // Inner children have child_meta 24..31: bits 3 and 4 both set.
-            let inner = ((child_meta & (child_meta << 1u)) & 0x10u) != 0u;
-            let bit_index = (child_meta ^ select(0u, ray.oct_inv, inner)) & 0x1fu;
-            let child_bits = (child_meta >> 5u) & 7u;
-            hit_mask |= child_bits << bit_index;
+        // Near and far planes per axis for the ray's octant, four children per word.
+        let lo_x = bvh_nodes[w + 8u];
+        let hi_x = bvh_nodes[w + 10u];
+        let lo_y = bvh_nodes[w + 12u];
+        let hi_y = bvh_nodes[w + 14u];
+        let lo_z = bvh_nodes[w + 16u];
+        let hi_z = bvh_nodes[w + 18u];
+        let near = vec3<u32>(select(lo_x, hi_x, neg.x), select(lo_y, hi_y, neg.y), select(lo_z, hi_z, neg.z));
+        let far = vec3<u32>(select(hi_x, lo_x, neg.x), select(hi_y, lo_y, neg.y), select(hi_z, lo_z, neg.z));
+        for (var b = 0u; b < 4u; b++) {
+            let child_meta = bvh_byte(metas, b);
+            if (child_meta == 0u) {
+                continue; // empty slot
+            }
+            let sh = b * 8u;
+            let q_near = vec3<f32>((near >> vec3<u32>(sh)) & vec3<u32>(0xffu));
+            let q_far = vec3<f32>((far >> vec3<u32>(sh)) & vec3<u32>(0xffu));
+            let t_lo = q_near * adj_dir_inv + adj_origin;
+            let t_hi = q_far * adj_dir_inv + adj_origin;
+            let t_near = max(max(max(t_lo.x, t_lo.y), t_lo.z), BVH_NODE_EPSILON);
+            let t_far = min(min(min(t_hi.x, t_hi.y), t_hi.z), ray.t_max);
+            if (t_near <= t_far) {
+                // Inner children have child_meta 24..31: bits 3 and 4 both set.
+                let inner = ((child_meta & (child_meta << 1u)) & 0x10u) != 0u;
+                let bit_index = (child_meta ^ select(0u, ray.oct_inv, inner)) & 0x1fu;
+                let child_bits = (child_meta >> 5u) & 7u;
+                hit_mask |= child_bits << bit_index;
+            }
         }
     }
     return hit_mask;
