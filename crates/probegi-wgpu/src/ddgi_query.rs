@@ -1,0 +1,322 @@
+//! The DDGI query on the GPU: `shaders/ddgi_query.wgsl`, a WGSL library an engine
+//! includes in its own shaders ([`query_wgsl`]), over a set of volumes uploaded by
+//! [`GpuDdgiField`] from the same view the CPU query reads
+//! (`probegi_core::ddgi_volume_blend::DdgiFieldSetView`). The shader mirrors
+//! `probegi_core::ddgi_query::irradiance` and
+//! `probegi_core::ddgi_volume_blend::field_set_irradiance` function by function
+//! (each cites its original); `tests/query_equivalence.rs` holds them together.
+//!
+//! Bind-group layout ([`GpuDdgiField::bind_group_layout`], visible to compute and
+//! fragment stages), all read-only storage buffers:
+//! - binding 0: `DdgiSet` — header (member count, blending 0 density / 1
+//!   cascades, has camera), the camera position, then one [`GpuDdgiVolume`] per
+//!   member in sampling order;
+//! - binding 1: every member's irradiance atlas, `vec4<f32>` texels (xyz γ-encoded),
+//!   tile-major as `probegi_core::probe_atlas` lays them out;
+//! - binding 2: every member's distance atlas, `vec2<f32>` (mean, mean²);
+//! - binding 3: per probe `vec4<f32>`: relocation offset (m), and in `w`'s bits
+//!   31 = usable by queries, 0..30 = the nearest usable probe (`0x7fffffff`: none).
+//!
+//! [`GpuFieldQuery`] runs the query over a batch of points (what the tests and a
+//! deferred renderer's compute pass do).
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use probegi_core::ddgi_settings::ProbeBiasMode;
+use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, VolumeBlending};
+use wgpu::util::DeviceExt;
+
+use crate::bvh_trace::{dispatch_2d, uniform_entry};
+use crate::gpu_context::{GpuContext, GpuError};
+
+/// The query library's WGSL source with its bindings in group `group`.
+pub fn query_wgsl(group: u32) -> String {
+    include_str!("shaders/ddgi_query.wgsl").replace("DDGI_GROUP", &group.to_string())
+}
+
+/// One member volume; must match `DdgiVolume` in `ddgi_query.wgsl` (112 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuDdgiVolume {
+    /// xyz: probe (0, 0, 0) before scrolling; w: min spacing (m).
+    pub origin_m: [f32; 4],
+    /// xyz: spacing (m); w: irradiance γ.
+    pub spacing_m: [f32; 4],
+    /// xyz: probes per axis; w: weight flags (1 backface, 2 Chebyshev, 4 crush, 8 trilinear).
+    pub probe_counts: [u32; 4],
+    /// xyz: circular-buffer phase; w: bias mode (0 none, 1 self-shadow, 2 normal).
+    pub scroll_offsets: [u32; 4],
+    /// Irradiance interior, distance interior, first irradiance texel, first distance texel.
+    pub texels: [u32; 4],
+    /// Self-shadow bias, normal bias (m), crush threshold, energy conservation.
+    pub params: [f32; 4],
+    /// First probe in the probe buffer, tracks the camera, 0, 0.
+    pub extra: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<GpuDdgiVolume>() == 112);
+
+/// The set's header; must match the first 32 bytes of `DdgiSet` in `ddgi_query.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuDdgiSetHeader {
+    /// Member count, blending (0 density, 1 cascades), has camera, 0.
+    pub header: [u32; 4],
+    pub camera_m: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<GpuDdgiSetHeader>() == 32);
+
+const NO_PROBE: u32 = 0x7fff_ffff;
+
+/// A set of DDGI volumes on the device, ready for `ddgi_query.wgsl`.
+pub struct GpuDdgiField {
+    pub volumes: usize,
+    pub probes: usize,
+    bytes: u64,
+    bind_group: wgpu::BindGroup,
+}
+
+impl GpuDdgiField {
+    /// The layout of `ddgi_query.wgsl`'s group (compute and fragment stages).
+    pub fn bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+        let entry = |binding: u32| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE | wgpu::ShaderStages::FRAGMENT,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("ddgi query"),
+            entries: &[entry(0), entry(1), entry(2), entry(3)],
+        })
+    }
+
+    /// Uploads every member of `set` (grids, settings, atlases, relocation offsets,
+    /// usable flags and fallback table) in the shader's layout.
+    pub fn upload(ctx: &GpuContext, set: &DdgiFieldSetView<'_>) -> Result<Self, GpuError> {
+        let header = GpuDdgiSetHeader {
+            header: [
+                set.members.len() as u32,
+                matches!(set.blending, VolumeBlending::Cascades) as u32,
+                set.camera_m.is_some() as u32,
+                0,
+            ],
+            camera_m: set.camera_m.map_or([0.0; 4], |c| [c.x, c.y, c.z, 0.0]),
+        };
+        let mut volumes: Vec<GpuDdgiVolume> = Vec::with_capacity(set.members.len());
+        let (mut irradiance, mut distance, mut probes): (Vec<[f32; 4]>, Vec<[f32; 2]>, Vec<[f32; 4]>) =
+            (vec![], vec![], vec![]);
+        for m in &set.members {
+            let f = &m.field;
+            let (g, s) = (f.grid, f.settings);
+            let n = g.probe_count();
+            if f.irradiance.texels.len() != n * f.irradiance.tile_len()
+                || f.distance.texels.len() != n * f.distance.tile_len()
+            {
+                return Err(GpuError::Input(format!("atlases of {} probes do not match the grid's {n}", f.irradiance.probe_count)));
+            }
+            let flags = s.probe_backface_weight as u32
+                | (s.probe_chebyshev_weight as u32) << 1
+                | (s.probe_crush_weight as u32) << 2
+                | (s.probe_trilinear_weight as u32) << 3;
+            let bias = match s.probe_bias_mode {
+                ProbeBiasMode::None => 0,
+                ProbeBiasMode::SelfShadow => 1,
+                ProbeBiasMode::Normal => 2,
+            };
+            volumes.push(GpuDdgiVolume {
+                origin_m: [g.origin_m.x, g.origin_m.y, g.origin_m.z, g.min_spacing_m()],
+                spacing_m: [g.spacing_m.x, g.spacing_m.y, g.spacing_m.z, s.probe_irradiance_gamma],
+                probe_counts: [g.probe_counts.x, g.probe_counts.y, g.probe_counts.z, flags],
+                scroll_offsets: [g.probe_scroll_offsets.x, g.probe_scroll_offsets.y, g.probe_scroll_offsets.z, bias],
+                texels: [f.irradiance.interior, f.distance.interior, irradiance.len() as u32, distance.len() as u32],
+                params: [
+                    s.probe_self_shadow_bias,
+                    s.probe_normal_bias_m,
+                    s.probe_crush_threshold,
+                    s.probe_energy_conservation,
+                ],
+                extra: [probes.len() as u32, m.tracks_camera as u32, 0, 0],
+            });
+            irradiance.extend(f.irradiance.texels.iter().map(|t| [t.x, t.y, t.z, 0.0]));
+            distance.extend(f.distance.texels.iter().map(|t| [t.x, t.y]));
+            for p in 0..n {
+                let usable = f.probe_usable.get(p).copied().unwrap_or(true);
+                let fallback = f.probe_fallback.get(p).copied().unwrap_or(u32::MAX);
+                let fallback = if fallback == u32::MAX || fallback >= NO_PROBE { NO_PROBE } else { fallback };
+                let o = f.probe_offsets_m.get(p).copied().unwrap_or(Vec3::ZERO);
+                probes.push([o.x, o.y, o.z, f32::from_bits(fallback | (usable as u32) << 31)]);
+            }
+        }
+        let mut set_bytes = bytemuck::bytes_of(&header).to_vec();
+        if volumes.is_empty() {
+            set_bytes.extend_from_slice(bytemuck::bytes_of(&GpuDdgiVolume::default()));
+        }
+        set_bytes.extend_from_slice(bytemuck::cast_slice(&volumes));
+        let pad = |v: &mut Vec<[f32; 4]>| {
+            if v.is_empty() {
+                v.push([0.0; 4]);
+            }
+        };
+        pad(&mut irradiance);
+        pad(&mut probes);
+        if distance.is_empty() {
+            distance.push([0.0; 2]);
+        }
+        let init = |label: &str, contents: &[u8]| {
+            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let buffers = [
+            init("ddgi set", &set_bytes),
+            init("ddgi irradiance", bytemuck::cast_slice(&irradiance)),
+            init("ddgi distance", bytemuck::cast_slice(&distance)),
+            init("ddgi probes", bytemuck::cast_slice(&probes)),
+        ];
+        let layout = Self::bind_group_layout(&ctx.device);
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+            .collect();
+        let bind_group =
+            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("ddgi query"), layout: &layout, entries: &entries });
+        Ok(Self {
+            volumes: set.members.len(),
+            probes: probes.len(),
+            bytes: buffers.iter().map(|b| b.size()).sum(),
+            bind_group,
+        })
+    }
+
+    /// The bind group to set at the group `query_wgsl` was built for.
+    pub fn bind_group(&self) -> &wgpu::BindGroup {
+        &self.bind_group
+    }
+
+    /// Device memory of the field's buffers.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+}
+
+/// A query point; must match `QueryPoint` in `field_query.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct QueryPoint {
+    pub position: [f32; 4],
+    /// Unit surface normal.
+    pub normal: [f32; 4],
+    /// Unit direction from the surface toward the viewer.
+    pub view_dir: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<QueryPoint>() == 48);
+
+impl QueryPoint {
+    pub fn new(position: Vec3, normal: Vec3, view_dir: Vec3) -> Self {
+        Self { position: position.extend(0.0).into(), normal: normal.extend(0.0).into(), view_dir: view_dir.extend(0.0).into() }
+    }
+}
+
+/// `field_query.wgsl`'s uniform block.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct FieldQueryParams {
+    pub point_count: u32,
+    pub groups_x: u32,
+    pub _pad: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<FieldQueryParams>() == 16);
+
+/// The query over a batch of points (`field_query.wgsl` with `ddgi_query.wgsl` at group 1).
+pub struct GpuFieldQuery {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl GpuFieldQuery {
+    pub fn new(ctx: &GpuContext) -> Self {
+        let source = format!("{}\n{}", query_wgsl(1), include_str!("shaders/field_query.wgsl"));
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("field_query.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("field query"),
+            entries: &[
+                uniform_entry(0),
+                crate::bvh_trace::storage_entry(1, true),
+                crate::bvh_trace::storage_entry(2, false),
+            ],
+        });
+        let field_layout = GpuDdgiField::bind_group_layout(&ctx.device);
+        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("field query"),
+            bind_group_layouts: &[Some(&layout), Some(&field_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("query_field"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("query_field"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { layout, pipeline }
+    }
+
+    /// Irradiance (W/m²) at every point.
+    pub fn query(&self, ctx: &GpuContext, field: &GpuDdgiField, points: &[QueryPoint]) -> Result<Vec<Vec3>, GpuError> {
+        let n = points.len() as u32;
+        if points.is_empty() {
+            return Ok(vec![]);
+        }
+        let (groups_x, groups_y) = dispatch_2d(n);
+        let device = &ctx.device;
+        let params = FieldQueryParams { point_count: n, groups_x, _pad: [0; 2] };
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("query params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("query points"),
+            contents: bytemuck::cast_slice(points),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let output = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("query irradiance"),
+            size: points.len() as u64 * 16,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("field query"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: input.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: output.as_entire_binding() },
+            ],
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.set_bind_group(1, field.bind_group(), &[]);
+            pass.dispatch_workgroups(groups_x, groups_y, 1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        let bytes = ctx.read_back(&output)?;
+        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok(v.iter().map(|e| Vec3::new(e[0], e[1], e[2])).collect())
+    }
+}
