@@ -29,7 +29,9 @@ impl WgpuProbeTracer {
     /// adapter or the scene needs what the GPU trace lacks (a TLAS).
     pub fn new(bvh: &BvhTracer, scene_name: &str) -> Result<Self> {
         let export = bvh.export_static().map_err(anyhow::Error::msg).with_context(|| {
-            format!("--backend wgpu cannot trace scene {scene_name}; use --backend cpu for moving or instanced geometry")
+            format!(
+                "--backend wgpu cannot trace scene {scene_name}; use --backend cpu for moving or instanced geometry"
+            )
         })?;
         let ctx = GpuContext::headless().context("--backend wgpu")?;
         let gpu_bvh = GpuBvh::upload(&ctx, &export).context("uploading the BVH")?;
@@ -40,7 +42,6 @@ impl WgpuProbeTracer {
     pub fn adapter_name(&self) -> &str {
         &self.ctx.adapter_name
     }
-
 }
 
 /// `bench --backend wgpu`: the GPU passes alone on one volume's last update batch,
@@ -107,12 +108,15 @@ pub fn time_gpu_passes(
     let ray_count = rays.len() as f64;
     let (pass_ms, source) = match &best {
         Some(ms) => (names.iter().zip(ms).map(|(k, v)| (k.to_string(), *v)).collect(), "timestamp queries"),
-        None => (std::collections::BTreeMap::from([("trace".to_string(), wall_trace_ms)]), "wall clock (no timestamps)"),
+        None => {
+            (std::collections::BTreeMap::from([("trace".to_string(), wall_trace_ms)]), "wall clock (no timestamps)")
+        }
     };
     let trace_ms = pass_ms["trace"];
     let all_ms: f64 = pass_ms.values().sum();
     let atlas_bytes_per_probe = (probegi_core::probe_atlas::tile_texel_count(s.probe_irradiance_texels) * 16
-        + probegi_core::probe_atlas::tile_texel_count(s.probe_distance_texels) * 8) as f64;
+        + probegi_core::probe_atlas::tile_texel_count(s.probe_distance_texels) * 8)
+        as f64;
     Ok(serde_json::json!({
         "adapter": gpu.adapter_name(),
         "pass_ms": pass_ms,
@@ -134,7 +138,12 @@ pub fn batch_rays(batch: &ProbeRayBatch) -> Vec<GpuRay> {
 }
 
 impl ProbeBatchTracer for WgpuProbeTracer {
-    fn closest_hits(&self, batch: &ProbeRayBatch, _static_only: bool, hits: &mut Vec<Option<RayHit>>) -> Result<(), String> {
+    fn closest_hits(
+        &self,
+        batch: &ProbeRayBatch,
+        _static_only: bool,
+        hits: &mut Vec<Option<RayHit>>,
+    ) -> Result<(), String> {
         // The GPU BVH holds static geometry only (`export_static`), so every batch
         // already sees what an initialisation round must.
         let gpu = self.trace.trace(&self.ctx, &self.bvh, &batch_rays(batch), false).map_err(|e| e.to_string())?;

@@ -51,7 +51,12 @@ pub fn trace_probe_batch(
 pub trait ProbeBatchTracer: Sync {
     /// Closest hits of every ray of `batch`, in batch order, into `hits` (resized).
     /// `static_only`: an initialisation round, which must see static geometry only.
-    fn closest_hits(&self, batch: &ProbeRayBatch, static_only: bool, hits: &mut Vec<Option<RayHit>>) -> Result<(), String>;
+    fn closest_hits(
+        &self,
+        batch: &ProbeRayBatch,
+        static_only: bool,
+        hits: &mut Vec<Option<RayHit>>,
+    ) -> Result<(), String>;
 }
 
 /// Shareable handle of a [`ProbeBatchTracer`] for render settings.

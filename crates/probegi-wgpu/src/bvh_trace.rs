@@ -130,7 +130,8 @@ impl GpuBvh {
     /// Uploads `export` in `bvh.wgsl`'s layout.
     pub fn upload(ctx: &GpuContext, export: &BvhExport) -> Result<Self, GpuError> {
         let leaves = export.leaf_triangles.len();
-        if export.leaf_triangle_ids.len() != leaves || (!export.leaf_cutouts.is_empty() && export.leaf_cutouts.len() != leaves)
+        if export.leaf_triangle_ids.len() != leaves
+            || (!export.leaf_cutouts.is_empty() && export.leaf_cutouts.len() != leaves)
         {
             return Err(GpuError::Input(format!(
                 "BVH export: {leaves} leaf triangles, {} ids, {} cutout entries",
@@ -183,7 +184,11 @@ impl GpuBvh {
             .enumerate()
             .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
             .collect();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("bvh"), layout: &layout, entries: &entries });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("bvh"),
+            layout: &layout,
+            entries: &entries,
+        });
         Ok(Self {
             node_count: export.node_count(),
             leaf_count: export.leaf_triangles.len(),
@@ -191,6 +196,30 @@ impl GpuBvh {
             bytes,
             bind_group,
         })
+    }
+
+    /// A BVH over a caller's own triangle soup (an engine's geometry): built on
+    /// the CPU with the same settings as probegi's scenes, all triangles opaque.
+    /// Hit `triangle` ids index `triangles`; the front face is the one whose
+    /// counter-clockwise normal `(v1 − v0) × (v2 − v0)` faces the ray's origin.
+    pub fn from_triangles(ctx: &GpuContext, triangles: &[[Vec3; 3]]) -> Result<Self, GpuError> {
+        if let Some(k) = triangles.iter().position(|t| !t.iter().all(|v| v.is_finite())) {
+            return Err(GpuError::Input(format!("triangle {k} has a non-finite vertex: {:?}", triangles[k])));
+        }
+        let mut mesh = probegi_scene::mesh::Mesh::default();
+        for (k, t) in triangles.iter().enumerate() {
+            let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
+            for &v in t {
+                mesh.positions.push(v);
+                mesh.normals.push(n);
+                mesh.uvs.push(Vec2::ZERO);
+            }
+            let b = 3 * k as u32;
+            mesh.triangles.push([b, b + 1, b + 2]);
+            mesh.triangle_materials.push(0);
+        }
+        let tracer = probegi_scene::BvhTracer::build(&mesh, probegi_scene::BvhSettings::default());
+        Self::upload(ctx, &tracer.export_static().map_err(GpuError::Input)?)
     }
 
     /// Device memory of the BVH's buffers.
@@ -365,7 +394,13 @@ impl GpuRayTrace {
 
     /// Traces `rays` (closest hit, or any hit for shadow rays) and reads the hits back,
     /// in batches that fit the adapter's storage bindings.
-    pub fn trace(&self, ctx: &GpuContext, bvh: &GpuBvh, rays: &[GpuRay], any_hit: bool) -> Result<Vec<GpuRayHit>, GpuError> {
+    pub fn trace(
+        &self,
+        ctx: &GpuContext,
+        bvh: &GpuBvh,
+        rays: &[GpuRay],
+        any_hit: bool,
+    ) -> Result<Vec<GpuRayHit>, GpuError> {
         let mut out = Vec::with_capacity(rays.len());
         for chunk in rays.chunks(Self::max_batch_rays(ctx).max(1)) {
             let batch = self.batch(ctx, chunk, any_hit)?;

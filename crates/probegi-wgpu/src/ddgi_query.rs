@@ -107,8 +107,9 @@ impl GpuDdgiField {
             camera_m: set.camera_m.map_or([0.0; 4], |c| [c.x, c.y, c.z, 0.0]),
         };
         let mut volumes: Vec<GpuDdgiVolume> = Vec::with_capacity(set.members.len());
-        let (mut irradiance, mut distance, mut probes): (Vec<[f32; 4]>, Vec<[f32; 2]>, Vec<[f32; 4]>) =
-            (vec![], vec![], vec![]);
+        let mut irradiance: Vec<[f32; 4]> = vec![];
+        let mut distance: Vec<[f32; 2]> = vec![];
+        let mut probes: Vec<[f32; 4]> = vec![];
         for m in &set.members {
             let f = &m.field;
             let (g, s) = (f.grid, f.settings);
@@ -116,7 +117,10 @@ impl GpuDdgiField {
             if f.irradiance.texels.len() != n * f.irradiance.tile_len()
                 || f.distance.texels.len() != n * f.distance.tile_len()
             {
-                return Err(GpuError::Input(format!("atlases of {} probes do not match the grid's {n}", f.irradiance.probe_count)));
+                return Err(GpuError::Input(format!(
+                    "atlases of {} probes do not match the grid's {n}",
+                    f.irradiance.probe_count
+                )));
             }
             let flags = s.probe_backface_weight as u32
                 | (s.probe_chebyshev_weight as u32) << 1
@@ -185,8 +189,11 @@ impl GpuDdgiField {
             .enumerate()
             .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
             .collect();
-        let bind_group =
-            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("ddgi query"), layout: &layout, entries: &entries });
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("ddgi query"),
+            layout: &layout,
+            entries: &entries,
+        });
         Ok(Self {
             volumes: set.members.len(),
             probes: probes.len(),
@@ -220,7 +227,11 @@ const _: () = assert!(std::mem::size_of::<QueryPoint>() == 48);
 
 impl QueryPoint {
     pub fn new(position: Vec3, normal: Vec3, view_dir: Vec3) -> Self {
-        Self { position: position.extend(0.0).into(), normal: normal.extend(0.0).into(), view_dir: view_dir.extend(0.0).into() }
+        Self {
+            position: position.extend(0.0).into(),
+            normal: normal.extend(0.0).into(),
+            view_dir: view_dir.extend(0.0).into(),
+        }
     }
 }
 

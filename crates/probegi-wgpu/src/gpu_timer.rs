@@ -52,8 +52,6 @@ impl GpuTimer {
         let Some((_, buffer)) = &self.queries else { return Ok(None) };
         let bytes = ctx.read_back(buffer)?;
         let ticks: &[u64] = bytemuck::cast_slice(&bytes);
-        Ok(Some(
-            ticks.chunks(2).map(|t| t[1].saturating_sub(t[0]) as f64 * self.period_ns * 1e-6).collect(),
-        ))
+        Ok(Some(ticks.chunks(2).map(|t| t[1].saturating_sub(t[0]) as f64 * self.period_ns * 1e-6).collect()))
     }
 }

@@ -3,6 +3,9 @@
 //! Mesa's lavapipe. Without an adapter the tests say so and pass, unless
 //! `PROBEGI_REQUIRE_GPU=1` (which `scripts/test.sh` sets once lavapipe is installed).
 
+mod common;
+
+use common::context;
 use glam::{Vec2, Vec3};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::fibonacci::{sample_uniform_rotation, spherical_fibonacci};
@@ -10,22 +13,7 @@ use probegi_core::probe_atlas::ProbeAtlas;
 use probegi_core::probe_blend::{BlendWeights, TexelThresholds, blend_distance_tile, blend_irradiance_tile};
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::rng::Pcg32;
-use probegi_wgpu::GpuContext;
 use probegi_wgpu::probe_blend::{BlendFrame, GpuProbeBlend, GpuVolumeAtlases};
-
-fn context() -> Option<GpuContext> {
-    match GpuContext::headless() {
-        Ok(c) => {
-            eprintln!("adapter: {}", c.adapter_name);
-            Some(c)
-        }
-        Err(e) if std::env::var_os("PROBEGI_REQUIRE_GPU").is_none() => {
-            eprintln!("skipping the GPU test: {e}");
-            None
-        }
-        Err(e) => panic!("PROBEGI_REQUIRE_GPU is set but {e}"),
-    }
-}
 
 struct Frame {
     dirs: Vec<Vec3>,

@@ -98,7 +98,13 @@ fn cornell_atlases_agree_after_1_and_100_frames_and_reruns_are_bit_identical() {
     }
 }
 
-fn render(scene: &Scene, size: u32, frames: u32, s: DdgiVolumeSettings, gpu: Option<Arc<GpuTracer>>) -> probegi_core::image::Image {
+fn render(
+    scene: &Scene,
+    size: u32,
+    frames: u32,
+    s: DdgiVolumeSettings,
+    gpu: Option<Arc<GpuTracer>>,
+) -> probegi_core::image::Image {
     let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
     let camera = CameraRays::new(&scene.camera.expect("camera"), size, size);
     let rs = RenderSettings {

@@ -63,7 +63,13 @@ fn compare(ctx: &GpuContext, view: &DdgiFieldSetView<'_>, pts: &[QueryPoint]) ->
     worst
 }
 
-fn converged(scene: &Scene, tracer: &BvhTracer, settings: &DdgiFieldSetSettings, camera: Option<Vec3>, frames: u32) -> DdgiFieldSet {
+fn converged(
+    scene: &Scene,
+    tracer: &BvhTracer,
+    settings: &DdgiFieldSetSettings,
+    camera: Option<Vec3>,
+    frames: u32,
+) -> DdgiFieldSet {
     let direct = DirectLighting::new(scene, tracer, DirectSettings::default());
     let mut set = DdgiFieldSet::new(settings, scene.bounds().expect("geometry"), camera);
     let mut ms = BTreeMap::new();
@@ -111,7 +117,8 @@ fn scrolled_cascades_and_density_blended_volumes() {
         volume_bounds_m: Some([lo, Vec3::new(mid.x, hi.y, hi.z)]),
         ..small(UVec3::new(4, 6, 6), 64)
     };
-    let density = DdgiFieldSetSettings { volumes: vec![small(UVec3::splat(4), 64), dense], blending: VolumeBlending::Density };
+    let density =
+        DdgiFieldSetSettings { volumes: vec![small(UVec3::splat(4), 64), dense], blending: VolumeBlending::Density };
     let set = converged(&scene, &tracer, &density, None, 10);
     assert!(compare(&ctx, &set.view(), &pts) < 1e-4, "density");
 }
@@ -129,6 +136,10 @@ fn cages_without_usable_probes_read_the_fallback_probes() {
     let mut field = v.view();
     field.probe_usable = &usable;
     field.probe_fallback = &fallback;
-    let view = DdgiFieldSetView { members: vec![SetMember { field, tracks_camera: false }], blending: VolumeBlending::Density, camera_m: None };
+    let view = DdgiFieldSetView {
+        members: vec![SetMember { field, tracks_camera: false }],
+        blending: VolumeBlending::Density,
+        camera_m: None,
+    };
     assert!(compare(&ctx, &view, &points(&scene, &tracer, 20_000)) < 1e-4);
 }

@@ -79,7 +79,12 @@ fn compare(ctx: &probegi_wgpu::GpuContext, scene: &Scene, n: usize) -> Agreement
 fn assert_agrees(a: &Agreement) {
     let allowed = a.rays / 500;
     assert!(a.hits > a.rays / 10, "too few hits to test: {}", a.hits);
-    assert!(a.hit_disagree + a.triangle_disagree <= allowed, "{} + {} > {allowed}", a.hit_disagree, a.triangle_disagree);
+    assert!(
+        a.hit_disagree + a.triangle_disagree <= allowed,
+        "{} + {} > {allowed}",
+        a.hit_disagree,
+        a.triangle_disagree
+    );
     assert!(a.any_disagree <= allowed, "any hit: {} > {allowed}", a.any_disagree);
     assert!(a.max_rel_dt < 1e-4, "Δt {:e}", a.max_rel_dt);
 }
