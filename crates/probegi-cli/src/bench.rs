@@ -119,7 +119,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let gpu = match args.backend {
         crate::gpu_backend::Backend::Cpu => None,
-        crate::gpu_backend::Backend::Wgpu => Some(crate::gpu_backend::WgpuProbeTracer::new(&bvh, &scene.name)?),
+        crate::gpu_backend::Backend::Wgpu => Some(crate::gpu_backend::wgpu_probe_tracer(&scene, &bvh)?),
     };
     let batch_tracer = gpu.as_ref().map(|g| g as &dyn probegi_cpu::probe_trace::ProbeBatchTracer);
     let mut rows = Vec::new();
@@ -158,7 +158,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
             let bare_rays = batch.len() as f64;
             let get = |k: &str| pass_ms.get(k).copied().unwrap_or(0.0);
             let gpu_row = match &gpu {
-                Some(g) => crate::gpu_backend::time_gpu_passes(g, volume, batch, args.repeat.max(1))?,
+                Some(g) => crate::gpu_backend::time_gpu_passes(g, &set, batch, args.repeat.max(1))?,
                 None => json!(null),
             };
             rows.push(json!({

@@ -1,14 +1,14 @@
 //! `--backend wgpu`: what of a frame runs on the GPU today. The DDGI probe ray
 //! batches (update and initialisation rounds) are traced by probegi-wgpu's
-//! compute-shader CWBVH traversal, over the same BVH the CPU builds; the rest of
-//! the frame (shading, blend, border, the camera image) is still the CPU's.
+//! compute-shader CWBVH traversal over the same BVH the CPU builds, and shaded
+//! by its shade pass where the scene allows (`probegi-wgpu-seam`); the set's
+//! bookkeeping (relocation, classification, states), blend, border and the
+//! camera image are still the CPU's.
 
 use anyhow::{Context, Result};
 use probegi_cpu::ddgi_field_set::ProbeRayBatch;
-use probegi_cpu::probe_trace::ProbeBatchTracer;
-use probegi_scene::{BvhTracer, RayHit};
+use probegi_scene::{BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
-use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayTrace};
 
 /// Which device traces the probe rays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -17,45 +17,39 @@ pub enum Backend {
     Wgpu,
 }
 
-/// The GPU trace behind the field set's seam.
-pub struct WgpuProbeTracer {
-    ctx: GpuContext,
-    trace: GpuRayTrace,
-    bvh: GpuBvh,
-}
+pub use probegi_wgpu_seam::{WgpuProbeTracer, batch_rays};
 
-impl WgpuProbeTracer {
-    /// A headless device and the scene's BVH on it; a clear error when there is no
-    /// adapter or the scene needs what the GPU trace lacks (a TLAS).
-    pub fn new(bvh: &BvhTracer, scene_name: &str) -> Result<Self> {
-        let export = bvh.export_static().map_err(anyhow::Error::msg).with_context(|| {
-            format!(
-                "--backend wgpu cannot trace scene {scene_name}; use --backend cpu for moving or instanced geometry"
-            )
-        })?;
-        let ctx = GpuContext::headless().context("--backend wgpu")?;
-        let gpu_bvh = GpuBvh::upload(&ctx, &export).context("uploading the BVH")?;
-        let trace = GpuRayTrace::new(&ctx);
-        Ok(Self { ctx, trace, bvh: gpu_bvh })
+/// A headless device with the scene on it; a clear error when there is no
+/// adapter or the scene needs what the GPU trace lacks (a TLAS). Where the GPU
+/// shading lacks something (normal or bump maps) the probe rays are shaded on
+/// the CPU, and a line says why.
+pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTracer> {
+    bvh.export_static().map_err(anyhow::Error::msg).with_context(|| {
+        format!("--backend wgpu cannot trace scene {}; use --backend cpu for moving or instanced geometry", scene.name)
+    })?;
+    let ctx = GpuContext::headless().context("--backend wgpu")?;
+    let g = WgpuProbeTracer::new(ctx, scene, bvh, true).context("--backend wgpu: putting the scene on the device")?;
+    match &g.shading_note {
+        None => eprintln!("probe rays traced and shaded on {}", g.adapter_name()),
+        Some(why) => eprintln!("probe rays traced on {}, shaded on the CPU: {why}", g.adapter_name()),
     }
-
-    pub fn adapter_name(&self) -> &str {
-        &self.ctx.adapter_name
-    }
+    Ok(g)
 }
 
 /// `bench --backend wgpu`: the GPU passes alone on one volume's last update batch,
 /// best of `repeat` submits: the trace (closest hit of every batch ray), then
-/// blend and border over every probe of the volume (an upper bound: sleeping
+/// blend and border over every probe of the volume, then (where the GPU shades
+/// this scene) the shade of every batch ray (an upper bound: sleeping
 /// probes would skip theirs), with per-pass times from timestamp queries where
 /// the adapter has them (wall-clock around the submit otherwise), device memory
 /// per probe and per probe ray.
 pub fn time_gpu_passes(
     gpu: &WgpuProbeTracer,
-    volume: &probegi_cpu::ddgi::DdgiVolume,
+    set: &probegi_cpu::ddgi_field_set::DdgiFieldSet,
     batch: &ProbeRayBatch,
     repeat: u32,
 ) -> Result<serde_json::Value> {
+    let volume = &set.volumes()[0];
     use probegi_wgpu::gpu_timer::GpuTimer;
     use probegi_wgpu::probe_blend::{BlendFrame, GpuProbeBlend, GpuVolumeAtlases, PASS_NAMES};
     let ctx = &gpu.ctx;
@@ -82,8 +76,13 @@ pub fn time_gpu_passes(
     };
     let blend = GpuProbeBlend::new(ctx);
     let bindings = blend.prepare(ctx, &atlases, &frame)?;
-    let timer = GpuTimer::new(ctx, 5);
-    let names = ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], PASS_NAMES[3]];
+    let timer = GpuTimer::new(ctx, 6);
+    let names = ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], PASS_NAMES[3], "shade"];
+    // The shade pass over every ray of the batch, with the set's field on the device.
+    let field = probegi_wgpu::ddgi_query::GpuDdgiField::upload(ctx, &set.view())?;
+    let info: Vec<u32> = (0..batch.len())
+        .map(|_| probegi_wgpu::probe_shade::shade_info(true, s.glossy_second_order, s.probe_area_light_samples))
+        .collect();
     let mut best: Option<Vec<f64>> = None;
     let mut wall_trace_ms = f64::INFINITY;
     for _ in 0..repeat {
@@ -95,6 +94,12 @@ pub fn time_gpu_passes(
         wall_trace_ms = wall_trace_ms.min(t.elapsed().as_secs_f64() * 1e3);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         blend.record(&mut encoder, &bindings, Some((&timer, 1)));
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait()?;
+        if let Some((shade, scene)) = gpu.shading() {
+            shade.shade(ctx, &gpu.bvh, &field, scene, &traced, &info, 1, 1, Some((&timer, 5)))?;
+        }
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
         timer.resolve(&mut encoder);
         ctx.queue.submit([encoder.finish()]);
         ctx.wait()?;
@@ -107,7 +112,15 @@ pub fn time_gpu_passes(
     }
     let ray_count = rays.len() as f64;
     let (pass_ms, source) = match &best {
-        Some(ms) => (names.iter().zip(ms).map(|(k, v)| (k.to_string(), *v)).collect(), "timestamp queries"),
+        Some(ms) => (
+            names
+                .iter()
+                .zip(ms)
+                .filter(|(k, _)| **k != "shade" || gpu.shades())
+                .map(|(k, v)| (k.to_string(), *v))
+                .collect(),
+            "timestamp queries",
+        ),
         None => {
             (std::collections::BTreeMap::from([("trace".to_string(), wall_trace_ms)]), "wall clock (no timestamps)")
         }
@@ -122,33 +135,15 @@ pub fn time_gpu_passes(
         "pass_ms": pass_ms,
         "pass_ms_source": source,
         "trace_mrays_per_s": ray_count / (trace_ms * 1e-3) / 1e6,
-        "trace_blend_border_mrays_per_s": ray_count / (all_ms * 1e-3) / 1e6,
-        "not_on_gpu": ["shade (CPU)", "classification and relocation (CPU)"],
+        "gpu_passes_mrays_per_s": ray_count / (all_ms * 1e-3) / 1e6,
+        "gpu_passes": pass_ms.keys().collect::<Vec<_>>(),
+        "not_on_gpu": if gpu.shades() {
+            vec!["classification, relocation and probe states (CPU)"]
+        } else {
+            vec!["shade (CPU)", "classification, relocation and probe states (CPU)"]
+        },
         "bvh_mib": gpu.bvh.bytes() as f64 / (1u64 << 20) as f64,
         "device_bytes_per_probe": atlas_bytes_per_probe,
         "device_bytes_per_probe_ray": traced.bytes() as f64 / ray_count.max(1.0),
     }))
-}
-
-/// A batch's rays as the GPU trace reads them.
-pub fn batch_rays(batch: &ProbeRayBatch) -> Vec<GpuRay> {
-    (0..batch.len())
-        .map(|i| GpuRay::new(batch.origins_m[i], batch.directions[i], 0.0, batch.max_distances_m[i]))
-        .collect()
-}
-
-impl ProbeBatchTracer for WgpuProbeTracer {
-    fn closest_hits(
-        &self,
-        batch: &ProbeRayBatch,
-        _static_only: bool,
-        hits: &mut Vec<Option<RayHit>>,
-    ) -> Result<(), String> {
-        // The GPU BVH holds static geometry only (`export_static`), so every batch
-        // already sees what an initialisation round must.
-        let gpu = self.trace.trace(&self.ctx, &self.bvh, &batch_rays(batch), false).map_err(|e| e.to_string())?;
-        hits.clear();
-        hits.extend(gpu.iter().map(|h| h.ray_hit()));
-        Ok(())
-    }
 }

@@ -218,9 +218,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             if !matches!(gi, GiMethod::Ddgi(_) | GiMethod::DdgiSet(_)) {
                 bail!("--backend wgpu traces the DDGI probe rays on the GPU: it needs --gi ddgi");
             }
-            let g = gpu_backend::WgpuProbeTracer::new(&bvh, &scene.name)?;
-            eprintln!("probe rays traced on {}", g.adapter_name());
-            Some(std::sync::Arc::new(g))
+            Some(std::sync::Arc::new(gpu_backend::wgpu_probe_tracer(&scene, &bvh)?))
         }
     };
     let rays = CameraRays::new(&camera, args.scene.width, args.scene.height);
@@ -314,6 +312,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         let json = serde_json::json!({
             "backend": format!("{:?}", args.backend).to_lowercase(),
             "adapter": gpu.as_ref().map(|g| g.adapter_name().to_string()),
+            "probe_shade_on": gpu.as_ref().map(|g| if g.shades() { "gpu" } else { "cpu" }),
             "frames": stats.frames,
             "pass_ms": stats.pass_ms,
             "rays_traced": stats.rays_traced,

@@ -98,7 +98,12 @@ impl DdgiFieldSet {
                         seed,
                         frame,
                     };
-                    traced += shade_probe_rays(&inputs, &mut radiance);
+                    let on_device = batch_tracer
+                        .and_then(|bt| bt.shade_batch(inputs.batch, &view, inputs.volumes, seed, frame, &mut radiance));
+                    match on_device {
+                        Some(result) => result?,
+                        None => traced += shade_probe_rays(&inputs, &mut radiance),
+                    }
                     drop(view);
                     time("shade", t, &mut own_ms);
                     step = self.submit_radiance(&radiance).unwrap_or_else(fail);

@@ -57,6 +57,22 @@ pub trait ProbeBatchTracer: Sync {
         static_only: bool,
         hits: &mut Vec<Option<RayHit>>,
     ) -> Result<(), String>;
+
+    /// Shades the update batch this tracer traced last (the shade pass of
+    /// `probe_shade` on another device) into `radiance` (one per batch ray), or
+    /// returns `None` to leave the shading to the CPU. `field` is the set as
+    /// queries read it, `volumes` the set's volumes (for their shading settings).
+    fn shade_batch(
+        &self,
+        _batch: &ProbeRayBatch,
+        _field: &probegi_core::ddgi_volume_blend::DdgiFieldSetView<'_>,
+        _volumes: &[crate::ddgi::DdgiVolume],
+        _seed: u64,
+        _frame: u32,
+        _radiance: &mut Vec<Vec3>,
+    ) -> Option<Result<(), String>> {
+        None
+    }
 }
 
 /// Shareable handle of a [`ProbeBatchTracer`] for render settings.

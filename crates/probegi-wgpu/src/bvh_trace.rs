@@ -283,6 +283,14 @@ pub struct GpuRayBatch {
 }
 
 impl GpuRayBatch {
+    pub(crate) fn rays_buffer(&self) -> &wgpu::Buffer {
+        &self.rays
+    }
+
+    pub(crate) fn hits_buffer(&self) -> &wgpu::Buffer {
+        &self.hits
+    }
+
     /// Device memory of the rays and hits.
     pub fn bytes(&self) -> u64 {
         self.rays.size() + self.hits.size()

@@ -71,6 +71,24 @@ impl GpuContext {
         })
     }
 
+    /// For test suites: a headless device, or `Ok(None)` (with a line saying why)
+    /// when there is no adapter, unless the environment sets `PROBEGI_REQUIRE_GPU`
+    /// (`scripts/test.sh` does once lavapipe is installed): then a missing adapter
+    /// is the error.
+    pub fn headless_unless_absent() -> Result<Option<Self>, GpuError> {
+        match Self::headless() {
+            Ok(c) => {
+                eprintln!("adapter: {}", c.adapter_name);
+                Ok(Some(c))
+            }
+            Err(e) if std::env::var_os("PROBEGI_REQUIRE_GPU").is_none() => {
+                eprintln!("skipping the GPU test: {e}");
+                Ok(None)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
     /// A device and queue the caller owns (an engine's).
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, adapter_name: impl Into<String>) -> Self {
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);

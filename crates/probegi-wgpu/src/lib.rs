@@ -17,7 +17,9 @@
 pub mod bvh_trace;
 pub mod ddgi_query;
 pub mod gpu_context;
+pub mod gpu_scene;
 pub mod gpu_timer;
 pub mod probe_blend;
+pub mod probe_shade;
 
 pub use gpu_context::{GpuContext, GpuError};

@@ -10,9 +10,8 @@ mod wgpu_embed;
 
 #[test]
 fn the_wgpu_embedding_example_draws_what_the_cpu_query_says() {
-    // The same skip rule as the other GPU tests (common/mod.rs).
-    if probegi_wgpu::GpuContext::headless().is_err() && std::env::var_os("PROBEGI_REQUIRE_GPU").is_none() {
-        eprintln!("skipping: no GPU adapter");
+    // The same skip rule as the other GPU tests.
+    if probegi_wgpu::GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set").is_none() {
         return;
     }
     let out = std::env::temp_dir().join(format!("probegi-wgpu-embed-{}.png", std::process::id()));

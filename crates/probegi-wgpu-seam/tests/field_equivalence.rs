@@ -1,0 +1,203 @@
+//! The DDGI field with its probe rays traced (and shaded) on the GPU, through the
+//! field set's seam, against the same field on the CPU.
+//!
+//! - Trace only (`WgpuProbeTracer` with CPU shading): on lavapipe the GPU's hits
+//!   equal the CPU's, so the atlases agree to float reordering at most (bound
+//!   1e-3 of the largest texel, leaving room for adapters that round a grazing
+//!   ray onto a neighbouring triangle); probe states and relocation are equal;
+//!   reruns are bit-identical.
+//! - Trace and shade on the GPU: the shade's random numbers differ from the CPU's
+//!   (see `probegi_wgpu::probe_shade`), so single texels differ by Monte Carlo
+//!   noise. The tolerance is that noise: the GPU field must be no farther from
+//!   the CPU field than the CPU field is from itself under another seed (×1.5),
+//!   after 1 frame and after 100; the furnace converges to its analytic answer;
+//!   images agree within HDR-FLIP 0.02.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use glam::UVec3;
+use probegi_core::camera::CameraRays;
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::image::Image;
+use probegi_cpu::ddgi::DdgiVolume;
+use probegi_cpu::ddgi_field_set::DdgiFieldSet;
+use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+use probegi_cpu::probe_trace::{ProbeBatchTracer, ProbeTracerHandle};
+use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_scene::{BvhSettings, BvhTracer, Scene};
+use probegi_wgpu::GpuContext;
+use probegi_wgpu_seam::WgpuProbeTracer;
+
+fn gpu(scene: &Scene, shade: bool) -> Option<WgpuProbeTracer> {
+    let ctx = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set")?;
+    let t =
+        WgpuProbeTracer::new(ctx, scene, &BvhTracer::for_scene(scene, BvhSettings::default()), shade).expect("upload");
+    assert_eq!(t.shades(), shade, "{:?}", t.shading_note);
+    Some(t)
+}
+
+fn settings() -> DdgiVolumeSettings {
+    DdgiVolumeSettings { probe_counts: UVec3::splat(6), probe_rays_per_probe: 128, ..Default::default() }
+}
+
+/// Largest texel difference over the largest texel, for both atlases.
+fn max_difference(a: &DdgiVolume, b: &DdgiVolume) -> (f32, f32) {
+    let rel = |x: &[f32], y: &[f32]| {
+        let scale = x.iter().fold(0f32, |m, v| m.max(v.abs())).max(1e-6);
+        x.iter().zip(y).fold(0f32, |m, (p, q)| m.max((p - q).abs())) / scale
+    };
+    let (ia, ib) = (flat3(a), flat3(b));
+    (rel(&ia, &ib), rel(&flat2(a), &flat2(b)))
+}
+
+fn flat3(v: &DdgiVolume) -> Vec<f32> {
+    v.irradiance.texels.iter().flat_map(|t| t.to_array()).collect()
+}
+
+fn flat2(v: &DdgiVolume) -> Vec<f32> {
+    v.distance.texels.iter().flat_map(|t| t.to_array()).collect()
+}
+
+/// RMS texel difference of the irradiance atlases.
+fn rms_difference(a: &DdgiVolume, b: &DdgiVolume) -> f32 {
+    let (x, y) = (flat3(a), flat3(b));
+    (x.iter().zip(&y).map(|(p, q)| (p - q) * (p - q)).sum::<f32>() / x.len() as f32).sqrt()
+}
+
+#[test]
+fn gpu_traced_cornell_atlases_match_after_1_and_100_frames_and_reruns_are_bit_identical() {
+    let scene = probegi_scene::builtin::cornell_box();
+    let Some(gpu) = gpu(&scene, false) else { return };
+    let cpu = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &cpu, DirectSettings::default());
+    let bounds = scene.bounds().expect("geometry");
+    let new_set = || DdgiFieldSet::single(DdgiVolume::new(settings(), bounds));
+    let (mut on_cpu, mut on_gpu, mut rerun) = (new_set(), new_set(), new_set());
+    let mut ms = BTreeMap::new();
+    for f in 0..100 {
+        on_cpu.update(&scene, &cpu, &direct, 5, f, &mut ms);
+        on_gpu.update_traced_by(&scene, &cpu, Some(&gpu), &direct, 5, f, &mut ms).expect("GPU trace");
+        if f < 3 {
+            rerun.update_traced_by(&scene, &cpu, Some(&gpu), &direct, 5, f, &mut ms).expect("GPU trace");
+        }
+        if f == 0 || f == 99 {
+            let (c, g) = (&on_cpu.volumes()[0], &on_gpu.volumes()[0]);
+            let (di, dd) = max_difference(c, g);
+            eprintln!("GPU trace, after {} frames: irradiance {di:.2e}, distance {dd:.2e} of the largest texel", f + 1);
+            assert!(di < 1e-3 && dd < 1e-3, "frame {f}: {di:e} {dd:e}");
+            assert_eq!(c.probe_states, g.probe_states, "probe states, frame {f}");
+            assert_eq!(c.probe_offsets, g.probe_offsets, "relocation, frame {f}");
+            g.validate();
+        }
+        if f == 2 {
+            let (a, b) = (&on_gpu.volumes()[0], &rerun.volumes()[0]);
+            assert_eq!(a.irradiance.texels, b.irradiance.texels, "a GPU rerun is bit-identical");
+            assert_eq!(a.distance.texels, b.distance.texels);
+        }
+    }
+}
+
+#[test]
+fn gpu_shaded_cornell_atlases_are_within_the_cpu_seed_noise_after_1_and_100_frames() {
+    let scene = probegi_scene::builtin::cornell_box();
+    let Some(gpu) = gpu(&scene, true) else { return };
+    let cpu = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &cpu, DirectSettings::default());
+    let bounds = scene.bounds().expect("geometry");
+    let new_set = || DdgiFieldSet::single(DdgiVolume::new(settings(), bounds));
+    let (mut a, mut b, mut g, mut g2) = (new_set(), new_set(), new_set(), new_set());
+    let mut ms = BTreeMap::new();
+    for f in 0..100 {
+        a.update(&scene, &cpu, &direct, 5, f, &mut ms);
+        b.update(&scene, &cpu, &direct, 6, f, &mut ms);
+        g.update_traced_by(&scene, &cpu, Some(&gpu), &direct, 5, f, &mut ms).expect("GPU");
+        if f < 2 {
+            g2.update_traced_by(&scene, &cpu, Some(&gpu), &direct, 5, f, &mut ms).expect("GPU");
+        }
+        if f == 1 {
+            assert_eq!(g.volumes()[0].irradiance.texels, g2.volumes()[0].irradiance.texels, "bit-identical rerun");
+        }
+        if f == 0 || f == 99 {
+            let (va, vb, vg) = (&a.volumes()[0], &b.volumes()[0], &g.volumes()[0]);
+            let noise = rms_difference(va, vb);
+            let gpu_cpu = rms_difference(va, vg);
+            let mean = |v: &DdgiVolume| flat3(v).iter().sum::<f32>() / flat3(v).len() as f32;
+            eprintln!(
+                "GPU shade, after {} frames: RMS texel difference GPU–CPU {gpu_cpu:.4}, CPU seed 5–6 {noise:.4}; \
+                 atlas means CPU {:.4}, GPU {:.4}",
+                f + 1,
+                mean(va),
+                mean(vg)
+            );
+            assert!(gpu_cpu <= 1.5 * noise, "frame {f}: {gpu_cpu} vs seed noise {noise}");
+            assert!((mean(va) - mean(vg)).abs() < 0.02 * mean(va), "atlas means");
+            assert_eq!(va.probe_states, vg.probe_states, "probe states");
+            vg.validate();
+        }
+    }
+}
+
+fn render(scene: &Scene, size: u32, frames: u32, s: DdgiVolumeSettings, gpu: Option<Arc<WgpuProbeTracer>>) -> Image {
+    let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
+    let camera = CameraRays::new(&scene.camera.expect("camera"), size, size);
+    let rs = RenderSettings {
+        width: size,
+        height: size,
+        frames,
+        seed: 3,
+        gi: GiMethod::Ddgi(Box::new(s)),
+        direct: DirectSettings::default(),
+        show_probes: false,
+        camera_path: Vec::new(),
+        probe_tracer: gpu.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
+    };
+    let out = render_frames(scene, &cpu, &camera, &rs, |_, _| {});
+    assert!(out.stats.error.is_none(), "{:?}", out.stats.error);
+    out.image
+}
+
+#[test]
+fn furnace_converges_to_le_over_one_minus_rho_on_the_gpu() {
+    let scene = probegi_scene::builtin::furnace_box(0.5, 1.0);
+    for shade in [false, true] {
+        let Some(gpu) = gpu(&scene, shade) else { return };
+        let s = DdgiVolumeSettings {
+            probe_counts: UVec3::splat(3),
+            probe_rays_per_probe: 128,
+            probe_hysteresis: 0.8,
+            ..Default::default()
+        };
+        let mean = render(&scene, 16, 80, s, Some(Arc::new(gpu))).mean();
+        eprintln!("furnace, GPU trace{}: mean {mean}", if shade { " and shade" } else { "" });
+        assert!((mean.x - 2.0).abs() < 0.04, "furnace mean {mean}, want 2.0 within 2 %");
+    }
+}
+
+#[test]
+fn cornell_and_door_room_images_agree_across_backends_within_flip_0_02() {
+    for (name, scene, s) in [
+        ("cornell box", probegi_scene::builtin::cornell_box(), settings()),
+        (
+            "door room",
+            probegi_scene::load_scene("builtin:door-room").expect("built in"),
+            DdgiVolumeSettings {
+                probe_counts: UVec3::new(6, 3, 6),
+                probe_origin_m: Some(glam::Vec3::new(-0.5, 0.5, -0.5)),
+                probe_spacing_m: Some(glam::Vec3::ONE),
+                probe_rays_per_probe: 128,
+                ..Default::default()
+            },
+        ),
+    ] {
+        let a = render(&scene, 48, 40, s.clone(), None);
+        for shade in [false, true] {
+            let Some(gpu) = gpu(&scene, shade) else { return };
+            let b = render(&scene, 48, 40, s.clone(), Some(Arc::new(gpu)));
+            let f = probegi_image::mean_flip_hdr(&a, &b).expect("same size");
+            eprintln!("{name}: HDR-FLIP CPU vs GPU trace{} {f:.5}", if shade { " + shade" } else { "" });
+            assert!(f < 0.02, "{name}: FLIP {f}");
+            assert!(b.first_invalid_pixel().is_none());
+        }
+    }
+}

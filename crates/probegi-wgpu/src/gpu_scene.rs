@@ -1,0 +1,196 @@
+//! A scene's surfaces, materials, textures and lights on the device, in the
+//! layout `shaders/scene.wgsl` reads (documented there): what the GPU shade
+//! pass needs to light a hit as the CPU does. Scenes with what the GPU shading
+//! does not implement yet are refused by name: normal and bump maps
+//! (`--set normal_maps=false` turns them off), and moving or instanced
+//! geometry (the GPU trace has no TLAS).
+
+use probegi_core::bsdf::{ALBEDO_TABLE_SIZE, specular_albedo_table};
+use probegi_core::color::{luminance, srgb8_to_linear_table};
+use probegi_core::sampling::Distribution1d;
+use probegi_scene::material::SpecularModel;
+use probegi_scene::{LightKind, Scene};
+use wgpu::util::DeviceExt;
+
+use crate::gpu_context::{GpuContext, GpuError};
+
+/// The bind-group layout of `scene.wgsl` (group 3): four read-only storage buffers.
+pub fn scene_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    let e = |b| crate::bvh_trace::storage_entry(b, true);
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("scene"),
+        entries: &[e(0), e(1), e(2), e(3)],
+    })
+}
+
+/// Why a scene cannot be shaded on the GPU yet, or `None`.
+pub fn unsupported_by_gpu_shading(scene: &Scene) -> Option<String> {
+    if let Some(m) = scene.materials.iter().find(|m| m.perturbs_normals()) {
+        return Some(format!(
+            "material {:?} has a normal or bump map, which the GPU shading does not apply yet \
+             (--set normal_maps=false renders without them)",
+            m.name
+        ));
+    }
+    if scene.has_moving_geometry() || !scene.instances.is_empty() {
+        return Some("moving objects and instanced meshes need a TLAS, which the GPU trace lacks".into());
+    }
+    None
+}
+
+/// The scene's shading data on the device.
+pub struct GpuScene {
+    pub triangles: usize,
+    pub emitters: usize,
+    bytes: u64,
+    bind_group: wgpu::BindGroup,
+}
+
+impl GpuScene {
+    pub fn upload(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
+        if let Some(why) = unsupported_by_gpu_shading(scene) {
+            return Err(GpuError::Input(format!("scene {}: {why}", scene.name)));
+        }
+        let mesh = &scene.mesh;
+        let nt = mesh.triangle_count();
+        let none = f32::from_bits(u32::MAX);
+        let mut triangles: Vec<[f32; 4]> = Vec::with_capacity(nt.max(1) * 8);
+        for t in 0..nt {
+            let [a, b, c] = mesh.triangles[t];
+            let (a, b, c) = (a as usize, b as usize, c as usize);
+            let p = |i: usize| mesh.positions[i];
+            let n = |i: usize| mesh.normals.get(i).copied().unwrap_or(glam::Vec3::ZERO);
+            let uv = |i: usize| mesh.uvs.get(i).copied().unwrap_or(glam::Vec2::ZERO);
+            let m = f32::from_bits(mesh.triangle_materials[t]);
+            triangles.push([p(a).x, p(a).y, p(a).z, m]);
+            triangles.push(p(b).extend(0.0).into());
+            triangles.push(p(c).extend(0.0).into());
+            triangles.push(n(a).extend(0.0).into());
+            triangles.push(n(b).extend(0.0).into());
+            triangles.push(n(c).extend(0.0).into());
+            triangles.push([uv(a).x, uv(a).y, uv(b).x, uv(b).y]);
+            triangles.push([uv(c).x, uv(c).y, 0.0, 0.0]);
+        }
+        if triangles.is_empty() {
+            triangles.push([0.0; 4]);
+        }
+        let tex_bits = |t: Option<usize>| match t {
+            Some(t) if t < scene.textures.len() => f32::from_bits(t as u32),
+            _ => none,
+        };
+        let mut materials: Vec<[f32; 4]> = Vec::with_capacity(scene.materials.len().max(1) * 4);
+        for m in &scene.materials {
+            let alpha = (m.roughness * m.roughness).clamp(probegi_core::bsdf::MIN_ALPHA, 1.0);
+            let model = match m.specular_model {
+                SpecularModel::None => 0,
+                SpecularModel::Mtl => 1,
+                SpecularModel::MetallicRoughness => 2,
+            };
+            let e = m.emissive_factor * m.emissive_strength;
+            materials.push(m.base_color_factor.extend(tex_bits(m.base_color_texture)).into());
+            materials.push(m.specular_color.extend(alpha).into());
+            materials.push([f32::from_bits(model), m.metallic, 0.0, 0.0]);
+            materials.push(e.extend(tex_bits(m.emissive_texture)).into());
+        }
+        if materials.is_empty() {
+            materials.push([0.0; 4]);
+        }
+        // Textures: the sRGB table, the GGX albedo table, headers, texels.
+        let lut = srgb8_to_linear_table();
+        let table = specular_albedo_table();
+        let mut words: Vec<u32> = lut.iter().map(|v| v.to_bits()).collect();
+        let headers = 260 + 3 * scene.textures.len();
+        words.extend([scene.textures.len() as u32, ALBEDO_TABLE_SIZE as u32, headers as u32, 0]);
+        let mut first = headers + table.len() * 2;
+        for t in &scene.textures {
+            words.extend([t.width, t.height, first as u32]);
+            first += t.texels.len();
+        }
+        for ab in table {
+            words.extend([ab[0].to_bits(), ab[1].to_bits()]);
+        }
+        for t in &scene.textures {
+            words.extend(t.texels.iter().map(|c| c[0] as u32 | (c[1] as u32) << 8 | (c[2] as u32) << 16));
+        }
+        // Lights: punctual lights, then the emitters' power-weighted distribution
+        // (probegi_cpu::light_sampling::AreaLights' rule: luminance of the mean
+        // emission × area).
+        let mut emitters = vec![];
+        let mut weights = vec![];
+        for t in 0..nt {
+            let mat = scene.material(mesh.triangle_materials[t]);
+            if !mat.is_emissive() {
+                continue;
+            }
+            let power = luminance(mat.mean_emission(&scene.textures)) * mesh.area(t);
+            if power > 0.0 && power.is_finite() {
+                emitters.push(t as u32);
+                weights.push(power);
+            }
+        }
+        let distribution = Distribution1d::new(&weights);
+        let mut lights: Vec<[f32; 4]> = vec![
+            [f32::from_bits(scene.lights.len() as u32), f32::from_bits(emitters.len() as u32), 0.0, 0.0],
+            scene.sky_radiance.extend(0.0).into(),
+        ];
+        for l in &scene.lights {
+            let kind = match l.kind {
+                LightKind::Point => 0u32,
+                LightKind::Spot => 1,
+                LightKind::Directional => 2,
+            };
+            lights.push([f32::from_bits(kind), l.range.unwrap_or(-1.0), l.inner_cone_angle, l.outer_cone_angle]);
+            lights.push(l.position.extend(0.0).into());
+            lights.push(l.direction.extend(0.0).into());
+            lights.push((l.color * l.intensity).extend(0.0).into());
+        }
+        let mut cdf = 0.0f32;
+        for (i, &t) in emitters.iter().enumerate() {
+            let pmf = distribution.pmf(i);
+            cdf = if i + 1 == emitters.len() { 1.0 } else { cdf + pmf };
+            lights.push([f32::from_bits(t), cdf, pmf / mesh.area(t as usize), 0.0]);
+        }
+        let init = |label: &str, contents: &[u8]| {
+            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let buffers = [
+            init("scene triangles", bytemuck::cast_slice(&triangles)),
+            init("scene materials", bytemuck::cast_slice(&materials)),
+            init("scene textures", bytemuck::cast_slice(&words)),
+            init("scene lights", bytemuck::cast_slice(&lights)),
+        ];
+        let limit = ctx.device.limits().max_storage_buffer_binding_size;
+        if let Some(b) = buffers.iter().find(|b| b.size() > limit) {
+            return Err(GpuError::Input(format!(
+                "scene {}: a {} MiB buffer exceeds this adapter's {} MiB binding limit",
+                scene.name,
+                b.size() >> 20,
+                limit >> 20
+            )));
+        }
+        let layout = scene_bind_group_layout(&ctx.device);
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+            .collect();
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("scene"),
+            layout: &layout,
+            entries: &entries,
+        });
+        Ok(Self { triangles: nt, emitters: emitters.len(), bytes: buffers.iter().map(|b| b.size()).sum(), bind_group })
+    }
+
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    pub(crate) fn bind_group(&self) -> &wgpu::BindGroup {
+        &self.bind_group
+    }
+}

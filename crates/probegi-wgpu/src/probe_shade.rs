@@ -1,0 +1,159 @@
+//! The shade pass of the probe rays on the GPU (`shaders/probe_shade.wgsl` over
+//! `scene.wgsl`, `bvh.wgsl` and `ddgi_query.wgsl`), mirroring
+//! `probegi_cpu::probe_shade::shade_probe_rays`: sky for misses, zero for back
+//! faces, direct light (punctual lights with shadow rays, emitters by stratified
+//! NEE with `probe_area_light_samples`), diffuse albedo/π × the set's previous
+//! irradiance, and second-order glossy where the volume enables it. It reads the
+//! trace pass's rays and hits where they lie on the device ([`GpuRayBatch`]).
+//!
+//! *Deviation:* random numbers come from a PCG hash per ray, not the CPU's PCG32
+//! stream per probe, so area-light estimates agree with the CPU's in
+//! distribution, not bit for bit (`tests/shade_equivalence.rs`).
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use wgpu::util::DeviceExt;
+
+use crate::bvh_trace::{GpuBvh, GpuRayBatch, bvh_bind_group_layout, dispatch_2d, storage_entry, uniform_entry};
+use crate::ddgi_query::{GpuDdgiField, query_wgsl};
+use crate::gpu_context::{GpuContext, GpuError};
+use crate::gpu_scene::{GpuScene, scene_bind_group_layout};
+
+/// The shade pass's uniform block; must match `ShadeParams` in `probe_shade.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct ShadeParams {
+    pub ray_count: u32,
+    pub groups_x: u32,
+    pub seed: u32,
+    pub frame: u32,
+}
+const _: () = assert!(std::mem::size_of::<ShadeParams>() == 16);
+
+/// Per-ray shading flags of `probe_shade.wgsl`'s `shade_info`.
+pub fn shade_info(needs_radiance: bool, glossy_second_order: bool, area_samples: u32) -> u32 {
+    (needs_radiance as u32) << 31 | (glossy_second_order as u32) << 30 | area_samples.min(0xffff)
+}
+
+pub struct GpuProbeShade {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl GpuProbeShade {
+    pub fn new(ctx: &GpuContext) -> Self {
+        let source = format!(
+            "{}\n{}\n{}\n{}",
+            include_str!("shaders/bvh.wgsl"),
+            query_wgsl(2),
+            include_str!("shaders/scene.wgsl"),
+            include_str!("shaders/probe_shade.wgsl")
+        );
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("probe_shade.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("probe shade"),
+            entries: &[
+                uniform_entry(0),
+                storage_entry(1, true),
+                storage_entry(2, true),
+                storage_entry(3, true),
+                storage_entry(4, false),
+            ],
+        });
+        let layouts = [
+            layout,
+            bvh_bind_group_layout(&ctx.device),
+            GpuDdgiField::bind_group_layout(&ctx.device),
+            scene_bind_group_layout(&ctx.device),
+        ];
+        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("probe shade"),
+            bind_group_layouts: &[Some(&layouts[0]), Some(&layouts[1]), Some(&layouts[2]), Some(&layouts[3])],
+            immediate_size: 0,
+        });
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("shade_probe_rays"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("shade_probe_rays"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let [layout, ..] = layouts;
+        Self { layout, pipeline }
+    }
+
+    /// Radiance of every ray of `batch` (traced already), by `info` ([`shade_info`]);
+    /// with `timer`, the pass writes its timestamps at index `timer.1`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn shade(
+        &self,
+        ctx: &GpuContext,
+        bvh: &GpuBvh,
+        field: &GpuDdgiField,
+        scene: &GpuScene,
+        batch: &GpuRayBatch,
+        info: &[u32],
+        seed: u32,
+        frame: u32,
+        timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
+    ) -> Result<Vec<Vec3>, GpuError> {
+        let n = batch.ray_count;
+        if info.len() != n as usize {
+            return Err(GpuError::Input(format!("{} shading flags for {n} rays", info.len())));
+        }
+        if n == 0 {
+            return Ok(vec![]);
+        }
+        let (gx, gy) = dispatch_2d(n);
+        let device = &ctx.device;
+        let params = ShadeParams { ray_count: n, groups_x: gx, seed, frame };
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("shade params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("shade info"),
+            contents: bytemuck::cast_slice(info),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let radiance = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("probe ray radiance"),
+            size: n as u64 * 16,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("probe shade"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: batch.rays_buffer().as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: batch.hits_buffer().as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: info.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: radiance.as_entire_binding() },
+            ],
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("shade probe rays"),
+                timestamp_writes: timer.and_then(|(t, i)| t.writes(i)),
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.set_bind_group(1, bvh.bind_group(), &[]);
+            pass.set_bind_group(2, field.bind_group(), &[]);
+            pass.set_bind_group(3, scene.bind_group(), &[]);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        let bytes = ctx.read_back(&radiance)?;
+        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok(v.iter().map(|l| Vec3::new(l[0], l[1], l[2])).collect())
+    }
+}

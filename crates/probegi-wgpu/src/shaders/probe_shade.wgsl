@@ -1,0 +1,73 @@
+// Shade pass of the probe rays (probegi_cpu::probe_shade::shade_probe_rays; seed 000
+// §3, seed 003 §4.4, seed 004 §4.1, §4.4): one thread per batch ray, over the
+// trace pass's hits. Misses take the sky; back faces give zero (the set's rule
+// turns their distance into −0.2·t); front faces get direct light (scene.wgsl)
+// plus diffuse albedo/π × the set's previous irradiance (ddgi_query.wgsl at group
+// 2), plus with second-order glossy the hit's specular reflection of the field.
+// No emission (see probe_shade.rs on the CPU: emitters are sampled as area lights).
+// Must match `probegi_wgpu::probe_shade::ShadeParams` (#[repr(C)], 16 bytes) and
+// the trace pass's `GpuRay` / `GpuRayHit`.
+
+struct ShadeParams {
+    ray_count: u32,
+    groups_x: u32,
+    seed: u32,
+    frame: u32,
+};
+
+struct ShadeRay {
+    origin: vec3<f32>,
+    t_min: f32,
+    dir: vec3<f32>,
+    t_max: f32,
+};
+
+struct ShadeHit {
+    t: f32,
+    triangle: u32,
+    bary: vec2<f32>,
+};
+
+@group(0) @binding(0) var<uniform> shade_params: ShadeParams;
+@group(0) @binding(1) var<storage, read> shade_rays: array<ShadeRay>;
+@group(0) @binding(2) var<storage, read> shade_hits: array<ShadeHit>;
+// Per ray: bit 31 the set wants its radiance, bit 30 second-order glossy, bits 0..15 area samples.
+@group(0) @binding(3) var<storage, read> shade_info: array<u32>;
+@group(0) @binding(4) var<storage, read_write> shade_radiance: array<vec4<f32>>;
+
+@compute @workgroup_size(64)
+fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = (wid.y * shade_params.groups_x + wid.x) * 64u + lid;
+    if (i >= shade_params.ray_count) {
+        return;
+    }
+    let info = shade_info[i];
+    let h = shade_hits[i];
+    if ((info & 0x80000000u) == 0u || ((h.triangle & 0x80000000u) != 0u && h.triangle != BVH_NO_HIT)) {
+        shade_radiance[i] = vec4<f32>(0.0);
+        return;
+    }
+    if (h.triangle == BVH_NO_HIT) {
+        shade_radiance[i] = vec4<f32>(scene_lights[1].xyz, 0.0);
+        return;
+    }
+    let r = shade_rays[i];
+    let sp = scene_surface_point(h.triangle, h.bary, false);
+    var rng = rng_hash(shade_params.seed ^ rng_hash(shade_params.frame ^ rng_hash(i)));
+    let to_viewer = -r.dir;
+    let n = scene_facing_normal(sp);
+    var l = scene_direct(sp, to_viewer, info & 0xffffu, &rng);
+    let bsdf = scene_bsdf(sp);
+    l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * ddgi_irradiance(sp.position, n, to_viewer);
+    if ((info & 0x40000000u) != 0u && max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0) {
+        // probegi_cpu::glossy::second_order_specular
+        let mirror = r.dir - n * (2.0 * dot(r.dir, n));
+        let e_mirror = ddgi_irradiance(sp.position, mirror, to_viewer);
+        l += bsdf_specular_albedo(bsdf.specular_f0, max(dot(to_viewer, n), 0.0), bsdf.alpha) * e_mirror / SCENE_PI;
+    }
+    if (all(abs(l) <= vec3<f32>(SCENE_F32_MAX))) {
+        shade_radiance[i] = vec4<f32>(l, 0.0);
+    } else {
+        shade_radiance[i] = vec4<f32>(bitcast<f32>(0x7fc00000u));
+    }
+}

@@ -1,0 +1,382 @@
+// A scene's surfaces, materials and lights on the GPU, mirroring the CPU's:
+//   probegi_scene::Scene::surface_point          (interpolated shading normal on the geometric side),
+//   probegi_scene::SurfacePoint::{facing_normal, facing_geometric_normal, spawn_origin},
+//   probegi_scene::material::Material::{bsdf, base_color, emission}, probegi_scene::texture::{Footprint, Texture::sample_bilinear},
+//   probegi_core::bsdf::SurfaceBsdf::eval        (Lambert × (1 − max F0) + GGX, height-correlated Smith, Schlick),
+//   probegi_cpu::shading::{lambert_cos, shadow_ray_to, shadow_ray_along, punctual_direct},
+//   probegi_cpu::light_sampling::{AreaLights::sample, punctual_incident}, probegi_core::punctual,
+//   probegi_cpu::direct::DirectLighting::reflected (punctual exactly, area lights by stratified NEE).
+// Random numbers differ from the CPU's (a PCG hash per ray instead of a PCG32
+// stream per probe), so area-light estimates agree in distribution, not bit for bit.
+// Buffers (group 3, written by `probegi_wgpu::gpu_scene::GpuScene`):
+//   scene_triangles: 8 × vec4 per scene triangle: p0 (w: material bits), p1, p2, n0, n1, n2, (uv0, uv1), (uv2, 0, 0)
+//   scene_materials: 4 × vec4 per material: (base colour factor, base texture bits | none),
+//                    (specular colour, α), (model: 0 none, 1 MTL, 2 metallic-roughness; metallic, 0, 0),
+//                    (emission = factor × strength, emissive texture bits | none)
+//   scene_textures:  words 0..255 the sRGB8 → linear table (f32 bits), 256 texture count, 257 the
+//                    GGX albedo table's side N, 258 its first word, 259 0, then per texture (width,
+//                    height, first texel word), the (A, B) table (N × N × 2 f32 bits,
+//                    probegi_core::bsdf::specular_albedo_table), then RGB8 texels one per word
+//   scene_lights:    vec4 header (punctual count, emitter count bits, 0, 0), vec4 sky radiance,
+//                    per punctual light 4 × vec4: (kind, range or −1, inner, outer), position, direction, colour × intensity;
+//                    per emitter vec4: (triangle bits, CDF, selection pdf / area, 0)
+
+@group(3) @binding(0) var<storage, read> scene_triangles: array<vec4<f32>>;
+@group(3) @binding(1) var<storage, read> scene_materials: array<vec4<f32>>;
+@group(3) @binding(2) var<storage, read> scene_textures: array<u32>;
+@group(3) @binding(3) var<storage, read> scene_lights: array<vec4<f32>>;
+
+const SCENE_PI: f32 = 3.14159265358979;
+const SCENE_NONE: u32 = 0xffffffffu;
+const SCENE_F32_MAX: f32 = 3.4028235e38;
+// probegi_core::bsdf::MIN_ALPHA
+const SCENE_MIN_ALPHA: f32 = 1e-3;
+
+struct SurfacePoint {
+    position: vec3<f32>,
+    geometric_normal: vec3<f32>,
+    shading_normal: vec3<f32>,
+    uv: vec2<f32>,
+    material: u32,
+    front_face: bool,
+};
+
+fn scene_normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
+    let l = length(v);
+    if (l > 0.0 && l < SCENE_F32_MAX) {
+        return v / l;
+    }
+    return vec3<f32>(0.0);
+}
+
+// probegi_scene::Scene::surface_point (no normal or bump maps: `GpuScene` refuses them).
+fn scene_surface_point(triangle: u32, bary_in: vec2<f32>, backface: bool) -> SurfacePoint {
+    let t = triangle * 8u;
+    let bary = vec3<f32>(1.0 - bary_in.x - bary_in.y, bary_in.x, bary_in.y);
+    let p0 = scene_triangles[t];
+    let p1 = scene_triangles[t + 1u].xyz;
+    let p2 = scene_triangles[t + 2u].xyz;
+    let position = p0.xyz * bary.x + p1 * bary.y + p2 * bary.z;
+    let ng = scene_normalize_or_zero(cross(p1 - p0.xyz, p2 - p0.xyz));
+    var ns = scene_normalize_or_zero(scene_triangles[t + 3u].xyz * bary.x + scene_triangles[t + 4u].xyz * bary.y
+        + scene_triangles[t + 5u].xyz * bary.z);
+    if (all(ns == vec3<f32>(0.0))) {
+        ns = ng;
+    } else if (dot(ns, ng) < 0.0) {
+        ns = -ns;
+    }
+    let uv01 = scene_triangles[t + 6u];
+    let uv2 = scene_triangles[t + 7u].xy;
+    let uv = uv01.xy * bary.x + uv01.zw * bary.y + uv2 * bary.z;
+    return SurfacePoint(position, ng, ns, uv, bitcast<u32>(p0.w), !backface);
+}
+
+fn scene_facing_normal(sp: SurfacePoint) -> vec3<f32> {
+    return select(-sp.shading_normal, sp.shading_normal, sp.front_face);
+}
+
+fn scene_facing_geometric_normal(sp: SurfacePoint) -> vec3<f32> {
+    return select(-sp.geometric_normal, sp.geometric_normal, sp.front_face);
+}
+
+// SurfacePoint::spawn_origin.
+fn scene_spawn_origin(sp: SurfacePoint, dir: vec3<f32>) -> vec3<f32> {
+    let n = select(-sp.geometric_normal, sp.geometric_normal, dot(dir, sp.geometric_normal) >= 0.0);
+    let p = abs(sp.position);
+    let eps = 1e-4 * (1.0 + max(max(p.x, p.y), p.z));
+    return sp.position + n * eps;
+}
+
+// probegi_cpu::shading::lambert_cos: the cosine on the viewer's side, or ≤ 0 when
+// `wi` points into the surface by either normal.
+fn scene_lambert_cos(sp: SurfacePoint, wi: vec3<f32>) -> f32 {
+    let cos = dot(wi, scene_facing_normal(sp));
+    if (cos > 0.0 && dot(wi, scene_facing_geometric_normal(sp)) > 0.0) {
+        return cos;
+    }
+    return 0.0;
+}
+
+// Texture::sample_bilinear (Footprint: wrap addressing, texel centres at half-integers).
+fn scene_texture(tex: u32, uv_in: vec2<f32>) -> vec3<f32> {
+    let h = 260u + tex * 3u;
+    let width = scene_textures[h];
+    let height = scene_textures[h + 1u];
+    let first = scene_textures[h + 2u];
+    var fx = 0.0;
+    var fy = 0.0;
+    var x0 = 0i;
+    var y0 = 0i;
+    if (all(abs(uv_in) <= vec2<f32>(SCENE_F32_MAX))) {
+        let uv = uv_in - floor(uv_in);
+        let x = uv.x * f32(width) - 0.5;
+        let y = uv.y * f32(height) - 0.5;
+        let fx0 = floor(x);
+        let fy0 = floor(y);
+        fx = x - fx0;
+        fy = y - fy0;
+        x0 = i32(fx0);
+        y0 = i32(fy0);
+    }
+    let w = i32(width);
+    let hh = i32(height);
+    let c0 = u32(((x0 % w) + w) % w);
+    let c1 = u32((((x0 + 1) % w) + w) % w);
+    let r0 = u32(((y0 % hh) + hh) % hh) * width;
+    let r1 = u32((((y0 + 1) % hh) + hh) % hh) * width;
+    let idx = array<u32, 4>(r0 + c0, r0 + c1, r1 + c0, r1 + c1);
+    var v: array<vec3<f32>, 4>;
+    for (var k = 0u; k < 4u; k++) {
+        let t = scene_textures[first + idx[k]];
+        v[k] = vec3<f32>(
+            bitcast<f32>(scene_textures[t & 0xffu]),
+            bitcast<f32>(scene_textures[(t >> 8u) & 0xffu]),
+            bitcast<f32>(scene_textures[(t >> 16u) & 0xffu]),
+        );
+    }
+    return (v[0] * (1.0 - fx) + v[1] * fx) * (1.0 - fy) + (v[2] * (1.0 - fx) + v[3] * fx) * fy;
+}
+
+struct Bsdf {
+    diffuse: vec3<f32>,
+    specular_f0: vec3<f32>,
+    alpha: f32,
+};
+
+// Material::bsdf at the surface point.
+fn scene_bsdf(sp: SurfacePoint) -> Bsdf {
+    let m = sp.material * 4u;
+    let a = scene_materials[m];
+    let s = scene_materials[m + 1u];
+    let model = scene_materials[m + 2u];
+    var base = a.xyz;
+    let tex = bitcast<u32>(a.w);
+    if (tex != SCENE_NONE) {
+        base = base * scene_texture(tex, sp.uv);
+    }
+    let kind = bitcast<u32>(model.x);
+    if (kind == 0u) {
+        return Bsdf(base, vec3<f32>(0.0), 1.0);
+    }
+    if (kind == 1u) {
+        return Bsdf(base, s.xyz, s.w);
+    }
+    let metallic = model.y;
+    return Bsdf(base * (1.0 - metallic), mix(vec3<f32>(0.04), base, metallic), s.w);
+}
+
+// Material::emission at the surface point (front face only, as Scene::emitted).
+fn scene_emission(material: u32, uv: vec2<f32>) -> vec3<f32> {
+    let e = scene_materials[material * 4u + 3u];
+    let tex = bitcast<u32>(e.w);
+    if (all(e.xyz == vec3<f32>(0.0)) || tex == SCENE_NONE) {
+        return e.xyz;
+    }
+    return e.xyz * scene_texture(tex, uv);
+}
+
+fn bsdf_diffuse_albedo(b: Bsdf) -> vec3<f32> {
+    return b.diffuse * (1.0 - min(max(max(b.specular_f0.x, b.specular_f0.y), b.specular_f0.z), 1.0));
+}
+
+// SurfaceBsdf::eval in the local frame (+z = facing normal).
+fn bsdf_eval(b: Bsdf, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
+    if (wi.z <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    var f = bsdf_diffuse_albedo(b) / SCENE_PI;
+    if (max(max(b.specular_f0.x, b.specular_f0.y), b.specular_f0.z) > 0.0 && wo.z > 0.0) {
+        let h = scene_normalize_or_zero(wo + wi);
+        if (any(h != vec3<f32>(0.0))) {
+            let a = max(b.alpha, SCENE_MIN_ALPHA);
+            let a2 = a * a;
+            let c2 = h.z * h.z;
+            let dd = c2 * (a2 - 1.0) + 1.0;
+            let d = a2 / (SCENE_PI * dd * dd);
+            let lo = wi.z * sqrt(a2 + (1.0 - a2) * wo.z * wo.z);
+            let li = wo.z * sqrt(a2 + (1.0 - a2) * wi.z * wi.z);
+            let g2 = 2.0 * wo.z * wi.z / (lo + li);
+            let m = pow(1.0 - clamp(dot(wi, h), 0.0, 1.0), 5.0);
+            let fresnel = b.specular_f0 + (vec3<f32>(1.0) - b.specular_f0) * m;
+            f += fresnel * (d * g2 / (4.0 * wo.z * wi.z));
+        }
+    }
+    return f;
+}
+
+// probegi_core::bsdf::specular_directional_albedo: F0·A + B, bilinear in the table.
+fn bsdf_specular_albedo(f0: vec3<f32>, cos_o: f32, alpha: f32) -> vec3<f32> {
+    let n = scene_textures[257u];
+    let first = scene_textures[258u];
+    let x = clamp(cos_o, 0.0, 1.0) * f32(n - 1u);
+    let y = clamp(alpha, 0.0, 1.0) * f32(n - 1u);
+    let x0 = min(u32(x), n - 2u);
+    let y0 = min(u32(y), n - 2u);
+    let fx = x - f32(x0);
+    let fy = y - f32(y0);
+    let at = array<u32, 4>(y0 * n + x0, y0 * n + x0 + 1u, (y0 + 1u) * n + x0, (y0 + 1u) * n + x0 + 1u);
+    var v: array<vec2<f32>, 4>;
+    for (var k = 0u; k < 4u; k++) {
+        v[k] = vec2<f32>(bitcast<f32>(scene_textures[first + 2u * at[k]]), bitcast<f32>(scene_textures[first + 2u * at[k] + 1u]));
+    }
+    let a0 = v[0] + (v[1] - v[0]) * fx;
+    let a1 = v[2] + (v[3] - v[2]) * fx;
+    let ab = a0 + (a1 - a0) * fy;
+    return f0 * ab.x + vec3<f32>(ab.y);
+}
+
+// An orthonormal frame around unit n (Duff et al. 2017).
+struct Frame {
+    t: vec3<f32>,
+    b: vec3<f32>,
+    n: vec3<f32>,
+};
+
+fn frame_from_normal(n: vec3<f32>) -> Frame {
+    let s = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    return Frame(vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x), vec3<f32>(b, s + n.y * n.y * a, -n.y), n);
+}
+
+fn frame_to_local(f: Frame, v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(v, f.t), dot(v, f.b), dot(v, f.n));
+}
+
+// A PCG hash stream (Jarzynski & Olano 2020), one per ray.
+fn rng_hash(v: u32) -> u32 {
+    let state = v * 747796405u + 2891336453u;
+    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+fn rng_next(state: ptr<function, u32>) -> f32 {
+    *state = rng_hash(*state);
+    return f32(*state >> 8u) * (1.0 / 16777216.0);
+}
+
+// probegi_cpu::light_sampling::punctual_incident → (wi, distance), irradiance in `e`.
+fn scene_punctual(k: u32, point: vec3<f32>, e: ptr<function, vec3<f32>>) -> vec4<f32> {
+    let base = 2u + k * 4u;
+    let h = scene_lights[base];
+    let power = scene_lights[base + 3u].xyz;
+    let kind = bitcast<u32>(h.x);
+    if (kind == 2u) {
+        *e = power;
+        return vec4<f32>(-normalize(scene_lights[base + 2u].xyz), SCENE_F32_MAX);
+    }
+    let to = scene_lights[base + 1u].xyz - point;
+    let d2 = dot(to, to);
+    if (d2 <= 0.0) {
+        *e = vec3<f32>(0.0);
+        return vec4<f32>(0.0);
+    }
+    let d = sqrt(d2);
+    let wi = to / d;
+    var window = 1.0;
+    if (h.y > 0.0) {
+        let q = d / h.y;
+        let c = clamp(1.0 - q * q * q * q, 0.0, 1.0);
+        window = c * c;
+    }
+    var irr = power * window / d2;
+    if (kind == 1u) {
+        let cos_angle = dot(normalize(scene_lights[base + 2u].xyz), -wi);
+        let cos_outer = cos(h.w);
+        let scale = 1.0 / max(cos(h.z) - cos_outer, 1e-3);
+        let t = clamp(cos_angle * scale - cos_outer * scale, 0.0, 1.0);
+        irr *= t * t;
+    }
+    *e = irr;
+    return vec4<f32>(wi, d);
+}
+
+// Direct light reflected toward `to_viewer` (DirectLighting::reflected with the sky
+// left out): punctual lights exactly, `area_samples` stratified NEE samples of the
+// emitters, every sample with a shadow ray through `bvh.wgsl`. No emission.
+fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, rng: ptr<function, u32>) -> vec3<f32> {
+    let fr = frame_from_normal(scene_facing_normal(sp));
+    var wo = frame_to_local(fr, to_viewer);
+    wo.z = max(wo.z, 1e-4);
+    wo = normalize(wo);
+    let bsdf = scene_bsdf(sp);
+    let header = scene_lights[0];
+    let punctual = bitcast<u32>(header.x);
+    let emitters = bitcast<u32>(header.y);
+    var l = vec3<f32>(0.0);
+    for (var k = 0u; k < punctual; k++) {
+        var e = vec3<f32>(0.0);
+        let inc = scene_punctual(k, sp.position, &e);
+        if (!(max(max(e.x, e.y), e.z) > 0.0)) {
+            continue;
+        }
+        let cos = scene_lambert_cos(sp, inc.xyz);
+        if (cos <= 0.0) {
+            continue;
+        }
+        var t_max = SCENE_F32_MAX;
+        if (inc.w < SCENE_F32_MAX) {
+            t_max = inc.w * (1.0 - 1e-4);
+        }
+        let shadow = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, inc.xyz), inc.xyz, 0.0, t_max), true);
+        if (shadow.leaf == BVH_NO_HIT) {
+            l += bsdf_eval(bsdf, wo, frame_to_local(fr, inc.xyz)) * e * cos;
+        }
+    }
+    if (emitters > 0u && area_samples > 0u) {
+        let k = u32(ceil(sqrt(f32(area_samples))));
+        let n = k * k;
+        let first = 2u + punctual * 4u;
+        var sum = vec3<f32>(0.0);
+        for (var i = 0u; i < n; i++) {
+            let u = vec2<f32>((f32(i % k) + rng_next(rng)) / f32(k), (f32(i / k) + rng_next(rng)) / f32(k));
+            let u_select = rng_next(rng);
+            // Distribution1d::sample_discrete: the first CDF entry above u.
+            var lo = 0u;
+            var hi = emitters;
+            while (lo < hi) {
+                let mid = (lo + hi) / 2u;
+                if (scene_lights[first + mid].y <= u_select) { lo = mid + 1u; } else { hi = mid; }
+            }
+            let em = scene_lights[first + min(lo, emitters - 1u)];
+            let tri = bitcast<u32>(em.x) * 8u;
+            let su = sqrt(u.x);
+            let b0 = 1.0 - su;
+            let b1 = u.y * su;
+            let b = vec3<f32>(b0, b1, 1.0 - b0 - b1);
+            let p0 = scene_triangles[tri].xyz;
+            let p1 = scene_triangles[tri + 1u].xyz;
+            let p2 = scene_triangles[tri + 2u].xyz;
+            let point = p0 * b.x + p1 * b.y + p2 * b.z;
+            let to = point - sp.position;
+            let dist2 = dot(to, to);
+            if (dist2 <= 0.0) {
+                continue;
+            }
+            let wi = to / sqrt(dist2);
+            let nl = scene_normalize_or_zero(cross(p1 - p0, p2 - p0));
+            let cos_light = -dot(wi, nl);
+            if (cos_light <= 0.0) {
+                continue;
+            }
+            let uv01 = scene_triangles[tri + 6u];
+            let uv = uv01.xy * b.x + uv01.zw * b.y + scene_triangles[tri + 7u].xy * b.z;
+            let radiance = scene_emission(bitcast<u32>(scene_triangles[tri].w), uv);
+            let pdf = em.z * dist2 / cos_light;
+            let cos = scene_lambert_cos(sp, wi);
+            if (cos <= 0.0 || all(radiance == vec3<f32>(0.0)) || pdf <= 0.0) {
+                continue;
+            }
+            // probegi_cpu::shading::shadow_ray_to
+            let origin = scene_spawn_origin(sp, point - sp.position);
+            let to_point = point - origin;
+            let d = length(to_point);
+            let shadow = bvh_trace(bvh_make_ray(origin, to_point / d, 0.0, d * (1.0 - 1e-4)), true);
+            if (shadow.leaf == BVH_NO_HIT) {
+                sum += bsdf_eval(bsdf, wo, frame_to_local(fr, wi)) * radiance * (cos / pdf);
+            }
+        }
+        l += sum / f32(n);
+    }
+    return l;
+}
