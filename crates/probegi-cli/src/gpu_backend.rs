@@ -1,9 +1,11 @@
-//! `--backend wgpu`: what of a frame runs on the GPU today. The DDGI probe ray
-//! batches (update and initialisation rounds) are traced by probegi-wgpu's
-//! compute-shader CWBVH traversal over the same BVH the CPU builds, and shaded
-//! by its shade pass where the scene allows (`probegi-wgpu-seam`); the set's
-//! bookkeeping (relocation, classification, states), blend, border and the
-//! camera image are still the CPU's.
+//! `--backend wgpu`: what of a frame runs on the GPU today (`probegi-wgpu-seam`).
+//! The DDGI probe ray batches (update and initialisation rounds) are traced by
+//! probegi-wgpu's compute-shader CWBVH traversal over the same BVH the CPU
+//! builds; where the scene allows (no normal or bump maps) they are shaded
+//! there too and the camera frame is rendered there (primary rays, direct light,
+//! glossy rays, the field query). The set's bookkeeping (relocation,
+//! classification, probe states), blend and border run on the CPU, whose
+//! atlases are uploaded for the GPU's queries each frame.
 
 use anyhow::{Context, Result};
 use probegi_cpu::ddgi_field_set::ProbeRayBatch;
@@ -30,8 +32,10 @@ pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTrac
     let ctx = GpuContext::headless().context("--backend wgpu")?;
     let g = WgpuProbeTracer::new(ctx, scene, bvh, true).context("--backend wgpu: putting the scene on the device")?;
     match &g.shading_note {
-        None => eprintln!("probe rays traced and shaded on {}", g.adapter_name()),
-        Some(why) => eprintln!("probe rays traced on {}, shaded on the CPU: {why}", g.adapter_name()),
+        None => eprintln!("probe rays and the camera frame on {}", g.adapter_name()),
+        Some(why) => {
+            eprintln!("probe rays traced on {}; their shading and the camera frame on the CPU: {why}", g.adapter_name())
+        }
     }
     Ok(g)
 }

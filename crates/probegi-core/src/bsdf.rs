@@ -91,8 +91,8 @@ pub fn ggx_reflection_pdf(wo: Vec3, wi: Vec3, alpha: f32) -> f32 {
     smith_g1(wo.z, alpha) * ggx_d(h.z, alpha) / (4.0 * wo.z) * if o_h > 0.0 { 1.0 } else { 0.0 }
 }
 
-/// Table resolution of [`specular_directional_albedo`] in μo and in α.
-/// Side of [`specular_albedo_table`] (cos θo × α samples).
+/// Table resolution of [`specular_directional_albedo`] (and of
+/// [`specular_albedo_table`]) in μo and in α.
 pub const ALBEDO_TABLE_SIZE: usize = 32;
 
 /// (A, B) per (α, μo) node, row-major in α; node i sits at i/(N − 1), so both ends

@@ -91,6 +91,15 @@ impl CameraRays {
             .normalize()
     }
 
+    /// What [`Self::ray_dir_world`] computes from, for a GPU camera pass:
+    /// forward, right, up, then (tan ½ fov_y, aspect, width, height) in pixels.
+    pub fn basis(&self) -> ([Vec3; 3], [f32; 4]) {
+        (
+            [self.forward_world, self.right_world, self.up_world],
+            [self.tan_half_fov_y, self.aspect, self.width, self.height],
+        )
+    }
+
     /// Unit viewing direction (the optical axis).
     pub fn forward_world(&self) -> Vec3 {
         self.forward_world

@@ -160,6 +160,21 @@ impl Accumulation {
         compose_pixels(&self.direct_sum, self.accumulated, &self.indirect)
     }
 
+    /// Records frame `f`'s means and hands its image to the caller.
+    fn finish_frame(
+        &self,
+        f: u32,
+        settings: &RenderSettings,
+        stats: &mut RenderStats,
+        on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
+    ) {
+        let compose = || Image { width: settings.width, height: settings.height, pixels: self.pixels() };
+        stats.frame_means.push(self.mean());
+        let indirect_sum: DVec3 = self.indirect.iter().map(|i| i.as_dvec3()).sum();
+        stats.frame_indirect_means.push((indirect_sum / self.indirect.len().max(1) as f64).as_vec3());
+        on_frame_done(f, &compose);
+    }
+
     /// Mean of the composed image, without composing it.
     fn mean(&self) -> Vec3 {
         let k = self.accumulated.max(1) as f64;
@@ -250,6 +265,38 @@ pub fn render_frames(
             }
         }
 
+        // The camera frame on another device, where the backend renders it.
+        if let (Some(h), Some(set)) = (&settings.probe_tracer, field.as_ref()) {
+            let t = Instant::now();
+            let second_order = set.volumes().iter().any(|v| v.settings.glossy_second_order);
+            let view = set.view();
+            let on_device = h.0.camera_frame(
+                camera,
+                &view,
+                camera_direct.direct_area_samples,
+                second_order,
+                f,
+                settings.seed,
+                &mut acc.frame_direct,
+                &mut acc.indirect,
+            );
+            drop(view);
+            match on_device {
+                Some(Ok(())) => {
+                    let camera_moved = moving_camera && f > 0 && camera_at(f - 1) != camera;
+                    acc.add_frame(animated || camera_moved);
+                    *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
+                    acc.finish_frame(f, settings, &mut stats, &mut on_frame_done);
+                    continue;
+                }
+                Some(Err(e)) => {
+                    stats.error = Some(format!("frame {f}: camera frame: {e}"));
+                    break;
+                }
+                None => {}
+            }
+        }
+
         let t = Instant::now();
         let (gbuffer, rays) = trace_gbuffer(scene, tracer, camera, settings.width, settings.height, f, settings.seed);
         *pass_totals.entry("gbuffer").or_default() += t.elapsed().as_secs_f64() * 1e3;
@@ -283,11 +330,7 @@ pub fn render_frames(
                 p.update(scene, tracer, direct, settings.direct, camera, &gbuffer, settings.seed, f, &mut pass_totals);
         }
         last_gbuffer = Some(gbuffer);
-        let compose = || Image { width: settings.width, height: settings.height, pixels: acc.pixels() };
-        stats.frame_means.push(acc.mean());
-        let indirect_sum: DVec3 = acc.indirect.iter().map(|i| i.as_dvec3()).sum();
-        stats.frame_indirect_means.push((indirect_sum / acc.indirect.len().max(1) as f64).as_vec3());
-        on_frame_done(f, &compose);
+        acc.finish_frame(f, settings, &mut stats, &mut on_frame_done);
     }
     stats.frames = frames;
     stats.pass_ms = pass_totals.into_iter().map(|(k, v)| (k, v / frames as f64)).collect();

@@ -44,9 +44,9 @@ pub fn trace_probe_batch(
     batch.len() as u64
 }
 
-/// Traces a whole probe ray batch somewhere else than the CPU tracer: the CLI's
-/// `--backend wgpu` plugs in `probegi-wgpu`'s compute-shader CWBVH traversal
-/// here. The hits must be what [`RayTracer::closest_hit`] returns for the ray
+/// Work a render hands to another device: every probe ray batch's trace, and
+/// optionally its shade and the camera frame. The CLI's `--backend wgpu` plugs
+/// in `probegi-wgpu-seam`'s GPU passes here. The hits must be what [`RayTracer::closest_hit`] returns for the ray
 /// `Ray::segment(origin, direction, max_distance)` (both faces).
 pub trait ProbeBatchTracer: Sync {
     /// Closest hits of every ray of `batch`, in batch order, into `hits` (resized).
@@ -70,6 +70,25 @@ pub trait ProbeBatchTracer: Sync {
         _seed: u64,
         _frame: u32,
         _radiance: &mut Vec<Vec3>,
+    ) -> Option<Result<(), String>> {
+        None
+    }
+
+    /// Renders the frame's camera image on the other device (the G-buffer and
+    /// camera passes of `frame_loop` under DDGI): per pixel the direct term
+    /// (emission, direct light, glossy reflections) into `direct` and the field
+    /// term into `indirect`, or `None` to leave the camera to the CPU.
+    #[allow(clippy::too_many_arguments)]
+    fn camera_frame(
+        &self,
+        _camera: &probegi_core::camera::CameraRays,
+        _field: &probegi_core::ddgi_volume_blend::DdgiFieldSetView<'_>,
+        _area_samples: u32,
+        _second_order: bool,
+        _frame: u32,
+        _seed: u64,
+        _direct: &mut [Vec3],
+        _indirect: &mut [Vec3],
     ) -> Option<Result<(), String>> {
         None
     }

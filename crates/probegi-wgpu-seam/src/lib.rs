@@ -11,12 +11,14 @@
 use std::sync::Mutex;
 
 use glam::Vec3;
+use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_volume_blend::DdgiFieldSetView;
 use probegi_cpu::ddgi::DdgiVolume;
 use probegi_cpu::ddgi_field_set::ProbeRayBatch;
 use probegi_cpu::probe_trace::ProbeBatchTracer;
 use probegi_scene::{BvhTracer, RayHit, Scene};
 use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace};
+use probegi_wgpu::camera_frame::{CameraFrame, GpuCameraPass};
 use probegi_wgpu::ddgi_query::GpuDdgiField;
 use probegi_wgpu::gpu_scene::{GpuScene, unsupported_by_gpu_shading};
 use probegi_wgpu::probe_shade::{GpuProbeShade, shade_info};
@@ -37,6 +39,9 @@ pub struct WgpuProbeTracer {
     /// The shade pass and the scene on the device; `None` when the scene needs
     /// what the GPU shading lacks (see `shading_note`).
     shading: Option<(GpuProbeShade, GpuScene)>,
+    /// The camera pass (with `shading`, unless asked to leave the camera to the CPU).
+    camera: Option<GpuCameraPass>,
+    sky_radiance: Vec3,
     /// Why the probe rays are shaded on the CPU, when they are.
     pub shading_note: Option<String>,
     /// The last traced batch, resident for the shade pass.
@@ -45,8 +50,19 @@ pub struct WgpuProbeTracer {
 
 impl WgpuProbeTracer {
     /// The scene's BVH (and, where supported, its shading data) on `ctx`.
-    /// `gpu_shading` false keeps the shade on the CPU.
+    /// `gpu_shading` false keeps the shade and the camera on the CPU; `gpu_camera`
+    /// false keeps only the camera there.
     pub fn new(ctx: GpuContext, scene: &Scene, bvh: &BvhTracer, gpu_shading: bool) -> Result<Self, GpuError> {
+        Self::with_camera(ctx, scene, bvh, gpu_shading, gpu_shading)
+    }
+
+    pub fn with_camera(
+        ctx: GpuContext,
+        scene: &Scene,
+        bvh: &BvhTracer,
+        gpu_shading: bool,
+        gpu_camera: bool,
+    ) -> Result<Self, GpuError> {
         let export = bvh.export_static().map_err(GpuError::Input)?;
         let gpu_bvh = GpuBvh::upload(&ctx, &export)?;
         let trace = GpuRayTrace::new(&ctx);
@@ -55,7 +71,22 @@ impl WgpuProbeTracer {
             None => Some((GpuProbeShade::new(&ctx), GpuScene::upload(&ctx, scene)?)),
             Some(_) => None,
         };
-        Ok(Self { ctx, trace, bvh: gpu_bvh, shading, shading_note: note, last: Mutex::new(None) })
+        let camera = (shading.is_some() && gpu_camera).then(|| GpuCameraPass::new(&ctx));
+        Ok(Self {
+            ctx,
+            trace,
+            bvh: gpu_bvh,
+            shading,
+            camera,
+            sky_radiance: scene.sky_radiance,
+            shading_note: note,
+            last: Mutex::new(None),
+        })
+    }
+
+    /// Whether the camera frame is rendered on the GPU.
+    pub fn renders_camera(&self) -> bool {
+        self.camera.is_some()
     }
 
     /// Whether the probe rays are shaded on the GPU.
@@ -127,5 +158,42 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             shade.shade(&self.ctx, &self.bvh, &gpu_field, scene, resident, &info, seed32, frame, None)
         };
         Some(run().map(|l| *radiance = l).map_err(|e| e.to_string()))
+    }
+
+    fn camera_frame(
+        &self,
+        camera: &CameraRays,
+        field: &DdgiFieldSetView<'_>,
+        area_samples: u32,
+        second_order: bool,
+        frame: u32,
+        seed: u64,
+        direct: &mut [Vec3],
+        indirect: &mut [Vec3],
+    ) -> Option<Result<(), String>> {
+        let pass = self.camera.as_ref()?;
+        let (_, scene) = self.shading.as_ref()?;
+        let ([_, _, _], [_, _, w, h]) = camera.basis();
+        let mut run = || -> Result<(), GpuError> {
+            let gpu_field = GpuDdgiField::upload(&self.ctx, field)?;
+            let f = CameraFrame {
+                camera,
+                width: w as u32,
+                height: h as u32,
+                frame,
+                seed: (seed ^ (seed >> 32)) as u32,
+                area_samples,
+                second_order,
+                sky_radiance: self.sky_radiance,
+            };
+            let (d, i) = pass.render(&self.ctx, &self.bvh, &gpu_field, scene, &f)?;
+            if d.len() != direct.len() || i.len() != indirect.len() {
+                return Err(GpuError::Input(format!("{} camera pixels for a {}-pixel frame", d.len(), direct.len())));
+            }
+            direct.copy_from_slice(&d);
+            indirect.copy_from_slice(&i);
+            Ok(())
+        };
+        Some(run().map_err(|e| e.to_string()))
     }
 }

@@ -15,6 +15,7 @@
 //! encodings, and never on the CPU backend.
 
 pub mod bvh_trace;
+pub mod camera_frame;
 pub mod ddgi_query;
 pub mod gpu_context;
 pub mod gpu_scene;

@@ -56,7 +56,7 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     var rng = rng_hash(shade_params.seed ^ rng_hash(shade_params.frame ^ rng_hash(i)));
     let to_viewer = -r.dir;
     let n = scene_facing_normal(sp);
-    var l = scene_direct(sp, to_viewer, info & 0xffffu, &rng);
+    var l = scene_direct(sp, to_viewer, info & 0xffffu, true, &rng);
     let bsdf = scene_bsdf(sp);
     l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * ddgi_irradiance(sp.position, n, to_viewer);
     if ((info & 0x40000000u) != 0u && max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0) {

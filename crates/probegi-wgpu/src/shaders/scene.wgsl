@@ -225,6 +225,45 @@ fn bsdf_specular_albedo(f0: vec3<f32>, cos_o: f32, alpha: f32) -> vec3<f32> {
     return f0 * ab.x + vec3<f32>(ab.y);
 }
 
+// SurfaceBsdf::sample_specular (GGX VNDF, Heitz 2018): (wi local, weight = F·G2/G1)
+// in `weight`, or w = 0 when there is no sample.
+fn bsdf_sample_specular(b: Bsdf, wo: vec3<f32>, u: vec2<f32>, weight: ptr<function, vec3<f32>>) -> vec4<f32> {
+    if (!(max(max(b.specular_f0.x, b.specular_f0.y), b.specular_f0.z) > 0.0) || wo.z <= 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let a = max(b.alpha, SCENE_MIN_ALPHA);
+    let vh = normalize(vec3<f32>(a * wo.x, a * wo.y, wo.z));
+    let lensq = vh.x * vh.x + vh.y * vh.y;
+    var t1 = vec3<f32>(1.0, 0.0, 0.0);
+    if (lensq > 0.0) {
+        t1 = vec3<f32>(-vh.y, vh.x, 0.0) / sqrt(lensq);
+    }
+    let t2 = cross(vh, t1);
+    let r = sqrt(u.x);
+    let phi = 2.0 * SCENE_PI * u.y;
+    let p1 = r * cos(phi);
+    let s = 0.5 * (1.0 + vh.z);
+    let p2 = (1.0 - s) * sqrt(max(1.0 - p1 * p1, 0.0)) + s * r * sin(phi);
+    let nh = t1 * p1 + t2 * p2 + vh * sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0));
+    let h = normalize(vec3<f32>(a * nh.x, a * nh.y, max(nh.z, 1e-6)));
+    let wi = h * (2.0 * dot(wo, h)) - wo;
+    if (wi.z <= 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let a2 = a * a;
+    let lo = wi.z * sqrt(a2 + (1.0 - a2) * wo.z * wo.z);
+    let li = wo.z * sqrt(a2 + (1.0 - a2) * wi.z * wi.z);
+    let g2 = 2.0 * wo.z * wi.z / (lo + li);
+    let g1 = 2.0 * wo.z / (wo.z + sqrt(a2 + (1.0 - a2) * wo.z * wo.z));
+    let m = pow(1.0 - clamp(dot(wi, h), 0.0, 1.0), 5.0);
+    *weight = (b.specular_f0 + (vec3<f32>(1.0) - b.specular_f0) * m) * (g2 / g1);
+    return vec4<f32>(wi, 1.0);
+}
+
+fn frame_to_world(f: Frame, v: vec3<f32>) -> vec3<f32> {
+    return f.t * v.x + f.b * v.y + f.n * v.z;
+}
+
 // An orthonormal frame around unit n (Duff et al. 2017).
 struct Frame {
     t: vec3<f32>,
@@ -293,8 +332,11 @@ fn scene_punctual(k: u32, point: vec3<f32>, e: ptr<function, vec3<f32>>) -> vec4
 
 // Direct light reflected toward `to_viewer` (DirectLighting::reflected with the sky
 // left out): punctual lights exactly, `area_samples` stratified NEE samples of the
-// emitters, every sample with a shadow ray through `bvh.wgsl`. No emission.
-fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, rng: ptr<function, u32>) -> vec3<f32> {
+// emitters (full BSDF, or the diffuse lobe alone when `specular_area` is false
+// because the caller gathers emitters' highlights with reflected rays), every
+// sample with a shadow ray through `bvh.wgsl`. No emission.
+fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, specular_area: bool,
+                rng: ptr<function, u32>) -> vec3<f32> {
     let fr = frame_from_normal(scene_facing_normal(sp));
     var wo = frame_to_local(fr, to_viewer);
     wo.z = max(wo.z, 1e-4);
@@ -373,7 +415,14 @@ fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, rng: 
             let d = length(to_point);
             let shadow = bvh_trace(bvh_make_ray(origin, to_point / d, 0.0, d * (1.0 - 1e-4)), true);
             if (shadow.leaf == BVH_NO_HIT) {
-                sum += bsdf_eval(bsdf, wo, frame_to_local(fr, wi)) * radiance * (cos / pdf);
+                let wl = frame_to_local(fr, wi);
+                var f = bsdf_diffuse_albedo(bsdf) / SCENE_PI;
+                if (specular_area) {
+                    f = bsdf_eval(bsdf, wo, wl);
+                } else if (wl.z <= 0.0) {
+                    f = vec3<f32>(0.0);
+                }
+                sum += f * radiance * (cos / pdf);
             }
         }
         l += sum / f32(n);

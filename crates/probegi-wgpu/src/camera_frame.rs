@@ -1,0 +1,162 @@
+//! The camera frame on the GPU (`shaders/camera_frame.wgsl`): primary rays
+//! through the same BVH, surfaces, textures and the BSDF as the probe shade,
+//! direct light with shadow rays, one GGX-sampled glossy ray per glossy pixel,
+//! and the field query for indirect diffuse, mirroring the CPU's G-buffer and
+//! camera passes under DDGI (`probegi_cpu::gbuffer`, `probegi_cpu::frame_loop`).
+//! The CPU reads back the frame's direct and indirect terms (it accumulates the
+//! direct one over frames, as on the CPU).
+//!
+//! *Deviation:* per-pixel random numbers come from a PCG hash, not the CPU's
+//! PCG32 streams, so area-light and glossy estimates (and the subpixel jitter
+//! after frame 0) agree with the CPU's in distribution, not bit for bit.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use probegi_core::camera::CameraRays;
+use wgpu::util::DeviceExt;
+
+use crate::bvh_trace::{GpuBvh, bvh_bind_group_layout, storage_entry, uniform_entry};
+use crate::ddgi_query::{GpuDdgiField, query_wgsl};
+use crate::gpu_context::{GpuContext, GpuError};
+use crate::gpu_scene::{GpuScene, scene_bind_group_layout};
+
+/// The camera pass's uniform block; must match `CameraParams` in `camera_frame.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct CameraParams {
+    pub origin: [f32; 4],
+    pub forward: [f32; 4],
+    pub right: [f32; 4],
+    pub up: [f32; 4],
+    pub info: [u32; 4],
+    pub sky: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<CameraParams>() == 96);
+
+/// One frame's camera settings.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraFrame<'a> {
+    pub camera: &'a CameraRays,
+    pub width: u32,
+    pub height: u32,
+    pub frame: u32,
+    pub seed: u32,
+    /// Area-light samples per pixel (stratified).
+    pub area_samples: u32,
+    /// Second-order glossy on glossy rays' hits.
+    pub second_order: bool,
+    pub sky_radiance: Vec3,
+}
+
+pub struct GpuCameraPass {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl GpuCameraPass {
+    pub fn new(ctx: &GpuContext) -> Self {
+        let source = format!(
+            "{}\n{}\n{}\n{}",
+            include_str!("shaders/bvh.wgsl"),
+            query_wgsl(2),
+            include_str!("shaders/scene.wgsl"),
+            include_str!("shaders/camera_frame.wgsl")
+        );
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("camera_frame.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("camera frame"),
+            entries: &[uniform_entry(0), storage_entry(1, false), storage_entry(2, false)],
+        });
+        let others = [
+            bvh_bind_group_layout(&ctx.device),
+            GpuDdgiField::bind_group_layout(&ctx.device),
+            scene_bind_group_layout(&ctx.device),
+        ];
+        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("camera frame"),
+            bind_group_layouts: &[Some(&layout), Some(&others[0]), Some(&others[1]), Some(&others[2])],
+            immediate_size: 0,
+        });
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("shade_camera"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("shade_camera"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { layout, pipeline }
+    }
+
+    /// The frame's direct and indirect terms, row-major.
+    pub fn render(
+        &self,
+        ctx: &GpuContext,
+        bvh: &GpuBvh,
+        field: &GpuDdgiField,
+        scene: &GpuScene,
+        f: &CameraFrame<'_>,
+    ) -> Result<(Vec<Vec3>, Vec<Vec3>), GpuError> {
+        let n = f.width as u64 * f.height as u64;
+        if n == 0 {
+            return Ok((vec![], vec![]));
+        }
+        let ([forward, right, up], [tan, aspect, w, h]) = f.camera.basis();
+        if w as u32 != f.width || h as u32 != f.height {
+            return Err(GpuError::Input(format!("camera rays for {w}×{h}, frame of {}×{}", f.width, f.height)));
+        }
+        let o = f.camera.origin_world;
+        let params = CameraParams {
+            origin: [o.x, o.y, o.z, tan],
+            forward: forward.extend(aspect).into(),
+            right: right.extend(w).into(),
+            up: up.extend(h).into(),
+            info: [f.frame, f.seed, f.area_samples, f.second_order as u32],
+            sky: f.sky_radiance.extend(0.0).into(),
+        };
+        let device = &ctx.device;
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("camera params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let image = |label| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: n * 16,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        };
+        let (direct, indirect) = (image("camera direct"), image("camera indirect"));
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("camera frame"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: direct.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: indirect.as_entire_binding() },
+            ],
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.set_bind_group(1, bvh.bind_group(), &[]);
+            pass.set_bind_group(2, field.bind_group(), &[]);
+            pass.set_bind_group(3, scene.bind_group(), &[]);
+            pass.dispatch_workgroups(f.width.div_ceil(8), f.height.div_ceil(8), 1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        let read = |b: &wgpu::Buffer| -> Result<Vec<Vec3>, GpuError> {
+            let bytes = ctx.read_back(b)?;
+            let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+            Ok(v.iter().map(|t| Vec3::new(t[0], t[1], t[2])).collect())
+        };
+        Ok((read(&direct)?, read(&indirect)?))
+    }
+}

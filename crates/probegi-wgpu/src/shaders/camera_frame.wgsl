@@ -1,0 +1,99 @@
+// The camera pass on the GPU (probegi_cpu::gbuffer::trace_gbuffer + frame_loop's
+// shade_camera under DDGI): per pixel a primary ray through `bvh.wgsl` (pixel
+// centre on frame 0, jittered inside the pixel after), then
+//   direct   = emission + direct light (scene.wgsl; the emitters' specular lobe left
+//              to the glossy ray on glossy pixels) + one GGX-sampled glossy ray whose
+//              hit gets emission + direct light + diffuse albedo/π × the field (and,
+//              with second-order glossy, its specular reflection of the field);
+//   indirect = diffuse albedo/π × ddgi_irradiance (ddgi_query.wgsl, group 2).
+// Pixels that see nothing get the sky. The CPU accumulates `direct` over frames.
+// Must match `probegi_wgpu::camera_frame::CameraParams` (#[repr(C)], 96 bytes).
+
+struct CameraParams {
+    origin: vec4<f32>,   // xyz; w = tan(fov_y / 2)
+    forward: vec4<f32>,  // xyz; w = aspect
+    right: vec4<f32>,    // xyz; w = width (pixels)
+    up: vec4<f32>,       // xyz; w = height (pixels)
+    info: vec4<u32>,     // frame, seed, area samples, flags (1: second-order glossy)
+    sky: vec4<f32>,
+};
+
+@group(0) @binding(0) var<uniform> camera: CameraParams;
+@group(0) @binding(1) var<storage, read_write> camera_direct: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> camera_indirect: array<vec4<f32>>;
+
+fn camera_finite(v: vec3<f32>) -> bool {
+    return all(abs(v) <= vec3<f32>(SCENE_F32_MAX));
+}
+
+@compute @workgroup_size(8, 8)
+fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let width = u32(camera.right.w);
+    let height = u32(camera.up.w);
+    if (gid.x >= width || gid.y >= height) {
+        return;
+    }
+    let i = gid.y * width + gid.x;
+    var rng = rng_hash(camera.info.y ^ rng_hash(camera.info.x ^ rng_hash(i)));
+    var jitter = vec2<f32>(0.5);
+    if (camera.info.x != 0u) {
+        jitter = vec2<f32>(rng_next(&rng), rng_next(&rng));
+    }
+    // CameraRays::ray_dir_world
+    let ndc_x = 2.0 * (f32(gid.x) + jitter.x) / camera.right.w - 1.0;
+    let ndc_y = 1.0 - 2.0 * (f32(gid.y) + jitter.y) / camera.up.w;
+    let dir = normalize(camera.forward.xyz + camera.right.xyz * (ndc_x * camera.origin.w * camera.forward.w)
+        + camera.up.xyz * (ndc_y * camera.origin.w));
+    let hit = bvh_trace(bvh_make_ray(camera.origin.xyz, dir, 0.0, SCENE_F32_MAX), false);
+    if (hit.leaf == BVH_NO_HIT) {
+        camera_direct[i] = vec4<f32>(camera.sky.xyz, 0.0);
+        camera_indirect[i] = vec4<f32>(0.0);
+        return;
+    }
+    let sp = scene_surface_point(bvh_triangle_id(hit.leaf), hit.bary, bvh_backface(hit.leaf, dir));
+    let to_viewer = -dir;
+    let bsdf = scene_bsdf(sp);
+    let glossy = max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0;
+    let area = camera.info.z;
+    var l = scene_direct(sp, to_viewer, area, !glossy, &rng);
+    if (sp.front_face) {
+        l += scene_emission(sp.material, sp.uv);
+    }
+    if (glossy) {
+        let fr = frame_from_normal(scene_facing_normal(sp));
+        var wo = frame_to_local(fr, to_viewer);
+        wo.z = max(wo.z, 1e-4);
+        wo = normalize(wo);
+        let u = vec2<f32>(rng_next(&rng), rng_next(&rng));
+        var weight = vec3<f32>(0.0);
+        let s = bsdf_sample_specular(bsdf, wo, u, &weight);
+        if (s.w > 0.0) {
+            let wi = frame_to_world(fr, s.xyz);
+            if (scene_lambert_cos(sp, wi) > 0.0) {
+                let g = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, SCENE_F32_MAX), false);
+                var lr = camera.sky.xyz;
+                if (g.leaf != BVH_NO_HIT) {
+                    // frame_loop's shade_glossy_hit
+                    let sh = scene_surface_point(bvh_triangle_id(g.leaf), g.bary, bvh_backface(g.leaf, wi));
+                    let bh = scene_bsdf(sh);
+                    let nh = scene_facing_normal(sh);
+                    lr = scene_direct(sh, -wi, area, true, &rng)
+                        + bsdf_diffuse_albedo(bh) / SCENE_PI * ddgi_irradiance(sh.position, nh, -wi);
+                    if (sh.front_face) {
+                        lr += scene_emission(sh.material, sh.uv);
+                    }
+                    if ((camera.info.w & 1u) != 0u && max(max(bh.specular_f0.x, bh.specular_f0.y), bh.specular_f0.z) > 0.0) {
+                        // probegi_cpu::glossy::second_order_specular
+                        let mirror = wi - nh * (2.0 * dot(wi, nh));
+                        let e_mirror = ddgi_irradiance(sh.position, mirror, -wi);
+                        lr += bsdf_specular_albedo(bh.specular_f0, max(dot(-wi, nh), 0.0), bh.alpha) * e_mirror / SCENE_PI;
+                    }
+                }
+                l += weight * lr;
+            }
+        }
+    }
+    camera_direct[i] = vec4<f32>(select(vec3<f32>(0.0), l, camera_finite(l)), 0.0);
+    let e = ddgi_irradiance(sp.position, scene_facing_normal(sp), to_viewer);
+    camera_indirect[i] = vec4<f32>(bsdf_diffuse_albedo(bsdf) / SCENE_PI * e, 0.0);
+}
