@@ -13,8 +13,8 @@ use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::probe_shade::{ProbeShadeInputs, shade_probe_rays};
 use probegi_cpu::probe_trace::Surfel;
 use probegi_cpu::{DirectLighting, DirectSettings};
-use probegi_scene::builtin::{add_box, add_polygon, cornell_box, furnace_box};
-use probegi_scene::{BvhSettings, BvhTracer, Material, Ray, RayTracer, Scene};
+use probegi_scene::builtin::{cornell_box, furnace_box};
+use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene};
 
 fn small(counts: UVec3, rays: u32) -> DdgiVolumeSettings {
     DdgiVolumeSettings { probe_counts: counts, probe_rays_per_probe: rays, ..Default::default() }
@@ -157,28 +157,6 @@ fn seam_misuse_is_an_error_not_a_panic() {
     assert_eq!(set.last_scrolled_in, 27, "applied at the next update: the whole window moved");
 }
 
-/// A ground plane under a bright sky; a roof covers x < 20, so probes under it
-/// see a dark sky overhead and probes in the open a bright one.
-fn half_roofed_ground() -> Scene {
-    let mut scene = Scene {
-        materials: vec![Material::diffuse("ground", Vec3::splat(0.5))],
-        sky_radiance: Vec3::splat(1.0),
-        ..Default::default()
-    };
-    add_polygon(
-        &mut scene.mesh,
-        &[
-            Vec3::new(-10.0, 0.0, -10.0),
-            Vec3::new(-10.0, 0.0, 10.0),
-            Vec3::new(50.0, 0.0, 10.0),
-            Vec3::new(50.0, 0.0, -10.0),
-        ],
-        0,
-    );
-    add_box(&mut scene.mesh, Vec3::new(-10.0, 3.0, -10.0), Vec3::new(20.0, 3.2, 10.0), 0);
-    scene
-}
-
 /// Mean decoded radiance of a probe's tile.
 fn tile_mean(v: &DdgiVolume, p: usize) -> f32 {
     let g = v.settings.probe_irradiance_gamma;
@@ -188,7 +166,7 @@ fn tile_mean(v: &DdgiVolume, p: usize) -> f32 {
 
 #[test]
 fn a_tracking_window_scrolls_without_copying_and_never_shows_a_stale_probe() {
-    let scene = half_roofed_ground();
+    let scene = probegi_scene::builtin::half_roofed_ground();
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");

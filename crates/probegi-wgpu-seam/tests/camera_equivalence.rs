@@ -2,7 +2,8 @@
 //! the camera pass) against the CPU renderer: HDR-FLIP of the images on the
 //! built-in Cornell box, the door room, McGuire's glossy Cornell box (GGX
 //! specular, glossy camera rays, second-order glossy) and the shared Sponza
-//! (textures; its bump maps off, which the GPU does not apply yet). Random
+//! (textures and bump maps); and, exactly, a point-lit plane under a normal
+//! map and under a bump map (nothing random: punctual light, frame 0). Random
 //! numbers differ between the backends, so the images differ by Monte Carlo
 //! noise. Each FLIP is printed beside the CPU's own FLIP between two seeds; it
 //! must stay under 0.02 where that noise floor is lower, and under the noise
@@ -118,11 +119,8 @@ fn textured_sponza_frame_on_the_gpu() {
     // A camera frame of 66k textured triangles on a software rasteriser's compute
     // path: 24 frames at 64×64 keep it to seconds.
     let mut scene = load_scene(&shared("dabrovic-sponza/sponza.obj")).expect("shared Sponza");
-    for m in &mut scene.materials {
-        m.normal_texture = None;
-        m.bump_texture = None;
-    }
     assert!(scene.materials.iter().any(|m| m.base_color_texture.is_some()), "Sponza is textured");
+    assert!(scene.materials.iter().any(|m| m.bump_texture.is_some()), "and bump-mapped");
     scene.camera = Some(probegi_core::camera::Camera {
         position: glam::Vec3::new(-12.0, 2.0, 0.0),
         target: glam::Vec3::new(10.0, 4.0, 0.0),
@@ -130,5 +128,75 @@ fn textured_sponza_frame_on_the_gpu() {
         fov_y_deg: 60.0,
     });
     scene.sky_radiance = glam::Vec3::splat(3.0);
-    check("sponza (textures, no bump maps)", scene, small(UVec3::new(12, 6, 6)), 64, 24);
+    check("sponza (textures, bump maps)", scene, small(UVec3::new(12, 6, 6)), 64, 24);
+}
+
+/// A 4 m plane (two triangles with UVs tiling a 64² map four times, tangent
+/// along +x), lit by a point light, seen from above, DDGI over it.
+fn mapped_plane(normal_map: bool) -> Scene {
+    use probegi_scene::{Material, PunctualLight};
+    let mut scene = Scene { materials: vec![Material::diffuse("mapped", glam::Vec3::splat(0.7))], ..Default::default() };
+    let m = &mut scene.mesh;
+    for (p, uv) in [((-2.0, -2.0), (0.0, 0.0)), ((2.0, -2.0), (4.0, 0.0)), ((2.0, 2.0), (4.0, 4.0)), ((-2.0, 2.0), (0.0, 4.0))] {
+        m.positions.push(glam::Vec3::new(p.0, 0.0, p.1));
+        m.normals.push(glam::Vec3::Y);
+        m.uvs.push(glam::Vec2::new(uv.0, uv.1));
+        m.tangents.push(glam::Vec4::new(1.0, 0.0, 0.0, 1.0));
+    }
+    m.triangles = vec![[0, 3, 2], [0, 2, 1]];
+    m.triangle_materials = vec![0, 0];
+    // Concentric ripples: as a normal map (tangent-space normals) or a height map.
+    let n = 64u32;
+    let texels = (0..n * n)
+        .map(|i| {
+            let (x, y) = ((i % n) as f32 / n as f32 - 0.5, (i / n) as f32 / n as f32 - 0.5);
+            let r = (x * x + y * y).sqrt() * 25.0;
+            if normal_map {
+                let (dx, dy) = (0.6 * r.cos() * x, 0.6 * r.cos() * y);
+                let v = glam::Vec3::new(dx, dy, 1.0).normalize() * 0.5 + glam::Vec3::splat(0.5);
+                [(v.x * 255.0) as u8, (v.y * 255.0) as u8, (v.z * 255.0) as u8]
+            } else {
+                let h = ((r.sin() * 0.5 + 0.5) * 255.0) as u8;
+                [h, h, h]
+            }
+        })
+        .collect();
+    scene.textures.push(probegi_scene::texture::Texture::from_rgb8(n, n, texels, "ripples".into()).expect("texture"));
+    if normal_map {
+        scene.materials[0].normal_texture = Some(0);
+    } else {
+        scene.materials[0].bump_texture = Some(0);
+        scene.materials[0].bump_multiplier = 3.0;
+    }
+    scene.lights.push(PunctualLight::point(glam::Vec3::new(0.5, 1.5, 0.3), glam::Vec3::ONE, 4.0));
+    scene.camera = Some(probegi_core::camera::Camera {
+        position: glam::Vec3::new(0.0, 3.5, 2.5),
+        target: glam::Vec3::ZERO,
+        up: glam::Vec3::Y,
+        fov_y_deg: 50.0,
+    });
+    scene
+}
+
+#[test]
+fn normal_and_bump_mapped_planes_shade_the_same_on_both_backends() {
+    for normal_map in [true, false] {
+        let scene = mapped_plane(normal_map);
+        let name = if normal_map { "normal-mapped plane" } else { "bump-mapped plane" };
+        let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
+        let gpu = WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true).expect("upload");
+        let s = small(UVec3::new(4, 2, 4));
+        let a = render(&scene, 64, 1, 3, &s, None);
+        let g = render(&scene, 64, 1, 3, &s, Some(Arc::new(gpu)));
+        // Without the map the plane is smooth: the map must show.
+        let mut plain = scene.clone();
+        plain.materials[0].normal_texture = None;
+        plain.materials[0].bump_texture = None;
+        let smooth = render(&plain, 64, 1, 3, &s, None);
+        let flip = |x: &Image, y: &Image| probegi_image::mean_flip_hdr(x, y).expect("same size");
+        let (f, shows) = (flip(&a, &g), flip(&a, &smooth));
+        eprintln!("{name}: HDR-FLIP CPU vs GPU {f:.5}; CPU with vs without the map {shows:.4}");
+        assert!(shows > 0.03, "{name}: the map changes little ({shows})");
+        assert!(f < 0.01, "{name}: FLIP {f}");
+    }
 }

@@ -31,8 +31,9 @@ use probegi_wgpu_seam::WgpuProbeTracer;
 
 fn gpu(scene: &Scene, shade: bool) -> Option<WgpuProbeTracer> {
     let ctx = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set")?;
-    let t =
-        WgpuProbeTracer::new(ctx, scene, &BvhTracer::for_scene(scene, BvhSettings::default()), shade).expect("upload");
+    // The field on the GPU, the camera on the CPU (tests/camera_equivalence.rs has the GPU camera).
+    let bvh = BvhTracer::for_scene(scene, BvhSettings::default());
+    let t = WgpuProbeTracer::with_camera(ctx, scene, &bvh, shade, false).expect("upload");
     assert_eq!(t.shades(), shade, "{:?}", t.shading_note);
     Some(t)
 }

@@ -1,9 +1,8 @@
 //! A scene's surfaces, materials, textures and lights on the device, in the
-//! layout `shaders/scene.wgsl` reads (documented there): what the GPU shade
-//! pass needs to light a hit as the CPU does. Scenes with what the GPU shading
-//! does not implement yet are refused by name: normal and bump maps
-//! (`--set normal_maps=false` turns them off), and moving or instanced
-//! geometry (the GPU trace has no TLAS).
+//! layout `shaders/scene.wgsl` reads (documented there): what the GPU shade and
+//! camera passes need to light a hit as the CPU does, normal and bump maps
+//! included. Moving or instanced geometry is refused by name (the GPU trace has
+//! no TLAS yet).
 
 use probegi_core::bsdf::{ALBEDO_TABLE_SIZE, specular_albedo_table};
 use probegi_core::color::{luminance, srgb8_to_linear_table};
@@ -25,13 +24,6 @@ pub fn scene_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
 
 /// Why a scene cannot be shaded on the GPU yet, or `None`.
 pub fn unsupported_by_gpu_shading(scene: &Scene) -> Option<String> {
-    if let Some(m) = scene.materials.iter().find(|m| m.perturbs_normals()) {
-        return Some(format!(
-            "material {:?} has a normal or bump map, which the GPU shading does not apply yet \
-             (--set normal_maps=false renders without them)",
-            m.name
-        ));
-    }
     if scene.has_moving_geometry() || !scene.instances.is_empty() {
         return Some("moving objects and instanced meshes need a TLAS, which the GPU trace lacks".into());
     }
@@ -54,7 +46,7 @@ impl GpuScene {
         let mesh = &scene.mesh;
         let nt = mesh.triangle_count();
         let none = f32::from_bits(u32::MAX);
-        let mut triangles: Vec<[f32; 4]> = Vec::with_capacity(nt.max(1) * 8);
+        let mut triangles: Vec<[f32; 4]> = Vec::with_capacity(nt.max(1) * 11);
         for t in 0..nt {
             let [a, b, c] = mesh.triangles[t];
             let (a, b, c) = (a as usize, b as usize, c as usize);
@@ -70,6 +62,8 @@ impl GpuScene {
             triangles.push(n(c).extend(0.0).into());
             triangles.push([uv(a).x, uv(a).y, uv(b).x, uv(b).y]);
             triangles.push([uv(c).x, uv(c).y, 0.0, 0.0]);
+            let tan = |i: usize| mesh.tangents.get(i).copied().unwrap_or(glam::Vec4::ZERO);
+            triangles.extend([tan(a).to_array(), tan(b).to_array(), tan(c).to_array()]);
         }
         if triangles.is_empty() {
             triangles.push([0.0; 4]);
@@ -78,7 +72,7 @@ impl GpuScene {
             Some(t) if t < scene.textures.len() => f32::from_bits(t as u32),
             _ => none,
         };
-        let mut materials: Vec<[f32; 4]> = Vec::with_capacity(scene.materials.len().max(1) * 4);
+        let mut materials: Vec<[f32; 4]> = Vec::with_capacity(scene.materials.len().max(1) * 5);
         for m in &scene.materials {
             let alpha = (m.roughness * m.roughness).clamp(probegi_core::bsdf::MIN_ALPHA, 1.0);
             let model = match m.specular_model {
@@ -91,6 +85,7 @@ impl GpuScene {
             materials.push(m.specular_color.extend(alpha).into());
             materials.push([f32::from_bits(model), m.metallic, 0.0, 0.0]);
             materials.push(e.extend(tex_bits(m.emissive_texture)).into());
+            materials.push([tex_bits(m.normal_texture), m.normal_scale, tex_bits(m.bump_texture), m.bump_multiplier]);
         }
         if materials.is_empty() {
             materials.push([0.0; 4]);

@@ -9,10 +9,12 @@
 // Random numbers differ from the CPU's (a PCG hash per ray instead of a PCG32
 // stream per probe), so area-light estimates agree in distribution, not bit for bit.
 // Buffers (group 3, written by `probegi_wgpu::gpu_scene::GpuScene`):
-//   scene_triangles: 8 × vec4 per scene triangle: p0 (w: material bits), p1, p2, n0, n1, n2, (uv0, uv1), (uv2, 0, 0)
-//   scene_materials: 4 × vec4 per material: (base colour factor, base texture bits | none),
+//   scene_triangles: 11 × vec4 per scene triangle: p0 (w: material bits), p1, p2, n0, n1, n2, (uv0, uv1),
+//                    (uv2, 0, 0), t0, t1, t2 (tangent xyz, bitangent sign w; zero when none)
+//   scene_materials: 5 × vec4 per material: (base colour factor, base texture bits | none),
 //                    (specular colour, α), (model: 0 none, 1 MTL, 2 metallic-roughness; metallic, 0, 0),
-//                    (emission = factor × strength, emissive texture bits | none)
+//                    (emission = factor × strength, emissive texture bits | none),
+//                    (normal texture bits | none, normal scale, bump texture bits | none, bump multiplier)
 //   scene_textures:  words 0..255 the sRGB8 → linear table (f32 bits), 256 texture count, 257 the
 //                    GGX albedo table's side N, 258 its first word, 259 0, then per texture (width,
 //                    height, first texel word), the (A, B) table (N × N × 2 f32 bits,
@@ -31,6 +33,10 @@ const SCENE_NONE: u32 = 0xffffffffu;
 const SCENE_F32_MAX: f32 = 3.4028235e38;
 // probegi_core::bsdf::MIN_ALPHA
 const SCENE_MIN_ALPHA: f32 = 1e-3;
+const SCENE_TRIANGLE_VEC4S: u32 = 11u;
+const SCENE_MATERIAL_VEC4S: u32 = 5u;
+// probegi_scene::material::BUMP_WHITE_HEIGHT_REL
+const SCENE_BUMP_WHITE_HEIGHT_REL: f32 = 0.02;
 
 struct SurfacePoint {
     position: vec3<f32>,
@@ -49,9 +55,10 @@ fn scene_normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(0.0);
 }
 
-// probegi_scene::Scene::surface_point (no normal or bump maps: `GpuScene` refuses them).
+// probegi_scene::Scene::surface_point: the interpolated shading normal on the
+// geometric side, perturbed by the material's normal or bump map.
 fn scene_surface_point(triangle: u32, bary_in: vec2<f32>, backface: bool) -> SurfacePoint {
-    let t = triangle * 8u;
+    let t = triangle * SCENE_TRIANGLE_VEC4S;
     let bary = vec3<f32>(1.0 - bary_in.x - bary_in.y, bary_in.x, bary_in.y);
     let p0 = scene_triangles[t];
     let p1 = scene_triangles[t + 1u].xyz;
@@ -68,7 +75,69 @@ fn scene_surface_point(triangle: u32, bary_in: vec2<f32>, backface: bool) -> Sur
     let uv01 = scene_triangles[t + 6u];
     let uv2 = scene_triangles[t + 7u].xy;
     let uv = uv01.xy * bary.x + uv01.zw * bary.y + uv2 * bary.z;
-    return SurfacePoint(position, ng, ns, uv, bitcast<u32>(p0.w), !backface);
+    let material = bitcast<u32>(p0.w);
+    let perturbed = scene_perturbed_normal(material, t, bary, ns, uv);
+    // A perturbed normal below the surface would shade light from inside it.
+    if (dot(perturbed, ng) > 1e-3) {
+        ns = perturbed;
+    }
+    return SurfacePoint(position, ng, ns, uv, material, !backface);
+}
+
+fn scene_normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
+    let n = scene_normalize_or_zero(v);
+    return select(n, fallback, all(n == vec3<f32>(0.0)));
+}
+
+// Scene::perturbed_normal: `n` tilted by the normal map (tangent space, glTF's
+// bitangent = sign · n × tangent) or by the bump map's slopes along ∂p/∂u, ∂p/∂v.
+fn scene_perturbed_normal(material: u32, t: u32, bary: vec3<f32>, n: vec3<f32>, uv: vec2<f32>) -> vec3<f32> {
+    let maps = scene_materials[material * SCENE_MATERIAL_VEC4S + 4u];
+    let normal_tex = bitcast<u32>(maps.x);
+    if (normal_tex != SCENE_NONE) {
+        let t0 = scene_triangles[t + 8u];
+        let tan0 = t0.xyz * bary.x + scene_triangles[t + 9u].xyz * bary.y + scene_triangles[t + 10u].xyz * bary.z;
+        let tan = scene_normalize_or_zero(tan0 - n * dot(n, tan0));
+        if (all(tan == vec3<f32>(0.0))) {
+            return n;
+        }
+        let bitangent = cross(n, tan) * select(1.0, -1.0, t0.w < 0.0);
+        let s = scene_texture_raw(normal_tex, uv) * 2.0 - vec3<f32>(1.0);
+        let local = vec3<f32>(s.x * maps.y, s.y * maps.y, s.z);
+        return scene_normalize_or(tan * local.x + bitangent * local.y + n * local.z, n);
+    }
+    let bump_tex = bitcast<u32>(maps.z);
+    if (bump_tex != SCENE_NONE) {
+        // uv_derivatives
+        let p0 = scene_triangles[t].xyz;
+        let p1 = scene_triangles[t + 1u].xyz;
+        let p2 = scene_triangles[t + 2u].xyz;
+        let uv01 = scene_triangles[t + 6u];
+        let uv2 = scene_triangles[t + 7u].xy;
+        let duv02 = uv01.xy - uv2;
+        let duv12 = uv01.zw - uv2;
+        let dp02 = p0 - p2;
+        let dp12 = p1 - p2;
+        let det = duv02.x * duv12.y - duv02.y * duv12.x;
+        if (abs(det) < 1e-12) {
+            return n;
+        }
+        let inv = 1.0 / det;
+        let dpdu = (dp02 * duv12.y - dp12 * duv02.y) * inv;
+        let dpdv = (dp12 * duv02.x - dp02 * duv12.x) * inv;
+        if (!(all(abs(dpdu) <= vec3<f32>(SCENE_F32_MAX)) && all(abs(dpdv) <= vec3<f32>(SCENE_F32_MAX)))) {
+            return n;
+        }
+        let h = 260u + bump_tex * 3u;
+        let size = vec2<f32>(f32(scene_textures[h]), f32(scene_textures[h + 1u]));
+        let grad = scene_height_gradient(bump_tex, uv);
+        let white_texels = SCENE_BUMP_WHITE_HEIGHT_REL * max(size.x, size.y);
+        let slope = grad / size * white_texels * maps.w;
+        let along_u = scene_normalize_or_zero(dpdu - n * dot(n, dpdu));
+        let along_v = scene_normalize_or_zero(dpdv - n * dot(n, dpdv));
+        return scene_normalize_or(n - along_u * slope.x - along_v * slope.y, n);
+    }
+    return n;
 }
 
 fn scene_facing_normal(sp: SurfacePoint) -> vec3<f32> {
@@ -97,8 +166,14 @@ fn scene_lambert_cos(sp: SurfacePoint, wi: vec3<f32>) -> f32 {
     return 0.0;
 }
 
-// Texture::sample_bilinear (Footprint: wrap addressing, texel centres at half-integers).
-fn scene_texture(tex: u32, uv_in: vec2<f32>) -> vec3<f32> {
+// probegi_scene::texture::Footprint::at: the four texels' words (row-major, wrap
+// addressing, texel centres at half-integers) and the bilinear fractions.
+struct TexFootprint {
+    words: vec4<u32>,
+    f: vec2<f32>,
+};
+
+fn scene_footprint(tex: u32, uv_in: vec2<f32>) -> TexFootprint {
     let h = 260u + tex * 3u;
     let width = scene_textures[h];
     let height = scene_textures[h + 1u];
@@ -124,17 +199,54 @@ fn scene_texture(tex: u32, uv_in: vec2<f32>) -> vec3<f32> {
     let c1 = u32((((x0 + 1) % w) + w) % w);
     let r0 = u32(((y0 % hh) + hh) % hh) * width;
     let r1 = u32((((y0 + 1) % hh) + hh) % hh) * width;
-    let idx = array<u32, 4>(r0 + c0, r0 + c1, r1 + c0, r1 + c1);
+    return TexFootprint(vec4<u32>(first + r0 + c0, first + r0 + c1, first + r1 + c0, first + r1 + c1), vec2<f32>(fx, fy));
+}
+
+fn tex_blend(v: array<vec3<f32>, 4>, f: vec2<f32>) -> vec3<f32> {
+    return (v[0] * (1.0 - f.x) + v[1] * f.x) * (1.0 - f.y) + (v[2] * (1.0 - f.x) + v[3] * f.x) * f.y;
+}
+
+// Texture::sample_bilinear: sRGB8 texels decoded by the table, then blended.
+fn scene_texture(tex: u32, uv: vec2<f32>) -> vec3<f32> {
+    let fp = scene_footprint(tex, uv);
     var v: array<vec3<f32>, 4>;
     for (var k = 0u; k < 4u; k++) {
-        let t = scene_textures[first + idx[k]];
+        let t = scene_textures[fp.words[k]];
         v[k] = vec3<f32>(
             bitcast<f32>(scene_textures[t & 0xffu]),
             bitcast<f32>(scene_textures[(t >> 8u) & 0xffu]),
             bitcast<f32>(scene_textures[(t >> 16u) & 0xffu]),
         );
     }
-    return (v[0] * (1.0 - fx) + v[1] * fx) * (1.0 - fy) + (v[2] * (1.0 - fx) + v[3] * fx) * fy;
+    return tex_blend(v, fp.f);
+}
+
+fn tex_unorm(t: u32) -> vec3<f32> {
+    return vec3<f32>(f32(t & 0xffu), f32((t >> 8u) & 0xffu), f32((t >> 16u) & 0xffu)) * (1.0 / 255.0);
+}
+
+// Texture::sample_raw: the stored values as unorm (normal maps).
+fn scene_texture_raw(tex: u32, uv: vec2<f32>) -> vec3<f32> {
+    let fp = scene_footprint(tex, uv);
+    var v: array<vec3<f32>, 4>;
+    for (var k = 0u; k < 4u; k++) {
+        v[k] = tex_unorm(scene_textures[fp.words[k]]);
+    }
+    return tex_blend(v, fp.f);
+}
+
+// Texture::sample_height_gradient's gradient: of the Rec. 709 grey level, per unit of u and v.
+fn scene_height_gradient(tex: u32, uv: vec2<f32>) -> vec2<f32> {
+    let fp = scene_footprint(tex, uv);
+    let grey = vec3<f32>(0.2126, 0.7152, 0.0722);
+    let h00 = dot(tex_unorm(scene_textures[fp.words.x]), grey);
+    let h10 = dot(tex_unorm(scene_textures[fp.words.y]), grey);
+    let h01 = dot(tex_unorm(scene_textures[fp.words.z]), grey);
+    let h11 = dot(tex_unorm(scene_textures[fp.words.w]), grey);
+    let d_dx = (1.0 - fp.f.y) * (h10 - h00) + fp.f.y * (h11 - h01);
+    let d_dy = (1.0 - fp.f.x) * (h01 - h00) + fp.f.x * (h11 - h10);
+    let h = 260u + tex * 3u;
+    return vec2<f32>(d_dx * f32(scene_textures[h]), d_dy * f32(scene_textures[h + 1u]));
 }
 
 struct Bsdf {
@@ -145,7 +257,7 @@ struct Bsdf {
 
 // Material::bsdf at the surface point.
 fn scene_bsdf(sp: SurfacePoint) -> Bsdf {
-    let m = sp.material * 4u;
+    let m = sp.material * SCENE_MATERIAL_VEC4S;
     let a = scene_materials[m];
     let s = scene_materials[m + 1u];
     let model = scene_materials[m + 2u];
@@ -167,7 +279,7 @@ fn scene_bsdf(sp: SurfacePoint) -> Bsdf {
 
 // Material::emission at the surface point (front face only, as Scene::emitted).
 fn scene_emission(material: u32, uv: vec2<f32>) -> vec3<f32> {
-    let e = scene_materials[material * 4u + 3u];
+    let e = scene_materials[material * SCENE_MATERIAL_VEC4S + 3u];
     let tex = bitcast<u32>(e.w);
     if (all(e.xyz == vec3<f32>(0.0)) || tex == SCENE_NONE) {
         return e.xyz;
@@ -381,7 +493,7 @@ fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, specu
                 if (scene_lights[first + mid].y <= u_select) { lo = mid + 1u; } else { hi = mid; }
             }
             let em = scene_lights[first + min(lo, emitters - 1u)];
-            let tri = bitcast<u32>(em.x) * 8u;
+            let tri = bitcast<u32>(em.x) * SCENE_TRIANGLE_VEC4S;
             let su = sqrt(u.x);
             let b0 = 1.0 - su;
             let b1 = u.y * su;

@@ -1,0 +1,69 @@
+//! A tracking window scrolling over `builtin::half_roofed_ground` with its probe
+//! rays traced and shaded on the GPU (the CPU test of the same name in
+//! `probegi-cpu/tests/world_scale.rs`, on the other backend): after every scroll
+//! each probe of the window matches a converged fixed volume's probe at the same
+//! world position, so no probe from under the roof survives into the open (a
+//! stale one would be off by the roof's contrast, 0.77 in the CPU test's broken
+//! run), and the GPU's query reads the scrolled circular buffers.
+
+use glam::{UVec3, Vec3};
+use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, ProbeStatesMode};
+use probegi_core::irradiance_encoding::decode_irradiance;
+use probegi_cpu::ddgi::DdgiVolume;
+use probegi_cpu::ddgi_field_set::DdgiFieldSet;
+use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_scene::{BvhSettings, BvhTracer};
+use probegi_wgpu::GpuContext;
+use probegi_wgpu_seam::WgpuProbeTracer;
+
+fn tile_mean(v: &DdgiVolume, p: usize) -> f32 {
+    let g = v.settings.probe_irradiance_gamma;
+    let t = v.irradiance.tile(p);
+    t.iter().map(|e| decode_irradiance(*e, g).x).sum::<f32>() / t.len() as f32
+}
+
+#[test]
+fn a_gpu_updated_tracking_window_never_shows_a_stale_probe() {
+    let scene = probegi_scene::builtin::half_roofed_ground();
+    let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let gpu = WgpuProbeTracer::new(ctx, &scene, &bvh, true).expect("upload");
+    assert!(gpu.shades());
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let bounds = scene.bounds().expect("bounds");
+    let base = DdgiVolumeSettings {
+        probe_rays_per_probe: 256,
+        probe_states: ProbeStatesMode::AllActive,
+        probe_relocation: false,
+        probe_spacing_m: Some(Vec3::ONE),
+        probe_origin_m: Some(Vec3::new(0.0, 0.5, -1.0)),
+        ..Default::default()
+    };
+    // The reference: a fixed volume over the corridor on the same lattice, CPU, converged.
+    let fixed_settings = DdgiVolumeSettings { probe_counts: UVec3::new(41, 3, 3), ..base.clone() };
+    let mut fixed = DdgiFieldSet::new(&DdgiFieldSetSettings::single(fixed_settings), bounds, None);
+    let mut ms = Default::default();
+    for f in 0..40 {
+        fixed.update(&scene, &bvh, &direct, 1, f, &mut ms);
+    }
+    let window = DdgiVolumeSettings { probe_counts: UVec3::new(7, 3, 3), volume_tracks_camera: true, ..base };
+    let start = Vec3::new(8.0, 1.5, 0.0);
+    let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::single(window), bounds, Some(start));
+    for f in 0..40 {
+        set.update_traced_by(&scene, &bvh, Some(&gpu), &direct, 1, f, &mut ms).expect("GPU");
+    }
+    let (mut worst, mut scrolled) = (0.0f32, 0);
+    for f in 40..90 {
+        scrolled += set.set_tracking_target(start + Vec3::new(0.4 * (f - 40) as f32, 0.0, 0.0));
+        set.update_traced_by(&scene, &bvh, Some(&gpu), &direct, 1, f, &mut ms).expect("GPU");
+        let (v, fv) = (&set.volumes()[0], &fixed.volumes()[0]);
+        for p in 0..v.grid.probe_count() {
+            let world = v.grid.probe_position(v.grid.probe_coords(p));
+            let q = fv.grid.probe_index(((world - fv.grid.origin_m) / fv.grid.spacing_m).round().as_uvec3());
+            worst = worst.max((tile_mean(v, p) - tile_mean(fv, q)).abs() / tile_mean(fv, q));
+        }
+    }
+    eprintln!("GPU-updated window: {scrolled} probes scrolled in; worst probe mean vs the fixed CPU volume {worst:.3}");
+    assert!(scrolled >= 9 * 18, "the window moved 20 m: {scrolled}");
+    assert!(worst < 0.25, "a probe differs from the fixed volume's at its position by {worst}");
+}
