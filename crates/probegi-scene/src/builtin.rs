@@ -241,7 +241,12 @@ pub fn half_roofed_ground() -> Scene {
     };
     add_polygon(
         &mut scene.mesh,
-        &[Vec3::new(-10.0, 0.0, -10.0), Vec3::new(-10.0, 0.0, 10.0), Vec3::new(50.0, 0.0, 10.0), Vec3::new(50.0, 0.0, -10.0)],
+        &[
+            Vec3::new(-10.0, 0.0, -10.0),
+            Vec3::new(-10.0, 0.0, 10.0),
+            Vec3::new(50.0, 0.0, 10.0),
+            Vec3::new(50.0, 0.0, -10.0),
+        ],
         0,
     );
     add_box(&mut scene.mesh, Vec3::new(-10.0, 3.0, -10.0), Vec3::new(20.0, 3.2, 10.0), 0);

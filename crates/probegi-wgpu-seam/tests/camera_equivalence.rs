@@ -135,9 +135,12 @@ fn textured_sponza_frame_on_the_gpu() {
 /// along +x), lit by a point light, seen from above, DDGI over it.
 fn mapped_plane(normal_map: bool) -> Scene {
     use probegi_scene::{Material, PunctualLight};
-    let mut scene = Scene { materials: vec![Material::diffuse("mapped", glam::Vec3::splat(0.7))], ..Default::default() };
+    let mut scene =
+        Scene { materials: vec![Material::diffuse("mapped", glam::Vec3::splat(0.7))], ..Default::default() };
     let m = &mut scene.mesh;
-    for (p, uv) in [((-2.0, -2.0), (0.0, 0.0)), ((2.0, -2.0), (4.0, 0.0)), ((2.0, 2.0), (4.0, 4.0)), ((-2.0, 2.0), (0.0, 4.0))] {
+    for (p, uv) in
+        [((-2.0, -2.0), (0.0, 0.0)), ((2.0, -2.0), (4.0, 0.0)), ((2.0, 2.0), (4.0, 4.0)), ((-2.0, 2.0), (0.0, 4.0))]
+    {
         m.positions.push(glam::Vec3::new(p.0, 0.0, p.1));
         m.normals.push(glam::Vec3::Y);
         m.uvs.push(glam::Vec2::new(uv.0, uv.1));
@@ -184,7 +187,8 @@ fn normal_and_bump_mapped_planes_shade_the_same_on_both_backends() {
         let scene = mapped_plane(normal_map);
         let name = if normal_map { "normal-mapped plane" } else { "bump-mapped plane" };
         let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
-        let gpu = WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true).expect("upload");
+        let gpu = WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true)
+            .expect("upload");
         let s = small(UVec3::new(4, 2, 4));
         let a = render(&scene, 64, 1, 3, &s, None);
         let g = render(&scene, 64, 1, 3, &s, Some(Arc::new(gpu)));

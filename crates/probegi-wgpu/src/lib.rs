@@ -1,18 +1,27 @@
-//! probegi-wgpu: the DDGI field passes as wgpu compute shaders (issue "The whole
-//! frame on the GPU…", in progress).
+//! probegi-wgpu: DDGI on the GPU as wgpu compute shaders (WGSL), on any adapter,
+//! software ones included (issue "The whole frame on the GPU…", in progress).
 //!
-//! Built so far, and tested against the CPU path on Mesa's lavapipe:
-//! - [`gpu_context`]: a headless device on any adapter (software ones included),
-//!   or a device and queue the caller owns;
-//! - [`probe_blend`]: the blend pass (irradiance with γ encoding and seed 004
-//!   Listing 3's thresholds; distance moments with the power-cosine weight) and
-//!   the border pass, over atlases that stay on the device.
+//! Built, and tested against the CPU path on Mesa's lavapipe:
+//! - [`gpu_context`]: a headless device on any adapter, or a device and queue
+//!   the caller owns; [`gpu_timer`]: per-pass GPU times from timestamp queries;
+//! - [`bvh_trace`]: the trace: the CPU's compressed-wide BVH (obvhs) uploaded as
+//!   it is and traversed in `bvh.wgsl`, closest and any hit, alpha cutouts
+//!   inside the traversal; also over a caller's own triangle soup;
+//! - [`gpu_scene`], [`probe_shade`]: the shade pass of the probe rays (sky,
+//!   back faces, direct light with shadow rays, the previous field, second-order
+//!   glossy), materials with textures, normal and bump maps;
+//! - [`camera_frame`]: the camera frame (primary rays, direct light, glossy
+//!   rays, the field query);
+//! - [`ddgi_query`]: the query of a set of volumes as WGSL an engine includes;
+//! - [`probe_blend`]: the blend (γ encoding, seed 004 Listing 3's thresholds,
+//!   distance moments) and border passes over device-resident atlases.
 //!
-//! Not built yet: ray generation, the trace (CWBVH traversal in WGSL), shading,
-//! relocation and classification, the query shader, the camera frame, the
-//! field set's volumes and cascades. The CPU backend (`probegi-cpu`) does all of
-//! them today. This crate depends on `probegi-core` for settings, layouts and
-//! encodings, and never on the CPU backend.
+//! Not built yet: ray generation on the device (the seam plans the batch on
+//! the CPU), relocation and classification, the probe states, a top-level BVH
+//! for moving objects and instances, and an update loop whose atlases live on
+//! the device (`probegi-wgpu-seam` blends on the CPU and uploads the atlases).
+//! This crate depends on `probegi-core` (settings, layouts, encodings) and
+//! `probegi-scene` (the BVH and the scene), and never on the CPU backend.
 
 pub mod bvh_trace;
 pub mod camera_frame;
