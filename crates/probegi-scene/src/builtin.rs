@@ -189,6 +189,30 @@ pub fn furnace_box(albedo: f32, emission: f32) -> Scene {
     }
 }
 
+/// A tracking-window test world: a 60 m × 20 m ground plane (x from −10 to 50)
+/// under a sky of radiance 1, roofed by a 0.2 m slab at y = 3 for x < 20 and
+/// open beyond, so probes under the roof and in the open differ by the roof's
+/// contrast (a stale probe that scrolled out from under the roof shows).
+pub fn half_roofed_ground() -> Scene {
+    let mut scene = Scene {
+        materials: vec![Material::diffuse("ground", Vec3::splat(0.5))],
+        sky_radiance: Vec3::splat(1.0),
+        ..Default::default()
+    };
+    add_polygon(
+        &mut scene.mesh,
+        &[
+            Vec3::new(-10.0, 0.0, -10.0),
+            Vec3::new(-10.0, 0.0, 10.0),
+            Vec3::new(50.0, 0.0, 10.0),
+            Vec3::new(50.0, 0.0, -10.0),
+        ],
+        0,
+    );
+    add_box(&mut scene.mesh, Vec3::new(-10.0, 3.0, -10.0), Vec3::new(20.0, 3.2, 10.0), 0);
+    scene
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -227,28 +251,4 @@ mod tests {
         }
         assert_eq!(s.mesh.triangle_count(), 36);
     }
-}
-
-/// A tracking-window test world: a 60 m × 20 m ground plane (x from −10 to 50)
-/// under a sky of radiance 1, roofed by a 0.2 m slab at y = 3 for x < 20 and
-/// open beyond, so probes under the roof and in the open differ by the roof's
-/// contrast (a stale probe that scrolled out from under the roof shows).
-pub fn half_roofed_ground() -> Scene {
-    let mut scene = Scene {
-        materials: vec![Material::diffuse("ground", Vec3::splat(0.5))],
-        sky_radiance: Vec3::splat(1.0),
-        ..Default::default()
-    };
-    add_polygon(
-        &mut scene.mesh,
-        &[
-            Vec3::new(-10.0, 0.0, -10.0),
-            Vec3::new(-10.0, 0.0, 10.0),
-            Vec3::new(50.0, 0.0, 10.0),
-            Vec3::new(50.0, 0.0, -10.0),
-        ],
-        0,
-    );
-    add_box(&mut scene.mesh, Vec3::new(-10.0, 3.0, -10.0), Vec3::new(20.0, 3.2, 10.0), 0);
-    scene
 }
