@@ -95,8 +95,6 @@ pub fn ggx_reflection_pdf(wo: Vec3, wi: Vec3, alpha: f32) -> f32 {
 /// [`specular_albedo_table`]) in μo and in α.
 pub const ALBEDO_TABLE_SIZE: usize = 32;
 
-/// (A, B) per (α, μo) node, row-major in α; node i sits at i/(N − 1), so both ends
-/// of [0, 1] are nodes. 1024 stratified VNDF samples each.
 /// The (A, B) split-sum table behind [`specular_directional_albedo`], row-major
 /// over α (rows) and cos θo (columns), both from 0 to 1 in `ALBEDO_TABLE_SIZE`
 /// steps; what the GPU backend uploads.
@@ -104,6 +102,8 @@ pub fn specular_albedo_table() -> &'static [[f32; 2]] {
     albedo_table()
 }
 
+/// (A, B) per (α, μo) node, row-major in α; node i sits at i/(N − 1), so both ends
+/// of [0, 1] are nodes. 1024 stratified VNDF samples each.
 fn albedo_table() -> &'static [[f32; 2]] {
     static TABLE: std::sync::OnceLock<Vec<[f32; 2]>> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| {

@@ -36,8 +36,11 @@ impl DdgiFieldSet {
     }
 
     /// [`DdgiFieldSet::update`] with the probe ray batches traced by `batch_tracer`
-    /// when given (a GPU trace); shadow rays of the shading still go to `tracer`
-    /// through `direct`. An error of the batch tracer ends the update with it.
+    /// when given (a GPU trace), and shaded by it when it shades
+    /// ([`ProbeBatchTracer::shade_batch`]; otherwise the CPU shades, its shadow
+    /// rays going to `tracer` through `direct`). Returns the rays traced on the
+    /// CPU plus the batch rays; shadow rays traced elsewhere are not counted. An
+    /// error of the batch tracer, or hits of the wrong count, end the update with it.
     #[allow(clippy::too_many_arguments)]
     pub fn update_traced_by(
         &mut self,
@@ -75,6 +78,13 @@ impl DdgiFieldSet {
                     traced += match batch_tracer {
                         Some(bt) => {
                             bt.closest_hits(self.ray_batch(), init, &mut batch_hits)?;
+                            if batch_hits.len() != self.ray_batch().len() {
+                                return Err(format!(
+                                    "the batch tracer returned {} hits for {} rays",
+                                    batch_hits.len(),
+                                    self.ray_batch().len()
+                                ));
+                            }
                             surfels_from_hits(scene, self.ray_batch(), &batch_hits, &mut surfels);
                             self.ray_batch().len() as u64
                         }

@@ -79,9 +79,12 @@ pub struct RenderSettings {
 /// Measurements of a render; serialised by the CLI's `--stats`.
 #[derive(Clone, Debug, Default)]
 pub struct RenderStats {
+    /// Frames rendered (fewer than asked when `error` is set).
     pub frames: u32,
     /// Mean wall-clock milliseconds per frame, by pass name.
     pub pass_ms: BTreeMap<&'static str, f64>,
+    /// Rays traced on the CPU, plus the probe batches and camera primary rays a
+    /// `probe_tracer` traced; the shadow and glossy rays it traced are not counted.
     pub rays_traced: u64,
     /// DDGI and SH: probes; DDGI only: probe rays per frame, mean field-update ms (the four
     /// update passes plus border) and probe rays per second over it.
@@ -107,7 +110,8 @@ pub struct RenderStats {
     pub frame_indirect_means: Vec<Vec3>,
     /// Per frame, with a DDGI or SH field: the fraction of pixels that see a
     /// surface whose diffuse albedo is non-zero but get no indirect light from the
-    /// field (a black wall or an unreadable probe shows up here).
+    /// field (a black wall or an unreadable probe shows up here). Not recorded
+    /// for frames whose camera a `probe_tracer` rendered.
     pub frame_unlit_fraction: Vec<f32>,
     /// Set when the render stopped early: a probe batch tracer failed (a GPU
     /// device lost, say). The image is then that of the frames before.
@@ -265,8 +269,9 @@ pub fn render_frames(
             }
         }
 
-        // The camera frame on another device, where the backend renders it.
-        if let (Some(h), Some(set)) = (&settings.probe_tracer, field.as_ref()) {
+        // The camera frame on another device, where the backend renders it
+        // (`show_probes` draws on the CPU's G-buffer, so it keeps the CPU camera).
+        if let (Some(h), Some(set), false) = (&settings.probe_tracer, field.as_ref(), settings.show_probes) {
             let t = Instant::now();
             let second_order = set.volumes().iter().any(|v| v.settings.glossy_second_order);
             let view = set.view();
@@ -283,6 +288,8 @@ pub fn render_frames(
             drop(view);
             match on_device {
                 Some(Ok(())) => {
+                    // Primary rays; the device's shadow and glossy rays are not counted.
+                    stats.rays_traced += settings.width as u64 * settings.height as u64;
                     let camera_moved = moving_camera && f > 0 && camera_at(f - 1) != camera;
                     acc.add_frame(animated || camera_moved);
                     *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
@@ -332,7 +339,9 @@ pub fn render_frames(
         last_gbuffer = Some(gbuffer);
         acc.finish_frame(f, settings, &mut stats, &mut on_frame_done);
     }
-    stats.frames = frames;
+    // Frames that completed (all of them unless a backend failed).
+    let frames = stats.frame_means.len().max(1) as u32;
+    stats.frames = stats.frame_means.len() as u32;
     stats.pass_ms = pass_totals.into_iter().map(|(k, v)| (k, v / frames as f64)).collect();
     if let Some(set) = &field {
         field_stats(set, &mut stats);

@@ -68,10 +68,10 @@ impl WgpuProbeTracer {
         let trace = GpuRayTrace::new(&ctx);
         let note = if gpu_shading { unsupported_by_gpu_shading(scene) } else { Some("CPU shading asked for".into()) };
         let shading = match note {
-            None => Some((GpuProbeShade::new(&ctx), GpuScene::upload(&ctx, scene)?)),
+            None => Some((GpuProbeShade::new(&ctx)?, GpuScene::upload(&ctx, scene)?)),
             Some(_) => None,
         };
-        let camera = (shading.is_some() && gpu_camera).then(|| GpuCameraPass::new(&ctx));
+        let camera = if shading.is_some() && gpu_camera { Some(GpuCameraPass::new(&ctx)?) } else { None };
         Ok(Self {
             ctx,
             trace,

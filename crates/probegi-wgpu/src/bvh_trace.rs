@@ -156,6 +156,13 @@ impl GpuBvh {
         if triangles.is_empty() {
             triangles.push([0.0; 4]);
         }
+        for (what, bytes) in [
+            ("the BVH nodes", nodes.len() * 4),
+            ("the BVH triangles", triangles.len() * 16),
+            ("the cutouts", cutouts.len() * 4),
+        ] {
+            ctx.check_buffer(bytes as u64, what)?;
+        }
         let device = &ctx.device;
         let init = |label: &str, contents: &[u8]| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -170,14 +177,6 @@ impl GpuBvh {
             init("bvh cutouts", bytemuck::cast_slice(&cutouts)),
         ];
         let bytes = buffers.iter().map(|b| b.size()).sum();
-        let limit = device.limits().max_storage_buffer_binding_size;
-        if let Some(b) = buffers.iter().find(|b| b.size() > limit) {
-            return Err(GpuError::Input(format!(
-                "the BVH needs a {} MiB buffer; this adapter binds at most {} MiB",
-                b.size() >> 20,
-                limit >> 20
-            )));
-        }
         let layout = bvh_bind_group_layout(device);
         let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
             .iter()
@@ -327,7 +326,8 @@ impl GpuRayTrace {
 
     /// The most rays one batch may hold on this device (its largest storage binding).
     pub fn max_batch_rays(ctx: &GpuContext) -> usize {
-        let limit = ctx.device.limits().max_storage_buffer_binding_size as usize;
+        let l = ctx.device.limits();
+        let limit = l.max_storage_buffer_binding_size.min(l.max_buffer_size) as usize;
         (limit / std::mem::size_of::<GpuRay>()).min(u32::MAX as usize)
     }
 

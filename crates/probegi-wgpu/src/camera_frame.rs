@@ -54,7 +54,12 @@ pub struct GpuCameraPass {
 }
 
 impl GpuCameraPass {
-    pub fn new(ctx: &GpuContext) -> Self {
+    /// Storage buffers the pass binds per stage: its own 2, the BVH's 3, the
+    /// field's 4 and the scene's 4.
+    pub const STORAGE_BUFFERS: u32 = 13;
+
+    pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        ctx.check_pipeline(Self::STORAGE_BUFFERS, "the camera pass")?;
         let source = format!(
             "{}\n{}\n{}\n{}",
             include_str!("shaders/bvh.wgsl"),
@@ -88,7 +93,7 @@ impl GpuCameraPass {
             compilation_options: Default::default(),
             cache: None,
         });
-        Self { layout, pipeline }
+        Ok(Self { layout, pipeline })
     }
 
     /// The frame's direct and indirect terms, row-major.

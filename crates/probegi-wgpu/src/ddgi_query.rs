@@ -170,6 +170,13 @@ impl GpuDdgiField {
         if distance.is_empty() {
             distance.push([0.0; 2]);
         }
+        for (what, bytes) in [
+            ("the irradiance atlases", irradiance.len() * 16),
+            ("the distance atlases", distance.len() * 8),
+            ("the probes", probes.len() * 16),
+        ] {
+            ctx.check_buffer(bytes as u64, what)?;
+        }
         let init = |label: &str, contents: &[u8]| {
             ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),

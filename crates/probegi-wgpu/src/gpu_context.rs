@@ -95,6 +95,36 @@ impl GpuContext {
         Self { device, queue, adapter_name: adapter_name.into(), timestamps }
     }
 
+    /// An error, not wgpu's panic, when a storage buffer of `bytes` exceeds what
+    /// the device allows (its largest buffer or storage binding).
+    pub(crate) fn check_buffer(&self, bytes: u64, what: &str) -> Result<(), GpuError> {
+        let l = self.device.limits();
+        let max = l.max_buffer_size.min(l.max_storage_buffer_binding_size);
+        if bytes > max {
+            return Err(GpuError::Input(format!(
+                "{what} needs a {} MiB buffer; this device binds at most {} MiB",
+                bytes >> 20,
+                max >> 20
+            )));
+        }
+        Ok(())
+    }
+
+    /// An error when a pipeline binding `n` storage buffers per stage (and four
+    /// bind groups) exceeds the device's limits (WebGPU's defaults are 8 and 4;
+    /// `headless` asks for what the adapter has).
+    pub(crate) fn check_pipeline(&self, storage_buffers: u32, what: &str) -> Result<(), GpuError> {
+        let l = self.device.limits();
+        if storage_buffers > l.max_storage_buffers_per_shader_stage || l.max_bind_groups < 4 {
+            return Err(GpuError::Device(format!(
+                "{what} binds {storage_buffers} storage buffers in 4 groups; this device allows {} and {} \
+                 (create it with the adapter's limits)",
+                l.max_storage_buffers_per_shader_stage, l.max_bind_groups
+            )));
+        }
+        Ok(())
+    }
+
     /// Waits until every submitted command has run.
     pub fn wait(&self) -> Result<(), GpuError> {
         self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Device(e.to_string()))

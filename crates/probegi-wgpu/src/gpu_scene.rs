@@ -1,8 +1,8 @@
 //! A scene's surfaces, materials, textures and lights on the device, in the
 //! layout `shaders/scene.wgsl` reads (documented there): what the GPU shade and
 //! camera passes need to light a hit as the CPU does, normal and bump maps
-//! included. Moving or instanced geometry is refused by name (the GPU trace has
-//! no TLAS yet).
+//! included. Moving or instanced geometry (the GPU trace has no TLAS yet) and
+//! keyframed lights (uploaded once, not posed per frame) are refused by name.
 
 use probegi_core::bsdf::{ALBEDO_TABLE_SIZE, specular_albedo_table};
 use probegi_core::color::{luminance, srgb8_to_linear_table};
@@ -24,6 +24,10 @@ pub fn scene_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
 
 /// Why a scene cannot be shaded on the GPU yet, or `None`.
 pub fn unsupported_by_gpu_shading(scene: &Scene) -> Option<String> {
+    if scene.lights.iter().any(|l| !l.keyframes.is_empty()) {
+        // The lights are uploaded once; the CPU poses them every frame.
+        return Some("keyframed lights, which the GPU shading does not pose per frame yet".into());
+    }
     if scene.has_moving_geometry() || !scene.instances.is_empty() {
         return Some("moving objects and instanced meshes need a TLAS, which the GPU trace lacks".into());
     }
@@ -145,6 +149,14 @@ impl GpuScene {
             cdf = if i + 1 == emitters.len() { 1.0 } else { cdf + pmf };
             lights.push([f32::from_bits(t), cdf, pmf / mesh.area(t as usize), 0.0]);
         }
+        for (what, bytes) in [
+            ("the scene's triangles", triangles.len() * 16),
+            ("its materials", materials.len() * 16),
+            ("its textures", words.len() * 4),
+            ("its lights", lights.len() * 16),
+        ] {
+            ctx.check_buffer(bytes as u64, &format!("scene {}: {what}", scene.name))?;
+        }
         let init = |label: &str, contents: &[u8]| {
             ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -158,15 +170,6 @@ impl GpuScene {
             init("scene textures", bytemuck::cast_slice(&words)),
             init("scene lights", bytemuck::cast_slice(&lights)),
         ];
-        let limit = ctx.device.limits().max_storage_buffer_binding_size;
-        if let Some(b) = buffers.iter().find(|b| b.size() > limit) {
-            return Err(GpuError::Input(format!(
-                "scene {}: a {} MiB buffer exceeds this adapter's {} MiB binding limit",
-                scene.name,
-                b.size() >> 20,
-                limit >> 20
-            )));
-        }
         let layout = scene_bind_group_layout(&ctx.device);
         let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
             .iter()

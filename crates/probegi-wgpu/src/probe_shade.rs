@@ -8,7 +8,7 @@
 //!
 //! *Deviation:* random numbers come from a PCG hash per ray, not the CPU's PCG32
 //! stream per probe, so area-light estimates agree with the CPU's in
-//! distribution, not bit for bit (`tests/shade_equivalence.rs`).
+//! distribution, not bit for bit (`probegi-wgpu-seam/tests/field_equivalence.rs`).
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -41,7 +41,12 @@ pub struct GpuProbeShade {
 }
 
 impl GpuProbeShade {
-    pub fn new(ctx: &GpuContext) -> Self {
+    /// Storage buffers the pass binds per stage: its own 4, the BVH's 3, the
+    /// field's 4 and the scene's 4.
+    pub const STORAGE_BUFFERS: u32 = 15;
+
+    pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        ctx.check_pipeline(Self::STORAGE_BUFFERS, "the probe shade pass")?;
         let source = format!(
             "{}\n{}\n{}\n{}",
             include_str!("shaders/bvh.wgsl"),
@@ -83,7 +88,7 @@ impl GpuProbeShade {
             cache: None,
         });
         let [layout, ..] = layouts;
-        Self { layout, pipeline }
+        Ok(Self { layout, pipeline })
     }
 
     /// Radiance of every ray of `batch` (traced already), by `info` ([`shade_info`]);
