@@ -19,7 +19,7 @@ pub enum Backend {
     Wgpu,
 }
 
-pub use probegi_wgpu_seam::{WgpuProbeTracer, batch_rays};
+pub use probegi_wgpu_seam::WgpuProbeTracer;
 
 /// A headless device with the scene on it; a clear error when there is no
 /// adapter or the scene needs what the GPU trace lacks (a TLAS). Where the GPU
@@ -41,10 +41,11 @@ pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTrac
 }
 
 /// `bench --backend wgpu`: the GPU passes alone on one volume's last update batch,
-/// best of `repeat` submits: the trace (closest hit of every batch ray), then
-/// blend and border over every probe of the volume, then (where the GPU shades
-/// this scene) the shade of every batch ray (an upper bound: sleeping
-/// probes would skip theirs), with per-pass times from timestamp queries where
+/// best of `repeat` submits: ray generation for the batch's probes (on the
+/// device, so no ray is uploaded), the trace (closest hit of every one of
+/// those rays), blend and border over every probe of the volume (an upper
+/// bound: sleeping probes would skip theirs), then (where the GPU shades this
+/// scene) the shade of every batch ray, with per-pass times from timestamp queries where
 /// the adapter has them (wall-clock around the submit otherwise), device memory
 /// per probe and per probe ray.
 pub fn time_gpu_passes(
@@ -60,8 +61,11 @@ pub fn time_gpu_passes(
     let s = &volume.settings;
     let probes = volume.grid.probe_count();
     let n = s.probe_rays_per_probe as usize;
-    let rays = batch_rays(batch);
-    let traced = gpu.trace.batch(ctx, &rays, false)?;
+    // The batch's probes (their relocated origins), their rays generated on the device.
+    let origins: Vec<glam::Vec3> = batch.probes.iter().map(|p| batch.origins_m[p.first_ray as usize]).collect();
+    let max_m = batch.max_distances_m.first().copied().unwrap_or(f32::INFINITY);
+    let rotation = probegi_cpu::probe_ray_gen::probe_ray_rotation(volume.stream_seed(1), 1);
+    let ray_gen = probegi_wgpu::probe_ray_gen::GpuProbeRayGen::new(ctx);
     let atlases = GpuVolumeAtlases::new(ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
     atlases.upload(ctx, &volume.irradiance, &volume.distance);
     let dirs: Vec<glam::Vec3> = batch.directions.iter().take(n).copied().collect();
@@ -80,8 +84,10 @@ pub fn time_gpu_passes(
     };
     let blend = GpuProbeBlend::new(ctx);
     let bindings = blend.prepare(ctx, &atlases, &frame)?;
-    let timer = GpuTimer::new(ctx, 6);
-    let names = ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], PASS_NAMES[3], "shade"];
+    let timer = GpuTimer::new(ctx, 7);
+    let names = ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], PASS_NAMES[3], "shade", "ray_gen"];
+    let traced = ray_gen.generate(ctx, &gpu.trace, &origins, max_m, rotation, n as u32, Some((&timer, 6)))?;
+    ctx.wait()?;
     // The shade pass over every ray of the batch, with the set's field on the device.
     let field = probegi_wgpu::ddgi_query::GpuDdgiField::upload(ctx, &set.view())?;
     let info: Vec<u32> = (0..batch.len())
@@ -89,7 +95,12 @@ pub fn time_gpu_passes(
         .collect();
     let mut best: Option<Vec<f64>> = None;
     let mut wall_trace_ms = f64::INFINITY;
-    for _ in 0..repeat {
+    for k in 0..repeat {
+        if k > 0 {
+            // Time the ray generation again, into the same kind of batch.
+            ray_gen.generate(ctx, &gpu.trace, &origins, max_m, rotation, n as u32, Some((&timer, 6)))?;
+            ctx.wait()?;
+        }
         let t = std::time::Instant::now();
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         gpu.trace.record(&mut encoder, &gpu.bvh, &traced, timer.writes(0));
@@ -114,7 +125,7 @@ pub fn time_gpu_passes(
             });
         }
     }
-    let ray_count = rays.len() as f64;
+    let ray_count = traced.ray_count as f64;
     let (pass_ms, source) = match &best {
         Some(ms) => (
             names

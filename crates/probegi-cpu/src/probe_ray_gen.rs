@@ -26,9 +26,15 @@ pub struct ProbeRayDirections {
 /// need no blend weights).
 pub fn probe_ray_directions(settings: &DdgiVolumeSettings, seed: u64, frame: u32) -> Vec<Vec3> {
     let n = settings.probe_rays_per_probe;
-    let mut rng = Pcg32::new(hash_combine(&[seed, frame as u64, 0x7261_7973]), frame as u64);
-    let rotation = sample_uniform_rotation(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()));
+    let rotation = probe_ray_rotation(seed, frame);
     (0..n).map(|i| (rotation * spherical_fibonacci(i, n)).normalize()).collect()
+}
+
+/// The frame's random rotation of the Fibonacci set, reproducible from `(seed,
+/// frame)` (what a GPU ray generation pass is given).
+pub fn probe_ray_rotation(seed: u64, frame: u32) -> glam::Quat {
+    let mut rng = Pcg32::new(hash_combine(&[seed, frame as u64, 0x7261_7973]), frame as u64);
+    sample_uniform_rotation(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()))
 }
 
 pub fn generate_probe_rays(settings: &DdgiVolumeSettings, seed: u64, frame: u32) -> ProbeRayDirections {

@@ -340,7 +340,18 @@ impl GpuRayTrace {
                 Self::max_batch_rays(ctx)
             )));
         }
-        let n = rays.len() as u32;
+        let device = &ctx.device;
+        let ray_bytes: &[u8] = if rays.is_empty() { &[0; 32] } else { bytemuck::cast_slice(rays) };
+        let ray_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("rays"),
+            contents: ray_bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+        });
+        Ok(self.bind_batch(ctx, ray_buffer, rays.len() as u32, any_hit))
+    }
+
+    /// A batch around `rays`: its parameters, a hit buffer and the bind group.
+    fn bind_batch(&self, ctx: &GpuContext, rays: wgpu::Buffer, n: u32, any_hit: bool) -> GpuRayBatch {
         let (groups_x, _) = dispatch_2d(n);
         let params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, _pad: 0 };
         let device = &ctx.device;
@@ -349,15 +360,9 @@ impl GpuRayTrace {
             contents: bytemuck::bytes_of(&params),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-        let ray_bytes: &[u8] = if rays.is_empty() { &[0; 32] } else { bytemuck::cast_slice(rays) };
-        let ray_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("rays"),
-            contents: ray_bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        });
         let hits = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("ray hits"),
-            size: (rays.len().max(1) * std::mem::size_of::<GpuRayHit>()) as u64,
+            size: (n.max(1) as usize * std::mem::size_of::<GpuRayHit>()) as u64,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
@@ -366,11 +371,31 @@ impl GpuRayTrace {
             layout: &self.layout,
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: ray_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: rays.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 2, resource: hits.as_entire_binding() },
             ],
         });
-        Ok(GpuRayBatch { ray_count: n, any_hit, rays: ray_buffer, hits, bind_group })
+        GpuRayBatch { ray_count: n, any_hit, rays, hits, bind_group }
+    }
+
+    /// A batch of `ray_count` rays left for a pass on the device to write
+    /// (`probe_ray_gen`).
+    pub fn empty_batch(&self, ctx: &GpuContext, ray_count: u32, any_hit: bool) -> Result<GpuRayBatch, GpuError> {
+        let bytes = ray_count.max(1) as u64 * std::mem::size_of::<GpuRay>() as u64;
+        ctx.check_buffer(bytes, "a ray batch")?;
+        let rays = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("rays"),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        Ok(self.bind_batch(ctx, rays, ray_count, any_hit))
+    }
+
+    /// The rays of a batch, read back.
+    pub fn download_rays(&self, ctx: &GpuContext, batch: &GpuRayBatch) -> Result<Vec<GpuRay>, GpuError> {
+        let bytes = ctx.read_back(&batch.rays)?;
+        Ok(bytemuck::cast_slice::<u8, GpuRay>(&bytes)[..batch.ray_count as usize].to_vec())
     }
 
     /// Records the trace of `batch` into `encoder`, with optional timestamps.

@@ -14,10 +14,11 @@
 //!   rays, the field query);
 //! - [`ddgi_query`]: the query of a set of volumes as WGSL an engine includes;
 //! - [`probe_blend`]: the blend (γ encoding, seed 004 Listing 3's thresholds,
-//!   distance moments) and border passes over device-resident atlases.
+//!   distance moments) and border passes over device-resident atlases;
+//! - [`probe_ray_gen`]: rotated spherical Fibonacci rays written straight into
+//!   a trace batch.
 //!
-//! Not built yet: ray generation on the device (the seam plans the batch on
-//! the CPU), relocation and classification, the probe states, a top-level BVH
+//! Not built yet: relocation and classification, the probe states, a top-level BVH
 //! for moving objects and instances, and an update loop whose atlases live on
 //! the device (`probegi-wgpu-seam` blends on the CPU and uploads the atlases).
 //! This crate depends on `probegi-core` (settings, layouts, encodings) and
@@ -30,6 +31,7 @@ pub mod gpu_context;
 pub mod gpu_scene;
 pub mod gpu_timer;
 pub mod probe_blend;
+pub mod probe_ray_gen;
 pub mod probe_shade;
 
 pub use gpu_context::{GpuContext, GpuError};

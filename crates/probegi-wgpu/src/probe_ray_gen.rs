@@ -1,0 +1,130 @@
+//! Ray generation on the device (`shaders/probe_ray_gen.wgsl`): every probe's
+//! rotated spherical Fibonacci rays written straight into a trace batch, so a
+//! device-resident update uploads 16 bytes per probe instead of 32 per ray. The
+//! frame's rotation is drawn on the CPU from (seed, frame) exactly as
+//! `probegi_cpu::probe_ray_gen::probe_ray_directions` draws it; the directions
+//! agree with the CPU's to the rounding of sin and cos, 2.4e-5 on lavapipe
+//! (`tests/ray_gen_equivalence.rs`).
+//!
+//! The seam's batches are still planned on the CPU (relocation offsets, states),
+//! so `render` uploads the CPU's rays; `bench --backend wgpu` times this pass.
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Quat, Vec3};
+use wgpu::util::DeviceExt;
+
+use crate::bvh_trace::{GpuRayBatch, GpuRayTrace, dispatch_2d, storage_entry, uniform_entry};
+use crate::gpu_context::{GpuContext, GpuError};
+
+/// The pass's uniform block; must match `RayGenParams` in `probe_ray_gen.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct RayGenParams {
+    pub rotation: [f32; 4],
+    pub rays_per_probe: u32,
+    pub probe_count: u32,
+    pub groups_x: u32,
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<RayGenParams>() == 32);
+
+pub struct GpuProbeRayGen {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl GpuProbeRayGen {
+    pub fn new(ctx: &GpuContext) -> Self {
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("probe_ray_gen.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/probe_ray_gen.wgsl").into()),
+        });
+        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("probe ray gen"),
+            entries: &[uniform_entry(0), storage_entry(1, true), storage_entry(2, false)],
+        });
+        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("probe ray gen"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("generate_probe_rays"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("generate_probe_rays"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { layout, pipeline }
+    }
+
+    /// A trace batch of `origins.len() × rays_per_probe` rays, probe-major, each
+    /// probe's along the `rotation`-rotated spherical Fibonacci set, up to
+    /// `max_distance_m`; with `timer`, the pass writes its timestamps at `timer.1`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn generate(
+        &self,
+        ctx: &GpuContext,
+        trace: &GpuRayTrace,
+        origins: &[Vec3],
+        max_distance_m: f32,
+        rotation: Quat,
+        rays_per_probe: u32,
+        timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
+    ) -> Result<GpuRayBatch, GpuError> {
+        let n = origins.len() as u64 * rays_per_probe as u64;
+        if n > GpuRayTrace::max_batch_rays(ctx) as u64 || rays_per_probe == 0 {
+            return Err(GpuError::Input(format!(
+                "{} probes × {rays_per_probe} rays: not a batch this device holds",
+                origins.len()
+            )));
+        }
+        let batch = trace.empty_batch(ctx, n as u32, false)?;
+        if n == 0 {
+            return Ok(batch);
+        }
+        let (gx, gy) = dispatch_2d(n as u32);
+        let params = RayGenParams {
+            rotation: rotation.normalize().to_array(),
+            rays_per_probe,
+            probe_count: origins.len() as u32,
+            groups_x: gx,
+            _pad: 0,
+        };
+        let t_max = max_distance_m.min(f32::MAX);
+        let probes: Vec<[f32; 4]> = origins.iter().map(|o| [o.x, o.y, o.z, t_max]).collect();
+        let device = &ctx.device;
+        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("ray gen params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let probes = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("ray gen probes"),
+            contents: bytemuck::cast_slice(&probes),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("probe ray gen"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: probes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: batch.rays_buffer().as_entire_binding() },
+            ],
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("probe ray gen"),
+                timestamp_writes: timer.and_then(|(t, i)| t.writes(i)),
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        Ok(batch)
+    }
+}
