@@ -1,9 +1,8 @@
 //! `--backend wgpu`: what of a frame runs on the GPU today (`probegi-wgpu-seam`).
 //! The DDGI probe ray batches (update and initialisation rounds) are traced by
 //! probegi-wgpu's compute-shader CWBVH traversal over the same BVH the CPU
-//! builds; where the scene allows (no keyframed lights) they are shaded
-//! there too and the camera frame is rendered there (primary rays, direct light,
-//! glossy rays, the field query). The set's bookkeeping (relocation,
+//! builds, and shaded there; the camera frame is rendered there too (primary
+//! rays, direct light, glossy rays, the field query). The set's bookkeeping (relocation,
 //! classification, probe states), blend and border run on the CPU, whose
 //! atlases are uploaded for the GPU's queries each frame.
 
@@ -22,9 +21,9 @@ pub enum Backend {
 pub use probegi_wgpu_seam::WgpuProbeTracer;
 
 /// A headless device with the scene on it; a clear error when there is no
-/// adapter or the scene needs what the GPU trace lacks (a TLAS). Where the GPU
-/// shading lacks something (keyframed lights) the probe rays and the camera are
-/// shaded on the CPU, and a line says why.
+/// adapter or the scene needs what the GPU trace lacks (a TLAS). Were the GPU
+/// shading to lack something a scene needs, the probe rays and the camera would
+/// be shaded on the CPU, with a line that says why (`shading_note`).
 pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTracer> {
     bvh.export_static().map_err(anyhow::Error::msg).with_context(|| {
         format!("--backend wgpu cannot trace scene {}; use --backend cpu for moving or instanced geometry", scene.name)

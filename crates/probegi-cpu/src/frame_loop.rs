@@ -245,6 +245,12 @@ pub fn render_frames(
             fs.set_frame_from(base_scene, f as f32);
         }
         let scene: &Scene = frame_scene.as_ref().unwrap_or(base_scene);
+        if let (true, Some(h)) = (animated, &settings.probe_tracer)
+            && let Err(e) = h.0.pose_scene(scene)
+        {
+            stats.error = Some(format!("frame {f}: posing the scene on the device: {e}"));
+            break;
+        }
         // Moving geometry: place the instances for this frame (TLAS rebuild).
         let t = Instant::now();
         let frame_tracer = if animated { tracer.at_frame(scene, f as f32) } else { None };

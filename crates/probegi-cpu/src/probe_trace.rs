@@ -74,6 +74,13 @@ pub trait ProbeBatchTracer: Sync {
         None
     }
 
+    /// The scene as it is at the coming frame (an animated scene, posed by
+    /// `Scene::set_frame_from`), before the frame's update: a device that keeps
+    /// its own copy of what changes (the lights) updates it here.
+    fn pose_scene(&self, _scene: &Scene) -> Result<(), String> {
+        Ok(())
+    }
+
     /// Renders the frame's camera image on the other device (the G-buffer and
     /// camera passes of `frame_loop` under DDGI): per pixel the direct term
     /// (emission, direct light, glossy reflections) into `direct` and the field

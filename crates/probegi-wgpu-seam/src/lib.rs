@@ -160,6 +160,13 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         Some(run().map(|l| *radiance = l).map_err(|e| e.to_string()))
     }
 
+    fn pose_scene(&self, scene: &Scene) -> Result<(), String> {
+        match &self.shading {
+            Some((_, gpu_scene)) => gpu_scene.pose_lights(&self.ctx, scene).map_err(|e| e.to_string()),
+            None => Ok(()),
+        }
+    }
+
     fn camera_frame(
         &self,
         camera: &CameraRays,

@@ -1,8 +1,9 @@
 //! A scene's surfaces, materials, textures and lights on the device, in the
 //! layout `shaders/scene.wgsl` reads (documented there): what the GPU shade and
 //! camera passes need to light a hit as the CPU does, normal and bump maps
-//! included. Moving or instanced geometry (the GPU trace has no TLAS yet) and
-//! keyframed lights (uploaded once, not posed per frame) are refused by name.
+//! included; keyframed lights are posed each frame ([`GpuScene::pose_lights`]).
+//! Moving or instanced geometry is refused by name (the GPU trace has no TLAS
+//! yet).
 
 use probegi_core::bsdf::{ALBEDO_TABLE_SIZE, specular_albedo_table};
 use probegi_core::color::{luminance, srgb8_to_linear_table};
@@ -24,10 +25,6 @@ pub fn scene_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
 
 /// Why a scene cannot be shaded on the GPU yet, or `None`.
 pub fn unsupported_by_gpu_shading(scene: &Scene) -> Option<String> {
-    if scene.lights.iter().any(|l| !l.keyframes.is_empty()) {
-        // The lights are uploaded once; the CPU poses them every frame.
-        return Some("keyframed lights, which the GPU shading does not pose per frame yet".into());
-    }
     if scene.has_moving_geometry() || !scene.instances.is_empty() {
         return Some("moving objects and instanced meshes need a TLAS, which the GPU trace lacks".into());
     }
@@ -40,6 +37,25 @@ pub struct GpuScene {
     pub emitters: usize,
     bytes: u64,
     bind_group: wgpu::BindGroup,
+    lights: wgpu::Buffer,
+}
+
+/// `scene_lights`' header, sky and punctual lights (emitters follow them).
+fn pack_punctual_lights(scene: &Scene) -> Vec<[f32; 4]> {
+    let mut lights: Vec<[f32; 4]> =
+        vec![[f32::from_bits(scene.lights.len() as u32), 0.0, 0.0, 0.0], scene.sky_radiance.extend(0.0).into()];
+    for l in &scene.lights {
+        let kind = match l.kind {
+            LightKind::Point => 0u32,
+            LightKind::Spot => 1,
+            LightKind::Directional => 2,
+        };
+        lights.push([f32::from_bits(kind), l.range.unwrap_or(-1.0), l.inner_cone_angle, l.outer_cone_angle]);
+        lights.push(l.position.extend(0.0).into());
+        lights.push(l.direction.extend(0.0).into());
+        lights.push((l.color * l.intensity).extend(0.0).into());
+    }
+    lights
 }
 
 impl GpuScene {
@@ -128,21 +144,8 @@ impl GpuScene {
             }
         }
         let distribution = Distribution1d::new(&weights);
-        let mut lights: Vec<[f32; 4]> = vec![
-            [f32::from_bits(scene.lights.len() as u32), f32::from_bits(emitters.len() as u32), 0.0, 0.0],
-            scene.sky_radiance.extend(0.0).into(),
-        ];
-        for l in &scene.lights {
-            let kind = match l.kind {
-                LightKind::Point => 0u32,
-                LightKind::Spot => 1,
-                LightKind::Directional => 2,
-            };
-            lights.push([f32::from_bits(kind), l.range.unwrap_or(-1.0), l.inner_cone_angle, l.outer_cone_angle]);
-            lights.push(l.position.extend(0.0).into());
-            lights.push(l.direction.extend(0.0).into());
-            lights.push((l.color * l.intensity).extend(0.0).into());
-        }
+        let mut lights = pack_punctual_lights(scene);
+        lights[0][1] = f32::from_bits(emitters.len() as u32);
         let mut cdf = 0.0f32;
         for (i, &t) in emitters.iter().enumerate() {
             let pmf = distribution.pmf(i);
@@ -164,11 +167,18 @@ impl GpuScene {
                 usage: wgpu::BufferUsages::STORAGE,
             })
         };
+        let init_rw = |label: &str, contents: &[u8]| {
+            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            })
+        };
         let buffers = [
             init("scene triangles", bytemuck::cast_slice(&triangles)),
             init("scene materials", bytemuck::cast_slice(&materials)),
             init("scene textures", bytemuck::cast_slice(&words)),
-            init("scene lights", bytemuck::cast_slice(&lights)),
+            init_rw("scene lights", bytemuck::cast_slice(&lights)),
         ];
         let layout = scene_bind_group_layout(&ctx.device);
         let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
@@ -181,7 +191,28 @@ impl GpuScene {
             layout: &layout,
             entries: &entries,
         });
-        Ok(Self { triangles: nt, emitters: emitters.len(), bytes: buffers.iter().map(|b| b.size()).sum(), bind_group })
+        let bytes = buffers.iter().map(|b| b.size()).sum();
+        let [_, _, _, lights] = buffers;
+        Ok(Self { triangles: nt, emitters: emitters.len(), bytes, bind_group, lights })
+    }
+
+    /// Rewrites the punctual lights (and the sky) from `scene` posed at a frame:
+    /// the same scene this was uploaded from, its lights moved, dimmed or
+    /// switched by their keyframes (the count and the emitters stay).
+    pub fn pose_lights(&self, ctx: &GpuContext, scene: &Scene) -> Result<(), GpuError> {
+        let mut lights = pack_punctual_lights(scene);
+        lights[0][1] = f32::from_bits(self.emitters as u32);
+        let bytes: &[u8] = bytemuck::cast_slice(&lights);
+        if bytes.len() as u64 > self.lights.size() {
+            return Err(GpuError::Input(format!(
+                "scene {} has {} lights, more than the {} it was uploaded with",
+                scene.name,
+                scene.lights.len(),
+                (self.lights.size() as usize / 16).saturating_sub(2 + self.emitters) / 4
+            )));
+        }
+        ctx.queue.write_buffer(&self.lights, 0, bytes);
+        Ok(())
     }
 
     pub fn bytes(&self) -> u64 {
