@@ -110,8 +110,7 @@ pub struct RenderStats {
     pub frame_indirect_means: Vec<Vec3>,
     /// Per frame, with a DDGI or SH field: the fraction of pixels that see a
     /// surface whose diffuse albedo is non-zero but get no indirect light from the
-    /// field (a black wall or an unreadable probe shows up here). Not recorded
-    /// for frames whose camera a `probe_tracer` rendered.
+    /// field (a black wall or an unreadable probe shows up here).
     pub frame_unlit_fraction: Vec<f32>,
     /// Set when the render stopped early: a probe batch tracer failed (a GPU
     /// device lost, say). The image is then that of the frames before.
@@ -293,9 +292,10 @@ pub fn render_frames(
             );
             drop(view);
             match on_device {
-                Some(Ok(())) => {
+                Some(Ok((surfaces, unlit))) => {
                     // Primary rays; the device's shadow and glossy rays are not counted.
                     stats.rays_traced += settings.width as u64 * settings.height as u64;
+                    stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
                     let camera_moved = moving_camera && f > 0 && camera_at(f - 1) != camera;
                     acc.add_frame(animated || camera_moved);
                     *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;

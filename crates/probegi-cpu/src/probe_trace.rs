@@ -84,7 +84,9 @@ pub trait ProbeBatchTracer: Sync {
     /// Renders the frame's camera image on the other device (the G-buffer and
     /// camera passes of `frame_loop` under DDGI): per pixel the direct term
     /// (emission, direct light, glossy reflections) into `direct` and the field
-    /// term into `indirect`, or `None` to leave the camera to the CPU.
+    /// term into `indirect`, returning (pixels on a surface with a diffuse
+    /// albedo, those of them the field left unlit), or `None` to leave the
+    /// camera to the CPU.
     #[allow(clippy::too_many_arguments)]
     fn camera_frame(
         &self,
@@ -96,7 +98,7 @@ pub trait ProbeBatchTracer: Sync {
         _seed: u64,
         _direct: &mut [Vec3],
         _indirect: &mut [Vec3],
-    ) -> Option<Result<(), String>> {
+    ) -> Option<Result<(usize, usize), String>> {
         None
     }
 }

@@ -177,11 +177,11 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         seed: u64,
         direct: &mut [Vec3],
         indirect: &mut [Vec3],
-    ) -> Option<Result<(), String>> {
+    ) -> Option<Result<(usize, usize), String>> {
         let pass = self.camera.as_ref()?;
         let (_, scene) = self.shading.as_ref()?;
         let ([_, _, _], [_, _, w, h]) = camera.basis();
-        let mut run = || -> Result<(), GpuError> {
+        let mut run = || -> Result<(usize, usize), GpuError> {
             let gpu_field = GpuDdgiField::upload(&self.ctx, field)?;
             let f = CameraFrame {
                 camera,
@@ -193,13 +193,17 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                 second_order,
                 sky_radiance: self.sky_radiance,
             };
-            let (d, i) = pass.render(&self.ctx, &self.bvh, &gpu_field, scene, &f)?;
-            if d.len() != direct.len() || i.len() != indirect.len() {
-                return Err(GpuError::Input(format!("{} camera pixels for a {}-pixel frame", d.len(), direct.len())));
+            let image = pass.render(&self.ctx, &self.bvh, &gpu_field, scene, &f)?;
+            if image.direct.len() != direct.len() || image.indirect.len() != indirect.len() {
+                return Err(GpuError::Input(format!(
+                    "{} camera pixels for a {}-pixel frame",
+                    image.direct.len(),
+                    direct.len()
+                )));
             }
-            direct.copy_from_slice(&d);
-            indirect.copy_from_slice(&i);
-            Ok(())
+            direct.copy_from_slice(&image.direct);
+            indirect.copy_from_slice(&image.indirect);
+            Ok((image.surfaces, image.unlit))
         };
         Some(run().map_err(|e| e.to_string()))
     }

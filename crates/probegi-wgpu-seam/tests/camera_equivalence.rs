@@ -57,6 +57,10 @@ fn render(
     };
     let out = render_frames(scene, &cpu, &camera, &rs, |_, _| {});
     assert!(out.stats.error.is_none(), "{:?}", out.stats.error);
+    // The black-wall statistic is recorded for every frame on both backends.
+    assert_eq!(out.stats.frame_unlit_fraction.len(), frames as usize);
+    let unlit = out.stats.frame_unlit_fraction.last().copied().unwrap_or(1.0);
+    assert!(unlit < 0.01, "{:.3} of the surface pixels are unlit", unlit);
     out.image
 }
 

@@ -48,6 +48,17 @@ pub struct CameraFrame<'a> {
     pub sky_radiance: Vec3,
 }
 
+/// One camera frame read back.
+#[derive(Clone, Debug, Default)]
+pub struct CameraImage {
+    pub direct: Vec<Vec3>,
+    pub indirect: Vec<Vec3>,
+    /// Pixels on a surface with a diffuse albedo.
+    pub surfaces: usize,
+    /// Those of them that got no light from the field.
+    pub unlit: usize,
+}
+
 pub struct GpuCameraPass {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
@@ -96,7 +107,8 @@ impl GpuCameraPass {
         Ok(Self { layout, pipeline })
     }
 
-    /// The frame's direct and indirect terms, row-major.
+    /// The frame's direct and indirect terms, row-major, and (surface pixels with
+    /// a diffuse albedo, those of them the field left unlit).
     pub fn render(
         &self,
         ctx: &GpuContext,
@@ -104,10 +116,10 @@ impl GpuCameraPass {
         field: &GpuDdgiField,
         scene: &GpuScene,
         f: &CameraFrame<'_>,
-    ) -> Result<(Vec<Vec3>, Vec<Vec3>), GpuError> {
+    ) -> Result<CameraImage, GpuError> {
         let n = f.width as u64 * f.height as u64;
         if n == 0 {
-            return Ok((vec![], vec![]));
+            return Ok(CameraImage::default());
         }
         let ([forward, right, up], [tan, aspect, w, h]) = f.camera.basis();
         if w as u32 != f.width || h as u32 != f.height {
@@ -157,11 +169,17 @@ impl GpuCameraPass {
             pass.dispatch_workgroups(f.width.div_ceil(8), f.height.div_ceil(8), 1);
         }
         ctx.queue.submit([encoder.finish()]);
-        let read = |b: &wgpu::Buffer| -> Result<Vec<Vec3>, GpuError> {
+        let read = |b: &wgpu::Buffer| -> Result<Vec<[f32; 4]>, GpuError> {
             let bytes = ctx.read_back(b)?;
-            let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-            Ok(v.iter().map(|t| Vec3::new(t[0], t[1], t[2])).collect())
+            Ok(bytemuck::cast_slice::<u8, [f32; 4]>(&bytes).to_vec())
         };
-        Ok((read(&direct)?, read(&indirect)?))
+        let (d, i) = (read(&direct)?, read(&indirect)?);
+        let v3 = |t: &[f32; 4]| Vec3::new(t[0], t[1], t[2]);
+        Ok(CameraImage {
+            direct: d.iter().map(v3).collect(),
+            indirect: i.iter().map(v3).collect(),
+            surfaces: i.iter().filter(|t| t[3] > 0.5).count(),
+            unlit: i.iter().filter(|t| t[3] > 1.5).count(),
+        })
     }
 }

@@ -7,6 +7,7 @@
 //              with second-order glossy, its specular reflection of the field);
 //   indirect = diffuse albedo/π × ddgi_irradiance (ddgi_query.wgsl, group 2).
 // Pixels that see nothing get the sky. The CPU accumulates `direct` over frames.
+// `indirect.w` flags surfaces with a diffuse albedo (1) and those of them unlit (2).
 // Must match `probegi_wgpu::camera_frame::CameraParams` (#[repr(C)], 96 bytes).
 
 struct CameraParams {
@@ -95,5 +96,12 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     camera_direct[i] = vec4<f32>(select(vec3<f32>(0.0), l, camera_finite(l)), 0.0);
     let e = ddgi_irradiance(sp.position, scene_facing_normal(sp), to_viewer);
-    camera_indirect[i] = vec4<f32>(bsdf_diffuse_albedo(bsdf) / SCENE_PI * e, 0.0);
+    // w: 1 for a surface with a diffuse albedo, 2 when the field gave it nothing
+    // (the `frame_unlit_fraction` statistic: a black wall shows up here).
+    let albedo = bsdf_diffuse_albedo(bsdf);
+    var flag = 0.0;
+    if (max(max(albedo.x, albedo.y), albedo.z) > 0.0) {
+        flag = select(1.0, 2.0, !(max(max(e.x, e.y), e.z) > 0.0));
+    }
+    camera_indirect[i] = vec4<f32>(albedo / SCENE_PI * e, flag);
 }
