@@ -3,7 +3,6 @@
 //! exact incident irradiance of punctual lights (glTF KHR_lights_punctual).
 
 use glam::{Vec2, Vec3};
-use probegi_core::color::luminance;
 use probegi_core::punctual::{range_window, spot_cone_attenuation};
 use probegi_core::sampling::{Distribution1d, sample_uniform_triangle};
 use probegi_scene::{LightKind, PunctualLight, Scene};
@@ -34,19 +33,7 @@ pub struct AreaLights {
 impl AreaLights {
     pub fn new(scene: &Scene) -> Self {
         let mesh = &scene.mesh;
-        let mut emitters = Vec::new();
-        let mut weights = Vec::new();
-        for t in 0..mesh.triangle_count() {
-            let mat = scene.material(mesh.triangle_materials[t]);
-            if !mat.is_emissive() {
-                continue;
-            }
-            let power = luminance(mat.mean_emission(&scene.textures)) * mesh.area(t);
-            if power > 0.0 && power.is_finite() {
-                emitters.push(t as u32);
-                weights.push(power);
-            }
-        }
+        let (emitters, weights) = scene.emitter_powers();
         let distribution = Distribution1d::new(&weights);
         let mut pdf_area_by_triangle = vec![0.0; mesh.triangle_count()];
         for (i, &t) in emitters.iter().enumerate() {

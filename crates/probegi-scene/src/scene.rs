@@ -331,6 +331,27 @@ impl Scene {
         self.material(sp.material).bsdf(&self.textures, sp.uv)
     }
 
+    /// The scene mesh's emitters for next-event estimation, and their selection
+    /// weights: every triangle whose material emits, weighted by the luminance of
+    /// its mean emission × its area (zero, negative or non-finite powers left
+    /// out). The one owner of the rule both backends' area-light sampling uses.
+    pub fn emitter_powers(&self) -> (Vec<u32>, Vec<f32>) {
+        let mesh = &self.mesh;
+        let (mut emitters, mut weights) = (Vec::new(), Vec::new());
+        for t in 0..mesh.triangle_count() {
+            let mat = self.material(mesh.triangle_materials[t]);
+            if !mat.is_emissive() {
+                continue;
+            }
+            let power = probegi_core::color::luminance(mat.mean_emission(&self.textures)) * mesh.area(t);
+            if power > 0.0 && power.is_finite() {
+                emitters.push(t as u32);
+                weights.push(power);
+            }
+        }
+        (emitters, weights)
+    }
+
     /// Radiance emitted toward the viewer of `sp`: non-zero only on the front face.
     pub fn emitted(&self, sp: &SurfacePoint) -> Vec3 {
         if !sp.front_face {

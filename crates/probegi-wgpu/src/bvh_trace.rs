@@ -104,6 +104,21 @@ pub(crate) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLay
     }
 }
 
+/// A bind group of `buffers` at bindings 0, 1, … (a layout of storage buffers).
+pub(crate) fn buffers_bind_group(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::BindGroupLayout,
+    buffers: &[wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
+}
+
 pub(crate) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
@@ -177,17 +192,7 @@ impl GpuBvh {
             init("bvh cutouts", bytemuck::cast_slice(&cutouts)),
         ];
         let bytes = buffers.iter().map(|b| b.size()).sum();
-        let layout = bvh_bind_group_layout(device);
-        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-            .collect();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("bvh"),
-            layout: &layout,
-            entries: &entries,
-        });
+        let bind_group = buffers_bind_group(device, "bvh", &bvh_bind_group_layout(device), &buffers);
         Ok(Self {
             node_count: export.node_count(),
             leaf_count: export.leaf_triangles.len(),

@@ -190,17 +190,12 @@ impl GpuDdgiField {
             init("ddgi distance", bytemuck::cast_slice(&distance)),
             init("ddgi probes", bytemuck::cast_slice(&probes)),
         ];
-        let layout = Self::bind_group_layout(&ctx.device);
-        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-            .collect();
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("ddgi query"),
-            layout: &layout,
-            entries: &entries,
-        });
+        let bind_group = crate::bvh_trace::buffers_bind_group(
+            &ctx.device,
+            "ddgi query",
+            &Self::bind_group_layout(&ctx.device),
+            &buffers,
+        );
         Ok(Self {
             volumes: set.members.len(),
             probes: probes.len(),

@@ -6,7 +6,7 @@
 //! yet).
 
 use probegi_core::bsdf::{ALBEDO_TABLE_SIZE, specular_albedo_table};
-use probegi_core::color::{luminance, srgb8_to_linear_table};
+use probegi_core::color::srgb8_to_linear_table;
 use probegi_core::sampling::Distribution1d;
 use probegi_scene::material::SpecularModel;
 use probegi_scene::{LightKind, Scene};
@@ -128,21 +128,8 @@ impl GpuScene {
             words.extend(t.texels.iter().map(|c| c[0] as u32 | (c[1] as u32) << 8 | (c[2] as u32) << 16));
         }
         // Lights: punctual lights, then the emitters' power-weighted distribution
-        // (probegi_cpu::light_sampling::AreaLights' rule: luminance of the mean
-        // emission × area).
-        let mut emitters = vec![];
-        let mut weights = vec![];
-        for t in 0..nt {
-            let mat = scene.material(mesh.triangle_materials[t]);
-            if !mat.is_emissive() {
-                continue;
-            }
-            let power = luminance(mat.mean_emission(&scene.textures)) * mesh.area(t);
-            if power > 0.0 && power.is_finite() {
-                emitters.push(t as u32);
-                weights.push(power);
-            }
-        }
+        // (`Scene::emitter_powers`, as the CPU's AreaLights).
+        let (emitters, weights) = scene.emitter_powers();
         let distribution = Distribution1d::new(&weights);
         let mut lights = pack_punctual_lights(scene);
         lights[0][1] = f32::from_bits(emitters.len() as u32);
@@ -180,17 +167,8 @@ impl GpuScene {
             init("scene textures", bytemuck::cast_slice(&words)),
             init_rw("scene lights", bytemuck::cast_slice(&lights)),
         ];
-        let layout = scene_bind_group_layout(&ctx.device);
-        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-            .collect();
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("scene"),
-            layout: &layout,
-            entries: &entries,
-        });
+        let bind_group =
+            crate::bvh_trace::buffers_bind_group(&ctx.device, "scene", &scene_bind_group_layout(&ctx.device), &buffers);
         let bytes = buffers.iter().map(|b| b.size()).sum();
         let [_, _, _, lights] = buffers;
         Ok(Self { triangles: nt, emitters: emitters.len(), bytes, bind_group, lights })

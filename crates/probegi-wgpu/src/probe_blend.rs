@@ -16,6 +16,7 @@ use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_count};
 use wgpu::util::DeviceExt;
 
+use crate::bvh_trace::{storage_entry, uniform_entry};
 use crate::gpu_context::{GpuContext, GpuError};
 
 /// The blend passes' uniform block; must match `BlendParams` in `probe_blend.wgsl`.
@@ -141,35 +142,16 @@ impl GpuProbeBlend {
             label: Some("probe_blend.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("shaders/probe_blend.wgsl").into()),
         });
-        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
         let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("probe blend"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                storage(1, true),
-                storage(2, true),
-                storage(3, true),
-                storage(4, true),
-                storage(5, false),
-                storage(6, false),
+                uniform_entry(0),
+                storage_entry(1, true),
+                storage_entry(2, true),
+                storage_entry(3, true),
+                storage_entry(4, true),
+                storage_entry(5, false),
+                storage_entry(6, false),
             ],
         });
         let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

@@ -124,23 +124,22 @@ fn bvh_intersect_node(node: u32, ray: BvhRay) -> u32 {
     return hit_mask;
 }
 
-// probegi-scene `texture.rs` `Footprint::at` + `blend` on a coverage plane.
-fn bvh_coverage(mask: u32, uv_in: vec2<f32>) -> f32 {
-    let m = 4u + mask * 6u;
-    let width = bvh_cutouts[m];
-    let height = bvh_cutouts[m + 1u];
-    let words = bvh_cutouts[m + 2u];
-    let factor = bitcast<f32>(bvh_cutouts[m + 3u]);
-    if (words == BVH_NO_HIT) {
-        return factor; // constant coverage 1
-    }
-    var uv = uv_in;
+// probegi-scene `texture.rs` `Footprint::at`: the four texels (row-major indices
+// in a width × height image, wrap addressing, texel centres at half-integers) and
+// the bilinear fractions; a non-finite uv reads texel (0, 0). The one WGSL owner
+// of it: scene.wgsl's texture lookups use it too.
+struct WrapFootprint {
+    texel: vec4<u32>,
+    f: vec2<f32>,
+};
+
+fn wrap_footprint(width: u32, height: u32, uv_in: vec2<f32>) -> WrapFootprint {
     var fx = 0.0;
     var fy = 0.0;
     var x0 = 0i;
     var y0 = 0i;
-    if (all(abs(uv) <= vec2<f32>(3.4028235e38))) {
-        uv = uv - floor(uv);
+    if (all(abs(uv_in) <= vec2<f32>(3.4028235e38))) {
+        let uv = uv_in - floor(uv_in);
         let x = uv.x * f32(width) - 0.5;
         let y = uv.y * f32(height) - 0.5;
         let fx0 = floor(x);
@@ -156,14 +155,31 @@ fn bvh_coverage(mask: u32, uv_in: vec2<f32>) -> f32 {
     let c1 = u32((((x0 + 1) % w) + w) % w);
     let r0 = u32(((y0 % h) + h) % h) * width;
     let r1 = u32((((y0 + 1) % h) + h) % h) * width;
-    let base = bvh_cutouts[2] + words;
-    let t = array<u32, 4>(r0 + c0, r0 + c1, r1 + c0, r1 + c1);
-    var v: array<f32, 4>;
-    for (var k = 0u; k < 4u; k++) {
-        v[k] = f32(bvh_byte(bvh_cutouts[base + t[k] / 4u], t[k] % 4u)) * (1.0 / 255.0);
+    return WrapFootprint(vec4<u32>(r0 + c0, r0 + c1, r1 + c0, r1 + c1), vec2<f32>(fx, fy));
+}
+
+// Footprint::blend of four scalars.
+fn wrap_blend(v: vec4<f32>, f: vec2<f32>) -> f32 {
+    return (v.x * (1.0 - f.x) + v.y * f.x) * (1.0 - f.y) + (v.z * (1.0 - f.x) + v.w * f.x) * f.y;
+}
+
+// The cutout rule (probegi-scene `bvh.rs` `CoverageMask::opaque_at`'s left side):
+// factor × the bilinear coverage.
+fn bvh_coverage(mask: u32, uv: vec2<f32>) -> f32 {
+    let m = 4u + mask * 6u;
+    let words = bvh_cutouts[m + 2u];
+    let factor = bitcast<f32>(bvh_cutouts[m + 3u]);
+    if (words == BVH_NO_HIT) {
+        return factor; // constant coverage 1
     }
-    let c = (v[0] * (1.0 - fx) + v[1] * fx) * (1.0 - fy) + (v[2] * (1.0 - fx) + v[3] * fx) * fy;
-    return factor * c;
+    let fp = wrap_footprint(bvh_cutouts[m], bvh_cutouts[m + 1u], uv);
+    let base = bvh_cutouts[2] + words;
+    var v = vec4<f32>(0.0);
+    for (var k = 0u; k < 4u; k++) {
+        let t = fp.texel[k];
+        v[k] = f32(bvh_byte(bvh_cutouts[base + t / 4u], t % 4u)) * (1.0 / 255.0);
+    }
+    return factor * wrap_blend(v, fp.f);
 }
 
 // Distance to leaf `leaf` along `ray` within [t_min, t_max] (obvhs

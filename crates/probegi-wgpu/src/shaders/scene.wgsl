@@ -166,40 +166,17 @@ fn scene_lambert_cos(sp: SurfacePoint, wi: vec3<f32>) -> f32 {
     return 0.0;
 }
 
-// probegi_scene::texture::Footprint::at: the four texels' words (row-major, wrap
-// addressing, texel centres at half-integers) and the bilinear fractions.
+// probegi_scene::texture::Footprint::at (bvh.wgsl's `wrap_footprint`) over texture
+// `tex`: the four texels' words in scene_textures and the bilinear fractions.
 struct TexFootprint {
     words: vec4<u32>,
     f: vec2<f32>,
 };
 
-fn scene_footprint(tex: u32, uv_in: vec2<f32>) -> TexFootprint {
+fn scene_footprint(tex: u32, uv: vec2<f32>) -> TexFootprint {
     let h = 260u + tex * 3u;
-    let width = scene_textures[h];
-    let height = scene_textures[h + 1u];
-    let first = scene_textures[h + 2u];
-    var fx = 0.0;
-    var fy = 0.0;
-    var x0 = 0i;
-    var y0 = 0i;
-    if (all(abs(uv_in) <= vec2<f32>(SCENE_F32_MAX))) {
-        let uv = uv_in - floor(uv_in);
-        let x = uv.x * f32(width) - 0.5;
-        let y = uv.y * f32(height) - 0.5;
-        let fx0 = floor(x);
-        let fy0 = floor(y);
-        fx = x - fx0;
-        fy = y - fy0;
-        x0 = i32(fx0);
-        y0 = i32(fy0);
-    }
-    let w = i32(width);
-    let hh = i32(height);
-    let c0 = u32(((x0 % w) + w) % w);
-    let c1 = u32((((x0 + 1) % w) + w) % w);
-    let r0 = u32(((y0 % hh) + hh) % hh) * width;
-    let r1 = u32((((y0 + 1) % hh) + hh) % hh) * width;
-    return TexFootprint(vec4<u32>(first + r0 + c0, first + r0 + c1, first + r1 + c0, first + r1 + c1), vec2<f32>(fx, fy));
+    let fp = wrap_footprint(scene_textures[h], scene_textures[h + 1u], uv);
+    return TexFootprint(fp.texel + vec4<u32>(scene_textures[h + 2u]), fp.f);
 }
 
 fn tex_blend(v: array<vec3<f32>, 4>, f: vec2<f32>) -> vec3<f32> {
