@@ -29,7 +29,9 @@ pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTrac
         format!("--backend wgpu cannot trace scene {}; use --backend cpu for moving or instanced geometry", scene.name)
     })?;
     let ctx = GpuContext::headless().context("--backend wgpu")?;
-    let g = WgpuProbeTracer::new(ctx, scene, bvh, true).context("--backend wgpu: putting the scene on the device")?;
+    let g = WgpuProbeTracer::new(ctx, scene, bvh, true)
+        .context("--backend wgpu: putting the scene on the device")?
+        .keeping_field(true);
     match &g.shading_note {
         None => eprintln!("probe rays and the camera frame on {}", g.adapter_name()),
         Some(why) => {

@@ -193,6 +193,20 @@ pub fn uncovered_point_probe(
     best.map(|(p, _)| p)
 }
 
+/// One probe as the classification round sees it, for a backend that runs the
+/// round elsewhere (the GPU's `probe_classification` pass).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClassificationProbe {
+    /// Its first ray in the round's batch, when it traced in it.
+    pub first_ray: Option<u32>,
+    /// Waiting for initialisation: the round classifies it.
+    pub pending: bool,
+    /// Its current state traces (a probe not pending that does counts as covering).
+    pub traces: bool,
+    /// Position with its relocation offset (m).
+    pub position_m: Vec3,
+}
+
 /// Seed 004 Listing 5's initial classification from the post-relocation trace:
 /// inside geometry (Listing 4's backface test) → Off; watching some front-face
 /// point ([`probe_watches`] over its front-face hits), or chosen by the covering
@@ -212,9 +226,12 @@ pub fn inside_grown_aabb(point: Vec3, lo: Vec3, hi: Vec3, grow: Vec3) -> bool {
     point.cmpge(lo - grow).all() && point.cmple(hi + grow).all()
 }
 
+/// (usage, relevant samples, backfaces) of one probe: [`probe_usage`]'s answer.
+pub type ProbeUsageCounts = (i32, u32, u32);
+
 /// Seed 003 eq. 6.1–6.2 over one probe's signed distances (negative = backface,
 /// infinite = miss) with cage diagonal `r`: (usage, relevant samples, backfaces).
-pub fn probe_usage(signed_distance: impl IntoIterator<Item = f32>, cage_diagonal_m: f32) -> (i32, u32, u32) {
+pub fn probe_usage(signed_distance: impl IntoIterator<Item = f32>, cage_diagonal_m: f32) -> ProbeUsageCounts {
     let (mut usage, mut relevant, mut backfaces) = (0i32, 0u32, 0u32);
     for d in signed_distance {
         if d < 0.0 {

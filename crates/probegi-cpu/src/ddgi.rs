@@ -31,7 +31,8 @@ use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_count};
 use probegi_core::probe_blend::{TexelThresholds, blend_distance_tile, blend_irradiance_tile};
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::probe_classification::{
-    ProbeState, classify_jcgt, classify_usage, inside_grown_aabb, probe_usage, probe_watches, uncovered_point_probe,
+    ClassificationProbe, ProbeState, classify_jcgt, classify_usage, inside_grown_aabb, probe_usage, probe_watches,
+    uncovered_point_probe,
 };
 use probegi_core::probe_grid::ProbeGrid;
 use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats, relocation_step};
@@ -95,7 +96,64 @@ pub struct DdgiVolume {
     visibility_events: Vec<HysteresisReduction>,
     traced_probes_last: usize,
     active_probes_last: usize,
+    /// Probes whose tiles were cleared since the last blend (a device that holds
+    /// the atlases clears its copies before its next blend).
+    probes_reset_since_blend: Vec<u32>,
 }
+
+/// One volume's share of an update blended on another device (see
+/// `DdgiFieldSet::device_blend_plan`): what `blend_results` would do, as data.
+#[derive(Clone, Debug)]
+pub struct DeviceVolumeBlend<'a> {
+    pub settings: &'a DdgiVolumeSettings,
+    /// The frame's unit ray directions (every probe's, in ray order) and the
+    /// blend's texel-to-ray weights for them.
+    pub ray_dirs: &'a [Vec3],
+    pub irradiance_weights: &'a probegi_core::probe_blend::BlendWeights,
+    pub distance_weights: &'a probegi_core::probe_blend::BlendWeights,
+    /// Per probe: its first ray in the batch and its blend hysteresis (before the
+    /// scene-event scales), or `None` when it does not blend this frame.
+    pub probe_blend: Vec<Option<(u32, f32)>>,
+    /// The scene-event reductions (`probe_fast_convergence`; 1 otherwise).
+    pub irradiance_scale: f32,
+    pub visibility_scale: f32,
+    /// The distance limit of the blend ([`DdgiVolume::distance_clamp_m`]).
+    pub distance_clamp_m: f32,
+    /// Probes whose tiles the host cleared since the last blend (scrolled in):
+    /// the device clears its copies before blending.
+    pub reset_probes: &'a [u32],
+}
+
+/// One probe of an initialisation batch whose relocation iteration runs on another
+/// device (`DdgiFieldSet::device_relocation_plan`): seed 004 Listing 4's inputs,
+/// as `probegi_core::probe_relocation::relocation_step` takes them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DeviceRelocationProbe {
+    pub first_ray: u32,
+    pub ray_count: u32,
+    /// The probe's current offset from its grid point (m).
+    pub offset_m: Vec3,
+    pub spacing_m: Vec3,
+    pub offset_limit_rel: f32,
+    pub min_frontface_rel: f32,
+}
+
+/// One volume's classification round run on another device
+/// (`DdgiFieldSet::device_classification_plan`): the grid, the watch box
+/// (`probe_classification_reach_rel`, the query's largest surface bias) and
+/// every probe of the volume.
+#[derive(Clone, Debug)]
+pub struct DeviceClassification<'a> {
+    pub grid: &'a ProbeGrid,
+    pub rays_per_probe: u32,
+    pub reach_rel: f32,
+    pub bias_m: f32,
+    pub probes: Vec<ClassificationProbe>,
+}
+
+/// Per volume of a [`DeviceClassification`] plan (`None`: not classified), per
+/// probe (inside geometry, kept): what a device returns for the round.
+pub type DeviceClassificationResults = Vec<Option<Vec<(bool, bool)>>>;
 
 /// One volume's per-frame scratch.
 #[derive(Clone, Debug, Default)]
@@ -184,6 +242,7 @@ impl DdgiVolume {
             visibility_events: Vec::new(),
             traced_probes_last: 0,
             active_probes_last: 0,
+            probes_reset_since_blend: Vec::new(),
             settings,
         }
     }
@@ -351,6 +410,7 @@ impl DdgiVolume {
         self.probe_has_history[p] = false;
         self.probe_alive_frames[p] = 0;
         self.probe_pending_init[p] = true;
+        self.probes_reset_since_blend.push(p as u32);
     }
 
     /// The initialisation rounds this volume runs for its pending probes.
@@ -363,6 +423,68 @@ impl DdgiVolume {
             rounds.push(InitRound::Classification);
         }
         rounds
+    }
+
+    /// Whether this volume's initialisation round `round` is its classification round.
+    pub(crate) fn init_round_is_classification(&self, round: usize) -> bool {
+        matches!(self.init_rounds().get(round), Some(InitRound::Classification))
+    }
+
+    /// The classification round's inputs, for a device that runs it.
+    pub(crate) fn device_classification<'a>(&'a self, frame: &VolumeFrame) -> DeviceClassification<'a> {
+        DeviceClassification {
+            grid: &self.grid,
+            rays_per_probe: frame.ray_count as u32,
+            reach_rel: self.settings.probe_classification_reach_rel,
+            bias_m: max_surface_bias_m(&self.settings, &self.grid),
+            probes: (0..self.grid.probe_count())
+                .map(|p| ClassificationProbe {
+                    first_ray: frame.first_ray.get(p).copied().filter(|f| *f != u32::MAX),
+                    pending: self.probe_pending_init[p],
+                    traces: self.probe_states[p].traces(),
+                    position_m: self.probe_positions[p],
+                })
+                .collect(),
+        }
+    }
+
+    /// Applies a classification round a device ran: per probe (inside geometry, kept).
+    pub(crate) fn accept_device_classification(&mut self, results: &[(bool, bool)]) {
+        for (p, &(inside, kept)) in results.iter().enumerate().take(self.grid.probe_count()) {
+            if self.probe_pending_init[p] {
+                self.probe_states[p] = classify_jcgt(inside, kept);
+            }
+        }
+    }
+
+    /// Whether this volume's initialisation round `round` is a relocation iteration.
+    pub(crate) fn init_round_is_relocation(&self, round: usize) -> bool {
+        matches!(self.init_rounds().get(round), Some(InitRound::Relocation(_)))
+    }
+
+    /// The device's inputs for probe `p`'s relocation iteration in the current
+    /// initialisation batch (`None` when it has no rays there).
+    pub(crate) fn device_relocation(&self, frame: &VolumeFrame, p: usize) -> Option<DeviceRelocationProbe> {
+        let first = *frame.first_ray.get(p)?;
+        (first != u32::MAX && self.probe_pending_init[p]).then(|| DeviceRelocationProbe {
+            first_ray: first,
+            ray_count: frame.ray_count as u32,
+            offset_m: self.probe_offsets[p],
+            spacing_m: self.grid.spacing_m,
+            offset_limit_rel: self.settings.probe_relocation_offset_limit_rel,
+            min_frontface_rel: self.settings.probe_relocation_min_frontface_rel,
+        })
+    }
+
+    /// Applies a relocation iteration another device ran: `offsets` are (probe, new offset).
+    pub(crate) fn accept_device_relocation(&mut self, offsets: &[(u32, Vec3)]) {
+        for &(p, o) in offsets {
+            let p = p as usize;
+            if p < self.probe_offsets.len() && self.probe_pending_init[p] {
+                self.probe_offsets[p] = o;
+                self.probe_positions[p] = self.grid.probe_position(self.grid.probe_coords(p)) + o;
+            }
+        }
     }
 
     /// Whether the volume has probes waiting for initialisation.
@@ -564,7 +686,18 @@ impl DdgiVolume {
     ) {
         let n = frame.ray_count;
         if self.settings.probe_states == ProbeStatesMode::Usage {
-            self.classify_usage_from_hits(frame, frame_index, hits);
+            let cage_diagonal = self.grid.spacing_m.length();
+            let counts: Vec<Option<(i32, u32, u32)>> = frame
+                .first_ray
+                .iter()
+                .map(|&first| {
+                    (first != u32::MAX).then(|| {
+                        let rays = &hits[first as usize..first as usize + n];
+                        probe_usage(rays.iter().map(|h| h.distance_m), cage_diagonal)
+                    })
+                })
+                .collect();
+            self.classify_usage_states(frame, frame_index, &counts);
         }
         for p in 0..self.grid.probe_count() {
             let first = frame.first_ray[p];
@@ -578,20 +711,40 @@ impl DdgiVolume {
         }
     }
 
-    /// Usage scheme (seed 003 §6.1): every probe's state from this frame's hits, and
-    /// which probes blend this frame (see `probegi_core::probe_classification`).
-    fn classify_usage_from_hits(&mut self, frame: &mut VolumeFrame, frame_index: u32, hits: &[ProbeRayHit]) {
+    /// As [`Self::accept_update_hits`] for hits that stayed on another device:
+    /// `usage_counts` holds, per probe that traced, seed 003's (usage, relevant,
+    /// backfaces) counted there (`probegi_core::probe_classification::probe_usage`;
+    /// read only under the usage scheme). Every ray of an updating probe is
+    /// marked: the device zeroes backface radiance itself.
+    pub(crate) fn accept_device_hits(
+        &mut self,
+        frame: &mut VolumeFrame,
+        frame_index: u32,
+        usage_counts: &[Option<(i32, u32, u32)>],
+        needs_radiance: &mut [bool],
+    ) {
         let n = frame.ray_count;
-        let cage_diagonal = self.grid.spacing_m.length();
+        if self.settings.probe_states == ProbeStatesMode::Usage {
+            self.classify_usage_states(frame, frame_index, usage_counts);
+        }
+        for p in 0..self.grid.probe_count() {
+            let first = frame.first_ray[p];
+            if first != u32::MAX && frame.active[p] {
+                needs_radiance[first as usize..first as usize + n].fill(true);
+            }
+        }
+    }
+
+    /// Usage scheme (seed 003 §6.1): every probe's state from this frame's usage
+    /// counts (per probe, `None` when it did not trace), and which probes blend
+    /// this frame (see `probegi_core::probe_classification`).
+    fn classify_usage_states(&mut self, frame: &mut VolumeFrame, frame_index: u32, counts: &[Option<(i32, u32, u32)>]) {
         let (interval, min_alive) =
             (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
         for p in 0..self.grid.probe_count() {
-            let first = frame.first_ray[p];
-            if first == u32::MAX {
+            let Some(&Some((usage, relevant, backfaces))) = counts.get(p) else {
                 continue;
-            }
-            let rays = &hits[first as usize..first as usize + n];
-            let (usage, relevant, backfaces) = probe_usage(rays.iter().map(|h| h.distance_m), cage_diagonal);
+            };
             let prev = self.probe_states[p];
             let mut next = classify_usage(usage, relevant, backfaces);
             if prev == ProbeState::Alive && next == ProbeState::UsageSleeping && self.probe_alive_frames[p] < min_alive
@@ -624,12 +777,7 @@ impl DdgiVolume {
     ) {
         let t = std::time::Instant::now();
         let n = frame.ray_count;
-        let event_scale = |events: &[HysteresisReduction]| events.iter().map(|e| e.scale).product::<f32>();
-        let (irr_scale, vis_scale) = if self.settings.probe_fast_convergence {
-            (event_scale(&self.irradiance_events), event_scale(&self.visibility_events))
-        } else {
-            (1.0, 1.0)
-        };
+        let (base, irr_scale, vis_scale) = self.blend_plan(frame);
         let thresholds = self.settings.probe_fast_convergence.then_some(TexelThresholds {
             significant: self.settings.probe_significant_change_threshold,
             new_distribution: self.settings.probe_new_distribution_threshold,
@@ -639,20 +787,6 @@ impl DdgiVolume {
         let clamp = self.distance_clamp_m();
         let irr_len = self.irradiance.tile_len();
         let dist_len = self.distance.tile_len();
-        // Per updating probe: its first ray and the hysteresis of its blend.
-        let base: Vec<Option<(usize, f32)>> = (0..self.grid.probe_count())
-            .map(|p| {
-                let first = frame.first_ray[p];
-                (frame.active[p] && first != u32::MAX).then(|| {
-                    let h = if !self.probe_has_history[p] || self.probe_states[p].is_new() {
-                        0.0
-                    } else {
-                        self.probe_hysteresis[p]
-                    };
-                    (first as usize, h)
-                })
-            })
-            .collect();
         let weights = &frame.rays;
         self.irradiance.texels.par_chunks_mut(irr_len).zip(base.par_iter()).for_each(|(tile, b)| {
             if let Some((first, h)) = *b {
@@ -695,13 +829,61 @@ impl DdgiVolume {
         });
         *pass_ms.entry("border").or_default() += t.elapsed().as_secs_f64() * 1e3;
         self.after_update(&updated);
-        self.frames_updated += 1;
         #[cfg(debug_assertions)]
         self.validate();
     }
 
+    /// Per probe, its first ray and the hysteresis of its blend this frame (`None`:
+    /// no blend), and the scene events' irradiance and visibility scales.
+    fn blend_plan(&self, frame: &VolumeFrame) -> (Vec<Option<(usize, f32)>>, f32, f32) {
+        let event_scale = |events: &[HysteresisReduction]| events.iter().map(|e| e.scale).product::<f32>();
+        let (irr_scale, vis_scale) = if self.settings.probe_fast_convergence {
+            (event_scale(&self.irradiance_events), event_scale(&self.visibility_events))
+        } else {
+            (1.0, 1.0)
+        };
+        let base = (0..self.grid.probe_count())
+            .map(|p| {
+                let first = frame.first_ray[p];
+                (frame.active[p] && first != u32::MAX).then(|| {
+                    let h = if !self.probe_has_history[p] || self.probe_states[p].is_new() {
+                        0.0
+                    } else {
+                        self.probe_hysteresis[p]
+                    };
+                    (first as usize, h)
+                })
+            })
+            .collect();
+        (base, irr_scale, vis_scale)
+    }
+
+    /// This frame's blend as data, for a device that holds the atlases.
+    pub(crate) fn device_blend<'a>(&'a self, frame: &'a VolumeFrame) -> DeviceVolumeBlend<'a> {
+        let (base, irradiance_scale, visibility_scale) = self.blend_plan(frame);
+        DeviceVolumeBlend {
+            settings: &self.settings,
+            ray_dirs: &frame.rays.dirs,
+            irradiance_weights: &frame.rays.irradiance_weights,
+            distance_weights: &frame.rays.distance_weights,
+            probe_blend: base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect(),
+            irradiance_scale,
+            visibility_scale,
+            distance_clamp_m: self.distance_clamp_m(),
+            reset_probes: &self.probes_reset_since_blend,
+        }
+    }
+
+    /// The bookkeeping of a blend another device ran by [`Self::device_blend`].
+    pub(crate) fn accept_device_blend(&mut self, frame: &VolumeFrame) {
+        let updated: Vec<bool> = self.blend_plan(frame).0.iter().map(|b| b.is_some()).collect();
+        self.after_update(&updated);
+    }
+
     /// State transitions and hysteresis ramps after a blend.
     fn after_update(&mut self, updated: &[bool]) {
+        self.frames_updated += 1;
+        self.probes_reset_since_blend.clear();
         let max_h = self.settings.probe_hysteresis;
         self.active_probes_last = updated.iter().filter(|a| **a).count();
         for (p, _) in updated.iter().enumerate().filter(|(_, u)| **u) {

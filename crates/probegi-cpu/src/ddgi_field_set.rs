@@ -55,7 +55,33 @@ use glam::Vec3;
 use probegi_core::ddgi_settings::DdgiFieldSetSettings;
 use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, SetMember, VolumeBlending, field_set_irradiance};
 
-use crate::ddgi::{DdgiVolume, SceneEvent, VolumeFrame};
+use crate::ddgi::{
+    DdgiVolume, DeviceClassification, DeviceRelocationProbe, DeviceVolumeBlend, SceneEvent, VolumeFrame,
+};
+
+/// What a device that keeps an update batch's hits must read back for the set
+/// ([`DdgiFieldSet::hits_needed_on_host`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HostHits {
+    /// Every hit, through [`DdgiFieldSet::submit_hits`] (the classification
+    /// round of initialisation reads the hit points).
+    All,
+    /// An initialisation round that is a relocation iteration for every volume
+    /// in it: per probe of the batch, its new offset, through
+    /// [`DdgiFieldSet::submit_device_relocation`] (inputs from
+    /// [`DdgiFieldSet::device_relocation_plan`]).
+    Relocation,
+    /// An initialisation round that is the jcgt classification round for every
+    /// volume in it: per probe, (inside geometry, kept), through
+    /// [`DdgiFieldSet::submit_device_classification`] (inputs from
+    /// [`DdgiFieldSet::device_classification_plan`]).
+    Classification,
+    /// Per probe of the batch, seed 003's usage counts, through
+    /// [`DdgiFieldSet::submit_device_hits`] (a volume under the usage scheme).
+    ProbeUsage,
+    /// Nothing: call [`DdgiFieldSet::submit_device_hits`] with no counts.
+    None,
+}
 
 /// Which seam call comes next.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -179,6 +205,9 @@ pub enum SeamError {
     OutOfOrder { expected: UpdateStep, called: &'static str },
     /// A results buffer does not have one entry per batch ray.
     WrongLength { what: &'static str, expected: usize, got: usize },
+    /// A host blend while another device holds the current atlases: copy them
+    /// back first ([`DdgiFieldSet::accept_host_atlases`]).
+    FieldOnDevice,
 }
 
 impl std::fmt::Display for SeamError {
@@ -188,7 +217,10 @@ impl std::fmt::Display for SeamError {
                 write!(f, "{called} called while the field set expects {expected:?}")
             }
             SeamError::WrongLength { what, expected, got } => {
-                write!(f, "{what} has {got} entries but the ray batch has {expected} rays")
+                write!(f, "{what} has {got} entries but the ray batch has {expected}")
+            }
+            SeamError::FieldOnDevice => {
+                write!(f, "the host blend needs the field's atlases, which are on another device")
             }
         }
     }
@@ -230,6 +262,9 @@ pub struct DdgiFieldSet {
     pub last_batch_rays_per_volume: Vec<u64>,
     /// Initialisation rays in the last update.
     pub last_init_rays: u64,
+    /// True while another device holds the current atlases (it blended the last
+    /// update there) and the volumes' own atlases are stale.
+    field_on_device: bool,
 }
 
 impl DdgiFieldSet {
@@ -272,6 +307,7 @@ impl DdgiFieldSet {
             last_batch_rays: 0,
             last_batch_rays_per_volume: vec![0; n],
             last_init_rays: 0,
+            field_on_device: false,
         }
     }
 
@@ -487,6 +523,9 @@ impl DdgiFieldSet {
     /// `needs_radiance` are read) and blends, borders and classifies every volume.
     pub fn submit_radiance(&mut self, radiance: &[Vec3]) -> Result<UpdateStep, SeamError> {
         self.expect(UpdateStep::ShadeRays, "submit_radiance")?;
+        if self.field_on_device {
+            return Err(SeamError::FieldOnDevice);
+        }
         if radiance.len() != self.batch.len() {
             return Err(SeamError::WrongLength { what: "radiance", expected: self.batch.len(), got: radiance.len() });
         }
@@ -504,6 +543,215 @@ impl DdgiFieldSet {
         self.last_pass_ms = pass_ms;
         self.expected = UpdateStep::Done;
         Ok(UpdateStep::Done)
+    }
+
+    /// What of the current batch's hits the set needs on the host. A device that
+    /// keeps the hits and the atlases (`ProbeBatchTracer::trace_on_device`) traces
+    /// the update batch there, counts usage there when asked, and goes on with
+    /// [`Self::submit_device_hits`]; initialisation rounds need every hit.
+    pub fn hits_needed_on_host(&self) -> HostHits {
+        if self.batch.kind == ProbeRayBatchKind::Initialization {
+            let round = self.init_round;
+            let pending = || self.volumes.iter().filter(|v| v.needs_init());
+            if pending().all(|v| v.init_round_is_relocation(round)) {
+                HostHits::Relocation
+            } else if pending().all(|v| v.init_round_is_classification(round)) {
+                HostHits::Classification
+            } else {
+                HostHits::All
+            }
+        } else if self
+            .volumes
+            .iter()
+            .any(|v| v.settings.probe_states == probegi_core::ddgi_settings::ProbeStatesMode::Usage)
+        {
+            HostHits::ProbeUsage
+        } else {
+            HostHits::None
+        }
+    }
+
+    /// Seed 004 Listing 4's inputs per entry of `ray_batch().probes`, for a
+    /// relocation round run on another device ([`HostHits::Relocation`]).
+    pub fn device_relocation_plan(&self) -> Result<Vec<DeviceRelocationProbe>, SeamError> {
+        self.expect(UpdateStep::TraceRays, "device_relocation_plan")?;
+        if self.hits_needed_on_host() != HostHits::Relocation {
+            return Err(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "device_relocation_plan" });
+        }
+        self.batch
+            .probes
+            .iter()
+            .map(|bp| {
+                let v = bp.volume as usize;
+                self.volumes[v]
+                    .device_relocation(&self.frames[v], bp.probe as usize)
+                    .ok_or(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "device_relocation_plan" })
+            })
+            .collect()
+    }
+
+    /// In place of [`Self::submit_hits`] for a relocation round run on another
+    /// device: one new offset per entry of `ray_batch().probes`. Plans the next
+    /// batch as `submit_hits` does.
+    pub fn submit_device_relocation(&mut self, offsets: &[Vec3]) -> Result<UpdateStep, SeamError> {
+        self.expect(UpdateStep::TraceRays, "submit_device_relocation")?;
+        if self.hits_needed_on_host() != HostHits::Relocation {
+            return Err(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "submit_device_relocation" });
+        }
+        if offsets.len() != self.batch.probes.len() {
+            return Err(SeamError::WrongLength {
+                what: "relocation offsets",
+                expected: self.batch.probes.len(),
+                got: offsets.len(),
+            });
+        }
+        let t = std::time::Instant::now();
+        self.last_init_rays += self.batch.len() as u64;
+        let mut per_volume: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); self.volumes.len()];
+        for (bp, o) in self.batch.probes.iter().zip(offsets) {
+            // A non-finite offset from a device keeps the probe where it was.
+            if o.is_finite() {
+                per_volume[bp.volume as usize].push((bp.probe, *o));
+            }
+        }
+        for (v, offsets) in self.volumes.iter_mut().zip(&per_volume) {
+            if v.needs_init() {
+                v.accept_device_relocation(offsets);
+            }
+        }
+        self.init_round += 1;
+        let step = self.plan_init_or_update();
+        self.time("probe_init", t);
+        Ok(step)
+    }
+
+    /// Per volume, the classification round's inputs (`None` for a volume with no
+    /// probe pending), for a round run on another device ([`HostHits::Classification`]).
+    pub fn device_classification_plan(&self) -> Result<Vec<Option<DeviceClassification<'_>>>, SeamError> {
+        self.expect(UpdateStep::TraceRays, "device_classification_plan")?;
+        if self.hits_needed_on_host() != HostHits::Classification {
+            return Err(SeamError::OutOfOrder {
+                expected: UpdateStep::TraceRays,
+                called: "device_classification_plan",
+            });
+        }
+        Ok(self
+            .volumes
+            .iter()
+            .zip(&self.frames)
+            .map(|(v, f)| v.needs_init().then(|| v.device_classification(f)))
+            .collect())
+    }
+
+    /// In place of [`Self::submit_hits`] for a classification round run on
+    /// another device: per volume of the plan, per probe (inside geometry, kept).
+    pub fn submit_device_classification(
+        &mut self,
+        results: &[Option<Vec<(bool, bool)>>],
+    ) -> Result<UpdateStep, SeamError> {
+        self.expect(UpdateStep::TraceRays, "submit_device_classification")?;
+        if self.hits_needed_on_host() != HostHits::Classification {
+            return Err(SeamError::OutOfOrder {
+                expected: UpdateStep::TraceRays,
+                called: "submit_device_classification",
+            });
+        }
+        if results.len() != self.volumes.len() {
+            return Err(SeamError::WrongLength {
+                what: "classification results",
+                expected: self.volumes.len(),
+                got: results.len(),
+            });
+        }
+        let t = std::time::Instant::now();
+        self.last_init_rays += self.batch.len() as u64;
+        for (v, r) in self.volumes.iter_mut().zip(results) {
+            if let (true, Some(r)) = (v.needs_init(), r) {
+                if r.len() != v.grid.probe_count() {
+                    return Err(SeamError::WrongLength {
+                        what: "classification results",
+                        expected: v.grid.probe_count(),
+                        got: r.len(),
+                    });
+                }
+                v.accept_device_classification(r);
+            }
+        }
+        self.init_round += 1;
+        let step = self.plan_init_or_update();
+        self.time("probe_init", t);
+        Ok(step)
+    }
+
+    /// In place of [`Self::submit_hits`] for an update batch whose hits stayed on
+    /// another device: `usage_counts` holds one (usage, relevant, backfaces) per
+    /// entry of `ray_batch().probes` when [`Self::hits_needed_on_host`] asked for
+    /// them (empty otherwise). Every ray of a probe that updates is then marked in
+    /// `needs_radiance`; the device applies the backface rule itself.
+    pub fn submit_device_hits(&mut self, usage_counts: &[(i32, u32, u32)]) -> Result<UpdateStep, SeamError> {
+        self.expect(UpdateStep::TraceRays, "submit_device_hits")?;
+        if self.batch.kind != ProbeRayBatchKind::Update {
+            return Err(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "submit_device_hits" });
+        }
+        let wanted = if self.hits_needed_on_host() == HostHits::ProbeUsage { self.batch.probes.len() } else { 0 };
+        if usage_counts.len() != wanted {
+            return Err(SeamError::WrongLength { what: "usage counts", expected: wanted, got: usage_counts.len() });
+        }
+        let t = std::time::Instant::now();
+        self.hits.clear();
+        self.distances.clear();
+        self.batch.needs_radiance = vec![false; self.batch.len()];
+        let mut per_volume: Vec<Vec<Option<(i32, u32, u32)>>> =
+            self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect();
+        for (bp, c) in self.batch.probes.iter().zip(usage_counts) {
+            per_volume[bp.volume as usize][bp.probe as usize] = Some(*c);
+        }
+        for ((v, f), counts) in self.volumes.iter_mut().zip(&mut self.frames).zip(&per_volume) {
+            v.accept_device_hits(f, self.frame, counts, &mut self.batch.needs_radiance);
+        }
+        self.time("classify", t);
+        self.expected = UpdateStep::ShadeRays;
+        Ok(UpdateStep::ShadeRays)
+    }
+
+    /// In place of [`Self::submit_radiance`] when another device shades the
+    /// update batch and blends it into atlases it holds: per volume, what to
+    /// blend ([`DeviceVolumeBlend`]). Call [`Self::submit_device_blend`] once the
+    /// device has run it.
+    pub fn device_blend_plan(&self) -> Result<Vec<DeviceVolumeBlend<'_>>, SeamError> {
+        self.expect(UpdateStep::ShadeRays, "device_blend_plan")?;
+        Ok(self.volumes.iter().zip(&self.frames).map(|(v, f)| v.device_blend(f)).collect())
+    }
+
+    /// The set's bookkeeping after a device ran [`Self::device_blend_plan`]
+    /// (hysteresis ramps, Newly * states, usable probes). The volumes' own
+    /// atlases are stale from here until [`Self::accept_host_atlases`].
+    pub fn submit_device_blend(&mut self) -> Result<UpdateStep, SeamError> {
+        self.expect(UpdateStep::ShadeRays, "submit_device_blend")?;
+        for i in 0..self.volumes.len() {
+            self.volumes[i].accept_device_blend(&self.frames[i]);
+        }
+        self.field_on_device = true;
+        self.expected = UpdateStep::Done;
+        Ok(UpdateStep::Done)
+    }
+
+    /// Whether another device holds the current atlases (the volumes' own are stale).
+    pub fn field_on_device(&self) -> bool {
+        self.field_on_device
+    }
+
+    /// The device's atlases, copied into the volumes by `copy` (given each volume
+    /// in order), make the volumes' own atlases current again.
+    pub fn accept_host_atlases(
+        &mut self,
+        mut copy: impl FnMut(usize, &mut DdgiVolume) -> Result<(), String>,
+    ) -> Result<(), String> {
+        for (i, v) in self.volumes.iter_mut().enumerate() {
+            copy(i, v)?;
+        }
+        self.field_on_device = false;
+        Ok(())
     }
 
     /// The hits of the current batch, as submitted (sanitised).

@@ -11,7 +11,7 @@ use glam::Vec3;
 use probegi_scene::{RayTracer, Scene};
 
 use crate::ddgi::DdgiVolume;
-use crate::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, UpdateStep};
+use crate::ddgi_field_set::{DdgiFieldSet, HostHits, ProbeRayHit, UpdateStep};
 use crate::direct::DirectLighting;
 use crate::probe_ray_gen::probe_ray_directions;
 use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
@@ -62,6 +62,7 @@ impl DdgiFieldSet {
             *ms.entry(name).or_default() += t.elapsed().as_secs_f64() * 1e3
         };
         let static_part = tracer.static_part();
+        let mut on_device = false;
         let mut step = self.begin_update(seed, frame);
         // Any seam error here is a bug of this driver, not of the caller's input.
         let fail = |e: crate::ddgi_field_set::SeamError| -> UpdateStep {
@@ -73,6 +74,39 @@ impl DdgiFieldSet {
                 UpdateStep::TraceRays => {
                     let t = Instant::now();
                     let init = self.ray_batch().static_geometry_only();
+                    // A relocation round on a device that runs it: only offsets come back.
+                    if let (Some(bt), HostHits::Relocation) = (batch_tracer, self.hits_needed_on_host()) {
+                        let plan = self.device_relocation_plan().map_err(|e| e.to_string())?;
+                        if let Some(offsets) = bt.relocate_on_device(self.ray_batch(), &plan) {
+                            traced += self.ray_batch().len() as u64;
+                            step = self.submit_device_relocation(&offsets?).unwrap_or_else(fail);
+                            time("probe_init", t, &mut own_ms);
+                            continue;
+                        }
+                    }
+                    // A classification round on a device that runs it: 16 bytes a probe come back.
+                    if let (Some(bt), HostHits::Classification) = (batch_tracer, self.hits_needed_on_host()) {
+                        let plan = self.device_classification_plan().map_err(|e| e.to_string())?;
+                        if let Some(results) = bt.classify_on_device(self.ray_batch(), &plan) {
+                            drop(plan);
+                            traced += self.ray_batch().len() as u64;
+                            step = self.submit_device_classification(&results?).unwrap_or_else(fail);
+                            time("probe_init", t, &mut own_ms);
+                            continue;
+                        }
+                    }
+                    // The update batch on a device that keeps the field: the hits stay there.
+                    if let (Some(bt), false) = (batch_tracer, init) {
+                        let usage = (self.hits_needed_on_host() == HostHits::ProbeUsage)
+                            .then(|| self.volumes().iter().map(|v| v.grid.spacing_m.length()).collect::<Vec<_>>());
+                        if let Some(counts) = bt.trace_on_device(self.ray_batch(), usage.as_deref()) {
+                            traced += self.ray_batch().len() as u64;
+                            step = self.submit_device_hits(&counts?).unwrap_or_else(fail);
+                            on_device = true;
+                            time("trace", t, &mut own_ms);
+                            continue;
+                        }
+                    }
                     // Initialisation sees static geometry only: moving objects wake probes instead.
                     let tr: &dyn RayTracer = if init { static_part.as_deref().unwrap_or(tracer) } else { tracer };
                     traced += match batch_tracer {
@@ -95,8 +129,29 @@ impl DdgiFieldSet {
                     step = self.submit_hits(&hits).unwrap_or_else(fail);
                     time(if init { "probe_init" } else { "trace" }, t, &mut own_ms);
                 }
+                UpdateStep::ShadeRays if on_device => {
+                    let bt = batch_tracer.ok_or("the device that traced the batch is gone")?;
+                    let plan = self.device_blend_plan().map_err(|e| e.to_string())?;
+                    let view = self.view();
+                    let device_ms = bt.shade_and_blend_on_device(
+                        self.ray_batch(),
+                        &view,
+                        !self.field_on_device(),
+                        &plan,
+                        self.volumes(),
+                        seed,
+                        frame,
+                    )?;
+                    drop((view, plan));
+                    for (pass, ms) in device_ms {
+                        *own_ms.entry(pass).or_default() += ms;
+                    }
+                    step = self.submit_device_blend().unwrap_or_else(fail);
+                }
                 UpdateStep::ShadeRays => {
                     let t = Instant::now();
+                    // The host shades (the field's previous light) and blends.
+                    self.sync_host_atlases(batch_tracer)?;
                     let view = self.view();
                     let inputs = ProbeShadeInputs {
                         scene,
@@ -132,6 +187,16 @@ impl DdgiFieldSet {
             *pass_ms.entry(k).or_default() += v;
         }
         Ok(traced)
+    }
+
+    /// Makes the volumes' own atlases current: when a device holds the field
+    /// (`field_on_device`), copies its atlases back through `batch_tracer`.
+    pub fn sync_host_atlases(&mut self, batch_tracer: Option<&dyn ProbeBatchTracer>) -> Result<(), String> {
+        if !self.field_on_device() {
+            return Ok(());
+        }
+        let bt = batch_tracer.ok_or("the field's atlases are on a device this caller does not reach")?;
+        self.accept_host_atlases(|i, v| bt.download_field(i, v))
     }
 }
 

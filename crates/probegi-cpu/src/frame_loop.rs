@@ -283,6 +283,7 @@ pub fn render_frames(
             let on_device = h.0.camera_frame(
                 camera,
                 &view,
+                set.field_on_device(),
                 camera_direct.direct_area_samples,
                 second_order,
                 f,
@@ -318,6 +319,13 @@ pub fn render_frames(
         if let Some(p) = sh.as_mut() {
             p.recentre(camera.origin_world, camera.forward_world());
         }
+        // The CPU camera reads the field's atlases on the host.
+        if let Some(set) = field.as_mut()
+            && let Err(e) = set.sync_host_atlases(settings.probe_tracer.as_ref().map(|h| &*h.0))
+        {
+            stats.error = Some(format!("frame {f}: reading the field back: {e}"));
+            break;
+        }
         let indirect_field = match (&field, &sh) {
             (Some(set), _) => Some(IndirectField::Ddgi(set.view())),
             (_, Some(p)) => Some(IndirectField::Sh(&p.cascades)),
@@ -344,6 +352,12 @@ pub fn render_frames(
         }
         last_gbuffer = Some(gbuffer);
         acc.finish_frame(f, settings, &mut stats, &mut on_frame_done);
+    }
+    // The field as the render leaves it, on the host (a device may hold it).
+    if let Some(set) = field.as_mut()
+        && let Err(e) = set.sync_host_atlases(settings.probe_tracer.as_ref().map(|h| &*h.0))
+    {
+        stats.error.get_or_insert(format!("reading the field back after the last frame: {e}"));
     }
     // Frames that completed (all of them unless a backend failed).
     let frames = stats.frame_means.len().max(1) as u32;

@@ -74,6 +74,71 @@ pub trait ProbeBatchTracer: Sync {
         None
     }
 
+    /// Traces the update batch and keeps its hits on the device, for
+    /// [`Self::shade_and_blend_on_device`], or returns `None` to go the host way
+    /// ([`Self::closest_hits`]; a tracer that does not keep the field, or a batch
+    /// too large for it). With `usage_cage_diagonals_m` (one per volume), returns
+    /// per entry of `batch.probes` seed 003's usage counts (usage, relevant,
+    /// backfaces; `probegi_core::probe_classification::probe_usage`) with its
+    /// volume's cage diagonal; otherwise an empty vector.
+    fn trace_on_device(
+        &self,
+        _batch: &ProbeRayBatch,
+        _usage_cage_diagonals_m: Option<&[f32]>,
+    ) -> Option<Result<Vec<probegi_core::probe_classification::ProbeUsageCounts>, String>> {
+        None
+    }
+
+    /// Traces an initialisation batch that is a relocation round
+    /// (`HostHits::Relocation`) and runs the iteration on the device: per entry
+    /// of `batch.probes` (inputs in `probes`, same order) the new offset. `None`
+    /// leaves the round to the host ([`Self::closest_hits`]).
+    fn relocate_on_device(
+        &self,
+        _batch: &ProbeRayBatch,
+        _probes: &[crate::ddgi::DeviceRelocationProbe],
+    ) -> Option<Result<Vec<Vec3>, String>> {
+        None
+    }
+
+    /// Traces an initialisation batch that is the classification round
+    /// (`HostHits::Classification`) and runs it on the device: per volume of
+    /// `plan` (`None`: not classified this round), per probe (inside geometry,
+    /// kept). `None` leaves the round to the host ([`Self::closest_hits`]).
+    fn classify_on_device(
+        &self,
+        _batch: &ProbeRayBatch,
+        _plan: &[Option<crate::ddgi::DeviceClassification<'_>>],
+    ) -> Option<Result<crate::ddgi::DeviceClassificationResults, String>> {
+        None
+    }
+
+    /// Shades the batch [`Self::trace_on_device`] traced and blends and borders
+    /// it by `plan` into the atlases the device holds (seed 003 §4.4–4.5), so
+    /// neither the rays' results nor the atlases leave it. `field` is the set as
+    /// queries read it (grids, relocation offsets, usable probes); with
+    /// `upload_atlases` its atlases are current on the host and replace the
+    /// device's first. Returns wall milliseconds by pass (`shade`, `blend`: blend
+    /// and border), the host having waited for each.
+    #[allow(clippy::too_many_arguments)]
+    fn shade_and_blend_on_device(
+        &self,
+        _batch: &ProbeRayBatch,
+        _field: &probegi_core::ddgi_volume_blend::DdgiFieldSetView<'_>,
+        _upload_atlases: bool,
+        _plan: &[crate::ddgi::DeviceVolumeBlend<'_>],
+        _volumes: &[crate::ddgi::DdgiVolume],
+        _seed: u64,
+        _frame: u32,
+    ) -> Result<Vec<(&'static str, f64)>, String> {
+        Err("this tracer does not hold a field".into())
+    }
+
+    /// Copies the atlases of volume `index` as the device holds them into `volume`'s own.
+    fn download_field(&self, _index: usize, _volume: &mut crate::ddgi::DdgiVolume) -> Result<(), String> {
+        Err("this tracer does not hold a field".into())
+    }
+
     /// The scene as it is at the coming frame (an animated scene, posed by
     /// `Scene::set_frame_from`), before the frame's update: a device that keeps
     /// its own copy of what changes (the lights) updates it here.
@@ -86,12 +151,14 @@ pub trait ProbeBatchTracer: Sync {
     /// (emission, direct light, glossy reflections) into `direct` and the field
     /// term into `indirect`, returning (pixels on a surface with a diffuse
     /// albedo, those of them the field left unlit), or `None` to leave the
-    /// camera to the CPU.
+    /// camera to the CPU. With `field_on_device` the device's own atlases are
+    /// the current ones (`field`'s are stale; its per-probe data is current).
     #[allow(clippy::too_many_arguments)]
     fn camera_frame(
         &self,
         _camera: &probegi_core::camera::CameraRays,
         _field: &probegi_core::ddgi_volume_blend::DdgiFieldSetView<'_>,
+        _field_on_device: bool,
         _area_samples: u32,
         _second_order: bool,
         _frame: u32,

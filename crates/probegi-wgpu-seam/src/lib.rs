@@ -1,9 +1,22 @@
 //! The field set's seam (`probegi_cpu::ddgi_field_set`) driven by the wgpu
 //! backend: [`WgpuProbeTracer`] is a `ProbeBatchTracer` whose probe ray batches
 //! are traced by `probegi_wgpu::bvh_trace` (the WGSL CWBVH traversal) and, where
-//! the scene allows, shaded by `probegi_wgpu::probe_shade` with the set's
-//! previous field uploaded for `ddgi_query.wgsl`. The set's own bookkeeping
-//! (relocation, classification, states, blend, border) stays on the CPU.
+//! the scene allows, shaded by `probegi_wgpu::probe_shade`. Two ways to run an
+//! update batch:
+//!
+//! - **field on the device** ([`WgpuProbeTracer::keeping_field`], what
+//!   `--backend wgpu` uses): trace, shade, blend and border all run there; the
+//!   atlases live in the resident `GpuDdgiField` that the shade and camera
+//!   queries read, and the host sends per frame only the set's per-probe data
+//!   (offsets, usable flags, the blend's per-probe hysteresis) and reads back
+//!   nothing but, under the usage scheme, 16 bytes of usage counts a probe
+//!   (`probegi_wgpu::probe_usage`). The atlases come back only when asked
+//!   (`download_field`: a CPU camera frame, the end of a render, a test);
+//! - **field on the host**: the hits and the shaded radiance come back, the set
+//!   blends on the CPU and the field is uploaded for the next frame's queries.
+//!
+//! Either way the set's bookkeeping (relocation and classification from the
+//! initialisation rounds' hits, probe states, hysteresis ramps) runs on the CPU.
 //!
 //! This crate exists so that neither backend depends on the other: `probegi-cpu`
 //! knows nothing of wgpu, `probegi-wgpu` nothing of the CPU backend.
@@ -13,7 +26,10 @@ use std::sync::Mutex;
 use glam::Vec3;
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_volume_blend::DdgiFieldSetView;
-use probegi_cpu::ddgi::DdgiVolume;
+use probegi_core::probe_classification::ProbeUsageCounts;
+use probegi_cpu::ddgi::{
+    DdgiVolume, DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
+};
 use probegi_cpu::ddgi_field_set::ProbeRayBatch;
 use probegi_cpu::probe_trace::ProbeBatchTracer;
 use probegi_scene::{BvhTracer, RayHit, Scene};
@@ -21,7 +37,11 @@ use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace};
 use probegi_wgpu::camera_frame::{CameraFrame, GpuCameraPass};
 use probegi_wgpu::ddgi_query::GpuDdgiField;
 use probegi_wgpu::gpu_scene::{GpuScene, unsupported_by_gpu_shading};
+use probegi_wgpu::probe_blend::{GpuProbeBlend, ResidentBlend};
+use probegi_wgpu::probe_classification::{ClassifyRound, GpuProbeClassification};
+use probegi_wgpu::probe_relocation::{GpuProbeRelocation, GpuRelocationProbe};
 use probegi_wgpu::probe_shade::{GpuProbeShade, shade_info};
+use probegi_wgpu::probe_usage::{GpuProbeUsage, UsageProbe};
 use probegi_wgpu::{GpuContext, GpuError};
 
 /// A batch's rays as the GPU trace reads them.
@@ -46,6 +66,16 @@ pub struct WgpuProbeTracer {
     pub shading_note: Option<String>,
     /// The last traced batch, resident for the shade pass.
     last: Mutex<Option<GpuRayBatch>>,
+    /// Keep the field on the device (see the crate docs); needs GPU shading.
+    keep_field: bool,
+    /// The passes of the device-resident update, made with `keeping_field`.
+    resident_passes: Option<(GpuProbeBlend, GpuProbeUsage, GpuProbeRelocation)>,
+    /// The classification round's pass (with `keeping_field`, where the adapter binds enough buffers).
+    classification: Option<GpuProbeClassification>,
+    /// Initialisation rounds run on the device: relocation iterations, classification rounds.
+    rounds_on_device: [std::sync::atomic::AtomicU32; 2],
+    /// The resident field (atlases and per-probe data), once an update made it.
+    field: Mutex<Option<GpuDdgiField>>,
 }
 
 impl WgpuProbeTracer {
@@ -81,7 +111,63 @@ impl WgpuProbeTracer {
             sky_radiance: scene.sky_radiance,
             shading_note: note,
             last: Mutex::new(None),
+            keep_field: false,
+            resident_passes: None,
+            classification: None,
+            rounds_on_device: Default::default(),
+            field: Mutex::new(None),
         })
+    }
+
+    /// With `keep` (and GPU shading), update batches are shaded, blended and
+    /// bordered on the device and the atlases stay there (see the crate docs).
+    pub fn keeping_field(mut self, keep: bool) -> Self {
+        self.keep_field = keep && self.shading.is_some();
+        self.resident_passes = self.keep_field.then(|| {
+            (GpuProbeBlend::new(&self.ctx), GpuProbeUsage::new(&self.ctx), GpuProbeRelocation::new(&self.ctx))
+        });
+        // Without it the classification round reads the hits back and runs on the host.
+        self.classification = if self.keep_field { GpuProbeClassification::new(&self.ctx).ok() } else { None };
+        self
+    }
+
+    /// Initialisation rounds this tracer ran on the device so far: (relocation
+    /// iterations, classification rounds).
+    pub fn init_rounds_on_device(&self) -> (u32, u32) {
+        use std::sync::atomic::Ordering::Relaxed;
+        (self.rounds_on_device[0].load(Relaxed), self.rounds_on_device[1].load(Relaxed))
+    }
+
+    /// Whether update batches keep the field on the device.
+    pub fn keeps_field(&self) -> bool {
+        self.keep_field
+    }
+
+    /// Device memory of the resident field (0 before the first update on the device).
+    pub fn field_bytes(&self) -> u64 {
+        self.field.lock().ok().and_then(|f| f.as_ref().map(|f| f.bytes())).unwrap_or(0)
+    }
+
+    /// The per-ray shading flags of `batch`.
+    fn shading_flags(batch: &ProbeRayBatch, volumes: &[DdgiVolume]) -> Vec<u32> {
+        let mut info = vec![0u32; batch.len()];
+        for bp in &batch.probes {
+            let s = &volumes[bp.volume as usize].settings;
+            for i in bp.first_ray..bp.first_ray + bp.ray_count {
+                let i = i as usize;
+                info[i] = shade_info(batch.needs_radiance[i], s.glossy_second_order, s.probe_area_light_samples);
+            }
+        }
+        info
+    }
+
+    /// Traces `batch` on the device and keeps it there as the last batch.
+    fn trace_resident(&self, batch: &ProbeRayBatch) -> Result<GpuRayBatch, GpuError> {
+        let resident = self.trace.batch(&self.ctx, &batch_rays(batch), false)?;
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        self.trace.record(&mut encoder, &self.bvh, &resident, None);
+        self.ctx.queue.submit([encoder.finish()]);
+        Ok(resident)
     }
 
     /// Whether the camera frame is rendered on the GPU.
@@ -122,10 +208,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             *self.last.lock().map_err(|e| e.to_string())? = None;
             return Ok(());
         }
-        let resident = self.trace.batch(&self.ctx, &rays, false).map_err(|e| e.to_string())?;
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-        self.trace.record(&mut encoder, &self.bvh, &resident, None);
-        self.ctx.queue.submit([encoder.finish()]);
+        let resident = self.trace_resident(batch).map_err(|e| e.to_string())?;
         let gpu = self.trace.download(&self.ctx, &resident).map_err(|e| e.to_string())?;
         hits.extend(gpu.iter().map(|h| h.ray_hit()));
         *self.last.lock().map_err(|e| e.to_string())? = Some(resident);
@@ -145,19 +228,209 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         let last = self.last.lock().ok()?;
         let resident = last.as_ref().filter(|b| b.ray_count as usize == batch.len())?;
         let run = || -> Result<Vec<Vec3>, GpuError> {
-            let mut info = vec![0u32; batch.len()];
-            for bp in &batch.probes {
-                let s = &volumes[bp.volume as usize].settings;
-                for i in bp.first_ray..bp.first_ray + bp.ray_count {
-                    let i = i as usize;
-                    info[i] = shade_info(batch.needs_radiance[i], s.glossy_second_order, s.probe_area_light_samples);
-                }
-            }
+            let info = Self::shading_flags(batch, volumes);
             let gpu_field = GpuDdgiField::upload(&self.ctx, field)?;
             let seed32 = (seed ^ (seed >> 32)) as u32;
             shade.shade(&self.ctx, &self.bvh, &gpu_field, scene, resident, &info, seed32, frame, None)
         };
         Some(run().map(|l| *radiance = l).map_err(|e| e.to_string()))
+    }
+
+    fn trace_on_device(
+        &self,
+        batch: &ProbeRayBatch,
+        usage_cage_diagonals_m: Option<&[f32]>,
+    ) -> Option<Result<Vec<ProbeUsageCounts>, String>> {
+        let (_, usage, _) = self.resident_passes.as_ref()?;
+        if batch.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
+            return None;
+        }
+        let run = || -> Result<Vec<ProbeUsageCounts>, String> {
+            let resident = self.trace_resident(batch).map_err(|e| e.to_string())?;
+            self.ctx.wait().map_err(|e| e.to_string())?;
+            let counts = match usage_cage_diagonals_m {
+                Some(diagonals) => {
+                    let probes: Vec<UsageProbe> = batch
+                        .probes
+                        .iter()
+                        .map(|p| UsageProbe {
+                            first_ray: p.first_ray,
+                            ray_count: p.ray_count,
+                            cage_diagonal_m: diagonals.get(p.volume as usize).copied().unwrap_or(0.0),
+                        })
+                        .collect();
+                    usage.counts(&self.ctx, &resident, &probes).map_err(|e| e.to_string())?
+                }
+                None => vec![],
+            };
+            *self.last.lock().map_err(|e| e.to_string())? = Some(resident);
+            Ok(counts)
+        };
+        Some(run())
+    }
+
+    fn relocate_on_device(
+        &self,
+        batch: &ProbeRayBatch,
+        probes: &[DeviceRelocationProbe],
+    ) -> Option<Result<Vec<Vec3>, String>> {
+        let (_, _, relocation) = self.resident_passes.as_ref()?;
+        if batch.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
+            return None;
+        }
+        let run = || -> Result<Vec<Vec3>, GpuError> {
+            let resident = self.trace_resident(batch)?;
+            let rows: Vec<GpuRelocationProbe> = probes
+                .iter()
+                .map(|p| GpuRelocationProbe {
+                    offset_m: p.offset_m.into(),
+                    first_ray: p.first_ray,
+                    spacing_m: p.spacing_m.into(),
+                    ray_count: p.ray_count,
+                    offset_limit_rel: p.offset_limit_rel,
+                    min_frontface_rel: p.min_frontface_rel,
+                    _pad: [0.0; 2],
+                })
+                .collect();
+            let offsets = relocation.relocate(&self.ctx, &resident, &rows)?;
+            self.rounds_on_device[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            Ok(offsets)
+        };
+        Some(run().map_err(|e| e.to_string()))
+    }
+
+    fn classify_on_device(
+        &self,
+        batch: &ProbeRayBatch,
+        plan: &[Option<DeviceClassification<'_>>],
+    ) -> Option<Result<DeviceClassificationResults, String>> {
+        let classification = self.classification.as_ref()?;
+        let (_, scene) = self.shading.as_ref()?;
+        if batch.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
+            return None;
+        }
+        let run = || -> Result<DeviceClassificationResults, GpuError> {
+            let resident = self.trace_resident(batch)?;
+            plan.iter()
+                .map(|v| {
+                    v.as_ref()
+                        .map(|v| {
+                            let round = ClassifyRound {
+                                grid: v.grid,
+                                rays_per_probe: v.rays_per_probe,
+                                reach_rel: v.reach_rel,
+                                bias_m: v.bias_m,
+                                probes: &v.probes,
+                            };
+                            classification.classify(&self.ctx, &self.bvh, scene, &resident, &round)
+                        })
+                        .transpose()
+                })
+                .collect::<Result<DeviceClassificationResults, GpuError>>()
+                .inspect(|_| {
+                    self.rounds_on_device[1].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                })
+        };
+        Some(run().map_err(|e| e.to_string()))
+    }
+
+    fn shade_and_blend_on_device(
+        &self,
+        batch: &ProbeRayBatch,
+        field: &DdgiFieldSetView<'_>,
+        upload_atlases: bool,
+        plan: &[DeviceVolumeBlend<'_>],
+        volumes: &[DdgiVolume],
+        seed: u64,
+        frame: u32,
+    ) -> Result<Vec<(&'static str, f64)>, String> {
+        let ((shade, scene), Some((blend, _, _))) =
+            (self.shading.as_ref().ok_or("the GPU does not shade this scene")?, self.resident_passes.as_ref())
+        else {
+            return Err("this tracer does not keep the field on the device".into());
+        };
+        let last = self.last.lock().map_err(|e| e.to_string())?;
+        let resident = last
+            .as_ref()
+            .filter(|b| b.ray_count as usize == batch.len())
+            .ok_or("the batch to shade is not the one traced on the device")?;
+        let mut gpu_field = self.field.lock().map_err(|e| e.to_string())?;
+        let run = |gpu_field: &mut Option<GpuDdgiField>| -> Result<Vec<(&'static str, f64)>, GpuError> {
+            let t = std::time::Instant::now();
+            // The field: uploaded whole when the host's atlases are current, else
+            // only its per-probe data (the blend below wrote the atlases last frame).
+            let refreshed = match gpu_field.as_ref() {
+                Some(f) => f.refresh(&self.ctx, field, upload_atlases).is_ok(),
+                None => false,
+            };
+            if !refreshed {
+                if !upload_atlases {
+                    return Err(GpuError::Input("the device lost the field it held".into()));
+                }
+                *gpu_field = Some(GpuDdgiField::upload(&self.ctx, field)?);
+            }
+            let f = gpu_field.as_ref().ok_or_else(|| GpuError::Input("no field".into()))?;
+            if plan.len() != f.volumes {
+                return Err(GpuError::Input(format!("{} volume plans for {} volumes", plan.len(), f.volumes)));
+            }
+            for (i, p) in plan.iter().enumerate() {
+                if !p.reset_probes.is_empty() && !upload_atlases {
+                    f.member_atlases(i)
+                        .ok_or_else(|| GpuError::Input("member".into()))?
+                        .zero_tiles(&self.ctx, p.reset_probes);
+                }
+            }
+            let info = Self::shading_flags(batch, volumes);
+            let seed32 = (seed ^ (seed >> 32)) as u32;
+            let results =
+                shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, &info, seed32, frame, None)?;
+            // The host waits after each pass so that its wall times are the device's
+            // (`bench`); an engine that records the passes itself would not.
+            self.ctx.wait()?;
+            let shade_ms = t.elapsed().as_secs_f64() * 1e3;
+            let t = std::time::Instant::now();
+            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+            for (i, p) in plan.iter().enumerate() {
+                if p.probe_blend.iter().all(|b| b.is_none()) {
+                    continue;
+                }
+                let atlases = f.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
+                let frame = ResidentBlend {
+                    settings: p.settings,
+                    rays_per_probe: p.ray_dirs.len() as u32,
+                    irradiance_weights: p.irradiance_weights,
+                    distance_weights: p.distance_weights,
+                    ray_results: &results,
+                    probe_blend: &p.probe_blend,
+                    irradiance_scale: p.irradiance_scale,
+                    visibility_scale: p.visibility_scale,
+                    distance_clamp_m: p.distance_clamp_m,
+                };
+                let bindings = blend.prepare_resident(&self.ctx, &atlases, &frame)?;
+                blend.record(&mut encoder, &bindings, None);
+            }
+            self.ctx.queue.submit([encoder.finish()]);
+            self.ctx.wait()?;
+            Ok(vec![("shade", shade_ms), ("blend", t.elapsed().as_secs_f64() * 1e3)])
+        };
+        run(&mut gpu_field).map_err(|e| e.to_string())
+    }
+
+    fn download_field(&self, index: usize, volume: &mut DdgiVolume) -> Result<(), String> {
+        let field = self.field.lock().map_err(|e| e.to_string())?;
+        let atlases = field
+            .as_ref()
+            .and_then(|f| f.member_atlases(index))
+            .ok_or_else(|| format!("the device holds no field for volume {index}"))?;
+        let (irradiance, distance) = atlases.download(&self.ctx).map_err(|e| e.to_string())?;
+        if irradiance.texels.len() != volume.irradiance.texels.len()
+            || distance.texels.len() != volume.distance.texels.len()
+        {
+            return Err(format!("the device's atlases of volume {index} do not match its grid"));
+        }
+        volume.irradiance = irradiance;
+        volume.distance = distance;
+        Ok(())
     }
 
     fn pose_scene(&self, scene: &Scene) -> Result<(), String> {
@@ -171,6 +444,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         &self,
         camera: &CameraRays,
         field: &DdgiFieldSetView<'_>,
+        field_on_device: bool,
         area_samples: u32,
         second_order: bool,
         frame: u32,
@@ -181,8 +455,21 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         let pass = self.camera.as_ref()?;
         let (_, scene) = self.shading.as_ref()?;
         let ([_, _, _], [_, _, w, h]) = camera.basis();
+        let resident = self.field.lock().ok()?;
         let mut run = || -> Result<(usize, usize), GpuError> {
-            let gpu_field = GpuDdgiField::upload(&self.ctx, field)?;
+            // The field the device holds (its atlases current), or the host's uploaded.
+            let uploaded;
+            let gpu_field = match (field_on_device, resident.as_ref()) {
+                (true, Some(f)) => {
+                    f.refresh(&self.ctx, field, false)?;
+                    f
+                }
+                (true, None) => return Err(GpuError::Input("the device lost the field it held".into())),
+                (false, _) => {
+                    uploaded = GpuDdgiField::upload(&self.ctx, field)?;
+                    &uploaded
+                }
+            };
             let f = CameraFrame {
                 camera,
                 width: w as u32,
@@ -193,7 +480,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                 second_order,
                 sky_radiance: self.sky_radiance,
             };
-            let image = pass.render(&self.ctx, &self.bvh, &gpu_field, scene, &f)?;
+            let image = pass.render(&self.ctx, &self.bvh, gpu_field, scene, &f)?;
             if image.direct.len() != direct.len() || image.indirect.len() != indirect.len() {
                 return Err(GpuError::Input(format!(
                     "{} camera pixels for a {}-pixel frame",

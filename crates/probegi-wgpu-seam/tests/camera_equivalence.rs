@@ -8,6 +8,7 @@
 //! noise. Each FLIP is printed beside the CPU's own FLIP between two seeds; it
 //! must stay under 0.02 where that noise floor is lower, and under the noise
 //! floor (plus 0.005) where it is not, and the image means must agree within 2 %.
+//! The GPU keeps the field on the device (`keeping_field`), as `--backend wgpu` does.
 
 use std::sync::Arc;
 
@@ -66,8 +67,9 @@ fn render(
 
 fn check(name: &str, scene: Scene, s: DdgiVolumeSettings, size: u32, frames: u32) {
     let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
-    let gpu =
-        WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true).expect("upload");
+    let gpu = WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true)
+        .expect("upload")
+        .keeping_field(true);
     assert!(gpu.renders_camera(), "{name}: {:?}", gpu.shading_note);
     let a = render(&scene, size, frames, 3, &s, None);
     let b = render(&scene, size, frames, 4, &s, None);
@@ -192,7 +194,8 @@ fn normal_and_bump_mapped_planes_shade_the_same_on_both_backends() {
         let name = if normal_map { "normal-mapped plane" } else { "bump-mapped plane" };
         let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
         let gpu = WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true)
-            .expect("upload");
+            .expect("upload")
+            .keeping_field(true);
         let s = small(UVec3::new(4, 2, 4));
         let a = render(&scene, 64, 1, 3, &s, None);
         let g = render(&scene, 64, 1, 3, &s, Some(Arc::new(gpu)));
@@ -221,8 +224,9 @@ fn a_keyframed_light_moves_and_switches_off_on_the_gpu_as_on_the_cpu() {
     let scene = load_scene(&path.to_string_lossy()).expect("scene");
     assert!(scene.is_animated());
     let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
-    let gpu =
-        WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true).expect("upload");
+    let gpu = WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true)
+        .expect("upload")
+        .keeping_field(true);
     assert!(gpu.renders_camera(), "{:?}", gpu.shading_note);
     let run = |g: Option<Arc<WgpuProbeTracer>>| {
         let cpu = BvhTracer::for_scene(&scene, BvhSettings::default());

@@ -4,7 +4,9 @@
 //! each probe of the window matches a converged fixed volume's probe at the same
 //! world position, so no probe from under the roof survives into the open (a
 //! stale one would be off by the roof's contrast, 0.77 in the CPU test's broken
-//! run), and the GPU's query reads the scrolled circular buffers.
+//! run), and the GPU's query reads the scrolled circular buffers. Run twice:
+//! blended on the host, and with the field kept on the device (its scrolled-in
+//! tiles cleared there, the circular buffers scrolled without moving a texel).
 
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, ProbeStatesMode};
@@ -24,10 +26,19 @@ fn tile_mean(v: &DdgiVolume, p: usize) -> f32 {
 
 #[test]
 fn a_gpu_updated_tracking_window_never_shows_a_stale_probe() {
+    window_never_shows_a_stale_probe(false);
+}
+
+#[test]
+fn a_tracking_window_kept_on_the_gpu_never_shows_a_stale_probe() {
+    window_never_shows_a_stale_probe(true);
+}
+
+fn window_never_shows_a_stale_probe(keep_field: bool) {
     let scene = probegi_scene::builtin::half_roofed_ground();
     let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
-    let gpu = WgpuProbeTracer::new(ctx, &scene, &bvh, true).expect("upload");
+    let gpu = WgpuProbeTracer::new(ctx, &scene, &bvh, true).expect("upload").keeping_field(keep_field);
     assert!(gpu.shades());
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");
@@ -56,6 +67,8 @@ fn a_gpu_updated_tracking_window_never_shows_a_stale_probe() {
     for f in 40..90 {
         scrolled += set.set_tracking_target(start + Vec3::new(0.4 * (f - 40) as f32, 0.0, 0.0));
         set.update_traced_by(&scene, &bvh, Some(&gpu), &direct, 1, f, &mut ms).expect("GPU");
+        assert_eq!(set.field_on_device(), keep_field);
+        set.sync_host_atlases(Some(&gpu)).expect("read back");
         let (v, fv) = (&set.volumes()[0], &fixed.volumes()[0]);
         for p in 0..v.grid.probe_count() {
             let world = v.grid.probe_position(v.grid.probe_coords(p));
@@ -63,7 +76,9 @@ fn a_gpu_updated_tracking_window_never_shows_a_stale_probe() {
             worst = worst.max((tile_mean(v, p) - tile_mean(fv, q)).abs() / tile_mean(fv, q));
         }
     }
-    eprintln!("GPU-updated window: {scrolled} probes scrolled in; worst probe mean vs the fixed CPU volume {worst:.3}");
+    eprintln!(
+        "GPU-updated window (field kept on the device: {keep_field}): {scrolled} probes scrolled in; worst probe mean vs the fixed CPU volume {worst:.3}"
+    );
     assert!(scrolled >= 9 * 18, "the window moved 20 m: {scrolled}");
     assert!(worst < 0.25, "a probe differs from the fixed volume's at its position by {worst}");
 }

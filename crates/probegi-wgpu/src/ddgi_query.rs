@@ -67,12 +67,116 @@ const _: () = assert!(std::mem::size_of::<GpuDdgiSetHeader>() == 32);
 
 const NO_PROBE: u32 = 0x7fff_ffff;
 
-/// A set of DDGI volumes on the device, ready for `ddgi_query.wgsl`.
+/// A set of DDGI volumes on the device, ready for `ddgi_query.wgsl`. Its
+/// atlases may also be the blend's targets ([`Self::member_atlases`]): the field
+/// then stays resident and only its per-probe data is refreshed each frame
+/// ([`Self::refresh`]).
 pub struct GpuDdgiField {
     pub volumes: usize,
     pub probes: usize,
     bytes: u64,
+    /// Per member: probes, irradiance / distance interior, first irradiance / distance texel.
+    members: Vec<[u32; 5]>,
+    /// Set, irradiance, distance, probes.
+    buffers: [wgpu::Buffer; 4],
     bind_group: wgpu::BindGroup,
+}
+
+/// A set packed in the shader's layout; atlases left empty unless asked for.
+struct PackedField {
+    set: Vec<u8>,
+    irradiance: Vec<[f32; 4]>,
+    distance: Vec<[f32; 2]>,
+    probes: Vec<[f32; 4]>,
+    /// Texels of the atlases (packed or not).
+    irradiance_texels: usize,
+    distance_texels: usize,
+    members: Vec<[u32; 5]>,
+}
+
+fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedField, GpuError> {
+    let header = GpuDdgiSetHeader {
+        header: [
+            set.members.len() as u32,
+            matches!(set.blending, VolumeBlending::Cascades) as u32,
+            set.camera_m.is_some() as u32,
+            0,
+        ],
+        camera_m: set.camera_m.map_or([0.0; 4], |c| [c.x, c.y, c.z, 0.0]),
+    };
+    let mut volumes: Vec<GpuDdgiVolume> = Vec::with_capacity(set.members.len());
+    let mut irradiance: Vec<[f32; 4]> = vec![];
+    let mut distance: Vec<[f32; 2]> = vec![];
+    let mut probes: Vec<[f32; 4]> = vec![];
+    let (mut irradiance_texels, mut distance_texels) = (0usize, 0usize);
+    let mut members = vec![];
+    for m in &set.members {
+        let f = &m.field;
+        let (g, s) = (f.grid, f.settings);
+        let n = g.probe_count();
+        if f.irradiance.texels.len() != n * f.irradiance.tile_len()
+            || f.distance.texels.len() != n * f.distance.tile_len()
+        {
+            return Err(GpuError::Input(format!(
+                "atlases of {} probes do not match the grid's {n}",
+                f.irradiance.probe_count
+            )));
+        }
+        let flags = s.probe_backface_weight as u32
+            | (s.probe_chebyshev_weight as u32) << 1
+            | (s.probe_crush_weight as u32) << 2
+            | (s.probe_trilinear_weight as u32) << 3;
+        let bias = match s.probe_bias_mode {
+            ProbeBiasMode::None => 0,
+            ProbeBiasMode::SelfShadow => 1,
+            ProbeBiasMode::Normal => 2,
+        };
+        let (irr_first, dist_first) = (irradiance_texels as u32, distance_texels as u32);
+        members.push([n as u32, f.irradiance.interior, f.distance.interior, irr_first, dist_first]);
+        volumes.push(GpuDdgiVolume {
+            origin_m: [g.origin_m.x, g.origin_m.y, g.origin_m.z, g.min_spacing_m()],
+            spacing_m: [g.spacing_m.x, g.spacing_m.y, g.spacing_m.z, s.probe_irradiance_gamma],
+            probe_counts: [g.probe_counts.x, g.probe_counts.y, g.probe_counts.z, flags],
+            scroll_offsets: [g.probe_scroll_offsets.x, g.probe_scroll_offsets.y, g.probe_scroll_offsets.z, bias],
+            texels: [f.irradiance.interior, f.distance.interior, irr_first, dist_first],
+            params: [
+                s.probe_self_shadow_bias,
+                s.probe_normal_bias_m,
+                s.probe_crush_threshold,
+                s.probe_energy_conservation,
+            ],
+            extra: [probes.len() as u32, m.tracks_camera as u32, 0, 0],
+        });
+        irradiance_texels += f.irradiance.texels.len();
+        distance_texels += f.distance.texels.len();
+        if with_atlases {
+            irradiance.extend(f.irradiance.texels.iter().map(|t| [t.x, t.y, t.z, 0.0]));
+            distance.extend(f.distance.texels.iter().map(|t| [t.x, t.y]));
+        }
+        for p in 0..n {
+            let usable = f.probe_usable.get(p).copied().unwrap_or(true);
+            let fallback = f.probe_fallback.get(p).copied().unwrap_or(u32::MAX);
+            let fallback = if fallback == u32::MAX || fallback >= NO_PROBE { NO_PROBE } else { fallback };
+            let o = f.probe_offsets_m.get(p).copied().unwrap_or(Vec3::ZERO);
+            probes.push([o.x, o.y, o.z, f32::from_bits(fallback | (usable as u32) << 31)]);
+        }
+    }
+    let mut set_bytes = bytemuck::bytes_of(&header).to_vec();
+    if volumes.is_empty() {
+        set_bytes.extend_from_slice(bytemuck::bytes_of(&GpuDdgiVolume::default()));
+    }
+    set_bytes.extend_from_slice(bytemuck::cast_slice(&volumes));
+    if probes.is_empty() {
+        probes.push([0.0; 4]);
+    }
+    // Empty sets keep one texel so every binding has a size.
+    irradiance_texels = irradiance_texels.max(1);
+    distance_texels = distance_texels.max(1);
+    if with_atlases {
+        irradiance.resize(irradiance_texels, [0.0; 4]);
+        distance.resize(distance_texels, [0.0; 2]);
+    }
+    Ok(PackedField { set: set_bytes, irradiance, distance, probes, irradiance_texels, distance_texels, members })
 }
 
 impl GpuDdgiField {
@@ -97,83 +201,11 @@ impl GpuDdgiField {
     /// Uploads every member of `set` (grids, settings, atlases, relocation offsets,
     /// usable flags and fallback table) in the shader's layout.
     pub fn upload(ctx: &GpuContext, set: &DdgiFieldSetView<'_>) -> Result<Self, GpuError> {
-        let header = GpuDdgiSetHeader {
-            header: [
-                set.members.len() as u32,
-                matches!(set.blending, VolumeBlending::Cascades) as u32,
-                set.camera_m.is_some() as u32,
-                0,
-            ],
-            camera_m: set.camera_m.map_or([0.0; 4], |c| [c.x, c.y, c.z, 0.0]),
-        };
-        let mut volumes: Vec<GpuDdgiVolume> = Vec::with_capacity(set.members.len());
-        let mut irradiance: Vec<[f32; 4]> = vec![];
-        let mut distance: Vec<[f32; 2]> = vec![];
-        let mut probes: Vec<[f32; 4]> = vec![];
-        for m in &set.members {
-            let f = &m.field;
-            let (g, s) = (f.grid, f.settings);
-            let n = g.probe_count();
-            if f.irradiance.texels.len() != n * f.irradiance.tile_len()
-                || f.distance.texels.len() != n * f.distance.tile_len()
-            {
-                return Err(GpuError::Input(format!(
-                    "atlases of {} probes do not match the grid's {n}",
-                    f.irradiance.probe_count
-                )));
-            }
-            let flags = s.probe_backface_weight as u32
-                | (s.probe_chebyshev_weight as u32) << 1
-                | (s.probe_crush_weight as u32) << 2
-                | (s.probe_trilinear_weight as u32) << 3;
-            let bias = match s.probe_bias_mode {
-                ProbeBiasMode::None => 0,
-                ProbeBiasMode::SelfShadow => 1,
-                ProbeBiasMode::Normal => 2,
-            };
-            volumes.push(GpuDdgiVolume {
-                origin_m: [g.origin_m.x, g.origin_m.y, g.origin_m.z, g.min_spacing_m()],
-                spacing_m: [g.spacing_m.x, g.spacing_m.y, g.spacing_m.z, s.probe_irradiance_gamma],
-                probe_counts: [g.probe_counts.x, g.probe_counts.y, g.probe_counts.z, flags],
-                scroll_offsets: [g.probe_scroll_offsets.x, g.probe_scroll_offsets.y, g.probe_scroll_offsets.z, bias],
-                texels: [f.irradiance.interior, f.distance.interior, irradiance.len() as u32, distance.len() as u32],
-                params: [
-                    s.probe_self_shadow_bias,
-                    s.probe_normal_bias_m,
-                    s.probe_crush_threshold,
-                    s.probe_energy_conservation,
-                ],
-                extra: [probes.len() as u32, m.tracks_camera as u32, 0, 0],
-            });
-            irradiance.extend(f.irradiance.texels.iter().map(|t| [t.x, t.y, t.z, 0.0]));
-            distance.extend(f.distance.texels.iter().map(|t| [t.x, t.y]));
-            for p in 0..n {
-                let usable = f.probe_usable.get(p).copied().unwrap_or(true);
-                let fallback = f.probe_fallback.get(p).copied().unwrap_or(u32::MAX);
-                let fallback = if fallback == u32::MAX || fallback >= NO_PROBE { NO_PROBE } else { fallback };
-                let o = f.probe_offsets_m.get(p).copied().unwrap_or(Vec3::ZERO);
-                probes.push([o.x, o.y, o.z, f32::from_bits(fallback | (usable as u32) << 31)]);
-            }
-        }
-        let mut set_bytes = bytemuck::bytes_of(&header).to_vec();
-        if volumes.is_empty() {
-            set_bytes.extend_from_slice(bytemuck::bytes_of(&GpuDdgiVolume::default()));
-        }
-        set_bytes.extend_from_slice(bytemuck::cast_slice(&volumes));
-        let pad = |v: &mut Vec<[f32; 4]>| {
-            if v.is_empty() {
-                v.push([0.0; 4]);
-            }
-        };
-        pad(&mut irradiance);
-        pad(&mut probes);
-        if distance.is_empty() {
-            distance.push([0.0; 2]);
-        }
+        let packed = pack_field(set, true)?;
         for (what, bytes) in [
-            ("the irradiance atlases", irradiance.len() * 16),
-            ("the distance atlases", distance.len() * 8),
-            ("the probes", probes.len() * 16),
+            ("the irradiance atlases", packed.irradiance.len() * 16),
+            ("the distance atlases", packed.distance.len() * 8),
+            ("the probes", packed.probes.len() * 16),
         ] {
             ctx.check_buffer(bytes as u64, what)?;
         }
@@ -181,14 +213,14 @@ impl GpuDdgiField {
             ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
                 contents,
-                usage: wgpu::BufferUsages::STORAGE,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
             })
         };
         let buffers = [
-            init("ddgi set", &set_bytes),
-            init("ddgi irradiance", bytemuck::cast_slice(&irradiance)),
-            init("ddgi distance", bytemuck::cast_slice(&distance)),
-            init("ddgi probes", bytemuck::cast_slice(&probes)),
+            init("ddgi set", &packed.set),
+            init("ddgi irradiance", bytemuck::cast_slice(&packed.irradiance)),
+            init("ddgi distance", bytemuck::cast_slice(&packed.distance)),
+            init("ddgi probes", bytemuck::cast_slice(&packed.probes)),
         ];
         let bind_group = crate::bvh_trace::buffers_bind_group(
             &ctx.device,
@@ -198,9 +230,49 @@ impl GpuDdgiField {
         );
         Ok(Self {
             volumes: set.members.len(),
-            probes: probes.len(),
+            probes: packed.probes.len(),
             bytes: buffers.iter().map(|b| b.size()).sum(),
+            members: packed.members,
+            buffers,
             bind_group,
+        })
+    }
+
+    /// Rewrites the per-frame data of `set` (grids and scroll phases, relocation
+    /// offsets, usable flags, fallbacks) into the resident buffers and, with
+    /// `atlases`, the atlases too. `set` must have the shape the field was
+    /// uploaded with (members, probe counts, texels).
+    pub fn refresh(&self, ctx: &GpuContext, set: &DdgiFieldSetView<'_>, atlases: bool) -> Result<(), GpuError> {
+        let packed = pack_field(set, atlases)?;
+        let sizes = [
+            packed.set.len() as u64,
+            packed.irradiance_texels as u64 * 16,
+            packed.distance_texels as u64 * 8,
+            packed.probes.len() as u64 * 16,
+        ];
+        if packed.members != self.members || sizes.iter().zip(&self.buffers).any(|(s, b)| *s != b.size()) {
+            return Err(GpuError::Input("the field set changed shape since its upload".into()));
+        }
+        ctx.queue.write_buffer(&self.buffers[0], 0, &packed.set);
+        ctx.queue.write_buffer(&self.buffers[3], 0, bytemuck::cast_slice(&packed.probes));
+        if atlases {
+            ctx.queue.write_buffer(&self.buffers[1], 0, bytemuck::cast_slice(&packed.irradiance));
+            ctx.queue.write_buffer(&self.buffers[2], 0, bytemuck::cast_slice(&packed.distance));
+        }
+        Ok(())
+    }
+
+    /// Member `m`'s atlases as the blend's targets: its range of the field's buffers.
+    pub fn member_atlases(&self, m: usize) -> Option<crate::probe_blend::GpuVolumeAtlases> {
+        let [probes, ni, nd, irr_first, dist_first] = *self.members.get(m)?;
+        Some(crate::probe_blend::GpuVolumeAtlases {
+            probe_count: probes as usize,
+            irradiance_interior: ni,
+            distance_interior: nd,
+            irradiance_first: irr_first,
+            distance_first: dist_first,
+            irradiance: self.buffers[1].clone(),
+            distance: self.buffers[2].clone(),
         })
     }
 

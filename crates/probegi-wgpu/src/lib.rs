@@ -31,7 +31,10 @@ pub mod gpu_context;
 pub mod gpu_scene;
 pub mod gpu_timer;
 pub mod probe_blend;
+pub mod probe_classification;
 pub mod probe_ray_gen;
+pub mod probe_relocation;
 pub mod probe_shade;
+pub mod probe_usage;
 
 pub use gpu_context::{GpuContext, GpuError};

@@ -8,12 +8,21 @@
 //!
 //! Atlases stay on the device ([`GpuVolumeAtlases`]) in the CPU's tile-major
 //! layout (`probegi_core::probe_atlas`); irradiance texels are `vec4<f32>` there
-//! (xyz used) for alignment.
+//! (xyz used) for alignment. A volume's atlases may be its own buffers or its
+//! range of a resident field's (`GpuDdgiField::member_atlases`), so the passes
+//! blend straight into what the queries read.
+//!
+//! The per-ray inputs are one `vec4<f32>` per batch ray: radiance in xyz and the
+//! signed blend distance in w (backface −0.2·t, miss the ray's max distance:
+//! `probegi_cpu::ddgi::blend_inputs`), as the shade pass writes them, so a batch
+//! shaded on the device is blended without leaving it ([`GpuProbeBlend::prepare_resident`]).
+//! Per probe the passes read its first ray in the batch and its hysteresis.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_count};
+use probegi_core::probe_blend::BlendWeights;
 use wgpu::util::DeviceExt;
 
 use crate::bvh_trace::{storage_entry, uniform_entry};
@@ -36,7 +45,11 @@ pub struct BlendParams {
     pub distance_exponent: f32,
     pub distance_clamp_m: f32,
     pub probes_per_row: u32,
-    pub _pad: [u32; 3],
+    /// The volume's first texel in the irradiance / distance buffer.
+    pub irradiance_first: u32,
+    pub distance_first: u32,
+    /// Where the (ray, weight) entries start in the weights buffer.
+    pub weight_entries_first: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<BlendParams>() == 64);
@@ -45,13 +58,16 @@ const _: () = assert!(std::mem::size_of::<BlendParams>() == 64);
 const MAX_GROUPS: u32 = 65_535;
 const WORKGROUP: u32 = 64;
 
-/// One volume's atlases on the device.
+/// One volume's atlases on the device: `probe_count` tiles from texel
+/// `irradiance_first` / `distance_first` of the two buffers.
 pub struct GpuVolumeAtlases {
     pub probe_count: usize,
     pub irradiance_interior: u32,
     pub distance_interior: u32,
-    irradiance: wgpu::Buffer,
-    distance: wgpu::Buffer,
+    pub irradiance_first: u32,
+    pub distance_first: u32,
+    pub(crate) irradiance: wgpu::Buffer,
+    pub(crate) distance: wgpu::Buffer,
 }
 
 impl GpuVolumeAtlases {
@@ -69,35 +85,67 @@ impl GpuVolumeAtlases {
             probe_count,
             irradiance_interior,
             distance_interior,
+            irradiance_first: 0,
+            distance_first: 0,
             irradiance: make("irradiance atlas", probe_count * tile_texel_count(irradiance_interior) * 16),
             distance: make("distance atlas", probe_count * tile_texel_count(distance_interior) * 8),
         }
+    }
+
+    fn irradiance_bytes(&self) -> (u64, u64) {
+        let tile = tile_texel_count(self.irradiance_interior) as u64 * 16;
+        (self.irradiance_first as u64 * 16, self.probe_count as u64 * tile)
+    }
+
+    fn distance_bytes(&self) -> (u64, u64) {
+        let tile = tile_texel_count(self.distance_interior) as u64 * 8;
+        (self.distance_first as u64 * 8, self.probe_count as u64 * tile)
     }
 
     /// Replaces the device atlases with the CPU ones.
     pub fn upload(&self, ctx: &GpuContext, irradiance: &ProbeAtlas<Vec3>, distance: &ProbeAtlas<Vec2>) {
         let irr: Vec<[f32; 4]> = irradiance.texels.iter().map(|t| [t.x, t.y, t.z, 0.0]).collect();
         let dist: Vec<[f32; 2]> = distance.texels.iter().map(|t| [t.x, t.y]).collect();
-        ctx.queue.write_buffer(&self.irradiance, 0, bytemuck::cast_slice(&irr));
-        ctx.queue.write_buffer(&self.distance, 0, bytemuck::cast_slice(&dist));
+        ctx.queue.write_buffer(&self.irradiance, self.irradiance_bytes().0, bytemuck::cast_slice(&irr));
+        ctx.queue.write_buffer(&self.distance, self.distance_bytes().0, bytemuck::cast_slice(&dist));
+    }
+
+    /// Zeroes the tiles of `probes` (probes the host reset: scrolled in, re-initialised).
+    pub fn zero_tiles(&self, ctx: &GpuContext, probes: &[u32]) {
+        let irr_tile = tile_texel_count(self.irradiance_interior) as u64 * 16;
+        let dist_tile = tile_texel_count(self.distance_interior) as u64 * 8;
+        let zeros = vec![0u8; irr_tile.max(dist_tile) as usize];
+        for &p in probes.iter().filter(|p| (**p as usize) < self.probe_count) {
+            let p = p as u64;
+            ctx.queue.write_buffer(
+                &self.irradiance,
+                self.irradiance_bytes().0 + p * irr_tile,
+                &zeros[..irr_tile as usize],
+            );
+            ctx.queue.write_buffer(
+                &self.distance,
+                self.distance_bytes().0 + p * dist_tile,
+                &zeros[..dist_tile as usize],
+            );
+        }
     }
 
     /// Reads both atlases back.
     pub fn download(&self, ctx: &GpuContext) -> Result<(ProbeAtlas<Vec3>, ProbeAtlas<Vec2>), GpuError> {
-        let read = |buffer: &wgpu::Buffer| {
+        let read = |buffer: &wgpu::Buffer, (offset, size): (u64, u64)| {
             let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("atlas readback"),
-                size: buffer.size(),
+                size: size.max(4),
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
-            encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, buffer.size());
+            encoder.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
             ctx.queue.submit([encoder.finish()]);
             ctx.read_buffer(&staging)
         };
-        let irr_bytes = read(&self.irradiance)?;
-        let dist_bytes = read(&self.distance)?;
+        let irr_bytes = read(&self.irradiance, self.irradiance_bytes())?;
+        let dist_bytes = read(&self.distance, self.distance_bytes())?;
         let mut irr = ProbeAtlas::new(self.probe_count, self.irradiance_interior);
         let mut dist = ProbeAtlas::new(self.probe_count, self.distance_interior);
         let irr_f: &[[f32; 4]] = bytemuck::cast_slice(&irr_bytes);
@@ -130,6 +178,24 @@ pub struct BlendFrame<'a> {
     pub distance_clamp_m: f32,
 }
 
+/// One volume's blend of a batch whose per-ray results are on the device.
+pub struct ResidentBlend<'a> {
+    pub settings: &'a DdgiVolumeSettings,
+    /// Rays per probe this frame.
+    pub rays_per_probe: u32,
+    /// The frame's weight tables (`probegi_cpu::probe_ray_gen::generate_probe_rays`).
+    pub irradiance_weights: &'a BlendWeights,
+    pub distance_weights: &'a BlendWeights,
+    /// One `vec4<f32>` per batch ray: radiance, signed blend distance.
+    pub ray_results: &'a wgpu::Buffer,
+    /// Per probe: its first ray in the batch and its blend hysteresis, or `None`
+    /// when it does not update this frame.
+    pub probe_blend: &'a [Option<(u32, f32)>],
+    pub irradiance_scale: f32,
+    pub visibility_scale: f32,
+    pub distance_clamp_m: f32,
+}
+
 /// The four compute pipelines (blend irradiance / distance, border irradiance / distance).
 pub struct GpuProbeBlend {
     layout: wgpu::BindGroupLayout,
@@ -149,9 +215,8 @@ impl GpuProbeBlend {
                 storage_entry(1, true),
                 storage_entry(2, true),
                 storage_entry(3, true),
-                storage_entry(4, true),
+                storage_entry(4, false),
                 storage_entry(5, false),
-                storage_entry(6, false),
             ],
         });
         let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -204,10 +269,73 @@ impl GpuProbeBlend {
                 frame.ray_distance.len()
             )));
         }
-        if frame.probe_hysteresis.len() != probes || probes == 0 || rays == 0 {
+        if frame.probe_hysteresis.len() != probes {
             return Err(GpuError::Input(format!(
                 "{} hysteresis values for {probes} probes",
                 frame.probe_hysteresis.len()
+            )));
+        }
+        let results: Vec<[f32; 4]> =
+            frame.ray_radiance.iter().zip(frame.ray_distance).map(|(l, d)| [l.x, l.y, l.z, *d]).collect();
+        let results = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("ray results"),
+            contents: bytemuck::cast_slice(&results),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let probe_blend: Vec<Option<(u32, f32)>> =
+            (0..probes).map(|p| frame.probe_hysteresis[p].map(|h| ((p * rays) as u32, h))).collect();
+        let irradiance_weights = BlendWeights::new(frame.ray_dirs, atlases.irradiance_interior, 1.0);
+        let distance_weights =
+            BlendWeights::new(frame.ray_dirs, atlases.distance_interior, frame.settings.probe_distance_exponent);
+        let resident = ResidentBlend {
+            settings: frame.settings,
+            rays_per_probe: rays as u32,
+            irradiance_weights: &irradiance_weights,
+            distance_weights: &distance_weights,
+            ray_results: &results,
+            probe_blend: &probe_blend,
+            irradiance_scale: frame.irradiance_scale,
+            visibility_scale: frame.visibility_scale,
+            distance_clamp_m: frame.distance_clamp_m,
+        };
+        self.prepare_resident(ctx, atlases, &resident)
+    }
+
+    /// Binds a batch's per-ray results where they lie on the device (the shade
+    /// pass's output) with `atlases`, uploading only the per-probe inputs.
+    pub fn prepare_resident(
+        &self,
+        ctx: &GpuContext,
+        atlases: &GpuVolumeAtlases,
+        frame: &ResidentBlend<'_>,
+    ) -> Result<BlendBindings, GpuError> {
+        let probes = atlases.probe_count;
+        let rays = frame.rays_per_probe as usize;
+        let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
+        let (iw, dw) = (frame.irradiance_weights, frame.distance_weights);
+        if iw.offsets.len() != (ni * ni + 1) as usize || dw.offsets.len() != (nd * nd + 1) as usize {
+            return Err(GpuError::Input(format!(
+                "weight tables of {} and {} texels for {ni}² and {nd}² interiors",
+                iw.offsets.len().saturating_sub(1),
+                dw.offsets.len().saturating_sub(1)
+            )));
+        }
+        if let Some((r, _)) = iw.entries.iter().chain(&dw.entries).find(|(r, _)| *r as usize >= rays) {
+            return Err(GpuError::Input(format!("a weight names ray {r} of {rays}")));
+        }
+        if frame.probe_blend.len() != probes || probes == 0 || rays == 0 {
+            return Err(GpuError::Input(format!(
+                "{} blend entries for {probes} probes with {rays} rays each",
+                frame.probe_blend.len()
+            )));
+        }
+        let batch_rays = frame.ray_results.size() / 16;
+        if let Some(p) = frame.probe_blend.iter().flatten().find(|(first, _)| *first as u64 + rays as u64 > batch_rays)
+        {
+            return Err(GpuError::Input(format!(
+                "a probe's rays {}..{} lie past the batch's {batch_rays} rays",
+                p.0,
+                p.0 as u64 + rays as u64
             )));
         }
         let s = frame.settings;
@@ -226,29 +354,38 @@ impl GpuProbeBlend {
             distance_exponent: s.probe_distance_exponent,
             distance_clamp_m: frame.distance_clamp_m,
             probes_per_row: per_row,
-            _pad: [0; 3],
+            irradiance_first: atlases.irradiance_first,
+            distance_first: atlases.distance_first,
+            weight_entries_first: (iw.offsets.len() + dw.offsets.len()) as u32,
         };
         let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
             ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
         };
-        let dirs: Vec<[f32; 4]> = frame.ray_dirs.iter().map(|d| [d.x, d.y, d.z, 0.0]).collect();
-        let radiance: Vec<[f32; 4]> = frame.ray_radiance.iter().map(|l| [l.x, l.y, l.z, 0.0]).collect();
-        let hysteresis: Vec<f32> = frame.probe_hysteresis.iter().map(|h| h.unwrap_or(-1.0)).collect();
+        // Offsets of both tables (the distance entries after the irradiance ones), then the entries.
+        let shift = iw.entries.len() as u32;
+        let mut weights: Vec<u32> = iw.offsets.clone();
+        weights.extend(dw.offsets.iter().map(|o| o + shift));
+        for (r, w) in iw.entries.iter().chain(&dw.entries) {
+            weights.extend([*r, w.to_bits()]);
+        }
+        let per_probe: Vec<[u32; 2]> = frame
+            .probe_blend
+            .iter()
+            .map(|b| match b {
+                Some((first, h)) => [*first, h.max(0.0).to_bits()],
+                None => [0, (-1.0f32).to_bits()],
+            })
+            .collect();
         let storage = wgpu::BufferUsages::STORAGE;
-        let buffers = [
-            init("blend params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM),
-            init("ray directions", bytemuck::cast_slice(&dirs), storage),
-            init("ray radiance", bytemuck::cast_slice(&radiance), storage),
-            init("ray distance", bytemuck::cast_slice(frame.ray_distance), storage),
-            init("probe hysteresis", bytemuck::cast_slice(&hysteresis), storage),
-        ];
-        let mut entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+        let params = init("blend params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let weights = init("blend weights", bytemuck::cast_slice(&weights), storage);
+        let per_probe = init("probe blend", bytemuck::cast_slice(&per_probe), storage);
+        let buffers = [&params, &weights, frame.ray_results, &per_probe, &atlases.irradiance, &atlases.distance];
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
             .iter()
             .enumerate()
             .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
             .collect();
-        entries.push(wgpu::BindGroupEntry { binding: 5, resource: atlases.irradiance.as_entire_binding() });
-        entries.push(wgpu::BindGroupEntry { binding: 6, resource: atlases.distance.as_entire_binding() });
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("probe blend"),
             layout: &self.layout,
@@ -256,7 +393,6 @@ impl GpuProbeBlend {
         });
         let rows = (probes as u32).div_ceil(per_row);
         let groups = |texels: u32| texels.div_ceil(WORKGROUP);
-        let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
         let dispatches = [groups(ni * ni), groups(nd * nd), groups((ni + 2) * (ni + 2)), groups((nd + 2) * (nd + 2))];
         Ok(BlendBindings { bind_group, dispatches, per_row, rows })
     }

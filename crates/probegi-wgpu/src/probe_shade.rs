@@ -106,12 +106,34 @@ impl GpuProbeShade {
         frame: u32,
         timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
     ) -> Result<Vec<Vec3>, GpuError> {
+        if batch.ray_count == 0 && info.is_empty() {
+            return Ok(vec![]);
+        }
+        let results = self.shade_on_device(ctx, bvh, field, scene, batch, info, seed, frame, timer)?;
+        let bytes = ctx.read_back(&results)?;
+        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok(v.iter().take(batch.ray_count as usize).map(|l| Vec3::new(l[0], l[1], l[2])).collect())
+    }
+
+    /// The shade pass submitted, its output left on the device: per ray a
+    /// `vec4<f32>` of radiance and the blend's signed distance, which
+    /// `probe_blend`'s passes read as they lie (`GpuProbeBlend::prepare_resident`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn shade_on_device(
+        &self,
+        ctx: &GpuContext,
+        bvh: &GpuBvh,
+        field: &GpuDdgiField,
+        scene: &GpuScene,
+        batch: &GpuRayBatch,
+        info: &[u32],
+        seed: u32,
+        frame: u32,
+        timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
+    ) -> Result<wgpu::Buffer, GpuError> {
         let n = batch.ray_count;
         if info.len() != n as usize {
             return Err(GpuError::Input(format!("{} shading flags for {n} rays", info.len())));
-        }
-        if n == 0 {
-            return Ok(vec![]);
         }
         let (gx, gy) = dispatch_2d(n);
         let device = &ctx.device;
@@ -123,12 +145,12 @@ impl GpuProbeShade {
         });
         let info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("shade info"),
-            contents: bytemuck::cast_slice(info),
+            contents: bytemuck::cast_slice(if info.is_empty() { &[0u32][..] } else { info }),
             usage: wgpu::BufferUsages::STORAGE,
         });
         let radiance = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("probe ray radiance"),
-            size: n as u64 * 16,
+            size: (n as u64).max(1) * 16,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
@@ -157,8 +179,6 @@ impl GpuProbeShade {
             pass.dispatch_workgroups(gx, gy, 1);
         }
         ctx.queue.submit([encoder.finish()]);
-        let bytes = ctx.read_back(&radiance)?;
-        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-        Ok(v.iter().map(|l| Vec3::new(l[0], l[1], l[2])).collect())
+        Ok(radiance)
     }
 }

@@ -17,40 +17,24 @@ struct BlendParams {
     distance_exponent: f32,    // k_s of eq. 4.14
     distance_clamp_m: f32,
     probes_per_row: u32,       // dispatch: probe = wid.y + wid.z * probes_per_row
-    _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
+    irradiance_first: u32,     // the volume's first texel in the irradiance buffer
+    distance_first: u32,       // the volume's first texel in the distance buffer
+    weight_entries_first: u32, // where blend_weights' (ray, weight) entries start
 };
 
 @group(0) @binding(0) var<uniform> params: BlendParams;
-@group(0) @binding(1) var<storage, read> ray_dirs: array<vec4<f32>>;       // rays_per_probe
-@group(0) @binding(2) var<storage, read> ray_radiance: array<vec4<f32>>;   // probes × rays
-@group(0) @binding(3) var<storage, read> ray_distance: array<f32>;         // probes × rays, signed
-@group(0) @binding(4) var<storage, read> probe_hysteresis: array<f32>;     // < 0: not updated
-@group(0) @binding(5) var<storage, read_write> irradiance: array<vec4<f32>>;
-@group(0) @binding(6) var<storage, read_write> distance: array<vec2<f32>>;
-
-// probegi_core::probe_blend::BLEND_WEIGHT_EPSILON
-const BLEND_WEIGHT_EPSILON: f32 = 1e-6;
-
-fn sign_not_zero(v: vec2<f32>) -> vec2<f32> {
-    return select(vec2<f32>(-1.0), vec2<f32>(1.0), v >= vec2<f32>(0.0));
-}
-
-// probegi_core::octahedral::oct_decode
-fn oct_decode(uv: vec2<f32>) -> vec3<f32> {
-    var d = vec3<f32>(uv.x, uv.y, 1.0 - abs(uv.x) - abs(uv.y));
-    if (d.z < 0.0) {
-        let xy = (vec2<f32>(1.0) - vec2<f32>(abs(d.y), abs(d.x))) * sign_not_zero(d.xy);
-        d = vec3<f32>(xy, d.z);
-    }
-    return normalize(d);
-}
-
-// probegi_core::octahedral::texel_center_uv
-fn texel_center_uv(i: u32, j: u32, n: u32) -> vec2<f32> {
-    return vec2<f32>((f32(i) + 0.5) / f32(n), (f32(j) + 0.5) / f32(n)) * 2.0 - vec2<f32>(1.0);
-}
+// The frame's sparse texel-to-ray weight tables, as probegi_core::probe_blend::BlendWeights
+// builds them (one owner of the weights, the same ray order as the CPU's sums):
+// irradiance offsets (irradiance_interior² + 1), distance offsets (distance_interior² + 1),
+// then from weight_entries_first (ray, weight bits) pairs, irradiance entries first.
+@group(0) @binding(1) var<storage, read> blend_weights: array<u32>;
+// Per batch ray: xyz radiance, w the signed blend distance (backfaces −0.2·t,
+// misses the ray's max distance), as probe_shade.wgsl writes them.
+@group(0) @binding(2) var<storage, read> ray_results: array<vec4<f32>>;
+// Per probe: x its first ray in the batch, y the bits of its blend hysteresis (< 0: not updated).
+@group(0) @binding(3) var<storage, read> probe_blend: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read_write> irradiance: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> distance: array<vec2<f32>>;
 
 // probegi_core::probe_atlas::interior_texel_index
 fn interior_texel_index(interior: u32, i: u32, j: u32) -> u32 {
@@ -81,7 +65,8 @@ struct TexelJob {
     i: u32,
     j: u32,
     hysteresis: f32,
-    dir: vec3<f32>,
+    first_ray: u32,
+    texel: u32,     // row-major interior texel, the weight tables' index
 };
 
 fn interior_job(gid: vec3<u32>, wid: vec3<u32>, n: u32) -> TexelJob {
@@ -90,11 +75,13 @@ fn interior_job(gid: vec3<u32>, wid: vec3<u32>, n: u32) -> TexelJob {
     job.n = n;
     job.valid = job.probe < params.probe_count && gid.x < n * n;
     if (!job.valid) { return job; }
-    job.hysteresis = probe_hysteresis[job.probe];
+    let pb = probe_blend[job.probe];
+    job.first_ray = pb.x;
+    job.hysteresis = bitcast<f32>(pb.y);
     job.valid = job.hysteresis >= 0.0;
     job.i = gid.x % n;
     job.j = gid.x / n;
-    job.dir = oct_decode(texel_center_uv(job.i, job.j, n));
+    job.texel = gid.x;
     return job;
 }
 
@@ -106,22 +93,23 @@ fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(work
     let probe = job.probe;
     let n = job.n;
     let h0 = job.hysteresis;
-    let texel_dir = job.dir;
     var sum = vec3<f32>(0.0);
     var wsum = 0.0;
-    let first = probe * params.rays_per_probe;
-    for (var r = 0u; r < params.rays_per_probe; r++) {
-        let c = dot(texel_dir, ray_dirs[r].xyz);
-        if (c <= 0.0 || c < BLEND_WEIGHT_EPSILON) { continue; }
-        let l = ray_radiance[first + r].xyz;
+    let first = job.first_ray;
+    let e0 = blend_weights[job.texel];
+    let e1 = blend_weights[job.texel + 1u];
+    for (var e = e0; e < e1; e++) {
+        let k = params.weight_entries_first + 2u * e;
+        let w = bitcast<f32>(blend_weights[k + 1u]);
+        let l = ray_results[first + blend_weights[k]].xyz;
         if (is_finite3(l)) {
-            sum += l * c;
-            wsum += c;
+            sum += l * w;
+            wsum += w;
         }
     }
     if (wsum <= 0.0) { return; }
     let encoded = encode_irradiance(sum / wsum, params.gamma);
-    let idx = probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
+    let idx = params.irradiance_first + probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
     let old = irradiance[idx].xyz;
     var h = h0 * params.irradiance_scale;
     if (params.use_thresholds != 0u) {
@@ -148,22 +136,22 @@ fn blend_distance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgr
     let probe = job.probe;
     let n = job.n;
     let h0 = job.hysteresis;
-    let texel_dir = job.dir;
     var sum = vec2<f32>(0.0);
     var wsum = 0.0;
-    let first = probe * params.rays_per_probe;
-    for (var r = 0u; r < params.rays_per_probe; r++) {
-        let c = dot(texel_dir, ray_dirs[r].xyz);
-        if (c <= 0.0) { continue; }
-        let w = pow(c, params.distance_exponent);
-        if (w < BLEND_WEIGHT_EPSILON) { continue; }
-        let d = min(abs(ray_distance[first + r]), params.distance_clamp_m);
+    let first = job.first_ray;
+    let offsets = params.irradiance_interior * params.irradiance_interior + 1u;
+    let e0 = blend_weights[offsets + job.texel];
+    let e1 = blend_weights[offsets + job.texel + 1u];
+    for (var e = e0; e < e1; e++) {
+        let k = params.weight_entries_first + 2u * e;
+        let w = bitcast<f32>(blend_weights[k + 1u]);
+        let d = min(abs(ray_results[first + blend_weights[k]].w), params.distance_clamp_m);
         if (d != d) { continue; }
         sum += vec2<f32>(d, d * d) * w;
         wsum += w;
     }
     if (wsum <= 0.0) { return; }
-    let idx = probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
+    let idx = params.distance_first + probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
     let h = h0 * params.visibility_scale;
     let blended = (sum / wsum) * (1.0 - h) + distance[idx] * h;
     if (all(abs(blended) <= vec2<f32>(3.4028235e38))) {
@@ -194,12 +182,12 @@ fn border_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(wor
     let probe = probe_of(wid);
     let n = params.irradiance_interior;
     let s = n + 2u;
-    if (probe >= params.probe_count || gid.x >= s * s || probe_hysteresis[probe] < 0.0) { return; }
+    if (probe >= params.probe_count || gid.x >= s * s || bitcast<f32>(probe_blend[probe].y) < 0.0) { return; }
     let x = gid.x % s;
     let y = gid.x / s;
     if (!is_border(x, y, n)) { return; }
     let src = border_source(x, y, n);
-    let base = probe * s * s;
+    let base = params.irradiance_first + probe * s * s;
     irradiance[base + y * s + x] = irradiance[base + src.y * s + src.x];
 }
 
@@ -208,11 +196,11 @@ fn border_distance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workg
     let probe = probe_of(wid);
     let n = params.distance_interior;
     let s = n + 2u;
-    if (probe >= params.probe_count || gid.x >= s * s || probe_hysteresis[probe] < 0.0) { return; }
+    if (probe >= params.probe_count || gid.x >= s * s || bitcast<f32>(probe_blend[probe].y) < 0.0) { return; }
     let x = gid.x % s;
     let y = gid.x / s;
     if (!is_border(x, y, n)) { return; }
     let src = border_source(x, y, n);
-    let base = probe * s * s;
+    let base = params.distance_first + probe * s * s;
     distance[base + y * s + x] = distance[base + src.y * s + src.x];
 }

@@ -32,6 +32,7 @@ struct ShadeHit {
 @group(0) @binding(1) var<storage, read> shade_rays: array<ShadeRay>;
 @group(0) @binding(2) var<storage, read> shade_hits: array<ShadeHit>;
 // Per ray: bit 31 the set wants its radiance, bit 30 second-order glossy, bits 0..15 area samples.
+// Output per ray: xyz radiance, w the blend's signed distance (probe_blend.wgsl's ray_results).
 @group(0) @binding(3) var<storage, read> shade_info: array<u32>;
 @group(0) @binding(4) var<storage, read_write> shade_radiance: array<vec4<f32>>;
 
@@ -43,15 +44,24 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     }
     let info = shade_info[i];
     let h = shade_hits[i];
-    if ((info & 0x80000000u) == 0u || ((h.triangle & 0x80000000u) != 0u && h.triangle != BVH_NO_HIT)) {
-        shade_radiance[i] = vec4<f32>(0.0);
+    let r = shade_rays[i];
+    let back = (h.triangle & 0x80000000u) != 0u && h.triangle != BVH_NO_HIT;
+    // w: the blend's signed distance (probegi_cpu::ddgi::blend_inputs: a backface
+    // −0.2·t, seed 004 §4.1; a miss the ray's max distance).
+    var d = h.t;
+    if (h.triangle == BVH_NO_HIT) {
+        d = r.t_max;
+    } else if (back) {
+        d = -0.2 * h.t;
+    }
+    if ((info & 0x80000000u) == 0u || back) {
+        shade_radiance[i] = vec4<f32>(0.0, 0.0, 0.0, d);
         return;
     }
     if (h.triangle == BVH_NO_HIT) {
-        shade_radiance[i] = vec4<f32>(scene_lights[1].xyz, 0.0);
+        shade_radiance[i] = vec4<f32>(scene_lights[1].xyz, d);
         return;
     }
-    let r = shade_rays[i];
     let sp = scene_surface_point(h.triangle, h.bary, false);
     var rng = rng_hash(shade_params.seed ^ rng_hash(shade_params.frame ^ rng_hash(i)));
     let to_viewer = -r.dir;
@@ -66,8 +76,8 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
         l += bsdf_specular_albedo(bsdf.specular_f0, max(dot(to_viewer, n), 0.0), bsdf.alpha) * e_mirror / SCENE_PI;
     }
     if (all(abs(l) <= vec3<f32>(SCENE_F32_MAX))) {
-        shade_radiance[i] = vec4<f32>(l, 0.0);
+        shade_radiance[i] = vec4<f32>(l, d);
     } else {
-        shade_radiance[i] = vec4<f32>(bitcast<f32>(0x7fc00000u));
+        shade_radiance[i] = vec4<f32>(vec3<f32>(bitcast<f32>(0x7fc00000u)), d);
     }
 }

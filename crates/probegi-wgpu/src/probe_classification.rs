@@ -1,0 +1,211 @@
+//! The classification round of seed 004's jcgt probe states on the GPU
+//! (`shaders/probe_classification.wgsl`), mirroring `probegi_cpu::ddgi`'s
+//! `classify_jcgt_pending` with `probegi_core::probe_classification::{probe_watches,
+//! uncovered_point_probe}`: per probe of one volume, whether it is inside geometry
+//! and whether it is kept (it watches a front face, or the covering pass chose it
+//! for a surface point no front-side cage probe served). The covering pass runs in
+//! one invocation, in the CPU's probe and ray order, so both backends keep the
+//! same probes. The rays and hits stay where the trace left them; the host reads
+//! back 16 bytes a probe.
+
+use bytemuck::{Pod, Zeroable};
+use probegi_core::probe_grid::ProbeGrid;
+use wgpu::util::DeviceExt;
+
+use crate::bvh_trace::{GpuBvh, GpuRayBatch, bvh_bind_group_layout, dispatch_2d, storage_entry, uniform_entry};
+use crate::gpu_context::{GpuContext, GpuError};
+use crate::gpu_scene::{GpuScene, scene_bind_group_layout};
+
+/// Must match `ClassifyParams` in `probe_classification.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct ClassifyParams {
+    pub origin_m: [f32; 3],
+    pub probe_count: u32,
+    pub spacing_m: [f32; 3],
+    pub rays_per_probe: u32,
+    pub probe_counts: [u32; 3],
+    pub groups_x: u32,
+    pub scroll_offsets: [u32; 3],
+    /// The covering pass's chunk: first probe and probe count.
+    pub cover_first: u32,
+    pub reach_rel: f32,
+    pub bias_m: f32,
+    pub cover_count: u32,
+    pub _pad: f32,
+}
+const _: () = assert!(std::mem::size_of::<ClassifyParams>() == 80);
+
+/// One probe of the volume for the classification round.
+pub use probegi_core::probe_classification::ClassificationProbe as ClassifyProbe;
+
+/// One volume's round: its grid, the watch box and the probes.
+pub struct ClassifyRound<'a> {
+    pub grid: &'a ProbeGrid,
+    pub rays_per_probe: u32,
+    /// `probe_classification_reach_rel` and the query's largest surface bias.
+    pub reach_rel: f32,
+    pub bias_m: f32,
+    pub probes: &'a [ClassifyProbe],
+}
+
+/// Rays one invocation of the covering pass walks per dispatch.
+const COVER_CHUNK_RAYS: u32 = 4096;
+
+pub struct GpuProbeClassification {
+    layout: wgpu::BindGroupLayout,
+    first: wgpu::ComputePipeline,
+    cover: wgpu::ComputePipeline,
+}
+
+impl GpuProbeClassification {
+    /// Storage buffers per stage: its own 5, the BVH's 3 and the scene's 4.
+    pub const STORAGE_BUFFERS: u32 = 12;
+
+    pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        ctx.check_pipeline(Self::STORAGE_BUFFERS, "the probe classification pass")?;
+        let source = format!(
+            "{}\n{}\n{}",
+            include_str!("shaders/bvh.wgsl"),
+            include_str!("shaders/scene.wgsl"),
+            include_str!("shaders/probe_classification.wgsl")
+        );
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("probe_classification.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("probe classification"),
+            entries: &[
+                uniform_entry(0),
+                storage_entry(1, true),
+                storage_entry(2, true),
+                storage_entry(3, true),
+                storage_entry(4, true),
+                storage_entry(5, false),
+            ],
+        });
+        let (bvh_layout, scene_layout) = (bvh_bind_group_layout(&ctx.device), scene_bind_group_layout(&ctx.device));
+        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("probe classification"),
+            bind_group_layouts: &[Some(&layout), Some(&bvh_layout), None, Some(&scene_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |entry: &str| {
+            ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        Ok(Self { first: pipeline("classify_first"), cover: pipeline("classify_cover"), layout })
+    }
+
+    /// Per probe of `round`: (inside geometry, kept), from `batch`'s rays and hits.
+    pub fn classify(
+        &self,
+        ctx: &GpuContext,
+        bvh: &GpuBvh,
+        scene: &GpuScene,
+        batch: &GpuRayBatch,
+        round: &ClassifyRound<'_>,
+    ) -> Result<Vec<(bool, bool)>, GpuError> {
+        let g = round.grid;
+        let n = round.probes.len();
+        if n != g.probe_count() {
+            return Err(GpuError::Input(format!("{n} probes for a grid of {}", g.probe_count())));
+        }
+        if n == 0 {
+            return Ok(vec![]);
+        }
+        let rays = round.rays_per_probe as u64;
+        if let Some(first) =
+            round.probes.iter().filter_map(|p| p.first_ray).find(|f| *f as u64 + rays > batch.ray_count as u64)
+        {
+            return Err(GpuError::Input(format!(
+                "a probe's rays {first}..{} lie past the batch's {} rays",
+                first as u64 + rays,
+                batch.ray_count
+            )));
+        }
+        let (gx, gy) = dispatch_2d(n as u32);
+        let params = ClassifyParams {
+            origin_m: g.origin_m.into(),
+            probe_count: n as u32,
+            spacing_m: g.spacing_m.into(),
+            rays_per_probe: round.rays_per_probe,
+            probe_counts: g.probe_counts.into(),
+            groups_x: gx,
+            scroll_offsets: g.probe_scroll_offsets.into(),
+            cover_first: 0,
+            reach_rel: round.reach_rel,
+            bias_m: round.bias_m,
+            cover_count: 0,
+            _pad: 0.0,
+        };
+        // The covering pass in chunks of about COVER_CHUNK_RAYS rays, in probe order.
+        let chunk = (COVER_CHUNK_RAYS / round.rays_per_probe.max(1)).max(1);
+        let chunks: Vec<ClassifyParams> = (0..(n as u32).div_ceil(chunk))
+            .map(|c| ClassifyParams { cover_first: c * chunk, cover_count: chunk, ..params })
+            .collect();
+        let rows: Vec<[u32; 4]> = round
+            .probes
+            .iter()
+            .map(|p| [p.first_ray.unwrap_or(u32::MAX), p.pending as u32, p.traces as u32, 0])
+            .collect();
+        let positions: Vec<[f32; 4]> = round.probes.iter().map(|p| p.position_m.extend(0.0).into()).collect();
+        let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
+            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        let params = init("classify params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let rows = init("classify probes", bytemuck::cast_slice(&rows), storage);
+        let positions = init("classify positions", bytemuck::cast_slice(&positions), storage);
+        let out = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("classify out"),
+            size: n as u64 * 16,
+            usage: storage | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let bind = |params: wgpu::Buffer| {
+            crate::bvh_trace::buffers_bind_group(
+                &ctx.device,
+                "probe classification",
+                &self.layout,
+                &[
+                    params,
+                    batch.rays_buffer().clone(),
+                    batch.hits_buffer().clone(),
+                    rows.clone(),
+                    positions.clone(),
+                    out.clone(),
+                ],
+            )
+        };
+        let mut steps = vec![(&self.first, bind(params), (gx, gy))];
+        for c in &chunks {
+            let p = init("classify cover params", bytemuck::bytes_of(c), wgpu::BufferUsages::UNIFORM);
+            steps.push((&self.cover, bind(p), (1, 1)));
+        }
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        for (pipeline, bind_group, groups) in &steps {
+            // One pass each: every step reads what the ones before it wrote.
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("probe classification"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.set_bind_group(1, bvh.bind_group(), &[]);
+            pass.set_bind_group(3, scene.bind_group(), &[]);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        let bytes = ctx.read_back(&out)?;
+        let v: &[[u32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok(v.iter().map(|o| (o[0] != 0, o[1] != 0)).collect())
+    }
+}

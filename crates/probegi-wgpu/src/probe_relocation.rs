@@ -1,0 +1,130 @@
+//! Probe relocation on the GPU (`shaders/probe_relocation.wgsl`): one iteration
+//! of seed 004 Listing 4's position optimizer per probe of a traced
+//! initialisation batch, mirroring `probegi_core::probe_relocation::{probe_ray_stats,
+//! relocation_step}` (RTXGI `ProbeRelocationCS`). The rays and hits stay where the
+//! trace left them; the host reads back one offset per probe (16 bytes) instead
+//! of one hit per ray.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use wgpu::util::DeviceExt;
+
+use crate::bvh_trace::{GpuRayBatch, dispatch_2d, storage_entry, uniform_entry};
+use crate::gpu_context::{GpuContext, GpuError};
+
+/// Must match `RelocationParams` in `probe_relocation.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct RelocationParams {
+    pub probe_count: u32,
+    pub groups_x: u32,
+    pub _pad: [u32; 2],
+}
+const _: () = assert!(std::mem::size_of::<RelocationParams>() == 16);
+
+/// One probe of the batch; must match `RelocationProbe` in `probe_relocation.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuRelocationProbe {
+    /// The probe's current offset from its grid point (m).
+    pub offset_m: [f32; 3],
+    pub first_ray: u32,
+    pub spacing_m: [f32; 3],
+    pub ray_count: u32,
+    /// `probe_relocation_offset_limit_rel`, `probe_relocation_min_frontface_rel`.
+    pub offset_limit_rel: f32,
+    pub min_frontface_rel: f32,
+    pub _pad: [f32; 2],
+}
+const _: () = assert!(std::mem::size_of::<GpuRelocationProbe>() == 48);
+
+pub struct GpuProbeRelocation {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl GpuProbeRelocation {
+    pub fn new(ctx: &GpuContext) -> Self {
+        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("probe_relocation.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/probe_relocation.wgsl").into()),
+        });
+        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("probe relocation"),
+            entries: &[
+                uniform_entry(0),
+                storage_entry(1, true),
+                storage_entry(2, true),
+                storage_entry(3, true),
+                storage_entry(4, false),
+            ],
+        });
+        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("probe relocation"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("relocate_probes"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("relocate_probes"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        Self { layout, pipeline }
+    }
+
+    /// Every probe's new offset after one iteration, from `batch`'s rays and hits.
+    pub fn relocate(
+        &self,
+        ctx: &GpuContext,
+        batch: &GpuRayBatch,
+        probes: &[GpuRelocationProbe],
+    ) -> Result<Vec<Vec3>, GpuError> {
+        if probes.is_empty() {
+            return Ok(vec![]);
+        }
+        if let Some(p) = probes.iter().find(|p| p.first_ray as u64 + p.ray_count as u64 > batch.ray_count as u64) {
+            return Err(GpuError::Input(format!(
+                "a probe's rays {}..{} lie past the batch's {} rays",
+                p.first_ray,
+                p.first_ray as u64 + p.ray_count as u64,
+                batch.ray_count
+            )));
+        }
+        let (gx, gy) = dispatch_2d(probes.len() as u32);
+        let params = RelocationParams { probe_count: probes.len() as u32, groups_x: gx, _pad: [0; 2] };
+        let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
+            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+        };
+        let params = init("relocation params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let rows = init("relocation probes", bytemuck::cast_slice(probes), wgpu::BufferUsages::STORAGE);
+        let out = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("relocation offsets"),
+            size: probes.len() as u64 * 16,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let bind_group = crate::bvh_trace::buffers_bind_group(
+            &ctx.device,
+            "probe relocation",
+            &self.layout,
+            &[params, batch.rays_buffer().clone(), batch.hits_buffer().clone(), rows, out.clone()],
+        );
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("probe relocation"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        let bytes = ctx.read_back(&out)?;
+        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        Ok(v.iter().map(|o| Vec3::new(o[0], o[1], o[2])).collect())
+    }
+}
