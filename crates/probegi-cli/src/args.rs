@@ -218,10 +218,10 @@ pub struct RenderArgs {
     /// Playback rate of the --gif preview.
     #[arg(long, default_value_t = 25.0, requires = "gif")]
     pub gif_fps: f32,
-    /// `cpu`, or `wgpu`: the DDGI probe rays traced and shaded and the camera
-    /// frame rendered by WGSL compute shaders on a GPU (or Mesa's lavapipe);
-    /// static scenes; relocation, classification, blend and border stay on the
-    /// CPU for now.
+    /// `cpu`, or `wgpu`: the DDGI field's update (trace, shade, blend, border,
+    /// relocation, classification) and the camera frame run as WGSL compute
+    /// shaders on a GPU (or Mesa's lavapipe), the atlases kept there; static
+    /// scenes only. With --show-probes the camera frame is the CPU's.
     #[arg(long, value_enum, default_value_t = crate::gpu_backend::Backend::Cpu)]
     pub backend: crate::gpu_backend::Backend,
 }
@@ -287,9 +287,10 @@ pub struct BenchArgs {
     /// DDGI field update at the same probe count (`--rays`, default 256) on the scene's camera.
     #[arg(long, value_enum, default_value_t = GiArg::None)]
     pub gi: GiArg,
-    /// DDGI sweep: `wgpu` traces and shades the probe rays on the GPU (the field
-    /// update through the seam) and times the GPU passes alone (trace, shade,
-    /// blend, border) with timestamp queries; `cpu` runs everything on the CPU.
+    /// DDGI sweep: `wgpu` runs the field update on the GPU (through the seam,
+    /// the atlases kept there) and times the GPU passes alone (ray generation,
+    /// trace, shade, blend, border) with timestamp queries; `cpu` runs everything
+    /// on the CPU.
     #[arg(long, value_enum, default_value_t = crate::gpu_backend::Backend::Cpu)]
     pub backend: crate::gpu_backend::Backend,
     /// DDGI sweep: frames timed per configuration (after one warm-up frame).

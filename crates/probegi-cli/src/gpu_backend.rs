@@ -1,10 +1,11 @@
-//! `--backend wgpu`: what of a frame runs on the GPU today (`probegi-wgpu-seam`).
-//! The DDGI probe ray batches (update and initialisation rounds) are traced by
+//! `--backend wgpu`: what of a frame runs on the GPU today (`probegi-wgpu-seam`
+//! with the field kept on the device). The DDGI probe ray batches are traced by
 //! probegi-wgpu's compute-shader CWBVH traversal over the same BVH the CPU
-//! builds, and shaded there; the camera frame is rendered there too (primary
-//! rays, direct light, glossy rays, the field query). The set's bookkeeping (relocation,
-//! classification, probe states), blend and border run on the CPU, whose
-//! atlases are uploaded for the GPU's queries each frame.
+//! builds; the update batch is shaded, blended and bordered there into atlases
+//! that stay there; the initialisation rounds relocate and classify there; the
+//! camera frame is rendered there too (primary rays, direct light, glossy
+//! rays, the field query). The host plans the batches and keeps the set's
+//! bookkeeping (probe states, hysteresis ramps).
 
 use anyhow::{Context, Result};
 use probegi_cpu::ddgi_field_set::ProbeRayBatch;
@@ -33,7 +34,7 @@ pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTrac
         .context("--backend wgpu: putting the scene on the device")?
         .keeping_field(true);
     match &g.shading_note {
-        None => eprintln!("probe rays and the camera frame on {}", g.adapter_name()),
+        None => eprintln!("the DDGI field and the camera frame on {}", g.adapter_name()),
         Some(why) => {
             eprintln!("probe rays traced on {}; their shading and the camera frame on the CPU: {why}", g.adapter_name())
         }

@@ -218,9 +218,6 @@ fn render(args: &RenderArgs) -> Result<()> {
             if !matches!(gi, GiMethod::Ddgi(_) | GiMethod::DdgiSet(_)) {
                 bail!("--backend wgpu runs the DDGI field and its camera frame on the GPU: it needs --gi ddgi");
             }
-            if args.show_probes {
-                bail!("--show-probes draws on the CPU's G-buffer: use it with --backend cpu");
-            }
             Some(std::sync::Arc::new(gpu_backend::wgpu_probe_tracer(&scene, &bvh)?))
         }
     };
@@ -316,7 +313,8 @@ fn render(args: &RenderArgs) -> Result<()> {
             "backend": format!("{:?}", args.backend).to_lowercase(),
             "adapter": gpu.as_ref().map(|g| g.adapter_name().to_string()),
             "probe_shade_on": gpu.as_ref().map(|g| if g.shades() { "gpu" } else { "cpu" }),
-            "camera_on": if gpu.as_ref().is_some_and(|g| g.renders_camera()) { "gpu" } else { "cpu" },
+            // --show-probes draws on the CPU's G-buffer, so its camera frame is the CPU's.
+            "camera_on": if gpu.as_ref().is_some_and(|g| g.renders_camera()) && !args.show_probes { "gpu" } else { "cpu" },
             "frames": stats.frames,
             "pass_ms": stats.pass_ms,
             "rays_traced": stats.rays_traced,

@@ -454,3 +454,32 @@ volume_tracks_camera = true
     std::fs::write(&scene, both).expect("write");
     fails_with(&["render", "--scene", &s(&scene), "--out", &s(&tmp("x.png"))], "[[volumes]]");
 }
+
+#[test]
+fn gpu_render_keeps_the_field_on_the_device_and_draws_probes_on_the_cpu_camera() {
+    // Where the suite requires the GPU tests (scripts/test.sh found a Vulkan driver).
+    if std::env::var_os("PROBEGI_REQUIRE_GPU").is_none() {
+        eprintln!("skipped: PROBEGI_REQUIRE_GPU is not set");
+        return;
+    }
+    let s = |p: &PathBuf| p.to_string_lossy().into_owned();
+    for show_probes in [false, true] {
+        let (png, stats, atlases) = (tmp("gpu.png"), tmp("gpu.json"), tmp("gpu-atlases"));
+        let mut args = vec!["render", "--gi", "ddgi", "--backend", "wgpu", "--frames", "3", "--width", "32"];
+        args.extend(["--height", "24", "--probes", "4,4,4", "--rays-per-probe", "32"]);
+        let (png_s, stats_s, atlases_s) = (s(&png), s(&stats), s(&atlases));
+        args.extend(["--out", &png_s, "--stats", &stats_s, "--dump-atlases", &atlases_s]);
+        if show_probes {
+            args.push("--show-probes");
+        }
+        let o = probegi(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+        assert_eq!(json["backend"], "wgpu");
+        assert_eq!(json["probe_shade_on"], "gpu");
+        assert_eq!(json["camera_on"], if show_probes { "cpu" } else { "gpu" });
+        // The atlases were read back from the device for the dump.
+        assert!(atlases.join("irradiance.exr").exists());
+    }
+}

@@ -46,8 +46,21 @@
 //! Tracking targets given while an exchange is under way are applied at the next
 //! `begin_update`, so a batch never refers to probes that moved under it.
 //!
+//! **A device that keeps the field.** A caller whose hits, shading and atlases live
+//! on another device (a GPU) reads back only what the set's bookkeeping needs,
+//! which [`DdgiFieldSet::hits_needed_on_host`] names per batch: for a relocation
+//! round the new offsets ([`DdgiFieldSet::device_relocation_plan`] →
+//! [`DdgiFieldSet::submit_device_relocation`]), for the jcgt classification round
+//! (inside, kept) per probe ([`DdgiFieldSet::device_classification_plan`] →
+//! [`DdgiFieldSet::submit_device_classification`]), for an update batch the usage
+//! counts under the usage scheme or nothing ([`DdgiFieldSet::submit_device_hits`]);
+//! then it blends there by [`DdgiFieldSet::device_blend_plan`] and reports with
+//! [`DdgiFieldSet::submit_device_blend`]. The volumes' own atlases are then stale
+//! ([`DdgiFieldSet::field_on_device`]) until the device's are copied back
+//! ([`DdgiFieldSet::accept_host_atlases`]); a host blend refuses to run until then.
+//!
 //! [`DdgiFieldSet::update`] (in `ddgi_scene_update`) is the convenience that plays
-//! both caller roles with probegi's own scene, tracer and shading.
+//! both caller roles with probegi's own scene, tracer and shading, on either path.
 
 use std::collections::BTreeMap;
 

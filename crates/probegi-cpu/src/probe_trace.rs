@@ -45,7 +45,9 @@ pub fn trace_probe_batch(
 }
 
 /// Work a render hands to another device: every probe ray batch's trace, and
-/// optionally its shade and the camera frame. The CLI's `--backend wgpu` plugs
+/// optionally its shade and the camera frame, or (`trace_on_device`,
+/// `relocate_on_device`, `classify_on_device`, `shade_and_blend_on_device`) the
+/// whole update with the atlases kept there. The CLI's `--backend wgpu` plugs
 /// in `probegi-wgpu-seam`'s GPU passes here. The hits must be what [`RayTracer::closest_hit`] returns for the ray
 /// `Ray::segment(origin, direction, max_distance)` (both faces).
 pub trait ProbeBatchTracer: Sync {

@@ -204,3 +204,56 @@ fn sponza_is_relocated_and_classified_on_the_gpu_as_on_the_host() {
     assert!(worst <= 1e-6, "offsets differ by {worst} m");
     assert_eq!(differ, 0, "probe states");
 }
+
+#[test]
+fn cascades_kept_on_the_gpu_converge_in_the_furnace() {
+    // Seed 003 §6.2: three camera-centred cascades under Algorithm 2, every one
+    // blended into the device's field (one ray batch, three atlas ranges of one
+    // buffer), the camera frame reading it there: L = Le / (1 − ρ) = 2.
+    use probegi_core::camera::CameraRays;
+    use probegi_core::ddgi_settings::DdgiFieldSetSettings;
+    use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+    use probegi_cpu::probe_trace::ProbeTracerHandle;
+    let scene = probegi_scene::builtin::furnace_box(0.5, 1.0);
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
+    let gpu = WgpuProbeTracer::new(ctx, &scene, &bvh, true).expect("upload").keeping_field(true);
+    assert!(gpu.keeps_field() && gpu.renders_camera());
+    let gpu = std::sync::Arc::new(gpu);
+    let camera = scene.camera.expect("camera");
+    let rays = CameraRays::new(&camera, 24, 24);
+    let base = DdgiVolumeSettings {
+        probe_hysteresis: 0.8,
+        probe_counts: UVec3::splat(5),
+        probe_rays_per_probe: 64,
+        ..Default::default()
+    };
+    let (lo, hi) = scene.bounds().expect("bounds");
+    let set = DdgiFieldSetSettings::cascades(3, &base, (hi - lo) / 8.0, 2.0);
+    let settings = RenderSettings {
+        width: 24,
+        height: 24,
+        frames: 80,
+        seed: 2,
+        gi: GiMethod::DdgiSet(Box::new(set)),
+        direct: DirectSettings::default(),
+        show_probes: false,
+        camera_path: Vec::new(),
+        probe_tracer: Some(ProbeTracerHandle(gpu.clone())),
+    };
+    let out = render_frames(&scene, &bvh, &rays, &settings, |_, _| {});
+    assert_eq!(out.stats.error, None);
+    let mean = out.image.mean();
+    eprintln!(
+        "furnace under 3 cascades kept on the GPU: image mean {mean} (analytic 2); field {} KiB on the device",
+        gpu.field_bytes() / 1024
+    );
+    assert!((mean.x - 2.0).abs() < 0.06, "mean {mean}, want 2 within 3 %");
+    let set = out.ddgi.expect("set");
+    assert!(!set.field_on_device(), "the render reads the field back at its end");
+    assert_eq!(set.volumes().len(), 3);
+    for v in set.volumes() {
+        v.validate();
+        assert!(v.irradiance.texels.iter().any(|t| t.x > 0.0), "every cascade was blended on the device");
+    }
+}

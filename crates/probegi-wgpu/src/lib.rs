@@ -14,13 +14,17 @@
 //!   rays, the field query);
 //! - [`ddgi_query`]: the query of a set of volumes as WGSL an engine includes;
 //! - [`probe_blend`]: the blend (γ encoding, seed 004 Listing 3's thresholds,
-//!   distance moments) and border passes over device-resident atlases;
+//!   distance moments, over the CPU's own weight tables) and border passes over
+//!   device-resident atlases (a volume's own, or its range of a resident field);
+//! - [`probe_relocation`], [`probe_classification`], [`probe_usage`]: seed 004
+//!   Listing 4's relocation iteration, Listing 5's classification round and seed
+//!   003's usage counts over a traced batch where it lies;
 //! - [`probe_ray_gen`]: rotated spherical Fibonacci rays written straight into
 //!   a trace batch.
 //!
-//! Not built yet: relocation and classification, the probe states, a top-level BVH
-//! for moving objects and instances, and an update loop whose atlases live on
-//! the device (`probegi-wgpu-seam` blends on the CPU and uploads the atlases).
+//! `probegi-wgpu-seam` drives these passes through the field set's seam, the
+//! atlases kept on the device. Not built yet: a top-level BVH for moving objects
+//! and instances, and ray generation inside that loop (it uploads the host's rays).
 //! This crate depends on `probegi-core` (settings, layouts, encodings) and
 //! `probegi-scene` (the BVH and the scene), and never on the CPU backend.
 
