@@ -154,10 +154,11 @@ pub fn time_gpu_passes(
         "trace_mrays_per_s": ray_count / (trace_ms * 1e-3) / 1e6,
         "gpu_passes_mrays_per_s": ray_count / (all_ms * 1e-3) / 1e6,
         "gpu_passes": pass_ms.keys().collect::<Vec<_>>(),
-        "not_on_gpu": if gpu.shades() {
-            vec!["classification, relocation and probe states (CPU)"]
+        // In the field update timed above (these pass times are the passes alone).
+        "not_on_gpu": if gpu.keeps_field() {
+            vec!["batch planning and probe-state bookkeeping (host)"]
         } else {
-            vec!["shade (CPU)", "classification, relocation and probe states (CPU)"]
+            vec!["shade, blend, border (CPU)", "relocation, classification and probe states (CPU)"]
         },
         "bvh_mib": gpu.bvh.bytes() as f64 / (1u64 << 20) as f64,
         "device_bytes_per_probe": atlas_bytes_per_probe,
