@@ -218,10 +218,11 @@ pub struct RenderArgs {
     /// Playback rate of the --gif preview.
     #[arg(long, default_value_t = 25.0, requires = "gif")]
     pub gif_fps: f32,
-    /// `cpu`, or `wgpu`: the DDGI field's update (trace, shade, blend, border,
-    /// relocation, classification) and the camera frame run as WGSL compute
-    /// shaders on a GPU (or Mesa's lavapipe), the atlases kept there; static
-    /// scenes only. With --show-probes the camera frame is the CPU's.
+    /// `cpu`, or `wgpu`: the DDGI field's update (ray generation, trace, shade,
+    /// blend, border, relocation, classification) and the camera frame run as
+    /// WGSL compute shaders on a GPU (or Mesa's lavapipe), the atlases kept
+    /// there; static scenes only. With --show-probes the camera frame is the
+    /// CPU's, and the atlases come back every frame for it.
     #[arg(long, value_enum, default_value_t = crate::gpu_backend::Backend::Cpu)]
     pub backend: crate::gpu_backend::Backend,
 }

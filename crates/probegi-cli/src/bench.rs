@@ -136,6 +136,9 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
                 set.update_traced_by(&scene, &bvh, batch_tracer, &direct, args.seed, f, &mut pass_ms)
                     .map_err(anyhow::Error::msg)?;
             }
+            // After the timed frames: the field back on the host, as the update left
+            // it (the GPU passes alone below start from it).
+            set.sync_host_atlases(batch_tracer).map_err(anyhow::Error::msg)?;
             let volume = &set.volumes()[0];
             for v in pass_ms.values_mut() {
                 *v /= args.frames as f64;

@@ -79,6 +79,9 @@ pub fn cascade_field_weight(grid: &ProbeGrid, point: Vec3) -> f32 {
 #[derive(Clone, Copy)]
 pub struct SetMember<'a> {
     pub field: DdgiFieldView<'a>,
+    /// The member's index among the set's volumes as given (its place in
+    /// sampling order may differ: densest first).
+    pub volume: usize,
     /// The volume tracks the camera (camera-aware blending under `Density`).
     pub tracks_camera: bool,
 }
@@ -189,6 +192,7 @@ mod tests {
 
         fn member(&self, tracks_camera: bool) -> SetMember<'_> {
             SetMember {
+                volume: 0,
                 field: DdgiFieldView {
                     grid: &self.grid,
                     settings: &self.settings,

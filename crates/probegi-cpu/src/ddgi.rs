@@ -400,6 +400,17 @@ impl DdgiVolume {
         reset
     }
 
+    /// Clears again the tiles of the probes reset since the last blend (after the
+    /// atlases were copied back from a device that had not cleared them yet).
+    pub(crate) fn clear_reset_tiles(&mut self) {
+        for &p in &self.probes_reset_since_blend {
+            if (p as usize) < self.grid.probe_count() {
+                self.irradiance.tile_mut(p as usize).fill(Vec3::ZERO);
+                self.distance.tile_mut(p as usize).fill(Vec2::ZERO);
+            }
+        }
+    }
+
     /// Forgets everything probe `p` knew: it is a new probe at its grid point.
     fn reset_probe(&mut self, p: usize) {
         self.irradiance.tile_mut(p).fill(Vec3::ZERO);
@@ -660,6 +671,7 @@ impl DdgiVolume {
         frame.rays = generate_probe_rays(&self.settings, self.stream_seed(seed), frame_index);
         frame.ray_count = frame.rays.dirs.len();
         frame.first_ray = vec![u32::MAX; probes];
+        let first_probe = batch.probes.len() as u32;
         for p in 0..probes {
             if frame.tracing[p] {
                 frame.first_ray[p] = batch.push_probe(
@@ -671,6 +683,14 @@ impl DdgiVolume {
                 );
             }
         }
+        batch.generated.push(crate::ddgi_field_set::GeneratedProbeRays {
+            volume,
+            first_probe,
+            probe_count: batch.probes.len() as u32 - first_probe,
+            rays_per_probe: frame.ray_count as u32,
+            rotation: crate::probe_ray_gen::probe_ray_rotation(self.stream_seed(seed), frame_index),
+            max_distance_m: self.settings.probe_max_ray_distance_m,
+        });
         self.traced_probes_last = frame.tracing.iter().filter(|t| **t).count();
     }
 

@@ -128,6 +128,22 @@ pub struct BatchProbe {
     pub ray_count: u32,
 }
 
+/// How one volume's update rays in a batch were made: each probe of
+/// `probes[first_probe..first_probe + probe_count]` casts `rays_per_probe`
+/// rays from its origin along the spherical Fibonacci set rotated by
+/// `rotation` (`probe_ray_gen::probe_ray_directions`), up to `max_distance_m`.
+/// A device that traces the batch can make them where it traces instead of
+/// receiving them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GeneratedProbeRays {
+    pub volume: u32,
+    pub first_probe: u32,
+    pub probe_count: u32,
+    pub rays_per_probe: u32,
+    pub rotation: glam::Quat,
+    pub max_distance_m: f32,
+}
+
 /// One frame's probe rays for every volume: structure of arrays, probe-major.
 #[derive(Clone, Debug, Default)]
 pub struct ProbeRayBatch {
@@ -141,6 +157,8 @@ pub struct ProbeRayBatch {
     /// radiance the caller must supply (others are ignored).
     pub needs_radiance: Vec<bool>,
     pub probes: Vec<BatchProbe>,
+    /// Update batches: how each volume's rays were made (see [`GeneratedProbeRays`]).
+    pub generated: Vec<GeneratedProbeRays>,
 }
 
 impl ProbeRayBatch {
@@ -173,6 +191,7 @@ impl ProbeRayBatch {
         self.max_distances_m.clear();
         self.needs_radiance.clear();
         self.probes.clear();
+        self.generated.clear();
     }
 
     /// Appends one probe's rays; returns its first ray index.
@@ -346,7 +365,9 @@ impl DdgiFieldSet {
         self.volumes
     }
 
-    /// The query's view of the set.
+    /// The query's view of the set. While [`Self::field_on_device`] its atlases
+    /// are stale (the per-probe data is current): copy the device's back first
+    /// ([`Self::accept_host_atlases`], `sync_host_atlases`).
     pub fn view(&self) -> DdgiFieldSetView<'_> {
         DdgiFieldSetView {
             members: self
@@ -354,7 +375,7 @@ impl DdgiFieldSet {
                 .iter()
                 .map(|&i| {
                     let v = &self.volumes[i];
-                    SetMember { field: v.view(), tracks_camera: v.settings.volume_tracks_camera }
+                    SetMember { field: v.view(), volume: i, tracks_camera: v.settings.volume_tracks_camera }
                 })
                 .collect(),
             blending: self.blending,
@@ -762,6 +783,8 @@ impl DdgiFieldSet {
     ) -> Result<(), String> {
         for (i, v) in self.volumes.iter_mut().enumerate() {
             copy(i, v)?;
+            // Tiles the host cleared since the device last blended (a scroll) stay clear.
+            v.clear_reset_tiles();
         }
         self.field_on_device = false;
         Ok(())

@@ -21,7 +21,9 @@ use crate::probe_trace::{
 
 impl DdgiFieldSet {
     /// One field update of every volume through the seam. Returns the rays traced
-    /// (probe rays plus shading shadow rays).
+    /// (probe rays plus shading shadow rays). A set whose field a device holds
+    /// (`field_on_device`) needs [`Self::update_traced_by`] with that device:
+    /// here the update is skipped (a debug assertion names it).
     pub fn update(
         &mut self,
         scene: &Scene,
@@ -31,8 +33,11 @@ impl DdgiFieldSet {
         frame: u32,
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) -> u64 {
-        // The CPU tracer cannot fail.
-        self.update_traced_by(scene, tracer, None, direct, seed, frame, pass_ms).unwrap_or(0)
+        // The CPU tracer cannot fail; a field held by a device is the caller's mistake.
+        self.update_traced_by(scene, tracer, None, direct, seed, frame, pass_ms).unwrap_or_else(|e| {
+            debug_assert!(false, "DdgiFieldSet::update: {e}");
+            0
+        })
     }
 
     /// [`DdgiFieldSet::update`] with the probe ray batches traced by `batch_tracer`

@@ -15,8 +15,12 @@
 //! - **field on the host**: the hits and the shaded radiance come back, the set
 //!   blends on the CPU and the field is uploaded for the next frame's queries.
 //!
-//! Either way the set's bookkeeping (relocation and classification from the
-//! initialisation rounds' hits, probe states, hysteresis ramps) runs on the CPU.
+//! Either way the host plans the batches and keeps the set's bookkeeping (probe
+//! states, hysteresis ramps). Relocation and classification run on the device
+//! with the field kept there (`probe_relocation`, `probe_classification`), on
+//! the host from the hits read back otherwise, and also when the volumes of a
+//! set are at different kinds of initialisation round, or the adapter binds too
+//! few storage buffers for the classification pass ([`WgpuProbeTracer::classification_note`]).
 //!
 //! This crate exists so that neither backend depends on the other: `probegi-cpu`
 //! knows nothing of wgpu, `probegi-wgpu` nothing of the CPU backend.
@@ -39,6 +43,7 @@ use probegi_wgpu::ddgi_query::GpuDdgiField;
 use probegi_wgpu::gpu_scene::{GpuScene, unsupported_by_gpu_shading};
 use probegi_wgpu::probe_blend::{GpuProbeBlend, ResidentBlend};
 use probegi_wgpu::probe_classification::{ClassifyRound, GpuProbeClassification};
+use probegi_wgpu::probe_ray_gen::GpuProbeRayGen;
 use probegi_wgpu::probe_relocation::{GpuProbeRelocation, GpuRelocationProbe};
 use probegi_wgpu::probe_shade::{GpuProbeShade, shade_info};
 use probegi_wgpu::probe_usage::{GpuProbeUsage, UsageProbe};
@@ -70,8 +75,12 @@ pub struct WgpuProbeTracer {
     keep_field: bool,
     /// The passes of the device-resident update, made with `keeping_field`.
     resident_passes: Option<(GpuProbeBlend, GpuProbeUsage, GpuProbeRelocation)>,
+    /// Ray generation for update batches (with `keeping_field`).
+    ray_gen: Option<GpuProbeRayGen>,
     /// The classification round's pass (with `keeping_field`, where the adapter binds enough buffers).
     classification: Option<GpuProbeClassification>,
+    /// Why the classification round runs on the host with the field kept, when it does.
+    pub classification_note: Option<String>,
     /// Initialisation rounds run on the device: relocation iterations, classification rounds.
     rounds_on_device: [std::sync::atomic::AtomicU32; 2],
     /// The resident field (atlases and per-probe data), once an update made it.
@@ -114,6 +123,8 @@ impl WgpuProbeTracer {
             keep_field: false,
             resident_passes: None,
             classification: None,
+            classification_note: None,
+            ray_gen: None,
             rounds_on_device: Default::default(),
             field: Mutex::new(None),
         })
@@ -127,7 +138,15 @@ impl WgpuProbeTracer {
             (GpuProbeBlend::new(&self.ctx), GpuProbeUsage::new(&self.ctx), GpuProbeRelocation::new(&self.ctx))
         });
         // Without it the classification round reads the hits back and runs on the host.
-        self.classification = if self.keep_field { GpuProbeClassification::new(&self.ctx).ok() } else { None };
+        self.classification = None;
+        self.classification_note = None;
+        if self.keep_field {
+            match GpuProbeClassification::new(&self.ctx) {
+                Ok(c) => self.classification = Some(c),
+                Err(e) => self.classification_note = Some(format!("classification on the host: {e}")),
+            }
+        }
+        self.ray_gen = self.keep_field.then(|| GpuProbeRayGen::new(&self.ctx));
         self
     }
 
@@ -138,6 +157,14 @@ impl WgpuProbeTracer {
         (self.rounds_on_device[0].load(Relaxed), self.rounds_on_device[1].load(Relaxed))
     }
 
+    /// With `generate` false (and `keeping_field`), update batches upload the
+    /// host's rays instead of generating them on the device (the directions then
+    /// equal the host's bit for bit, not to the 2.4e-5 of sin and cos on the device).
+    pub fn generating_rays(mut self, generate: bool) -> Self {
+        self.ray_gen = (self.keep_field && generate).then(|| GpuProbeRayGen::new(&self.ctx));
+        self
+    }
+
     /// Whether update batches keep the field on the device.
     pub fn keeps_field(&self) -> bool {
         self.keep_field
@@ -146,6 +173,40 @@ impl WgpuProbeTracer {
     /// Device memory of the resident field (0 before the first update on the device).
     pub fn field_bytes(&self) -> u64 {
         self.field.lock().ok().and_then(|f| f.as_ref().map(|f| f.bytes())).unwrap_or(0)
+    }
+
+    /// `batch`'s rays generated on the device, when it records how to make all
+    /// of them and this tracer keeps the field.
+    fn generate_rays(&self, batch: &ProbeRayBatch) -> Result<Option<GpuRayBatch>, GpuError> {
+        let Some(ray_gen) = self.ray_gen.as_ref() else { return Ok(None) };
+        let covered: u64 = batch.generated.iter().map(|g| g.probe_count as u64 * g.rays_per_probe as u64).sum();
+        if batch.generated.is_empty() || covered != batch.len() as u64 {
+            return Ok(None);
+        }
+        let out = self.trace.empty_batch(&self.ctx, batch.len() as u32, false)?;
+        for g in &batch.generated {
+            let probes = batch.probes.get(g.first_probe as usize..(g.first_probe + g.probe_count) as usize);
+            let Some(probes) = probes.filter(|p| p.iter().all(|p| p.ray_count == g.rays_per_probe)) else {
+                return Ok(None);
+            };
+            let Some(first) = probes.first() else { continue };
+            // Contiguous, probe-major: the volume's rays start at its first probe's.
+            if probes.iter().enumerate().any(|(k, p)| p.first_ray != first.first_ray + k as u32 * g.rays_per_probe) {
+                return Ok(None);
+            }
+            let origins: Vec<Vec3> = probes.iter().map(|p| batch.origins_m[p.first_ray as usize]).collect();
+            ray_gen.generate_into(
+                &self.ctx,
+                &out,
+                first.first_ray,
+                &origins,
+                g.max_distance_m,
+                g.rotation,
+                g.rays_per_probe,
+                None,
+            )?;
+        }
+        Ok(Some(out))
     }
 
     /// The per-ray shading flags of `batch`.
@@ -161,9 +222,15 @@ impl WgpuProbeTracer {
         info
     }
 
-    /// Traces `batch` on the device and keeps it there as the last batch.
+    /// Traces `batch` on the device and keeps it there as the last batch. An
+    /// update batch whose rays record how they were made (`batch.generated`) has
+    /// them generated on the device (`probe_ray_gen.wgsl`), with the field kept
+    /// there; others are uploaded.
     fn trace_resident(&self, batch: &ProbeRayBatch) -> Result<GpuRayBatch, GpuError> {
-        let resident = self.trace.batch(&self.ctx, &batch_rays(batch), false)?;
+        let resident = match self.generate_rays(batch)? {
+            Some(generated) => generated,
+            None => self.trace.batch(&self.ctx, &batch_rays(batch), false)?,
+        };
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         self.trace.record(&mut encoder, &self.bvh, &resident, None);
         self.ctx.queue.submit([encoder.finish()]);
@@ -359,15 +426,12 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             let t = std::time::Instant::now();
             // The field: uploaded whole when the host's atlases are current, else
             // only its per-probe data (the blend below wrote the atlases last frame).
-            let refreshed = match gpu_field.as_ref() {
-                Some(f) => f.refresh(&self.ctx, field, upload_atlases).is_ok(),
-                None => false,
-            };
-            if !refreshed {
-                if !upload_atlases {
-                    return Err(GpuError::Input("the device lost the field it held".into()));
-                }
-                *gpu_field = Some(GpuDdgiField::upload(&self.ctx, field)?);
+            match (gpu_field.as_ref(), upload_atlases) {
+                (Some(f), _) if f.refresh(&self.ctx, field, upload_atlases).is_ok() => {}
+                // First frame, or the set changed shape while the host held the field.
+                (_, true) => *gpu_field = Some(GpuDdgiField::upload(&self.ctx, field)?),
+                (Some(f), false) => f.refresh(&self.ctx, field, false)?,
+                (None, false) => return Err(GpuError::Input("the device lost the field it held".into())),
             }
             let f = gpu_field.as_ref().ok_or_else(|| GpuError::Input("no field".into()))?;
             if plan.len() != f.volumes {

@@ -75,8 +75,9 @@ pub struct GpuDdgiField {
     pub volumes: usize,
     pub probes: usize,
     bytes: u64,
-    /// Per member: probes, irradiance / distance interior, first irradiance / distance texel.
-    members: Vec<[u32; 5]>,
+    /// Per member in sampling order: probes, irradiance / distance interior,
+    /// first irradiance / distance texel, its index among the set's volumes.
+    members: Vec<[u32; 6]>,
     /// Set, irradiance, distance, probes.
     buffers: [wgpu::Buffer; 4],
     bind_group: wgpu::BindGroup,
@@ -91,7 +92,7 @@ struct PackedField {
     /// Texels of the atlases (packed or not).
     irradiance_texels: usize,
     distance_texels: usize,
-    members: Vec<[u32; 5]>,
+    members: Vec<[u32; 6]>,
 }
 
 fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedField, GpuError> {
@@ -132,7 +133,7 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
             ProbeBiasMode::Normal => 2,
         };
         let (irr_first, dist_first) = (irradiance_texels as u32, distance_texels as u32);
-        members.push([n as u32, f.irradiance.interior, f.distance.interior, irr_first, dist_first]);
+        members.push([n as u32, f.irradiance.interior, f.distance.interior, irr_first, dist_first, m.volume as u32]);
         volumes.push(GpuDdgiVolume {
             origin_m: [g.origin_m.x, g.origin_m.y, g.origin_m.z, g.min_spacing_m()],
             spacing_m: [g.spacing_m.x, g.spacing_m.y, g.spacing_m.z, s.probe_irradiance_gamma],
@@ -262,9 +263,11 @@ impl GpuDdgiField {
         Ok(())
     }
 
-    /// Member `m`'s atlases as the blend's targets: its range of the field's buffers.
-    pub fn member_atlases(&self, m: usize) -> Option<crate::probe_blend::GpuVolumeAtlases> {
-        let [probes, ni, nd, irr_first, dist_first] = *self.members.get(m)?;
+    /// The atlases of the set's volume `volume` (its index among the set's
+    /// volumes as given, `SetMember::volume`, not its place in sampling order) as
+    /// the blend's targets: its range of the field's buffers.
+    pub fn member_atlases(&self, volume: usize) -> Option<crate::probe_blend::GpuVolumeAtlases> {
+        let [probes, ni, nd, irr_first, dist_first, _] = *self.members.iter().find(|m| m[5] as usize == volume)?;
         Some(crate::probe_blend::GpuVolumeAtlases {
             probe_count: probes as usize,
             irradiance_interior: ni,

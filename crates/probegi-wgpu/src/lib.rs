@@ -24,7 +24,7 @@
 //!
 //! `probegi-wgpu-seam` drives these passes through the field set's seam, the
 //! atlases kept on the device. Not built yet: a top-level BVH for moving objects
-//! and instances, and ray generation inside that loop (it uploads the host's rays).
+//! and instances.
 //! This crate depends on `probegi-core` (settings, layouts, encodings) and
 //! `probegi-scene` (the BVH and the scene), and never on the CPU backend.
 

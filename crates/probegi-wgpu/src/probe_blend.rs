@@ -2,9 +2,10 @@
 //! `probegi_core::probe_blend::{blend_irradiance_tile, blend_distance_tile}` and
 //! `probegi_core::probe_border::update_tile_border` (seed 003 §4.5, seed 004
 //! §2.3 eq. 1, §4.2 Listing 1, §4.3 Listing 3). One thread per interior texel per
-//! probe; the texel-to-ray weights are computed in the shader from the frame's
-//! ray directions with the CPU table's cutoff (`BLEND_WEIGHT_EPSILON`), summed
-//! in the same ray order.
+//! probe, over the frame's sparse texel-to-ray weight tables as
+//! `probegi_core::probe_blend::BlendWeights` builds them, uploaded (one owner of
+//! the weights: the same entries summed in the same order as on the CPU, and no
+//! `pow(cos, k)` per texel and ray on the device).
 //!
 //! Atlases stay on the device ([`GpuVolumeAtlases`]) in the CPU's tile-major
 //! layout (`probegi_core::probe_atlas`); irradiance texels are `vec4<f32>` there

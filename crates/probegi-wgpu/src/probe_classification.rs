@@ -3,9 +3,10 @@
 //! `classify_jcgt_pending` with `probegi_core::probe_classification::{probe_watches,
 //! uncovered_point_probe}`: per probe of one volume, whether it is inside geometry
 //! and whether it is kept (it watches a front face, or the covering pass chose it
-//! for a surface point no front-side cage probe served). The covering pass runs in
-//! one invocation, in the CPU's probe and ray order, so both backends keep the
-//! same probes. The rays and hits stay where the trace left them; the host reads
+//! for a surface point no front-side cage probe served). The covering pass runs
+//! one invocation at a time over chunks of probes (about 4096 rays each), in the
+//! CPU's probe and ray order, so both backends keep the same probes (a single
+//! invocation over the shared Sponza's 131 072 rays was cut short on lavapipe). The rays and hits stay where the trace left them; the host reads
 //! back 16 bytes a probe.
 
 use bytemuck::{Pod, Zeroable};

@@ -6,8 +6,11 @@
 //! agree with the CPU's to the rounding of sin and cos, 2.4e-5 on lavapipe
 //! (`tests/ray_gen_equivalence.rs`).
 //!
-//! The seam's batches are still planned on the CPU (relocation offsets, states),
-//! so `render` uploads the CPU's rays; `bench --backend wgpu` times this pass.
+//! The seam's update batches are planned on the CPU (which probes trace, their
+//! relocated origins), and record how their rays were made
+//! (`probegi_cpu::ddgi_field_set::GeneratedProbeRays`), so the device-resident
+//! update generates them here ([`GpuProbeRayGen::generate_into`]) instead of
+//! receiving them; `bench --backend wgpu` times this pass alone.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Quat, Vec3};
@@ -24,7 +27,8 @@ pub struct RayGenParams {
     pub rays_per_probe: u32,
     pub probe_count: u32,
     pub groups_x: u32,
-    pub _pad: u32,
+    /// Where the probes' rays start in the batch.
+    pub first_ray: u32,
 }
 const _: () = assert!(std::mem::size_of::<RayGenParams>() == 32);
 
@@ -81,8 +85,35 @@ impl GpuProbeRayGen {
             )));
         }
         let batch = trace.empty_batch(ctx, n as u32, false)?;
+        self.generate_into(ctx, &batch, 0, origins, max_distance_m, rotation, rays_per_probe, timer)?;
+        Ok(batch)
+    }
+
+    /// Writes `origins.len() × rays_per_probe` rays, as [`Self::generate`] makes
+    /// them, into `batch` from ray `first_ray` on (one volume's share of a
+    /// batch several volumes trace together).
+    #[allow(clippy::too_many_arguments)]
+    pub fn generate_into(
+        &self,
+        ctx: &GpuContext,
+        batch: &GpuRayBatch,
+        first_ray: u32,
+        origins: &[Vec3],
+        max_distance_m: f32,
+        rotation: Quat,
+        rays_per_probe: u32,
+        timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
+    ) -> Result<(), GpuError> {
+        let n = origins.len() as u64 * rays_per_probe as u64;
+        if first_ray as u64 + n > batch.ray_count as u64 {
+            return Err(GpuError::Input(format!(
+                "rays {first_ray}..{} lie past the batch's {}",
+                first_ray as u64 + n,
+                batch.ray_count
+            )));
+        }
         if n == 0 {
-            return Ok(batch);
+            return Ok(());
         }
         let (gx, gy) = dispatch_2d(n as u32);
         let params = RayGenParams {
@@ -90,7 +121,7 @@ impl GpuProbeRayGen {
             rays_per_probe,
             probe_count: origins.len() as u32,
             groups_x: gx,
-            _pad: 0,
+            first_ray,
         };
         let t_max = max_distance_m.min(f32::MAX);
         let probes: Vec<[f32; 4]> = origins.iter().map(|o| [o.x, o.y, o.z, t_max]).collect();
@@ -125,6 +156,6 @@ impl GpuProbeRayGen {
             pass.dispatch_workgroups(gx, gy, 1);
         }
         ctx.queue.submit([encoder.finish()]);
-        Ok(batch)
+        Ok(())
     }
 }

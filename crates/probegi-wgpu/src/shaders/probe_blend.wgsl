@@ -145,8 +145,9 @@ fn blend_distance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgr
     for (var e = e0; e < e1; e++) {
         let k = params.weight_entries_first + 2u * e;
         let w = bitcast<f32>(blend_weights[k + 1u]);
-        let d = min(abs(ray_results[first + blend_weights[k]].w), params.distance_clamp_m);
-        if (d != d) { continue; }
+        let signed = ray_results[first + blend_weights[k]].w;
+        if (signed != signed) { continue; } // NaN before min, which may drop it
+        let d = min(abs(signed), params.distance_clamp_m);
         sum += vec2<f32>(d, d * d) * w;
         wsum += w;
     }

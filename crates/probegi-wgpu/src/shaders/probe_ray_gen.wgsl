@@ -12,7 +12,7 @@ struct RayGenParams {
     rays_per_probe: u32,
     probe_count: u32,
     groups_x: u32,
-    _pad: u32,
+    first_ray: u32,       // where these probes' rays start in the batch
 };
 
 struct GenRay {
@@ -53,5 +53,5 @@ fn generate_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_inv
     }
     let probe = ray_gen_probes[k / n];
     let dir = normalize(quat_rotate(ray_gen.rotation, spherical_fibonacci(k % n, n)));
-    ray_gen_rays[k] = GenRay(probe.xyz, 0.0, dir, probe.w);
+    ray_gen_rays[ray_gen.first_ray + k] = GenRay(probe.xyz, 0.0, dir, probe.w);
 }
