@@ -18,7 +18,15 @@ fi
 
 # GPU tests (crates/probegi-wgpu) run on any Vulkan driver; without one, install
 # Mesa's software Vulkan (lavapipe) when apt is usable, and then require them.
-have_vulkan() { ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json >/dev/null 2>&1; }
+# Any ICD manifest in either folder (one of them may exist empty: `ls a/* b/*`
+# fails when either glob matches nothing, which skipped the GPU tests' requirement).
+have_vulkan() {
+  local f
+  for f in /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json; do
+    [ -e "$f" ] && return 0
+  done
+  return 1
+}
 if ! have_vulkan && command -v apt-get >/dev/null 2>&1; then
   echo "no Vulkan driver found: installing mesa-vulkan-drivers (lavapipe) for the GPU tests" >&2
   SUDO=""; [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1 && SUDO="sudo -n"
