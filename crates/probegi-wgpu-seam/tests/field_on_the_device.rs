@@ -142,16 +142,21 @@ fn a_field_kept_on_the_gpu_with_its_own_rays_stays_within_the_ray_directions_rou
     run_pair(settings, 100, &[0, 99], true, (3e-4, 3e-3));
 }
 
-#[test]
-fn usage_states_from_gpu_counts_match_the_host_ones() {
-    // Relocation off, so the probes inside the Cornell box's blocks stay there and go DEAD.
-    let settings = DdgiVolumeSettings {
+/// Seed 003's usage scheme on the Cornell box, 8³ probes × 64 rays; relocation
+/// off, so the probes inside the blocks stay there and go DEAD.
+fn usage_settings() -> DdgiVolumeSettings {
+    DdgiVolumeSettings {
         probe_counts: UVec3::splat(8),
         probe_rays_per_probe: 64,
         probe_states: ProbeStatesMode::Usage,
         probe_relocation: false,
         ..Default::default()
-    };
+    }
+}
+
+#[test]
+fn usage_states_from_gpu_counts_match_the_host_ones() {
+    let settings = usage_settings();
     run_pair(settings, 12, &[0, 11], false, (1e-5, 1e-5));
 }
 
@@ -160,13 +165,7 @@ fn gpu_usage_counts_equal_the_core_function_over_the_same_hits() {
     let scene = probegi_scene::builtin::cornell_box();
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let Some(device) = gpu(&scene, &bvh, true) else { return };
-    let settings = DdgiVolumeSettings {
-        probe_counts: UVec3::splat(8),
-        probe_rays_per_probe: 64,
-        probe_states: ProbeStatesMode::Usage,
-        probe_relocation: false,
-        ..Default::default()
-    };
+    let settings = usage_settings();
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, scene.bounds().expect("geometry")));
     set.update_traced_by(&scene, &bvh, Some(&device), &direct, 3, 0, &mut BTreeMap::new()).expect("frame 0");

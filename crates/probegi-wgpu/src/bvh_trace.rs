@@ -295,6 +295,18 @@ impl GpuRayBatch {
         &self.hits
     }
 
+    /// An error when rays `first..first + count` are not all in the batch.
+    pub(crate) fn check_rays(&self, first: u32, count: u32) -> Result<(), GpuError> {
+        let end = first as u64 + count as u64;
+        if end > self.ray_count as u64 {
+            return Err(GpuError::Input(format!(
+                "a probe's rays {first}..{end} lie past the batch's {} rays",
+                self.ray_count
+            )));
+        }
+        Ok(())
+    }
+
     /// Device memory of the rays and hits.
     pub fn bytes(&self) -> u64 {
         self.rays.size() + self.hits.size()

@@ -2,6 +2,7 @@
 //! the first adapter wgpu finds (lavapipe's software Vulkan included).
 
 use std::fmt;
+use wgpu::util::DeviceExt;
 
 /// Why no device could be used.
 #[derive(Debug)]
@@ -42,6 +43,10 @@ pub struct GpuContext {
     /// Whether the device records GPU timestamps (`Features::TIMESTAMP_QUERY`).
     pub timestamps: bool,
 }
+
+/// One compute pass of [`GpuContext::run_passes`]: the pipeline, its bind groups
+/// from group 0 on (`None`: unused), and the workgroups in x and y.
+pub(crate) type PassStep<'a> = (&'a wgpu::ComputePipeline, Vec<Option<&'a wgpu::BindGroup>>, (u32, u32));
 
 impl GpuContext {
     /// A headless device on the default backends (Vulkan, Metal, DX12, GL).
@@ -123,6 +128,70 @@ impl GpuContext {
             )));
         }
         Ok(())
+    }
+
+    /// Compute pipelines for `entries` of one WGSL module over `layouts` (one per
+    /// bind group; `None` for a group the module does not use).
+    pub(crate) fn compute_pipelines<const N: usize>(
+        &self,
+        label: &str,
+        source: String,
+        layouts: &[Option<&wgpu::BindGroupLayout>],
+        entries: [&str; N],
+    ) -> [wgpu::ComputePipeline; N] {
+        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: layouts,
+            immediate_size: 0,
+        });
+        entries.map(|entry| {
+            self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        })
+    }
+
+    /// A buffer holding `contents`.
+    pub(crate) fn buffer_with(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+    }
+
+    /// A storage buffer of `bytes` a pass writes and the host reads back.
+    pub(crate) fn output_buffer(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes.max(16),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Submits `steps` ([`PassStep`]: pipeline, bind groups from group 0 on with `None` for an
+    /// unused one, workgroups x and y), one compute pass each so every step sees
+    /// what the steps before it wrote.
+    pub(crate) fn run_passes(&self, label: &str, steps: &[PassStep<'_>]) {
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        for (pipeline, groups, (x, y)) in steps {
+            let mut pass =
+                encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+            pass.set_pipeline(pipeline);
+            for (i, g) in groups.iter().enumerate() {
+                if let Some(g) = g {
+                    pass.set_bind_group(i as u32, *g, &[]);
+                }
+            }
+            pass.dispatch_workgroups(*x, *y, 1);
+        }
+        self.queue.submit([encoder.finish()]);
     }
 
     /// Waits until every submitted command has run.

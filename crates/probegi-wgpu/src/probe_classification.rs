@@ -11,7 +11,6 @@
 
 use bytemuck::{Pod, Zeroable};
 use probegi_core::probe_grid::ProbeGrid;
-use wgpu::util::DeviceExt;
 
 use crate::bvh_trace::{GpuBvh, GpuRayBatch, bvh_bind_group_layout, dispatch_2d, storage_entry, uniform_entry};
 use crate::gpu_context::{GpuContext, GpuError};
@@ -71,10 +70,6 @@ impl GpuProbeClassification {
             include_str!("shaders/scene.wgsl"),
             include_str!("shaders/probe_classification.wgsl")
         );
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("probe_classification.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
         let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("probe classification"),
             entries: &[
@@ -87,22 +82,13 @@ impl GpuProbeClassification {
             ],
         });
         let (bvh_layout, scene_layout) = (bvh_bind_group_layout(&ctx.device), scene_bind_group_layout(&ctx.device));
-        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("probe classification"),
-            bind_group_layouts: &[Some(&layout), Some(&bvh_layout), None, Some(&scene_layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |entry: &str| {
-            ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
-        Ok(Self { first: pipeline("classify_first"), cover: pipeline("classify_cover"), layout })
+        let [first, cover] = ctx.compute_pipelines(
+            "probe_classification.wgsl",
+            source,
+            &[Some(&layout), Some(&bvh_layout), None, Some(&scene_layout)],
+            ["classify_first", "classify_cover"],
+        );
+        Ok(Self { first, cover, layout })
     }
 
     /// Per probe of `round`: (inside geometry, kept), from `batch`'s rays and hits.
@@ -122,15 +108,8 @@ impl GpuProbeClassification {
         if n == 0 {
             return Ok(vec![]);
         }
-        let rays = round.rays_per_probe as u64;
-        if let Some(first) =
-            round.probes.iter().filter_map(|p| p.first_ray).find(|f| *f as u64 + rays > batch.ray_count as u64)
-        {
-            return Err(GpuError::Input(format!(
-                "a probe's rays {first}..{} lie past the batch's {} rays",
-                first as u64 + rays,
-                batch.ray_count
-            )));
+        for first in round.probes.iter().filter_map(|p| p.first_ray) {
+            batch.check_rays(first, round.rays_per_probe)?;
         }
         let (gx, gy) = dispatch_2d(n as u32);
         let params = ClassifyParams {
@@ -158,55 +137,34 @@ impl GpuProbeClassification {
             .map(|p| [p.first_ray.unwrap_or(u32::MAX), p.pending as u32, p.traces as u32, 0])
             .collect();
         let positions: Vec<[f32; 4]> = round.probes.iter().map(|p| p.position_m.extend(0.0).into()).collect();
-        let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
-        };
         let storage = wgpu::BufferUsages::STORAGE;
-        let params = init("classify params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        let rows = init("classify probes", bytemuck::cast_slice(&rows), storage);
-        let positions = init("classify positions", bytemuck::cast_slice(&positions), storage);
-        let out = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("classify out"),
-            size: n as u64 * 16,
-            usage: storage | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
+        let params = ctx.buffer_with("classify params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let rows = ctx.buffer_with("classify probes", bytemuck::cast_slice(&rows), storage);
+        let positions = ctx.buffer_with("classify positions", bytemuck::cast_slice(&positions), storage);
+        let out = ctx.output_buffer("classify out", n as u64 * 16);
         let bind = |params: wgpu::Buffer| {
-            crate::bvh_trace::buffers_bind_group(
-                &ctx.device,
-                "probe classification",
-                &self.layout,
-                &[
-                    params,
-                    batch.rays_buffer().clone(),
-                    batch.hits_buffer().clone(),
-                    rows.clone(),
-                    positions.clone(),
-                    out.clone(),
-                ],
-            )
+            let buffers = [params, batch.rays_buffer().clone(), batch.hits_buffer().clone()];
+            let buffers = [buffers.as_slice(), &[rows.clone(), positions.clone(), out.clone()]].concat();
+            crate::bvh_trace::buffers_bind_group(&ctx.device, "probe classification", &self.layout, &buffers)
         };
-        let mut steps = vec![(&self.first, bind(params), (gx, gy))];
+        let mut bind_groups = vec![bind(params)];
         for c in &chunks {
-            let p = init("classify cover params", bytemuck::bytes_of(c), wgpu::BufferUsages::UNIFORM);
-            steps.push((&self.cover, bind(p), (1, 1)));
+            let p = ctx.buffer_with("classify cover params", bytemuck::bytes_of(c), wgpu::BufferUsages::UNIFORM);
+            bind_groups.push(bind(p));
         }
-        let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        for (pipeline, bind_group, groups) in &steps {
-            // One pass each: every step reads what the ones before it wrote.
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("probe classification"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, bind_group, &[]);
-            pass.set_bind_group(1, bvh.bind_group(), &[]);
-            pass.set_bind_group(3, scene.bind_group(), &[]);
-            pass.dispatch_workgroups(groups.0, groups.1, 1);
-        }
-        ctx.queue.submit([encoder.finish()]);
+        // The first pass, then the covering pass chunk after chunk (each reads what
+        // the steps before it wrote).
+        let steps: Vec<_> = bind_groups
+            .iter()
+            .enumerate()
+            .map(|(k, g)| {
+                let (pipeline, groups) = if k == 0 { (&self.first, (gx, gy)) } else { (&self.cover, (1, 1)) };
+                (pipeline, vec![Some(g), Some(bvh.bind_group()), None, Some(scene.bind_group())], groups)
+            })
+            .collect();
+        ctx.run_passes("probe classification", &steps);
         let bytes = ctx.read_back(&out)?;
         let v: &[[u32; 4]] = bytemuck::cast_slice(&bytes);
-        Ok(v.iter().map(|o| (o[0] != 0, o[1] != 0)).collect())
+        Ok(v.iter().take(n).map(|o| (o[0] != 0, o[1] != 0)).collect())
     }
 }

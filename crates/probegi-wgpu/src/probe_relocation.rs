@@ -7,7 +7,6 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
-use wgpu::util::DeviceExt;
 
 use crate::bvh_trace::{GpuRayBatch, dispatch_2d, storage_entry, uniform_entry};
 use crate::gpu_context::{GpuContext, GpuError};
@@ -45,10 +44,6 @@ pub struct GpuProbeRelocation {
 
 impl GpuProbeRelocation {
     pub fn new(ctx: &GpuContext) -> Self {
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("probe_relocation.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/probe_relocation.wgsl").into()),
-        });
         let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("probe relocation"),
             entries: &[
@@ -59,19 +54,12 @@ impl GpuProbeRelocation {
                 storage_entry(4, false),
             ],
         });
-        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("probe relocation"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("relocate_probes"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("relocate_probes"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let [pipeline] = ctx.compute_pipelines(
+            "probe_relocation.wgsl",
+            include_str!("shaders/probe_relocation.wgsl").into(),
+            &[Some(&layout)],
+            ["relocate_probes"],
+        );
         Self { layout, pipeline }
     }
 
@@ -85,46 +73,23 @@ impl GpuProbeRelocation {
         if probes.is_empty() {
             return Ok(vec![]);
         }
-        if let Some(p) = probes.iter().find(|p| p.first_ray as u64 + p.ray_count as u64 > batch.ray_count as u64) {
-            return Err(GpuError::Input(format!(
-                "a probe's rays {}..{} lie past the batch's {} rays",
-                p.first_ray,
-                p.first_ray as u64 + p.ray_count as u64,
-                batch.ray_count
-            )));
+        for p in probes {
+            batch.check_rays(p.first_ray, p.ray_count)?;
         }
         let (gx, gy) = dispatch_2d(probes.len() as u32);
         let params = RelocationParams { probe_count: probes.len() as u32, groups_x: gx, _pad: [0; 2] };
-        let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
-        };
-        let params = init("relocation params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        let rows = init("relocation probes", bytemuck::cast_slice(probes), wgpu::BufferUsages::STORAGE);
-        let out = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("relocation offsets"),
-            size: probes.len() as u64 * 16,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
+        let params = ctx.buffer_with("relocation params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let rows = ctx.buffer_with("relocation probes", bytemuck::cast_slice(probes), wgpu::BufferUsages::STORAGE);
+        let out = ctx.output_buffer("relocation offsets", probes.len() as u64 * 16);
         let bind_group = crate::bvh_trace::buffers_bind_group(
             &ctx.device,
             "probe relocation",
             &self.layout,
             &[params, batch.rays_buffer().clone(), batch.hits_buffer().clone(), rows, out.clone()],
         );
-        let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("probe relocation"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(gx, gy, 1);
-        }
-        ctx.queue.submit([encoder.finish()]);
+        ctx.run_passes("probe relocation", &[(&self.pipeline, vec![Some(&bind_group)], (gx, gy))]);
         let bytes = ctx.read_back(&out)?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-        Ok(v.iter().map(|o| Vec3::new(o[0], o[1], o[2])).collect())
+        Ok(v.iter().take(probes.len()).map(|o| Vec3::new(o[0], o[1], o[2])).collect())
     }
 }
