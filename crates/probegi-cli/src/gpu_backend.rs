@@ -22,13 +22,11 @@ pub enum Backend {
 pub use probegi_wgpu_seam::WgpuProbeTracer;
 
 /// A headless device with the scene on it; a clear error when there is no
-/// adapter or the scene needs what the GPU trace lacks (a TLAS). Were the GPU
+/// adapter. Moving objects and instanced meshes go through the top level the
+/// CPU builds, placed on the device each frame. Were the GPU
 /// shading to lack something a scene needs, the probe rays and the camera would
 /// be shaded on the CPU, with a line that says why (`shading_note`).
 pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTracer> {
-    bvh.export_static().map_err(anyhow::Error::msg).with_context(|| {
-        format!("--backend wgpu cannot trace scene {}; use --backend cpu for moving or instanced geometry", scene.name)
-    })?;
     let ctx = GpuContext::headless().context("--backend wgpu")?;
     let g = WgpuProbeTracer::new(ctx, scene, bvh, true)
         .context("--backend wgpu: putting the scene on the device")?

@@ -245,7 +245,7 @@ pub fn render_frames(
         }
         let scene: &Scene = frame_scene.as_ref().unwrap_or(base_scene);
         if let (true, Some(h)) = (animated, &settings.probe_tracer)
-            && let Err(e) = h.0.pose_scene(scene)
+            && let Err(e) = h.0.pose_scene(scene, f as f32)
         {
             stats.error = Some(format!("frame {f}: posing the scene on the device: {e}"));
             break;

@@ -141,10 +141,11 @@ pub trait ProbeBatchTracer: Sync {
         Err("this tracer does not hold a field".into())
     }
 
-    /// The scene as it is at the coming frame (an animated scene, posed by
+    /// The scene as it is at frame `frame` (an animated scene, posed by
     /// `Scene::set_frame_from`), before the frame's update: a device that keeps
-    /// its own copy of what changes (the lights) updates it here.
-    fn pose_scene(&self, _scene: &Scene) -> Result<(), String> {
+    /// its own copy of what changes (the lights, the moving objects' triangles
+    /// and their placement in the top level) updates it here.
+    fn pose_scene(&self, _scene: &Scene, _frame: f32) -> Result<(), String> {
         Ok(())
     }
 

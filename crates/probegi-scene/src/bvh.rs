@@ -249,68 +249,88 @@ pub struct BvhCutTriangle {
     pub uv: [Vec2; 3],
 }
 
-/// The static BVH in the flat form a GPU traversal reads (`probegi-wgpu`'s
-/// `bvh.wgsl`): obvhs's compressed-wide BVH nodes (Ylitie et al. 2017), its
-/// triangles in leaf order and their alpha cutouts. The same tree the CPU
+/// A tracer's BVHs in the flat form a GPU traversal reads (`probegi-wgpu`'s
+/// `bvh.wgsl`): obvhs's compressed-wide BVH nodes (Ylitie et al. 2017) of every
+/// bottom level one after another, their triangles in leaf order, their alpha
+/// cutouts, and the top level when there is one. The same trees the CPU
 /// traverses, so both backends visit the same nodes in the same order.
 #[derive(Clone, Debug, Default)]
 pub struct BvhExport {
     /// 20 little-endian words per node: obvhs `CwBvhNode` (`repr(C)`, 80 bytes):
     /// `p.xyz`, `e[0..3] | imask << 24`, `child_base_idx`, `primitive_base_idx`,
     /// `child_meta[8]`, then `child_min_x[8]`, `child_max_x[8]`, `child_min_y[8]`,
-    /// `child_max_y[8]`, `child_min_z[8]`, `child_max_z[8]`.
+    /// `child_max_y[8]`, `child_min_z[8]`, `child_max_z[8]`. A bottom level's
+    /// `child_base_idx` and `primitive_base_idx` are rebased to index this
+    /// export's nodes and leaves.
     pub node_words: Vec<u32>,
+    /// Per bottom level, its root node (`u32::MAX` for one without triangles);
+    /// the static part (`blases[0]`) first.
+    pub blas_root_nodes: Vec<u32>,
     /// Per leaf, obvhs `RtTriangle`: `v0`, `e1 = v0 − v1`, `e2 = v2 − v0`, `ng = e1 × e2`.
     pub leaf_triangles: Vec<[Vec3; 4]>,
-    /// Leaf order → `Scene::mesh.triangles` index.
+    /// Leaf order → `Scene::mesh.triangles` index (or the prototype mesh's).
     pub leaf_triangle_ids: Vec<u32>,
     /// Per leaf: index into `cut_triangles`, or `u32::MAX`; empty when nothing is cut out.
     pub leaf_cutouts: Vec<u32>,
     pub cut_triangles: Vec<BvhCutTriangle>,
     pub cutout_masks: Vec<BvhCutoutMask>,
+    /// The top level in the rest pose: moving objects at rest, the still
+    /// instances; `None` when rays go straight to `blases[0]`.
+    pub tlas: Option<TlasExport>,
+}
+
+impl BvhCutoutMask {
+    fn of(m: &CoverageMask) -> Self {
+        Self { width: m.width, height: m.height, coverage: m.coverage.clone(), factor: m.factor, cutoff: m.cutoff }
+    }
+}
+
+/// obvhs `CwBvhNode`s as `BvhExport::node_words`, child and primitive indices
+/// moved by `node_base` and `leaf_base`.
+fn node_words_rebased(bvh: &CwBvh, node_base: u32, leaf_base: u32) -> Vec<u32> {
+    let mut node_words = Vec::with_capacity(bvh.nodes.len() * 20);
+    let le = |b: &[u8]| u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+    for n in &bvh.nodes {
+        node_words.extend([n.p.x.to_bits(), n.p.y.to_bits(), n.p.z.to_bits()]);
+        node_words.push(le(&[n.e[0], n.e[1], n.e[2], n.imask]));
+        node_words.extend([n.child_base_idx.wrapping_add(node_base), n.primitive_base_idx.wrapping_add(leaf_base)]);
+        for bytes in
+            [&n.child_meta, &n.child_min_x, &n.child_max_x, &n.child_min_y, &n.child_max_y, &n.child_min_z, &n.child_max_z]
+        {
+            node_words.extend([le(&bytes[0..4]), le(&bytes[4..8])]);
+        }
+    }
+    node_words
+}
+
+fn node_words(bvh: &CwBvh) -> Vec<u32> {
+    node_words_rebased(bvh, 0, 0)
 }
 
 impl BvhExport {
-    fn of_blas(blas: &Blas, masks: &[CoverageMask]) -> Self {
-        let mut node_words = Vec::with_capacity(blas.bvh.nodes.len() * 20);
-        let le = |b: &[u8]| u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-        for n in &blas.bvh.nodes {
-            node_words.extend([n.p.x.to_bits(), n.p.y.to_bits(), n.p.z.to_bits()]);
-            node_words.push(le(&[n.e[0], n.e[1], n.e[2], n.imask]));
-            node_words.extend([n.child_base_idx, n.primitive_base_idx]);
-            for bytes in [
-                &n.child_meta,
-                &n.child_min_x,
-                &n.child_max_x,
-                &n.child_min_y,
-                &n.child_max_y,
-                &n.child_min_z,
-                &n.child_max_z,
-            ] {
-                node_words.extend([le(&bytes[0..4]), le(&bytes[4..8])]);
+    /// Appends one bottom level, its indices rebased past what is already here.
+    fn append_blas(&mut self, blas: &Blas) {
+        if blas.triangles.is_empty() {
+            self.blas_root_nodes.push(u32::MAX);
+            return;
+        }
+        let (node_base, leaf_base) = (self.node_count() as u32, self.leaf_triangles.len() as u32);
+        let cut_base = self.cut_triangles.len() as u32;
+        self.blas_root_nodes.push(node_base);
+        self.node_words.extend(node_words_rebased(&blas.bvh, node_base, leaf_base));
+        self.leaf_triangles.extend(blas.triangles.iter().map(|t| [t.v0.into(), t.e1.into(), t.e2.into(), t.ng.into()]));
+        self.leaf_triangle_ids.extend(&blas.triangle_ids);
+        let had_cutouts = !self.leaf_cutouts.is_empty();
+        if !blas.leaf_cut.is_empty() || had_cutouts {
+            // Pad the leaves before this level, then this level's (rebased).
+            self.leaf_cutouts.resize(leaf_base as usize, u32::MAX);
+            if blas.leaf_cut.is_empty() {
+                self.leaf_cutouts.resize(self.leaf_triangles.len(), u32::MAX);
+            } else {
+                self.leaf_cutouts.extend(blas.leaf_cut.iter().map(|&c| if c == u32::MAX { c } else { c + cut_base }));
             }
         }
-        Self {
-            node_words,
-            leaf_triangles: blas
-                .triangles
-                .iter()
-                .map(|t| [t.v0.into(), t.e1.into(), t.e2.into(), t.ng.into()])
-                .collect(),
-            leaf_triangle_ids: blas.triangle_ids.clone(),
-            leaf_cutouts: blas.leaf_cut.clone(),
-            cut_triangles: blas.cut.iter().map(|c| BvhCutTriangle { mask: c.mask, uv: c.uv }).collect(),
-            cutout_masks: masks
-                .iter()
-                .map(|m| BvhCutoutMask {
-                    width: m.width,
-                    height: m.height,
-                    coverage: m.coverage.clone(),
-                    factor: m.factor,
-                    cutoff: m.cutoff,
-                })
-                .collect(),
-        }
+        self.cut_triangles.extend(blas.cut.iter().map(|c| BvhCutTriangle { mask: c.mask, uv: c.uv }));
     }
 
     pub fn node_count(&self) -> usize {
@@ -348,6 +368,142 @@ struct Tlas {
     instances: Vec<Instance>,
 }
 
+/// What a tracer's top level is built from: the bounds of its bottom levels,
+/// its moving objects and its still instances. A device that traces the two
+/// levels itself (`probegi-wgpu`) keeps this and places the instances for each
+/// frame with [`TlasLayout::export_at`], as [`RayTracer::at_frame`] does.
+#[derive(Clone, Debug)]
+pub struct TlasLayout {
+    /// Bounds of `BvhTracer::blases[k]` (`None`: no triangles).
+    blas_bounds: Vec<Option<(Vec3, Vec3)>>,
+    /// Scene object index of `blases[k + 1]`.
+    object_ids: Vec<usize>,
+    /// Still instances: BLAS index, world from local, `Scene::instances` index.
+    placed: Vec<(usize, Affine3A, u32)>,
+    pad_rel: f32,
+}
+
+/// One placed bottom level of [`TlasExport`].
+#[derive(Clone, Copy, Debug)]
+pub struct TlasInstance {
+    /// Index of the bottom level (`BvhExport::blas_root_nodes`).
+    pub blas: u32,
+    /// `None` for the identity (the static part).
+    pub local_from_world: Option<Affine3A>,
+    /// Index into `Scene::instances`, `u32::MAX` for the scene's own mesh.
+    pub scene_instance: u32,
+    /// A moving object (left out of initialisation rounds, which see static geometry).
+    pub moving: bool,
+}
+
+/// A top level in the flat form a GPU traversal reads: obvhs CWBVH nodes (the
+/// layout of `BvhExport::node_words`) over instance bounds, whose primitives are
+/// `instances` in leaf order.
+#[derive(Clone, Debug, Default)]
+pub struct TlasExport {
+    pub node_words: Vec<u32>,
+    pub instances: Vec<TlasInstance>,
+}
+
+impl TlasExport {
+    pub fn node_count(&self) -> usize {
+        self.node_words.len() / 20
+    }
+}
+
+impl TlasLayout {
+    /// Whether `posed` has the moving objects this layout instances.
+    fn follows(&self, posed: &Scene) -> bool {
+        self.object_ids.len() == posed.objects.iter().filter(|o| o.is_animated()).count()
+            && self.object_ids.iter().all(|&i| posed.objects.get(i).is_some_and(|o| o.is_animated()))
+    }
+
+    /// The moving objects' transforms at `frame`.
+    fn poses(&self, posed: &Scene, frame: f32) -> Vec<Option<Affine3A>> {
+        self.object_ids.iter().map(|&i| Some(posed.objects[i].world_from_rest(frame))).collect()
+    }
+
+    /// The top level with the moving objects of `posed` placed at `frame` (the
+    /// one [`RayTracer::at_frame`] traces); an error when `posed` is not the
+    /// scene this layout's tracer was built for.
+    pub fn export_at(&self, posed: &Scene, frame: f32) -> Result<TlasExport, String> {
+        if !self.follows(posed) {
+            return Err(format!(
+                "scene {} has other moving objects than the {} its BVH was built with",
+                posed.name,
+                self.object_ids.len()
+            ));
+        }
+        Ok(self.export(&self.build(Some(&self.poses(posed, frame)))))
+    }
+
+    /// Whether the layout has moving objects (its top level changes per frame).
+    pub fn moves(&self) -> bool {
+        !self.object_ids.is_empty()
+    }
+
+    /// Moving objects and still instances placed by this layout.
+    pub fn instance_count(&self) -> usize {
+        1 + self.object_ids.len() + self.placed.len()
+    }
+
+    fn export(&self, tlas: &Tlas) -> TlasExport {
+        TlasExport {
+            node_words: node_words(&tlas.bvh),
+            instances: tlas
+                .instances
+                .iter()
+                .map(|i| TlasInstance {
+                    blas: i.blas as u32,
+                    local_from_world: i.local_from_world,
+                    scene_instance: i.scene_instance,
+                    moving: (1..=self.object_ids.len()).contains(&i.blas),
+                })
+                .collect(),
+        }
+    }
+
+    /// The top-level BVH over the static part, the moving objects placed by
+    /// `moving` (`None` entries: at rest; `None` altogether: left out) and the
+    /// still instances.
+    fn build(&self, moving: Option<&[Option<Affine3A>]>) -> Tlas {
+        let mut instances = vec![];
+        let mut aabbs = vec![];
+        let pad = Vec3A::splat(self.pad_rel.max(0.0));
+        let mut add = |blas: usize, xf: Option<Affine3A>, scene_instance: u32| {
+            let Some((lo, hi)) = self.blas_bounds[blas] else { return };
+            let (lo, hi) = match xf {
+                None => (lo, hi),
+                Some(m) => transformed_bounds(&m, lo, hi),
+            };
+            let extent = (hi - lo).max_element().max(1e-6);
+            aabbs.push(Aabb::new(Vec3A::from(lo) - pad * extent, Vec3A::from(hi) + pad * extent));
+            instances.push(Instance { blas, local_from_world: xf.map(|m| m.inverse()), scene_instance });
+        };
+        add(0, None, u32::MAX);
+        if let Some(moving) = moving {
+            for (k, &xf) in moving.iter().enumerate().take(self.object_ids.len()) {
+                add(k + 1, xf, u32::MAX);
+            }
+        }
+        for &(blas, xf, i) in &self.placed {
+            add(blas, Some(xf), i);
+        }
+        let bvh = if aabbs.is_empty() {
+            CwBvh::default()
+        } else {
+            build_cwbvh(&aabbs, BvhBuildParams::fastest_build(), &mut Duration::default())
+        };
+        let instances = if aabbs.is_empty() {
+            instances
+        } else {
+            let mut slots: Vec<Option<Instance>> = instances.into_iter().map(Some).collect();
+            bvh.primitive_indices.iter().filter_map(|&i| slots[i as usize].take()).collect()
+        };
+        Tlas { bvh, instances }
+    }
+}
+
 /// The scene's ray tracer. Static triangles share one BVH built once; each moving
 /// object (`BvhTracer::for_scene`) has its own BVH in rest space, built once, and
 /// [`RayTracer::at_frame`] places them with a top-level BVH over the instances,
@@ -356,16 +512,13 @@ pub struct BvhTracer {
     /// `blases[0]` is the static part; then one per moving object; then one per
     /// scene prototype.
     blases: Vec<Blas>,
-    /// Scene object index of `blases[k + 1]`.
-    object_ids: Vec<usize>,
-    /// Still instances: BLAS index, world from local, `Scene::instances` index.
-    placed: Vec<(usize, Affine3A, u32)>,
+    /// What the top level is built from (moving objects, still instances).
+    layout: TlasLayout,
     /// The instances in their rest pose (what this tracer traces by itself).
     rest: Option<Tlas>,
     /// The static BLAS and the still instances, without moving objects: the
     /// static part when both exist.
     static_tlas: Option<Tlas>,
-    pad_rel: f32,
     cutouts: Cutouts,
     pub build_time: Duration,
 }
@@ -381,13 +534,17 @@ impl BvhTracer {
         let pad = pad_m(mesh.bounds(), settings);
         let ids: Vec<u32> = (0..mesh.triangle_count() as u32).collect();
         let blases = vec![Blas::build(mesh, &ids, pad, &cutouts)];
-        Self {
-            blases,
+        let layout = TlasLayout {
+            blas_bounds: vec![blases[0].bounds],
             object_ids: vec![],
             placed: vec![],
+            pad_rel: settings.bvh_aabb_pad_rel,
+        };
+        Self {
+            blases,
+            layout,
             rest: None,
             static_tlas: None,
-            pad_rel: settings.bvh_aabb_pad_rel,
             cutouts,
             build_time: start.elapsed(),
         }
@@ -428,21 +585,18 @@ impl BvhTracer {
             .enumerate()
             .map(|(i, inst)| (first_prototype + inst.prototype as usize, inst.world_from_local, i as u32))
             .collect();
-        let mut tracer = Self {
-            blases,
+        let layout = TlasLayout {
+            blas_bounds: blases.iter().map(|b| b.bounds).collect(),
             object_ids,
             placed,
-            rest: None,
-            static_tlas: None,
             pad_rel: settings.bvh_aabb_pad_rel,
-            cutouts,
-            build_time: Duration::ZERO,
         };
-        let rest = vec![None; tracer.object_ids.len()];
-        tracer.rest = Some(tracer.build_tlas(Some(&rest)));
-        if !tracer.object_ids.is_empty() && !tracer.placed.is_empty() {
-            tracer.static_tlas = Some(tracer.build_tlas(None));
-        }
+        let rest = vec![None; layout.object_ids.len()];
+        let rest = Some(layout.build(Some(&rest)));
+        let static_tlas =
+            (!layout.object_ids.is_empty() && !layout.placed.is_empty()).then(|| layout.build(None));
+        let mut tracer =
+            Self { blases, layout, rest, static_tlas, cutouts, build_time: Duration::ZERO };
         tracer.build_time = start.elapsed();
         tracer
     }
@@ -451,18 +605,25 @@ impl BvhTracer {
         self.blases.iter().map(|b| b.triangles.len()).sum()
     }
 
-    /// The BVH for a GPU traversal ([`BvhExport`]). Only a tracer without a
-    /// top-level structure has one: moving objects and instanced meshes are an
-    /// error that says so (the GPU backend does not trace a TLAS yet).
-    pub fn export_static(&self) -> Result<BvhExport, String> {
-        if self.rest.is_some() {
-            return Err(format!(
-                "the GPU trace has no top-level BVH yet: this scene has {} moving objects and {} instances",
-                self.object_ids.len(),
-                self.placed.len()
-            ));
+    /// Every BVH of this tracer in the flat form a GPU traversal reads
+    /// ([`BvhExport`]): the bottom levels one after another, and, for a tracer
+    /// with a top level (moving objects, instanced meshes), that top level in
+    /// its rest pose (`BvhExport::tlas`; [`TlasLayout::export_at`] places it
+    /// for a frame).
+    pub fn export(&self) -> BvhExport {
+        let mut out = BvhExport::default();
+        for blas in &self.blases {
+            out.append_blas(blas);
         }
-        Ok(BvhExport::of_blas(&self.blases[0], &self.cutouts.masks))
+        out.cutout_masks = self.cutouts.masks.iter().map(BvhCutoutMask::of).collect();
+        out.tlas = self.rest.as_ref().map(|t| self.layout.export(t));
+        out
+    }
+
+    /// What this tracer's top level is built from, for a device that places the
+    /// instances itself each frame; `None` when it has no top level.
+    pub fn tlas_layout(&self) -> Option<&TlasLayout> {
+        self.rest.as_ref().map(|_| &self.layout)
     }
 
     /// Triangles whose hits are alpha-tested.
@@ -472,47 +633,7 @@ impl BvhTracer {
 
     /// Moving objects this tracer instances.
     pub fn instanced_object_count(&self) -> usize {
-        self.object_ids.len()
-    }
-
-    /// The top-level BVH over the static part, the moving objects placed by
-    /// `moving` (`None` entries: at rest; `None` altogether: left out) and the
-    /// still instances.
-    fn build_tlas(&self, moving: Option<&[Option<Affine3A>]>) -> Tlas {
-        let mut instances = vec![];
-        let mut aabbs = vec![];
-        let pad = Vec3A::splat(self.pad_rel.max(0.0));
-        let mut add = |blas: usize, xf: Option<Affine3A>, scene_instance: u32| {
-            let Some((lo, hi)) = self.blases[blas].bounds else { return };
-            let (lo, hi) = match xf {
-                None => (lo, hi),
-                Some(m) => transformed_bounds(&m, lo, hi),
-            };
-            let extent = (hi - lo).max_element().max(1e-6);
-            aabbs.push(Aabb::new(Vec3A::from(lo) - pad * extent, Vec3A::from(hi) + pad * extent));
-            instances.push(Instance { blas, local_from_world: xf.map(|m| m.inverse()), scene_instance });
-        };
-        add(0, None, u32::MAX);
-        if let Some(moving) = moving {
-            for (k, &xf) in moving.iter().enumerate().take(self.object_ids.len()) {
-                add(k + 1, xf, u32::MAX);
-            }
-        }
-        for &(blas, xf, i) in &self.placed {
-            add(blas, Some(xf), i);
-        }
-        let bvh = if aabbs.is_empty() {
-            CwBvh::default()
-        } else {
-            build_cwbvh(&aabbs, BvhBuildParams::fastest_build(), &mut Duration::default())
-        };
-        let instances = if aabbs.is_empty() {
-            instances
-        } else {
-            let mut slots: Vec<Option<Instance>> = instances.into_iter().map(Some).collect();
-            bvh.primitive_indices.iter().filter_map(|&i| slots[i as usize].take()).collect()
-        };
-        Tlas { bvh, instances }
+        self.layout.object_ids.len()
     }
 
     fn closest_in(&self, tlas: Option<&Tlas>, ray: &Ray) -> Option<RayHit> {
@@ -632,10 +753,8 @@ impl RayTracer for BvhTracer {
         if !posed.has_moving_geometry() {
             return None;
         }
-        let follows = self.object_ids.len() == posed.objects.iter().filter(|o| o.is_animated()).count()
-            && self.object_ids.iter().all(|&i| posed.objects.get(i).is_some_and(|o| o.is_animated()));
-        if !follows {
-            let settings = BvhSettings { bvh_aabb_pad_rel: self.pad_rel };
+        if !self.layout.follows(posed) {
+            let settings = BvhSettings { bvh_aabb_pad_rel: self.layout.pad_rel };
             if !posed.instances.is_empty() {
                 // A tracer built from the mesh alone never knew the instances: rebuild all.
                 let mut at_rest = posed.clone();
@@ -644,13 +763,11 @@ impl RayTracer for BvhTracer {
             }
             return Some(Box::new(BvhTracer::build_static(&posed.mesh, self.cutouts.clone(), settings)));
         }
-        let xfs: Vec<Option<Affine3A>> =
-            self.object_ids.iter().map(|&i| Some(posed.objects[i].world_from_rest(frame))).collect();
-        Some(Box::new(FrameTracer { base: self, tlas: self.build_tlas(Some(&xfs)) }))
+        Some(Box::new(FrameTracer { base: self, tlas: self.layout.build(Some(&self.layout.poses(posed, frame))) }))
     }
 
     fn static_part<'a>(&'a self) -> Option<Box<dyn RayTracer + 'a>> {
-        (!self.object_ids.is_empty()).then(|| Box::new(StaticPart(self)) as Box<dyn RayTracer + 'a>)
+        (!self.layout.object_ids.is_empty()).then(|| Box::new(StaticPart(self)) as Box<dyn RayTracer + 'a>)
     }
 }
 

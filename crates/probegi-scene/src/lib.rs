@@ -21,7 +21,7 @@ pub mod texture;
 pub mod tracer;
 
 pub use animation::{MotionPath, ObjectAnimation, SceneObject, TransformKeyframe};
-pub use bvh::{BvhCutTriangle, BvhCutoutMask, BvhExport, BvhSettings, BvhTracer};
+pub use bvh::{BvhCutTriangle, BvhCutoutMask, BvhExport, BvhSettings, BvhTracer, TlasExport, TlasInstance, TlasLayout};
 pub use error::SceneError;
 pub use light::{LightKind, PunctualLight};
 pub use load::load_scene;

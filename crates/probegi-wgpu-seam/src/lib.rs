@@ -36,11 +36,11 @@ use probegi_cpu::ddgi::{
 };
 use probegi_cpu::ddgi_field_set::ProbeRayBatch;
 use probegi_cpu::probe_trace::ProbeBatchTracer;
-use probegi_scene::{BvhTracer, RayHit, Scene};
+use probegi_scene::{BvhTracer, RayHit, Scene, TlasLayout};
 use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace};
 use probegi_wgpu::camera_frame::{CameraFrame, GpuCameraPass};
 use probegi_wgpu::ddgi_query::GpuDdgiField;
-use probegi_wgpu::gpu_scene::{GpuScene, unsupported_by_gpu_shading};
+use probegi_wgpu::gpu_scene::GpuScene;
 use probegi_wgpu::probe_blend::{GpuProbeBlend, ResidentBlend};
 use probegi_wgpu::probe_classification::{ClassifyRound, GpuProbeClassification};
 use probegi_wgpu::probe_ray_gen::GpuProbeRayGen;
@@ -61,6 +61,9 @@ pub struct WgpuProbeTracer {
     pub ctx: GpuContext,
     pub trace: GpuRayTrace,
     pub bvh: GpuBvh,
+    /// The top level's layout and the bottom levels' root nodes, for a scene
+    /// with moving objects or instanced meshes (`pose_scene` places them).
+    tlas: Option<(TlasLayout, Vec<u32>)>,
     /// The shade pass and the scene on the device; `None` when the scene needs
     /// what the GPU shading lacks (see `shading_note`).
     shading: Option<(GpuProbeShade, GpuScene)>,
@@ -102,10 +105,11 @@ impl WgpuProbeTracer {
         gpu_shading: bool,
         gpu_camera: bool,
     ) -> Result<Self, GpuError> {
-        let export = bvh.export_static().map_err(GpuError::Input)?;
+        let export = bvh.export();
         let gpu_bvh = GpuBvh::upload(&ctx, &export)?;
+        let tlas = bvh.tlas_layout().map(|l| (l.clone(), export.blas_root_nodes.clone()));
         let trace = GpuRayTrace::new(&ctx);
-        let note = if gpu_shading { unsupported_by_gpu_shading(scene) } else { Some("CPU shading asked for".into()) };
+        let note = if gpu_shading { None } else { Some("CPU shading asked for".into()) };
         let shading = match note {
             None => Some((GpuProbeShade::new(&ctx)?, GpuScene::upload(&ctx, scene)?)),
             Some(_) => None,
@@ -115,6 +119,7 @@ impl WgpuProbeTracer {
             ctx,
             trace,
             bvh: gpu_bvh,
+            tlas,
             shading,
             camera,
             sky_radiance: scene.sky_radiance,
@@ -225,16 +230,25 @@ impl WgpuProbeTracer {
     /// Traces `batch` on the device and keeps it there as the last batch. An
     /// update batch whose rays record how they were made (`batch.generated`) has
     /// them generated on the device (`probe_ray_gen.wgsl`), with the field kept
-    /// there; others are uploaded.
-    fn trace_resident(&self, batch: &ProbeRayBatch) -> Result<GpuRayBatch, GpuError> {
+    /// there; others are uploaded. `static_only`: an initialisation round, which
+    /// leaves moving objects out.
+    fn trace_resident(&self, batch: &ProbeRayBatch, static_only: bool) -> Result<GpuRayBatch, GpuError> {
         let resident = match self.generate_rays(batch)? {
             Some(generated) => generated,
             None => self.trace.batch(&self.ctx, &batch_rays(batch), false)?,
         };
+        if static_only {
+            resident.set_static_only(&self.ctx, true);
+        }
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         self.trace.record(&mut encoder, &self.bvh, &resident, None);
         self.ctx.queue.submit([encoder.finish()]);
         Ok(resident)
+    }
+
+    /// Whether the scene has moving objects, placed each frame by `pose_scene`.
+    pub fn has_moving_geometry(&self) -> bool {
+        self.tlas.as_ref().is_some_and(|(l, _)| l.moves())
     }
 
     /// Whether the camera frame is rendered on the GPU.
@@ -261,21 +275,26 @@ impl ProbeBatchTracer for WgpuProbeTracer {
     fn closest_hits(
         &self,
         batch: &ProbeRayBatch,
-        _static_only: bool,
+        static_only: bool,
         hits: &mut Vec<Option<RayHit>>,
     ) -> Result<(), String> {
-        // The GPU BVH holds static geometry only (`export_static`), so every batch
-        // already sees what an initialisation round must.
         let rays = batch_rays(batch);
         hits.clear();
         if rays.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
+            if static_only && self.has_moving_geometry() {
+                return Err(format!(
+                    "an initialisation batch of {} rays is larger than one binding of this adapter, which \
+                     traces it only with the moving objects in it",
+                    rays.len()
+                ));
+            }
             // Larger than one binding: trace in pieces, shade on the CPU.
             let gpu = self.trace.trace(&self.ctx, &self.bvh, &rays, false).map_err(|e| e.to_string())?;
             hits.extend(gpu.iter().map(|h| h.ray_hit()));
             *self.last.lock().map_err(|e| e.to_string())? = None;
             return Ok(());
         }
-        let resident = self.trace_resident(batch).map_err(|e| e.to_string())?;
+        let resident = self.trace_resident(batch, static_only).map_err(|e| e.to_string())?;
         let gpu = self.trace.download(&self.ctx, &resident).map_err(|e| e.to_string())?;
         hits.extend(gpu.iter().map(|h| h.ray_hit()));
         *self.last.lock().map_err(|e| e.to_string())? = Some(resident);
@@ -313,7 +332,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             return None;
         }
         let run = || -> Result<Vec<ProbeUsageCounts>, String> {
-            let resident = self.trace_resident(batch).map_err(|e| e.to_string())?;
+            let resident = self.trace_resident(batch, false).map_err(|e| e.to_string())?;
             self.ctx.wait().map_err(|e| e.to_string())?;
             let counts = match usage_cage_diagonals_m {
                 Some(diagonals) => {
@@ -346,7 +365,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             return None;
         }
         let run = || -> Result<Vec<Vec3>, GpuError> {
-            let resident = self.trace_resident(batch)?;
+            let resident = self.trace_resident(batch, true)?;
             let rows: Vec<GpuRelocationProbe> = probes
                 .iter()
                 .map(|p| GpuRelocationProbe {
@@ -377,7 +396,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             return None;
         }
         let run = || -> Result<DeviceClassificationResults, GpuError> {
-            let resident = self.trace_resident(batch)?;
+            let resident = self.trace_resident(batch, true)?;
             plan.iter()
                 .map(|v| {
                     v.as_ref()
@@ -497,9 +516,18 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         Ok(())
     }
 
-    fn pose_scene(&self, scene: &Scene) -> Result<(), String> {
+    fn pose_scene(&self, scene: &Scene, frame: f32) -> Result<(), String> {
+        if let Some((layout, roots)) = &self.tlas
+            && scene.has_moving_geometry()
+        {
+            let tlas = layout.export_at(scene, frame)?;
+            self.bvh.place(&self.ctx, &tlas, roots).map_err(|e| e.to_string())?;
+        }
         match &self.shading {
-            Some((_, gpu_scene)) => gpu_scene.pose_lights(&self.ctx, scene).map_err(|e| e.to_string()),
+            Some((_, gpu_scene)) => {
+                gpu_scene.pose_lights(&self.ctx, scene).map_err(|e| e.to_string())?;
+                gpu_scene.pose_geometry(&self.ctx, scene).map_err(|e| e.to_string())
+            }
             None => Ok(()),
         }
     }

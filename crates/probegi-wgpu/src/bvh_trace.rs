@@ -8,12 +8,14 @@
 //! Möller–Trumbore test: hits agree with the CPU's up to float rounding
 //! (`tests/trace_equivalence.rs`).
 //!
-//! Not yet: the top-level BVH of moving objects and instanced meshes
-//! ([`probegi_scene::BvhTracer::export_static`] refuses such scenes by name).
+//! Moving objects and instanced meshes are traced through the CPU's two
+//! levels: every bottom level is uploaded once, and the top level (a CWBVH over
+//! instance bounds that the host rebuilds each frame, `TlasLayout::export_at`)
+//! is rewritten by [`GpuBvh::place`]; `bvh.wgsl` walks both in one loop.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
-use probegi_scene::{BvhExport, RayHit};
+use probegi_scene::{BvhExport, RayHit, TlasExport};
 use wgpu::util::DeviceExt;
 
 use crate::gpu_context::{GpuContext, GpuError};
@@ -25,8 +27,13 @@ pub struct TraceParams {
     pub ray_count: u32,
     pub groups_x: u32,
     pub any_hit: u32,
-    pub _pad: u32,
+    /// `bvh.wgsl`'s `BVH_INSTANCE_*` flags of instances left out.
+    pub skip: u32,
 }
+
+/// `bvh.wgsl`'s flag of a moving object's instance (left out of a static-only trace).
+pub const BVH_INSTANCE_MOVING: u32 = 2;
+const BVH_INSTANCE_IDENTITY: u32 = 1;
 const _: () = assert!(std::mem::size_of::<TraceParams>() == 16);
 
 /// One ray; must match `GpuRay` in `trace_rays.wgsl` (vec3 + f32, twice).
@@ -58,23 +65,25 @@ pub struct GpuRayHit {
     pub triangle: u32,
     /// Weights of vertices 1 and 2.
     pub bary: [f32; 2],
+    /// `Scene::instances` index (`RayHit::instance`), `u32::MAX` for the scene's own mesh.
+    pub instance: u32,
+    pub _pad: u32,
 }
-const _: () = assert!(std::mem::size_of::<GpuRayHit>() == 16);
+const _: () = assert!(std::mem::size_of::<GpuRayHit>() == 24);
 
 impl GpuRayHit {
     pub fn is_hit(&self) -> bool {
         self.triangle != u32::MAX
     }
 
-    /// The CPU tracer's record of the same hit (`instance` is always `u32::MAX`:
-    /// no TLAS on the GPU yet).
+    /// The CPU tracer's record of the same hit.
     pub fn ray_hit(&self) -> Option<RayHit> {
         self.is_hit().then(|| RayHit {
             t: self.t,
             triangle: self.triangle & 0x7fff_ffff,
             barycentric: Vec2::from(self.bary),
             backface: self.triangle & 0x8000_0000 != 0,
-            instance: u32::MAX,
+            instance: self.instance,
         })
     }
 }
@@ -83,11 +92,11 @@ impl GpuRayHit {
 const MAX_GROUPS: u32 = 65_535;
 const WORKGROUP: u32 = 64;
 
-/// The bind-group layout of `bvh.wgsl` (group 1): three read-only storage buffers.
+/// The bind-group layout of `bvh.wgsl` (group 1): four read-only storage buffers.
 pub fn bvh_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("bvh"),
-        entries: &[storage_entry(0, true), storage_entry(1, true), storage_entry(2, true)],
+        entries: &[storage_entry(0, true), storage_entry(1, true), storage_entry(2, true), storage_entry(3, true)],
     })
 }
 
@@ -137,8 +146,49 @@ pub struct GpuBvh {
     pub node_count: usize,
     pub leaf_count: usize,
     pub cut_triangle_count: usize,
+    /// Instances of the top level (0: none, rays go straight to the bottom level).
+    pub instance_count: usize,
     bytes: u64,
     bind_group: wgpu::BindGroup,
+    nodes: wgpu::Buffer,
+    instances: wgpu::Buffer,
+    /// First node of the top level's region and the nodes it may hold.
+    tlas_base: u32,
+    tlas_capacity: u32,
+}
+
+/// `bvh_instances` of `bvh.wgsl` for `tlas`, whose root is node `tlas_base`.
+fn pack_instances(tlas: &TlasExport, blas_roots: &[u32], tlas_base: u32) -> Result<Vec<[f32; 4]>, GpuError> {
+    let bits = f32::from_bits;
+    let mut out = vec![[bits(tlas.instances.len() as u32), bits(tlas_base), 0.0, 0.0]];
+    for inst in &tlas.instances {
+        let root = *blas_roots.get(inst.blas as usize).ok_or_else(|| {
+            GpuError::Input(format!("a top-level instance names bottom level {} of {}", inst.blas, blas_roots.len()))
+        })?;
+        let flags = match inst.local_from_world {
+            None => BVH_INSTANCE_IDENTITY,
+            Some(_) => 0,
+        } | if inst.moving { BVH_INSTANCE_MOVING } else { 0 };
+        let m = inst.local_from_world.unwrap_or(glam::Affine3A::IDENTITY);
+        if !(m.matrix3.is_finite() && m.translation.is_finite()) {
+            return Err(GpuError::Input("a top-level instance has a non-finite transform".into()));
+        }
+        let col = |c: glam::Vec3A, w: u32| [c.x, c.y, c.z, bits(w)];
+        out.push(col(m.matrix3.x_axis, root));
+        out.push(col(m.matrix3.y_axis, inst.scene_instance));
+        out.push(col(m.matrix3.z_axis, flags));
+        out.push(col(m.translation, 0));
+    }
+    Ok(out)
+}
+
+/// A top level's node words with their child indices moved to start at `tlas_base`.
+fn rebased_tlas_nodes(tlas: &TlasExport, tlas_base: u32) -> Vec<u32> {
+    let mut words = tlas.node_words.clone();
+    for node in words.chunks_exact_mut(20) {
+        node[4] = node[4].wrapping_add(tlas_base);
+    }
+    words
 }
 
 impl GpuBvh {
@@ -165,6 +215,17 @@ impl GpuBvh {
         }
         let cutouts = pack_cutouts(export);
         let mut nodes = export.node_words.clone();
+        // The top level's region after the bottom levels: a CWBVH over n
+        // instances has at most n − 1 nodes (one per inner node of the binary
+        // tree it collapses), so n + 1 always holds a rebuilt one.
+        let tlas_base = export.node_count() as u32;
+        let (mut instances, mut tlas_capacity) = (vec![[0.0f32; 4]], 0u32);
+        if let Some(tlas) = &export.tlas {
+            tlas_capacity = (tlas.instances.len() as u32 + 1).max(tlas.node_count() as u32);
+            nodes.extend(rebased_tlas_nodes(tlas, tlas_base));
+            nodes.resize((tlas_base + tlas_capacity) as usize * 20, 0);
+            instances = pack_instances(tlas, &export.blas_root_nodes, tlas_base)?;
+        }
         if nodes.is_empty() {
             nodes.push(0); // shorter than a node: `bvh_trace` sees an empty tree
         }
@@ -175,31 +236,63 @@ impl GpuBvh {
             ("the BVH nodes", nodes.len() * 4),
             ("the BVH triangles", triangles.len() * 16),
             ("the cutouts", cutouts.len() * 4),
+            ("the instances", instances.len() * 16),
         ] {
             ctx.check_buffer(bytes as u64, what)?;
         }
         let device = &ctx.device;
-        let init = |label: &str, contents: &[u8]| {
+        let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
                 contents,
-                usage: wgpu::BufferUsages::STORAGE,
+                usage: wgpu::BufferUsages::STORAGE | usage,
             })
         };
+        let copy = wgpu::BufferUsages::COPY_DST;
         let buffers = [
-            init("bvh nodes", bytemuck::cast_slice(&nodes)),
-            init("bvh triangles", bytemuck::cast_slice(&triangles)),
-            init("bvh cutouts", bytemuck::cast_slice(&cutouts)),
+            init("bvh nodes", bytemuck::cast_slice(&nodes), copy),
+            init("bvh triangles", bytemuck::cast_slice(&triangles), wgpu::BufferUsages::empty()),
+            init("bvh cutouts", bytemuck::cast_slice(&cutouts), wgpu::BufferUsages::empty()),
+            init("bvh instances", bytemuck::cast_slice(&instances), copy),
         ];
         let bytes = buffers.iter().map(|b| b.size()).sum();
         let bind_group = buffers_bind_group(device, "bvh", &bvh_bind_group_layout(device), &buffers);
+        let [nodes, _, _, instance_buffer] = buffers;
         Ok(Self {
             node_count: export.node_count(),
             leaf_count: export.leaf_triangles.len(),
             cut_triangle_count: export.cut_triangles.len(),
+            instance_count: export.tlas.as_ref().map_or(0, |t| t.instances.len()),
             bytes,
             bind_group,
+            nodes,
+            instances: instance_buffer,
+            tlas_base,
+            tlas_capacity,
         })
+    }
+
+    /// Places the instances for a frame: rewrites the top level with `tlas`
+    /// (`TlasLayout::export_at` of the tracer this was uploaded from), which
+    /// must place as many instances as the one uploaded. `blas_root_nodes`:
+    /// the upload's `BvhExport::blas_root_nodes`.
+    pub fn place(&self, ctx: &GpuContext, tlas: &TlasExport, blas_root_nodes: &[u32]) -> Result<(), GpuError> {
+        if tlas.instances.len() != self.instance_count || tlas.node_count() as u32 > self.tlas_capacity {
+            return Err(GpuError::Input(format!(
+                "a top level of {} instances and {} nodes for a BVH uploaded with {} instances and room for {} nodes",
+                tlas.instances.len(),
+                tlas.node_count(),
+                self.instance_count,
+                self.tlas_capacity
+            )));
+        }
+        let nodes = rebased_tlas_nodes(tlas, self.tlas_base);
+        let instances = pack_instances(tlas, blas_root_nodes, self.tlas_base)?;
+        if !nodes.is_empty() {
+            ctx.queue.write_buffer(&self.nodes, self.tlas_base as u64 * 80, bytemuck::cast_slice(&nodes));
+        }
+        ctx.queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&instances));
+        Ok(())
     }
 
     /// A BVH over a caller's own triangle soup (an engine's geometry): built on
@@ -223,7 +316,7 @@ impl GpuBvh {
             mesh.triangle_materials.push(0);
         }
         let tracer = probegi_scene::BvhTracer::build(&mesh, probegi_scene::BvhSettings::default());
-        Self::upload(ctx, &tracer.export_static().map_err(GpuError::Input)?)
+        Self::upload(ctx, &tracer.export())
     }
 
     /// Device memory of the BVH's buffers.
@@ -283,6 +376,7 @@ pub struct GpuRayBatch {
     any_hit: bool,
     rays: wgpu::Buffer,
     hits: wgpu::Buffer,
+    params: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
 }
 
@@ -305,6 +399,15 @@ impl GpuRayBatch {
             )));
         }
         Ok(())
+    }
+
+    /// With `static_only`, the batch's next traces leave moving objects out
+    /// (initialisation rounds see static geometry only, as on the CPU).
+    pub fn set_static_only(&self, ctx: &GpuContext, static_only: bool) {
+        let (groups_x, _) = dispatch_2d(self.ray_count);
+        let skip = if static_only { BVH_INSTANCE_MOVING } else { 0 };
+        let params = TraceParams { ray_count: self.ray_count, groups_x, any_hit: self.any_hit as u32, skip };
+        ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
     }
 
     /// Device memory of the rays and hits.
@@ -370,12 +473,12 @@ impl GpuRayTrace {
     /// A batch around `rays`: its parameters, a hit buffer and the bind group.
     fn bind_batch(&self, ctx: &GpuContext, rays: wgpu::Buffer, n: u32, any_hit: bool) -> GpuRayBatch {
         let (groups_x, _) = dispatch_2d(n);
-        let params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, _pad: 0 };
+        let params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, skip: 0 };
         let device = &ctx.device;
         let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("trace params"),
             contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         });
         let hits = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("ray hits"),
@@ -392,7 +495,7 @@ impl GpuRayTrace {
                 wgpu::BindGroupEntry { binding: 2, resource: hits.as_entire_binding() },
             ],
         });
-        GpuRayBatch { ray_count: n, any_hit, rays, hits, bind_group }
+        GpuRayBatch { ray_count: n, any_hit, rays, hits, params, bind_group }
     }
 
     /// A batch of `ray_count` rays left for a pass on the device to write

@@ -1,9 +1,10 @@
 //! A scene's surfaces, materials, textures and lights on the device, in the
 //! layout `shaders/scene.wgsl` reads (documented there): what the GPU shade and
 //! camera passes need to light a hit as the CPU does, normal and bump maps
-//! included; keyframed lights are posed each frame ([`GpuScene::pose_lights`]).
-//! Moving or instanced geometry is refused by name (the GPU trace has no TLAS
-//! yet).
+//! included; keyframed lights are posed each frame ([`GpuScene::pose_lights`]),
+//! and so are moving objects' triangles ([`GpuScene::pose_geometry`]: the
+//! scene's mesh as `Scene::set_frame_from` leaves it). Instanced meshes keep
+//! one copy of their prototype's triangles and a transform per instance.
 
 use probegi_core::bsdf::{ALBEDO_TABLE_SIZE, specular_albedo_table};
 use probegi_core::color::srgb8_to_linear_table;
@@ -23,13 +24,27 @@ pub fn scene_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     })
 }
 
-/// Why a scene cannot be shaded on the GPU yet, or `None`.
-pub fn unsupported_by_gpu_shading(scene: &Scene) -> Option<String> {
-    if scene.has_moving_geometry() || !scene.instances.is_empty() {
-        return Some("moving objects and instanced meshes need a TLAS, which the GPU trace lacks".into());
-    }
-    None
+/// `scene_triangles`' 11 vec4s of triangle `t` of `mesh`.
+fn pack_triangle(mesh: &probegi_scene::mesh::Mesh, t: usize, out: &mut Vec<[f32; 4]>) {
+    let [a, b, c] = mesh.triangles[t];
+    let (a, b, c) = (a as usize, b as usize, c as usize);
+    let p = |i: usize| mesh.positions[i];
+    let n = |i: usize| mesh.normals.get(i).copied().unwrap_or(glam::Vec3::ZERO);
+    let uv = |i: usize| mesh.uvs.get(i).copied().unwrap_or(glam::Vec2::ZERO);
+    let m = f32::from_bits(mesh.triangle_materials[t]);
+    out.push([p(a).x, p(a).y, p(a).z, m]);
+    out.push(p(b).extend(0.0).into());
+    out.push(p(c).extend(0.0).into());
+    out.push(n(a).extend(0.0).into());
+    out.push(n(b).extend(0.0).into());
+    out.push(n(c).extend(0.0).into());
+    out.push([uv(a).x, uv(a).y, uv(b).x, uv(b).y]);
+    out.push([uv(c).x, uv(c).y, 0.0, 0.0]);
+    let tan = |i: usize| mesh.tangents.get(i).copied().unwrap_or(glam::Vec4::ZERO);
+    out.extend([tan(a).to_array(), tan(b).to_array(), tan(c).to_array()]);
 }
+
+const TRIANGLE_VEC4S: usize = 11;
 
 /// The scene's shading data on the device.
 pub struct GpuScene {
@@ -38,6 +53,9 @@ pub struct GpuScene {
     bytes: u64,
     bind_group: wgpu::BindGroup,
     lights: wgpu::Buffer,
+    triangle_buffer: wgpu::Buffer,
+    /// Triangle ranges of the moving objects (rewritten by `pose_geometry`).
+    moving: Vec<std::ops::Range<usize>>,
 }
 
 /// `scene_lights`' header, sky and punctual lights (emitters follow them).
@@ -60,33 +78,36 @@ fn pack_punctual_lights(scene: &Scene) -> Vec<[f32; 4]> {
 
 impl GpuScene {
     pub fn upload(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
-        if let Some(why) = unsupported_by_gpu_shading(scene) {
-            return Err(GpuError::Input(format!("scene {}: {why}", scene.name)));
-        }
         let mesh = &scene.mesh;
         let nt = mesh.triangle_count();
         let none = f32::from_bits(u32::MAX);
-        let mut triangles: Vec<[f32; 4]> = Vec::with_capacity(nt.max(1) * 11);
+        let stored = nt + scene.prototypes.iter().map(|p| p.mesh.triangle_count()).sum::<usize>();
+        let mut triangles: Vec<[f32; 4]> =
+            Vec::with_capacity(stored.max(1) * TRIANGLE_VEC4S + scene.instances.len() * 7);
         for t in 0..nt {
-            let [a, b, c] = mesh.triangles[t];
-            let (a, b, c) = (a as usize, b as usize, c as usize);
-            let p = |i: usize| mesh.positions[i];
-            let n = |i: usize| mesh.normals.get(i).copied().unwrap_or(glam::Vec3::ZERO);
-            let uv = |i: usize| mesh.uvs.get(i).copied().unwrap_or(glam::Vec2::ZERO);
-            let m = f32::from_bits(mesh.triangle_materials[t]);
-            triangles.push([p(a).x, p(a).y, p(a).z, m]);
-            triangles.push(p(b).extend(0.0).into());
-            triangles.push(p(c).extend(0.0).into());
-            triangles.push(n(a).extend(0.0).into());
-            triangles.push(n(b).extend(0.0).into());
-            triangles.push(n(c).extend(0.0).into());
-            triangles.push([uv(a).x, uv(a).y, uv(b).x, uv(b).y]);
-            triangles.push([uv(c).x, uv(c).y, 0.0, 0.0]);
-            let tan = |i: usize| mesh.tangents.get(i).copied().unwrap_or(glam::Vec4::ZERO);
-            triangles.extend([tan(a).to_array(), tan(b).to_array(), tan(c).to_array()]);
+            pack_triangle(mesh, t, &mut triangles);
+        }
+        // Each prototype's triangles once, then a placement per instance.
+        let mut first_triangle = vec![];
+        for proto in &scene.prototypes {
+            first_triangle.push((triangles.len() / TRIANGLE_VEC4S) as u32);
+            for t in 0..proto.mesh.triangle_count() {
+                pack_triangle(&proto.mesh, t, &mut triangles);
+            }
         }
         if triangles.is_empty() {
             triangles.push([0.0; 4]);
+        }
+        let instance_records = triangles.len() as u32;
+        for inst in &scene.instances {
+            let m = inst.world_from_local.matrix3;
+            let first = first_triangle.get(inst.prototype as usize).copied().unwrap_or(0);
+            triangles.push(glam::Vec3::from(m.x_axis).extend(f32::from_bits(first)).into());
+            triangles.push(glam::Vec3::from(m.y_axis).extend(0.0).into());
+            triangles.push(glam::Vec3::from(m.z_axis).extend(0.0).into());
+            triangles.push(glam::Vec3::from(inst.world_from_local.translation).extend(0.0).into());
+            let n = inst.normal_from_local;
+            triangles.extend([n.x_axis, n.y_axis, n.z_axis].map(|c| glam::Vec3::from(c).extend(0.0).to_array()));
         }
         let tex_bits = |t: Option<usize>| match t {
             Some(t) if t < scene.textures.len() => f32::from_bits(t as u32),
@@ -115,7 +136,7 @@ impl GpuScene {
         let table = specular_albedo_table();
         let mut words: Vec<u32> = lut.iter().map(|v| v.to_bits()).collect();
         let headers = 260 + 3 * scene.textures.len();
-        words.extend([scene.textures.len() as u32, ALBEDO_TABLE_SIZE as u32, headers as u32, 0]);
+        words.extend([scene.textures.len() as u32, ALBEDO_TABLE_SIZE as u32, headers as u32, instance_records]);
         let mut first = headers + table.len() * 2;
         for t in &scene.textures {
             words.extend([t.width, t.height, first as u32]);
@@ -162,7 +183,7 @@ impl GpuScene {
             })
         };
         let buffers = [
-            init("scene triangles", bytemuck::cast_slice(&triangles)),
+            init_rw("scene triangles", bytemuck::cast_slice(&triangles)),
             init("scene materials", bytemuck::cast_slice(&materials)),
             init("scene textures", bytemuck::cast_slice(&words)),
             init_rw("scene lights", bytemuck::cast_slice(&lights)),
@@ -170,8 +191,9 @@ impl GpuScene {
         let bind_group =
             crate::bvh_trace::buffers_bind_group(&ctx.device, "scene", &scene_bind_group_layout(&ctx.device), &buffers);
         let bytes = buffers.iter().map(|b| b.size()).sum();
-        let [_, _, _, lights] = buffers;
-        Ok(Self { triangles: nt, emitters: emitters.len(), bytes, bind_group, lights })
+        let moving = scene.objects.iter().filter(|o| o.is_animated()).map(|o| o.triangles()).collect();
+        let [triangle_buffer, _, _, lights] = buffers;
+        Ok(Self { triangles: nt, emitters: emitters.len(), bytes, bind_group, lights, triangle_buffer, moving })
     }
 
     /// Rewrites the punctual lights (and the sky) from `scene` posed at a frame:
@@ -191,6 +213,34 @@ impl GpuScene {
         }
         ctx.queue.write_buffer(&self.lights, 0, bytes);
         Ok(())
+    }
+
+    /// Rewrites the moving objects' triangles from `scene` posed at a frame
+    /// (`Scene::set_frame_from`: world-space vertices, normals and tangents),
+    /// the same scene this was uploaded from.
+    pub fn pose_geometry(&self, ctx: &GpuContext, scene: &Scene) -> Result<(), GpuError> {
+        let mut words = vec![];
+        for range in &self.moving {
+            if range.end > scene.mesh.triangle_count() {
+                return Err(GpuError::Input(format!(
+                    "scene {} has {} triangles, fewer than the moving objects it was uploaded with",
+                    scene.name,
+                    scene.mesh.triangle_count()
+                )));
+            }
+            words.clear();
+            for t in range.clone() {
+                pack_triangle(&scene.mesh, t, &mut words);
+            }
+            let offset = (range.start * TRIANGLE_VEC4S * 16) as u64;
+            ctx.queue.write_buffer(&self.triangle_buffer, offset, bytemuck::cast_slice(&words));
+        }
+        Ok(())
+    }
+
+    /// Whether the scene has moving objects whose triangles `pose_geometry` rewrites.
+    pub fn has_moving_geometry(&self) -> bool {
+        !self.moving.is_empty()
     }
 
     pub fn bytes(&self) -> u64 {

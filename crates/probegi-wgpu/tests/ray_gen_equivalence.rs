@@ -43,7 +43,7 @@ fn a_generated_batch_traces_like_the_same_rays_uploaded() {
     let Some(ctx) = common::context() else { return };
     let scene = probegi_scene::builtin::cornell_box();
     let cpu = probegi_scene::BvhTracer::for_scene(&scene, Default::default());
-    let bvh = GpuBvh::upload(&ctx, &cpu.export_static().expect("static")).expect("upload");
+    let bvh = GpuBvh::upload(&ctx, &cpu.export()).expect("upload");
     let trace = GpuRayTrace::new(&ctx);
     let (lo, hi) = scene.bounds().expect("bounds");
     let origins: Vec<Vec3> = (0..27)

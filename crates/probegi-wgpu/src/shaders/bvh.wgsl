@@ -4,17 +4,30 @@
 // `CwBvh::ray_traverse` / `ray_traverse_miss` (the `traverse!` loop),
 // `RtTriangle::intersect` and `compute_barycentric`, and probegi-scene's alpha
 // cutouts (`bvh.rs` `Blas::intersect`, `texture.rs` `Footprint`).
+// With a top level (moving objects, instanced meshes: probegi-scene's `BvhTracer`
+// `closest_in` / `occluded_in`), one loop walks both levels: at a top-level leaf
+// the ray moves into the instance's space (unnormalised direction, so t is the
+// same in both) and the walk goes on in its bottom level on the same stack, then
+// back up where it left the top level, so the nodes come in the CPU's order.
 // The buffers are `probegi_scene::BvhExport`, uploaded by `probegi_wgpu::bvh_trace::GpuBvh`:
-//   bvh_nodes:     20 words per node (the `CwBvhNode` layout, documented on `BvhExport::node_words`);
+//   bvh_nodes:     20 words per node (the `CwBvhNode` layout, documented on `BvhExport::node_words`):
+//                  every bottom level (indices rebased), then the top level's nodes (rewritten
+//                  each frame by `GpuBvh::place`);
 //   bvh_triangles: 4 × vec4 per leaf: (v0, triangle id bits), (e1, cutout index bits), (e2, 0), (ng, 0);
 //   bvh_cutouts:   [mask count, cut-triangle offset, coverage offset, 0,
 //                   per mask: width, height, coverage word offset, factor bits, cutoff bits, 0,
 //                   per cut triangle: mask, uv0.x, uv0.y, uv1.x, uv1.y, uv2.x, uv2.y,
-//                   coverage bytes packed 4 per word, little-endian].
+//                   coverage bytes packed 4 per word, little-endian];
+//   bvh_instances: vec4 header (instance count bits, top-level root node bits, 0, 0); per instance
+//                  in top-level leaf order 4 × vec4: the columns of local-from-world (xyz) with
+//                  w = bottom-level root node bits, scene instance bits (`RayHit::instance`),
+//                  flag bits (BVH_INSTANCE_*), and the translation (xyz). A count of 0: no top
+//                  level, rays go straight to the bottom level at node 0.
 
 @group(1) @binding(0) var<storage, read> bvh_nodes: array<u32>;
 @group(1) @binding(1) var<storage, read> bvh_triangles: array<vec4<f32>>;
 @group(1) @binding(2) var<storage, read> bvh_cutouts: array<u32>;
+@group(1) @binding(3) var<storage, read> bvh_instances: array<vec4<f32>>;
 
 const BVH_NODE_WORDS: u32 = 20u;
 // obvhs `cwbvh::node::EPSILON`: the nodes' near plane.
@@ -23,8 +36,12 @@ const BVH_NO_HIT: u32 = 0xffffffffu;
 // A leaf test's miss (hits have t ≥ t_min ≥ 0). Rays carry finite t_max (the
 // host clamps +∞ to f32::MAX), so no shader value is infinite.
 const BVH_MISS: f32 = -1.0;
-// obvhs `CwBvh::validate` keeps trees shallower than this.
-const BVH_STACK_SIZE: u32 = 32u;
+// obvhs `CwBvh::validate` keeps trees shallower than 32; a bottom level's walk
+// stacks on top of its top level's.
+const BVH_STACK_SIZE: u32 = 64u;
+// bvh_instances flags: the identity transform (the static part); a moving object.
+const BVH_INSTANCE_IDENTITY: u32 = 1u;
+const BVH_INSTANCE_MOVING: u32 = 2u;
 
 struct BvhRay {
     origin: vec3<f32>,
@@ -42,6 +59,11 @@ struct BvhHit {
     leaf: u32,
     // Weights of vertices 1 and 2.
     bary: vec2<f32>,
+    // `Scene::instances` index of the hit copy, BVH_NO_HIT for the scene's own mesh.
+    instance: u32,
+    // The ray met the clockwise side (in the instance's space, which has the
+    // same sides: instance transforms keep handedness).
+    backface: bool,
 };
 
 // obvhs `ray::safe_inverse` (f32::EPSILON); directions carry no negative zeros.
@@ -228,30 +250,79 @@ fn bvh_intersect_leaf(leaf: u32, ray: BvhRay, bary: ptr<function, vec2<f32>>) ->
 }
 
 // The closest hit (`any_hit` false) or the first hit found (`any_hit` true, for
-// shadow rays) of `ray`: obvhs's `traverse!` loop with an explicit stack.
-fn bvh_trace(ray_in: BvhRay, any_hit: bool) -> BvhHit {
-    var ray = ray_in;
-    var hit = BvhHit(ray_in.t_max, BVH_NO_HIT, vec2<f32>(0.0));
+// shadow rays) of `ray`: obvhs's `traverse!` loop with an explicit stack, over
+// both levels. Instances whose flags share a bit with `skip` are left out
+// (BVH_INSTANCE_MOVING: static geometry only, for initialisation rounds).
+fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
+    var hit = BvhHit(ray_in.t_max, BVH_NO_HIT, vec2<f32>(0.0), BVH_NO_HIT, false);
     if (arrayLength(&bvh_nodes) < BVH_NODE_WORDS) {
         return hit;
     }
+    let top_level = bitcast<u32>(bvh_instances[0].x) > 0u;
+    // The world ray (its t_max the closest hit so far) and the ray of the level walked.
+    var world = ray_in;
+    var ray = ray_in;
+    var in_bottom = !top_level;
+    var instance = BVH_NO_HIT;
     var stack: array<vec2<u32>, BVH_STACK_SIZE>;
     var sp = 0u;
-    var current = vec2<u32>(0u, 0x80000000u);
+    // Where the bottom level's stack starts, and the top level's state left there.
+    var floor = 0u;
+    var top_current = vec2<u32>(0u, 0u);
+    var top_prims = vec2<u32>(0u, 0u);
+    var current = vec2<u32>(select(0u, bitcast<u32>(bvh_instances[0].y), top_level), 0x80000000u);
     var prims = vec2<u32>(0u, 0u);
     loop {
         while (prims.y != 0u) {
             let local = firstLeadingBit(prims.y);
             prims.y &= ~(1u << local);
             let leaf = prims.x + local;
-            var bary = vec2<f32>(0.0);
-            let t = bvh_intersect_leaf(leaf, ray, &bary);
-            if (t >= 0.0 && t < ray.t_max) {
-                hit = BvhHit(t, leaf, bary);
-                ray.t_max = t;
-                if (any_hit) {
-                    return hit;
+            if (in_bottom) {
+                var bary = vec2<f32>(0.0);
+                let t = bvh_intersect_leaf(leaf, ray, &bary);
+                if (t >= 0.0 && t < ray.t_max) {
+                    let back = dot(bvh_triangles[leaf * 4u + 3u].xyz, ray.dir) < 0.0;
+                    var scene_instance = BVH_NO_HIT;
+                    if (instance != BVH_NO_HIT) {
+                        scene_instance = bitcast<u32>(bvh_instances[1u + instance * 4u + 1u].w);
+                    }
+                    hit = BvhHit(t, leaf, bary, scene_instance, back);
+                    ray.t_max = t;
+                    world.t_max = t;
+                    if (any_hit) {
+                        return hit;
+                    }
                 }
+            } else {
+                // An instance: into its bottom level (BvhTracer::closest_in, Instance::to_local).
+                let base = 1u + leaf * 4u;
+                let c0 = bvh_instances[base];
+                let c1 = bvh_instances[base + 1u];
+                let c2 = bvh_instances[base + 2u];
+                let flags = bitcast<u32>(c2.w);
+                let root = bitcast<u32>(c0.w);
+                if ((flags & skip) != 0u || root == BVH_NO_HIT) {
+                    continue;
+                }
+                if ((flags & BVH_INSTANCE_IDENTITY) != 0u) {
+                    ray = world;
+                } else {
+                    let tr = bvh_instances[base + 3u].xyz;
+                    let o = world.origin;
+                    let d = world.dir;
+                    // glam's Affine3A::transform_point3a / transform_vector3a, in its order.
+                    let origin = ((c0.xyz * o.x + c1.xyz * o.y) + c2.xyz * o.z) + tr;
+                    let dir = (c0.xyz * d.x + c1.xyz * d.y) + c2.xyz * d.z;
+                    ray = bvh_make_ray(origin, dir, world.t_min, world.t_max);
+                }
+                instance = leaf;
+                top_current = current;
+                top_prims = prims;
+                floor = sp;
+                in_bottom = true;
+                current = vec2<u32>(root, 0x80000000u);
+                prims = vec2<u32>(0u, 0u);
+                break;
             }
         }
         prims = vec2<u32>(0u, 0u);
@@ -274,7 +345,16 @@ fn bvh_trace(ray_in: BvhRay, any_hit: bool) -> BvhHit {
             current = vec2<u32>(0u, 0u);
         }
         if (prims.y == 0u && (current.y & 0xff000000u) == 0u) {
-            if (sp == 0u) {
+            if (sp == floor) {
+                if (in_bottom && top_level) {
+                    // Back up to the top level where it was left.
+                    in_bottom = false;
+                    ray = world;
+                    current = top_current;
+                    prims = top_prims;
+                    floor = 0u;
+                    continue;
+                }
                 break;
             }
             sp--;
@@ -284,13 +364,11 @@ fn bvh_trace(ray_in: BvhRay, any_hit: bool) -> BvhHit {
     return hit;
 }
 
+fn bvh_trace(ray: BvhRay, any_hit: bool) -> BvhHit {
+    return bvh_trace_skipping(ray, any_hit, 0u);
+}
+
 // The scene triangle of a leaf.
 fn bvh_triangle_id(leaf: u32) -> u32 {
     return bitcast<u32>(bvh_triangles[leaf * 4u].w);
-}
-
-// Whether `ray` meets the back (clockwise) side of leaf `leaf`: geometric normal ·
-// direction > 0, with obvhs's ng the negated counter-clockwise normal.
-fn bvh_backface(leaf: u32, dir: vec3<f32>) -> bool {
-    return dot(bvh_triangles[leaf * 4u + 3u].xyz, dir) < 0.0;
 }

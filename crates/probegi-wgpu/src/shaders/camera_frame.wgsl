@@ -51,7 +51,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
         camera_indirect[i] = vec4<f32>(0.0);
         return;
     }
-    let sp = scene_surface_point(bvh_triangle_id(hit.leaf), hit.bary, bvh_backface(hit.leaf, dir));
+    let sp = scene_surface_point(bvh_triangle_id(hit.leaf), hit.instance, hit.bary, hit.backface);
     let to_viewer = -dir;
     let bsdf = scene_bsdf(sp);
     let glossy = max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0;
@@ -75,7 +75,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
                 var lr = camera.sky.xyz;
                 if (g.leaf != BVH_NO_HIT) {
                     // frame_loop's shade_glossy_hit
-                    let sh = scene_surface_point(bvh_triangle_id(g.leaf), g.bary, bvh_backface(g.leaf, wi));
+                    let sh = scene_surface_point(bvh_triangle_id(g.leaf), g.instance, g.bary, g.backface);
                     let bh = scene_bsdf(sh);
                     let nh = scene_facing_normal(sh);
                     lr = scene_direct(sh, -wi, area, true, &rng)

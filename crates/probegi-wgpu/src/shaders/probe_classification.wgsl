@@ -39,6 +39,8 @@ struct ClassifyHit {
     t: f32,
     triangle: u32,
     bary: vec2<f32>,
+    instance: u32,
+    _pad: u32,
 };
 
 @group(0) @binding(0) var<uniform> classify_params: ClassifyParams;
@@ -89,7 +91,7 @@ fn classify_front_hit(r: u32) -> FrontHit {
     if (!out.ok) { return out; }
     let ray = classify_rays[r];
     out.point = ray.origin + ray.dir * h.t;
-    out.normal = scene_facing_normal(scene_surface_point(h.triangle, h.bary, false));
+    out.normal = scene_facing_normal(scene_surface_point(h.triangle, h.instance, h.bary, false));
     return out;
 }
 

@@ -2,7 +2,7 @@
 // initialisation batch: probegi_core::probe_relocation::probe_ray_stats over the
 // probe's rays (directions from the trace's rays, signed distances from its hits),
 // then relocation_step. Must match `probegi_wgpu::probe_relocation::{RelocationParams,
-// GpuRelocationProbe}` and the trace pass's `GpuRay` (32 bytes) / `GpuRayHit` (16).
+// GpuRelocationProbe}` and the trace pass's `GpuRay` (32 bytes) / `GpuRayHit` (24).
 
 struct RelocationParams {
     probe_count: u32,
@@ -22,6 +22,8 @@ struct RelocationHit {
     t: f32,
     triangle: u32,
     bary: vec2<f32>,
+    instance: u32,
+    _pad: u32,
 };
 
 struct RelocationProbe {

@@ -26,6 +26,8 @@ struct ShadeHit {
     t: f32,
     triangle: u32,
     bary: vec2<f32>,
+    instance: u32,
+    _pad: u32,
 };
 
 @group(0) @binding(0) var<uniform> shade_params: ShadeParams;
@@ -62,7 +64,7 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
         shade_radiance[i] = vec4<f32>(scene_lights[1].xyz, d);
         return;
     }
-    let sp = scene_surface_point(h.triangle, h.bary, false);
+    let sp = scene_surface_point(h.triangle, h.instance, h.bary, false);
     var rng = rng_hash(shade_params.seed ^ rng_hash(shade_params.frame ^ rng_hash(i)));
     let to_viewer = -r.dir;
     let n = scene_facing_normal(sp);

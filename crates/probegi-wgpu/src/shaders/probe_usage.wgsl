@@ -3,7 +3,7 @@
 // hit within the cage diagonal r, 0 otherwise; with the relevant and backface
 // counts the usage scheme's states come from. One thread per batch probe.
 // Must match `probegi_wgpu::probe_usage::{UsageParams, UsageProbe}` and the trace
-// pass's `GpuRayHit` (16 bytes; triangle bit 31 = backface, all ones = miss).
+// pass's `GpuRayHit` (24 bytes; triangle bit 31 = backface, all ones = miss).
 
 struct UsageParams {
     probe_count: u32,
@@ -16,6 +16,8 @@ struct UsageHit {
     t: f32,
     triangle: u32,
     bary: vec2<f32>,
+    instance: u32,
+    _pad: u32,
 };
 
 @group(0) @binding(0) var<uniform> usage_params: UsageParams;

@@ -10,13 +10,18 @@
 // stream per probe), so area-light estimates agree in distribution, not bit for bit.
 // Buffers (group 3, written by `probegi_wgpu::gpu_scene::GpuScene`):
 //   scene_triangles: 11 × vec4 per scene triangle: p0 (w: material bits), p1, p2, n0, n1, n2, (uv0, uv1),
-//                    (uv2, 0, 0), t0, t1, t2 (tangent xyz, bitangent sign w; zero when none)
+//                    (uv2, 0, 0), t0, t1, t2 (tangent xyz, bitangent sign w; zero when none): the
+//                    scene mesh's (moving objects as posed at the frame), then each prototype's
+//                    (`Scene::prototypes`) in its local space; then per `Scene::instances` entry
+//                    7 × vec4: world-from-local columns (xyz; w of the first: its prototype's first
+//                    triangle bits), its translation, normal-from-local columns (xyz)
 //   scene_materials: 5 × vec4 per material: (base colour factor, base texture bits | none),
 //                    (specular colour, α), (model: 0 none, 1 MTL, 2 metallic-roughness; metallic, 0, 0),
 //                    (emission = factor × strength, emissive texture bits | none),
 //                    (normal texture bits | none, normal scale, bump texture bits | none, bump multiplier)
 //   scene_textures:  words 0..255 the sRGB8 → linear table (f32 bits), 256 texture count, 257 the
-//                    GGX albedo table's side N, 258 its first word, 259 0, then per texture (width,
+//                    GGX albedo table's side N, 258 its first word, 259 the first vec4 of the instance
+//                    records in scene_triangles, then per texture (width,
 //                    height, first texel word), the (A, B) table (N × N × 2 f32 bits,
 //                    probegi_core::bsdf::specular_albedo_table), then RGB8 texels one per word
 //   scene_lights:    vec4 header (punctual count, emitter count bits, 0, 0), vec4 sky radiance,
@@ -55,33 +60,76 @@ fn scene_normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(0.0);
 }
 
-// probegi_scene::Scene::surface_point: the interpolated shading normal on the
-// geometric side, perturbed by the material's normal or bump map.
-fn scene_surface_point(triangle: u32, bary_in: vec2<f32>, backface: bool) -> SurfacePoint {
-    let t = triangle * SCENE_TRIANGLE_VEC4S;
-    let bary = vec3<f32>(1.0 - bary_in.x - bary_in.y, bary_in.x, bary_in.y);
+// probegi_scene::scene `Corners`: a hit triangle's corners in world space, an
+// instanced copy's placed by its transform (`Corners::placed`).
+struct SceneCorners {
+    p0: vec3<f32>,
+    p1: vec3<f32>,
+    p2: vec3<f32>,
+    n0: vec3<f32>,
+    n1: vec3<f32>,
+    n2: vec3<f32>,
+    uv0: vec2<f32>,
+    uv1: vec2<f32>,
+    uv2: vec2<f32>,
+    t0: vec4<f32>,
+    t1: vec4<f32>,
+    t2: vec4<f32>,
+    material: u32,
+};
+
+fn scene_corners(triangle: u32, instance: u32) -> SceneCorners {
+    var tri = triangle;
+    var inst = 0u;
+    if (instance != SCENE_NONE) {
+        inst = scene_textures[259] + instance * 7u;
+        tri += bitcast<u32>(scene_triangles[inst].w);
+    }
+    let t = tri * SCENE_TRIANGLE_VEC4S;
     let p0 = scene_triangles[t];
-    let p1 = scene_triangles[t + 1u].xyz;
-    let p2 = scene_triangles[t + 2u].xyz;
-    let position = p0.xyz * bary.x + p1 * bary.y + p2 * bary.z;
-    let ng = scene_normalize_or_zero(cross(p1 - p0.xyz, p2 - p0.xyz));
-    var ns = scene_normalize_or_zero(scene_triangles[t + 3u].xyz * bary.x + scene_triangles[t + 4u].xyz * bary.y
-        + scene_triangles[t + 5u].xyz * bary.z);
+    let uv01 = scene_triangles[t + 6u];
+    var c = SceneCorners(p0.xyz, scene_triangles[t + 1u].xyz, scene_triangles[t + 2u].xyz,
+        scene_triangles[t + 3u].xyz, scene_triangles[t + 4u].xyz, scene_triangles[t + 5u].xyz,
+        uv01.xy, uv01.zw, scene_triangles[t + 7u].xy,
+        scene_triangles[t + 8u], scene_triangles[t + 9u], scene_triangles[t + 10u], bitcast<u32>(p0.w));
+    if (instance != SCENE_NONE) {
+        let m = mat3x3<f32>(scene_triangles[inst].xyz, scene_triangles[inst + 1u].xyz, scene_triangles[inst + 2u].xyz);
+        let tr = scene_triangles[inst + 3u].xyz;
+        let nm = mat3x3<f32>(scene_triangles[inst + 4u].xyz, scene_triangles[inst + 5u].xyz, scene_triangles[inst + 6u].xyz);
+        c.p0 = m * c.p0 + tr;
+        c.p1 = m * c.p1 + tr;
+        c.p2 = m * c.p2 + tr;
+        c.n0 = nm * c.n0;
+        c.n1 = nm * c.n1;
+        c.n2 = nm * c.n2;
+        c.t0 = vec4<f32>(scene_normalize_or_zero(m * c.t0.xyz), c.t0.w);
+        c.t1 = vec4<f32>(scene_normalize_or_zero(m * c.t1.xyz), c.t1.w);
+        c.t2 = vec4<f32>(scene_normalize_or_zero(m * c.t2.xyz), c.t2.w);
+    }
+    return c;
+}
+
+// probegi_scene::Scene::surface_point: the interpolated shading normal on the
+// geometric side, perturbed by the material's normal or bump map. `instance`:
+// the hit's `RayHit::instance` (SCENE_NONE for the scene's own mesh).
+fn scene_surface_point(triangle: u32, instance: u32, bary_in: vec2<f32>, backface: bool) -> SurfacePoint {
+    let c = scene_corners(triangle, instance);
+    let bary = vec3<f32>(1.0 - bary_in.x - bary_in.y, bary_in.x, bary_in.y);
+    let position = c.p0 * bary.x + c.p1 * bary.y + c.p2 * bary.z;
+    let ng = scene_normalize_or_zero(cross(c.p1 - c.p0, c.p2 - c.p0));
+    var ns = scene_normalize_or_zero(c.n0 * bary.x + c.n1 * bary.y + c.n2 * bary.z);
     if (all(ns == vec3<f32>(0.0))) {
         ns = ng;
     } else if (dot(ns, ng) < 0.0) {
         ns = -ns;
     }
-    let uv01 = scene_triangles[t + 6u];
-    let uv2 = scene_triangles[t + 7u].xy;
-    let uv = uv01.xy * bary.x + uv01.zw * bary.y + uv2 * bary.z;
-    let material = bitcast<u32>(p0.w);
-    let perturbed = scene_perturbed_normal(material, t, bary, ns, uv);
+    let uv = c.uv0 * bary.x + c.uv1 * bary.y + c.uv2 * bary.z;
+    let perturbed = scene_perturbed_normal(c, bary, ns, uv);
     // A perturbed normal below the surface would shade light from inside it.
     if (dot(perturbed, ng) > 1e-3) {
         ns = perturbed;
     }
-    return SurfacePoint(position, ng, ns, uv, material, !backface);
+    return SurfacePoint(position, ng, ns, uv, c.material, !backface);
 }
 
 fn scene_normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
@@ -91,12 +139,12 @@ fn scene_normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
 
 // Scene::perturbed_normal: `n` tilted by the normal map (tangent space, glTF's
 // bitangent = sign · n × tangent) or by the bump map's slopes along ∂p/∂u, ∂p/∂v.
-fn scene_perturbed_normal(material: u32, t: u32, bary: vec3<f32>, n: vec3<f32>, uv: vec2<f32>) -> vec3<f32> {
-    let maps = scene_materials[material * SCENE_MATERIAL_VEC4S + 4u];
+fn scene_perturbed_normal(c: SceneCorners, bary: vec3<f32>, n: vec3<f32>, uv: vec2<f32>) -> vec3<f32> {
+    let maps = scene_materials[c.material * SCENE_MATERIAL_VEC4S + 4u];
     let normal_tex = bitcast<u32>(maps.x);
     if (normal_tex != SCENE_NONE) {
-        let t0 = scene_triangles[t + 8u];
-        let tan0 = t0.xyz * bary.x + scene_triangles[t + 9u].xyz * bary.y + scene_triangles[t + 10u].xyz * bary.z;
+        let t0 = c.t0;
+        let tan0 = t0.xyz * bary.x + c.t1.xyz * bary.y + c.t2.xyz * bary.z;
         let tan = scene_normalize_or_zero(tan0 - n * dot(n, tan0));
         if (all(tan == vec3<f32>(0.0))) {
             return n;
@@ -109,15 +157,10 @@ fn scene_perturbed_normal(material: u32, t: u32, bary: vec3<f32>, n: vec3<f32>, 
     let bump_tex = bitcast<u32>(maps.z);
     if (bump_tex != SCENE_NONE) {
         // uv_derivatives
-        let p0 = scene_triangles[t].xyz;
-        let p1 = scene_triangles[t + 1u].xyz;
-        let p2 = scene_triangles[t + 2u].xyz;
-        let uv01 = scene_triangles[t + 6u];
-        let uv2 = scene_triangles[t + 7u].xy;
-        let duv02 = uv01.xy - uv2;
-        let duv12 = uv01.zw - uv2;
-        let dp02 = p0 - p2;
-        let dp12 = p1 - p2;
+        let duv02 = c.uv0 - c.uv2;
+        let duv12 = c.uv1 - c.uv2;
+        let dp02 = c.p0 - c.p2;
+        let dp12 = c.p1 - c.p2;
         let det = duv02.x * duv12.y - duv02.y * duv12.x;
         if (abs(det) < 1e-12) {
             return n;

@@ -1,5 +1,5 @@
 // Trace pass: one thread per ray through `bvh.wgsl`. Must match
-// `probegi_wgpu::bvh_trace::{TraceParams, GpuRay, GpuRayHit}` (#[repr(C)], 16, 32 and 16 bytes).
+// `probegi_wgpu::bvh_trace::{TraceParams, GpuRay, GpuRayHit}` (#[repr(C)], 16, 32 and 24 bytes).
 
 struct TraceParams {
     ray_count: u32,
@@ -7,7 +7,8 @@ struct TraceParams {
     groups_x: u32,
     // 1: any hit (shadow rays), 0: closest hit.
     any_hit: u32,
-    _pad: u32,
+    // BVH_INSTANCE_* flags of instances left out (BVH_INSTANCE_MOVING: static geometry only).
+    skip: u32,
 };
 
 struct GpuRay {
@@ -23,6 +24,9 @@ struct GpuRayHit {
     // Scene triangle, bit 31 set on a back face; 0xffffffff for a miss.
     triangle: u32,
     bary: vec2<f32>,
+    // `Scene::instances` index, 0xffffffff for the scene's own mesh (and a miss).
+    instance: u32,
+    _pad: u32,
 };
 
 @group(0) @binding(0) var<uniform> trace_params: TraceParams;
@@ -36,14 +40,15 @@ fn trace_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_i
         return;
     }
     let r = rays[i];
-    let h = bvh_trace(bvh_make_ray(r.origin, r.dir, r.t_min, r.t_max), trace_params.any_hit != 0u);
+    let ray = bvh_make_ray(r.origin, r.dir, r.t_min, r.t_max);
+    let h = bvh_trace_skipping(ray, trace_params.any_hit != 0u, trace_params.skip);
     if (h.leaf == BVH_NO_HIT) {
-        hits[i] = GpuRayHit(r.t_max, BVH_NO_HIT, vec2<f32>(0.0));
+        hits[i] = GpuRayHit(r.t_max, BVH_NO_HIT, vec2<f32>(0.0), BVH_NO_HIT, 0u);
         return;
     }
     var triangle = bvh_triangle_id(h.leaf);
-    if (bvh_backface(h.leaf, r.dir)) {
+    if (h.backface) {
         triangle |= 0x80000000u;
     }
-    hits[i] = GpuRayHit(h.t, triangle, h.bary);
+    hits[i] = GpuRayHit(h.t, triangle, h.bary, h.instance, 0u);
 }
