@@ -482,4 +482,37 @@ fn gpu_render_keeps_the_field_on_the_device_and_draws_probes_on_the_cpu_camera()
         // The atlases were read back from the device for the dump.
         assert!(atlases.join("irradiance.exr").exists());
     }
+    // A moving object and instanced meshes go through the device's top level.
+    let moving = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/moving-box.toml");
+    for scene in [s(&moving), "builtin:forest".to_string()] {
+        let (png, stats) = (tmp("gpu-tlas.png"), tmp("gpu-tlas.json"));
+        let (png_s, stats_s) = (s(&png), s(&stats));
+        let o = probegi(&[
+            "render",
+            "--scene",
+            &scene,
+            "--gi",
+            "ddgi",
+            "--backend",
+            "wgpu",
+            "--frames",
+            "3",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--probes",
+            "4,4,4",
+            "--rays-per-probe",
+            "32",
+            "--out",
+            &png_s,
+            "--stats",
+            &stats_s,
+        ]);
+        assert!(o.status.success(), "{scene}: {}", stderr(&o));
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+        assert_eq!(json["camera_on"], "gpu", "{scene}");
+    }
 }

@@ -294,9 +294,15 @@ fn node_words_rebased(bvh: &CwBvh, node_base: u32, leaf_base: u32) -> Vec<u32> {
         node_words.extend([n.p.x.to_bits(), n.p.y.to_bits(), n.p.z.to_bits()]);
         node_words.push(le(&[n.e[0], n.e[1], n.e[2], n.imask]));
         node_words.extend([n.child_base_idx.wrapping_add(node_base), n.primitive_base_idx.wrapping_add(leaf_base)]);
-        for bytes in
-            [&n.child_meta, &n.child_min_x, &n.child_max_x, &n.child_min_y, &n.child_max_y, &n.child_min_z, &n.child_max_z]
-        {
+        for bytes in [
+            &n.child_meta,
+            &n.child_min_x,
+            &n.child_max_x,
+            &n.child_min_y,
+            &n.child_max_y,
+            &n.child_min_z,
+            &n.child_max_z,
+        ] {
             node_words.extend([le(&bytes[0..4]), le(&bytes[4..8])]);
         }
     }
@@ -540,14 +546,7 @@ impl BvhTracer {
             placed: vec![],
             pad_rel: settings.bvh_aabb_pad_rel,
         };
-        Self {
-            blases,
-            layout,
-            rest: None,
-            static_tlas: None,
-            cutouts,
-            build_time: start.elapsed(),
-        }
+        Self { blases, layout, rest: None, static_tlas: None, cutouts, build_time: start.elapsed() }
     }
 
     /// A static BVH over everything that does not move, plus one per moving object
@@ -593,10 +592,8 @@ impl BvhTracer {
         };
         let rest = vec![None; layout.object_ids.len()];
         let rest = Some(layout.build(Some(&rest)));
-        let static_tlas =
-            (!layout.object_ids.is_empty() && !layout.placed.is_empty()).then(|| layout.build(None));
-        let mut tracer =
-            Self { blases, layout, rest, static_tlas, cutouts, build_time: Duration::ZERO };
+        let static_tlas = (!layout.object_ids.is_empty() && !layout.placed.is_empty()).then(|| layout.build(None));
+        let mut tracer = Self { blases, layout, rest, static_tlas, cutouts, build_time: Duration::ZERO };
         tracer.build_time = start.elapsed();
         tracer
     }

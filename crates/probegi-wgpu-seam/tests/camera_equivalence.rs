@@ -2,7 +2,10 @@
 //! the camera pass) against the CPU renderer: HDR-FLIP of the images on the
 //! built-in Cornell box, the door room, McGuire's glossy Cornell box (GGX
 //! specular, glossy camera rays, second-order glossy) and the shared Sponza
-//! (textures and bump maps); and, exactly, a point-lit plane under a normal
+//! (textures and bump maps), the instanced forest (36 copies of the shared pine
+//! through the top level, alpha-cut needles) and the door room with a box
+//! that moves, turns and grows (its top level placed and its triangles posed on
+//! the device each frame); and, exactly, a point-lit plane under a normal
 //! map and under a bump map (nothing random: punctual light, frame 0). Random
 //! numbers differ between the backends, so the images differ by Monte Carlo
 //! noise. Each FLIP is printed beside the CPU's own FLIP between two seeds; it
@@ -135,6 +138,43 @@ fn textured_sponza_frame_on_the_gpu() {
     });
     scene.sky_radiance = glam::Vec3::splat(3.0);
     check("sponza (textures, bump maps)", scene, small(UVec3::new(12, 6, 6)), 64, 24);
+}
+
+#[test]
+fn instanced_forest_frame_on_the_gpu() {
+    let scene = load_scene("builtin:forest").expect("built-in forest (shared pine)");
+    assert!(!scene.instances.is_empty(), "instanced");
+    let s = DdgiVolumeSettings { probe_counts: UVec3::new(8, 4, 8), probe_rays_per_probe: 128, ..Default::default() };
+    check("instanced forest", scene, s, 64, 24);
+}
+
+#[test]
+fn moving_box_frame_on_the_gpu() {
+    use glam::{Quat, Vec3};
+    use probegi_scene::{ObjectAnimation, TransformKeyframe};
+    let mut scene = load_scene("builtin:door-room").expect("built in");
+    let key = |frame: f32, t: Vec3, scale: f32| TransformKeyframe {
+        frame,
+        translation: Some(t),
+        rotation: Some(Quat::from_rotation_y(frame * 0.07)),
+        scale: Some(Vec3::splat(scale)),
+    };
+    let animation = ObjectAnimation {
+        keyframes: vec![key(0.0, Vec3::ZERO, 1.0), key(20.0, Vec3::new(2.0, 0.3, 1.5), 1.6)],
+        ..Default::default()
+    };
+    scene.add_object(
+        "mover",
+        |m| probegi_scene::builtin::add_box(m, Vec3::new(0.6, 0.0, 0.6), Vec3::new(1.4, 0.8, 1.4), 0),
+        animation,
+    );
+    scene.validate().expect("valid");
+    let s = DdgiVolumeSettings {
+        probe_origin_m: Some(Vec3::new(-0.5, 0.5, -0.5)),
+        probe_spacing_m: Some(Vec3::ONE),
+        ..small(UVec3::new(6, 3, 6))
+    };
+    check("door room, moving box", scene, s, 64, 32);
 }
 
 /// A 4 m plane (two triangles with UVs tiling a 64² map four times, tangent

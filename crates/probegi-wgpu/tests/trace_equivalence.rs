@@ -54,7 +54,13 @@ fn compare(ctx: &probegi_wgpu::GpuContext, scene: &Scene, n: usize) -> Agreement
 
 /// The GPU's traces of `n` random rays (closest hit, then any hit over
 /// segments) through `bvh`, moving objects left out with `static_only`.
-fn gpu_trace(ctx: &probegi_wgpu::GpuContext, bvh: &GpuBvh, rays: &[Ray], any_hit: bool, static_only: bool) -> Vec<GpuRayHit> {
+fn gpu_trace(
+    ctx: &probegi_wgpu::GpuContext,
+    bvh: &GpuBvh,
+    rays: &[Ray],
+    any_hit: bool,
+    static_only: bool,
+) -> Vec<GpuRayHit> {
     let trace = GpuRayTrace::new(ctx);
     let gpu_rays: Vec<GpuRay> = rays.iter().map(|r| GpuRay::new(r.origin, r.dir, r.t_min, r.t_max)).collect();
     let batch = trace.batch(ctx, &gpu_rays, any_hit).expect("batch");
