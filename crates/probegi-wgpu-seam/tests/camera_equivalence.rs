@@ -5,7 +5,8 @@
 //! (textures and bump maps), the instanced forest (36 copies of the shared pine
 //! through the top level, alpha-cut needles) and the door room with a box
 //! that moves, turns and grows (its top level placed and its triangles posed on
-//! the device each frame); and, exactly, a point-lit plane under a normal
+//! the device each frame; it glows, so the emitters' distribution is posed
+//! too); and, exactly, a point-lit plane under a normal
 //! map and under a bump map (nothing random: punctual light, frame 0). Random
 //! numbers differ between the backends, so the images differ by Monte Carlo
 //! noise. Each FLIP is printed beside the CPU's own FLIP between two seeds; it
@@ -163,9 +164,14 @@ fn moving_box_frame_on_the_gpu() {
         keyframes: vec![key(0.0, Vec3::ZERO, 1.0), key(20.0, Vec3::new(2.0, 0.3, 1.5), 1.6)],
         ..Default::default()
     };
+    // It glows, so the emitters' distribution follows its growing area too.
+    let mut glow = probegi_scene::Material::diffuse("glow", Vec3::splat(0.5));
+    glow.emissive_factor = Vec3::new(2.0, 1.5, 1.0);
+    scene.materials.push(glow);
+    let glow = (scene.materials.len() - 1) as u32;
     scene.add_object(
         "mover",
-        |m| probegi_scene::builtin::add_box(m, Vec3::new(0.6, 0.0, 0.6), Vec3::new(1.4, 0.8, 1.4), 0),
+        |m| probegi_scene::builtin::add_box(m, Vec3::new(0.6, 0.0, 0.6), Vec3::new(1.4, 0.8, 1.4), glow),
         animation,
     );
     scene.validate().expect("valid");
@@ -174,7 +180,7 @@ fn moving_box_frame_on_the_gpu() {
         probe_spacing_m: Some(Vec3::ONE),
         ..small(UVec3::new(6, 3, 6))
     };
-    check("door room, moving box", scene, s, 64, 32);
+    check("door room, moving glowing box", scene, s, 64, 32);
 }
 
 /// A 4 m plane (two triangles with UVs tiling a 64² map four times, tangent

@@ -46,6 +46,33 @@ fn pack_triangle(mesh: &probegi_scene::mesh::Mesh, t: usize, out: &mut Vec<[f32;
 
 const TRIANGLE_VEC4S: usize = 11;
 
+/// `scene_lights`: the punctual lights, then the emitters' power-weighted
+/// distribution (`Scene::emitter_powers`, as the CPU's AreaLights); and the
+/// emitter count.
+fn pack_lights(scene: &Scene) -> (Vec<[f32; 4]>, usize) {
+    let (emitters, weights) = scene.emitter_powers();
+    let distribution = Distribution1d::new(&weights);
+    let mut lights = pack_punctual_lights(scene);
+    lights[0][1] = f32::from_bits(emitters.len() as u32);
+    let mut cdf = 0.0f32;
+    for (i, &t) in emitters.iter().enumerate() {
+        let pmf = distribution.pmf(i);
+        cdf = if i + 1 == emitters.len() { 1.0 } else { cdf + pmf };
+        lights.push([f32::from_bits(t), cdf, pmf / scene.mesh.area(t as usize), 0.0]);
+    }
+    (lights, emitters.len())
+}
+
+/// Whether an emitting triangle belongs to a moving object (its area, and so
+/// the emitters' distribution, may change per frame: `DirectLighting::for_frame`).
+fn emitter_moves(scene: &Scene) -> bool {
+    scene
+        .objects
+        .iter()
+        .filter(|o| o.is_animated())
+        .any(|o| o.triangles().any(|t| scene.material(scene.mesh.triangle_materials[t]).is_emissive()))
+}
+
 /// The scene's shading data on the device.
 pub struct GpuScene {
     pub triangles: usize,
@@ -56,6 +83,8 @@ pub struct GpuScene {
     triangle_buffer: wgpu::Buffer,
     /// Triangle ranges of the moving objects (rewritten by `pose_geometry`).
     moving: Vec<std::ops::Range<usize>>,
+    /// An emitter moves: `pose_lights` rewrites the emitters' distribution too.
+    emitter_moves: bool,
 }
 
 /// `scene_lights`' header, sky and punctual lights (emitters follow them).
@@ -150,16 +179,7 @@ impl GpuScene {
         }
         // Lights: punctual lights, then the emitters' power-weighted distribution
         // (`Scene::emitter_powers`, as the CPU's AreaLights).
-        let (emitters, weights) = scene.emitter_powers();
-        let distribution = Distribution1d::new(&weights);
-        let mut lights = pack_punctual_lights(scene);
-        lights[0][1] = f32::from_bits(emitters.len() as u32);
-        let mut cdf = 0.0f32;
-        for (i, &t) in emitters.iter().enumerate() {
-            let pmf = distribution.pmf(i);
-            cdf = if i + 1 == emitters.len() { 1.0 } else { cdf + pmf };
-            lights.push([f32::from_bits(t), cdf, pmf / mesh.area(t as usize), 0.0]);
-        }
+        let (lights, emitters) = pack_lights(scene);
         for (what, bytes) in [
             ("the scene's triangles", triangles.len() * 16),
             ("its materials", materials.len() * 16),
@@ -193,15 +213,37 @@ impl GpuScene {
         let bytes = buffers.iter().map(|b| b.size()).sum();
         let moving = scene.objects.iter().filter(|o| o.is_animated()).map(|o| o.triangles()).collect();
         let [triangle_buffer, _, _, lights] = buffers;
-        Ok(Self { triangles: nt, emitters: emitters.len(), bytes, bind_group, lights, triangle_buffer, moving })
+        Ok(Self {
+            triangles: nt,
+            emitters,
+            bytes,
+            bind_group,
+            lights,
+            triangle_buffer,
+            moving,
+            emitter_moves: emitter_moves(scene),
+        })
     }
 
     /// Rewrites the punctual lights (and the sky) from `scene` posed at a frame:
     /// the same scene this was uploaded from, its lights moved, dimmed or
-    /// switched by their keyframes (the count and the emitters stay).
+    /// switched by their keyframes (the count stays); and, when an emitter is
+    /// on a moving object, the emitters' distribution from their posed areas.
     pub fn pose_lights(&self, ctx: &GpuContext, scene: &Scene) -> Result<(), GpuError> {
-        let mut lights = pack_punctual_lights(scene);
-        lights[0][1] = f32::from_bits(self.emitters as u32);
+        let lights = if self.emitter_moves {
+            let (lights, emitters) = pack_lights(scene);
+            if emitters != self.emitters {
+                return Err(GpuError::Input(format!(
+                    "scene {} has {emitters} emitting triangles at this frame, {} when uploaded",
+                    scene.name, self.emitters
+                )));
+            }
+            lights
+        } else {
+            let mut lights = pack_punctual_lights(scene);
+            lights[0][1] = f32::from_bits(self.emitters as u32);
+            lights
+        };
         let bytes: &[u8] = bytemuck::cast_slice(&lights);
         if bytes.len() as u64 > self.lights.size() {
             return Err(GpuError::Input(format!(

@@ -23,8 +23,9 @@
 //!   a trace batch.
 //!
 //! `probegi-wgpu-seam` drives these passes through the field set's seam, the
-//! atlases kept on the device. Not built yet: a top-level BVH for moving objects
-//! and instances.
+//! atlases kept on the device; moving objects and instanced meshes go through
+//! the CPU's top level, placed on the device each frame ([`bvh_trace::GpuBvh::place`]).
+//! Not built: a ray-query trace path (the compute traversal runs everywhere).
 //! This crate depends on `probegi-core` (settings, layouts, encodings) and
 //! `probegi-scene` (the BVH and the scene), and never on the CPU backend.
 
