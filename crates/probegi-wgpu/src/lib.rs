@@ -1,5 +1,5 @@
 //! probegi-wgpu: DDGI on the GPU as wgpu compute shaders (WGSL), on any adapter,
-//! software ones included (issue "The whole frame on the GPU…", in progress).
+//! software ones included (issue "The whole frame on the GPU…").
 //!
 //! Built, and tested against the CPU path on Mesa's lavapipe:
 //! - [`gpu_context`]: a headless device on any adapter, or a device and queue
