@@ -281,15 +281,11 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         let rays = batch_rays(batch);
         hits.clear();
         if rays.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
-            if static_only && self.has_moving_geometry() {
-                return Err(format!(
-                    "an initialisation batch of {} rays is larger than one binding of this adapter, which \
-                     traces it only with the moving objects in it",
-                    rays.len()
-                ));
-            }
             // Larger than one binding: trace in pieces, shade on the CPU.
-            let gpu = self.trace.trace(&self.ctx, &self.bvh, &rays, false).map_err(|e| e.to_string())?;
+            let gpu = self
+                .trace
+                .trace_static_only(&self.ctx, &self.bvh, &rays, false, static_only)
+                .map_err(|e| e.to_string())?;
             hits.extend(gpu.iter().map(|h| h.ray_hit()));
             *self.last.lock().map_err(|e| e.to_string())? = None;
             return Ok(());

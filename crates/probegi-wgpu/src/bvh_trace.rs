@@ -554,9 +554,25 @@ impl GpuRayTrace {
         rays: &[GpuRay],
         any_hit: bool,
     ) -> Result<Vec<GpuRayHit>, GpuError> {
+        self.trace_static_only(ctx, bvh, rays, any_hit, false)
+    }
+
+    /// [`Self::trace`], with moving objects left out where `static_only`
+    /// (initialisation rounds).
+    pub fn trace_static_only(
+        &self,
+        ctx: &GpuContext,
+        bvh: &GpuBvh,
+        rays: &[GpuRay],
+        any_hit: bool,
+        static_only: bool,
+    ) -> Result<Vec<GpuRayHit>, GpuError> {
         let mut out = Vec::with_capacity(rays.len());
         for chunk in rays.chunks(Self::max_batch_rays(ctx).max(1)) {
             let batch = self.batch(ctx, chunk, any_hit)?;
+            if static_only {
+                batch.set_static_only(ctx, true);
+            }
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             self.record(&mut encoder, bvh, &batch, None);
             ctx.queue.submit([encoder.finish()]);

@@ -239,4 +239,8 @@ fn a_moving_box_is_placed_by_the_top_level_and_left_out_of_static_traces() {
         .filter(|h| h.is_hit() && box_tris.contains(&((h.triangle & 0x7fff_ffff) as usize)))
         .count();
     assert_eq!(still, 0, "static-only traces hit the box ({moved_hits} hits with it)");
+    // The chunked trace (batches larger than one binding) leaves it out the same way.
+    let gpu_rays: Vec<GpuRay> = rays.iter().map(|r| GpuRay::new(r.origin, r.dir, r.t_min, r.t_max)).collect();
+    let chunked = GpuRayTrace::new(&ctx).trace_static_only(&ctx, &bvh, &gpu_rays, false, true).expect("trace");
+    assert_eq!(chunked, gpu_trace(&ctx, &bvh, &rays, false, true));
 }
