@@ -105,6 +105,14 @@ impl WgpuProbeTracer {
         gpu_shading: bool,
         gpu_camera: bool,
     ) -> Result<Self, GpuError> {
+        // A tracer built from the mesh alone (`BvhTracer::build`) has no top level
+        // to place the moving objects with; the CPU rebuilds then, the device cannot.
+        if scene.has_moving_geometry() && !bvh.tlas_layout().is_some_and(|l| l.moves()) {
+            return Err(GpuError::Input(format!(
+                "scene {} has moving objects, but its BVH has none instanced: build it with BvhTracer::for_scene",
+                scene.name
+            )));
+        }
         let export = bvh.export();
         let gpu_bvh = GpuBvh::upload(&ctx, &export)?;
         let tlas = bvh.tlas_layout().map(|l| (l.clone(), export.blas_root_nodes.clone()));
@@ -513,9 +521,10 @@ impl ProbeBatchTracer for WgpuProbeTracer {
     }
 
     fn pose_scene(&self, scene: &Scene, frame: f32) -> Result<(), String> {
-        if let Some((layout, roots)) = &self.tlas
-            && scene.has_moving_geometry()
-        {
+        if scene.has_moving_geometry() {
+            let Some((layout, roots)) = self.tlas.as_ref().filter(|(l, _)| l.moves()) else {
+                return Err(format!("scene {} moves, but this tracer was made without its moving objects", scene.name));
+            };
             let tlas = layout.export_at(scene, frame)?;
             self.bvh.place(&self.ctx, &tlas, roots).map_err(|e| e.to_string())?;
         }

@@ -215,6 +215,11 @@ fn a_moving_box_gives_the_same_field_through_the_gpu_top_level() {
     let scene = probegi_scene::load_scene(&path.to_string_lossy()).expect("moving box");
     assert!(scene.has_moving_geometry());
     let Some(gpu) = gpu(&scene, false) else { return };
+    // A BVH over the mesh alone cannot place the box on the device: refused.
+    let flat = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let ctx = GpuContext::headless_unless_absent().expect("device").expect("device");
+    let refused = WgpuProbeTracer::new(ctx, &scene, &flat, true).err().expect("refused").to_string();
+    assert!(refused.contains("moving objects"), "{refused}");
     let mut s = scene.volume.clone().expect("volume");
     s.probe_rays_per_probe = 64;
     let run = |tracer: Option<Arc<WgpuProbeTracer>>| {

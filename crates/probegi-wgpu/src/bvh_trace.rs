@@ -92,12 +92,13 @@ impl GpuRayHit {
 const MAX_GROUPS: u32 = 65_535;
 const WORKGROUP: u32 = 64;
 
-/// The bind-group layout of `bvh.wgsl` (group 1): four read-only storage buffers.
+/// Storage buffers of `bvh.wgsl`'s group: nodes, triangles, cutouts, instances.
+pub const BVH_STORAGE_BUFFERS: u32 = 4;
+
+/// The bind-group layout of `bvh.wgsl` (group 1): [`BVH_STORAGE_BUFFERS`] read-only storage buffers.
 pub fn bvh_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("bvh"),
-        entries: &[storage_entry(0, true), storage_entry(1, true), storage_entry(2, true), storage_entry(3, true)],
-    })
+    let entries: Vec<_> = (0..BVH_STORAGE_BUFFERS).map(|b| storage_entry(b, true)).collect();
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("bvh"), entries: &entries })
 }
 
 pub(crate) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
@@ -182,6 +183,14 @@ fn pack_instances(tlas: &TlasExport, blas_roots: &[u32], tlas_base: u32) -> Resu
     Ok(out)
 }
 
+/// An error unless `words` is whole 20-word nodes.
+fn check_node_words(words: &[u32], what: &str) -> Result<(), GpuError> {
+    if words.len() % 20 != 0 {
+        return Err(GpuError::Input(format!("BVH export: {what} hold {} words, not whole 20-word nodes", words.len())));
+    }
+    Ok(())
+}
+
 /// A top level's node words with their child indices moved to start at `tlas_base`.
 fn rebased_tlas_nodes(tlas: &TlasExport, tlas_base: u32) -> Vec<u32> {
     let mut words = tlas.node_words.clone();
@@ -194,6 +203,10 @@ fn rebased_tlas_nodes(tlas: &TlasExport, tlas_base: u32) -> Vec<u32> {
 impl GpuBvh {
     /// Uploads `export` in `bvh.wgsl`'s layout.
     pub fn upload(ctx: &GpuContext, export: &BvhExport) -> Result<Self, GpuError> {
+        check_node_words(&export.node_words, "the bottom levels")?;
+        if let Some(t) = &export.tlas {
+            check_node_words(&t.node_words, "the top level")?;
+        }
         let leaves = export.leaf_triangles.len();
         if export.leaf_triangle_ids.len() != leaves
             || (!export.leaf_cutouts.is_empty() && export.leaf_cutouts.len() != leaves)
@@ -277,6 +290,7 @@ impl GpuBvh {
     /// must place as many instances as the one uploaded. `blas_root_nodes`:
     /// the upload's `BvhExport::blas_root_nodes`.
     pub fn place(&self, ctx: &GpuContext, tlas: &TlasExport, blas_root_nodes: &[u32]) -> Result<(), GpuError> {
+        check_node_words(&tlas.node_words, "the top level")?;
         if tlas.instances.len() != self.instance_count || tlas.node_count() as u32 > self.tlas_capacity {
             return Err(GpuError::Input(format!(
                 "a top level of {} instances and {} nodes for a BVH uploaded with {} instances and room for {} nodes",

@@ -65,9 +65,9 @@ pub struct GpuCameraPass {
 }
 
 impl GpuCameraPass {
-    /// Storage buffers the pass binds per stage: its own 2, the BVH's 3, the
+    /// Storage buffers the pass binds per stage: its own 2, the BVH's, the
     /// field's 4 and the scene's 4.
-    pub const STORAGE_BUFFERS: u32 = 13;
+    pub const STORAGE_BUFFERS: u32 = 2 + crate::bvh_trace::BVH_STORAGE_BUFFERS + 4 + 4;
 
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         ctx.check_pipeline(Self::STORAGE_BUFFERS, "the camera pass")?;

@@ -59,8 +59,8 @@ pub struct GpuProbeClassification {
 }
 
 impl GpuProbeClassification {
-    /// Storage buffers per stage: its own 5, the BVH's 3 and the scene's 4.
-    pub const STORAGE_BUFFERS: u32 = 12;
+    /// Storage buffers per stage: its own 5, the BVH's and the scene's 4.
+    pub const STORAGE_BUFFERS: u32 = 5 + crate::bvh_trace::BVH_STORAGE_BUFFERS + 4;
 
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         ctx.check_pipeline(Self::STORAGE_BUFFERS, "the probe classification pass")?;

@@ -3,7 +3,7 @@
 //! probe of a traced batch, (usage, relevant samples, backfaces) from the hits
 //! where they lie on the device. The usage scheme classifies every probe from
 //! these each frame, so a device that keeps the hits reads back 16 bytes a
-//! probe instead of 16 a ray.
+//! probe instead of 24 a ray.
 
 use bytemuck::{Pod, Zeroable};
 use probegi_core::probe_classification::ProbeUsageCounts;

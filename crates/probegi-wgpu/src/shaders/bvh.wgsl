@@ -267,7 +267,7 @@ fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
     var stack: array<vec2<u32>, BVH_STACK_SIZE>;
     var sp = 0u;
     // Where the bottom level's stack starts, and the top level's state left there.
-    var floor = 0u;
+    var bottom_floor = 0u;
     var top_current = vec2<u32>(0u, 0u);
     var top_prims = vec2<u32>(0u, 0u);
     var current = vec2<u32>(select(0u, bitcast<u32>(bvh_instances[0].y), top_level), 0x80000000u);
@@ -318,7 +318,7 @@ fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
                 instance = leaf;
                 top_current = current;
                 top_prims = prims;
-                floor = sp;
+                bottom_floor = sp;
                 in_bottom = true;
                 current = vec2<u32>(root, 0x80000000u);
                 prims = vec2<u32>(0u, 0u);
@@ -345,14 +345,14 @@ fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
             current = vec2<u32>(0u, 0u);
         }
         if (prims.y == 0u && (current.y & 0xff000000u) == 0u) {
-            if (sp == floor) {
+            if (sp == bottom_floor) {
                 if (in_bottom && top_level) {
                     // Back up to the top level where it was left.
                     in_bottom = false;
                     ray = world;
                     current = top_current;
                     prims = top_prims;
-                    floor = 0u;
+                    bottom_floor = 0u;
                     continue;
                 }
                 break;
