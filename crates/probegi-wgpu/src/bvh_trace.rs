@@ -185,7 +185,7 @@ fn pack_instances(tlas: &TlasExport, blas_roots: &[u32], tlas_base: u32) -> Resu
 
 /// An error unless `words` is whole 20-word nodes.
 fn check_node_words(words: &[u32], what: &str) -> Result<(), GpuError> {
-    if words.len() % 20 != 0 {
+    if !words.len().is_multiple_of(20) {
         return Err(GpuError::Input(format!("BVH export: {what} hold {} words, not whole 20-word nodes", words.len())));
     }
     Ok(())
