@@ -3,10 +3,9 @@
 //! built-in Cornell box, the door room, McGuire's glossy Cornell box (GGX
 //! specular, glossy camera rays, second-order glossy) and the shared Sponza
 //! (textures and bump maps), the instanced forest (36 copies of the shared pine
-//! through the top level, alpha-cut needles) and the door room with a box
-//! that moves, turns and grows (its top level placed and its triangles posed on
-//! the device each frame; it glows, so the emitters' distribution is posed
-//! too); and, exactly, a point-lit plane under a normal
+//! through the top level, alpha-cut needles) and `scenes/moving-box.toml`,
+//! its box made to glow (the top level placed, the box's triangles and the
+//! emitters' distribution rewritten on the device each frame); and, exactly, a point-lit plane under a normal
 //! map and under a bump map (nothing random: punctual light, frame 0). Random
 //! numbers differ between the backends, so the images differ by Monte Carlo
 //! noise. Each FLIP is printed beside the CPU's own FLIP between two seeds; it
@@ -151,36 +150,19 @@ fn instanced_forest_frame_on_the_gpu() {
 
 #[test]
 fn moving_box_frame_on_the_gpu() {
-    use glam::{Quat, Vec3};
-    use probegi_scene::{ObjectAnimation, TransformKeyframe};
-    let mut scene = load_scene("builtin:door-room").expect("built in");
-    let key = |frame: f32, t: Vec3, scale: f32| TransformKeyframe {
-        frame,
-        translation: Some(t),
-        rotation: Some(Quat::from_rotation_y(frame * 0.07)),
-        scale: Some(Vec3::splat(scale)),
-    };
-    let animation = ObjectAnimation {
-        keyframes: vec![key(0.0, Vec3::ZERO, 1.0), key(20.0, Vec3::new(2.0, 0.3, 1.5), 1.6)],
-        ..Default::default()
-    };
-    // It glows, so the emitters' distribution follows its growing area too.
-    let mut glow = probegi_scene::Material::diffuse("glow", Vec3::splat(0.5));
-    glow.emissive_factor = Vec3::new(2.0, 1.5, 1.0);
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/moving-box.toml");
+    let mut scene = load_scene(&path.to_string_lossy()).expect("moving box");
+    // Its box glows, so the emitters' distribution follows its growing area too.
+    let mut glow = probegi_scene::Material::diffuse("glow", glam::Vec3::splat(0.5));
+    glow.emissive_factor = glam::Vec3::new(2.0, 1.5, 1.0);
     scene.materials.push(glow);
     let glow = (scene.materials.len() - 1) as u32;
-    scene.add_object(
-        "mover",
-        |m| probegi_scene::builtin::add_box(m, Vec3::new(0.6, 0.0, 0.6), Vec3::new(1.4, 0.8, 1.4), glow),
-        animation,
-    );
+    let mover = scene.objects.iter().find(|o| o.name == "blue box").expect("blue box").triangles();
+    mover.for_each(|t| scene.mesh.triangle_materials[t] = glow);
     scene.validate().expect("valid");
-    let s = DdgiVolumeSettings {
-        probe_origin_m: Some(Vec3::new(-0.5, 0.5, -0.5)),
-        probe_spacing_m: Some(Vec3::ONE),
-        ..small(UVec3::new(6, 3, 6))
-    };
-    check("door room, moving glowing box", scene, s, 64, 32);
+    let mut s = scene.volume.clone().expect("volume");
+    s.probe_rays_per_probe = 128;
+    check("moving glowing box", scene, s, 64, 32);
 }
 
 /// A 4 m plane (two triangles with UVs tiling a 64² map four times, tangent

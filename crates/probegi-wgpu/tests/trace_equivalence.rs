@@ -7,7 +7,7 @@
 //! a ray grazing an edge picks a neighbouring triangle; the bounds allow that:
 //! at most 0.2 % of rays disagree on hit or triangle, and hits on the same
 //! triangle agree to 1e-4 relative in t. Scenes with a top level (the
-//! instanced forest; the door room with a box that moves, turns and grows, at a
+//! instanced forest; the room of `scenes/moving-box.toml` with a box that moves, turns and grows, at a
 //! frame and with moving objects left out) agree as closely, instance included.
 
 mod common;
@@ -172,34 +172,16 @@ fn instanced_forest_hits_match_the_cpu_tracer_instance_for_instance() {
     assert!(copies.len() > 20, "{} copies hit", copies.len());
 }
 
-/// The door room with a box that slides, turns and grows over frames 0–20.
-fn door_room_with_mover() -> Scene {
-    use glam::Quat;
-    use probegi_scene::{ObjectAnimation, TransformKeyframe};
-    let mut s = load_scene("builtin:door-room").expect("built in");
-    let key = |frame: f32, t: Vec3, scale: f32| TransformKeyframe {
-        frame,
-        translation: Some(t),
-        rotation: Some(Quat::from_rotation_y(frame * 0.07)),
-        scale: Some(Vec3::splat(scale)),
-    };
-    let animation = ObjectAnimation {
-        keyframes: vec![key(0.0, Vec3::ZERO, 1.0), key(20.0, Vec3::new(2.0, 0.3, 1.5), 1.6)],
-        ..Default::default()
-    };
-    s.add_object(
-        "mover",
-        |m| probegi_scene::builtin::add_box(m, Vec3::new(0.6, 0.0, 0.6), Vec3::new(1.4, 0.8, 1.4), 0),
-        animation,
-    );
-    s.validate().expect("valid");
-    s
+/// `scenes/moving-box.toml`: a room whose blue box slides, turns and grows.
+fn moving_box_room() -> Scene {
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/moving-box.toml");
+    load_scene(&path.to_string_lossy()).expect("moving box")
 }
 
 #[test]
 fn a_moving_box_is_placed_by_the_top_level_and_left_out_of_static_traces() {
     let Some(ctx) = common::context() else { return };
-    let base = door_room_with_mover();
+    let base = moving_box_room();
     let cpu = BvhTracer::for_scene(&base, BvhSettings::default());
     let export = cpu.export();
     let bvh = GpuBvh::upload(&ctx, &export).expect("upload");
@@ -215,7 +197,7 @@ fn a_moving_box_is_placed_by_the_top_level_and_left_out_of_static_traces() {
         // Rays aimed at the box where it is at this frame hit it.
         let (lo, hi) = posed.moving_object_bounds()[0];
         let rays = aimed_rays(&base, (lo + hi) * 0.5, 2_000);
-        let box_tris = base.objects.iter().find(|o| o.name == "mover").expect("mover").triangles();
+        let box_tris = base.objects.iter().find(|o| o.name == "blue box").expect("blue box").triangles();
         moved_hits = gpu_trace(&ctx, &bvh, &rays, false, false)
             .iter()
             .filter(|h| h.is_hit() && box_tris.contains(&((h.triangle & 0x7fff_ffff) as usize)))
@@ -233,7 +215,7 @@ fn a_moving_box_is_placed_by_the_top_level_and_left_out_of_static_traces() {
     assert_agrees(&a);
     let (lo, hi) = posed.moving_object_bounds()[0];
     let rays = aimed_rays(&base, (lo + hi) * 0.5, 2_000);
-    let box_tris = base.objects.iter().find(|o| o.name == "mover").expect("mover").triangles();
+    let box_tris = base.objects.iter().find(|o| o.name == "blue box").expect("blue box").triangles();
     let still = gpu_trace(&ctx, &bvh, &rays, false, true)
         .iter()
         .filter(|h| h.is_hit() && box_tris.contains(&((h.triangle & 0x7fff_ffff) as usize)))
