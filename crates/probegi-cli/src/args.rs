@@ -221,8 +221,9 @@ pub struct RenderArgs {
     /// `cpu`, or `wgpu`: the DDGI field's update (ray generation, trace, shade,
     /// blend, border, relocation, classification) and the camera frame run as
     /// WGSL compute shaders on a GPU (or Mesa's lavapipe), the atlases kept
-    /// there; static scenes only. With --show-probes the camera frame is the
-    /// CPU's, and the atlases come back every frame for it.
+    /// there; moving objects and instanced meshes through the CPU's top-level
+    /// BVH, placed on the device each frame. With --show-probes the camera
+    /// frame is the CPU's, and the atlases come back every frame for it.
     #[arg(long, value_enum, default_value_t = crate::gpu_backend::Backend::Cpu)]
     pub backend: crate::gpu_backend::Backend,
 }

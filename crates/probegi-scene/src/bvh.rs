@@ -448,11 +448,6 @@ impl TlasLayout {
         !self.object_ids.is_empty()
     }
 
-    /// Moving objects and still instances placed by this layout.
-    pub fn instance_count(&self) -> usize {
-        1 + self.object_ids.len() + self.placed.len()
-    }
-
     fn export(&self, tlas: &Tlas) -> TlasExport {
         TlasExport {
             node_words: node_words(&tlas.bvh),

@@ -254,11 +254,6 @@ impl WgpuProbeTracer {
         Ok(resident)
     }
 
-    /// Whether the scene has moving objects, placed each frame by `pose_scene`.
-    pub fn has_moving_geometry(&self) -> bool {
-        self.tlas.as_ref().is_some_and(|(l, _)| l.moves())
-    }
-
     /// Whether the camera frame is rendered on the GPU.
     pub fn renders_camera(&self) -> bool {
         self.camera.is_some()

@@ -205,10 +205,6 @@ pub struct GpuProbeBlend {
 
 impl GpuProbeBlend {
     pub fn new(ctx: &GpuContext) -> Self {
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("probe_blend.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/probe_blend.wgsl").into()),
-        });
         let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("probe blend"),
             entries: &[
@@ -220,27 +216,12 @@ impl GpuProbeBlend {
                 storage_entry(5, false),
             ],
         });
-        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("probe blend"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |entry: &str| {
-            ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
-        let pipelines = [
-            pipeline("blend_irradiance"),
-            pipeline("blend_distance"),
-            pipeline("border_irradiance"),
-            pipeline("border_distance"),
-        ];
+        let pipelines = ctx.compute_pipelines(
+            "probe_blend.wgsl",
+            include_str!("shaders/probe_blend.wgsl").into(),
+            &[Some(&layout)],
+            PASS_NAMES,
+        );
         Self { layout, pipelines }
     }
 
