@@ -2,6 +2,24 @@
 //! from `position` toward `target`; `fov_y_deg` is the full vertical field of
 //! view; pixel (0,0) is the top-left corner of the image and pixel centres are at
 //! half-integers (box filter = uniform jitter inside `[x, x+1) × [y, y+1)`).
+//!
+//! **The view basis** ([`Camera::view_basis`]) is never degenerate. `up` is a
+//! hint: the image's up is the hint made orthogonal to the view direction.
+//! Where the view is parallel to the hint (a camera looking straight up or
+//! down), the hint says nothing, and the basis falls back:
+//! - on a path, to the previous frame's image up (made orthogonal to this
+//!   frame's view), so the image turns continuously through the vertical;
+//! - for a single camera, to the world axis least aligned with the view
+//!   (ties broken Z, X, Y), signed by the view's side of the hint: looking down
+//!   a y-up world the image's up is −Z, looking up it is +Z — where a camera
+//!   looking along −Z ends when it pitches down or up.
+//!
+//! On a path the hint's sign is also carried from frame to frame: once a path
+//! has turned over the vertical (looking along +x, up, then along −x), it keeps
+//! the image upright relative to the frames before instead of flipping it by
+//! 180°, i.e. it continues upside down relative to the hint, as a real camera
+//! pitched over the top does. Far from the vertical a single camera's basis is
+//! the classic look-at (right = forward × up).
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -41,14 +59,73 @@ impl Camera {
         if (self.target - self.position).length_squared() < 1e-12 {
             return Err("camera target equals camera position".into());
         }
-        if (self.target - self.position).normalize().cross(self.up.normalize_or_zero()).length_squared() < 1e-10 {
-            return Err("camera up is parallel to the view direction".into());
-        }
         if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 179.0) {
             return Err(format!("fov_y_deg = {} must be in (0, 179)", self.fov_y_deg));
         }
         Ok(())
     }
+}
+
+/// |forward × hint|² below which the hint gives no usable right vector
+/// (the view is within about 0.006° of the hint).
+const PARALLEL_SIN2: f32 = 1e-8;
+
+/// A camera's orthonormal view basis, and the image up that a following frame
+/// of a path continues from (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewBasis {
+    pub forward_world: Vec3,
+    pub right_world: Vec3,
+    pub up_world: Vec3,
+}
+
+impl Camera {
+    /// The view basis of this camera; `previous_up_world` is the image up of
+    /// the previous frame of a path (`None` for a single camera). Needs a
+    /// camera that passes [`Camera::validate`].
+    pub fn view_basis(&self, previous_up_world: Option<Vec3>) -> ViewBasis {
+        let forward_world = (self.target - self.position).normalize();
+        let hint = self.up.normalize_or_zero();
+        let mut right = forward_world.cross(hint);
+        if let Some(prev) = previous_up_world {
+            // Keep the image up on the previous frame's side: a path over the
+            // vertical continues instead of flipping.
+            if right.cross(forward_world).dot(prev) < 0.0 {
+                right = -right;
+            }
+        }
+        if right.length_squared() < PARALLEL_SIN2 {
+            let up = match previous_up_world {
+                Some(prev) if forward_world.cross(prev).length_squared() >= PARALLEL_SIN2 => prev,
+                _ => fallback_up(forward_world, hint),
+            };
+            right = forward_world.cross(up);
+        }
+        let right_world = right.normalize();
+        ViewBasis { forward_world, right_world, up_world: right_world.cross(forward_world) }
+    }
+
+    /// A camera of a path whose `up` is the image up of `basis`, so that
+    /// [`CameraRays::new`] gives that basis; unchanged where the hint already
+    /// gives it (so a path far from the vertical renders as before).
+    pub fn with_basis(&self, basis: &ViewBasis) -> Camera {
+        if self.view_basis(None) == *basis { *self } else { Camera { up: basis.up_world, ..*self } }
+    }
+}
+
+/// The single camera's fallback image up (module docs): the world axis least
+/// aligned with `forward` (ties Z, X, Y), on the side of the hint `forward`
+/// points to.
+fn fallback_up(forward: Vec3, hint: Vec3) -> Vec3 {
+    let a = forward.abs();
+    let axis = if a.z <= a.x && a.z <= a.y {
+        Vec3::Z
+    } else if a.x <= a.y {
+        Vec3::X
+    } else {
+        Vec3::Y
+    };
+    if forward.dot(hint) < 0.0 { -axis } else { axis }
 }
 
 /// A camera prepared for one image size: maps continuous pixel coordinates to world rays.
@@ -65,10 +142,11 @@ pub struct CameraRays {
 }
 
 impl CameraRays {
+    /// The camera's rays with its single-camera basis ([`Camera::view_basis`]
+    /// without a previous frame); a path's frames come from
+    /// `Scene::camera_path`, whose cameras already carry their frame's up.
     pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
-        let forward_world = (camera.target - camera.position).normalize();
-        let right_world = forward_world.cross(camera.up).normalize();
-        let up_world = right_world.cross(forward_world);
+        let ViewBasis { forward_world, right_world, up_world } = camera.view_basis(None);
         Self {
             origin_world: camera.position,
             forward_world,
@@ -129,6 +207,7 @@ impl CameraRays {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Quat;
 
     #[test]
     fn centre_pixel_looks_at_target_and_edges_span_fov() {
@@ -177,7 +256,62 @@ mod tests {
         c.target = c.position;
         assert!(c.validate().is_err());
         let mut c = Camera::default();
-        c.up = c.target - c.position;
+        c.position.x = f32::NAN;
         assert!(c.validate().is_err());
+        let mut c = Camera::default();
+        c.up = c.target - c.position;
+        assert!(c.validate().is_ok(), "an up along the view falls back, it is not an error");
+    }
+
+    fn orthonormal(b: &ViewBasis) -> bool {
+        let unit = |v: Vec3| (v.length() - 1.0).abs() < 1e-5;
+        unit(b.forward_world)
+            && unit(b.right_world)
+            && unit(b.up_world)
+            && b.forward_world.dot(b.right_world).abs() < 1e-5
+            && b.forward_world.dot(b.up_world).abs() < 1e-5
+            && b.right_world.dot(b.up_world).abs() < 1e-5
+    }
+
+    #[test]
+    fn straight_down_and_up_fall_back_to_minus_and_plus_z() {
+        let down = Camera { position: Vec3::new(0.0, 1.9, 0.0), target: Vec3::ZERO, up: Vec3::Y, fov_y_deg: 60.0 };
+        let b = down.view_basis(None);
+        assert!(orthonormal(&b), "{b:?}");
+        assert!((b.up_world - Vec3::NEG_Z).length() < 1e-6, "{b:?}");
+        let up = Camera { target: Vec3::new(0.0, 3.8, 0.0), ..down };
+        let b = up.view_basis(None);
+        assert!((b.up_world - Vec3::Z).length() < 1e-6, "{b:?}");
+        // The fallback is where a camera looking along −Z ends when it pitches.
+        let tilt =
+            |deg: f32| Camera { target: down.position + Quat::from_rotation_x(deg.to_radians()) * Vec3::NEG_Z, ..down };
+        assert!(tilt(-89.9).view_basis(None).up_world.dot(Vec3::NEG_Z) > 0.99);
+        assert!(tilt(89.9).view_basis(None).up_world.dot(Vec3::Z) > 0.99);
+        let rays = CameraRays::new(&down, 8, 8);
+        assert!(rays.ray_dir_world(4.0, 4.0).is_finite() && rays.ray_dir_world(4.0, 4.0).y < -0.99);
+    }
+
+    #[test]
+    fn a_path_through_the_vertical_turns_continuously_without_flipping() {
+        // Turn in place from looking along +x, over the top, to looking along −x.
+        let mut prev: Option<ViewBasis> = None;
+        let steps = 300;
+        for i in 0..=steps {
+            let a = std::f32::consts::PI * i as f32 / steps as f32;
+            let dir = Vec3::new(a.cos(), a.sin(), 0.0);
+            let c = Camera { position: Vec3::ZERO, target: dir, up: Vec3::Y, fov_y_deg: 60.0 };
+            let b = c.view_basis(prev.map(|p| p.up_world));
+            assert!(orthonormal(&b), "step {i}: {b:?}");
+            if let Some(p) = prev {
+                assert!(b.right_world.dot(p.right_world) > 0.999, "step {i}: right flipped {b:?} after {p:?}");
+                assert!(b.up_world.dot(p.up_world) > 0.99, "step {i}: up jumped {b:?} after {p:?}");
+            }
+            // The camera the path hands to CameraRays reproduces the basis.
+            let rays = CameraRays::new(&c.with_basis(&b), 4, 4);
+            assert!((rays.basis().0[1] - b.right_world).length() < 1e-5, "step {i}");
+            prev = Some(b);
+        }
+        let end = prev.expect("frames");
+        assert!(end.up_world.y < -0.99, "over the top the image continues upside down: {end:?}");
     }
 }

@@ -72,7 +72,7 @@ impl AnimatedGif {
     pub fn finish(mut self) -> Result<u32, ImageError> {
         // Dropping the encoder writes the trailer and flushes the file.
         drop(self.encoder.take());
-        std::fs::rename(&self.tmp, &self.path).map_err(|e| io_err(&self.path, e))?;
+        crate::io::commit(&self.tmp, &self.path, Ok(()))?;
         Ok(self.frames)
     }
 }

@@ -148,13 +148,49 @@ pub fn write_image(path: &Path, img: &Image) -> Result<(), ImageError> {
             write_png_rgb8(&tmp, img.width, img.height, rgb).map_err(|e| io_err(path, e))
         }
     };
-    match result {
-        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| io_err(path, e)),
-        Err(e) => {
-            std::fs::remove_file(&tmp).ok();
-            Err(e)
+    commit(&tmp, path, result)
+}
+
+/// Renames the finished temporary file `tmp` onto `path`, or removes it: on
+/// every failure (the write's, or the rename's, e.g. when `path` is a
+/// directory) nothing is left behind.
+pub(crate) fn commit(tmp: &Path, path: &Path, written: Result<(), ImageError>) -> Result<(), ImageError> {
+    let result = written.and_then(|()| {
+        if path.is_dir() {
+            return Err(io_err(path, "is a directory"));
         }
+        std::fs::rename(tmp, path).map_err(|e| io_err(path, e))
+    });
+    if result.is_err() {
+        std::fs::remove_file(tmp).ok();
     }
+    result
+}
+
+/// Whether an output file can be written at `path`, checked before a long
+/// render instead of at its end: a supported image extension (when `image`),
+/// not an existing directory, and a folder that exists or can be made (its
+/// nearest existing ancestor a writable directory). Creates nothing that
+/// stays.
+pub fn check_output_path(path: &Path, image: bool) -> Result<(), ImageError> {
+    if image {
+        ImageFormat::from_path(path)?;
+    }
+    if path.is_dir() {
+        return Err(io_err(path, "is a directory; give a file name"));
+    }
+    let parent = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let Some(existing) = parent.ancestors().find(|a| a.as_os_str().is_empty() || a.exists()) else {
+        return Ok(());
+    };
+    let existing = if existing.as_os_str().is_empty() { Path::new(".") } else { existing };
+    if !existing.is_dir() {
+        return Err(io_err(path, format!("{} is not a directory", existing.display())));
+    }
+    let probe = temp_path(&existing.join(".probegi-write-check"));
+    std::fs::write(&probe, b"").map_err(|e| io_err(path, format!("cannot write in {}: {e}", existing.display())))?;
+    std::fs::remove_file(&probe).ok();
+    Ok(())
 }
 
 /// Writes 8-bit sRGB data as PNG, atomically.
@@ -164,13 +200,8 @@ pub fn write_png(path: &Path, width: u32, height: u32, rgb: Vec<u8>) -> Result<(
         std::fs::create_dir_all(dir).map_err(|e| io_err(path, e))?;
     }
     let tmp = temp_path(path);
-    match write_png_rgb8(&tmp, width, height, rgb) {
-        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| io_err(path, e)),
-        Err(e) => {
-            std::fs::remove_file(&tmp).ok();
-            Err(io_err(path, e))
-        }
-    }
+    let written = write_png_rgb8(&tmp, width, height, rgb).map_err(|e| io_err(path, e));
+    commit(&tmp, path, written)
 }
 
 fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: Vec<u8>) -> Result<(), String> {
@@ -269,6 +300,30 @@ mod tests {
         std::fs::write(&bogus, b"not an exr").expect("write");
         assert!(read_image(&bogus).expect_err("corrupt").to_string().contains("probegi-bogus"));
         std::fs::remove_file(&bogus).ok();
+    }
+
+    #[test]
+    fn a_directory_as_output_fails_and_leaves_no_temporary_file() {
+        let dir = std::env::temp_dir().join(format!("probegi-io-dir-{}", std::process::id()));
+        let out = dir.join("taken.png");
+        std::fs::create_dir_all(&out).expect("dir");
+        let img = Image { width: 2, height: 1, pixels: vec![Vec3::ONE; 2] };
+        assert!(check_output_path(&out, true).is_err());
+        assert!(write_image(&out, &img).is_err());
+        assert!(write_image(&out.with_extension("exr"), &img).is_ok());
+        assert!(write_png(&out, 1, 1, vec![0, 0, 0]).is_err());
+        let names: Vec<String> = std::fs::read_dir(&dir)
+            .expect("list")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .collect();
+        assert!(names.iter().all(|n| !n.contains("partial")), "{names:?}");
+        assert!(check_output_path(&dir.join("new/deeper/o.exr"), true).is_ok());
+        assert!(!dir.join("new").exists(), "the check creates nothing");
+        assert!(check_output_path(&out.join("o.png"), true).is_ok(), "inside the directory is fine");
+        assert!(check_output_path(&dir.join("taken.png.exr/x.png"), true).is_ok());
+        std::fs::write(dir.join("file"), b"").expect("file");
+        assert!(check_output_path(&dir.join("file/o.png"), true).is_err(), "a file as a folder");
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

@@ -8,4 +8,4 @@ pub mod plot;
 
 pub use compare::{FlipResult, compare_files, flip_srgb8, mean_flip_hdr};
 pub use gif::AnimatedGif;
-pub use io::{ImageError, LoadedImage, read_image, write_image};
+pub use io::{ImageError, LoadedImage, check_output_path, read_image, write_image};
