@@ -71,9 +71,8 @@ impl AreaLights {
         if cos_light <= 0.0 {
             return None; // the back face does not emit
         }
-        let [a, bb, c] = mesh.triangles[tri];
-        let uv = mesh.uvs[a as usize] * b.x + mesh.uvs[bb as usize] * b.y + mesh.uvs[c as usize] * b.z;
-        let radiance = scene.material(mesh.triangle_materials[tri]).emission(&scene.textures, uv);
+        let at = mesh.attributes_at(tri, b);
+        let radiance = scene.material(mesh.triangle_materials[tri]).emission(&scene.textures, &at);
         let pdf_solid_angle = self.pdf_area_by_triangle[tri] * dist2 / cos_light;
         Some(AreaLightSample { point, wi, distance, radiance, pdf_solid_angle })
     }

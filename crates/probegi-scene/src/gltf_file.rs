@@ -1,8 +1,40 @@
-//! glTF 2.0 loader (.gltf with external or embedded buffers, and .glb): the
-//! default scene's node hierarchy with transforms, triangle primitives, metallic-
-//! roughness materials with base-colour and emissive textures (texture set 0,
-//! repeat addressing), KHR_materials_emissive_strength, KHR_lights_punctual and
-//! the first perspective camera.
+//! glTF 2.0 loader (.gltf with external or embedded buffers, and .glb).
+//! Section numbers are the glTF 2.0 specification's (Khronos, 2.0.1).
+//!
+//! What it reads:
+//! - the default scene's node hierarchy with transforms (§3.5), the first
+//!   perspective camera (§3.10), KHR_lights_punctual;
+//! - triangle primitives (§3.7.2.1): modes TRIANGLES, TRIANGLE_STRIP and
+//!   TRIANGLE_FAN, strips and fans turned into triangle lists with the
+//!   section's winding; `POSITION`, `NORMAL` (flat normals without it, and then
+//!   `TANGENT` is ignored), `TANGENT` (MikkTSpace without it, for normal maps),
+//!   `TEXCOORD_0`, `TEXCOORD_1` and `COLOR_0` (VEC3 or VEC4; float, normalized
+//!   unsigned byte or short; clamped to [0, 1]). POINTS, LINES, LINE_LOOP and
+//!   LINE_STRIP primitives are skipped with a warning naming the mesh;
+//! - metallic-roughness materials (§3.9.2): `baseColorFactor` × `COLOR_0` ×
+//!   `baseColorTexture` (sRGB), `metallicFactor` and `roughnessFactor` × the
+//!   blue and green channels of `metallicRoughnessTexture` (linear),
+//!   `normalTexture` with its `scale`, `emissiveFactor` × `emissiveTexture`
+//!   (sRGB) × KHR_materials_emissive_strength, `alphaMode` and `alphaCutoff`
+//!   (§3.9.4; BLEND as MASK at 0.5, see `material.rs`). Every texture
+//!   reference reads its `texCoord` set (0 or 1; a higher set is a warning and
+//!   the texture is ignored) through KHR_texture_transform (offset, rotation,
+//!   scale, texCoord override; see `UvMapping`) and its texture's sampler
+//!   (§3.8.4: wrapS/wrapT per axis, magFilter; no mipmaps, see `texture.rs`);
+//! - animations (below).
+//!
+//! Not read: `occlusionTexture` (the renderers trace occlusion themselves; §3.9.3
+//! applies it to ambient light only), skins and morph targets (the rest pose is
+//! drawn), orthographic cameras, `doubleSided` (every surface is two-sided).
+//!
+//! Extensions (§3.12): KHR_lights_punctual, KHR_materials_emissive_strength and
+//! KHR_texture_transform are followed. A file whose `extensionsRequired` names any
+//! other is refused with an error naming the extension; any other extension in
+//! `extensionsUsed` (KHR_materials_transmission, clearcoat, sheen, volume, ior,
+//! specular, iridescence, anisotropy, dispersion, pbrSpecularGlossiness, unlit,
+//! variants, KHR_draco_mesh_compression, EXT_meshopt_compression,
+//! KHR_mesh_quantization, KHR_texture_basisu, …) loads with a warning naming it:
+//! the scene renders as if it were absent.
 //!
 //! Animations: translation, rotation and scale channels of every animation play
 //! together on the scene clock (`Scene::frames_per_second`, key times in seconds).
@@ -33,10 +65,10 @@ use probegi_core::camera::Camera;
 use crate::animation::{KeyClock, ObjectAnimation, SceneObject, TransformKeyframe};
 use crate::error::{Result, SceneError};
 use crate::light::{LightKind, PunctualLight};
-use crate::material::Material;
+use crate::material::{Material, UvMapping};
 use crate::mesh::{Mesh, NormalSource};
 use crate::scene::Scene;
-use crate::texture::Texture;
+use crate::texture::{Filter, Sampler, Texture, Wrap};
 
 struct Loader<'a> {
     path: &'a Path,
@@ -45,7 +77,8 @@ struct Loader<'a> {
     images: Vec<Option<gltf::image::Data>>,
     scene: Scene,
     material_ids: HashMap<Option<usize>, u32>,
-    texture_ids: HashMap<usize, Option<usize>>,
+    /// Scene textures by (image, sampler) index.
+    texture_ids: HashMap<(usize, Option<usize>), Option<usize>>,
     /// Animation channels by node index.
     channels: HashMap<usize, NodeChannels>,
 }
@@ -91,6 +124,45 @@ impl NodeChannels {
 
 /// Node hierarchies deeper than this are refused (a recursion bound).
 pub const MAX_NODE_DEPTH: usize = 256;
+
+/// The glTF extensions the loader follows (see the module docs).
+pub const FOLLOWED_EXTENSIONS: [&str; 3] =
+    ["KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_texture_transform"];
+
+/// A file that requires an extension the loader does not follow is refused
+/// (glTF 2.0 §3.12: `extensionsRequired` lists what is needed "to load and/or
+/// render" it), before the library validates it (which would say only
+/// "Unsupported extension"). The document is parsed without validation here; a
+/// document that does not parse is left to the library's own error.
+fn check_required_extensions(path: &Path) -> Result<()> {
+    let Ok(file) = std::fs::File::open(path) else {
+        return Ok(()); // the library's own error follows
+    };
+    let Ok(doc) = gltf::Gltf::from_reader_without_validation(std::io::BufReader::new(file)) else {
+        return Ok(());
+    };
+    match doc.extensions_required().find(|e| !FOLLOWED_EXTENSIONS.contains(e)) {
+        Some(ext) => Err(SceneError::Gltf {
+            path: path.to_path_buf(),
+            message: format!("the file requires extension {ext}, which probegi does not implement"),
+        }),
+        None => Ok(()),
+    }
+}
+
+/// One warning per extension in `extensionsUsed` that the loader does not
+/// follow: nothing it adds is silently dropped.
+fn unfollowed_extension_warnings(path: &Path, doc: &gltf::Document) -> Vec<String> {
+    doc.extensions_used()
+        .filter(|e| !FOLLOWED_EXTENSIONS.contains(e))
+        .map(|e| {
+            format!(
+                "{}: extension {e} is used but probegi does not implement it; the scene renders without it",
+                path.display()
+            )
+        })
+        .collect()
+}
 
 /// A GLB's header and chunk lengths against the file's size, before the library
 /// allocates what they claim.
@@ -321,12 +393,13 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene> {
         });
     }
     check_glb_header(path)?;
+    check_required_extensions(path)?;
     check_external_files(path)?;
     let gltf_err = |e: gltf::Error| SceneError::Gltf { path: path.to_path_buf(), message: e.to_string() };
     let gltf::Gltf { document: doc, blob } = gltf::Gltf::open(path).map_err(gltf_err)?;
     let base = path.parent();
     let buffers = gltf::import_buffers(&doc, base, blob).map_err(gltf_err)?;
-    let mut warnings = vec![];
+    let mut warnings = unfollowed_extension_warnings(path, &doc);
     let images: Vec<Option<gltf::image::Data>> = doc
         .images()
         .map(|im| {
@@ -611,78 +684,20 @@ impl Loader<'_> {
     }
 
     fn add_primitive(&mut self, mesh: &gltf::Mesh, prim: &gltf::Primitive, world: Mat4) -> Result<()> {
+        use gltf::mesh::Mode;
         let what = format!("mesh {} (`{}`) primitive {}", mesh.index(), mesh.name().unwrap_or(""), prim.index());
-        if prim.mode() != gltf::mesh::Mode::Triangles {
-            self.scene.warnings.push(format!("{}: {what}: mode {:?} skipped", self.path.display(), prim.mode()));
+        if !matches!(prim.mode(), Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+            self.scene.warnings.push(format!(
+                "{}: {what}: mode {:?} skipped (points and lines have no surface to shade)",
+                self.path.display(),
+                prim.mode()
+            ));
             return Ok(());
         }
-        {
-            use gltf::accessor::{DataType as T, Dimensions as D};
-            use gltf::mesh::Semantic;
-            let check = |a: &gltf::Accessor, allowed: &[(T, D)], name: &str| {
-                check_accessor(self.path, &self.buffers, a, allowed, &format!("{what}: {name}"))
-            };
-            let pos =
-                prim.get(&Semantic::Positions).ok_or_else(|| self.err(format!("{what}: no POSITION attribute")))?;
-            check(&pos, &[(T::F32, D::Vec3)], "POSITION")?;
-            if let Some(a) = prim.get(&Semantic::Normals) {
-                check(&a, &[(T::F32, D::Vec3)], "NORMAL")?;
-            }
-            if let Some(a) = prim.get(&Semantic::Tangents) {
-                check(&a, &[(T::F32, D::Vec4)], "TANGENT")?;
-            }
-            if let Some(a) = prim.get(&Semantic::TexCoords(0)) {
-                check(&a, &[(T::F32, D::Vec2), (T::U8, D::Vec2), (T::U16, D::Vec2)], "TEXCOORD_0")?;
-            }
-            if let Some(a) = prim.indices() {
-                check(&a, &[(T::U8, D::Scalar), (T::U16, D::Scalar), (T::U32, D::Scalar)], "indices")?;
-            }
-        }
-        let buffers = &self.buffers;
-        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-        let positions: Vec<Vec3> = reader
-            .read_positions()
-            .ok_or_else(|| self.err(format!("{what}: no POSITION attribute")))?
-            .map(Vec3::from)
-            .collect();
-        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
-            return Err(self.err(format!("{what}: vertex {i} has a non-finite position")));
-        }
-        let n = positions.len();
-        let normals: Option<Vec<Vec3>> = reader.read_normals().map(|it| it.map(Vec3::from).collect());
-        let uvs: Vec<Vec2> = match reader.read_tex_coords(0) {
-            Some(tc) => tc.into_f32().map(Vec2::from).collect(),
-            None => vec![Vec2::ZERO; n],
-        };
-        let indices: Vec<u32> = match reader.read_indices() {
-            Some(ix) => ix.into_u32().collect(),
-            None => (0..n as u32).collect(),
-        };
-        if !indices.len().is_multiple_of(3) {
-            return Err(self.err(format!("{what}: index count {} is not a multiple of 3", indices.len())));
-        }
-        if let Some(&bad) = indices.iter().find(|&&i| i as usize >= n) {
-            return Err(self.err(format!("{what}: index {bad} out of range ({n} vertices)")));
-        }
-        if uvs.len() != n || normals.as_ref().is_some_and(|v| v.len() != n) {
-            return Err(self.err(format!("{what}: attribute counts differ from POSITION ({n})")));
-        }
-        // glTF §3.7.2.1: without NORMAL, flat normals, and TANGENT is ignored.
-        let tangents: Vec<Vec4> = match (&normals, reader.read_tangents()) {
-            (Some(_), Some(t)) => t.map(Vec4::from).collect(),
-            _ => vec![],
-        };
+        self.check_primitive(prim, &what)?;
         let material = self.material(prim.material())?;
-        if !tangents.is_empty() && tangents.len() != n {
-            return Err(self.err(format!("{what}: attribute counts differ from POSITION ({n})")));
-        }
-        let mut local = Mesh {
-            positions,
-            normals: normals.clone().unwrap_or_else(|| vec![Vec3::ZERO; n]),
-            uvs,
-            triangles: indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
-            triangle_materials: vec![material; indices.len() / 3],
-            tangents: tangents.into_iter().map(|t| if t.is_finite() { t } else { Vec4::ZERO }).collect(),
+        let Some(mut local) = self.read_primitive(prim, &what, material)? else {
+            return Ok(());
         };
         let needs: Vec<bool> = local.normals.iter().map(|v| !(v.is_finite() && v.length_squared() > 0.0)).collect();
         if needs.iter().any(|&b| b) {
@@ -703,22 +718,165 @@ impl Loader<'_> {
         Ok(())
     }
 
+    /// Every accessor of a triangle primitive that the loader reads, checked
+    /// before the library reads it (glTF 2.0 §3.7.2.1's types per attribute).
+    fn check_primitive(&self, prim: &gltf::Primitive, what: &str) -> Result<()> {
+        use gltf::accessor::{DataType as T, Dimensions as D};
+        use gltf::mesh::Semantic;
+        let check = |a: &gltf::Accessor, allowed: &[(T, D)], name: &str| {
+            check_accessor(self.path, &self.buffers, a, allowed, &format!("{what}: {name}"))
+        };
+        let pos = prim.get(&Semantic::Positions).ok_or_else(|| self.err(format!("{what}: no POSITION attribute")))?;
+        check(&pos, &[(T::F32, D::Vec3)], "POSITION")?;
+        if let Some(a) = prim.get(&Semantic::Normals) {
+            check(&a, &[(T::F32, D::Vec3)], "NORMAL")?;
+        }
+        if let Some(a) = prim.get(&Semantic::Tangents) {
+            check(&a, &[(T::F32, D::Vec4)], "TANGENT")?;
+        }
+        for set in 0..2 {
+            if let Some(a) = prim.get(&Semantic::TexCoords(set)) {
+                check(&a, &[(T::F32, D::Vec2), (T::U8, D::Vec2), (T::U16, D::Vec2)], &format!("TEXCOORD_{set}"))?;
+            }
+        }
+        if let Some(a) = prim.get(&Semantic::Colors(0)) {
+            let colors = [T::F32, T::U8, T::U16].into_iter().flat_map(|t| [(t, D::Vec3), (t, D::Vec4)]);
+            check(&a, &colors.collect::<Vec<_>>(), "COLOR_0")?;
+        }
+        if let Some(a) = prim.indices() {
+            check(&a, &[(T::U8, D::Scalar), (T::U16, D::Scalar), (T::U32, D::Scalar)], "indices")?;
+        }
+        Ok(())
+    }
+
+    /// The primitive's vertices and triangles in its local space, every
+    /// triangle with `material` (`None` when it has no triangles).
+    fn read_primitive(&mut self, prim: &gltf::Primitive, what: &str, material: u32) -> Result<Option<Mesh>> {
+        let buffers = &self.buffers;
+        let reader = prim.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+        let positions: Vec<Vec3> = reader
+            .read_positions()
+            .ok_or_else(|| self.err(format!("{what}: no POSITION attribute")))?
+            .map(Vec3::from)
+            .collect();
+        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(self.err(format!("{what}: vertex {i} has a non-finite position")));
+        }
+        let n = positions.len();
+        let normals: Option<Vec<Vec3>> = reader.read_normals().map(|it| it.map(Vec3::from).collect());
+        let read_uvs = |set| reader.read_tex_coords(set).map(|tc| tc.into_f32().map(Vec2::from).collect::<Vec<_>>());
+        let (uvs, uvs1) = (read_uvs(0).unwrap_or_else(|| vec![Vec2::ZERO; n]), read_uvs(1).unwrap_or_default());
+        let colors: Vec<Vec4> =
+            reader.read_colors(0).map(|c| c.into_rgba_f32().map(Vec4::from).collect()).unwrap_or_default();
+        let indices: Vec<u32> = match reader.read_indices() {
+            Some(ix) => ix.into_u32().collect(),
+            None => (0..n as u32).collect(),
+        };
+        if let Some(&bad) = indices.iter().find(|&&i| i as usize >= n) {
+            return Err(self.err(format!("{what}: index {bad} out of range ({n} vertices)")));
+        }
+        let triangles = triangles_of(prim.mode(), &indices)
+            .ok_or_else(|| self.err(format!("{what}: index count {} is not a multiple of 3", indices.len())))?;
+        let counts_differ = uvs.len() != n
+            || normals.as_ref().is_some_and(|v| v.len() != n)
+            || !(uvs1.is_empty() || uvs1.len() == n)
+            || !(colors.is_empty() || colors.len() == n);
+        if counts_differ {
+            return Err(self.err(format!("{what}: attribute counts differ from POSITION ({n})")));
+        }
+        // glTF §3.7.2.1: without NORMAL, flat normals, and TANGENT is ignored.
+        let tangents: Vec<Vec4> = match (&normals, reader.read_tangents()) {
+            (Some(_), Some(t)) => {
+                t.map(|t| Vec4::from(t)).map(|t| if t.is_finite() { t } else { Vec4::ZERO }).collect()
+            }
+            _ => vec![],
+        };
+        if !tangents.is_empty() && tangents.len() != n {
+            return Err(self.err(format!("{what}: attribute counts differ from POSITION ({n})")));
+        }
+        let colors = self.vertex_colors(colors, material, what);
+        self.warn_missing_second_set(material, uvs1.is_empty(), what);
+        if triangles.is_empty() {
+            return Ok(None);
+        }
+        Ok(Some(Mesh {
+            positions,
+            normals: normals.unwrap_or_else(|| vec![Vec3::ZERO; n]),
+            uvs,
+            uvs1,
+            colors,
+            triangle_materials: vec![material; triangles.len()],
+            triangles,
+            tangents,
+        }))
+    }
+
+    /// `COLOR_0`'s RGB, clamped to [0, 1] as glTF 2.0 §3.7.2.1 requires (with a
+    /// warning where it was not); its alpha is not a coverage (a warning says
+    /// so where it is below 1 on a cut-out material).
+    fn vertex_colors(&mut self, colors: Vec<Vec4>, material: u32, what: &str) -> Vec<Vec3> {
+        let file = self.path.display();
+        if colors.iter().any(|c| !(c.cmpge(Vec4::ZERO).all() && c.cmple(Vec4::ONE).all())) {
+            self.scene.warnings.push(format!("{file}: {what}: COLOR_0 outside [0, 1] (or not finite) is clamped"));
+        }
+        let m = &self.scene.materials[material as usize];
+        if m.alpha_mode != crate::material::AlphaMode::Opaque && colors.iter().any(|c| c.w < 1.0) {
+            self.scene
+                .warnings
+                .push(format!("{file}: {what}: COLOR_0's alpha is not used for alpha cutouts (material `{}`)", m.name));
+        }
+        let unit = |v: f32| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+        colors.into_iter().map(|c| Vec3::new(unit(c.x), unit(c.y), unit(c.z))).collect()
+    }
+
+    /// A warning when the material's textures read `TEXCOORD_1` and the
+    /// primitive has none (they read `TEXCOORD_0` instead).
+    fn warn_missing_second_set(&mut self, material: u32, missing: bool, what: &str) {
+        let m = &self.scene.materials[material as usize];
+        let slots = [
+            (m.base_color_texture, m.base_color_uv),
+            (m.emissive_texture, m.emissive_uv),
+            (m.normal_texture, m.normal_uv),
+            (m.metallic_roughness_texture, m.metallic_roughness_uv),
+        ];
+        if missing && slots.iter().any(|(t, uv)| t.is_some() && uv.set == 1) {
+            self.scene.warnings.push(format!(
+                "{}: {what}: material `{}` reads TEXCOORD_1, which the primitive lacks; TEXCOORD_0 is used",
+                self.path.display(),
+                m.name
+            ));
+        }
+    }
+
     fn material(&mut self, mat: gltf::Material) -> Result<u32> {
         let key = mat.index();
         if let Some(&id) = self.material_ids.get(&key) {
             return Ok(id);
         }
-        let pbr = mat.pbr_metallic_roughness();
-        let bc = pbr.base_color_factor();
-        let base_color_texture = match pbr.base_color_texture() {
-            Some(info) => self.texture(info.texture(), info.tex_coord())?,
-            None => None,
-        };
-        let (normal_texture, normal_scale) = match mat.normal_texture() {
-            Some(info) => (self.texture(info.texture(), info.tex_coord())?, info.scale()),
-            None => (None, 1.0),
-        };
+        let m = self.build_material(&mat)?;
+        self.warn_cutout_sampling(&m);
+        self.scene.materials.push(m);
+        let id = (self.scene.materials.len() - 1) as u32;
+        self.material_ids.insert(key, id);
+        Ok(id)
+    }
+
+    /// glTF 2.0 §3.9: the metallic-roughness parameters and their textures
+    /// (each with its coordinate set and KHR_texture_transform), normal and
+    /// emissive textures, alpha mode; out-of-range factors clamped with a warning.
+    fn build_material(&mut self, mat: &gltf::Material) -> Result<Material> {
         use crate::material::{AlphaMode, DEFAULT_ALPHA_CUTOFF};
+        let name = mat.name().unwrap_or("gltf-default").to_string();
+        let pbr = mat.pbr_metallic_roughness();
+        let (base_color_texture, base_color_uv) =
+            self.texture_slot(pbr.base_color_texture().as_ref().map(TextureRef::of_info), &name)?;
+        let (metallic_roughness_texture, metallic_roughness_uv) =
+            self.texture_slot(pbr.metallic_roughness_texture().as_ref().map(TextureRef::of_info), &name)?;
+        let (emissive_texture, emissive_uv) =
+            self.texture_slot(mat.emissive_texture().as_ref().map(TextureRef::of_info), &name)?;
+        let normal = mat.normal_texture();
+        let (normal_texture, normal_uv) = self.texture_slot(normal.as_ref().map(TextureRef::of_normal), &name)?;
+        let normal_scale = normal.map_or(1.0, |n| n.scale());
         let alpha_mode = match mat.alpha_mode() {
             gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
             gltf::material::AlphaMode::Mask => {
@@ -726,79 +884,117 @@ impl Loader<'_> {
             }
             gltf::material::AlphaMode::Blend => AlphaMode::Mask { cutoff: DEFAULT_ALPHA_CUTOFF },
         };
-        let emissive_texture = match mat.emissive_texture() {
-            Some(info) => self.texture(info.texture(), info.tex_coord())?,
-            None => None,
-        };
-        // Out-of-spec factors (glTF 2.0 §5.22: roughness, metallic, alpha in [0, 1];
-        // alphaCutoff ≥ 0) are clamped with a warning.
-        let name = mat.name().unwrap_or("gltf-default").to_string();
+        if let AlphaMode::Mask { cutoff } = alpha_mode
+            && (cutoff.is_nan() || cutoff < 0.0)
+        {
+            return Err(self.err(format!("material `{name}`: alphaCutoff {cutoff} must be ≥ 0")));
+        }
+        if !normal_scale.is_finite() {
+            return Err(self.err(format!("material `{name}`: normalTexture.scale {normal_scale} is not finite")));
+        }
+        let bc = pbr.base_color_factor();
+        let (roughness, metallic, alpha) = self.unit_factors(
+            &name,
+            [pbr.roughness_factor(), pbr.metallic_factor(), bc[3]],
+            ["roughnessFactor", "metallicFactor", "baseColorFactor alpha"],
+        );
+        Ok(Material {
+            base_color_factor: Vec3::new(bc[0], bc[1], bc[2]),
+            base_color_texture,
+            base_color_uv,
+            emissive_factor: Vec3::from(mat.emissive_factor()),
+            emissive_texture,
+            emissive_uv,
+            emissive_strength: mat.emissive_strength().unwrap_or(1.0),
+            roughness,
+            metallic,
+            metallic_roughness_texture,
+            metallic_roughness_uv,
+            specular_model: crate::material::SpecularModel::MetallicRoughness,
+            alpha_mode,
+            alpha_factor: alpha,
+            alpha_texture: base_color_texture.filter(|&t| self.scene.textures[t].alpha.is_some()),
+            normal_texture,
+            normal_uv,
+            normal_scale,
+            ..Material::default_grey(&name)
+        })
+    }
+
+    /// Factors glTF 2.0 §5.22 keeps in [0, 1] (roughness, metallic, alpha),
+    /// clamped with a warning when outside (NaN becomes 0).
+    fn unit_factors(&mut self, material: &str, values: [f32; 3], names: [&str; 3]) -> (f32, f32, f32) {
         let mut unit = |v: f32, what: &str| {
             if (0.0..=1.0).contains(&v) {
                 return v;
             }
             let clamped = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
             self.scene.warnings.push(format!(
-                "{}: material `{name}`: {what} {v} is outside [0, 1]; using {clamped}",
+                "{}: material `{material}`: {what} {v} is outside [0, 1]; using {clamped}",
                 self.path.display()
             ));
             clamped
         };
-        let (roughness, metallic, alpha) = (
-            unit(pbr.roughness_factor(), "roughnessFactor"),
-            unit(pbr.metallic_factor(), "metallicFactor"),
-            unit(bc[3], "baseColorFactor alpha"),
-        );
-        let alpha_mode = match alpha_mode {
-            AlphaMode::Mask { cutoff } if cutoff.is_nan() || cutoff < 0.0 => {
-                return Err(self.err(format!("material `{name}`: alphaCutoff {cutoff} must be ≥ 0")));
-            }
-            m => m,
-        };
-        if !normal_scale.is_finite() {
-            return Err(self.err(format!("material `{name}`: normalTexture.scale {normal_scale} is not finite")));
-        }
-        let m = Material {
-            name,
-            base_color_factor: Vec3::new(bc[0], bc[1], bc[2]),
-            base_color_texture,
-            emissive_factor: Vec3::from(mat.emissive_factor()),
-            emissive_texture,
-            emissive_strength: mat.emissive_strength().unwrap_or(1.0),
-            roughness,
-            metallic,
-            specular_color: Vec3::ZERO,
-            specular_exponent: 0.0,
-            specular_model: crate::material::SpecularModel::MetallicRoughness,
-            alpha_mode,
-            alpha_factor: alpha,
-            alpha_texture: base_color_texture.filter(|&t| self.scene.textures[t].alpha.is_some()),
-            normal_texture,
-            normal_scale,
-            ..Material::default_grey("")
-        };
-        self.scene.materials.push(m);
-        let id = (self.scene.materials.len() - 1) as u32;
-        self.material_ids.insert(key, id);
-        Ok(id)
+        (unit(values[0], names[0]), unit(values[1], names[1]), unit(values[2], names[2]))
     }
 
-    fn texture(&mut self, tex: gltf::Texture, tex_coord: u32) -> Result<Option<usize>> {
-        if tex_coord != 0 {
+    /// Alpha cutouts are tested inside traversal with `TEXCOORD_0`, repeat
+    /// addressing, bilinear filtering and no transform (`bvh.rs`): a warning
+    /// where a cut-out material's base-colour texture asks for more.
+    fn warn_cutout_sampling(&mut self, m: &Material) {
+        let Some(t) = m.alpha_texture.filter(|_| m.has_cutout()) else { return };
+        let plain_sampler = self.scene.textures[t].sampler == crate::texture::Sampler::default();
+        if !plain_sampler || m.base_color_uv != UvMapping::IDENTITY {
             self.scene.warnings.push(format!(
-                "{}: texture {} uses TEXCOORD_{tex_coord}; only set 0 is supported, texture ignored",
+                "{}: material `{}`: its alpha cutout is tested with TEXCOORD_0, repeat addressing, bilinear \
+                 filtering and no texture transform, unlike its base colour",
                 self.path.display(),
-                tex.index()
+                m.name
             ));
-            return Ok(None);
         }
+    }
+
+    /// A texture reference as the material stores it: the texture (`None` when
+    /// it cannot be used; a warning says why) and its coordinates. glTF 2.0
+    /// §3.9.2 `texCoord`, overridden by KHR_texture_transform's when given.
+    fn texture_slot(&mut self, r: Option<TextureRef>, material: &str) -> Result<(Option<usize>, UvMapping)> {
+        let Some(r) = r else { return Ok((None, UvMapping::IDENTITY)) };
+        let set = r.transform.and_then(|t| t.tex_coord).unwrap_or(r.tex_coord);
+        if set > 1 {
+            self.scene.warnings.push(format!(
+                "{}: material `{material}`: texture {} uses TEXCOORD_{set}; probegi reads sets 0 and 1, texture ignored",
+                self.path.display(),
+                r.texture.index()
+            ));
+            return Ok((None, UvMapping::IDENTITY));
+        }
+        let mapping = match r.transform {
+            Some(t) => {
+                if !(t.offset.is_finite() && t.rotation.is_finite() && t.scale.is_finite()) {
+                    return Err(self.err(format!(
+                        "material `{material}`: texture {}: KHR_texture_transform has a non-finite value",
+                        r.texture.index()
+                    )));
+                }
+                UvMapping::texture_transform(set, t.offset, t.rotation, t.scale)
+            }
+            None => UvMapping { set, ..UvMapping::IDENTITY },
+        };
+        Ok((self.texture(r.texture)?, mapping))
+    }
+
+    /// The scene texture of a glTF texture (its image read through its
+    /// sampler, glTF 2.0 §3.8), shared by every reference to the same image and
+    /// sampler; `None` when its image could not be read.
+    fn texture(&mut self, tex: gltf::Texture) -> Result<Option<usize>> {
         let img_index = tex.source().index();
-        if let Some(&id) = self.texture_ids.get(&img_index) {
+        let key = (img_index, tex.sampler().index());
+        if let Some(&id) = self.texture_ids.get(&key) {
             return Ok(id);
         }
         let Some(data) = self.images.get(img_index).ok_or_else(|| self.err(format!("image {img_index} missing")))?
         else {
-            self.texture_ids.insert(img_index, None);
+            self.texture_ids.insert(key, None);
             return Ok(None);
         };
         use gltf::image::Format;
@@ -812,7 +1008,7 @@ impl Loader<'_> {
                     "{}: image {img_index} has unsupported format {other:?}; texture ignored",
                     self.path.display()
                 ));
-                self.texture_ids.insert(img_index, None);
+                self.texture_ids.insert(key, None);
                 return Ok(None);
             }
         };
@@ -832,9 +1028,97 @@ impl Loader<'_> {
             let alpha = data.pixels.chunks_exact(channels).map(|p| p[channels - 1]).collect();
             t = t.with_alpha(alpha).ok_or_else(mismatch)?;
         }
-        self.scene.textures.push(t);
+        self.scene.textures.push(t.with_sampler(sampler_of(&tex.sampler())));
         let id = Some(self.scene.textures.len() - 1);
-        self.texture_ids.insert(img_index, id);
+        self.texture_ids.insert(key, id);
         Ok(id)
     }
+}
+
+/// A material's reference to a texture, from a `textureInfo` or a
+/// `normalTextureInfo`.
+struct TextureRef<'a> {
+    texture: gltf::Texture<'a>,
+    tex_coord: u32,
+    transform: Option<TextureTransform>,
+}
+
+/// KHR_texture_transform's values.
+#[derive(Clone, Copy)]
+struct TextureTransform {
+    offset: Vec2,
+    rotation: f32,
+    scale: Vec2,
+    tex_coord: Option<u32>,
+}
+
+impl<'a> TextureRef<'a> {
+    fn of_info(info: &gltf::texture::Info<'a>) -> Self {
+        let transform = info.texture_transform().map(|t| TextureTransform {
+            offset: Vec2::from(t.offset()),
+            rotation: t.rotation(),
+            scale: Vec2::from(t.scale()),
+            tex_coord: t.tex_coord(),
+        });
+        Self { texture: info.texture(), tex_coord: info.tex_coord(), transform }
+    }
+
+    /// The library does not parse KHR_texture_transform on normal textures;
+    /// it is read here from the extension's JSON (an unreadable one reads as
+    /// no transform).
+    fn of_normal(info: &gltf::material::NormalTexture<'a>) -> Self {
+        use gltf::json::extensions::texture::TextureTransform as Json;
+        let json = info.extension_value("KHR_texture_transform").cloned();
+        let transform =
+            json.and_then(|v| gltf::json::deserialize::from_value::<Json>(v).ok()).map(|t| TextureTransform {
+                offset: Vec2::from(t.offset.0),
+                rotation: t.rotation.0,
+                scale: Vec2::from(t.scale.0),
+                tex_coord: t.tex_coord,
+            });
+        Self { texture: info.texture(), tex_coord: info.tex_coord(), transform }
+    }
+}
+
+/// glTF 2.0 §3.8.4: wrap modes as given; the filter is `magFilter` (every
+/// lookup is treated as magnification, see `texture.rs`), else the §3.8.4.2
+/// no-mipmap fallback of `minFilter`, else linear.
+fn sampler_of(s: &gltf::texture::Sampler) -> Sampler {
+    use gltf::texture::{MagFilter, MinFilter, WrappingMode};
+    let wrap = |w| match w {
+        WrappingMode::Repeat => Wrap::Repeat,
+        WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+        WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+    };
+    let filter = match (s.mag_filter(), s.min_filter()) {
+        (Some(MagFilter::Nearest), _) => Filter::Nearest,
+        (Some(MagFilter::Linear), _) => Filter::Linear,
+        (None, Some(MinFilter::Nearest | MinFilter::NearestMipmapNearest | MinFilter::NearestMipmapLinear)) => {
+            Filter::Nearest
+        }
+        (None, _) => Filter::Linear,
+    };
+    Sampler { wrap_u: wrap(s.wrap_s()), wrap_v: wrap(s.wrap_t()), filter }
+}
+
+/// The triangles a primitive's indices describe (glTF 2.0 §3.7.2.1,
+/// topology types): lists as they are, `None` when their count is not a
+/// multiple of 3; strips `p_i = {v_i, v_(i+1+i%2), v_(i+2−i%2)}` (every other
+/// triangle flipped, so all keep the first one's winding); fans `p_i =
+/// {v_(i+1), v_(i+2), v_0}`. A strip's or fan's triangles that use a vertex
+/// twice (degenerate joins, which the section advises against) are dropped.
+fn triangles_of(mode: gltf::mesh::Mode, v: &[u32]) -> Option<Vec<[u32; 3]>> {
+    use gltf::mesh::Mode;
+    let corners: Vec<[u32; 3]> = match mode {
+        Mode::Triangles if v.len().is_multiple_of(3) => {
+            return Some(v.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect());
+        }
+        Mode::Triangles => return None,
+        Mode::TriangleStrip => {
+            (0..v.len().saturating_sub(2)).map(|i| [v[i], v[i + 1 + i % 2], v[i + 2 - i % 2]]).collect()
+        }
+        Mode::TriangleFan => (0..v.len().saturating_sub(2)).map(|i| [v[i + 1], v[i + 2], v[0]]).collect(),
+        _ => Vec::new(),
+    };
+    Some(corners.into_iter().filter(|[a, b, c]| a != b && b != c && a != c).collect())
 }

@@ -8,6 +8,8 @@ use std::collections::HashMap;
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
+use crate::material::VertexAttributes;
+
 #[derive(Clone, Debug, Default)]
 pub struct Mesh {
     pub positions: Vec<Vec3>,
@@ -15,6 +17,11 @@ pub struct Mesh {
     pub normals: Vec<Vec3>,
     /// Texture coordinates, one per vertex (`v = 0` at the top of the image).
     pub uvs: Vec<Vec2>,
+    /// The second texture coordinate set (glTF `TEXCOORD_1`). Vertices past
+    /// its end (meshes without a second set) read `uvs` instead.
+    pub uvs1: Vec<Vec2>,
+    /// Linear vertex colours (glTF `COLOR_0`'s RGB). Vertices past its end are white.
+    pub colors: Vec<Vec3>,
     pub triangles: Vec<[u32; 3]>,
     /// Index into `Scene::materials`, one per triangle.
     pub triangle_materials: Vec<u32>,
@@ -59,12 +66,45 @@ impl Mesh {
         0.5 * self.face_normal_scaled(tri).length()
     }
 
+    /// Vertex `v`'s second texture coordinate set (its first where it has none).
+    pub fn uv1(&self, v: usize) -> Vec2 {
+        self.uvs1.get(v).or(self.uvs.get(v)).copied().unwrap_or(Vec2::ZERO)
+    }
+
+    /// Vertex `v`'s colour (white where it has none).
+    pub fn color(&self, v: usize) -> Vec3 {
+        self.colors.get(v).copied().unwrap_or(Vec3::ONE)
+    }
+
+    /// The material inputs of vertex `v`.
+    pub fn vertex_attributes(&self, v: usize) -> VertexAttributes {
+        VertexAttributes { uv: [self.uvs.get(v).copied().unwrap_or(Vec2::ZERO), self.uv1(v)], color: self.color(v) }
+    }
+
+    /// The material inputs at barycentric weights `bary` (of corners 0, 1, 2)
+    /// inside triangle `tri`.
+    pub fn attributes_at(&self, tri: usize, bary: Vec3) -> VertexAttributes {
+        let [a, b, c] = self.triangles[tri].map(|v| self.vertex_attributes(v as usize));
+        interpolate_attributes([a, b, c], bary)
+    }
+
     /// Appends `other`, shifting its material ids by `material_offset`.
     pub fn append(&mut self, other: &Mesh, material_offset: u32) {
         let base = self.positions.len() as u32;
         self.positions.extend_from_slice(&other.positions);
         self.normals.extend_from_slice(&other.normals);
         self.uvs.extend_from_slice(&other.uvs);
+        if !(self.uvs1.is_empty() && other.uvs1.is_empty()) {
+            // Fill this mesh's vertices without a second set with their first, then append.
+            let from = self.uvs1.len().min(base as usize);
+            self.uvs1.truncate(from);
+            self.uvs1.extend_from_slice(&self.uvs[from..base as usize]);
+            self.uvs1.extend((0..other.positions.len()).map(|v| other.uv1(v)));
+        }
+        if !(self.colors.is_empty() && other.colors.is_empty()) {
+            self.colors.resize(base as usize, Vec3::ONE);
+            self.colors.extend((0..other.positions.len()).map(|v| other.color(v)));
+        }
         self.triangles.extend(other.triangles.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
         self.triangle_materials.extend(other.triangle_materials.iter().map(|m| m + material_offset));
         if !self.tangents.is_empty() || !other.tangents.is_empty() {
@@ -228,6 +268,8 @@ impl Mesh {
         let with_tangents = !self.tangents.is_empty() || corners.iter().any(|c| c.2.is_some_and(|t| t != Vec4::ZERO));
         let mut ids: HashMap<(u32, [u32; 3], [u32; 4]), u32> = HashMap::new();
         let (mut positions, mut normals, mut uvs, mut tangents, mut old) = (vec![], vec![], vec![], vec![], vec![]);
+        let (mut uvs1, mut colors) = (vec![], vec![]);
+        let (with_uvs1, with_colors) = (!self.uvs1.is_empty(), !self.colors.is_empty());
         for (c, tri) in corners.chunks_exact(3).zip(self.triangles.iter_mut()) {
             for (k, &(v, n, tan)) in c.iter().enumerate() {
                 let tan = tan.unwrap_or(Vec4::ZERO);
@@ -236,6 +278,13 @@ impl Mesh {
                     .or_insert_with(|| {
                         positions.push(self.positions[v as usize]);
                         uvs.push(self.uvs[v as usize]);
+                        let vi = v as usize;
+                        if with_uvs1 {
+                            uvs1.push(*self.uvs1.get(vi).unwrap_or(&self.uvs[vi]));
+                        }
+                        if with_colors {
+                            colors.push(self.colors.get(vi).copied().unwrap_or(Vec3::ONE));
+                        }
                         normals.push(n);
                         tangents.push(tan);
                         old.push(v);
@@ -247,6 +296,8 @@ impl Mesh {
         self.positions = positions;
         self.normals = normals;
         self.uvs = uvs;
+        self.uvs1 = uvs1;
+        self.colors = colors;
         self.tangents = if with_tangents { tangents } else { vec![] };
         old
     }
@@ -256,6 +307,12 @@ impl Mesh {
         let first = *self.positions.first()?;
         Some(self.positions.iter().fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p))))
     }
+}
+
+/// Barycentric blend of three vertices' material inputs.
+pub fn interpolate_attributes(v: [VertexAttributes; 3], bary: Vec3) -> VertexAttributes {
+    let mix2 = |k: usize| v[0].uv[k] * bary.x + v[1].uv[k] * bary.y + v[2].uv[k] * bary.z;
+    VertexAttributes { uv: [mix2(0), mix2(1)], color: v[0].color * bary.x + v[1].color * bary.y + v[2].color * bary.z }
 }
 
 /// A tangent under an affine transform: the linear part moves it, and a
@@ -342,7 +399,7 @@ mod tests {
             uvs: vec![Vec2::ZERO; n],
             triangles,
             triangle_materials: m.triangle_materials,
-            tangents: vec![],
+            ..Default::default()
         }
     }
 
@@ -382,6 +439,35 @@ mod tests {
     }
 
     #[test]
+    fn second_uv_sets_and_colours_survive_appends_and_vertex_splits() {
+        let tri = |uv1: Vec<Vec2>, colors: Vec<Vec3>| Mesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            normals: vec![Vec3::Z; 3],
+            uvs: vec![Vec2::new(0.1, 0.0), Vec2::new(0.2, 0.0), Vec2::new(0.3, 0.0)],
+            uvs1: uv1,
+            colors,
+            triangles: vec![[0, 1, 2]],
+            triangle_materials: vec![0],
+            ..Default::default()
+        };
+        let mut m = tri(vec![], vec![]);
+        m.append(&tri(vec![Vec2::splat(0.5); 3], vec![Vec3::new(1.0, 0.0, 0.0); 3]), 0);
+        m.append(&tri(vec![], vec![]), 0);
+        assert_eq!((m.uvs1.len(), m.colors.len()), (9, 9));
+        assert_eq!((m.uv1(1), m.color(1)), (Vec2::new(0.2, 0.0), Vec3::ONE), "no second set: the first");
+        assert_eq!((m.uv1(4), m.color(4)), (Vec2::splat(0.5), Vec3::X));
+        assert_eq!((m.uv1(8), m.color(8)), (Vec2::new(0.3, 0.0), Vec3::ONE));
+        let centre = m.attributes_at(1, Vec3::splat(1.0 / 3.0));
+        assert!((centre.uv[1] - Vec2::splat(0.5)).length() < 1e-6 && (centre.color - Vec3::X).length() < 1e-6);
+        // Flat normals on a mesh of shared corners split vertices; the attributes follow them.
+        m.triangles[1] = [0, 4, 5];
+        m.derive_normals(&[NormalSource::Flat; 3], &[], 180.0);
+        assert_eq!((m.uvs1.len(), m.colors.len()), (m.positions.len(), m.positions.len()));
+        let v = m.triangles[1][1] as usize;
+        assert_eq!((m.uv1(v), m.color(v)), (Vec2::splat(0.5), Vec3::X));
+    }
+
+    #[test]
     fn mikktspace_tangents_follow_u_on_a_plane_and_flip_sign_when_v_is_mirrored() {
         for (v_sign, w) in [(1.0f32, 1.0f32), (-1.0, -1.0)] {
             let mut m = Mesh {
@@ -390,7 +476,7 @@ mod tests {
                 uvs: vec![Vec2::ZERO, Vec2::new(1.0, 0.0), Vec2::new(1.0, v_sign), Vec2::new(0.0, v_sign)],
                 triangles: vec![[0, 1, 2], [0, 2, 3]],
                 triangle_materials: vec![0, 0],
-                tangents: vec![],
+                ..Default::default()
             };
             m.generate_tangents().expect("mikktspace");
             assert_eq!(m.tangents.len(), m.positions.len());

@@ -18,7 +18,7 @@ use probegi_core::camera::Camera;
 
 use crate::animation::SceneObject;
 use crate::light::PunctualLight;
-use crate::material::Material;
+use crate::material::{Material, VertexAttributes};
 use crate::mesh::Mesh;
 use crate::texture::Texture;
 use crate::tracer::RayHit;
@@ -119,7 +119,8 @@ impl MeshInstance {
 struct Corners {
     p: [Vec3; 3],
     n: [Vec3; 3],
-    uv: [Vec2; 3],
+    /// Both texture coordinate sets and the vertex colour of each corner.
+    attributes: [VertexAttributes; 3],
     /// Tangent (xyz, world) and bitangent sign (w); zero when none.
     t: [glam::Vec4; 3],
 }
@@ -130,7 +131,7 @@ impl Corners {
         Self {
             p: v.map(|i| mesh.positions[i]),
             n: v.map(|i| mesh.normals[i]),
-            uv: v.map(|i| mesh.uvs[i]),
+            attributes: v.map(|i| mesh.vertex_attributes(i)),
             t: v.map(|i| mesh.tangents.get(i).copied().unwrap_or(glam::Vec4::ZERO)),
         }
     }
@@ -154,7 +155,12 @@ pub struct SurfacePoint {
     pub geometric_normal: Vec3,
     /// Unit shading normal, interpolated and flipped into the geometric normal's hemisphere.
     pub shading_normal: Vec3,
+    /// Texture coordinate set 0.
     pub uv: Vec2,
+    /// Texture coordinate set 1 (set 0 where the mesh has no second set).
+    pub uv1: Vec2,
+    /// Linear vertex colour (white where the mesh has none).
+    pub vertex_color: Vec3,
     pub material: u32,
     /// Index of the triangle in `Scene::mesh`, or in its prototype's mesh when
     /// `instance` is set.
@@ -166,6 +172,11 @@ pub struct SurfacePoint {
 }
 
 impl SurfacePoint {
+    /// What its material reads here: both coordinate sets and the vertex colour.
+    pub fn attributes(&self) -> VertexAttributes {
+        VertexAttributes { uv: [self.uv, self.uv1], color: self.vertex_color }
+    }
+
     /// The shading normal turned toward the side the ray came from: the frame two-sided
     /// Lambertian shading uses.
     pub fn facing_normal(&self) -> Vec3 {
@@ -261,11 +272,12 @@ impl Scene {
         } else if shading_normal.dot(geometric_normal) < 0.0 {
             shading_normal = -shading_normal;
         }
-        let uv = corners.uv[0] * bary.x + corners.uv[1] * bary.y + corners.uv[2] * bary.z;
+        let attributes = crate::mesh::interpolate_attributes(corners.attributes, bary);
+        let uv = attributes.uv[0];
         let material_id = mesh.triangle_materials[tri];
         let material = &self.materials[material_id as usize];
         if material.perturbs_normals() {
-            let perturbed = self.perturbed_normal(material, &corners, bary, shading_normal, uv);
+            let perturbed = self.perturbed_normal(material, &corners, bary, shading_normal, &attributes);
             // A perturbed normal below the surface would shade light from inside it.
             if perturbed.dot(geometric_normal) > 1e-3 {
                 shading_normal = perturbed;
@@ -276,6 +288,8 @@ impl Scene {
             geometric_normal,
             shading_normal,
             uv,
+            uv1: attributes.uv[1],
+            vertex_color: attributes.color,
             material: material_id,
             triangle: hit.triangle,
             instance: hit.instance,
@@ -283,14 +297,22 @@ impl Scene {
         }
     }
 
-    /// The shading normal `n` at `uv` perturbed by the material's normal map
+    /// The shading normal `n` at `at` perturbed by the material's normal map
     /// (tangent space: the interpolated tangent, made orthogonal to `n`, and
     /// bitangent = sign · n × tangent, glTF's convention) or height map (see
     /// [`crate::material::BUMP_WHITE_HEIGHT_REL`]: the map's slopes in texel
     /// space tilt `n` against the directions of ∂p/∂u and ∂p/∂v, which come
     /// from the triangle's UV mapping as in pbrt). Returns `n` where the frame
-    /// is degenerate.
-    fn perturbed_normal(&self, material: &Material, corners: &Corners, bary: Vec3, n: Vec3, uv: Vec2) -> Vec3 {
+    /// is degenerate. Both maps read the coordinates of `material.normal_uv`.
+    fn perturbed_normal(
+        &self,
+        material: &Material,
+        corners: &Corners,
+        bary: Vec3,
+        n: Vec3,
+        at: &VertexAttributes,
+    ) -> Vec3 {
+        let uv = material.normal_uv.apply(at);
         if let Some(t) = material.normal_texture.and_then(|t| self.textures.get(t)) {
             let tangents = corners.t;
             let tan =
@@ -306,7 +328,8 @@ impl Scene {
             return (tan * local.x + bitangent * local.y + n * local.z).normalize_or(n);
         }
         if let Some(t) = material.bump_texture.and_then(|t| self.textures.get(t)) {
-            let Some((dpdu, dpdv)) = uv_derivatives(corners.p, corners.uv) else {
+            let corner_uv = corners.attributes.map(|a| material.normal_uv.apply(&a));
+            let Some((dpdu, dpdv)) = uv_derivatives(corners.p, corner_uv) else {
                 return n;
             };
             let (_, grad_uv) = t.sample_height_gradient(uv);
@@ -328,7 +351,7 @@ impl Scene {
 
     /// The BSDF at a surface point.
     pub fn bsdf(&self, sp: &SurfacePoint) -> probegi_core::bsdf::SurfaceBsdf {
-        self.material(sp.material).bsdf(&self.textures, sp.uv)
+        self.material(sp.material).bsdf(&self.textures, &sp.attributes())
     }
 
     /// The scene mesh's emitters for next-event estimation, and their selection
@@ -357,7 +380,7 @@ impl Scene {
         if !sp.front_face {
             return Vec3::ZERO;
         }
-        self.material(sp.material).emission(&self.textures, sp.uv)
+        self.material(sp.material).emission(&self.textures, &sp.attributes())
     }
 
     /// Whether anything in the scene changes from frame to frame.
@@ -589,6 +612,8 @@ impl Scene {
         let m = &self.mesh;
         if m.normals.len() != m.positions.len()
             || m.uvs.len() != m.positions.len()
+            || m.uvs1.len() > m.positions.len()
+            || m.colors.len() > m.positions.len()
             || !(m.tangents.is_empty() || m.tangents.len() == m.positions.len())
         {
             return Err("per-vertex arrays differ in length".into());
@@ -689,6 +714,8 @@ impl Scene {
             let name = &proto.name;
             if pm.normals.len() != pm.positions.len()
                 || pm.uvs.len() != pm.positions.len()
+                || pm.uvs1.len() > pm.positions.len()
+                || pm.colors.len() > pm.positions.len()
                 || pm.triangle_materials.len() != pm.triangles.len()
                 || !(pm.tangents.is_empty() || pm.tangents.len() == pm.positions.len())
             {

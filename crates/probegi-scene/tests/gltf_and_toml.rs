@@ -162,7 +162,8 @@ fn gltf_base_color_texture_is_srgb_decoded_and_multiplied_by_the_factor() {
     std::fs::write(&path, json).expect("write");
     let s = load_scene(&path.to_string_lossy()).expect("loads");
     assert_eq!(s.textures.len(), 1);
-    let c = s.materials[0].base_color(&s.textures, glam::Vec2::new(0.3, 0.7));
+    let c = s.materials[0]
+        .base_color(&s.textures, &probegi_scene::material::VertexAttributes::at_uv(glam::Vec2::new(0.3, 0.7)));
     // sRGB 128 decodes to 0.2158; times the 0.5 factor.
     assert!((c.x - 0.5 * 0.215_860_5).abs() < 1e-5, "{c}");
     std::fs::remove_dir_all(dir).ok();
