@@ -218,6 +218,11 @@ pub struct RenderArgs {
     /// Playback rate of the --gif preview.
     #[arg(long, default_value_t = 25.0, requires = "gif")]
     pub gif_fps: f32,
+    /// Accept frames that come out all black although the scene has light
+    /// sources and the camera sees lit surfaces (by default such a render is an
+    /// error: it is almost always a bug, e.g. a degenerate camera).
+    #[arg(long)]
+    pub allow_black_frames: bool,
     /// `cpu`, or `wgpu`: the DDGI field's update (ray generation, trace, shade,
     /// blend, border, relocation, classification) and the camera frame run as
     /// WGSL compute shaders on a GPU (or Mesa's lavapipe), the atlases kept

@@ -190,9 +190,10 @@ fn render(args: &RenderArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    probegi_image::io::ImageFormat::from_path(&args.out)?;
+    check_render_outputs(args)?;
     // G-buffer texel, frame and accumulation buffers.
     let (scene, camera) = prepare(&args.scene, &args.volume.set, 160)?;
+    check_posed_bounds(&scene, args.frames.saturating_sub(1) as f32)?;
     let v = &args.volume;
     if args.gi == GiArg::None
         && (v.probes.is_some() || v.rays_per_probe.is_some() || probe_settings(&v.set).next().is_some())
@@ -288,6 +289,18 @@ fn render(args: &RenderArgs) -> Result<()> {
     if let Some(e) = &stats.error {
         bail!("render stopped: {e}");
     }
+    if !stats.black_frames.is_empty() && !args.allow_black_frames {
+        for path in &sequence_written {
+            std::fs::remove_file(path).ok();
+        }
+        bail!(
+            "frame{} {:?} came out all black although the scene has light sources and the camera sees lit \
+             surfaces: this is almost always a bug (please report it with the scene); nothing was written. \
+             --allow-black-frames accepts such frames",
+            if stats.black_frames.len() == 1 { "" } else { "s" },
+            stats.black_frames
+        );
+    }
     let elapsed = start.elapsed();
     write_radiance(&args.out, &image)?;
     if let (Some(dir), Some(set)) = (&args.dump_atlases, &out.ddgi) {
@@ -338,6 +351,10 @@ fn render(args: &RenderArgs) -> Result<()> {
             "frame_means": stats.frame_means.iter().map(|m| [m.x, m.y, m.z]).collect::<Vec<_>>(),
             "frame_indirect_means": stats.frame_indirect_means.iter().map(|m| [m.x, m.y, m.z]).collect::<Vec<_>>(),
             "frame_unlit_fraction": stats.frame_unlit_fraction,
+            // Rays answered without a full BVH walk (probegi_scene::bvh_walk): the
+            // ray rule's misses and walks cut short, per backend.
+            "trace_guards_cpu": bvh.trace_guard_counts(),
+            "trace_guards_gpu": gpu.as_ref().map(|g| g.bvh.trace_guard_counts(&g.ctx)).transpose()?,
         });
         write_text(path, &serde_json::to_string_pretty(&json)?)?;
     }
@@ -410,10 +427,7 @@ fn camera_path(scene: &Scene, args: &SceneArgs, frames: u32) -> Vec<CameraRays> 
     if fixed || !scene.has_camera_animation() {
         return Vec::new();
     }
-    (0..frames)
-        .filter_map(|f| scene.camera_at(f as f32))
-        .map(|c| CameraRays::new(&c, args.width, args.height))
-        .collect()
+    scene.camera_path(frames).iter().map(|c| CameraRays::new(c, args.width, args.height)).collect()
 }
 
 /// `--probes`, `--rays-per-probe` and each `--set`, in order, over `s`.
@@ -468,11 +482,12 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
     if args.max_depth == 0 || args.max_depth > 4096 {
         bail!("--max-depth must be in 1..=4096 (got {})", args.max_depth);
     }
-    probegi_image::io::ImageFormat::from_path(&args.out)?;
+    probegi_image::check_output_path(&args.out, true)?;
     if !args.frame.is_finite() {
         bail!("--frame must be a finite frame number");
     }
     let (mut scene, camera) = prepare(&args.scene, &args.set, 16)?;
+    check_posed_bounds(&scene, args.frame.max(0.0))?;
     if let Some(a) = probe_settings(&args.set).next() {
         bail!(
             "--set {a}: the reference takes scene settings only ({})",
@@ -513,6 +528,31 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
         scene.name
     );
     Ok(())
+}
+
+/// Every output of a render checked before it starts, so that a long render
+/// does not fail at its end (`probegi_image::check_output_path`).
+fn check_render_outputs(args: &RenderArgs) -> Result<()> {
+    probegi_image::check_output_path(&args.out, true)?;
+    if let Some(p) = &args.stats {
+        probegi_image::check_output_path(p, false)?;
+    }
+    if let Some(p) = &args.gif {
+        probegi_image::check_output_path(p, false)?;
+    }
+    for dir in [&args.sequence, &args.dump_atlases].into_iter().flatten() {
+        if dir.exists() && !dir.is_dir() {
+            bail!("{}: exists and is not a directory", dir.display());
+        }
+        probegi_image::check_output_path(&dir.join("frame-0000.png"), true)?;
+    }
+    Ok(())
+}
+
+/// Moving geometry must stay inside the coordinate bound of loaded geometry
+/// at every frame up to `last_frame` (`Scene::check_posed_bounds`).
+fn check_posed_bounds(scene: &Scene, last_frame: f32) -> Result<()> {
+    scene.check_posed_bounds(last_frame).map_err(|e| anyhow::anyhow!("scene {}: {e}", scene.name))
 }
 
 fn write_text(path: &Path, text: &str) -> Result<()> {

@@ -56,7 +56,11 @@ impl Camera {
         if !(self.position.is_finite() && self.target.is_finite() && self.up.is_finite()) {
             return Err("camera position, target and up must be finite".into());
         }
-        if (self.target - self.position).length_squared() < 1e-12 {
+        let view = self.target - self.position;
+        if !view.is_finite() {
+            return Err("camera target and position are too far apart to subtract in f32".into());
+        }
+        if view.length_squared() < 1e-12 {
             return Err("camera target equals camera position".into());
         }
         if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 179.0) {
@@ -84,8 +88,8 @@ impl Camera {
     /// the previous frame of a path (`None` for a single camera). Needs a
     /// camera that passes [`Camera::validate`].
     pub fn view_basis(&self, previous_up_world: Option<Vec3>) -> ViewBasis {
-        let forward_world = (self.target - self.position).normalize();
-        let hint = self.up.normalize_or_zero();
+        let forward_world = unit(self.target - self.position);
+        let hint = unit(self.up);
         let mut right = forward_world.cross(hint);
         if let Some(prev) = previous_up_world {
             // Keep the image up on the previous frame's side: a path over the
@@ -111,6 +115,13 @@ impl Camera {
     pub fn with_basis(&self, basis: &ViewBasis) -> Camera {
         if self.view_basis(None) == *basis { *self } else { Camera { up: basis.up_world, ..*self } }
     }
+}
+
+/// `v` normalised without overflow (its largest component scaled to 1 first),
+/// zero for a zero vector.
+fn unit(v: Vec3) -> Vec3 {
+    let largest = v.abs().max_element();
+    if largest > 0.0 { (v / largest).normalize_or_zero() } else { Vec3::ZERO }
 }
 
 /// The single camera's fallback image up (module docs): the world axis least

@@ -145,6 +145,14 @@ pub struct GeneratedProbeRays {
 }
 
 /// One frame's probe rays for every volume: structure of arrays, probe-major.
+///
+/// **The ray rule at the seam** (`probegi_scene::bvh_walk`, the same in
+/// `bvh.wgsl`): a ray whose origin or direction is NaN or infinite, whose
+/// direction is zero (denormal components count as zero), or whose max
+/// distance is NaN or negative, is a miss on both backends — never an error,
+/// never a hang — and the tracers count it (`--stats`: `trace_guards_*`). Every
+/// walk is bounded by its BVH's node count. A batch a tracer hands back must
+/// keep that rule for the rays an engine puts here itself.
 #[derive(Clone, Debug, Default)]
 pub struct ProbeRayBatch {
     pub kind: ProbeRayBatchKind,

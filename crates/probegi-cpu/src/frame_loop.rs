@@ -112,6 +112,11 @@ pub struct RenderStats {
     /// surface whose diffuse albedo is non-zero but get no indirect light from the
     /// field (a black wall or an unreadable probe shows up here).
     pub frame_unlit_fraction: Vec<f32>,
+    /// Frames whose image is all black (mean exactly 0) although the scene had
+    /// light sources at that frame (`Scene::has_light_sources`) and pixels
+    /// that see a lit surface: a bug to find, not an output (the CLI refuses
+    /// such a render).
+    pub black_frames: Vec<u32>,
     /// Set when the render stopped early: a probe batch tracer failed (a GPU
     /// device lost, say). The image is then that of the frames before.
     pub error: Option<String>,
@@ -176,6 +181,14 @@ impl Accumulation {
         let indirect_sum: DVec3 = self.indirect.iter().map(|i| i.as_dvec3()).sum();
         stats.frame_indirect_means.push((indirect_sum / self.indirect.len().max(1) as f64).as_vec3());
         on_frame_done(f, &compose);
+    }
+
+    /// Notes frame `f` in `stats.black_frames` when its image is all black
+    /// although `scene` has light sources and `surfaces` pixels see a surface.
+    fn check_black(&self, f: u32, scene: &Scene, surfaces: usize, stats: &mut RenderStats) {
+        if surfaces > 0 && self.mean() == Vec3::ZERO && scene.has_light_sources() {
+            stats.black_frames.push(f);
+        }
     }
 
     /// Mean of the composed image, without composing it.
@@ -299,6 +312,7 @@ pub fn render_frames(
                     stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
                     let camera_moved = moving_camera && f > 0 && camera_at(f - 1) != camera;
                     acc.add_frame(animated || camera_moved);
+                    acc.check_black(f, scene, surfaces, &mut stats);
                     *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
                     acc.finish_frame(f, settings, &mut stats, &mut on_frame_done);
                     continue;
@@ -344,6 +358,7 @@ pub fn render_frames(
         // last frame (a camera that holds at its last key accumulates again).
         let camera_moved = moving_camera && f > 0 && camera_at(f - 1) != camera;
         acc.add_frame(animated || camera_moved);
+        acc.check_black(f, scene, surfaces, &mut stats);
 
         *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
         if let Some(p) = sh.as_mut() {
@@ -491,14 +506,13 @@ fn shade_camera(
                     }
                 }
                 *d = if l.is_finite() { l } else { Vec3::ZERO };
+                let albedo = ctx.bsdf.diffuse_albedo();
+                let diffuse = albedo.max_element() > 0.0;
+                surfaces += diffuse as usize;
                 *i = match &field {
                     Some(f) => {
                         let e = f.irradiance(sp.position, sp.facing_normal(), texel.view_dir_world);
-                        let albedo = ctx.bsdf.diffuse_albedo();
-                        if albedo.max_element() > 0.0 {
-                            surfaces += 1;
-                            unlit += (e.max_element() <= 0.0) as usize;
-                        }
+                        unlit += (diffuse && e.max_element() <= 0.0) as usize;
                         albedo * FRAC_1_PI * e
                     }
                     None => Vec3::ZERO,

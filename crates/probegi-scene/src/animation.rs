@@ -214,6 +214,54 @@ impl SceneObject {
         placement * local * placement.inverse()
     }
 
+    /// The frames that bound this object's poses up to `last_frame`: frame 0,
+    /// `last_frame`, every key (translation and scale are linear between keys,
+    /// a rotation keeps lengths) and the midpoints between them.
+    fn bounding_frames(&self, last_frame: f32) -> Vec<f32> {
+        let per_key = match self.animation.clock {
+            KeyClock::Frames => 1.0,
+            KeyClock::Seconds { frames_per_second } => frames_per_second,
+        };
+        let mut frames: Vec<f32> = [0.0, last_frame.max(0.0)]
+            .into_iter()
+            .chain(self.animation.keyframes.iter().map(|k| k.frame * per_key))
+            .filter(|f| f.is_finite())
+            .collect();
+        frames.sort_by(f32::total_cmp);
+        let mids: Vec<f32> = frames.windows(2).map(|w| w[0] * 0.5 + w[1] * 0.5).collect();
+        frames.extend(mids);
+        frames.sort_by(f32::total_cmp);
+        frames.dedup();
+        frames
+    }
+
+    /// The first frame up to `last_frame` (and at any key) at which this
+    /// object's geometry, whose rest pose lies in the box `rest_bounds`,
+    /// may reach beyond ±`bound_m` on an axis, with that reach; `None` when
+    /// every pose stays inside. Conservative: the rest box's bounding sphere
+    /// goes through each bounding frame's transform, its radius scaled by the
+    /// transform's Frobenius norm; an orbit adds its centre's distance.
+    pub fn posed_reach_beyond(&self, rest_bounds: (Vec3, Vec3), last_frame: f32, bound_m: f32) -> Option<(f32, f32)> {
+        if !self.is_animated() {
+            return None;
+        }
+        let (centre, radius) = ((rest_bounds.0 + rest_bounds.1) * 0.5, (rest_bounds.1 - rest_bounds.0).length() * 0.5);
+        self.bounding_frames(last_frame).into_iter().find_map(|f| {
+            let m = self.world_from_rest(f);
+            let c = m.transform_point3(centre);
+            let linear = m.matrix3;
+            let norm =
+                (linear.x_axis.length_squared() + linear.y_axis.length_squared() + linear.z_axis.length_squared())
+                    .sqrt();
+            let mut reach = c.abs().max_element() + radius * norm;
+            if let Some(MotionPath::Orbit { centre_m, .. }) = self.animation.motion {
+                reach = reach.max(centre_m.abs().max_element() + (c - centre_m).length() + radius * norm);
+            }
+            let inside = reach <= bound_m; // false for NaN too
+            (!inside).then_some((f, reach))
+        })
+    }
+
     /// Why this object is unusable, if it is.
     pub fn validate(&self) -> Result<(), String> {
         let a = &self.animation;
@@ -295,6 +343,42 @@ mod tests {
         let p = orbit.world_from_rest(2.0).transform_point3(Vec3::new(1.0, 0.0, 0.0));
         assert!((p - Vec3::new(0.0, 0.0, -1.0)).length() < 1e-5, "{p}");
         assert!((orbit.world_from_rest(8.0).transform_point3(Vec3::X) - Vec3::X).length() < 1e-5);
+    }
+
+    #[test]
+    fn posed_reach_is_bounded_at_keys_motion_ends_and_orbits() {
+        let rest = (Vec3::ZERO, Vec3::ONE);
+        let key = |frame, t: Option<Vec3>, s: Option<Vec3>| TransformKeyframe {
+            frame,
+            translation: t,
+            rotation: None,
+            scale: s,
+        };
+        let far = object(ObjectAnimation {
+            keyframes: vec![key(0.0, Some(Vec3::ZERO), None), key(10.0, Some(Vec3::new(1e30, 0.0, 0.0)), None)],
+            ..Default::default()
+        });
+        assert_eq!(far.posed_reach_beyond(rest, 0.0, 1e15).map(|r| r.0), Some(5.0), "between keys");
+        let huge =
+            object(ObjectAnimation { keyframes: vec![key(3.0, None, Some(Vec3::splat(1e30)))], ..Default::default() });
+        assert!(huge.posed_reach_beyond(rest, 0.0, 1e15).is_some());
+        let fast = object(ObjectAnimation {
+            motion: Some(MotionPath::Translate { velocity_m_per_frame: Vec3::new(0.0, 1e30, 0.0) }),
+            ..Default::default()
+        });
+        assert_eq!(fast.posed_reach_beyond(rest, 0.0, 1e15), None, "frame 0 is at rest");
+        assert_eq!(fast.posed_reach_beyond(rest, 4.0, 1e15).map(|r| r.0), Some(2.0));
+        let orbit = object(ObjectAnimation {
+            motion: Some(MotionPath::Orbit { centre_m: Vec3::splat(1e30), axis: Vec3::Y, period_frames: 8.0 }),
+            ..Default::default()
+        });
+        assert!(orbit.posed_reach_beyond(rest, 0.0, 1e15).is_some());
+        let fine = object(ObjectAnimation {
+            keyframes: vec![key(0.0, Some(Vec3::splat(5.0)), Some(Vec3::splat(2.0)))],
+            motion: Some(MotionPath::Orbit { centre_m: Vec3::splat(3.0), axis: Vec3::Y, period_frames: 8.0 }),
+            ..Default::default()
+        });
+        assert_eq!(fine.posed_reach_beyond(rest, 1000.0, 1e15), None);
     }
 
     #[test]

@@ -19,7 +19,12 @@
 //! queries go on past it without re-tracing. Every ray kind goes through here.
 //! [`BvhTracer::for_scene`] reads the cutouts from the scene's materials;
 //! [`BvhTracer::build`] sees opaque triangles only.
+//!
+//! Every ray goes through the ray rule of [`crate::bvh_walk`] (NaN, infinite,
+//! zero-direction and empty-range rays are misses, counted) and every walk of
+//! either level is bounded by its BVH's node count.
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::{Affine3A, Vec2, Vec3, Vec3A};
@@ -27,10 +32,11 @@ use obvhs::{
     BvhBuildParams,
     aabb::Aabb,
     cwbvh::{CwBvh, builder::build_cwbvh},
-    ray::{Ray as ObRay, RayHit as ObRayHit},
+    ray::Ray as ObRay,
     rt_triangle::RtTriangle,
 };
 
+use crate::bvh_walk::{self, TraceGuardCounts, TraceGuards};
 use crate::mesh::Mesh;
 use crate::scene::Scene;
 use crate::tracer::{Ray, RayHit, RayTracer};
@@ -201,16 +207,15 @@ impl Blas {
     }
 
     /// Closest hit along `r` (leaf index and t).
-    fn closest(&self, masks: &[CoverageMask], r: ObRay) -> Option<(u32, f32)> {
+    fn closest(&self, masks: &[CoverageMask], guards: &TraceGuards, r: ObRay) -> Option<(u32, f32)> {
         if self.triangles.is_empty() {
             return None;
         }
-        let mut hit = ObRayHit::none();
-        self.bvh.ray_traverse(r, &mut hit, |r, id| self.intersect(masks, r, id)).then_some((hit.primitive_id, hit.t))
+        bvh_walk::closest(&self.bvh, guards, r, |r, id| self.intersect(masks, r, id))
     }
 
-    fn occluded(&self, masks: &[CoverageMask], r: ObRay) -> bool {
-        !self.triangles.is_empty() && !self.bvh.ray_traverse_miss(r, |r, id| self.intersect(masks, r, id))
+    fn occluded(&self, masks: &[CoverageMask], guards: &TraceGuards, r: ObRay) -> bool {
+        !self.triangles.is_empty() && bvh_walk::any(&self.bvh, guards, r, |r, id| self.intersect(masks, r, id))
     }
 
     /// The public hit record of leaf `leaf` hit by `r` (in this BLAS's space) at `t`.
@@ -355,15 +360,12 @@ struct Instance {
 }
 
 impl Instance {
-    fn to_local(&self, r: &ObRay) -> ObRay {
+    /// `r` in this instance's space; `None` where the move overflows (a miss
+    /// of this instance).
+    fn to_local(&self, r: &ObRay) -> Option<ObRay> {
         match &self.local_from_world {
-            None => *r,
-            // Unnormalised direction: the ray parameter t is the same in both spaces.
-            // + 0.0 clears negative zeros a rotation can produce (see `to_obvhs`).
-            Some(m) => {
-                let dir = m.transform_vector3a(r.direction) + Vec3A::ZERO;
-                ObRay::new(m.transform_point3a(r.origin), dir, r.tmin, r.tmax)
-            }
+            None => Some(*r),
+            Some(m) => bvh_walk::moved_ray(r, m),
         }
     }
 }
@@ -521,6 +523,8 @@ pub struct BvhTracer {
     /// static part when both exist.
     static_tlas: Option<Tlas>,
     cutouts: Cutouts,
+    /// Shared with the tracers [`RayTracer::at_frame`] rebuilds.
+    guards: Arc<TraceGuards>,
     pub build_time: Duration,
 }
 
@@ -541,7 +545,8 @@ impl BvhTracer {
             placed: vec![],
             pad_rel: settings.bvh_aabb_pad_rel,
         };
-        Self { blases, layout, rest: None, static_tlas: None, cutouts, build_time: start.elapsed() }
+        let guards = Arc::default();
+        Self { blases, layout, rest: None, static_tlas: None, cutouts, guards, build_time: start.elapsed() }
     }
 
     /// A static BVH over everything that does not move, plus one per moving object
@@ -588,7 +593,8 @@ impl BvhTracer {
         let rest = vec![None; layout.object_ids.len()];
         let rest = Some(layout.build(Some(&rest)));
         let static_tlas = (!layout.object_ids.is_empty() && !layout.placed.is_empty()).then(|| layout.build(None));
-        let mut tracer = Self { blases, layout, rest, static_tlas, cutouts, build_time: Duration::ZERO };
+        let guards = Arc::default();
+        let mut tracer = Self { blases, layout, rest, static_tlas, cutouts, guards, build_time: Duration::ZERO };
         tracer.build_time = start.elapsed();
         tracer
     }
@@ -628,43 +634,51 @@ impl BvhTracer {
         self.layout.object_ids.len()
     }
 
+    /// Rays this tracer (and the frame tracers it made) answered without a
+    /// full walk: the ray rule's misses and walks cut short (`bvh_walk`).
+    pub fn trace_guard_counts(&self) -> TraceGuardCounts {
+        self.guards.counts()
+    }
+
     fn closest_in(&self, tlas: Option<&Tlas>, ray: &Ray) -> Option<RayHit> {
-        let r = to_obvhs(ray);
+        let g = &*self.guards;
+        let r = g.usable(ray)?;
         let masks = &self.cutouts.masks[..];
         let Some(tlas) = tlas else {
-            let (leaf, t) = self.blases[0].closest(masks, r)?;
+            let (leaf, t) = self.blases[0].closest(masks, g, r)?;
             return Some(self.blases[0].hit(leaf, &r, t));
         };
         if tlas.instances.is_empty() {
             return None;
         }
         let mut best: Option<(&Instance, u32, ObRay, f32)> = None;
-        let mut hit = ObRayHit::none();
-        tlas.bvh.ray_traverse(r, &mut hit, |r, id| {
+        bvh_walk::closest(&tlas.bvh, g, r, |r, id| {
             let inst = &tlas.instances[id];
-            let local = inst.to_local(r);
-            match self.blases[inst.blas].closest(masks, local) {
+            let Some(local) = inst.to_local(r) else { return f32::INFINITY };
+            match self.blases[inst.blas].closest(masks, g, local) {
                 Some((leaf, t)) => {
                     best = Some((inst, leaf, local, t));
                     t
                 }
                 None => f32::INFINITY,
             }
-        });
+        })?;
         let (inst, leaf, local, t) = best?;
         Some(RayHit { instance: inst.scene_instance, ..self.blases[inst.blas].hit(leaf, &local, t) })
     }
 
     fn occluded_in(&self, tlas: Option<&Tlas>, ray: &Ray) -> bool {
-        let r = to_obvhs(ray);
+        let g = &*self.guards;
+        let Some(r) = g.usable(ray) else { return false };
         let masks = &self.cutouts.masks[..];
-        let Some(tlas) = tlas else { return self.blases[0].occluded(masks, r) };
+        let Some(tlas) = tlas else { return self.blases[0].occluded(masks, g, r) };
         if tlas.instances.is_empty() {
             return false;
         }
-        !tlas.bvh.ray_traverse_miss(r, |r, id| {
+        bvh_walk::any(&tlas.bvh, g, r, |r, id| {
             let inst = &tlas.instances[id];
-            if self.blases[inst.blas].occluded(masks, inst.to_local(r)) { r.tmin } else { f32::INFINITY }
+            let hit = inst.to_local(r).is_some_and(|local| self.blases[inst.blas].occluded(masks, g, local));
+            if hit { r.tmin } else { f32::INFINITY }
         })
     }
 }
@@ -687,12 +701,6 @@ pub(crate) fn transformed_bounds(m: &Affine3A, lo: Vec3, hi: Vec3) -> (Vec3, Vec
         out = (out.0.min(q), out.1.max(q));
     }
     out
-}
-
-fn to_obvhs(ray: &Ray) -> ObRay {
-    // + 0.0 turns negative zeros positive: obvhs misses boxes along a direction
-    // such as (-1, -0, -0) (seen on a unit cube), which `-Vec3::X` produces.
-    ObRay::new(ray.origin.into(), (ray.dir + Vec3::ZERO).into(), ray.t_min, ray.t_max)
 }
 
 /// A tracer with its moving objects placed for one frame.
@@ -751,9 +759,11 @@ impl RayTracer for BvhTracer {
                 // A tracer built from the mesh alone never knew the instances: rebuild all.
                 let mut at_rest = posed.clone();
                 at_rest.objects.clear();
-                return Some(Box::new(BvhTracer::for_scene(&at_rest, settings)));
+                let rebuilt = BvhTracer::for_scene(&at_rest, settings);
+                return Some(Box::new(BvhTracer { guards: self.guards.clone(), ..rebuilt }));
             }
-            return Some(Box::new(BvhTracer::build_static(&posed.mesh, self.cutouts.clone(), settings)));
+            let rebuilt = BvhTracer::build_static(&posed.mesh, self.cutouts.clone(), settings);
+            return Some(Box::new(BvhTracer { guards: self.guards.clone(), ..rebuilt }));
         }
         Some(Box::new(FrameTracer { base: self, tlas: self.layout.build(Some(&self.layout.poses(posed, frame))) }))
     }

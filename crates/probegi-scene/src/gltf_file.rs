@@ -786,9 +786,7 @@ impl Loader<'_> {
         }
         // glTF §3.7.2.1: without NORMAL, flat normals, and TANGENT is ignored.
         let tangents: Vec<Vec4> = match (&normals, reader.read_tangents()) {
-            (Some(_), Some(t)) => {
-                t.map(|t| Vec4::from(t)).map(|t| if t.is_finite() { t } else { Vec4::ZERO }).collect()
-            }
+            (Some(_), Some(t)) => t.map(Vec4::from).map(|t| if t.is_finite() { t } else { Vec4::ZERO }).collect(),
             _ => vec![],
         };
         if !tangents.is_empty() && tangents.len() != n {

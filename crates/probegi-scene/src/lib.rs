@@ -2,11 +2,13 @@
 //!
 //! - [`scene`], [`animation`] (rigid objects over frames), [`mesh`], [`material`], [`texture`], [`light`]: the model.
 //! - [`obj`], [`gltf_file`], [`scene_file`], [`builtin`], [`load`]: loaders.
-//! - [`tracer`]: the ray-casting trait; [`bvh`]: its obvhs CWBVH implementation.
+//! - [`tracer`]: the ray-casting trait; [`bvh`]: its obvhs CWBVH implementation; [`bvh_walk`]: the ray rule
+//!   and the bounded walks every ray goes through.
 
 pub mod animation;
 pub mod builtin;
 pub mod bvh;
+pub mod bvh_walk;
 pub mod error;
 pub mod file_lookup;
 pub mod gltf_file;
@@ -22,6 +24,7 @@ pub mod tracer;
 
 pub use animation::{MotionPath, ObjectAnimation, SceneObject, TransformKeyframe};
 pub use bvh::{BvhCutTriangle, BvhCutoutMask, BvhExport, BvhSettings, BvhTracer, TlasExport, TlasInstance, TlasLayout};
+pub use bvh_walk::TraceGuardCounts;
 pub use error::SceneError;
 pub use light::{LightKind, PunctualLight};
 pub use load::load_scene;

@@ -78,9 +78,33 @@ pub(crate) fn camera_keyframe_error(keys: &[CameraKeyframe]) -> Option<(usize, S
         if i > 0 && k.frame <= keys[i - 1].frame {
             return Some((i, format!("frame {} must be after the previous key's ({})", k.frame, keys[i - 1].frame)));
         }
-        k.camera.validate().err().map(|e| (i, e))
+        if let Some(e) = k.camera.validate().err() {
+            return Some((i, e));
+        }
+        (i > 0).then(|| eye_meets_target(&keys[i - 1], k)).flatten().map(|frame| {
+            (
+                i,
+                format!(
+                    "between this key and the previous one the camera's position reaches its target (frame {frame})"
+                ),
+            )
+        })
     })
 }
+
+/// The frame between two keys at which the linearly interpolated eye reaches
+/// the interpolated target, if it does: `target − position` is linear in the
+/// blend, so its shortest length is found in closed form.
+fn eye_meets_target(a: &CameraKeyframe, b: &CameraKeyframe) -> Option<f32> {
+    let (da, db) = (a.camera.target - a.camera.position, b.camera.target - b.camera.position);
+    let slope = db - da;
+    let t = if slope.length_squared() > 0.0 { (-da.dot(slope) / slope.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
+    ((da + slope * t).length_squared() < 1e-12).then_some(a.frame + (b.frame - a.frame) * t)
+}
+
+/// Most frames [`Scene::camera_at`] steps through to carry a path's image up
+/// (beyond this many, it steps by more than one frame).
+const MAX_CAMERA_WALK_STEPS: f32 = 1e6;
 
 /// A mesh drawn by instances, in its local space; its triangles' material ids
 /// index `Scene::materials`.
@@ -555,6 +579,43 @@ impl Scene {
         }
     }
 
+    /// An error naming the object and the frame if moving geometry can reach
+    /// beyond ±[`MAX_COORDINATE_M`] at any key or at any frame up to
+    /// `last_frame` (loaded geometry is held to the same bound; a posed box
+    /// beyond it overflows the BVH builder). [`Scene::validate`] checks the
+    /// keys; a renderer checks its last frame before it starts.
+    pub fn check_posed_bounds(&self, last_frame: f32) -> Result<(), String> {
+        for o in self.objects.iter().filter(|o| o.is_animated()) {
+            let vertices = self.mesh.positions.get(o.vertices()).unwrap_or(&[]);
+            let Some(rest) = vertices
+                .iter()
+                .fold(None, |b: Option<(Vec3, Vec3)>, &p| Some(b.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p)))))
+            else {
+                continue;
+            };
+            if let Some((frame, reach)) = o.posed_reach_beyond(rest, last_frame, MAX_COORDINATE_M) {
+                return Err(format!(
+                    "object `{}`: at frame {frame} its animation moves its geometry to ±{reach:e} m, beyond \
+                     ±{MAX_COORDINATE_M:e} m (check its keyframes' translation and scale, and its motion)",
+                    o.name
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether anything in the scene gives light as it stands (at the frame it
+    /// is set to): a punctual light of non-zero intensity and colour, a
+    /// triangle with an emissive material, or a non-black sky.
+    pub fn has_light_sources(&self) -> bool {
+        let lit = |l: &crate::light::PunctualLight| l.intensity > 0.0 && l.color.max_element() > 0.0;
+        let emits = |&m: &u32| self.materials.get(m as usize).is_some_and(|m| m.is_emissive());
+        self.sky_radiance.max_element() > 0.0
+            || self.lights.iter().any(lit)
+            || self.mesh.triangle_materials.iter().any(emits)
+            || self.prototypes.iter().any(|p| p.mesh.triangle_materials.iter().any(emits))
+    }
+
     /// Whether the camera is animated: it has keyframes (then
     /// [`Scene::camera_at`] gives its camera for every frame).
     pub fn has_camera_animation(&self) -> bool {
@@ -562,13 +623,62 @@ impl Scene {
     }
 
     /// The animated camera at `frame` (fractional frames allowed); `None` when
-    /// the camera has no keyframes. Between two keys, position, target, up and
-    /// fov_y_deg interpolate linearly (up normalised afterwards, or the earlier
-    /// key's up where the blend vanishes); before the first key and after the
-    /// last the camera holds, and at a key it is that key's camera exactly.
-    /// Keys that move the eye through the target can give a degenerate camera
-    /// in between; each key itself is valid.
+    /// the camera has no keyframes. Position, target, up hint and fov
+    /// interpolate as [`Scene::camera_between_keys`] says; the camera's `up` is
+    /// then its frame's image up on the path (`Camera::view_basis` carried from
+    /// frame 0 through every whole frame before `frame`), so a path through the
+    /// vertical turns continuously; from the first whole frame after the last
+    /// key the camera holds. `camera_at(f)` equals `camera_path(n)[f]` for
+    /// every whole frame `f < n` (for paths under a million frames long).
     pub fn camera_at(&self, frame: f32) -> Option<Camera> {
+        let hold = self.camera_hold_frame()?;
+        let end = if frame.is_nan() { 0.0 } else { frame.min(hold) };
+        let step = (end / MAX_CAMERA_WALK_STEPS).max(1.0);
+        let mut previous_up = None;
+        let mut f = 0.0f32;
+        while f < end {
+            let c = self.camera_between_keys(f)?;
+            previous_up = Some(c.view_basis(previous_up).up_world);
+            f += step;
+        }
+        let c = self.camera_between_keys(end)?;
+        Some(c.with_basis(&c.view_basis(previous_up)))
+    }
+
+    /// The first whole frame at or after the last camera key, from which the
+    /// path holds its camera.
+    fn camera_hold_frame(&self) -> Option<f32> {
+        Some(self.camera_keyframes.last()?.frame.max(0.0).ceil())
+    }
+
+    /// The cameras of frames `0..frames` of the keyframed path (see
+    /// [`Scene::camera_at`]); empty when the camera has no keyframes.
+    pub fn camera_path(&self, frames: u32) -> Vec<Camera> {
+        let Some(hold) = self.camera_hold_frame() else { return Vec::new() };
+        let mut previous_up = None;
+        let mut path: Vec<Camera> = Vec::with_capacity(frames as usize);
+        for f in 0..frames {
+            if f as f32 > hold
+                && let Some(&last) = path.last()
+            {
+                path.push(last);
+                continue;
+            }
+            let Some(c) = self.camera_between_keys(f as f32) else { break };
+            let basis = c.view_basis(previous_up);
+            previous_up = Some(basis.up_world);
+            path.push(c.with_basis(&basis));
+        }
+        path
+    }
+
+    /// The keyframed camera at `frame` as the keys give it: between two keys,
+    /// position, target, up hint and fov_y_deg interpolate linearly (the hint
+    /// normalised afterwards, or the earlier key's where the blend vanishes);
+    /// before the first key and after the last the camera holds, and at a key
+    /// it is that key's camera exactly. Validation ([`Scene::validate`]) makes
+    /// sure the eye never reaches the target in between.
+    pub fn camera_between_keys(&self, frame: f32) -> Option<Camera> {
         let keys = &self.camera_keyframes;
         let first = keys.first()?;
         // Keys at or before `frame`; a NaN frame counts as before the first.
@@ -699,6 +809,7 @@ impl Scene {
             }
             o.validate().map_err(|e| format!("object `{name}`: {e}"))?;
         }
+        self.check_posed_bounds(0.0)?;
         let mut vertex_owner = vec![u32::MAX; m.positions.len()];
         for (i, o) in self.objects.iter().enumerate() {
             vertex_owner[o.vertices()].iter_mut().for_each(|v| *v = i as u32);

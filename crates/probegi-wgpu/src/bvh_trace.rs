@@ -15,7 +15,7 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
-use probegi_scene::{BvhExport, RayHit, TlasExport};
+use probegi_scene::{BvhExport, RayHit, TlasExport, TraceGuardCounts};
 use wgpu::util::DeviceExt;
 
 use crate::gpu_context::{GpuContext, GpuError};
@@ -51,7 +51,9 @@ const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
 
 impl GpuRay {
     pub fn new(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Self {
-        Self { origin: origin.into(), t_min, dir: dir.into(), t_max: t_max.min(f32::MAX) }
+        // Only +∞ becomes f32::MAX: a NaN stays NaN, for the ray rule to refuse.
+        let t_max = if t_max == f32::INFINITY { f32::MAX } else { t_max };
+        Self { origin: origin.into(), t_min, dir: dir.into(), t_max }
     }
 }
 
@@ -92,12 +94,14 @@ impl GpuRayHit {
 const MAX_GROUPS: u32 = 65_535;
 const WORKGROUP: u32 = 64;
 
-/// Storage buffers of `bvh.wgsl`'s group: nodes, triangles, cutouts, instances.
-pub const BVH_STORAGE_BUFFERS: u32 = 4;
+/// Storage buffers of `bvh.wgsl`'s group: nodes, triangles, cutouts,
+/// instances (read-only), and the guard counters (read-write).
+pub const BVH_STORAGE_BUFFERS: u32 = 5;
 
-/// The bind-group layout of `bvh.wgsl` (group 1): [`BVH_STORAGE_BUFFERS`] read-only storage buffers.
+/// The bind-group layout of `bvh.wgsl` (group 1): [`BVH_STORAGE_BUFFERS`]
+/// storage buffers, all read-only but the last (`bvh_guards`).
 pub fn bvh_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    let entries: Vec<_> = (0..BVH_STORAGE_BUFFERS).map(|b| storage_entry(b, true)).collect();
+    let entries: Vec<_> = (0..BVH_STORAGE_BUFFERS).map(|b| storage_entry(b, b + 1 < BVH_STORAGE_BUFFERS)).collect();
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("bvh"), entries: &entries })
 }
 
@@ -153,6 +157,8 @@ pub struct GpuBvh {
     bind_group: wgpu::BindGroup,
     nodes: wgpu::Buffer,
     instances: wgpu::Buffer,
+    /// `bvh_guards`: rays refused and walks cut short (`bvh.wgsl`).
+    guards: wgpu::Buffer,
     /// First node of the top level's region and the nodes it may hold.
     tlas_base: u32,
     tlas_capacity: u32,
@@ -267,10 +273,11 @@ impl GpuBvh {
             init("bvh triangles", bytemuck::cast_slice(&triangles), wgpu::BufferUsages::empty()),
             init("bvh cutouts", bytemuck::cast_slice(&cutouts), wgpu::BufferUsages::empty()),
             init("bvh instances", bytemuck::cast_slice(&instances), copy),
+            init("bvh guards", bytemuck::cast_slice(&[0u32; 2]), wgpu::BufferUsages::COPY_SRC),
         ];
         let bytes = buffers.iter().map(|b| b.size()).sum();
         let bind_group = buffers_bind_group(device, "bvh", &bvh_bind_group_layout(device), &buffers);
-        let [nodes, _, _, instance_buffer] = buffers;
+        let [nodes, _, _, instance_buffer, guards] = buffers;
         Ok(Self {
             node_count: export.node_count(),
             leaf_count: export.leaf_triangles.len(),
@@ -280,6 +287,7 @@ impl GpuBvh {
             bind_group,
             nodes,
             instances: instance_buffer,
+            guards,
             tlas_base,
             tlas_capacity,
         })
@@ -331,6 +339,16 @@ impl GpuBvh {
         }
         let tracer = probegi_scene::BvhTracer::build(&mesh, probegi_scene::BvhSettings::default());
         Self::upload(ctx, &tracer.export())
+    }
+
+    /// Rays the device's walks answered without a full walk since the upload
+    /// (the ray rule's misses, walks cut short), as the CPU tracer counts them
+    /// (`BvhTracer::trace_guard_counts`). Waits for the device.
+    pub fn trace_guard_counts(&self, ctx: &GpuContext) -> Result<TraceGuardCounts, GpuError> {
+        let bytes = ctx.read_back(&self.guards)?;
+        let words: Vec<u32> = bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+        let word = |i: usize| words.get(i).copied().unwrap_or(0) as u64;
+        Ok(TraceGuardCounts { rays_refused: word(0), walks_cut_short: word(1) })
     }
 
     /// Device memory of the BVH's buffers.

@@ -9,6 +9,7 @@
 //! triangle agree to 1e-4 relative in t. Scenes with a top level (the
 //! instanced forest; the room of `scenes/moving-box.toml` with a box that moves, turns and grows, at a
 //! frame and with moving objects left out) agree as closely, instance included.
+//! Hostile rays (NaN, ±∞, zero, denormal, huge) finish under the same rule on both.
 
 mod common;
 
@@ -225,4 +226,38 @@ fn a_moving_box_is_placed_by_the_top_level_and_left_out_of_static_traces() {
     let gpu_rays: Vec<GpuRay> = rays.iter().map(|r| GpuRay::new(r.origin, r.dir, r.t_min, r.t_max)).collect();
     let chunked = GpuRayTrace::new(&ctx).trace_static_only(&ctx, &bvh, &gpu_rays, false, true).expect("trace");
     assert_eq!(chunked, gpu_trace(&ctx, &bvh, &rays, false, true));
+}
+
+/// `bvh.wgsl` keeps the CPU's ray rule and walk bound (`probegi_scene::bvh_walk`):
+/// every hostile ray finishes, the refused ones are misses of both queries
+/// and are counted on the device, and the extreme rays the rule traces
+/// answer as on the CPU, on the shared Sponza and through the forest's top level.
+fn hostile_rays_agree(ctx: &probegi_wgpu::GpuContext, scene: &Scene) {
+    let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
+    let bvh = GpuBvh::upload(ctx, &cpu.export()).expect("upload");
+    let (lo, hi) = scene.bounds().expect("geometry");
+    let (refused, traced) = probegi_scene::bvh_walk::hostile_rays((lo + hi) * 0.5);
+    for any_hit in [false, true] {
+        let gpu = gpu_trace(ctx, &bvh, &refused, any_hit, false);
+        assert!(gpu.iter().all(|h| !h.is_hit()), "refused rays must miss: {gpu:?}");
+    }
+    let counts = bvh.trace_guard_counts(ctx).expect("guards");
+    assert_eq!(counts.rays_refused, 2 * refused.len() as u64, "{counts:?}");
+    let closest = gpu_trace(ctx, &bvh, &traced, false, false);
+    let occluded = gpu_trace(ctx, &bvh, &traced, true, false);
+    for ((r, c), o) in traced.iter().zip(&closest).zip(&occluded) {
+        let want = cpu.closest_hit(r);
+        assert_eq!(want.map(|h| (h.triangle, h.instance)), c.ray_hit().map(|h| (h.triangle, h.instance)), "{r:?}");
+        assert_eq!(cpu.occluded(r), o.is_hit(), "{r:?}");
+    }
+    let counts = bvh.trace_guard_counts(ctx).expect("guards");
+    assert_eq!(counts.walks_cut_short, 0, "{counts:?}");
+    assert_eq!(cpu.trace_guard_counts().walks_cut_short, 0);
+}
+
+#[test]
+fn hostile_rays_finish_as_misses_or_as_on_the_cpu() {
+    let Some(ctx) = common::context() else { return };
+    hostile_rays_agree(&ctx, &load_scene(&common::shared("dabrovic-sponza/sponza.obj")).expect("shared Sponza"));
+    hostile_rays_agree(&ctx, &load_scene("builtin:forest").expect("built-in forest (shared pine)"));
 }

@@ -23,11 +23,20 @@
 //                  w = bottom-level root node bits, scene instance bits (`RayHit::instance`),
 //                  flag bits (BVH_INSTANCE_*), and the translation (xyz). A count of 0: no top
 //                  level, rays go straight to the bottom level at node 0.
+//   bvh_guards:    [rays refused, walks cut short] (probegi-scene `TraceGuardCounts`),
+//                  read back by `GpuBvh::trace_guard_counts`.
+// The ray rule and the walk bound are probegi-scene's `bvh_walk` (its module docs):
+// denormal direction components flush to zero; a ray with a non-finite origin or
+// direction, a zero direction, a non-finite t_min, a NaN t_max or t_min > t_max is
+// a miss (counted); a walk of one level that would enter more nodes than the
+// export holds returns a miss (counted). Finiteness is tested on the bits: WGSL
+// lets a compiler assume that floats are never NaN or infinite.
 
 @group(1) @binding(0) var<storage, read> bvh_nodes: array<u32>;
 @group(1) @binding(1) var<storage, read> bvh_triangles: array<vec4<f32>>;
 @group(1) @binding(2) var<storage, read> bvh_cutouts: array<u32>;
 @group(1) @binding(3) var<storage, read> bvh_instances: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read_write> bvh_guards: array<atomic<u32>, 2>;
 
 const BVH_NODE_WORDS: u32 = 20u;
 // obvhs `cwbvh::node::EPSILON`: the nodes' near plane.
@@ -75,9 +84,33 @@ fn bvh_safe_inverse(x: f32) -> f32 {
     return 1.0 / x;
 }
 
+const BVH_EXPONENT_BITS: u32 = 0x7f800000u;
+
+// Whether `x` is finite, from its bits (not NaN, not ±∞).
+fn bvh_is_finite(x: f32) -> bool {
+    return (bitcast<u32>(x) & BVH_EXPONENT_BITS) != BVH_EXPONENT_BITS;
+}
+
+fn bvh_is_finite3(v: vec3<f32>) -> bool {
+    return bvh_is_finite(v.x) && bvh_is_finite(v.y) && bvh_is_finite(v.z);
+}
+
+// Zeros and denormals to +0 (`bvh_walk::usable_ray`'s flush), from the bits.
+fn bvh_flush(x: f32) -> f32 {
+    return select(x, 0.0, (bitcast<u32>(x) & BVH_EXPONENT_BITS) == 0u);
+}
+
+// probegi-scene `bvh_walk::usable_ray`: whether the rule traces `ray` at all.
+fn bvh_ray_usable(ray: BvhRay) -> bool {
+    let t_max_nan = !bvh_is_finite(ray.t_max) && (bitcast<u32>(ray.t_max) & 0x007fffffu) != 0u;
+    let dir_zero = ray.dir.x == 0.0 && ray.dir.y == 0.0 && ray.dir.z == 0.0;
+    return bvh_is_finite3(ray.origin) && bvh_is_finite3(ray.dir) && !dir_zero && bvh_is_finite(ray.t_min)
+        && !t_max_nan && ray.t_min <= ray.t_max;
+}
+
 fn bvh_make_ray(origin: vec3<f32>, dir_in: vec3<f32>, t_min: f32, t_max: f32) -> BvhRay {
-    // + 0.0 clears negative zeros, as probegi-scene's `to_obvhs` does.
-    let dir = dir_in + vec3<f32>(0.0);
+    // Denormals flushed and negative zeros cleared, as probegi-scene's `usable_ray` does.
+    let dir = vec3<f32>(bvh_flush(dir_in.x), bvh_flush(dir_in.y), bvh_flush(dir_in.z)) + vec3<f32>(0.0);
     let inv = vec3<f32>(bvh_safe_inverse(dir.x), bvh_safe_inverse(dir.y), bvh_safe_inverse(dir.z));
     var oct = 0u;
     if (dir.x >= 0.0) { oct |= 4u; }
@@ -258,6 +291,15 @@ fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
     if (arrayLength(&bvh_nodes) < BVH_NODE_WORDS) {
         return hit;
     }
+    if (!bvh_ray_usable(ray_in)) {
+        atomicAdd(&bvh_guards[0], 1u);
+        return hit;
+    }
+    let miss = hit;
+    // Nodes entered in the level walked (and the top level's count while below it).
+    let bound = arrayLength(&bvh_nodes) / BVH_NODE_WORDS;
+    var entered = 0u;
+    var top_entered = 0u;
     let top_level = bitcast<u32>(bvh_instances[0].x) > 0u;
     // The world ray (its t_max the closest hit so far) and the ray of the level walked.
     var world = ray_in;
@@ -316,6 +358,8 @@ fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
                     ray = bvh_make_ray(origin, dir, world.t_min, world.t_max);
                 }
                 instance = leaf;
+                top_entered = entered;
+                entered = 0u;
                 top_current = current;
                 top_prims = prims;
                 bottom_floor = sp;
@@ -337,6 +381,11 @@ fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
             let slot = (offset - 24u) ^ ray.oct_inv;
             let relative = countOneBits(hits_imask & ~(0xffffffffu << slot));
             let node = current.x + relative;
+            entered++;
+            if (entered > bound) {
+                atomicAdd(&bvh_guards[1], 1u);
+                return miss;
+            }
             let hitmask = bvh_intersect_node(node, ray);
             let base = node * BVH_NODE_WORDS;
             current = vec2<u32>(bvh_nodes[base + 4u], (hitmask & 0xff000000u) | (bvh_nodes[base + 3u] >> 24u));
@@ -349,6 +398,7 @@ fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
                 if (in_bottom && top_level) {
                     // Back up to the top level where it was left.
                     in_bottom = false;
+                    entered = top_entered;
                     ray = world;
                     current = top_current;
                     prims = top_prims;

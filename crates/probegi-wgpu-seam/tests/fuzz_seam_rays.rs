@@ -1,0 +1,109 @@
+//! Random ray batches with NaN, ±∞, zero, denormal and huge values through
+//! the field set's seam (`ProbeBatchTracer::closest_hits`) on the GPU
+//! (`WgpuProbeTracer`, lavapipe in CI) against the CPU tracer on the same
+//! rays (`Ray::segment(origin, direction, max distance)`, as
+//! `probe_trace::trace_probe_batch` builds them). Every batch must come back
+//! within a bound, every ray the rule refuses (`probegi_scene::bvh_walk`) must
+//! be a miss on both, and the others must agree hit for hit, triangle for
+//! triangle, on the shared Sponza and through the instanced forest's top level.
+//! `PROBEGI_FUZZ_SEAM_SECONDS` (default 8 in all) and `PROBEGI_FUZZ_SEED`.
+
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use probegi_core::rng::Pcg32;
+use probegi_cpu::ddgi_field_set::ProbeRayBatch;
+use probegi_cpu::probe_trace::ProbeBatchTracer;
+use probegi_scene::bvh_walk::ray_is_traced;
+use probegi_scene::{BvhSettings, BvhTracer, Ray, RayHit, RayTracer, Scene, load_scene};
+use probegi_wgpu::GpuContext;
+use probegi_wgpu_seam::WgpuProbeTracer;
+
+fn shared(path: &str) -> String {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/scenes")
+        .join(path)
+        .to_string_lossy()
+        .into_owned()
+}
+
+fn component(rng: &mut Pcg32) -> f32 {
+    let palette = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0, 1e-40, f32::MIN_POSITIVE, 1e38, -3e38];
+    if rng.next_f32() < 0.3 { palette[rng.next_u32() as usize % palette.len()] } else { rng.next_f32() * 2.0 - 1.0 }
+}
+
+fn hostile_batch(rng: &mut Pcg32, inside: Vec3, n: usize) -> ProbeRayBatch {
+    let mut batch = ProbeRayBatch::default();
+    for _ in 0..n {
+        let jitter = Vec3::new(component(rng), component(rng), component(rng));
+        batch.origins_m.push(if rng.next_f32() < 0.6 {
+            inside + jitter.clamp(Vec3::splat(-1.0), Vec3::ONE)
+        } else {
+            jitter
+        });
+        batch.directions.push(Vec3::new(component(rng), component(rng), component(rng)));
+        batch.max_distances_m.push(if rng.next_f32() < 0.7 { 1e4 } else { component(rng) });
+    }
+    batch
+}
+
+/// The CPU's answers and the GPU's through the seam, from a worker thread
+/// that must finish within `secs`.
+/// Per ray, the closest hit or `None` for a miss.
+type Hits = Vec<Option<RayHit>>;
+
+fn trace_both(scene: Scene, batch: ProbeRayBatch, secs: u64) -> Option<(Hits, Hits)> {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let ctx = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set");
+        let Some(ctx) = ctx else {
+            let _ = tx.send(None);
+            return;
+        };
+        let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+        let gpu = WgpuProbeTracer::new(ctx, &scene, &bvh, false).expect("upload");
+        let rays =
+            (0..batch.len()).map(|i| Ray::segment(batch.origins_m[i], batch.directions[i], batch.max_distances_m[i]));
+        let cpu: Hits = rays.map(|r| bvh.closest_hit(&r)).collect();
+        let mut hits = vec![];
+        gpu.closest_hits(&batch, false, &mut hits).expect("GPU trace");
+        let _ = tx.send(Some((cpu, hits)));
+    });
+    rx.recv_timeout(Duration::from_secs(secs)).unwrap_or_else(|_| panic!("a hostile batch did not finish in {secs} s"))
+}
+
+#[test]
+fn hostile_batches_through_the_seam_finish_and_agree_with_the_cpu() {
+    let budget = std::env::var("PROBEGI_FUZZ_SEAM_SECONDS").ok().and_then(|v| v.parse().ok()).unwrap_or(8.0f64);
+    let seed = std::env::var("PROBEGI_FUZZ_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(1u64);
+    let scenes = [
+        load_scene(&shared("dabrovic-sponza/sponza.obj")).expect("shared Sponza"),
+        load_scene("builtin:forest").expect("built-in forest (shared pine)"),
+    ];
+    let mut rng = Pcg32::new(seed, 0x5ea3);
+    let start = Instant::now();
+    let (mut batches, mut refused, mut hits) = (0, 0, 0);
+    while batches < 2 || start.elapsed().as_secs_f64() < budget {
+        let scene = scenes[batches % 2].clone();
+        let (lo, hi) = scene.bounds().expect("geometry");
+        let batch = hostile_batch(&mut rng, (lo + hi) * 0.5, 2048);
+        let Some((cpu, gpu)) = trace_both(scene, batch.clone(), 120) else {
+            eprintln!("skipped: no GPU adapter and PROBEGI_REQUIRE_GPU is not set");
+            return;
+        };
+        for i in 0..batch.len() {
+            let ray = Ray::segment(batch.origins_m[i], batch.directions[i], batch.max_distances_m[i]);
+            let (c, g) = (cpu[i].map(|h| (h.triangle, h.instance)), gpu[i].map(|h| (h.triangle, h.instance)));
+            if !ray_is_traced(&ray) {
+                refused += 1;
+                assert!(c.is_none() && g.is_none(), "ray {ray:?}: refused rays miss ({c:?}, {g:?})");
+            }
+            hits += c.is_some() as usize;
+            assert_eq!(c, g, "ray {ray:?}");
+        }
+        batches += 1;
+    }
+    eprintln!("{batches} batches of 2048 hostile rays: {refused} refused, {hits} hits, CPU = GPU");
+    assert!(refused > 0 && hits > 0, "{refused} refused, {hits} hits");
+}
