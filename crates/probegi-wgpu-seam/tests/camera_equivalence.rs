@@ -240,6 +240,101 @@ fn normal_and_bump_mapped_planes_shade_the_same_on_both_backends() {
     }
 }
 
+/// A 4 m plane under a point light with glTF 2.0 §3.9 material inputs: a
+/// metallic-roughness texture (roughness ramp in G, a metalness checker in B,
+/// mirrored in u and clamped in v, KHR_texture_transform-scaled), a base-colour
+/// texture read through TEXCOORD_1 with a rotated and offset transform, clamped
+/// in u, mirrored in v and filtered nearest, an emissive texture on set 0, and
+/// vertex colours (COLOR_0). With `textured` false: the same plane with its
+/// factors alone.
+fn gltf_material_plane(textured: bool) -> Scene {
+    use probegi_scene::material::{SpecularModel, UvMapping};
+    use probegi_scene::texture::{Filter, Sampler, Texture, Wrap};
+    use probegi_scene::{Material, PunctualLight};
+    let mut m = Material {
+        roughness: 0.9,
+        metallic: 1.0,
+        specular_model: SpecularModel::MetallicRoughness,
+        emissive_factor: glam::Vec3::splat(0.05),
+        ..Material::diffuse("glTF", glam::Vec3::new(0.9, 0.8, 0.7))
+    };
+    let mut scene = Scene::default();
+    let mesh = &mut scene.mesh;
+    let corners =
+        [((-2.0, -2.0), (0.0, 0.0)), ((2.0, -2.0), (3.0, 0.0)), ((2.0, 2.0), (3.0, 3.0)), ((-2.0, 2.0), (0.0, 3.0))];
+    let colors = [
+        glam::Vec3::new(1.0, 0.4, 0.4),
+        glam::Vec3::new(0.4, 1.0, 0.4),
+        glam::Vec3::ONE,
+        glam::Vec3::new(0.4, 0.4, 1.0),
+    ];
+    for (k, (p, uv)) in corners.into_iter().enumerate() {
+        mesh.positions.push(glam::Vec3::new(p.0, 0.0, p.1));
+        mesh.normals.push(glam::Vec3::Y);
+        mesh.uvs.push(glam::Vec2::new(uv.0, uv.1));
+        if textured {
+            mesh.uvs1.push(glam::Vec2::new(uv.1 * 0.5 - 0.4, uv.0 * 0.6 - 0.3));
+            mesh.colors.push(colors[k]);
+        }
+    }
+    mesh.triangles = vec![[0, 3, 2], [0, 2, 1]];
+    mesh.triangle_materials = vec![0, 0];
+    if textured {
+        let n = 16u32;
+        let ramp = (0..n * n).map(|i| {
+            let (x, y) = (i % n, i / n);
+            [(x * 16) as u8, (40 + y * 13) as u8, if (x / 4 + y / 4) % 2 == 0 { 250 } else { 10 }]
+        });
+        let rgb = (0..n * n).map(|i| [(i % n * 15) as u8, 200 - (i / n * 12) as u8, ((i * 7) % 256) as u8]);
+        let texture = |texels: Vec<[u8; 3]>, sampler| {
+            Texture::from_rgb8(n, n, texels, "plane".into()).expect("texture").with_sampler(sampler)
+        };
+        let mirror_clamp = Sampler { wrap_u: Wrap::MirroredRepeat, wrap_v: Wrap::ClampToEdge, filter: Filter::Linear };
+        let clamp_mirror_nearest =
+            Sampler { wrap_u: Wrap::ClampToEdge, wrap_v: Wrap::MirroredRepeat, filter: Filter::Nearest };
+        scene.textures = vec![texture(ramp.collect(), mirror_clamp), texture(rgb.collect(), clamp_mirror_nearest)];
+        m.metallic_roughness_texture = Some(0);
+        m.metallic_roughness_uv =
+            UvMapping::texture_transform(0, glam::Vec2::new(0.1, -0.2), 0.0, glam::Vec2::splat(0.8));
+        m.base_color_texture = Some(1);
+        m.base_color_uv = UvMapping::texture_transform(1, glam::Vec2::new(0.3, 0.1), 0.4, glam::Vec2::new(1.2, 0.9));
+        m.emissive_texture = Some(1);
+    }
+    scene.materials.push(m);
+    scene.lights.push(PunctualLight::point(glam::Vec3::new(0.5, 1.5, 0.3), glam::Vec3::ONE, 4.0));
+    scene.camera = Some(probegi_core::camera::Camera {
+        position: glam::Vec3::new(0.0, 3.5, 2.5),
+        target: glam::Vec3::ZERO,
+        up: glam::Vec3::Y,
+        fov_y_deg: 50.0,
+    });
+    scene.validate().expect("valid");
+    scene
+}
+
+#[test]
+fn gltf_material_inputs_shade_the_same_on_both_backends() {
+    let scene = gltf_material_plane(true);
+    let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
+    let gpu = WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true)
+        .expect("upload")
+        .keeping_field(true);
+    assert!(gpu.renders_camera() && gpu.shades(), "{:?}", gpu.shading_note);
+    let s = small(UVec3::new(4, 2, 4));
+    let a = render(&scene, 64, 1, 3, &s, None);
+    let g = render(&scene, 64, 1, 3, &s, Some(Arc::new(gpu)));
+    // The textures, their samplers and transforms, the second set and the
+    // vertex colours must show: the factors alone render differently.
+    let plain = render(&gltf_material_plane(false), 64, 1, 3, &s, None);
+    let flip = |x: &Image, y: &Image| probegi_image::mean_flip_hdr(x, y).expect("same size");
+    let (f, shows) = (flip(&a, &g), flip(&a, &plain));
+    eprintln!("glTF material plane: HDR-FLIP CPU vs GPU {f:.5}; CPU with vs without its inputs {shows:.4}");
+    assert!(shows > 0.05, "the material inputs change little ({shows})");
+    assert!(f < 0.01, "FLIP {f}");
+    let (ma, mg) = (a.mean(), g.mean());
+    assert!((ma - mg).abs().max_element() < 0.01 * ma.max_element(), "means {ma} vs {mg}");
+}
+
 #[test]
 fn a_keyframed_light_moves_and_switches_off_on_the_gpu_as_on_the_cpu() {
     // scenes/cornell-moving-light.toml: a point light sweeps red → green over

@@ -9,7 +9,8 @@
 use probegi_core::bsdf::{ALBEDO_TABLE_SIZE, specular_albedo_table};
 use probegi_core::color::srgb8_to_linear_table;
 use probegi_core::sampling::Distribution1d;
-use probegi_scene::material::SpecularModel;
+use probegi_scene::material::{SpecularModel, UvMapping};
+use probegi_scene::texture::{Filter, Sampler, Wrap};
 use probegi_scene::{LightKind, Scene};
 use wgpu::util::DeviceExt;
 
@@ -24,13 +25,14 @@ pub fn scene_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     })
 }
 
-/// `scene_triangles`' 11 vec4s of triangle `t` of `mesh`.
+/// `scene_triangles`' 15 vec4s of triangle `t` of `mesh`.
 fn pack_triangle(mesh: &probegi_scene::mesh::Mesh, t: usize, out: &mut Vec<[f32; 4]>) {
     let [a, b, c] = mesh.triangles[t];
     let (a, b, c) = (a as usize, b as usize, c as usize);
     let p = |i: usize| mesh.positions[i];
     let n = |i: usize| mesh.normals.get(i).copied().unwrap_or(glam::Vec3::ZERO);
     let uv = |i: usize| mesh.uvs.get(i).copied().unwrap_or(glam::Vec2::ZERO);
+    let (uv1, color) = (|i: usize| mesh.uv1(i), |i: usize| mesh.color(i));
     let m = f32::from_bits(mesh.triangle_materials[t]);
     out.push([p(a).x, p(a).y, p(a).z, m]);
     out.push(p(b).extend(0.0).into());
@@ -39,12 +41,35 @@ fn pack_triangle(mesh: &probegi_scene::mesh::Mesh, t: usize, out: &mut Vec<[f32;
     out.push(n(b).extend(0.0).into());
     out.push(n(c).extend(0.0).into());
     out.push([uv(a).x, uv(a).y, uv(b).x, uv(b).y]);
-    out.push([uv(c).x, uv(c).y, 0.0, 0.0]);
+    out.push([uv(c).x, uv(c).y, uv1(a).x, uv1(a).y]);
     let tan = |i: usize| mesh.tangents.get(i).copied().unwrap_or(glam::Vec4::ZERO);
     out.extend([tan(a).to_array(), tan(b).to_array(), tan(c).to_array()]);
+    out.push([uv1(b).x, uv1(b).y, uv1(c).x, uv1(c).y]);
+    out.extend([color(a), color(b), color(c)].map(|c| c.extend(1.0).to_array()));
 }
 
-const TRIANGLE_VEC4S: usize = 11;
+const TRIANGLE_VEC4S: usize = 15;
+
+/// `scene_materials`' vec4s per material.
+const MATERIAL_VEC4S: usize = 13;
+
+/// A texture reference's coordinates as `scene_materials` holds them: the
+/// mapping's rows, the set's bits in the first row's w.
+fn pack_uv_mapping(m: &UvMapping) -> [[f32; 4]; 2] {
+    let [r0, r1] = m.rows;
+    [r0.extend(f32::from_bits(m.set)).to_array(), r1.extend(0.0).to_array()]
+}
+
+/// A texture's sampler as the header word `scene.wgsl` reads: wrap u (0
+/// repeat, 1 mirrored repeat, 2 clamp to edge), wrap v << 2, nearest << 4.
+fn sampler_bits(s: &Sampler) -> u32 {
+    let wrap = |w: Wrap| match w {
+        Wrap::Repeat => 0u32,
+        Wrap::MirroredRepeat => 1,
+        Wrap::ClampToEdge => 2,
+    };
+    wrap(s.wrap_u) | wrap(s.wrap_v) << 2 | u32::from(s.filter == Filter::Nearest) << 4
+}
 
 /// `scene_lights`: the punctual lights, then the emitters' power-weighted
 /// distribution (`Scene::emitter_powers`, as the CPU's AreaLights); and the
@@ -142,7 +167,7 @@ impl GpuScene {
             Some(t) if t < scene.textures.len() => f32::from_bits(t as u32),
             _ => none,
         };
-        let mut materials: Vec<[f32; 4]> = Vec::with_capacity(scene.materials.len().max(1) * 5);
+        let mut materials: Vec<[f32; 4]> = Vec::with_capacity(scene.materials.len().max(1) * MATERIAL_VEC4S);
         for m in &scene.materials {
             let alpha = (m.roughness * m.roughness).clamp(probegi_core::bsdf::MIN_ALPHA, 1.0);
             let model = match m.specular_model {
@@ -153,9 +178,12 @@ impl GpuScene {
             let e = m.emissive_factor * m.emissive_strength;
             materials.push(m.base_color_factor.extend(tex_bits(m.base_color_texture)).into());
             materials.push(m.specular_color.extend(alpha).into());
-            materials.push([f32::from_bits(model), m.metallic, 0.0, 0.0]);
+            materials.push([f32::from_bits(model), m.metallic, m.roughness, tex_bits(m.metallic_roughness_texture)]);
             materials.push(e.extend(tex_bits(m.emissive_texture)).into());
             materials.push([tex_bits(m.normal_texture), m.normal_scale, tex_bits(m.bump_texture), m.bump_multiplier]);
+            for uv in [&m.base_color_uv, &m.emissive_uv, &m.normal_uv, &m.metallic_roughness_uv] {
+                materials.extend(pack_uv_mapping(uv));
+            }
         }
         if materials.is_empty() {
             materials.push([0.0; 4]);
@@ -164,11 +192,11 @@ impl GpuScene {
         let lut = srgb8_to_linear_table();
         let table = specular_albedo_table();
         let mut words: Vec<u32> = lut.iter().map(|v| v.to_bits()).collect();
-        let headers = 260 + 3 * scene.textures.len();
+        let headers = 260 + 4 * scene.textures.len();
         words.extend([scene.textures.len() as u32, ALBEDO_TABLE_SIZE as u32, headers as u32, instance_records]);
         let mut first = headers + table.len() * 2;
         for t in &scene.textures {
-            words.extend([t.width, t.height, first as u32]);
+            words.extend([t.width, t.height, first as u32, sampler_bits(&t.sampler)]);
             first += t.texels.len();
         }
         for ab in table {

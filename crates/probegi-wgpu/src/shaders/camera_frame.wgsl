@@ -58,7 +58,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     let area = camera.info.z;
     var l = scene_direct(sp, to_viewer, area, !glossy, &rng);
     if (sp.front_face) {
-        l += scene_emission(sp.material, sp.uv);
+        l += scene_emission(sp.material, sp.uv, sp.uv1);
     }
     if (glossy) {
         let fr = frame_from_normal(scene_facing_normal(sp));
@@ -81,7 +81,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
                     lr = scene_direct(sh, -wi, area, true, &rng)
                         + bsdf_diffuse_albedo(bh) / SCENE_PI * ddgi_irradiance(sh.position, nh, -wi);
                     if (sh.front_face) {
-                        lr += scene_emission(sh.material, sh.uv);
+                        lr += scene_emission(sh.material, sh.uv, sh.uv1);
                     }
                     if ((camera.info.w & 1u) != 0u && max(max(bh.specular_f0.x, bh.specular_f0.y), bh.specular_f0.z) > 0.0) {
                         // probegi_cpu::glossy::second_order_specular

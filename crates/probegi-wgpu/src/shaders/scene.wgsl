@@ -1,7 +1,8 @@
 // A scene's surfaces, materials and lights on the GPU, mirroring the CPU's:
 //   probegi_scene::Scene::surface_point          (interpolated shading normal on the geometric side),
 //   probegi_scene::SurfacePoint::{facing_normal, facing_geometric_normal, spawn_origin},
-//   probegi_scene::material::Material::{bsdf, base_color, emission}, probegi_scene::texture::{Footprint, Texture::sample_bilinear},
+//   probegi_scene::material::Material::{bsdf, base_color, roughness_metallic, emission}, probegi_scene::material::UvMapping::apply,
+//   probegi_scene::texture::{Footprint::sampled, axis_texels, Texture::sample},
 //   probegi_core::bsdf::SurfaceBsdf::eval        (Lambert × (1 − max F0) + GGX, height-correlated Smith, Schlick),
 //   probegi_cpu::shading::{lambert_cos, shadow_ray_to, shadow_ray_along, punctual_direct},
 //   probegi_cpu::light_sampling::{AreaLights::sample, punctual_incident}, probegi_core::punctual,
@@ -9,20 +10,25 @@
 // Random numbers differ from the CPU's (a PCG hash per ray instead of a PCG32
 // stream per probe), so area-light estimates agree in distribution, not bit for bit.
 // Buffers (group 3, written by `probegi_wgpu::gpu_scene::GpuScene`):
-//   scene_triangles: 11 × vec4 per scene triangle: p0 (w: material bits), p1, p2, n0, n1, n2, (uv0, uv1),
-//                    (uv2, 0, 0), t0, t1, t2 (tangent xyz, bitangent sign w; zero when none): the
+//   scene_triangles: 15 × vec4 per scene triangle: p0 (w: material bits), p1, p2, n0, n1, n2, (uv0, uv1),
+//                    (uv2, set-1 uv0), t0, t1, t2 (tangent xyz, bitangent sign w; zero when none),
+//                    (set-1 uv1, set-1 uv2), colour0, colour1, colour2 (linear rgb, 1): the
 //                    scene mesh's (moving objects as posed at the frame), then each prototype's
 //                    (`Scene::prototypes`) in its local space; then per `Scene::instances` entry
 //                    7 × vec4: world-from-local columns (xyz; w of the first: its prototype's first
 //                    triangle bits), its translation, normal-from-local columns (xyz)
-//   scene_materials: 5 × vec4 per material: (base colour factor, base texture bits | none),
-//                    (specular colour, α), (model: 0 none, 1 MTL, 2 metallic-roughness; metallic, 0, 0),
+//   scene_materials: 13 × vec4 per material: (base colour factor, base texture bits | none),
+//                    (specular colour, α of the roughness factor), (model: 0 none, 1 MTL, 2 metallic-roughness;
+//                    metallic, roughness, metallic-roughness texture bits | none),
 //                    (emission = factor × strength, emissive texture bits | none),
-//                    (normal texture bits | none, normal scale, bump texture bits | none, bump multiplier)
+//                    (normal texture bits | none, normal scale, bump texture bits | none, bump multiplier),
+//                    then the UvMappings of the base-colour, emissive, normal (and bump) and
+//                    metallic-roughness textures, 2 × vec4 each: (row 0, set bits), (row 1, 0)
 //   scene_textures:  words 0..255 the sRGB8 → linear table (f32 bits), 256 texture count, 257 the
 //                    GGX albedo table's side N, 258 its first word, 259 the first vec4 of the instance
 //                    records in scene_triangles, then per texture (width,
-//                    height, first texel word), the (A, B) table (N × N × 2 f32 bits,
+//                    height, first texel word, sampler: wrap u (0 repeat, 1 mirrored, 2 clamp) | wrap v << 2
+//                    | nearest << 4), the (A, B) table (N × N × 2 f32 bits,
 //                    probegi_core::bsdf::specular_albedo_table), then RGB8 texels one per word
 //   scene_lights:    vec4 header (punctual count, emitter count bits, 0, 0), vec4 sky radiance,
 //                    per punctual light 4 × vec4: (kind, range or −1, inner, outer), position, direction, colour × intensity;
@@ -38,8 +44,13 @@ const SCENE_NONE: u32 = 0xffffffffu;
 const SCENE_F32_MAX: f32 = 3.4028235e38;
 // probegi_core::bsdf::MIN_ALPHA
 const SCENE_MIN_ALPHA: f32 = 1e-3;
-const SCENE_TRIANGLE_VEC4S: u32 = 11u;
-const SCENE_MATERIAL_VEC4S: u32 = 5u;
+const SCENE_TRIANGLE_VEC4S: u32 = 15u;
+const SCENE_MATERIAL_VEC4S: u32 = 13u;
+// The material's texture slots (UvMapping order in scene_materials).
+const SCENE_SLOT_BASE: u32 = 0u;
+const SCENE_SLOT_EMISSIVE: u32 = 1u;
+const SCENE_SLOT_NORMAL: u32 = 2u;
+const SCENE_SLOT_METALLIC_ROUGHNESS: u32 = 3u;
 // probegi_scene::material::BUMP_WHITE_HEIGHT_REL
 const SCENE_BUMP_WHITE_HEIGHT_REL: f32 = 0.02;
 
@@ -48,9 +59,26 @@ struct SurfacePoint {
     geometric_normal: vec3<f32>,
     shading_normal: vec3<f32>,
     uv: vec2<f32>,
+    // Texture coordinate set 1 and the linear vertex colour.
+    uv1: vec2<f32>,
+    color: vec3<f32>,
     material: u32,
     front_face: bool,
 };
+
+// probegi_scene::material::UvMapping::apply for texture slot `slot` of
+// `material`: its set's coordinates (`uv0` or `uv1`), transformed unless the
+// mapping is the identity.
+fn scene_map_uv(material: u32, slot: u32, uv0: vec2<f32>, uv1: vec2<f32>) -> vec2<f32> {
+    let m = material * SCENE_MATERIAL_VEC4S + 5u + 2u * slot;
+    let r0 = scene_materials[m];
+    let r1 = scene_materials[m + 1u];
+    let uv = select(uv0, uv1, bitcast<u32>(r0.w) >= 1u);
+    if (all(r0.xyz == vec3<f32>(1.0, 0.0, 0.0)) && all(r1.xyz == vec3<f32>(0.0, 1.0, 0.0))) {
+        return uv;
+    }
+    return vec2<f32>(r0.x * uv.x + r0.y * uv.y + r0.z, r1.x * uv.x + r1.y * uv.y + r1.z);
+}
 
 fn scene_normalize_or_zero(v: vec3<f32>) -> vec3<f32> {
     let l = length(v);
@@ -72,6 +100,13 @@ struct SceneCorners {
     uv0: vec2<f32>,
     uv1: vec2<f32>,
     uv2: vec2<f32>,
+    // Texture coordinate set 1 and the colour of each corner.
+    set1_0: vec2<f32>,
+    set1_1: vec2<f32>,
+    set1_2: vec2<f32>,
+    color0: vec3<f32>,
+    color1: vec3<f32>,
+    color2: vec3<f32>,
     t0: vec4<f32>,
     t1: vec4<f32>,
     t2: vec4<f32>,
@@ -88,9 +123,12 @@ fn scene_corners(triangle: u32, instance: u32) -> SceneCorners {
     let t = tri * SCENE_TRIANGLE_VEC4S;
     let p0 = scene_triangles[t];
     let uv01 = scene_triangles[t + 6u];
+    let uv2 = scene_triangles[t + 7u];
+    let set1 = scene_triangles[t + 11u];
     var c = SceneCorners(p0.xyz, scene_triangles[t + 1u].xyz, scene_triangles[t + 2u].xyz,
         scene_triangles[t + 3u].xyz, scene_triangles[t + 4u].xyz, scene_triangles[t + 5u].xyz,
-        uv01.xy, uv01.zw, scene_triangles[t + 7u].xy,
+        uv01.xy, uv01.zw, uv2.xy, uv2.zw, set1.xy, set1.zw,
+        scene_triangles[t + 12u].xyz, scene_triangles[t + 13u].xyz, scene_triangles[t + 14u].xyz,
         scene_triangles[t + 8u], scene_triangles[t + 9u], scene_triangles[t + 10u], bitcast<u32>(p0.w));
     if (instance != SCENE_NONE) {
         let m = mat3x3<f32>(scene_triangles[inst].xyz, scene_triangles[inst + 1u].xyz, scene_triangles[inst + 2u].xyz);
@@ -123,13 +161,16 @@ fn scene_surface_point(triangle: u32, instance: u32, bary_in: vec2<f32>, backfac
     } else if (dot(ns, ng) < 0.0) {
         ns = -ns;
     }
+    // probegi_scene::mesh::interpolate_attributes
     let uv = c.uv0 * bary.x + c.uv1 * bary.y + c.uv2 * bary.z;
-    let perturbed = scene_perturbed_normal(c, bary, ns, uv);
+    let uv1 = c.set1_0 * bary.x + c.set1_1 * bary.y + c.set1_2 * bary.z;
+    let color = c.color0 * bary.x + c.color1 * bary.y + c.color2 * bary.z;
+    let perturbed = scene_perturbed_normal(c, bary, ns, uv, uv1);
     // A perturbed normal below the surface would shade light from inside it.
     if (dot(perturbed, ng) > 1e-3) {
         ns = perturbed;
     }
-    return SurfacePoint(position, ng, ns, uv, c.material, !backface);
+    return SurfacePoint(position, ng, ns, uv, uv1, color, c.material, !backface);
 }
 
 fn scene_normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
@@ -138,9 +179,11 @@ fn scene_normalize_or(v: vec3<f32>, fallback: vec3<f32>) -> vec3<f32> {
 }
 
 // Scene::perturbed_normal: `n` tilted by the normal map (tangent space, glTF's
-// bitangent = sign · n × tangent) or by the bump map's slopes along ∂p/∂u, ∂p/∂v.
-fn scene_perturbed_normal(c: SceneCorners, bary: vec3<f32>, n: vec3<f32>, uv: vec2<f32>) -> vec3<f32> {
+// bitangent = sign · n × tangent) or by the bump map's slopes along ∂p/∂u, ∂p/∂v;
+// both read the coordinates of the material's normal slot.
+fn scene_perturbed_normal(c: SceneCorners, bary: vec3<f32>, n: vec3<f32>, uv0: vec2<f32>, uv1: vec2<f32>) -> vec3<f32> {
     let maps = scene_materials[c.material * SCENE_MATERIAL_VEC4S + 4u];
+    let uv = scene_map_uv(c.material, SCENE_SLOT_NORMAL, uv0, uv1);
     let normal_tex = bitcast<u32>(maps.x);
     if (normal_tex != SCENE_NONE) {
         let t0 = c.t0;
@@ -156,9 +199,12 @@ fn scene_perturbed_normal(c: SceneCorners, bary: vec3<f32>, n: vec3<f32>, uv: ve
     }
     let bump_tex = bitcast<u32>(maps.z);
     if (bump_tex != SCENE_NONE) {
-        // uv_derivatives
-        let duv02 = c.uv0 - c.uv2;
-        let duv12 = c.uv1 - c.uv2;
+        // uv_derivatives over the corners' mapped coordinates
+        let cuv0 = scene_map_uv(c.material, SCENE_SLOT_NORMAL, c.uv0, c.set1_0);
+        let cuv1 = scene_map_uv(c.material, SCENE_SLOT_NORMAL, c.uv1, c.set1_1);
+        let cuv2 = scene_map_uv(c.material, SCENE_SLOT_NORMAL, c.uv2, c.set1_2);
+        let duv02 = cuv0 - cuv2;
+        let duv12 = cuv1 - cuv2;
         let dp02 = c.p0 - c.p2;
         let dp12 = c.p1 - c.p2;
         let det = duv02.x * duv12.y - duv02.y * duv12.x;
@@ -171,7 +217,7 @@ fn scene_perturbed_normal(c: SceneCorners, bary: vec3<f32>, n: vec3<f32>, uv: ve
         if (!(all(abs(dpdu) <= vec3<f32>(SCENE_F32_MAX)) && all(abs(dpdv) <= vec3<f32>(SCENE_F32_MAX)))) {
             return n;
         }
-        let h = 260u + bump_tex * 3u;
+        let h = 260u + bump_tex * 4u;
         let size = vec2<f32>(f32(scene_textures[h]), f32(scene_textures[h + 1u]));
         let grad = scene_height_gradient(bump_tex, uv);
         let white_texels = SCENE_BUMP_WHITE_HEIGHT_REL * max(size.x, size.y);
@@ -209,24 +255,76 @@ fn scene_lambert_cos(sp: SurfacePoint, wi: vec3<f32>) -> f32 {
     return 0.0;
 }
 
-// probegi_scene::texture::Footprint::at (bvh.wgsl's `wrap_footprint`) over texture
-// `tex`: the four texels' words in scene_textures and the bilinear fractions.
+// probegi_scene::texture::Footprint::sampled over texture `tex` through its
+// sampler: the four texels' words in scene_textures and the bilinear fractions;
+// the default sampler (repeat, linear) is Footprint::at, bvh.wgsl's `wrap_footprint`.
 struct TexFootprint {
     words: vec4<u32>,
     f: vec2<f32>,
 };
 
 fn scene_footprint(tex: u32, uv: vec2<f32>) -> TexFootprint {
-    let h = 260u + tex * 3u;
-    let fp = wrap_footprint(scene_textures[h], scene_textures[h + 1u], uv);
-    return TexFootprint(fp.texel + vec4<u32>(scene_textures[h + 2u]), fp.f);
+    let h = 260u + tex * 4u;
+    let width = scene_textures[h];
+    let height = scene_textures[h + 1u];
+    let sampler = scene_textures[h + 3u];
+    let first = vec4<u32>(scene_textures[h + 2u]);
+    if (sampler == 0u) {
+        let fp = wrap_footprint(width, height, uv);
+        return TexFootprint(fp.texel + first, fp.f);
+    }
+    if (!all(abs(uv) <= vec2<f32>(SCENE_F32_MAX))) {
+        return TexFootprint(first, vec2<f32>(0.0));
+    }
+    let nearest = (sampler & 16u) != 0u;
+    let cols = tex_axis(uv.x, width, sampler & 3u, nearest);
+    let rows = tex_axis(uv.y, height, (sampler >> 2u) & 3u, nearest);
+    let r = rows.i * width;
+    return TexFootprint(vec4<u32>(r.x + cols.i.x, r.x + cols.i.y, r.y + cols.i.x, r.y + cols.i.y) + first,
+        vec2<f32>(cols.f, rows.f));
+}
+
+// probegi_scene::texture::axis_texels: the two texel indices along an axis of
+// `size` texels (the same one twice when `nearest`) and the fraction between.
+struct AxisTexels {
+    i: vec2<u32>,
+    f: f32,
+};
+
+fn tex_address(i: i32, n: i32, wrap: u32) -> u32 {
+    if (wrap == 0u) {
+        return u32(((i % n) + n) % n);
+    }
+    if (wrap == 1u) {
+        let m = ((i % (2 * n)) + 2 * n) % (2 * n);
+        return u32(select(m, 2 * n - 1 - m, m >= n));
+    }
+    return u32(clamp(i, 0, n - 1));
+}
+
+fn tex_axis(c_in: f32, size: u32, wrap: u32, nearest: bool) -> AxisTexels {
+    // One period of the wrap mode first (rem_euclid(1), rem_euclid(2), clamp to [−1, 2]).
+    var c = clamp(c_in, -1.0, 2.0);
+    if (wrap == 0u) {
+        c = c_in - floor(c_in);
+    } else if (wrap == 1u) {
+        c = c_in - 2.0 * floor(c_in * 0.5);
+    }
+    let n = i32(size);
+    if (nearest) {
+        let i = tex_address(i32(floor(c * f32(size))), n, wrap);
+        return AxisTexels(vec2<u32>(i, i), 0.0);
+    }
+    let x = c * f32(size) - 0.5;
+    let x0 = floor(x);
+    return AxisTexels(vec2<u32>(tex_address(i32(x0), n, wrap), tex_address(i32(x0) + 1, n, wrap)), x - x0);
 }
 
 fn tex_blend(v: array<vec3<f32>, 4>, f: vec2<f32>) -> vec3<f32> {
     return (v[0] * (1.0 - f.x) + v[1] * f.x) * (1.0 - f.y) + (v[2] * (1.0 - f.x) + v[3] * f.x) * f.y;
 }
 
-// Texture::sample_bilinear: sRGB8 texels decoded by the table, then blended.
+// Texture::sample: sRGB8 texels decoded by the table, then filtered.
 fn scene_texture(tex: u32, uv: vec2<f32>) -> vec3<f32> {
     let fp = scene_footprint(tex, uv);
     var v: array<vec3<f32>, 4>;
@@ -245,7 +343,7 @@ fn tex_unorm(t: u32) -> vec3<f32> {
     return vec3<f32>(f32(t & 0xffu), f32((t >> 8u) & 0xffu), f32((t >> 16u) & 0xffu)) * (1.0 / 255.0);
 }
 
-// Texture::sample_raw: the stored values as unorm (normal maps).
+// Texture::sample_raw: the stored values as unorm (normal, height, metallic-roughness maps).
 fn scene_texture_raw(tex: u32, uv: vec2<f32>) -> vec3<f32> {
     let fp = scene_footprint(tex, uv);
     var v: array<vec3<f32>, 4>;
@@ -265,7 +363,7 @@ fn scene_height_gradient(tex: u32, uv: vec2<f32>) -> vec2<f32> {
     let h11 = dot(tex_unorm(scene_textures[fp.words.w]), grey);
     let d_dx = (1.0 - fp.f.y) * (h10 - h00) + fp.f.y * (h11 - h01);
     let d_dy = (1.0 - fp.f.x) * (h01 - h00) + fp.f.x * (h11 - h10);
-    let h = 260u + tex * 3u;
+    let h = 260u + tex * 4u;
     return vec2<f32>(d_dx * f32(scene_textures[h]), d_dy * f32(scene_textures[h + 1u]));
 }
 
@@ -275,16 +373,17 @@ struct Bsdf {
     alpha: f32,
 };
 
-// Material::bsdf at the surface point.
+// Material::bsdf at the surface point: base colour = factor × vertex colour ×
+// texture; roughness and metalness × the metallic-roughness texture's G and B.
 fn scene_bsdf(sp: SurfacePoint) -> Bsdf {
     let m = sp.material * SCENE_MATERIAL_VEC4S;
     let a = scene_materials[m];
     let s = scene_materials[m + 1u];
     let model = scene_materials[m + 2u];
-    var base = a.xyz;
+    var base = a.xyz * sp.color;
     let tex = bitcast<u32>(a.w);
     if (tex != SCENE_NONE) {
-        base = base * scene_texture(tex, sp.uv);
+        base = base * scene_texture(tex, scene_map_uv(sp.material, SCENE_SLOT_BASE, sp.uv, sp.uv1));
     }
     let kind = bitcast<u32>(model.x);
     if (kind == 0u) {
@@ -293,18 +392,27 @@ fn scene_bsdf(sp: SurfacePoint) -> Bsdf {
     if (kind == 1u) {
         return Bsdf(base, s.xyz, s.w);
     }
-    let metallic = model.y;
-    return Bsdf(base * (1.0 - metallic), mix(vec3<f32>(0.04), base, metallic), s.w);
+    var metallic = model.y;
+    var alpha = s.w;
+    let mr_tex = bitcast<u32>(model.w);
+    if (mr_tex != SCENE_NONE) {
+        let texel = scene_texture_raw(mr_tex, scene_map_uv(sp.material, SCENE_SLOT_METALLIC_ROUGHNESS, sp.uv, sp.uv1));
+        let roughness = model.z * texel.y;
+        metallic = model.y * texel.z;
+        alpha = clamp(roughness * roughness, SCENE_MIN_ALPHA, 1.0);
+    }
+    return Bsdf(base * (1.0 - metallic), mix(vec3<f32>(0.04), base, metallic), alpha);
 }
 
-// Material::emission at the surface point (front face only, as Scene::emitted).
-fn scene_emission(material: u32, uv: vec2<f32>) -> vec3<f32> {
+// Material::emission at a point with coordinate sets `uv0`, `uv1` (front face
+// only, as Scene::emitted).
+fn scene_emission(material: u32, uv0: vec2<f32>, uv1: vec2<f32>) -> vec3<f32> {
     let e = scene_materials[material * SCENE_MATERIAL_VEC4S + 3u];
     let tex = bitcast<u32>(e.w);
     if (all(e.xyz == vec3<f32>(0.0)) || tex == SCENE_NONE) {
         return e.xyz;
     }
-    return e.xyz * scene_texture(tex, uv);
+    return e.xyz * scene_texture(tex, scene_map_uv(material, SCENE_SLOT_EMISSIVE, uv0, uv1));
 }
 
 fn bsdf_diffuse_albedo(b: Bsdf) -> vec3<f32> {
@@ -533,9 +641,13 @@ fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, specu
             if (cos_light <= 0.0) {
                 continue;
             }
+            // Mesh::attributes_at
             let uv01 = scene_triangles[tri + 6u];
-            let uv = uv01.xy * b.x + uv01.zw * b.y + scene_triangles[tri + 7u].xy * b.z;
-            let radiance = scene_emission(bitcast<u32>(scene_triangles[tri].w), uv);
+            let uv2 = scene_triangles[tri + 7u];
+            let set1 = scene_triangles[tri + 11u];
+            let uv = uv01.xy * b.x + uv01.zw * b.y + uv2.xy * b.z;
+            let uv1 = uv2.zw * b.x + set1.xy * b.y + set1.zw * b.z;
+            let radiance = scene_emission(bitcast<u32>(scene_triangles[tri].w), uv, uv1);
             let pdf = em.z * dist2 / cos_light;
             let cos = scene_lambert_cos(sp, wi);
             if (cos <= 0.0 || all(radiance == vec3<f32>(0.0)) || pdf <= 0.0) {
