@@ -39,6 +39,39 @@ if have_vulkan; then
 else
   echo "warning: no Vulkan driver and none could be installed: the GPU tests will SKIP (install mesa-vulkan-drivers)" >&2
 fi
+# The glTF corpus test (crates/probegi-scene/tests/assimp_gltf2.rs) loads every
+# glTF 2.0 file of Debian's assimp-testmodels (importer-breaking files and valid
+# ones): installed like mesa-vulkan-drivers, else that test skips with a warning.
+ASSIMP_GLTF2=/usr/share/assimp/models/glTF2
+if [ ! -d "$ASSIMP_GLTF2" ] && command -v apt-get >/dev/null 2>&1; then
+  echo "installing assimp-testmodels for the glTF corpus test" >&2
+  SUDO=""; [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1 && SUDO="sudo -n"
+  { $SUDO apt-get install -y assimp-testmodels >/dev/null 2>&1 ||
+    { $SUDO apt-get update >/dev/null 2>&1 && $SUDO apt-get install -y assimp-testmodels >/dev/null 2>&1; }; } ||
+    echo "could not install assimp-testmodels" >&2
+fi
+if [ ! -d "$ASSIMP_GLTF2" ]; then
+  echo "warning: assimp-testmodels is not installed: the glTF corpus test will SKIP" >&2
+fi
+# Khronos glTF samples (WaterBottle, TextureSettingsTest, TextureTransformTest,
+# AlphaBlendModeTest) as the scena crate 1.5.0 ships them in its tests, fetched
+# once into a cache outside the repository for
+# crates/probegi-scene/tests/khronos_gltf_samples.rs (which skips without them).
+PROBEGI_SCENA_DIR="${XDG_CACHE_HOME:-$HOME/.cache}/probegi/scena-1.5.0"
+if [ ! -d "$PROBEGI_SCENA_DIR/tests/assets/gltf/khronos" ]; then
+  scena_tmp=$(mktemp -d)
+  if command -v curl >/dev/null 2>&1 &&
+    curl -fsSL --max-time 300 https://static.crates.io/crates/scena/scena-1.5.0.crate | tar xz -C "$scena_tmp" &&
+    [ -d "$scena_tmp/scena-1.5.0/tests/assets/gltf/khronos" ]; then
+    mkdir -p "$(dirname "$PROBEGI_SCENA_DIR")"
+    rm -rf "$PROBEGI_SCENA_DIR"
+    mv "$scena_tmp/scena-1.5.0" "$PROBEGI_SCENA_DIR"
+  else
+    echo "warning: could not fetch the scena 1.5.0 crate from crates.io: the Khronos glTF sample test will SKIP" >&2
+  fi
+  rm -rf "$scena_tmp"
+fi
+export PROBEGI_SCENA_DIR
 # wgpu's Vulkan loader wants a runtime dir; give it one instead of a warning per device.
 if [ -z "${XDG_RUNTIME_DIR:-}" ] || [ ! -d "${XDG_RUNTIME_DIR}" ]; then
   XDG_RUNTIME_DIR=$(mktemp -d)

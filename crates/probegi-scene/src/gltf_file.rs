@@ -81,6 +81,8 @@ struct Loader<'a> {
     texture_ids: HashMap<(usize, Option<usize>), Option<usize>>,
     /// Animation channels by node index.
     channels: HashMap<usize, NodeChannels>,
+    /// Point and line primitives left out, for the error when nothing else is drawn.
+    skipped_primitives: Vec<String>,
 }
 
 /// A node's animated local TRS channels, `(time s, value)` sorted by time.
@@ -429,6 +431,7 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene> {
         material_ids: HashMap::new(),
         texture_ids: HashMap::new(),
         channels: HashMap::new(),
+        skipped_primitives: Vec::new(),
     };
     loader.read_animations(&doc)?;
     let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
@@ -439,7 +442,13 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene> {
         loader.visit(&node, Mat4::IDENTITY, &[], &mut Vec::new())?;
     }
     if loader.scene.mesh.triangles.is_empty() {
-        return Err(SceneError::Invalid { path: path.to_path_buf(), message: "no triangle primitives".into() });
+        let skipped = &loader.skipped_primitives;
+        let message = if skipped.is_empty() {
+            "no triangle primitives".to_string()
+        } else {
+            format!("no triangle primitives (points and lines are not drawn: {})", skipped.join(", "))
+        };
+        return Err(SceneError::Invalid { path: path.to_path_buf(), message });
     }
     Ok(loader.scene)
 }
@@ -687,6 +696,7 @@ impl Loader<'_> {
         use gltf::mesh::Mode;
         let what = format!("mesh {} (`{}`) primitive {}", mesh.index(), mesh.name().unwrap_or(""), prim.index());
         if !matches!(prim.mode(), Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+            self.skipped_primitives.push(format!("{what} ({:?})", prim.mode()));
             self.scene.warnings.push(format!(
                 "{}: {what}: mode {:?} skipped (points and lines have no surface to shade)",
                 self.path.display(),
