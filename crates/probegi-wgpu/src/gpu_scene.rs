@@ -71,6 +71,59 @@ fn sampler_bits(s: &Sampler) -> u32 {
     wrap(s.wrap_u) | wrap(s.wrap_v) << 2 | u32::from(s.filter == Filter::Nearest) << 4
 }
 
+/// `scene_materials`: [`MATERIAL_VEC4S`] vec4s per material (one zero vec4
+/// for a scene without materials).
+fn pack_materials(scene: &Scene) -> Vec<[f32; 4]> {
+    let tex_bits = |t: Option<usize>| match t {
+        Some(t) if t < scene.textures.len() => f32::from_bits(t as u32),
+        _ => f32::from_bits(u32::MAX),
+    };
+    let mut materials: Vec<[f32; 4]> = Vec::with_capacity(scene.materials.len().max(1) * MATERIAL_VEC4S);
+    for m in &scene.materials {
+        let alpha = (m.roughness * m.roughness).clamp(probegi_core::bsdf::MIN_ALPHA, 1.0);
+        let model = match m.specular_model {
+            SpecularModel::None => 0,
+            SpecularModel::Mtl => 1,
+            SpecularModel::MetallicRoughness => 2,
+        };
+        let e = m.emissive_factor * m.emissive_strength;
+        materials.push(m.base_color_factor.extend(tex_bits(m.base_color_texture)).into());
+        materials.push(m.specular_color.extend(alpha).into());
+        materials.push([f32::from_bits(model), m.metallic, m.roughness, tex_bits(m.metallic_roughness_texture)]);
+        materials.push(e.extend(tex_bits(m.emissive_texture)).into());
+        materials.push([tex_bits(m.normal_texture), m.normal_scale, tex_bits(m.bump_texture), m.bump_multiplier]);
+        for uv in [&m.base_color_uv, &m.emissive_uv, &m.normal_uv, &m.metallic_roughness_uv] {
+            materials.extend(pack_uv_mapping(uv));
+        }
+    }
+    if materials.is_empty() {
+        materials.push([0.0; 4]);
+    }
+    materials
+}
+
+/// `scene_textures`: the sRGB table, the counts, the texture headers, the GGX
+/// albedo table and the texels (the layout `scene.wgsl` documents).
+fn pack_textures(scene: &Scene, instance_records: u32) -> Vec<u32> {
+    let lut = srgb8_to_linear_table();
+    let table = specular_albedo_table();
+    let mut words: Vec<u32> = lut.iter().map(|v| v.to_bits()).collect();
+    let headers = 260 + 4 * scene.textures.len();
+    words.extend([scene.textures.len() as u32, ALBEDO_TABLE_SIZE as u32, headers as u32, instance_records]);
+    let mut first = headers + table.len() * 2;
+    for t in &scene.textures {
+        words.extend([t.width, t.height, first as u32, sampler_bits(&t.sampler)]);
+        first += t.texels.len();
+    }
+    for ab in table {
+        words.extend([ab[0].to_bits(), ab[1].to_bits()]);
+    }
+    for t in &scene.textures {
+        words.extend(t.texels.iter().map(|c| c[0] as u32 | (c[1] as u32) << 8 | (c[2] as u32) << 16));
+    }
+    words
+}
+
 /// `scene_lights`: the punctual lights, then the emitters' power-weighted
 /// distribution (`Scene::emitter_powers`, as the CPU's AreaLights); and the
 /// emitter count.
@@ -134,7 +187,6 @@ impl GpuScene {
     pub fn upload(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
         let mesh = &scene.mesh;
         let nt = mesh.triangle_count();
-        let none = f32::from_bits(u32::MAX);
         let stored = nt + scene.prototypes.iter().map(|p| p.mesh.triangle_count()).sum::<usize>();
         let mut triangles: Vec<[f32; 4]> =
             Vec::with_capacity(stored.max(1) * TRIANGLE_VEC4S + scene.instances.len() * 7);
@@ -163,48 +215,8 @@ impl GpuScene {
             let n = inst.normal_from_local;
             triangles.extend([n.x_axis, n.y_axis, n.z_axis].map(|c| glam::Vec3::from(c).extend(0.0).to_array()));
         }
-        let tex_bits = |t: Option<usize>| match t {
-            Some(t) if t < scene.textures.len() => f32::from_bits(t as u32),
-            _ => none,
-        };
-        let mut materials: Vec<[f32; 4]> = Vec::with_capacity(scene.materials.len().max(1) * MATERIAL_VEC4S);
-        for m in &scene.materials {
-            let alpha = (m.roughness * m.roughness).clamp(probegi_core::bsdf::MIN_ALPHA, 1.0);
-            let model = match m.specular_model {
-                SpecularModel::None => 0,
-                SpecularModel::Mtl => 1,
-                SpecularModel::MetallicRoughness => 2,
-            };
-            let e = m.emissive_factor * m.emissive_strength;
-            materials.push(m.base_color_factor.extend(tex_bits(m.base_color_texture)).into());
-            materials.push(m.specular_color.extend(alpha).into());
-            materials.push([f32::from_bits(model), m.metallic, m.roughness, tex_bits(m.metallic_roughness_texture)]);
-            materials.push(e.extend(tex_bits(m.emissive_texture)).into());
-            materials.push([tex_bits(m.normal_texture), m.normal_scale, tex_bits(m.bump_texture), m.bump_multiplier]);
-            for uv in [&m.base_color_uv, &m.emissive_uv, &m.normal_uv, &m.metallic_roughness_uv] {
-                materials.extend(pack_uv_mapping(uv));
-            }
-        }
-        if materials.is_empty() {
-            materials.push([0.0; 4]);
-        }
-        // Textures: the sRGB table, the GGX albedo table, headers, texels.
-        let lut = srgb8_to_linear_table();
-        let table = specular_albedo_table();
-        let mut words: Vec<u32> = lut.iter().map(|v| v.to_bits()).collect();
-        let headers = 260 + 4 * scene.textures.len();
-        words.extend([scene.textures.len() as u32, ALBEDO_TABLE_SIZE as u32, headers as u32, instance_records]);
-        let mut first = headers + table.len() * 2;
-        for t in &scene.textures {
-            words.extend([t.width, t.height, first as u32, sampler_bits(&t.sampler)]);
-            first += t.texels.len();
-        }
-        for ab in table {
-            words.extend([ab[0].to_bits(), ab[1].to_bits()]);
-        }
-        for t in &scene.textures {
-            words.extend(t.texels.iter().map(|c| c[0] as u32 | (c[1] as u32) << 8 | (c[2] as u32) << 16));
-        }
+        let materials = pack_materials(scene);
+        let words = pack_textures(scene, instance_records);
         // Lights: punctual lights, then the emitters' power-weighted distribution
         // (`Scene::emitter_powers`, as the CPU's AreaLights).
         let (lights, emitters) = pack_lights(scene);
