@@ -716,8 +716,9 @@ impl Loader<'_> {
         for v in &mut local.normals {
             *v = v.normalize_or(Vec3::Y);
         }
-        let normal_mapped = self.scene.materials[material as usize].normal_texture.is_some();
-        if normal_mapped && local.tangents.iter().all(|t| *t == Vec4::ZERO) && local.generate_tangents().is_none() {
+        let m = &self.scene.materials[material as usize];
+        let (normal_mapped, normal_uv) = (m.normal_texture.is_some(), m.normal_uv);
+        if normal_mapped && local.tangents.iter().all(|t| *t == Vec4::ZERO) && !tangents_for(&mut local, normal_uv) {
             self.scene.warnings.push(format!(
                 "{}: {what}: MikkTSpace could not build tangents; its normal map is ignored",
                 self.path.display()
@@ -883,7 +884,12 @@ impl Loader<'_> {
         let (emissive_texture, emissive_uv) =
             self.texture_slot(mat.emissive_texture().as_ref().map(TextureRef::of_info), &name)?;
         let normal = mat.normal_texture();
-        let (normal_texture, normal_uv) = self.texture_slot(normal.as_ref().map(TextureRef::of_normal), &name)?;
+        let normal_ref = normal
+            .as_ref()
+            .map(TextureRef::of_normal)
+            .transpose()
+            .map_err(|e| self.err(format!("material `{name}`: normalTexture: KHR_texture_transform: {e}")))?;
+        let (normal_texture, normal_uv) = self.texture_slot(normal_ref, &name)?;
         let normal_scale = normal.map_or(1.0, |n| n.scale());
         let alpha_mode = match mat.alpha_mode() {
             gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
@@ -1072,20 +1078,42 @@ impl<'a> TextureRef<'a> {
     }
 
     /// The library does not parse KHR_texture_transform on normal textures;
-    /// it is read here from the extension's JSON (an unreadable one reads as
-    /// no transform).
-    fn of_normal(info: &gltf::material::NormalTexture<'a>) -> Self {
+    /// it is read here from the extension's JSON (malformed JSON is an error,
+    /// as the library makes it on other texture references).
+    fn of_normal(info: &gltf::material::NormalTexture<'a>) -> std::result::Result<Self, String> {
         use gltf::json::extensions::texture::TextureTransform as Json;
-        let json = info.extension_value("KHR_texture_transform").cloned();
-        let transform =
-            json.and_then(|v| gltf::json::deserialize::from_value::<Json>(v).ok()).map(|t| TextureTransform {
-                offset: Vec2::from(t.offset.0),
-                rotation: t.rotation.0,
-                scale: Vec2::from(t.scale.0),
-                tex_coord: t.tex_coord,
-            });
-        Self { texture: info.texture(), tex_coord: info.tex_coord(), transform }
+        let transform = match info.extension_value("KHR_texture_transform") {
+            Some(v) => {
+                let t = gltf::json::deserialize::from_value::<Json>(v.clone()).map_err(|e| e.to_string())?;
+                Some(TextureTransform {
+                    offset: Vec2::from(t.offset.0),
+                    rotation: t.rotation.0,
+                    scale: Vec2::from(t.scale.0),
+                    tex_coord: t.tex_coord,
+                })
+            }
+            None => None,
+        };
+        Ok(Self { texture: info.texture(), tex_coord: info.tex_coord(), transform })
     }
+}
+
+/// MikkTSpace tangents over the coordinates the normal map reads (§3.7.2.1:
+/// "the texture coordinates associated with the normal texture", its set and
+/// KHR_texture_transform), the mesh's own coordinates kept; false when the
+/// algorithm gave up.
+fn tangents_for(mesh: &mut Mesh, normal_uv: UvMapping) -> bool {
+    if normal_uv == UvMapping::IDENTITY {
+        return mesh.generate_tangents().is_some();
+    }
+    let uvs = mesh.uvs.clone();
+    mesh.uvs = (0..uvs.len()).map(|v| normal_uv.apply(&mesh.vertex_attributes(v))).collect();
+    let Some(old) = mesh.generate_tangents() else {
+        mesh.uvs = uvs;
+        return false;
+    };
+    mesh.uvs = old.iter().map(|&v| uvs[v as usize]).collect();
+    true
 }
 
 /// glTF 2.0 §3.8.4: wrap modes as given; the filter is `magFilter` (every

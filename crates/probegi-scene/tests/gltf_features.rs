@@ -209,6 +209,18 @@ fn metallic_roughness_samplers_second_sets_vertex_colours_and_transforms_are_rea
     // COLOR_0 (normalized unsigned bytes) and TEXCOORD_1 per vertex.
     assert_eq!(s.mesh.colors[..3], [Vec3::X, Vec3::Y, Vec3::Z]);
     assert_eq!(s.mesh.uvs1[1], Vec2::new(2.5, 0.5));
+    // A malformed transform on a normal texture is an error, as on the others.
+    let bad = material.replace(r#""scale": [2.0, 3.0], "texCoord": 1"#, r#""scale": "large""#);
+    let path = quad_file(&dir, "bad-transform", &bad, samplers, true);
+    let e = load_scene(&path.to_string_lossy()).expect_err("malformed").to_string();
+    assert!(e.contains("bad-transform.gltf") && e.contains("normalTexture"), "{e}");
+    // MikkTSpace tangents follow the normal map's coordinates: turned a quarter
+    // turn by its transform, u' runs along the quad's v, which is +y.
+    let turned = r#"{"name": "n", "normalTexture": {"index": 0,
+        "extensions": {"KHR_texture_transform": {"rotation": 1.5707964}}}}"#;
+    let s = load(&quad_file(&dir, "turned", turned, samplers, true));
+    assert!(!s.mesh.tangents.is_empty() && s.mesh.tangents.iter().all(|t| t.y.abs() > 0.999), "{:?}", s.mesh.tangents);
+    assert_eq!(s.mesh.uvs[2], Vec2::ONE, "the mesh keeps its own coordinates");
     // Without TEXCOORD_1 on the primitive: a warning, and set 0 is read.
     let s = load(&quad_file(&dir, "no-uv1", material, samplers, false));
     assert!(s.warnings.iter().any(|w| w.contains("TEXCOORD_1")), "{:?}", s.warnings);
