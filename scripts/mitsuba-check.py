@@ -3,8 +3,9 @@
 
 What it checks
 --------------
-For each `--scene` (a Wavefront `.obj`, a probegi `.toml` scene file, or
-`builtin:NAME` for the built-in scenes whose source is in this repository) the
+For each `--scene` (a Wavefront `.obj`, a glTF 2.0 `.gltf` or `.glb`, a probegi
+`.toml` scene file, whose [[meshes]] may be any of those, or `builtin:NAME` for
+the built-in scenes whose source is in this repository) the
 script builds the same scene in Mitsuba 3 *by reading the files itself*,
 following probegi's documented scene semantics (README "Scene conventions",
 `crates/probegi-scene`), not by asking probegi for its geometry. It renders
@@ -18,8 +19,11 @@ and prints a table with FLIP(Mitsuba seed A vs probegi), computed by
 `probegi compare`, next to FLIP(Mitsuba seed A vs Mitsuba seed B), the noise
 floor at that sample count. A probegi-vs-Mitsuba FLIP well above the noise floor
 means the two renderers disagree about the scene; the per-channel mean ratio
-(probegi / Mitsuba) tells an energy difference from a noise difference. Images,
-the Mitsuba-vs-probegi contact sheet and `results.md` go to `--out-dir`.
+(probegi / Mitsuba) tells an energy difference from a noise difference; it is
+given over the whole image and over the pixels that see geometry (a pixel whose
+every sample reaches the constant sky is exactly the sky in both Mitsuba
+images, and would dilute the ratio). Images, the Mitsuba-vs-probegi contact
+sheet and `results.md` go to `--out-dir`.
 
 Run from the repository root, e.g.
 
@@ -28,6 +32,15 @@ Run from the repository root, e.g.
         --camera-pos 0,1,3.9 --camera-target 0,1,0 --fov-y 39.3 \
         --width 160 --height 120 --spp 256
     python3 scripts/mitsuba-check.py --scene scenes/sponza-sun.toml --spp 64
+    # Khronos samples shipped in the scena 1.5.0 crate's tests:
+    #   mkdir -p ~/.cache/probegi && curl -L \
+    #     https://static.crates.io/crates/scena/scena-1.5.0.crate | tar xz -C ~/.cache/probegi
+    K=~/.cache/probegi/scena-1.5.0/tests/assets/gltf/khronos
+    python3 scripts/mitsuba-check.py --variant llvm_ad_rgb --sky 1,1,1 --spp 64 \
+        --scene $K/WaterBottle/WaterBottle.gltf --width 96 --height 160
+    python3 scripts/mitsuba-check.py --variant llvm_ad_rgb --sky 1,1,1 --spp 64 \
+        --scene $K/AlphaBlendModeTest/AlphaBlendModeTest.gltf --width 192 --height 80 \
+        --camera-pos 0,1.25,8 --camera-target 0,1.1,0 --fov-y 28
 
 It is a manual check, not part of CI (`scripts/test.sh` does not run it).
 
@@ -35,13 +48,16 @@ Needs
 -----
   * Python >= 3.11 (tomllib), `pip install mitsuba numpy` (tested with
     mitsuba 3.9.1, drjit 1.5.0, numpy 2.4). No PIL: textures are read with
-    Mitsuba's own `mi.Bitmap`.
+    Mitsuba's own `mi.Bitmap`; no glTF package either: .gltf/.glb files are
+    read with `json` and numpy (accessors, strides, data URIs, GLB chunks,
+    images in buffer views).
   * a built probegi (`--probegi`, default `target/release/probegi`).
   * optional, much faster: the `llvm_ad_rgb` variant (`--variant llvm_ad_rgb`),
     which needs libLLVM: on Debian 12 `apt-get install -y libllvm19`. The
     script sets `DRJIT_LIBLLVM_PATH` to /usr/lib/x86_64-linux-gnu/libLLVM-19.so
     (or another libLLVM it finds) when the variable is unset. The default,
-    `scalar_rgb`, needs nothing but is slow, above all with the Python GGX BSDF.
+    `scalar_rgb`, needs nothing but is slow, above all with the Python GGX BSDF,
+    and falls back to Mitsuba's `area` emitter (see Emission).
 
 How probegi's semantics are mapped
 ----------------------------------
@@ -86,11 +102,20 @@ How probegi's semantics are mapped
     (n where degenerate), dropped unless n'·n_g > 1e-3. Triangles whose UV
     mapping is degenerate (|det| < 1e-12) get the material without its bump
     map, as probegi leaves them unbumped.
-  * Emission: Ke (× map_Ke) through a Mitsuba `area` emitter on a mesh without
-    vertex normals, so it emits from the counter-clockwise (front) face only,
-    as probegi does. A constant Ke is given as an `rgb` radiance so that Mitsuba
-    samples the emitter by area like probegi (a bitmap radiance would be
-    importance-sampled through UVs, which untextured lights do not have).
+  * Emission: Ke (× map_Ke; glTF emissiveFactor × emissiveStrength ×
+    emissiveTexture, sRGB, through its texture reference) through a Python
+    emitter, `ProbegiArea`, on each emissive mesh (flat or smooth-shaded as the
+    material is): it emits from the counter-clockwise (front) face only, by the
+    geometric normal, as probegi's `Scene::emitted` does, and next-event
+    estimation picks points uniformly by area over the mesh's triangles. Not
+    Mitsuba's `area` emitter: with vertex normals it emits by the interpolated
+    normal's side, and it samples a textured radiance through the UV layout
+    (`eval_parameterization`), which never reaches a triangle whose UVs overlap
+    another's; on TransmissionTest.glb (two-sided labels sharing UVs) that made
+    Mitsuba 1.3 % darker than probegi. The MIS density both strategies use has
+    the normal Mitsuba puts in `ds.n` (the shading normal on hits), so the
+    weights sum to one; the sample weight divides by the true (geometric)
+    density. Scalar variants keep `area` (a note says so).
   * Shading normals: OBJ `vn` as given; corners without one in a smoothing
     group `s N` (N != 0) get angle-weighted normals of the group's faces that
     share the position (bit-equal coordinates); `s 0`/`s off`/no `s` → face
@@ -112,6 +137,63 @@ How probegi's semantics are mapped
     a `range`, → a Python emitter with the glTF KHR_lights_punctual cone
     falloff and range window of probegi (Mitsuba's `spot` falls off linearly
     in angle). Sky → `constant` emitter.
+  * Placed files: a [[meshes]] / [[objects]] entry's placement moves the file's
+    geometry and also its punctual lights and camera (`PLACE_SUB_SCENE_LIGHTS`;
+    probegi moves only the geometry, see "Known mismatches").
+  * glTF 2.0 (`load_gltf`, following `gltf_file.rs`): the default scene's nodes
+    (else the first scene's; a file without scenes: the nodes nobody has as a
+    child) walked with their `matrix` or TRS; triangle primitives, mode 4 as
+    given, 5 (strips) and 6 (fans) as triangle lists with the section's
+    windings (p_i = v_i, v_(i+1+i%2), v_(i+2−i%2); fans v_(i+1), v_(i+2), v_0),
+    a strip's or fan's triangles that repeat a vertex dropped; other modes
+    skipped with a warning. `POSITION`; `NORMAL` normalised (missing, zero or
+    non-finite → the face normal at those corners; a triangle with none →
+    Mitsuba mesh without vertex normals); `TANGENT` only with `NORMAL`;
+    `TEXCOORD_0`/`_1` and `COLOR_0` (float or normalized u8/u16; COLOR_0's RGB
+    clamped to [0, 1], its alpha unused); sparse accessors, animations and
+    `extensionsRequired` beyond KHR_lights_punctual,
+    KHR_materials_emissive_strength and KHR_texture_transform are refused,
+    other `extensionsUsed` warned about (probegi ignores them too). First
+    perspective camera in visiting order (eye = node origin, view −Z, up +Y,
+    `yfov`), KHR_lights_punctual lights (point, spot, directional; node −Z).
+  * glTF metallic-roughness materials: the Python `ProbegiBSDF` evaluates
+    `Material::bsdf` per point, i.e. `probegi_core::bsdf::SurfaceBsdf` with
+    base = baseColorFactor × COLOR_0 × baseColorTexture (sRGB decoded per texel,
+    then filtered), r = roughnessFactor × G and m = metallicFactor × B of
+    metallicRoughnessTexture (raw unorm), α = clamp(r², 1e-3, 1), diffuse =
+    base (1 − m), F0 = lerp(0.04, base, m); so f = base (1 − m)(1 − max F0)/π
+    + GGX D · height-correlated G2 · Schlick F / (4 cos cos), no specular lobe
+    where max F0 = 0, probegi's lobe-selection mixture. A primitive without a
+    material gets glTF's default (white, metallic 1, roughness 1). Textures are
+    float bitmaps (`raw`) with the sampler's filter (magFilter, else
+    minFilter's no-mipmap fallback, else bilinear; no mipmaps: probegi
+    magnifies every lookup) and wrap mode (repeat, mirrored repeat, clamp to
+    edge on the integer texel index: Mitsuba's `wrap_mode` rules; mixed wrapS /
+    wrapT: the image padded by one texel per side and the coordinate folded per
+    axis, which is exact). Each texture reference reads its `texCoord` set
+    (TEXCOORD_1 through a mesh attribute; a set above 1 ignores the texture,
+    as probegi) through its KHR_texture_transform (u' = sx cos r u + sy sin r v
+    + ox, v' = −sx sin r u + sy cos r v + oy, `UvMapping::texture_transform`).
+    Mitsuba's own `principled` BSDF (`--shading-model mitsuba`, wrapped in
+    `twosided`, with `normalmap`) is kept only for contrast: it does not scale
+    the diffuse lobe by 1 − max F0, its diffuse is Disney's, its Fresnel and
+    specular differ, and it reads set 0 with Mitsuba's tangent frame. On
+    WaterBottle and AlphaBlendModeTest it is 2–2.5× the noise floor in FLIP
+    and 1.7 % brighter on the latter; ProbegiBSDF is at the floor.
+  * glTF normal maps (`Scene::perturbed_normal`): the shading normal n (flipped
+    into the geometric hemisphere), the interpolated tangent made orthogonal
+    to n (unchanged where it vanishes), bitangent = sign(w of the triangle's
+    first corner) · n × tangent, texel × 2 − 1 with X, Y × `scale`; dropped
+    unless 1e-3 above the geometric plane. Without TANGENT (probegi:
+    MikkTSpace over the normal map's coordinates) this checker accumulates
+    ∂p/∂u per vertex (`approximate_tangents`, see Known mismatches).
+  * glTF alpha: OPAQUE ignores alpha; MASK cuts at `alphaCutoff` (0.5 when
+    absent), BLEND is MASK at 0.5; coverage = baseColorFactor.a × the alpha of
+    the base colour texture when that image has an alpha channel with a texel
+    below 255, read with TEXCOORD_0, repeat, bilinear and no transform whatever
+    the base colour's sampler and transform (what probegi's traversal test
+    reads; probegi warns where they differ). Mitsuba: `mask` with the
+    thresholded grid, as for OBJ cutouts below.
   * Path length: probegi's `--max-depth N` surface interactions = Mitsuba
     `max_depth N + 1` (both default to effectively unbounded; Russian roulette
     differs but both are unbiased). At small N they differ by the sky seen
@@ -134,13 +216,32 @@ Known mismatches / limits
   * Alpha cutouts in the forest (`scenes/builtin/forest.toml`): FLIP at the noise
     floor, but probegi's mean is 0.5 % below Mitsuba's at 128 spp, about as much as
     the cut-edge approximation moves it (`--cutout-supersample 1` gives +0.5 %).
-  * glTF/GLB files are not read by this checker (an error says so).
+  * glTF files without `scenes`: probegi's loader visits every node as a root
+    (`doc.nodes().collect()` in gltf_file.rs), so a child node's mesh is drawn
+    twice, once under its parents and once untransformed; this checker draws
+    the hierarchy once, so such files differ (a probegi bug, reported).
+  * Placed files' lights and camera: probegi's scene_file.rs transforms only a
+    [[meshes]] / [[objects]] file's geometry; this checker also places its
+    KHR_lights_punctual lights and camera (set `PLACE_SUB_SCENE_LIGHTS = False`
+    to reproduce probegi).
+  * Normal-mapped glTF primitives without TANGENT: `approximate_tangents`
+    (angle-weighted ∂p/∂u per vertex index, orthogonalised, handedness from
+    ∂p/∂v) instead of MikkTSpace. On WaterBottle with TANGENT removed, under a
+    sun, it is at the noise floor; on meshes with UV seams or mirrored islands
+    at shared vertices it may differ.
+  * glTF cutout edges: as for OBJ, the thresholded grid is an approximation
+    along the cut; where the coverage jumps within a texel (an alpha ramp
+    wrapping from 255 to 0) raise `--cutout-supersample` (a synthetic GLB:
+    1.10× the floor at 8, at the floor at 128).
+  * Not read by either renderer: occlusionTexture, doubleSided (all surfaces
+    are two-sided), KHR_materials_* other than emissive_strength, skins and
+    morph targets (the stored rest pose), orthographic cameras; 16-bit images
+    are ignored by both (a warning).
   * Animated `[[objects]]` are refused; the static scene is rendered at
     `--frame` for lights only.
   * Alpha cut edges: nearest lookup of a finer thresholded grid (above).
-  * Emissive triangles always use flat shading here; an emissive material
-    with a cutout still emits in Mitsuba where it is cut (probegi: no).
-  * glTF normal maps (`normalTexture`) are not handled (glTF is not read).
+  * An emissive material with a cutout still emits in Mitsuba where it is cut
+    (probegi: no).
 """
 
 from __future__ import annotations
@@ -183,6 +284,11 @@ class Texture:
     path: str
     rgb8: np.ndarray  # (H, W, 3) uint8, row 0 = top
     alpha8: np.ndarray | None  # (H, W) uint8, None if absent or all opaque
+    # glTF sampler (texture.rs `Sampler`): wrap along u, along v ("repeat", "mirror",
+    # "clamp") and filter ("bilinear", "nearest"). OBJ textures: repeat, bilinear.
+    wrap_u: str = "repeat"
+    wrap_v: str = "repeat"
+    filter: str = "bilinear"
 
     def linear_rgb(self) -> np.ndarray:
         return SRGB8_TO_LINEAR[self.rgb8]
@@ -211,15 +317,30 @@ class Material:
     alpha_tex: Texture | None = None
     bump_tex: Texture | None = None
     bump_multiplier: float = 1.0
+    # glTF metallic-roughness (material.rs SpecularModel::MetallicRoughness): kd = base colour
+    # factor, kd_tex = baseColorTexture, `roughness` and `metallic` the factors, mr_tex's G and B
+    # multiply them; F0 = lerp(0.04, base, metallic), diffuse = base · (1 − metallic).
+    gltf: bool = False
+    metallic: float = 0.0
+    mr_tex: Texture | None = None
+    normal_tex: Texture | None = None
+    normal_scale: float = 1.0
+    alpha_cutoff: float = ALPHA_CUTOFF
+    # Per texture reference: (TEXCOORD set, 2×3 KHR_texture_transform rows or None).
+    kd_uv: tuple = (0, None)
+    mr_uv: tuple = (0, None)
+    normal_uv: tuple = (0, None)
+    ke_uv: tuple = (0, None)
+    vertex_color: bool = False  # COLOR_0 multiplies the base colour (set per primitive)
 
     def has_specular(self) -> bool:
-        return self.mtl and float(self.ks.max()) > 0.0
+        return self.gltf or (self.mtl and float(self.ks.max()) > 0.0)
 
     def is_emissive(self) -> bool:
         return float(self.ke.max()) > 0.0
 
     def has_cutout(self) -> bool:
-        return self.alpha_tex is not None or self.alpha_factor < ALPHA_CUTOFF
+        return self.alpha_tex is not None or self.alpha_factor < self.alpha_cutoff
 
 
 @dataclass
@@ -245,13 +366,22 @@ class Camera:
 @dataclass
 class Geometry:
     """Triangles expanded per corner: P (F,3,3), N (F,3,3; zero rows where flat),
-    UV (F,3,2), mat (F,) material index, flat (F,) bool."""
+    UV (F,3,2), mat (F,) material index, flat (F,) bool. glTF only (None elsewhere):
+    T (F,3,3) tangents (zero = none), TS (F,) the bitangent sign of corner 0 (probegi
+    reads the sign of the triangle's first corner), UV1 (F,3,2) TEXCOORD_1 (set 0 where
+    absent), COL (F,3,3) linear COLOR_0 (white where absent)."""
 
     P: np.ndarray
     N: np.ndarray
     UV: np.ndarray
     mat: np.ndarray
     flat: np.ndarray
+    T: np.ndarray | None = None
+    TS: np.ndarray | None = None
+    UV1: np.ndarray | None = None
+    COL: np.ndarray | None = None
+
+    EXTRA = ("T", "TS", "UV1", "COL")
 
     @staticmethod
     def empty() -> "Geometry":
@@ -263,6 +393,25 @@ class Geometry:
             np.zeros(0, bool),
         )
 
+    def extra(self, name: str) -> np.ndarray:
+        """An optional attribute, or its default where this geometry has none."""
+        v = getattr(self, name)
+        if v is not None:
+            return v
+        f = self.P.shape[0]
+        return {
+            "T": lambda: np.zeros((f, 3, 3)),
+            "TS": lambda: np.ones(f),
+            "UV1": lambda: self.UV.copy(),
+            "COL": lambda: np.ones((f, 3, 3)),
+        }[name]()
+
+    def copy(self) -> "Geometry":
+        return Geometry(*[None if getattr(self, a) is None else getattr(self, a).copy() for a in self.FIELDS])
+
+    def select(self, sel: np.ndarray) -> "Geometry":
+        return Geometry(*[None if getattr(self, a) is None else getattr(self, a)[sel] for a in self.FIELDS])
+
     def transform(self, m: np.ndarray) -> None:
         a, t = m[:3, :3], m[:3, 3]
         self.P = self.P @ a.T + t
@@ -270,9 +419,29 @@ class Geometry:
         n = self.N @ nm.T
         ln = np.linalg.norm(n, axis=-1, keepdims=True)
         self.N = np.where(ln > 0, n / np.where(ln > 0, ln, 1), 0.0)
-        if np.linalg.det(a) < 0:  # mirroring: keep front faces front
-            for arr in (self.P, self.N, self.UV):
-                arr[:, [1, 2]] = arr[:, [2, 1]]
+        mirror = np.linalg.det(a) < 0
+        if self.T is not None:  # mesh.rs transformed_tangent: the linear part, normalised
+            tv = self.T @ a.T
+            lt = np.linalg.norm(tv, axis=-1, keepdims=True)
+            self.T = np.where(lt > 0, tv / np.where(lt > 0, lt, 1), 0.0)
+            if mirror:
+                self.TS = -self.TS
+        if mirror:  # mirroring: keep front faces front
+            for arr in (self.P, self.N, self.UV, self.T, self.UV1, self.COL):
+                if arr is not None:
+                    arr[:, [1, 2]] = arr[:, [2, 1]]
+
+
+Geometry.FIELDS = ("P", "N", "UV", "mat", "flat", *Geometry.EXTRA)
+
+
+def cat_geometry(gs: list[Geometry]) -> Geometry:
+    """Concatenates geometries; an optional attribute present in one is filled with its
+    default in the others."""
+    out = [np.concatenate([getattr(g, a) for g in gs]) for a in ("P", "N", "UV", "mat", "flat")]
+    for a in Geometry.EXTRA:
+        out.append(np.concatenate([g.extra(a) for g in gs]) if any(getattr(g, a) is not None for g in gs) else None)
+    return Geometry(*out)
 
 
 @dataclass
@@ -287,14 +456,9 @@ class Scene:
 
 def merge(dst: Scene, src: Scene) -> None:
     off = len(dst.materials)
-    g, s = dst.geometry, src.geometry
-    dst.geometry = Geometry(
-        np.concatenate([g.P, s.P]),
-        np.concatenate([g.N, s.N]),
-        np.concatenate([g.UV, s.UV]),
-        np.concatenate([g.mat, s.mat + off]),
-        np.concatenate([g.flat, s.flat]),
-    )
+    s = src.geometry.copy()
+    s.mat = s.mat + off
+    dst.geometry = cat_geometry([dst.geometry, s])
     dst.materials += src.materials
     dst.lights += src.lights
     dst.sky = np.maximum(dst.sky, src.sky)
@@ -337,16 +501,20 @@ def resolve_case_insensitive(base: Path, name: str) -> Path | None:
 _TEXTURES: dict[Path, Texture] = {}
 
 
-def load_texture(path: Path) -> Texture:
+def load_texture(path: Path, source: str | None = None) -> Texture:
+    """An 8-bit image as probegi keeps it. `source` set (a glTF image, possibly a temporary
+    file): not cached, and a 16-bit image is refused (probegi's glTF loader ignores them)."""
     import mitsuba as mi
 
     key = path.resolve()
-    if key in _TEXTURES:
+    if source is None and key in _TEXTURES:
         return _TEXTURES[key]
     bmp = mi.Bitmap(str(path))
     arr = np.array(bmp)
     if arr.ndim == 2:
         arr = arr[..., None]
+    if source is not None and arr.dtype != np.uint8:
+        raise _Unsupported16Bit()
     if arr.dtype == np.uint16:
         arr = np.round(arr.astype(np.float32) / 257.0).astype(np.uint8)
     elif arr.dtype != np.uint8:
@@ -361,8 +529,9 @@ def load_texture(path: Path) -> Texture:
     alpha = arr[..., -1] if has_alpha and ch in (2, 4) else None
     if alpha is not None and not (alpha < 255).any():
         alpha = None  # probegi drops an all-opaque alpha plane
-    tex = Texture(str(path), np.ascontiguousarray(rgb), None if alpha is None else np.ascontiguousarray(alpha))
-    _TEXTURES[key] = tex
+    tex = Texture(source or str(path), np.ascontiguousarray(rgb), None if alpha is None else np.ascontiguousarray(alpha))
+    if source is None:
+        _TEXTURES[key] = tex
     return tex
 
 
@@ -859,13 +1028,40 @@ def instance_placements(e: dict) -> list[np.ndarray]:
     return out
 
 
+# probegi's scene_file.rs moves only the geometry of a placed file (`sub.mesh.transform(xf)`):
+# a glTF's KHR_lights_punctual lights and camera stay where the file put them. This checker
+# places them with the geometry (the file's lights belong to it); False reproduces probegi.
+PLACE_SUB_SCENE_LIGHTS = True
+
+
+def place_sub_scene(sub: Scene, xf: np.ndarray) -> None:
+    """A [[meshes]] / [[objects]] placement: the geometry, and (PLACE_SUB_SCENE_LIGHTS) the
+    file's punctual lights and camera."""
+    sub.geometry.transform(xf)
+    if not PLACE_SUB_SCENE_LIGHTS:
+        return
+    a, t = xf[:3, :3], xf[:3, 3]
+
+    def unit(v):
+        n = np.linalg.norm(v)
+        return v / n if n > 0 else v
+
+    for l in sub.lights:
+        l.position = a @ l.position + t
+        l.direction = unit(a @ l.direction)
+    if sub.camera is not None:
+        c = sub.camera
+        sub.camera = Camera(a @ c.position + t, a @ c.target + t, unit(a @ c.up), c.fov_y_deg)
+
+
 def load_toml(path: Path, text: str, base: Path, frame: float, bump: bool) -> Scene:
     f = tomllib.loads(text)
     scene = empty_scene()
     for i, m in enumerate(f.get("meshes", [])):
         sub = load_sub(m["path"], base, m, frame, bump)
-        sub.geometry.transform(
-            placement_matrix(m.get("translation", [0, 0, 0]), m.get("rotation_deg", [0, 0, 0]), m.get("scale", [1, 1, 1]))
+        place_sub_scene(
+            sub,
+            placement_matrix(m.get("translation", [0, 0, 0]), m.get("rotation_deg", [0, 0, 0]), m.get("scale", [1, 1, 1])),
         )
         merge(scene, sub)
     for i, e in enumerate(f.get("instances", [])):
@@ -873,20 +1069,21 @@ def load_toml(path: Path, text: str, base: Path, frame: float, bump: bool) -> Sc
         sub.lights = []  # probegi does not copy an instanced file's lights
         copies = []
         for xf in instance_placements(e):
-            g = Geometry(sub.geometry.P.copy(), sub.geometry.N.copy(), sub.geometry.UV.copy(), sub.geometry.mat, sub.geometry.flat)
+            g = sub.geometry.copy()
             g.transform(xf)
             copies.append(g)
-        sub.geometry = Geometry(*[np.concatenate([getattr(c, a) for c in copies]) for a in ("P", "N", "UV", "mat", "flat")])
+        sub.geometry = cat_geometry(copies)
         merge(scene, sub)
     for i, o in enumerate(f.get("objects", [])):
         if o.get("keyframes") or o.get("motion"):
             raise SystemExit(f"{path}: objects[{i}] is animated; this checker renders static objects only")
         if "path" in o:
             sub = load_sub(o["path"], base, o, frame, bump)
-            sub.geometry.transform(
+            place_sub_scene(
+                sub,
                 placement_matrix(
                     o.get("translation", [0, 0, 0]), o.get("rotation_deg", [0, 0, 0]), o.get("scale", [1, 1, 1])
-                )
+                ),
             )
         else:
             name = o.get("name", "object")
@@ -900,7 +1097,7 @@ def load_toml(path: Path, text: str, base: Path, frame: float, bump: bool) -> Sc
             else:
                 faces = box_faces(o["box_min_m"], o["box_max_m"])
                 gs = [polygon_geometry(fc, 0) for fc in faces]
-                g = Geometry(*[np.concatenate([getattr(x, a) for x in gs]) for a in ("P", "N", "UV", "mat", "flat")])
+                g = cat_geometry(gs)
                 if o.get("box_inward"):
                     g.P[:, [1, 2]] = g.P[:, [2, 1]]
                 sub.geometry = g
@@ -911,6 +1108,426 @@ def load_toml(path: Path, text: str, base: Path, frame: float, bump: bool) -> Sc
     if "camera" in f:
         scene.camera = parse_camera(f["camera"])
     return scene
+
+
+# --------------------------------------------------------------------------------------
+# glTF 2.0 (.gltf / .glb), read with json + numpy (gltf_file.rs's rules)
+# --------------------------------------------------------------------------------------
+
+GLTF_FOLLOWED_EXTENSIONS = ("KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_texture_transform")
+_GLTF_COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_GLTF_TYPE_SIZE = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_GLTF_WRAP = {10497: "repeat", 33648: "mirror", 33071: "clamp"}
+
+
+def _data_uri(uri: str) -> bytes | None:
+    import base64
+    import urllib.parse
+
+    if not uri.startswith("data:"):
+        return None
+    head, _, data = uri.partition(",")
+    return base64.b64decode(data) if head.endswith(";base64") else urllib.parse.unquote_to_bytes(data)
+
+
+def quat_matrix(q) -> np.ndarray:
+    x, y, z, w = (float(c) for c in q)
+    n = math.sqrt(x * x + y * y + z * z + w * w) or 1.0
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def gltf_node_matrix(node: dict) -> np.ndarray:
+    if "matrix" in node:
+        return np.asarray(node["matrix"], np.float64).reshape(4, 4).T  # column-major
+    m = np.eye(4)
+    m[:3, :3] = quat_matrix(node.get("rotation", [0, 0, 0, 1])) @ np.diag(node.get("scale", [1, 1, 1]))
+    m[:3, 3] = node.get("translation", [0, 0, 0])
+    return m
+
+
+def triangles_of(mode: int, v: np.ndarray) -> np.ndarray:
+    """gltf_file.rs triangles_of: lists as given, strips p_i = {v_i, v_(i+1+i%2), v_(i+2−i%2)},
+    fans p_i = {v_(i+1), v_(i+2), v_0}; strips' and fans' triangles that repeat a vertex dropped."""
+    if mode == 4:
+        if len(v) % 3:
+            raise SystemExit(f"index count {len(v)} is not a multiple of 3")
+        return v.reshape(-1, 3)
+    i = np.arange(max(len(v) - 2, 0))
+    if mode == 5:
+        t = np.stack([v[i], v[i + 1 + i % 2], v[i + 2 - i % 2]], axis=1)
+    else:
+        t = np.stack([v[i + 1], v[i + 2], np.full_like(i, v[0]) if len(v) else v[i]], axis=1)
+    keep = (t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 0] != t[:, 2])
+    return t[keep]
+
+
+def approximate_tangents(P: np.ndarray, N: np.ndarray, UV: np.ndarray, tri: np.ndarray, nv: int):
+    """Per-vertex tangents for a normal-mapped primitive without TANGENT. probegi runs
+    MikkTSpace (the `mikktspace` crate); this is Lengyel's accumulation of ∂p/∂u over the
+    faces sharing a vertex index (angle-weighted), orthogonalised against the vertex normal,
+    w = handedness: the same frame as MikkTSpace on smooth, unmirrored UV layouts, not
+    bit-equal (MikkTSpace also splits vertices and joins by position)."""
+    p, uv = P[tri], UV[tri]
+    duv1, duv2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    dp1, dp2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    det = duv1[:, 0] * duv2[:, 1] - duv1[:, 1] * duv2[:, 0]
+    ok = np.abs(det) > 1e-20
+    r = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+    su = (dp1 * duv2[:, 1:2] - dp2 * duv1[:, 1:2]) * r
+    sv = (dp2 * duv1[:, 0:1] - dp1 * duv2[:, 0:1]) * r
+    ang = corner_angles(p)
+    t_acc = np.zeros((nv, 3))
+    b_acc = np.zeros((nv, 3))
+    for k in range(3):
+        np.add.at(t_acc, tri[:, k], su * ang[:, k : k + 1])
+        np.add.at(b_acc, tri[:, k], sv * ang[:, k : k + 1])
+    t = t_acc - N * (N * t_acc).sum(1, keepdims=True)
+    lt = np.linalg.norm(t, axis=1, keepdims=True)
+    t = np.where(lt > 1e-20, t / np.where(lt > 1e-20, lt, 1), 0.0)
+    w = np.where((np.cross(N, t) * b_acc).sum(1) < 0, -1.0, 1.0)
+    return np.concatenate([t, w[:, None]], axis=1)
+
+
+class GltfFile:
+    def __init__(self, path: Path, warnings: list[str]):
+        self.path = path
+        self.base = path.parent
+        self.warnings = warnings
+        data = path.read_bytes()
+        self.blob = None
+        if data[:4] == b"glTF":
+            import struct
+
+            _, _, length = struct.unpack_from("<III", data, 0)
+            off, js = 12, None
+            while off + 8 <= min(length, len(data)):
+                clen, ctype = struct.unpack_from("<II", data, off)
+                chunk = data[off + 8 : off + 8 + clen]
+                if ctype == 0x4E4F534A:
+                    js = chunk
+                elif ctype == 0x004E4942 and self.blob is None:
+                    self.blob = chunk
+                off += 8 + clen
+            if js is None:
+                raise SystemExit(f"{path}: GLB without a JSON chunk")
+            data = js
+        import json
+
+        self.doc = json.loads(data.decode("utf-8"))
+        for e in self.doc.get("extensionsRequired", []):
+            if e not in GLTF_FOLLOWED_EXTENSIONS:
+                raise SystemExit(f"{path}: the file requires extension {e}, which probegi does not implement")
+        for e in self.doc.get("extensionsUsed", []):
+            if e not in GLTF_FOLLOWED_EXTENSIONS:
+                warnings.append(f"{path}: extension {e} is used but not followed (probegi ignores it too)")
+        self.buffers: list[bytes] = []
+        import urllib.parse
+
+        for i, b in enumerate(self.doc.get("buffers", [])):
+            uri = b.get("uri")
+            if uri is None:
+                if self.blob is None:
+                    raise SystemExit(f"{path}: buffer {i} has no uri and the file no BIN chunk")
+                self.buffers.append(self.blob)
+            else:
+                raw = _data_uri(uri)
+                if raw is None:
+                    f = self.base / urllib.parse.unquote(uri)
+                    if not f.exists():
+                        raise SystemExit(f"{path}: buffer {i}: file {f} not found")
+                    raw = f.read_bytes()
+                self.buffers.append(raw)
+        self.textures: dict = {}
+
+    def view_bytes(self, view_index: int) -> tuple[bytes, int, int | None]:
+        v = self.doc["bufferViews"][view_index]
+        buf = self.buffers[v["buffer"]]
+        off = v.get("byteOffset", 0)
+        return buf[off : off + v["byteLength"]], v.get("byteStride"), v.get("buffer")
+
+    def accessor(self, index: int, normalize_ints: bool = False) -> np.ndarray:
+        a = self.doc["accessors"][index]
+        if "sparse" in a:
+            raise SystemExit(f"{self.path}: accessor {index}: sparse accessors are not supported (probegi refuses them)")
+        dt = np.dtype(_GLTF_COMPONENT[a["componentType"]])
+        ncomp = _GLTF_TYPE_SIZE[a["type"]]
+        count = a["count"]
+        raw, stride, _ = self.view_bytes(a["bufferView"])
+        elem = dt.itemsize * ncomp
+        stride = stride or elem
+        off = a.get("byteOffset", 0)
+        if count == 0:
+            out = np.zeros((0, ncomp), dt)
+        else:
+            buf = np.frombuffer(raw, np.uint8, count=stride * (count - 1) + elem, offset=off)
+            rows = np.lib.stride_tricks.as_strided(buf, shape=(count, elem), strides=(stride, 1))
+            out = np.ascontiguousarray(rows).view(dt).reshape(count, ncomp)
+        if normalize_ints and dt.kind in "ui":
+            if dt.kind == "u":
+                return out.astype(np.float64) / float(np.iinfo(dt).max)
+            return np.maximum(out.astype(np.float64) / float(np.iinfo(dt).max), -1.0)
+        return out.astype(np.float64) if dt.kind == "f" else out
+
+    def texture(self, index: int) -> Texture | None:
+        """A glTF texture: its image (8-bit PNG/JPEG, as probegi reads them) with its sampler."""
+        if index in self.textures:
+            return self.textures[index]
+        tex = None
+        t = self.doc["textures"][index]
+        src = t.get("source")
+        img = self.doc.get("images", [])[src] if src is not None else None
+        if img is not None:
+            import tempfile
+            import urllib.parse
+
+            try:
+                if "uri" in img and _data_uri(img["uri"]) is None:
+                    f = self.base / urllib.parse.unquote(img["uri"])
+                    base = load_texture(f) if f.exists() else None
+                    if base is None:
+                        self.warnings.append(f"{self.path}: image {src} `{f}` not found; textures using it are ignored")
+                else:
+                    raw = _data_uri(img["uri"]) if "uri" in img else self.view_bytes(img["bufferView"])[0]
+                    suffix = ".jpg" if raw[:3] == b"\xff\xd8\xff" else ".png"
+                    with tempfile.NamedTemporaryFile(suffix=suffix, delete=False) as fh:
+                        fh.write(raw)
+                    try:
+                        base = load_texture(Path(fh.name), f"{self.path} image {src}")
+                    finally:
+                        os.unlink(fh.name)
+            except _Unsupported16Bit:
+                self.warnings.append(f"{self.path}: image {src} is 16-bit; ignored as probegi ignores it")
+                base = None
+            if base is not None:
+                s = self.doc.get("samplers", [])[t["sampler"]] if "sampler" in t else {}
+                mag, minf = s.get("magFilter"), s.get("minFilter")
+                nearest = mag == 9728 or (mag is None and minf in (9728, 9984, 9986))
+                tex = dataclasses.replace(
+                    base,
+                    wrap_u=_GLTF_WRAP.get(s.get("wrapS", 10497), "repeat"),
+                    wrap_v=_GLTF_WRAP.get(s.get("wrapT", 10497), "repeat"),
+                    filter="nearest" if nearest else "bilinear",
+                )
+        self.textures[index] = tex
+        return tex
+
+    def texture_ref(self, info: dict | None, material: str):
+        """(texture, (set, rows)) of a textureInfo, KHR_texture_transform applied."""
+        if info is None:
+            return None, (0, None)
+        xf = info.get("extensions", {}).get("KHR_texture_transform")
+        uv_set = int(info.get("texCoord", 0))
+        rows = None
+        if xf is not None:
+            uv_set = int(xf.get("texCoord", uv_set))
+            ox, oy = xf.get("offset", [0.0, 0.0])
+            r = float(xf.get("rotation", 0.0))
+            sx, sy = xf.get("scale", [1.0, 1.0])
+            c, s = math.cos(r), math.sin(r)
+            rows = np.array([[sx * c, sy * s, ox], [-sx * s, sy * c, oy]], np.float64)
+            if np.array_equal(rows, np.array([[1.0, 0, 0], [0, 1.0, 0]])):
+                rows = None
+        if uv_set > 1:
+            self.warnings.append(f"{self.path}: material `{material}`: TEXCOORD_{uv_set}; texture ignored (as probegi)")
+            return None, (0, None)
+        return self.texture(info["index"]), (uv_set, rows)
+
+    def material(self, index: int | None, bump: bool) -> Material:
+        m = self.doc["materials"][index] if index is not None else {}
+        name = m.get("name", "gltf-default")
+        pbr = m.get("pbrMetallicRoughness", {})
+
+        def unit(v, what):
+            v = float(v)
+            if 0.0 <= v <= 1.0:
+                return v
+            c = 0.0 if math.isnan(v) else min(max(v, 0.0), 1.0)
+            self.warnings.append(f"{self.path}: material `{name}`: {what} {v} clamped to {c}")
+            return c
+
+        bc = pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0])
+        kd_tex, kd_uv = self.texture_ref(pbr.get("baseColorTexture"), name)
+        mr_tex, mr_uv = self.texture_ref(pbr.get("metallicRoughnessTexture"), name)
+        ke_tex, ke_uv = self.texture_ref(m.get("emissiveTexture"), name)
+        normal_tex, normal_uv = self.texture_ref(m.get("normalTexture"), name) if bump else (None, (0, None))
+        strength = float(m.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0))
+        mode = m.get("alphaMode", "OPAQUE")
+        cutoff = float(m.get("alphaCutoff", ALPHA_CUTOFF)) if mode == "MASK" else ALPHA_CUTOFF
+        mat = Material(
+            name=name,
+            kd=np.asarray(bc[:3], np.float32),
+            kd_tex=kd_tex,
+            ke=np.asarray(m.get("emissiveFactor", [0.0, 0.0, 0.0]), np.float32) * np.float32(strength),
+            ke_tex=ke_tex,
+            roughness=unit(pbr.get("roughnessFactor", 1.0), "roughnessFactor"),
+            metallic=unit(pbr.get("metallicFactor", 1.0), "metallicFactor"),
+            mr_tex=mr_tex,
+            normal_tex=normal_tex,
+            normal_scale=float(m.get("normalTexture", {}).get("scale", 1.0)),
+            gltf=True,
+            alpha_cutoff=cutoff,
+            kd_uv=kd_uv,
+            mr_uv=mr_uv,
+            normal_uv=normal_uv,
+            ke_uv=ke_uv,
+        )
+        if mode in ("MASK", "BLEND"):
+            # BLEND is MASK at 0.5; coverage = baseColorFactor.a × the base colour texture's alpha
+            # (TEXCOORD_0, repeat, bilinear: what probegi's traversal test reads).
+            mat.alpha_factor = unit(bc[3], "baseColorFactor alpha")
+            mat.alpha_tex = kd_tex if kd_tex is not None and kd_tex.alpha8 is not None else None
+        return mat
+
+
+class _Unsupported16Bit(Exception):
+    pass
+
+
+def load_gltf(path: Path, bump: bool = True) -> Scene:
+    """gltf_file.rs: the default scene's nodes (else the first scene's, else the root nodes) with
+    their transforms, triangle primitives (modes 4, 5, 6), metallic-roughness materials,
+    the first perspective camera, KHR_lights_punctual."""
+    warnings: list[str] = []
+    f = GltfFile(path, warnings)
+    doc = f.doc
+    if doc.get("animations"):
+        raise SystemExit(f"{path}: the file has animations; this checker renders static glTF scenes only")
+    nodes = doc.get("nodes", [])
+    scenes = doc.get("scenes", [])
+    if scenes:
+        roots = scenes[doc.get("scene", 0)]["nodes"] if "scene" in doc else scenes[0]["nodes"]
+    else:
+        # No scenes: every node that is nobody's child (the hierarchy's roots). probegi's
+        # gltf_file.rs visits *every* node as a root (`doc.nodes().collect()`), which draws
+        # each child node a second time, untransformed by its parents (reported).
+        children = {c for n in nodes for c in n.get("children", [])}
+        roots = [i for i in range(len(nodes)) if i not in children]
+    materials: list[Material] = []
+    mat_ids: dict = {}
+    parts: list[Geometry] = []
+    lights: list[Light] = []
+    camera: Camera | None = None
+    light_defs = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
+
+    def material_id(index, vertex_color: bool) -> int:
+        key = (index, vertex_color)
+        if key not in mat_ids:
+            m = f.material(index, bump)
+            m.vertex_color = vertex_color
+            materials.append(m)
+            mat_ids[key] = len(materials) - 1
+        return mat_ids[key]
+
+    def add_primitive(mesh: dict, k: int, prim: dict, world: np.ndarray) -> None:
+        nonlocal parts
+        what = f"{path}: mesh {mesh.get('name', '')} primitive {k}"
+        mode = prim.get("mode", 4)
+        if mode not in (4, 5, 6):
+            warnings.append(f"{what}: mode {mode} skipped (points and lines)")
+            return
+        at = prim["attributes"]
+        pos = f.accessor(at["POSITION"])
+        nv = len(pos)
+        nrm = f.accessor(at["NORMAL"]) if "NORMAL" in at else None
+        uv0 = f.accessor(at["TEXCOORD_0"], True) if "TEXCOORD_0" in at else np.zeros((nv, 2))
+        uv1 = f.accessor(at["TEXCOORD_1"], True) if "TEXCOORD_1" in at else None
+        col = f.accessor(at["COLOR_0"], True)[:, :3] if "COLOR_0" in at else None
+        if col is not None:
+            col = np.clip(np.nan_to_num(col, nan=0.0), 0.0, 1.0)
+        tan = f.accessor(at["TANGENT"]) if ("TANGENT" in at and nrm is not None) else None
+        idx = f.accessor(prim["indices"]).reshape(-1).astype(np.int64) if "indices" in prim else np.arange(nv)
+        if (idx >= nv).any():
+            raise SystemExit(f"{what}: index out of range")
+        tri = triangles_of(mode, idx)
+        if len(tri) == 0:
+            return
+        mid = material_id(prim.get("material"), col is not None)
+        m = materials[mid]
+        # Normals: as given; invalid ones (zero, non-finite) and a missing NORMAL → face normals.
+        Nv = nrm if nrm is not None else np.zeros((nv, 3))
+        good = np.isfinite(Nv).all(1) & (np.linalg.norm(np.nan_to_num(Nv), axis=1) > 0)
+        Nv = np.where(good[:, None], np.nan_to_num(Nv), 0.0)
+        ln = np.linalg.norm(Nv, axis=1, keepdims=True)
+        Nv = np.where(ln > 0, Nv / np.where(ln > 0, ln, 1), 0.0)
+        if m.normal_tex is not None and (tan is None or not np.any(tan)):
+            # Over the coordinates the normal map reads (glTF 2.0 §3.7.2.1): its set and transform.
+            uvt = uv1 if (m.normal_uv[0] == 1 and uv1 is not None) else uv0
+            if m.normal_uv[1] is not None:
+                rows = m.normal_uv[1]
+                uvt = uvt @ rows[:, :2].T + rows[:, 2]
+            tan = approximate_tangents(pos, Nv, uvt, tri, nv)
+            warnings.append(f"{what}: no TANGENT; approximate tangents (probegi: MikkTSpace)")
+        if tan is not None:
+            tan = np.where(np.isfinite(tan).all(1, keepdims=True), tan, 0.0)
+        P = pos[tri]
+        N = Nv[tri]
+        derive = ~good[tri]
+        N = derive_normals(P, N, derive, np.zeros(len(tri), np.int64), 180.0)
+        flat = derive.all(axis=1)
+        N[flat] = 0.0
+        g = Geometry(P, N, uv0[tri], np.full(len(tri), mid), flat)
+        if tan is not None:
+            g.T = tan[tri][..., :3]
+            g.TS = np.where(tan[tri[:, 0], 3] < 0, -1.0, 1.0)
+        if uv1 is not None:
+            g.UV1 = uv1[tri]
+        if col is not None:
+            g.COL = col[tri]
+        g.transform(world)
+        parts.append(g)
+
+    def visit(i: int, parent: np.ndarray, stack: list[int]) -> None:
+        nonlocal camera
+        if i in stack:
+            raise SystemExit(f"{path}: node {i} is its own ancestor")
+        node = nodes[i]
+        world = parent @ gltf_node_matrix(node)
+        if "mesh" in node:
+            mesh = doc["meshes"][node["mesh"]]
+            for k, prim in enumerate(mesh["primitives"]):
+                add_primitive(mesh, k, prim, world)
+        lref = node.get("extensions", {}).get("KHR_lights_punctual")
+        if lref is not None:
+            ld = light_defs[lref["light"]]
+            dn = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
+            ln = np.linalg.norm(dn)
+            spot = ld.get("spot", {})
+            lights.append(
+                Light(
+                    kind=ld["type"],
+                    position=world[:3, 3].copy(),
+                    direction=dn / ln if ln > 0 else dn,
+                    color=np.asarray(ld.get("color", [1.0, 1.0, 1.0]), np.float64),
+                    intensity=float(ld.get("intensity", 1.0)),
+                    range=ld.get("range"),
+                    inner=float(spot.get("innerConeAngle", 0.0)),
+                    outer=float(spot.get("outerConeAngle", math.pi / 4)),
+                )
+            )
+        if "camera" in node and camera is None:
+            c = doc["cameras"][node["camera"]]
+            if c.get("type") == "perspective":
+                pos = world[:3, 3].copy()
+                fwd = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
+                up = world[:3, :3] @ np.array([0.0, 1.0, 0.0])
+                fwd /= max(np.linalg.norm(fwd), 1e-30)
+                up /= max(np.linalg.norm(up), 1e-30)
+                camera = Camera(pos, pos + fwd, up, math.degrees(float(c["perspective"]["yfov"])))
+        for ch in node.get("children", []):
+            visit(ch, world, stack + [i])
+
+    for r in roots:
+        visit(r, np.eye(4), [])
+    if not parts:
+        raise SystemExit(f"{path}: no triangle primitives")
+    return Scene(cat_geometry(parts), materials, lights, np.zeros(3), camera, warnings)
 
 
 def load_scene(spec: str, frame: float = 0.0, bump: bool = True) -> Scene:
@@ -926,7 +1543,7 @@ def load_scene(spec: str, frame: float = 0.0, bump: bool = True) -> Scene:
             s.materials = [Material("furnace", kd=np.full(3, 0.5, np.float32), ke=np.ones(3, np.float32))]
             lo, hi = [-1, 0, -1], [1, 2, 1]
             gs = [polygon_geometry(fc, 0) for fc in box_faces(lo, hi)]
-            g = Geometry(*[np.concatenate([getattr(x, a) for x in gs]) for a in ("P", "N", "UV", "mat", "flat")])
+            g = cat_geometry(gs)
             g.P[:, [1, 2]] = g.P[:, [2, 1]]
             s.geometry = g
             s.camera = Camera(np.array([0, 1, 0.5]), np.array([0, 1, -1.0]), np.array([0, 1, 0.0]), 90.0)
@@ -942,7 +1559,7 @@ def load_scene(spec: str, frame: float = 0.0, bump: bool = True) -> Scene:
     if ext == ".toml":
         return load_toml(path, path.read_text(), path.parent, frame, bump)
     if ext in (".gltf", ".glb"):
-        raise SystemExit(f"{spec}: glTF is not supported by this checker (OBJ and TOML scenes only)")
+        return load_gltf(path, bump=bump)
     raise SystemExit(f"{spec}: unknown scene type")
 
 
@@ -986,6 +1603,9 @@ def setup_mitsuba(variant: str):
     return mi, variant
 
 
+PLUGINS: dict = {}  # define_plugins: "area" = ProbegiArea (the emitter of emissive meshes)
+
+
 def define_plugins(mi):
     import drjit as dr
 
@@ -1021,21 +1641,64 @@ def define_plugins(mi):
         nh = t1 * p1 + t2 * p2 + vh * dr.sqrt(dr.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
         return dr.normalize(mi.Vector3f(a * nh.x, a * nh.y, dr.maximum(nh.z, 1e-6)))
 
+    def normalize_or_zero(v):
+        ln = dr.norm(v)
+        ok = (ln > 0) & dr.isfinite(ln)
+        return dr.select(ok, v / dr.select(ok, ln, 1.0), 0.0), ok
+
+    def mapped_uv(ref, uv0, uv1):
+        tex, (uv_set, rows), fold = ref
+        uv = uv1 if uv_set == 1 else uv0
+        if rows is not None:
+            r = [[float(x) for x in row] for row in rows]
+            uv = mi.Point2f(r[0][0] * uv.x + r[0][1] * uv.y + r[0][2], r[1][0] * uv.x + r[1][1] * uv.y + r[1][2])
+        if fold is not None:
+            uv = fold(uv)
+        return uv
+
+    def lookup(ref, si, active):
+        """A texture reference (texture, (set, rows), fold) evaluated at the interaction:
+        TEXCOORD_0 (`si.uv`) or TEXCOORD_1 (mesh attribute `vertex_uv1`), through the
+        KHR_texture_transform rows, folded per axis for mixed wrap modes (`gltf_tex_ref`)."""
+        tex, (uv_set, rows), fold = ref
+        if uv_set == 0 and rows is None and fold is None:
+            return tex.eval(si, active)
+        uv1 = None
+        if uv_set == 1:
+            a = si.shape.eval_attribute_3("vertex_uv1", si, active)
+            uv1 = mi.Point2f(a[0], a[1])
+        si2 = mi.SurfaceInteraction3f(si)
+        si2.uv = mapped_uv(ref, mi.Point2f(si.uv), uv1)
+        return tex.eval(si2, active)
+
+    def lookup_uv(ref, uv0, uv1, active):
+        """The same at explicit coordinates (emitter samples, which have no interaction)."""
+        si2 = dr.zeros(mi.SurfaceInteraction3f)
+        si2.uv = mapped_uv(ref, uv0, uv1)
+        return ref[0].eval(si2, active)
+
     class ProbegiBSDF(mi.BSDF):
         """probegi's surface model at a Mitsuba interaction: `probegi_core::bsdf::SurfaceBsdf`
         (diffuse × (1 − max F0)/π + GGX, Schlick F, height-correlated Smith) in the frame of
         `probegi_cpu::shading::ShadingContext`: the shading normal flipped into the geometric
-        hemisphere, optionally bump-perturbed as `Scene::perturbed_normal` does, turned to the
-        viewer's side by the *geometric* normal; the viewer clamped to just above the shading
-        horizon; light accepted only above both the shading and the geometric plane
-        (`lambert_cos`). Sampling is probegi's mixture (VNDF + cosine)."""
+        hemisphere, optionally bump- or normal-map-perturbed as `Scene::perturbed_normal` does,
+        turned to the viewer's side by the *geometric* normal; the viewer clamped to just above
+        the shading horizon; light accepted only above both the shading and the geometric plane
+        (`lambert_cos`). Sampling is probegi's mixture (VNDF + cosine).
 
-        def __init__(self, props, diffuse=None, f0=(0.0, 0.0, 0.0), alpha=1.0, bump=None, bump_slope=(1.0, 1.0)):
+        MTL: `diffuse` (Kd × map_Kd), constant `f0` (Ks) and `alpha`. glTF (`gltf` a dict, see
+        `material_bsdf`): `Material::bsdf` per point: base = factor × COLOR_0 × baseColorTexture,
+        roughness/metalness = factors × G/B of metallicRoughnessTexture, α = clamp(r², 1e-3, 1),
+        diffuse = base (1 − metallic), F0 = lerp(0.04, base, metallic)."""
+
+        def __init__(
+            self, props, diffuse=None, f0=(0.0, 0.0, 0.0), alpha=1.0, bump=None, bump_slope=(1.0, 1.0), gltf=None
+        ):
             mi.BSDF.__init__(self, props)
             self.diffuse = diffuse
+            self.gltf = gltf
             self.f0 = mi.Color3f(*[float(x) for x in f0])
-            self.has_spec = max(float(x) for x in f0) > 0.0
-            self.f0_lum = float(0.2126 * f0[0] + 0.7152 * f0[1] + 0.0722 * f0[2])
+            self.has_spec = gltf is not None or max(float(x) for x in f0) > 0.0
             self.kdiff = 1.0 - min(max(float(x) for x in f0), 1.0)
             self.alpha = max(float(alpha), MIN_ALPHA)
             self.bump = bump
@@ -1050,6 +1713,25 @@ def define_plugins(mi):
                 flags = flags | c
             self.m_flags = flags
 
+        def _params(self, si, active):
+            """(diffuse albedo after the 1 − max F0 split, F0, α, specular lobe on)."""
+            if self.gltf is None:
+                base = self.diffuse.eval(si, active) * self.kdiff
+                return base, self.f0, mi.Float(self.alpha), mi.Bool(self.has_spec)
+            g = self.gltf
+            base = lookup(g["base"], si, active)
+            if g["vertex_color"]:
+                base = base * si.shape.eval_attribute_3("vertex_color", si, active)
+            rough, metal = mi.Float(g["roughness"]), mi.Float(g["metallic"])
+            if g["mr"] is not None:
+                t = lookup(g["mr"], si, active)
+                rough, metal = rough * t[1], metal * t[2]
+            a = dr.clip(rough * rough, MIN_ALPHA, 1.0)
+            f0 = 0.04 * (1.0 - metal) + base * metal
+            fmax = dr.maximum(dr.maximum(f0[0], f0[1]), f0[2])
+            diffuse = base * (1.0 - metal) * (1.0 - dr.minimum(fmax, 1.0))
+            return diffuse, f0, a, fmax > 0.0
+
         def _frame(self, si, active):
             """World facing normal, facing geometric normal, and the local viewer direction."""
             ng = si.n
@@ -1063,16 +1745,24 @@ def define_plugins(mi):
                 # on degenerate vectors; dropped unless 1e-3 above the geometric plane.
                 grad = self.bump.eval_1_grad(si, active)
                 slope = mi.Vector2f(grad.x * self.bump_slope[0], grad.y * self.bump_slope[1])
-
-                def normalize_or_zero(v):
-                    ln = dr.norm(v)
-                    ok = (ln > 0) & dr.isfinite(ln)
-                    return dr.select(ok, v / dr.select(ok, ln, 1.0), 0.0), ok
-
                 along_u, _ = normalize_or_zero(si.dp_du - ns * dr.dot(ns, si.dp_du))
                 along_v, _ = normalize_or_zero(si.dp_dv - ns * dr.dot(ns, si.dp_dv))
                 b, ok = normalize_or_zero(ns - along_u * slope.x - along_v * slope.y)
                 b = dr.select(ok, b, ns)
+                ns = dr.select(dr.dot(b, ng) > 1e-3, b, ns)
+            if self.gltf is not None and self.gltf["normal"] is not None:
+                # `Scene::perturbed_normal` (normal map): the interpolated tangent made
+                # orthogonal to ns, bitangent = sign(corner 0's w) · ns × tangent, the texel
+                # (raw unorm × 2 − 1) with X, Y × normalTexture.scale; unchanged where the
+                # tangent vanishes, dropped unless 1e-3 above the geometric plane.
+                t = mi.Vector3f(si.shape.eval_attribute_3("vertex_tangent", si, active))
+                sign = dr.select(si.shape.eval_attribute_1("face_tsign", si, active) < 0, -1.0, 1.0)
+                tan, tan_ok = normalize_or_zero(t - ns * dr.dot(ns, t))
+                bit = dr.cross(ns, tan) * sign
+                s = lookup(self.gltf["normal"], si, active) * 2.0 - 1.0
+                k = self.gltf["normal_scale"]
+                b, ok = normalize_or_zero(tan * (s[0] * k) + bit * (s[1] * k) + ns * s[2])
+                b = dr.select(ok & tan_ok, b, ns)
                 ns = dr.select(dr.dot(b, ng) > 1e-3, b, ns)
             wv_world = si.to_world(si.wi)
             front = dr.dot(wv_world, ng) > 0
@@ -1083,40 +1773,41 @@ def define_plugins(mi):
             wv = dr.normalize(mi.Vector3f(wv.x, wv.y, dr.maximum(wv.z, 1e-4)))
             return frame, gf, wv
 
-        def _lobe_probability(self, base):
-            if not self.has_spec:
-                return mi.Float(0.0)
-            d = lum(base)
-            s = self.f0_lum
-            return dr.select(d <= 0, 1.0, dr.clip(s / (s + d), 0.1, 0.9))
+        @staticmethod
+        def _lobe_probability(diffuse, f0, spec_on):
+            d = lum(diffuse)
+            s = lum(f0)
+            p = dr.select(d <= 0, 1.0, dr.clip(s / dr.maximum(s + d, 1e-30), 0.1, 0.9))
+            return dr.select(spec_on, p, 0.0)
 
-        def _eval_pdf_local(self, si, wv, wl, ok, active):
-            base = self.diffuse.eval(si, active) * self.kdiff
+        def _eval_pdf_local(self, params, wv, wl, ok, active):
+            diffuse, f0, a, spec_on = params
             valid = active & ok & (wv.z > 0) & (wl.z > 0)
-            value = base * dr.inv_pi * wl.z
-            ps = self._lobe_probability(base)
+            value = diffuse * dr.inv_pi * wl.z
+            ps = self._lobe_probability(diffuse, f0, spec_on)
             pdf = (1.0 - ps) * wl.z * dr.inv_pi
             if self.has_spec:
                 h = dr.normalize(wv + wl)
-                a = self.alpha
                 m = (1.0 - dr.clip(dr.dot(wl, h), 0.0, 1.0)) ** 5
-                fres = self.f0 + (1.0 - self.f0) * m
-                value += fres * (ggx_d(h.z, a) * smith_g2(wv.z, wl.z, a) / (4.0 * wv.z * wl.z)) * wl.z
+                fres = f0 + (1.0 - f0) * m
+                wlz = dr.maximum(wl.z, 1e-12)  # invalid directions are masked; scalar floats raise on /0
+                spec = fres * (ggx_d(h.z, a) * smith_g2(wv.z, wlz, a) / (4.0 * wv.z * wlz)) * wl.z
+                value += dr.select(spec_on, spec, 0.0)
                 pdf += ps * smith_g1(wv.z, a) * ggx_d(h.z, a) / (4.0 * wv.z)
             return dr.select(valid, value, 0.0), dr.select(valid, pdf, 0.0)
 
         def sample(self, ctx, si, sample1, sample2, active=True):
             frame, gf, wv = self._frame(si, active)
-            base = self.diffuse.eval(si, active) * self.kdiff
-            ps = self._lobe_probability(base)
+            params = self._params(si, active)
+            ps = self._lobe_probability(params[0], params[1], params[3])
             wl = mi.warp.square_to_cosine_hemisphere(sample2)
             pick_spec = sample1 < ps
             if self.has_spec:
-                h = vndf(wv, self.alpha, sample2)
+                h = vndf(wv, params[2], sample2)
                 wl = dr.select(pick_spec, 2.0 * dr.dot(wv, h) * h - wv, wl)
             wl_world = frame.to_world(wl)
             ok = dr.dot(wl_world, gf) > 0
-            value, pdf = self._eval_pdf_local(si, wv, wl, ok, active)
+            value, pdf = self._eval_pdf_local(params, wv, wl, ok, active)
             bs = dr.zeros(mi.BSDFSample3f)
             bs.wo = si.to_local(wl_world)
             bs.eta = 1.0
@@ -1132,7 +1823,7 @@ def define_plugins(mi):
             frame, gf, wv = self._frame(si, active)
             wl_world = si.to_world(wo)
             ok = dr.dot(wl_world, gf) > 0
-            return self._eval_pdf_local(si, wv, frame.to_local(wl_world), ok, active)
+            return self._eval_pdf_local(self._params(si, active), wv, frame.to_local(wl_world), ok, active)
 
         def eval(self, ctx, si, wo, active=True):
             return self.eval_pdf(ctx, si, wo, active)[0]
@@ -1141,7 +1832,7 @@ def define_plugins(mi):
             return self.eval_pdf(ctx, si, wo, active)[1]
 
         def eval_diffuse_reflectance(self, si, active=True):
-            return self.diffuse.eval(si, active) * self.kdiff
+            return self._params(si, active)[0]
 
         def traverse(self, callback):
             pass
@@ -1150,7 +1841,109 @@ def define_plugins(mi):
             pass
 
         def to_string(self):
-            return f"ProbegiBSDF[f0={self.f0}, alpha={self.alpha}, bump={self.bump is not None}]"
+            return f"ProbegiBSDF[f0={self.f0}, alpha={self.alpha}, bump={self.bump is not None}, gltf={self.gltf is not None}]"
+
+    def new_direction_sample():
+        """dr.zeros(DirectionSample3f); scalar variants cannot build one that way."""
+        if mi.variant().startswith("scalar"):
+            return mi.DirectionSample3f()
+        return dr.zeros(mi.DirectionSample3f)
+
+    class ProbegiArea(mi.Emitter):
+        """An emissive mesh as probegi treats it (`Scene::emitted`, `DirectLighting`): it emits
+        from the front (counter-clockwise) face only, decided by the *geometric* normal, with
+        radiance Ke (× the emissive texture through its reference: TEXCOORD_0/1,
+        KHR_texture_transform, sampler). Next-event estimation picks a point uniformly by area
+        over the mesh's own triangle list (Mitsuba's `area` emitter samples a textured radiance
+        through the UV layout instead, `eval_parameterization`, which misses every triangle
+        whose UVs overlap another's: mirrored labels, two-sided cards). The density MIS weighs
+        with (`ds.pdf`, `pdf_direction`) uses the normal in `ds.n`, the shading normal as
+        Mitsuba fills it on hits, in both places, so the weights still sum to one; the
+        returned weight divides by the true density (geometric cosine). JIT variants only."""
+
+        def __init__(self, props, geom: "Geometry", flat: bool, radiance, tex_ref=None):
+            mi.Emitter.__init__(self, props)
+            self.m_flags = +mi.EmitterFlags.Surface
+            if tex_ref is not None:
+                self.m_flags = self.m_flags | mi.EmitterFlags.SpatiallyVarying
+            P = geom.P.astype(np.float64)
+            areas = 0.5 * np.linalg.norm(np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]), axis=1)
+            self.inv_area = 1.0 / max(float(areas.sum()), 1e-30)
+            self.dist = mi.DiscreteDistribution(mi.Float(areas.astype(np.float32)))
+            f32 = lambda a: mi.Float(np.ascontiguousarray(a, np.float32).reshape(-1))  # noqa: E731
+            self.p = [f32(P[:, k]) for k in range(3)]
+            self.n = None if flat else [f32(geom.N[:, k]) for k in range(3)]
+            self.uv = [f32(geom.UV[:, k]) for k in range(3)]
+            self.uv1 = [f32(geom.extra("UV1")[:, k]) for k in range(3)] if geom.UV1 is not None else self.uv
+            self.radiance = mi.Color3f(*[float(x) for x in radiance])
+            self.tex_ref = tex_ref
+
+        def _le(self, uv0, uv1, active):
+            if self.tex_ref is None:
+                return self.radiance
+            return self.radiance * lookup_uv(self.tex_ref, uv0, uv1, active)
+
+        def eval(self, si, active=True):
+            front = dr.dot(si.n, si.to_world(si.wi)) > 0
+            uv1 = None
+            if self.tex_ref is not None and self.tex_ref[1][0] == 1:
+                a = si.shape.eval_attribute_3("vertex_uv1", si, active)
+                uv1 = mi.Point2f(a[0], a[1])
+            return dr.select(active & front, self._le(mi.Point2f(si.uv), uv1, active), 0.0)
+
+        def sample_direction(self, it, sample, active=True):
+            idx, u = self.dist.sample_reuse(sample.x, active)
+            b = mi.warp.square_to_uniform_triangle(mi.Point2f(u, sample.y))
+            w0 = 1.0 - b.x - b.y
+
+            def at(arrs, T):
+                c = [dr.gather(T, a, idx, active) for a in arrs]
+                return c[0] * w0 + c[1] * b.x + c[2] * b.y
+
+            q = [dr.gather(mi.Point3f, a, idx, active) for a in self.p]
+            p = q[0] * w0 + q[1] * b.x + q[2] * b.y
+            ng = dr.normalize(dr.cross(q[1] - q[0], q[2] - q[0]))
+            ns = ng if self.n is None else dr.normalize(at(self.n, mi.Vector3f))
+            d = p - it.p
+            dist2 = dr.squared_norm(d)
+            dist = dr.sqrt(dist2)
+            wi = d / dist
+            cos_g = -dr.dot(ng, wi)
+            cos_s = dr.abs(dr.dot(ns, wi))
+            ok = active & (cos_g > 0) & (dist2 > 0)
+            ds = dr.zeros(mi.DirectionSample3f)
+            ds.p = p
+            ds.n = ns
+            ds.uv = at(self.uv, mi.Point2f)
+            ds.d = wi
+            ds.dist = dist
+            ds.pdf = dr.select(ok, self.inv_area * dist2 / dr.maximum(cos_s, 1e-12), 0.0)
+            ds.delta = False
+            ds.time = it.time
+            ds.emitter = mi.EmitterPtr(self)
+            uv1 = at(self.uv1, mi.Point2f) if (self.tex_ref is not None and self.tex_ref[1][0] == 1) else None
+            le = self._le(ds.uv, uv1, ok)
+            weight = le * cos_g / (self.inv_area * dr.maximum(dist2, 1e-30))
+            return ds, dr.select(ok, weight, 0.0)
+
+        def pdf_direction(self, it, ds, active=True):
+            c = dr.abs(dr.dot(ds.d, ds.n))
+            return dr.select(active & (c > 0), self.inv_area * ds.dist * ds.dist / dr.maximum(c, 1e-12), 0.0)
+
+        def eval_direction(self, it, ds, active=True):
+            return mi.Color3f(0.0)  # not used by `path` / `volpath`
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            raise NotImplementedError("light tracing is not supported by this emitter")
+
+        def traverse(self, callback):
+            pass
+
+        def parameters_changed(self, keys):
+            pass
+
+        def to_string(self):
+            return f"ProbegiArea[textured={self.tex_ref is not None}]"
 
     class GltfPunctual(mi.Emitter):
         """A point or spot light with KHR_lights_punctual falloff and range window."""
@@ -1169,7 +1962,7 @@ def define_plugins(mi):
             self.range = light.range
 
         def sample_direction(self, it, sample, active=True):
-            ds = dr.zeros(mi.DirectionSample3f)
+            ds = new_direction_sample()
             to = self.pos - it.p
             d2 = dr.squared_norm(to)
             dist = dr.sqrt(d2)
@@ -1211,20 +2004,123 @@ def define_plugins(mi):
         def to_string(self):
             return "GltfPunctual[]"
 
+    PLUGINS["area"] = ProbegiArea
     return ProbegiBSDF, GltfPunctual
 
 
-def bitmap_texture(mi, arr: np.ndarray, nearest: bool = False):
+def bitmap_texture(mi, arr: np.ndarray, nearest: bool = False, wrap: str = "repeat", to_uv=None):
     arr = np.ascontiguousarray(arr.astype(np.float32))
-    return mi.load_dict(
-        {
-            "type": "bitmap",
-            "bitmap": mi.Bitmap(arr),
-            "raw": True,
-            "filter_type": "nearest" if nearest else "bilinear",
-            "wrap_mode": "repeat",
-        }
-    )
+    d = {
+        "type": "bitmap",
+        "bitmap": mi.Bitmap(arr),
+        "raw": True,
+        "filter_type": "nearest" if nearest else "bilinear",
+        "wrap_mode": wrap,
+    }
+    if to_uv is not None:
+        d["to_uv"] = to_uv
+    return mi.load_dict(d)
+
+
+def uv_transform(mi, rows):
+    """KHR_texture_transform rows as a Mitsuba `to_uv` transform (None: identity)."""
+    if rows is None:
+        return None
+    m = np.eye(3)
+    m[:2, :] = rows
+    return mi.ScalarTransform3f(m.tolist())
+
+
+def gltf_tex_ref(mi, tex: Texture | None, arr: np.ndarray | None, mapping, const=None):
+    """A glTF texture reference for `lookup` in ProbegiBSDF: (Mitsuba texture, (set, rows),
+    fold). texture.rs samplers: the filter (bilinear or nearest, no mipmaps) and wrapping on
+    the integer texel index. One wrap mode on both axes is Mitsuba's own `wrap_mode` (repeat,
+    mirror, clamp: the same index rules); mixed modes are exact too: the image padded by one
+    texel per side (the wrapped neighbour for repeat, the edge texel for mirror and clamp),
+    read with clamp, the coordinate folded per axis into [0, 1] by its mode first."""
+    if tex is None:
+        return (const_texture(mi, const), (0, None), None)
+    nearest = tex.filter == "nearest"
+    if tex.wrap_u == tex.wrap_v:
+        return (bitmap_texture(mi, arr, nearest, tex.wrap_u), mapping, None)
+    import drjit as dr
+
+    h, w = arr.shape[:2]
+
+    def pad(a, axis, mode):
+        n = a.shape[axis]
+        lo, hi = ([n - 1], [0]) if mode == "repeat" else ([0], [n - 1])
+        return np.concatenate([np.take(a, lo, axis), a, np.take(a, hi, axis)], axis)
+
+    padded = pad(pad(arr, 1, tex.wrap_u), 0, tex.wrap_v)
+
+    def fold1(c, mode, n):
+        if mode == "repeat":
+            c = c - dr.floor(c)
+        elif mode == "mirror":
+            t = c - 2.0 * dr.floor(c * 0.5)
+            c = dr.select(t > 1.0, 2.0 - t, t)
+        else:
+            c = dr.clip(c, 0.0, 1.0)
+        return (c * n + 1.0) / (n + 2.0)
+
+    def fold(uv):
+        return mi.Point2f(fold1(uv.x, tex.wrap_u, w), fold1(uv.y, tex.wrap_v, h))
+
+    return (bitmap_texture(mi, padded, nearest, "clamp"), mapping, fold)
+
+
+def gltf_material_bsdf(mi, ProbegiBSDF, m: Material, cache: dict, model: str, notes: list[str]):
+    """glTF metallic-roughness → ProbegiBSDF (probegi's Material::bsdf per point), or, with
+    `--shading-model mitsuba`, Mitsuba's own `principled` (+ `normalmap`) for contrast."""
+    unorm = lambda t: t.rgb8.astype(np.float32) / 255.0  # noqa: E731
+
+    def cached(key, make):
+        if key not in cache:
+            cache[key] = make()
+        return cache[key]
+
+    kd = m.kd.astype(np.float32)
+    if model == "mitsuba":
+        base = (
+            bitmap_texture(mi, m.kd_tex.linear_rgb() * kd[None, None, :], to_uv=uv_transform(mi, m.kd_uv[1]))
+            if m.kd_tex is not None
+            else const_texture(mi, kd)
+        )
+        d = {"type": "principled", "base_color": base, "specular": 0.5, "spec_tint": 0.0}
+        if m.mr_tex is not None:
+            t = unorm(m.mr_tex)
+            xf = uv_transform(mi, m.mr_uv[1])
+            d["roughness"] = bitmap_texture(mi, (t[..., 1] * m.roughness)[..., None], to_uv=xf)
+            d["metallic"] = bitmap_texture(mi, (t[..., 2] * m.metallic)[..., None], to_uv=xf)
+        else:
+            d["roughness"], d["metallic"] = float(m.roughness), float(m.metallic)
+        bsdf = mi.load_dict({"type": "twosided", "material": d})
+        if m.normal_tex is not None:
+            nm = bitmap_texture(mi, unorm(m.normal_tex), to_uv=uv_transform(mi, m.normal_uv[1]))
+            bsdf = mi.load_dict({"type": "normalmap", "normalmap": nm, "bsdf": bsdf})
+        return bsdf
+    g = {
+        "base": cached(
+            ("kd", id(m.kd_tex), tuple(kd), m.kd_uv[0], None if m.kd_uv[1] is None else m.kd_uv[1].tobytes()),
+            lambda: gltf_tex_ref(
+                mi, m.kd_tex, None if m.kd_tex is None else m.kd_tex.linear_rgb() * kd[None, None, :], m.kd_uv, kd
+            ),
+        ),
+        "vertex_color": m.vertex_color,
+        "roughness": float(m.roughness),
+        "metallic": float(m.metallic),
+        "mr": None
+        if m.mr_tex is None
+        else cached(("mr", id(m.mr_tex), m.mr_uv[0], None if m.mr_uv[1] is None else m.mr_uv[1].tobytes()),
+                    lambda: gltf_tex_ref(mi, m.mr_tex, unorm(m.mr_tex), m.mr_uv)),
+        "normal": None
+        if m.normal_tex is None
+        else cached(("nm", id(m.normal_tex), m.normal_uv[0], None if m.normal_uv[1] is None else m.normal_uv[1].tobytes()),
+                    lambda: gltf_tex_ref(mi, m.normal_tex, unorm(m.normal_tex), m.normal_uv)),
+        "normal_scale": float(m.normal_scale),
+    }
+    return ProbegiBSDF(mi.Properties(), gltf=g)
 
 
 def const_texture(mi, c):
@@ -1237,8 +2133,8 @@ def const_texture(mi, c):
 CUTOUT_SUPERSAMPLE = 8
 
 
-def thresholded_coverage(tex: Texture, factor: float, max_res: int = 4096) -> np.ndarray:
-    """Coverage ≥ 0.5 of probegi's bilinear filter, evaluated on a grid k× finer."""
+def thresholded_coverage(tex: Texture, factor: float, cutoff: float = ALPHA_CUTOFF, max_res: int = 4096) -> np.ndarray:
+    """Coverage ≥ the cutoff of probegi's bilinear filter (repeat), evaluated on a grid k× finer."""
     a = tex.coverage()
     h, w = a.shape
     k = max(1, min(CUTOUT_SUPERSAMPLE, max_res // max(w, h)))
@@ -1253,7 +2149,7 @@ def thresholded_coverage(tex: Texture, factor: float, max_res: int = 4096) -> np
         return arr[i0, :] * (1 - fx)[:, None] + arr[i1, :] * fx[:, None]
 
     up = resample(resample(a, w, 1), h, 0)
-    return (factor * up >= ALPHA_CUTOFF).astype(np.float32)
+    return (factor * up >= cutoff).astype(np.float32)
 
 
 # probegi-scene `material::BUMP_WHITE_HEIGHT_REL`: a white texel of a height map rises
@@ -1269,11 +2165,14 @@ def bump_slope(m: Material) -> tuple[float, float]:
     return (white_texels / w * m.bump_multiplier, white_texels / h * m.bump_multiplier)
 
 
-def material_bsdf(mi, ProbegiBSDF, m: Material, cache: dict, smooth: bool, model: str):
+def material_bsdf(mi, ProbegiBSDF, m: Material, cache: dict, smooth: bool, model: str, notes: list[str] | None = None):
     """The Mitsuba BSDF of a material. model = "probegi": specular, bump-mapped and
     smooth-shaded materials use ProbegiBSDF (probegi's BSDF and shading-frame rules);
     "mitsuba": only specular ones do, bump maps go through Mitsuba's `bumpmap` with
-    scale = bm (the pbrt/Mitsuba reading, not probegi's: see the module docstring)."""
+    scale = bm (the pbrt/Mitsuba reading, not probegi's: see the module docstring).
+    glTF materials: `gltf_material_bsdf`. Cutouts: a `mask` around it."""
+    if m.gltf:
+        return with_cutout(mi, m, gltf_material_bsdf(mi, ProbegiBSDF, m, cache, model, notes if notes is not None else []))
     if m.kd_tex is not None:
         key = (id(m.kd_tex), tuple(m.kd))
         if key not in cache:
@@ -1301,9 +2200,16 @@ def material_bsdf(mi, ProbegiBSDF, m: Material, cache: dict, smooth: bool, model
             bsdf = mi.load_dict(
                 {"type": "bumpmap", "arbitrary": height, "scale": float(m.bump_multiplier), "bsdf": bsdf}
             )
+    return with_cutout(mi, m, bsdf)
+
+
+def with_cutout(mi, m: Material, bsdf):
+    """A `mask` BSDF with the thresholded coverage (TEXCOORD_0, repeat, bilinear, as
+    probegi's traversal test reads it whatever the texture's sampler) where it has a cutout."""
     if m.has_cutout():
         if m.alpha_tex is not None:
-            opacity = bitmap_texture(mi, thresholded_coverage(m.alpha_tex, m.alpha_factor)[..., None], nearest=True)
+            cov = thresholded_coverage(m.alpha_tex, m.alpha_factor, m.alpha_cutoff)
+            opacity = bitmap_texture(mi, cov[..., None], nearest=True)
         else:
             opacity = mi.load_dict({"type": "rgb", "value": [0.0, 0.0, 0.0]})
         bsdf = mi.load_dict({"type": "mask", "opacity": opacity, "bsdf": bsdf})
@@ -1326,7 +2232,10 @@ def uv_derivatives_ok(P: np.ndarray, UV: np.ndarray) -> np.ndarray:
     return ok & np.isfinite(dpdu).all(axis=1) & np.isfinite(dpdv).all(axis=1)
 
 
-def make_mesh(mi, name: str, P, N, UV, flat: bool, bsdf, emitter):
+def make_mesh(mi, name: str, P, N, UV, flat: bool, bsdf, emitter, extra: Geometry | None = None):
+    """A Mitsuba mesh of corner-expanded triangles. `extra` (glTF materials): its tangents
+    (`vertex_tangent`), corner-0 bitangent signs (`face_tsign`), TEXCOORD_1 (`vertex_uv1`)
+    and COLOR_0 (`vertex_color`) become mesh attributes that ProbegiBSDF reads."""
     f = P.shape[0]
     props = mi.Properties()
     props["bsdf"] = bsdf
@@ -1345,6 +2254,16 @@ def make_mesh(mi, name: str, P, N, UV, flat: bool, bsdf, emitter):
     if not flat:
         put("vertex_normals", N.astype(np.float32))
     params.update()
+    if extra is not None:
+        uv1 = extra.extra("UV1")
+        uv1 = np.concatenate([uv1, np.zeros(uv1.shape[:2] + (1,))], axis=2)
+        for key, arr, k in (
+            ("vertex_tangent", extra.extra("T"), 3),
+            ("vertex_uv1", uv1, 3),
+            ("vertex_color", extra.extra("COL"), 3),
+            ("face_tsign", extra.extra("TS"), 1),
+        ):
+            mesh.add_attribute(key, k, np.ascontiguousarray(arr.astype(np.float32).reshape(-1)).tolist())
     return mesh
 
 
@@ -1383,28 +2302,48 @@ def build_mitsuba_scene(mi, ProbegiBSDF, GltfPunctual, scene: Scene, cam: Camera
         "sampler": {"type": "independent", "sample_count": args.spp},
     }
     tex_cache: dict = {}
-    n_spec = n_bump = n_pbsdf = 0
+    n_spec = n_bump = n_pbsdf = n_gltf = n_normal = 0
     for mi_idx in np.unique(g.mat):
         m = scene.materials[int(mi_idx)]
         sel = g.mat == mi_idx
-        smooth = bool((sel & ~g.flat).any()) and not m.is_emissive()
-        bsdf = material_bsdf(mi, ProbegiBSDF, m, tex_cache, smooth, args.shading_model)
-        n_spec += m.has_specular()
+        smooth = bool((sel & ~g.flat).any())
+        bsdf = material_bsdf(mi, ProbegiBSDF, m, tex_cache, smooth, args.shading_model, notes)
+        n_spec += m.has_specular() and not m.gltf
         n_bump += m.bump_tex is not None
+        n_gltf += m.gltf
+        n_normal += m.normal_tex is not None
         n_pbsdf += args.shading_model == "probegi" and (m.has_specular() or m.bump_tex is not None or smooth)
         emitter = None
         if m.is_emissive():
+            jit = not mi.variant().startswith("scalar")
+            tex_ref = None
             if m.ke_tex is not None:
-                rad = bitmap_texture(mi, m.ke_tex.linear_rgb() * m.ke[None, None, :])
-                emitter = mi.load_dict({"type": "area", "radiance": rad})
+                tex_ref = gltf_tex_ref(mi, m.ke_tex, m.ke_tex.linear_rgb(), m.ke_uv)
+            if jit:
+
+                def emitter(sub, flat, ke=m.ke, tex_ref=tex_ref):
+                    return PLUGINS["area"](mi.Properties(), sub, flat, ke, tex_ref)
+
             else:
-                # A constant radiance: Mitsuba then samples the emitter uniformly by area, as
-                # probegi does (a spatially varying one would be sampled through its UVs).
-                emitter = mi.load_dict(
-                    {"type": "area", "radiance": {"type": "rgb", "value": [float(x) for x in m.ke]}}
-                )
+                # scalar variants: Mitsuba's `area` (a Python emitter's gathers need JIT arrays).
+                # It emits from the side of the interpolated normal, and samples a textured
+                # radiance through the UV layout (wrong where UVs overlap).
+                notes.append(f"material {m.name}: emitter is Mitsuba's `area` (scalar variant; see docstring)")
+
+                def emitter(sub, flat, m=m):
+                    if m.ke_tex is None:
+                        rad = {"type": "rgb", "value": [float(x) for x in m.ke]}
+                    else:
+                        t = m.ke_tex
+                        rad = bitmap_texture(
+                            mi, t.linear_rgb() * m.ke[None, None, :], t.filter == "nearest", t.wrap_u,
+                            uv_transform(mi, m.ke_uv[1]),
+                        )
+                    return mi.load_dict({"type": "area", "radiance": rad})
+
             if m.has_cutout():
                 notes.append(f"material {m.name}: emissive with a cutout; Mitsuba emits where probegi cuts")
+
         # probegi leaves the normal unbumped on triangles whose UV mapping is degenerate
         # (`uv_derivatives` → None); Mitsuba would fall back to an arbitrary ∂p/∂u frame there.
         parts = [(sel, bsdf, "")]
@@ -1418,12 +2357,12 @@ def build_mitsuba_scene(mi, ProbegiBSDF, GltfPunctual, scene: Scene, cam: Camera
         for part, part_bsdf, suffix in parts:
             for flat in (True, False):
                 s = part & (g.flat == flat)
-                if emitter is not None:
-                    s = part if flat else np.zeros_like(part)  # emitters: face normals (front face emits)
                 if not s.any():
                     continue
                 key = f"mesh_{int(mi_idx)}_{'flat' if flat else 'smooth'}{suffix}"
-                d[key] = make_mesh(mi, key, g.P[s], g.N[s], g.UV[s], flat, part_bsdf, emitter)
+                extra = g.select(s) if m.gltf else None
+                em = emitter(g.select(s), flat) if emitter is not None else None
+                d[key] = make_mesh(mi, key, g.P[s], g.N[s], g.UV[s], flat, part_bsdf, em, extra)
     if n_spec:
         notes.append(f"{n_spec} material(s) with Ks > 0 (GGX lobe)")
     if n_bump:
@@ -1431,6 +2370,9 @@ def build_mitsuba_scene(mi, ProbegiBSDF, GltfPunctual, scene: Scene, cam: Camera
         notes.append(f"{n_bump} material(s) with bump maps: {how}")
     if n_pbsdf:
         notes.append(f"{n_pbsdf} material(s) through the Python ProbegiBSDF (--shading-model {args.shading_model})")
+    if n_gltf:
+        how = "ProbegiBSDF (probegi's Material::bsdf)" if args.shading_model == "probegi" else "Mitsuba `principled`"
+        notes.append(f"{n_gltf} glTF metallic-roughness material(s): {how}; {n_normal} with normal maps")
     if float(scene.sky.max()) > 0:
         d["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [float(x) for x in scene.sky]}}
     for i, l in enumerate(scene.lights):
@@ -1520,7 +2462,9 @@ def slug(spec: str) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("--scene", action="append", required=True, help=".obj, .toml or builtin:NAME (repeatable)")
+    ap.add_argument(
+        "--scene", action="append", required=True, help=".obj, .gltf, .glb, .toml or builtin:NAME (repeatable)"
+    )
     ap.add_argument("--width", type=int, default=160)
     ap.add_argument("--height", type=int, default=120)
     ap.add_argument("--spp", type=int, default=64)
@@ -1537,7 +2481,9 @@ def main() -> int:
     ap.add_argument("--frame", type=float, default=0.0, help="light keyframes evaluated at this frame")
     ap.add_argument("--seed", type=int, default=0, help="probegi seed; Mitsuba uses seed+1 and seed+2")
     ap.add_argument(
-        "--no-bump", action="store_true", help="ignore MTL bump maps (probegi gets --set normal_maps=false)"
+        "--no-bump",
+        action="store_true",
+        help="ignore MTL bump maps and glTF normal maps (probegi gets --set normal_maps=false)",
     )
     ap.add_argument(
         "--shading-model",
@@ -1545,7 +2491,8 @@ def main() -> int:
         default="probegi",
         help="probegi: bump-mapped, glossy and smooth-shaded materials use the Python ProbegiBSDF with\n"
         "probegi's shading-frame and bump rules; mitsuba: Mitsuba's bumpmap (scale = -bm, scene units;\n"
-        "NOT equivalent to probegi's texel-space bump rule) and twosided(diffuse) rules",
+        "NOT equivalent to probegi's texel-space bump rule) and twosided(diffuse) rules; glTF materials:\n"
+        "twosided(principled) + normalmap (NOT equivalent either, for contrast)",
     )
     ap.add_argument(
         "--no-cutouts", action="store_true", help="every material opaque (probegi gets --set alpha_cutouts=false)"
@@ -1650,6 +2597,15 @@ def main() -> int:
             row["ratio"] = a.reshape(-1, 3).mean(0) / np.maximum(b.reshape(-1, 3).mean(0), 1e-12)
             b2 = read_exr(mi, mit[1])
             row["ratio_floor"] = b2.reshape(-1, 3).mean(0) / np.maximum(b.reshape(-1, 3).mean(0), 1e-12)
+            # The same over the pixels that see geometry: a pixel whose every sample leaves for the
+            # constant sky is exactly the sky in both Mitsuba images (it would dilute the ratio).
+            sky = np.asarray(scene.sky, np.float64)
+            tol = 1e-4 * max(float(sky.max()), 1.0)
+            obj = (np.abs(b - sky).max(-1) > tol) | (np.abs(b2 - sky).max(-1) > tol)
+            row["object_px"] = float(obj.mean())
+            if obj.any():
+                row["ratio_obj"] = a[obj].mean(0) / np.maximum(b[obj].mean(0), 1e-12)
+                row["ratio_obj_floor"] = b2[obj].mean(0) / np.maximum(b[obj].mean(0), 1e-12)
         rows.append(row)
         print(f"[{spec}] scene build {t_load:.1f} s", file=sys.stderr)
 
@@ -1657,14 +2613,21 @@ def main() -> int:
         f"Mitsuba {mi.__version__} ({variant}) vs probegi reference ({args.probegi})",
         "",
         "| scene | resolution | spp | FLIP probegi vs Mitsuba | FLIP Mitsuba seed A vs B (noise floor) "
-        "| mean ratio probegi/Mitsuba (R,G,B) | same for Mitsuba B/A |",
-        "|---|---|---|---|---|---|---|",
+        "| mean ratio probegi/Mitsuba (R,G,B) | same for Mitsuba B/A "
+        "| object pixels | mean ratio over them, probegi/Mitsuba | same for Mitsuba B/A |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
+
+    def f3(r, k):
+        return " ".join(f"{x:.3f}" for x in r[k]) if k in r else "-"
+
     for r in rows:
-        ratio = " ".join(f"{x:.3f}" for x in r["ratio"]) if "ratio" in r else "-"
-        rf = " ".join(f"{x:.3f}" for x in r["ratio_floor"]) if "ratio_floor" in r else "-"
         fl = f"{r['flip']:.4f}" if "flip" in r else "-"
-        lines.append(f"| {r['scene']} | {r['res']} | {r['spp']} | {fl} | {r['floor']:.4f} | {ratio} | {rf} |")
+        px = f"{100 * r['object_px']:.0f} %" if "object_px" in r else "-"
+        lines.append(
+            f"| {r['scene']} | {r['res']} | {r['spp']} | {fl} | {r['floor']:.4f} | {f3(r, 'ratio')} "
+            f"| {f3(r, 'ratio_floor')} | {px} | {f3(r, 'ratio_obj')} | {f3(r, 'ratio_obj_floor')} |"
+        )
     lines.append("")
     for r in rows:
         for n in r["notes"]:
