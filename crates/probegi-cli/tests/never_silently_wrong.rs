@@ -250,3 +250,35 @@ fn an_all_black_frame_of_a_lit_scene_is_an_error_unless_allowed() {
     let o = probegi(&failing);
     assert!(o.status.success(), "{}", stderr(&o));
 }
+
+#[test]
+fn looking_straight_up_in_sponza_shows_the_sky_through_the_open_roof() {
+    // `scenes/sponza-world-zenith.toml`'s turn on one copy of the shared Sponza,
+    // 9 frames: straight up at frame 4, under a sky no surface can match.
+    let scene = tmp("sponza-zenith.toml");
+    std::fs::write(
+        &scene,
+        "sky_radiance = [0.25, 0.5, 1.0]\n[[meshes]]\npath = \"shared:scenes/dabrovic-sponza/sponza.obj\"\n\
+         [camera]\nposition = [0.0, 4.0, 0.0]\nfov_y_deg = 65.0\nkeyframes = [{ frame = 0, target = [10.0, 4.0, 0.0] }, \
+         { frame = 4, target = [0.0, 14.0, 0.0] }, { frame = 8, target = [-10.0, 4.0, 0.0] }]\n",
+    )
+    .expect("scene");
+    let seq = tmp("sponza-zenith-seq");
+    let args = ["render", "--scene", &s(&scene), "--frames", "9", "--width", "24", "--height", "24"];
+    let mut args: Vec<&str> = args.to_vec();
+    let (seq_s, out_s) = (s(&seq), s(&tmp("sponza-zenith.exr")));
+    args.extend(["--sequence", &seq_s, "--sequence-exr", "--out", &out_s]);
+    let o = probegi(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let sky_fraction = |f: u32| {
+        let path = seq.join(format!("frame-{f:04}.exr"));
+        let probegi_image::LoadedImage::Hdr(img) = probegi_image::read_image(&path).expect("frame") else {
+            panic!("an .exr reads as HDR")
+        };
+        let sky = |p: &glam::Vec3| (*p - glam::Vec3::new(0.25, 0.5, 1.0)).abs().max_element() < 1e-6;
+        img.pixels.iter().filter(|p| sky(p)).count() as f32 / img.pixels.len() as f32
+    };
+    let up = sky_fraction(4);
+    assert!(up > 0.2 && up < 1.0, "looking up, the open roof shows the sky in {up} of the pixels");
+    assert!(sky_fraction(0) < up && sky_fraction(8) < up, "the horizontal views see the walls");
+}

@@ -18,8 +18,9 @@
 //! has turned over the vertical (looking along +x, up, then along −x), it keeps
 //! the image upright relative to the frames before instead of flipping it by
 //! 180°, i.e. it continues upside down relative to the hint, as a real camera
-//! pitched over the top does. Far from the vertical a single camera's basis is
-//! the classic look-at (right = forward × up).
+//! pitched over the top does. A hint that the keys themselves reverse (up +Y at
+//! one key, −Y at the next) is followed: that roll is asked for. Far from the
+//! vertical a single camera's basis is the classic look-at (right = forward × up).
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -74,46 +75,58 @@ impl Camera {
 /// (the view is within about 0.006° of the hint).
 const PARALLEL_SIN2: f32 = 1e-8;
 
-/// A camera's orthonormal view basis, and the image up that a following frame
-/// of a path continues from (see the module docs).
+/// A camera's orthonormal view basis, and what a following frame of a path
+/// continues from (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewBasis {
     pub forward_world: Vec3,
     pub right_world: Vec3,
     pub up_world: Vec3,
+    /// The unit up hint this frame used (zero for a zero hint).
+    pub hint_world: Vec3,
+    /// +1, or −1 once a path has turned over the vertical: the image up is on
+    /// the side of `−hint`.
+    pub hint_sign: f32,
 }
 
 impl Camera {
-    /// The view basis of this camera; `previous_up_world` is the image up of
-    /// the previous frame of a path (`None` for a single camera). Needs a
-    /// camera that passes [`Camera::validate`].
-    pub fn view_basis(&self, previous_up_world: Option<Vec3>) -> ViewBasis {
+    /// The view basis of this camera; `previous` is the basis of the previous
+    /// frame of a path (`None` for a single camera). Needs a camera that
+    /// passes [`Camera::validate`].
+    pub fn view_basis(&self, previous: Option<&ViewBasis>) -> ViewBasis {
         let forward_world = unit(self.target - self.position);
-        let hint = unit(self.up);
-        let mut right = forward_world.cross(hint);
-        if let Some(prev) = previous_up_world {
-            // Keep the image up on the previous frame's side: a path over the
-            // vertical continues instead of flipping.
-            if right.cross(forward_world).dot(prev) < 0.0 {
-                right = -right;
-            }
+        let hint_world = unit(self.up);
+        let mut hint_sign = previous.map_or(1.0, |p| p.hint_sign);
+        let mut right = forward_world.cross(hint_world) * hint_sign;
+        // With the hint as before (not a keyed reversal), an image up that turned
+        // against the previous frame's means the view crossed the hint: the path
+        // continues over the vertical instead of flipping.
+        if let Some(p) = previous
+            && p.hint_world.dot(hint_world) > 0.0
+            && right.cross(forward_world).dot(p.up_world) < 0.0
+        {
+            hint_sign = -hint_sign;
+            right = -right;
         }
         if right.length_squared() < PARALLEL_SIN2 {
-            let up = match previous_up_world {
-                Some(prev) if forward_world.cross(prev).length_squared() >= PARALLEL_SIN2 => prev,
-                _ => fallback_up(forward_world, hint),
+            let up = match previous {
+                Some(p) if forward_world.cross(p.up_world).length_squared() >= PARALLEL_SIN2 => p.up_world,
+                _ => fallback_up(forward_world, hint_world),
             };
             right = forward_world.cross(up);
         }
         let right_world = right.normalize();
-        ViewBasis { forward_world, right_world, up_world: right_world.cross(forward_world) }
+        let up_world = right_world.cross(forward_world);
+        ViewBasis { forward_world, right_world, up_world, hint_world, hint_sign }
     }
 
     /// A camera of a path whose `up` is the image up of `basis`, so that
     /// [`CameraRays::new`] gives that basis; unchanged where the hint already
     /// gives it (so a path far from the vertical renders as before).
     pub fn with_basis(&self, basis: &ViewBasis) -> Camera {
-        if self.view_basis(None) == *basis { *self } else { Camera { up: basis.up_world, ..*self } }
+        let single = self.view_basis(None);
+        let same = single.right_world == basis.right_world && single.up_world == basis.up_world;
+        if same { *self } else { Camera { up: basis.up_world, ..*self } }
     }
 }
 
@@ -157,7 +170,7 @@ impl CameraRays {
     /// without a previous frame); a path's frames come from
     /// `Scene::camera_path`, whose cameras already carry their frame's up.
     pub fn new(camera: &Camera, width: u32, height: u32) -> Self {
-        let ViewBasis { forward_world, right_world, up_world } = camera.view_basis(None);
+        let ViewBasis { forward_world, right_world, up_world, .. } = camera.view_basis(None);
         Self {
             origin_world: camera.position,
             forward_world,
@@ -311,7 +324,7 @@ mod tests {
             let a = std::f32::consts::PI * i as f32 / steps as f32;
             let dir = Vec3::new(a.cos(), a.sin(), 0.0);
             let c = Camera { position: Vec3::ZERO, target: dir, up: Vec3::Y, fov_y_deg: 60.0 };
-            let b = c.view_basis(prev.map(|p| p.up_world));
+            let b = c.view_basis(prev.as_ref());
             assert!(orthonormal(&b), "step {i}: {b:?}");
             if let Some(p) = prev {
                 assert!(b.right_world.dot(p.right_world) > 0.999, "step {i}: right flipped {b:?} after {p:?}");

@@ -634,15 +634,15 @@ impl Scene {
         let hold = self.camera_hold_frame()?;
         let end = if frame.is_nan() { 0.0 } else { frame.min(hold) };
         let step = (end / MAX_CAMERA_WALK_STEPS).max(1.0);
-        let mut previous_up = None;
+        let mut previous = None;
         let mut f = 0.0f32;
         while f < end {
             let c = self.camera_between_keys(f)?;
-            previous_up = Some(c.view_basis(previous_up).up_world);
+            previous = Some(c.view_basis(previous.as_ref()));
             f += step;
         }
         let c = self.camera_between_keys(end)?;
-        Some(c.with_basis(&c.view_basis(previous_up)))
+        Some(c.with_basis(&c.view_basis(previous.as_ref())))
     }
 
     /// The first whole frame at or after the last camera key, from which the
@@ -655,7 +655,7 @@ impl Scene {
     /// [`Scene::camera_at`]); empty when the camera has no keyframes.
     pub fn camera_path(&self, frames: u32) -> Vec<Camera> {
         let Some(hold) = self.camera_hold_frame() else { return Vec::new() };
-        let mut previous_up = None;
+        let mut previous = None;
         let mut path: Vec<Camera> = Vec::with_capacity(frames as usize);
         for f in 0..frames {
             if f as f32 > hold
@@ -665,9 +665,9 @@ impl Scene {
                 continue;
             }
             let Some(c) = self.camera_between_keys(f as f32) else { break };
-            let basis = c.view_basis(previous_up);
-            previous_up = Some(basis.up_world);
+            let basis = c.view_basis(previous.as_ref());
             path.push(c.with_basis(&basis));
+            previous = Some(basis);
         }
         path
     }
