@@ -436,7 +436,13 @@ fn load_gltf_unguarded(path: &Path) -> Result<Scene> {
     loader.read_animations(&doc)?;
     let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
         Some(s) => s.nodes().collect(),
-        None => doc.nodes().collect(),
+        // No scene: every node that is nobody's child is a root (glTF 2.0 §3.5.2
+        // leaves the choice to the loader; a child must not be drawn twice).
+        None => {
+            let children: std::collections::HashSet<usize> =
+                doc.nodes().flat_map(|n| n.children().map(|c| c.index()).collect::<Vec<_>>()).collect();
+            doc.nodes().filter(|n| !children.contains(&n.index())).collect()
+        }
     };
     for node in roots {
         loader.visit(&node, Mat4::IDENTITY, &[], &mut Vec::new())?;

@@ -478,6 +478,9 @@ pub fn load_scene_file(path: &Path) -> Result<Scene> {
 
 /// Parses scene-file text; `name` is what errors call it, `base_dir` what relative
 /// paths are relative to.
+///
+/// A placed file's punctual lights and camera move with its geometry (a glTF's
+/// KHR_lights_punctual lights and camera are part of what it places).
 pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scene> {
     let path = name;
     let toml_err = |message: String| SceneError::Toml { path: path.to_path_buf(), message };
@@ -491,6 +494,7 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
         let mut sub = load_sub_scene(&m.path, base_dir)?;
         m.normals.apply(&mut sub, m.crease_angle_deg).map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
         sub.mesh.transform(xf);
+        place_lights_and_camera(&mut sub, xf);
         for inst in &mut sub.instances {
             *inst = crate::scene::MeshInstance::new(inst.prototype, xf * Mat4::from(inst.world_from_local))
                 .map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
@@ -641,6 +645,7 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
         }
         let xf = placement(placement_matrix(o.translation, o.rotation_deg, o.scale))?;
         sub.mesh.transform(xf);
+        place_lights_and_camera(&mut sub, xf);
         sub.objects.clear();
         sub
     } else {
@@ -855,4 +860,27 @@ fn apply_override<T: serde::Serialize + serde::de::DeserializeOwned>(
     let mut table = toml::Table::try_from(settings).map_err(|e| e.to_string())?;
     table.insert(canonical.clone(), parsed);
     table.try_into().map_err(|e: toml::de::Error| format!("{canonical} = {value}: {}", e.message()))
+}
+
+/// Moves a placed file's punctual lights (positions, directions, and their
+/// keyframes') and its camera (and camera keyframes) by `xf`, as its geometry
+/// moves; directions stay unit length.
+fn place_lights_and_camera(sub: &mut Scene, xf: Mat4) {
+    let point = |p: Vec3| xf.transform_point3(p);
+    let dir = |d: Vec3| xf.transform_vector3(d).try_normalize().unwrap_or(d);
+    for l in &mut sub.lights {
+        l.position = point(l.position);
+        l.direction = dir(l.direction);
+        for k in &mut l.keyframes {
+            k.position = k.position.map(point);
+            k.direction = k.direction.map(dir);
+        }
+    }
+    let place = |c: &mut Camera| {
+        (c.position, c.target, c.up) = (point(c.position), point(c.target), dir(c.up));
+    };
+    if let Some(c) = sub.camera.as_mut() {
+        place(c);
+    }
+    sub.camera_keyframes.iter_mut().for_each(|k| place(&mut k.camera));
 }

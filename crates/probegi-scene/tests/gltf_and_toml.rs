@@ -336,3 +336,50 @@ fn a_missing_gltf_image_and_out_of_spec_factors_warn_and_load() {
     assert!(e.contains("hot.obj") && e.contains("blinding") && e.contains("absurd"), "{e}");
     std::fs::remove_dir_all(dir).ok();
 }
+
+/// One triangle (corners at the origin, +x and +y) as a glTF with `nodes`
+/// and `extras` given by the caller.
+fn triangle_gltf(nodes: &str, extra: &str) -> String {
+    format!(
+        r#"{{"asset": {{"version": "2.0"}}, "nodes": [{nodes}], {extra}
+"meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}],
+"buffers": [{{"uri": "data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA", "byteLength": 36}}],
+"bufferViews": [{{"buffer": 0, "byteOffset": 0, "byteLength": 36}}],
+"accessors": [{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}}]}}"#
+    )
+}
+
+#[test]
+fn a_gltf_without_scenes_draws_each_node_once_under_its_parent() {
+    let dir = tmp_dir("no-scenes");
+    let path = dir.join("tree.gltf");
+    let nodes = r#"{"children": [1], "translation": [1.5, 0, 0]}, {"mesh": 0}"#;
+    std::fs::write(&path, triangle_gltf(nodes, "")).expect("write");
+    let s = load_scene(&path.to_string_lossy()).expect("loads");
+    assert_eq!(s.mesh.triangle_count(), 1, "the child is drawn under its parent only");
+    let (lo, _) = s.bounds().expect("geometry");
+    assert!((lo.x - 1.5).abs() < 1e-6, "{lo}");
+}
+
+#[test]
+fn a_placed_gltf_brings_its_lights_and_camera_along() {
+    let dir = tmp_dir("placed-lights");
+    let gltf = triangle_gltf(
+        r#"{"mesh": 0}, {"translation": [0.3, 0.3, 1], "extensions": {"KHR_lights_punctual": {"light": 0}}},
+           {"translation": [0.3, 0.3, 4], "camera": 0}"#,
+        r#""scene": 0, "scenes": [{"nodes": [0, 1, 2]}], "extensionsUsed": ["KHR_lights_punctual"],
+"extensions": {"KHR_lights_punctual": {"lights": [{"type": "point", "intensity": 5}]}},
+"cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.01}}],"#,
+    );
+    std::fs::write(dir.join("lit.gltf"), gltf).expect("write");
+    let toml = "[[meshes]]\npath = \"lit.gltf\"\ntranslation = [3.0, 0.0, 0.0]\nrotation_deg = [0.0, 90.0, 0.0]\n";
+    std::fs::write(dir.join("placed.toml"), toml).expect("write");
+    let s = load_scene(&dir.join("placed.toml").to_string_lossy()).expect("loads");
+    let light = s.lights.first().expect("the file's light");
+    // (0.3, 0.3, 1) turned 90° about y is (1, 0.3, −0.3), then moved 3 m along x.
+    assert!((light.position - Vec3::new(4.0, 0.3, -0.3)).length() < 1e-5, "{}", light.position);
+    let camera = s.camera.expect("the file's camera");
+    assert!((camera.position - Vec3::new(7.0, 0.3, -0.3)).length() < 1e-4, "{}", camera.position);
+    let to_target = (camera.target - camera.position).normalize();
+    assert!((to_target - Vec3::NEG_X).length() < 1e-4, "the camera still faces the triangle: {to_target}");
+}
