@@ -219,7 +219,7 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 25.0, requires = "gif")]
     pub gif_fps: f32,
     /// Accept frames that come out all black although the scene has light
-    /// sources and the camera sees lit surfaces (by default such a render is an
+    /// sources and the camera sees diffuse surfaces (by default such a render is an
     /// error: it is almost always a bug, e.g. a degenerate camera).
     #[arg(long)]
     pub allow_black_frames: bool,

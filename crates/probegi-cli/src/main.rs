@@ -271,35 +271,25 @@ fn render(args: &RenderArgs) -> Result<()> {
             sequence_error = g.push(&img).err();
         }
     });
-    if let Some(e) = sequence_error {
-        // No partial sequence that looks complete: this run's frames go too.
+    let (image, stats) = (out.image, out.stats);
+    bar.finish_and_clear();
+    let failure = match sequence_error {
+        Some(e) => Some(anyhow::Error::new(e).context(
+            "writing the --sequence / --gif frames (this run's frames were removed); a non-finite pixel \
+             usually comes from a material, texture or light with huge or non-finite values",
+        )),
+        None => render_failure(&stats, args.allow_black_frames),
+    };
+    if let Some(e) = failure {
+        // No partial sequence that looks complete: this run's frames go too, and
+        // the unfinished GIF's temporary file goes when `gif` drops.
         for path in &sequence_written {
             std::fs::remove_file(path).ok();
         }
-        return Err(anyhow::Error::new(e).context(
-            "writing the --sequence / --gif frames (this run's frames were removed); a non-finite pixel \
-             usually comes from a material, texture or light with huge or non-finite values",
-        ));
+        return Err(e);
     }
     if let Some(g) = gif {
         g.finish()?;
-    }
-    let (image, stats) = (out.image, out.stats);
-    bar.finish_and_clear();
-    if let Some(e) = &stats.error {
-        bail!("render stopped: {e}");
-    }
-    if !stats.black_frames.is_empty() && !args.allow_black_frames {
-        for path in &sequence_written {
-            std::fs::remove_file(path).ok();
-        }
-        bail!(
-            "frame{} {:?} came out all black although the scene has light sources and the camera sees lit \
-             surfaces: this is almost always a bug (please report it with the scene); nothing was written. \
-             --allow-black-frames accepts such frames",
-            if stats.black_frames.len() == 1 { "" } else { "s" },
-            stats.black_frames
-        );
     }
     let elapsed = start.elapsed();
     write_radiance(&args.out, &image)?;
@@ -528,6 +518,25 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
         scene.name
     );
     Ok(())
+}
+
+/// Why a finished render must not be written: the frame loop stopped early,
+/// or frames came out all black though the scene has light sources and the
+/// camera sees surfaces with a diffuse albedo (`RenderStats::black_frames`).
+fn render_failure(stats: &probegi_cpu::frame_loop::RenderStats, allow_black_frames: bool) -> Option<anyhow::Error> {
+    if let Some(e) = &stats.error {
+        return Some(anyhow::anyhow!("render stopped: {e}; nothing was written"));
+    }
+    if stats.black_frames.is_empty() || allow_black_frames {
+        return None;
+    }
+    Some(anyhow::anyhow!(
+        "frame{} {:?} came out all black although the scene has light sources and the camera sees diffuse \
+         surfaces: this is almost always a bug (please report it with the scene); nothing was written. \
+         --allow-black-frames accepts such frames (a view where every light is hidden)",
+        if stats.black_frames.len() == 1 { "" } else { "s" },
+        stats.black_frames
+    ))
 }
 
 /// Every output of a render checked before it starts, so that a long render

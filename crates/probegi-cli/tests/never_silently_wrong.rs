@@ -207,11 +207,10 @@ fn outputs_are_checked_before_rendering_and_failures_leave_nothing() {
     let dir = tmp("outputs");
     std::fs::create_dir_all(dir.join("taken.png")).expect("dir");
     let before: Vec<_> = std::fs::read_dir(&dir).expect("ls").collect();
-    let start = std::time::Instant::now();
-    // A render long enough that a late failure would show (2000 frames).
+    // Checked before rendering: no frame is rendered (no progress, no "wrote").
     let args = ["render", "--gi", "ddgi", "--frames", "2000", "--out", &s(&dir.join("taken.png"))];
-    fails_with(&args, "is a directory");
-    assert!(start.elapsed().as_secs() < 30, "the output was checked only after rendering");
+    let e = fails_with(&args, "is a directory");
+    assert!(!e.contains("render [") && !e.contains("wrote"), "{e}");
     let file = dir.join("plain-file");
     std::fs::write(&file, b"x").expect("file");
     fails_with(&["render", "--out", &s(&file.join("o.png"))], "not a directory");
@@ -240,11 +239,17 @@ fn an_all_black_frame_of_a_lit_scene_is_an_error_unless_allowed() {
     let out = tmp("shut.png");
     let args = ["render", "--scene", &s(&scene), "--frames", "2", "--width", "8", "--height", "8"];
     let mut failing: Vec<&str> = args.to_vec();
-    let (seq_s, out_s) = (s(&seq), s(&out));
-    failing.extend(["--sequence", &seq_s, "--out", &out_s]);
+    let gif = tmp("shut.gif");
+    let (seq_s, out_s, gif_s) = (s(&seq), s(&out), s(&gif));
+    failing.extend(["--sequence", &seq_s, "--out", &out_s, "--gif", &gif_s]);
     let e = fails_with(&failing, "all black");
     assert!(e.contains("[0, 1]"), "{e}");
-    assert!(!out.exists(), "nothing written");
+    assert!(!out.exists() && !gif.exists(), "nothing written");
+    let partial = std::fs::read_dir(gif.parent().expect("dir"))
+        .expect("ls")
+        .filter(|e| e.as_ref().is_ok_and(|e| e.file_name().to_string_lossy().contains("shut.partial")))
+        .count();
+    assert_eq!(partial, 0, "no temporary file left");
     assert_eq!(std::fs::read_dir(&seq).map(|d| d.count()).unwrap_or(0), 0, "no sequence frames left");
     failing.push("--allow-black-frames");
     let o = probegi(&failing);

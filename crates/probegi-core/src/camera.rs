@@ -133,6 +133,11 @@ impl Camera {
 /// `v` normalised without overflow (its largest component scaled to 1 first),
 /// zero for a zero vector.
 fn unit(v: Vec3) -> Vec3 {
+    if v.length_squared().is_finite() {
+        // The plain normalisation wherever it does not overflow, so that ordinary
+        // cameras keep their bases bit for bit.
+        return v.normalize_or_zero();
+    }
     let largest = v.abs().max_element();
     if largest > 0.0 { (v / largest).normalize_or_zero() } else { Vec3::ZERO }
 }

@@ -114,8 +114,8 @@ pub struct RenderStats {
     pub frame_unlit_fraction: Vec<f32>,
     /// Frames whose image is all black (mean exactly 0) although the scene had
     /// light sources at that frame (`Scene::has_light_sources`) and pixels
-    /// that see a lit surface: a bug to find, not an output (the CLI refuses
-    /// such a render).
+    /// that see a surface with a diffuse albedo: almost always a bug to find,
+    /// not an output (the CLI refuses such a render unless told to accept it).
     pub black_frames: Vec<u32>,
     /// Set when the render stopped early: a probe batch tracer failed (a GPU
     /// device lost, say). The image is then that of the frames before.

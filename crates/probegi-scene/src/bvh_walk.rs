@@ -173,8 +173,10 @@ pub(crate) fn any(
 /// ray parameter t is the same in both spaces); a ray the move made unusable
 /// (an overflow to ±∞) is `None`.
 pub(crate) fn moved_ray(r: &ObRay, local_from_world: &glam::Affine3A) -> Option<ObRay> {
-    // + 0.0 clears negative zeros a rotation can produce (see `usable_ray`).
-    let dir = local_from_world.transform_vector3a(r.direction) + Vec3A::ZERO;
+    // Denormals flushed and negative zeros cleared, as `usable_ray` does.
+    let moved = local_from_world.transform_vector3a(r.direction);
+    let flush = |c: f32| if c.abs() < f32::MIN_POSITIVE { 0.0 } else { c };
+    let dir = Vec3A::new(flush(moved.x), flush(moved.y), flush(moved.z)) + Vec3A::ZERO;
     let origin = local_from_world.transform_point3a(r.origin);
     (origin.is_finite() && dir.is_finite() && dir != Vec3A::ZERO).then(|| ObRay::new(origin, dir, r.tmin, r.tmax))
 }

@@ -96,10 +96,14 @@ pub(crate) fn camera_keyframe_error(keys: &[CameraKeyframe]) -> Option<(usize, S
 /// the interpolated target, if it does: `target − position` is linear in the
 /// blend, so its shortest length is found in closed form.
 fn eye_meets_target(a: &CameraKeyframe, b: &CameraKeyframe) -> Option<f32> {
-    let (da, db) = (a.camera.target - a.camera.position, b.camera.target - b.camera.position);
+    // In f64: keys far apart would overflow the squared lengths in f32.
+    let view = |c: &Camera| c.target.as_dvec3() - c.position.as_dvec3();
+    let (da, db) = (view(&a.camera), view(&b.camera));
     let slope = db - da;
-    let t = if slope.length_squared() > 0.0 { (-da.dot(slope) / slope.length_squared()).clamp(0.0, 1.0) } else { 0.0 };
-    ((da + slope * t).length_squared() < 1e-12).then_some(a.frame + (b.frame - a.frame) * t)
+    let s2 = slope.length_squared();
+    let t = if s2 > 0.0 { (-da.dot(slope) / s2).clamp(0.0, 1.0) } else { 0.0 };
+    let closest = (da + slope * t).length_squared();
+    (closest < 1e-12 || closest.is_nan()).then_some(a.frame + (b.frame - a.frame) * t as f32)
 }
 
 /// Most frames [`Scene::camera_at`] steps through to carry a path's image up

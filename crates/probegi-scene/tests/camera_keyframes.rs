@@ -224,6 +224,12 @@ fn scene_validate_checks_programmatic_keyframes() {
     s.camera_keyframes[1].frame = 4.0;
     s.camera_keyframes[0].camera.target = cam.position;
     assert!(s.validate().is_err_and(|e| e.contains("camera.keyframes[0]")));
+    // Keys so far apart that their squared distance overflows f32, the eye
+    // passing through the target half way: refused, not a NaN frame.
+    let far = |z: f32| Camera { position: Vec3::new(0.0, 0.0, z), target: Vec3::ZERO, ..cam };
+    s.camera_keyframes =
+        vec![CameraKeyframe { frame: 0.0, camera: far(1e20) }, CameraKeyframe { frame: 2.0, camera: far(-1e20) }];
+    assert!(s.validate().is_err_and(|e| e.contains("camera.keyframes[1]") && e.contains("frame 1")));
 }
 
 #[test]

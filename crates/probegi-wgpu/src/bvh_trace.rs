@@ -44,7 +44,8 @@ pub struct GpuRay {
     pub t_min: f32,
     /// Unit direction.
     pub dir: [f32; 3],
-    /// Finite: `+∞` is stored as `f32::MAX` ([`GpuRay::new`]).
+    /// `+∞` is stored as `f32::MAX` ([`GpuRay::new`]); a NaN stays NaN (a
+    /// miss under the ray rule of `bvh.wgsl`).
     pub t_max: f32,
 }
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);

@@ -29,7 +29,8 @@
 // denormal direction components flush to zero; a ray with a non-finite origin or
 // direction, a zero direction, a non-finite t_min, a NaN t_max or t_min > t_max is
 // a miss (counted); a walk of one level that would enter more nodes than the
-// export holds returns a miss (counted). Finiteness is tested on the bits: WGSL
+// whole export holds (the CPU bounds each level by its own count) returns a miss
+// for the whole ray (counted). Finiteness is tested on the bits: WGSL
 // lets a compiler assume that floats are never NaN or infinite.
 
 @group(1) @binding(0) var<storage, read> bvh_nodes: array<u32>;
@@ -42,8 +43,8 @@ const BVH_NODE_WORDS: u32 = 20u;
 // obvhs `cwbvh::node::EPSILON`: the nodes' near plane.
 const BVH_NODE_EPSILON: f32 = 0.0001;
 const BVH_NO_HIT: u32 = 0xffffffffu;
-// A leaf test's miss (hits have t ≥ t_min ≥ 0). Rays carry finite t_max (the
-// host clamps +∞ to f32::MAX), so no shader value is infinite.
+// A leaf test's miss (hits have t ≥ t_min ≥ 0). Usable rays carry a finite
+// t_max (the host stores +∞ as f32::MAX); a refused ray's miss keeps its t_max.
 const BVH_MISS: f32 = -1.0;
 // obvhs `CwBvh::validate` keeps trees shallower than 32; a bottom level's walk
 // stacks on top of its top level's.
@@ -288,11 +289,11 @@ fn bvh_intersect_leaf(leaf: u32, ray: BvhRay, bary: ptr<function, vec2<f32>>) ->
 // (BVH_INSTANCE_MOVING: static geometry only, for initialisation rounds).
 fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
     var hit = BvhHit(ray_in.t_max, BVH_NO_HIT, vec2<f32>(0.0), BVH_NO_HIT, false);
-    if (arrayLength(&bvh_nodes) < BVH_NODE_WORDS) {
-        return hit;
-    }
     if (!bvh_ray_usable(ray_in)) {
         atomicAdd(&bvh_guards[0], 1u);
+        return hit;
+    }
+    if (arrayLength(&bvh_nodes) < BVH_NODE_WORDS) {
         return hit;
     }
     let miss = hit;
