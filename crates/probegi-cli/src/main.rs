@@ -291,6 +291,13 @@ fn render(args: &RenderArgs) -> Result<()> {
     if let Some(g) = gif {
         g.finish()?;
     }
+    if stats.nonfinite_pixels > 0 {
+        eprintln!(
+            "warning: {} camera pixel samples came out NaN or infinite and were written as 0; check the \
+             scene's materials, textures and lights for huge or non-finite values",
+            stats.nonfinite_pixels
+        );
+    }
     let elapsed = start.elapsed();
     write_radiance(&args.out, &image)?;
     if let (Some(dir), Some(set)) = (&args.dump_atlases, &out.ddgi) {
@@ -344,6 +351,7 @@ fn render(args: &RenderArgs) -> Result<()> {
             // Rays answered without a full BVH walk (probegi_scene::bvh_walk): the
             // ray rule's misses and walks cut short, per backend.
             "trace_guards_cpu": bvh.trace_guard_counts(),
+            "nonfinite_pixels": stats.nonfinite_pixels,
             "trace_guards_gpu": gpu.as_ref().map(|g| g.bvh.trace_guard_counts(&g.ctx)).transpose()?,
         });
         write_text(path, &serde_json::to_string_pretty(&json)?)?;

@@ -40,6 +40,7 @@ fn gpu_required() -> bool {
 /// The per-frame image means a render's `--stats` reports.
 fn frame_means(stats: &Path) -> Vec<f64> {
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(stats).expect("stats")).expect("json");
+    assert_eq!(json["nonfinite_pixels"], 0, "no pixel came out NaN");
     let means = json["frame_means"].as_array().expect("frame_means");
     means.iter().map(|m| m.as_array().expect("rgb").iter().map(|c| c.as_f64().expect("f64")).sum::<f64>()).collect()
 }

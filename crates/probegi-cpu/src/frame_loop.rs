@@ -117,6 +117,9 @@ pub struct RenderStats {
     /// that see a surface with a diffuse albedo: almost always a bug to find,
     /// not an output (the CLI refuses such a render unless told to accept it).
     pub black_frames: Vec<u32>,
+    /// CPU camera pixels, summed over frames, whose direct radiance came out
+    /// NaN or infinite and were written as 0 (the CLI warns and reports them).
+    pub nonfinite_pixels: u64,
     /// Set when the render stopped early: a probe batch tracer failed (a GPU
     /// device lost, say). The image is then that of the frames before.
     pub error: Option<String>,
@@ -349,7 +352,10 @@ pub fn render_frames(
         let second_order = field.as_ref().is_some_and(|s| s.volumes().iter().any(|v| v.settings.glossy_second_order));
         let t = Instant::now();
         let passes = CameraPasses { scene, tracer, direct, direct_settings: camera_direct, second_order };
-        let (rays, surfaces, unlit) = shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut acc);
+        let nonfinite = std::sync::atomic::AtomicU64::new(0);
+        let (rays, surfaces, unlit) =
+            shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut acc, &nonfinite);
+        stats.nonfinite_pixels += nonfinite.into_inner();
         stats.rays_traced += rays;
         if indirect_field_used {
             stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
@@ -441,7 +447,8 @@ struct CameraPasses<'a> {
 /// emitter, so the direct NEE uses the diffuse lobe only for them (no double count).
 /// Pixels that see nothing get the sky. Returns rays traced and, for the
 /// `frame_unlit_fraction` statistic, (surface pixels with a diffuse albedo, those
-/// of them that got no indirect light).
+/// of them that got no indirect light). A pixel whose direct radiance comes out
+/// non-finite is written as 0 and counted in `nonfinite` (never silently).
 fn shade_camera(
     passes: &CameraPasses<'_>,
     field: Option<IndirectField<'_>>,
@@ -449,6 +456,7 @@ fn shade_camera(
     frame: u32,
     seed: u64,
     acc: &mut Accumulation,
+    nonfinite: &std::sync::atomic::AtomicU64,
 ) -> (u64, usize, usize) {
     let CameraPasses { scene, tracer, direct, direct_settings, second_order } = *passes;
     let (direct_out, indirect_out) = (&mut acc.frame_direct, &mut acc.indirect);
@@ -505,7 +513,12 @@ fn shade_camera(
                         l += weight * lr;
                     }
                 }
-                *d = if l.is_finite() { l } else { Vec3::ZERO };
+                *d = if l.is_finite() {
+                    l
+                } else {
+                    nonfinite.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    Vec3::ZERO
+                };
                 let albedo = ctx.bsdf.diffuse_albedo();
                 let diffuse = albedo.max_element() > 0.0;
                 surfaces += diffuse as usize;
