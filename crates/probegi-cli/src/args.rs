@@ -123,8 +123,9 @@ pub struct SceneArgs {
     /// Camera target X,Y,Z in metres.
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub camera_target: Option<Vec3>,
-    /// Camera up direction X,Y,Z (default: the scene's, else +Y); needed for a view
-    /// straight along +Y or −Y.
+    /// Camera up hint X,Y,Z (default: the scene's, else +Y). A view along the
+    /// hint falls back to the world axis least aligned with it (looking down a
+    /// y-up world the image's up is −Z).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub camera_up: Option<Vec3>,
     /// Vertical field of view in degrees.

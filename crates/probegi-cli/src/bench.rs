@@ -227,7 +227,7 @@ fn bench_scene(args: &BenchArgs) -> Result<probegi_scene::Scene> {
     crate::apply_scene_settings(&mut scene, &args.set)?;
     // The last frame any bench mode poses: the frame loop's, or the instancing run's.
     let last_frame = (args.frames as f32 + 1.0).max(7.0 + args.repeat as f32);
-    scene.check_posed_bounds(last_frame).map_err(|e| anyhow::anyhow!("scene {}: {e}", args.scene))?;
+    crate::check_posed_bounds(&scene, last_frame)?;
     Ok(scene)
 }
 

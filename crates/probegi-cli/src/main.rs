@@ -319,44 +319,59 @@ fn render(args: &RenderArgs) -> Result<()> {
         scene.name
     );
     if let Some(path) = &args.stats {
-        let json = serde_json::json!({
-            "backend": format!("{:?}", args.backend).to_lowercase(),
-            "adapter": gpu.as_ref().map(|g| g.adapter_name().to_string()),
-            "probe_shade_on": gpu.as_ref().map(|g| if g.shades() { "gpu" } else { "cpu" }),
-            // --show-probes draws on the CPU's G-buffer, so its camera frame is the CPU's.
-            "camera_on": if gpu.as_ref().is_some_and(|g| g.renders_camera()) && !args.show_probes { "gpu" } else { "cpu" },
-            "frames": stats.frames,
-            "pass_ms": stats.pass_ms,
-            "rays_traced": stats.rays_traced,
-            "width": image.width,
-            "height": image.height,
-            "triangles": scene.drawn_triangle_count(),
-            "stored_triangles": scene.stored_triangle_count(),
-            "instances": scene.instances.len(),
-            "bvh_build_ms": bvh.build_time.as_secs_f64() * 1e3,
-            "probes": stats.probes,
-            "rays_per_frame": stats.rays_per_frame,
-            "field_update_ms": stats.field_update_ms,
-            "field_update_mrays_per_s": stats.field_update_mrays_per_s,
-            "probe_states": stats.probe_states,
-            "active_probes": stats.active_probes,
-            "volumes": stats.volumes,
-            "batch_rays": stats.batch_rays,
-            "batch_rays_per_volume": stats.batch_rays_per_volume,
-            "probes_scrolled_in": stats.probes_scrolled_in,
-            "probes_woken": stats.probes_woken,
-            "frame_means": stats.frame_means.iter().map(|m| [m.x, m.y, m.z]).collect::<Vec<_>>(),
-            "frame_indirect_means": stats.frame_indirect_means.iter().map(|m| [m.x, m.y, m.z]).collect::<Vec<_>>(),
-            "frame_unlit_fraction": stats.frame_unlit_fraction,
-            // Rays answered without a full BVH walk (probegi_scene::bvh_walk): the
-            // ray rule's misses and walks cut short, per backend.
-            "trace_guards_cpu": bvh.trace_guard_counts(),
-            "nonfinite_pixels": stats.nonfinite_pixels,
-            "trace_guards_gpu": gpu.as_ref().map(|g| g.bvh.trace_guard_counts(&g.ctx)).transpose()?,
-        });
-        write_text(path, &serde_json::to_string_pretty(&json)?)?;
+        let run = RenderRun { args, scene: &scene, bvh: &bvh, gpu: gpu.as_deref(), image: &image, stats: &stats };
+        write_text(path, &serde_json::to_string_pretty(&render_stats_json(&run)?)?)?;
     }
     Ok(())
+}
+
+/// What a finished render's `--stats` reports from.
+struct RenderRun<'a> {
+    args: &'a RenderArgs,
+    scene: &'a Scene,
+    bvh: &'a BvhTracer,
+    gpu: Option<&'a probegi_wgpu_seam::WgpuProbeTracer>,
+    image: &'a probegi_core::image::Image,
+    stats: &'a probegi_cpu::frame_loop::RenderStats,
+}
+
+/// The `--stats` JSON of a render.
+fn render_stats_json(run: &RenderRun<'_>) -> Result<serde_json::Value> {
+    Ok(serde_json::json!({
+        "backend": format!("{:?}", run.args.backend).to_lowercase(),
+        "adapter": run.gpu.map(|g| g.adapter_name().to_string()),
+        "probe_shade_on": run.gpu.map(|g| if g.shades() { "gpu" } else { "cpu" }),
+        // --show-probes draws on the CPU's G-buffer, so its camera frame is the CPU's.
+        "camera_on": if run.gpu.is_some_and(|g| g.renders_camera()) && !run.args.show_probes { "gpu" } else { "cpu" },
+        "frames": run.stats.frames,
+        "pass_ms": run.stats.pass_ms,
+        "rays_traced": run.stats.rays_traced,
+        "width": run.image.width,
+        "height": run.image.height,
+        "triangles": run.scene.drawn_triangle_count(),
+        "stored_triangles": run.scene.stored_triangle_count(),
+        "instances": run.scene.instances.len(),
+        "bvh_build_ms": run.bvh.build_time.as_secs_f64() * 1e3,
+        "probes": run.stats.probes,
+        "rays_per_frame": run.stats.rays_per_frame,
+        "field_update_ms": run.stats.field_update_ms,
+        "field_update_mrays_per_s": run.stats.field_update_mrays_per_s,
+        "probe_states": run.stats.probe_states,
+        "active_probes": run.stats.active_probes,
+        "volumes": run.stats.volumes,
+        "batch_rays": run.stats.batch_rays,
+        "batch_rays_per_volume": run.stats.batch_rays_per_volume,
+        "probes_scrolled_in": run.stats.probes_scrolled_in,
+        "probes_woken": run.stats.probes_woken,
+        "frame_means": run.stats.frame_means.iter().map(|m| [m.x, m.y, m.z]).collect::<Vec<_>>(),
+        "frame_indirect_means": run.stats.frame_indirect_means.iter().map(|m| [m.x, m.y, m.z]).collect::<Vec<_>>(),
+        "frame_unlit_fraction": run.stats.frame_unlit_fraction,
+        // Rays answered without a full BVH walk (probegi_scene::bvh_walk): the
+        // ray rule's misses and walks cut short, per backend.
+        "trace_guards_cpu": run.bvh.trace_guard_counts(),
+        "nonfinite_pixels": run.stats.nonfinite_pixels,
+        "trace_guards_gpu": run.gpu.map(|g| g.bvh.trace_guard_counts(&g.ctx)).transpose()?,
+    }))
 }
 
 /// The scene-level `--set` keys (`normal_maps`, `alpha_cutouts`) among `set`.

@@ -82,6 +82,34 @@ pub(crate) fn usable_ray(ray: &Ray) -> Option<ObRay> {
     usable.then(|| ObRay::new(ray.origin.into(), dir.into(), ray.t_min, ray.t_max))
 }
 
+/// The nodes a walk of one BVH may still enter (the bound of the module docs).
+struct NodeBudget {
+    left: usize,
+    /// The walk wanted one more node than its BVH holds.
+    cut_short: bool,
+}
+
+impl NodeBudget {
+    fn of(bvh: &CwBvh) -> Self {
+        Self { left: bvh.nodes.len(), cut_short: false }
+    }
+
+    /// Takes one node; `false` (and `cut_short`) once the BVH's count is spent.
+    #[inline(always)]
+    fn enter(&mut self) -> bool {
+        match self.left.checked_sub(1) {
+            Some(left) => {
+                self.left = left;
+                true
+            }
+            None => {
+                self.cut_short = true;
+                false
+            }
+        }
+    }
+}
+
 /// The closest primitive of `bvh` along `ray` whose `intersect` distance is
 /// below the ray's `tmax` (leaf index and t), entering at most as many nodes as
 /// `bvh` holds.
@@ -96,17 +124,13 @@ pub(crate) fn closest(
     let mut best = None;
     let mut state = bvh.new_traversal(ray.direction);
     let mut node;
-    let mut entered = 0usize;
-    let bound = bvh.nodes.len();
-    let mut cut_short = false;
+    let mut budget = NodeBudget::of(bvh);
     obvhs::traverse!(
         bvh,
         node,
         state,
         {
-            entered += 1;
-            if entered > bound {
-                cut_short = true;
+            if !budget.enter() {
                 break;
             }
             node.intersect_ray(&traverse_ray, state.oct_inv4)
@@ -119,7 +143,7 @@ pub(crate) fn closest(
             }
         }
     );
-    if cut_short {
+    if budget.cut_short {
         guards.cut_short();
         return None;
     }
@@ -137,9 +161,7 @@ pub(crate) fn any(
 ) -> bool {
     let mut state = bvh.new_traversal(ray.direction);
     let mut node;
-    let mut entered = 0usize;
-    let bound = bvh.nodes.len();
-    let mut cut_short = false;
+    let mut budget = NodeBudget::of(bvh);
     let mut found = false;
     'walk: {
         obvhs::traverse!(
@@ -147,9 +169,7 @@ pub(crate) fn any(
             node,
             state,
             {
-                entered += 1;
-                if entered > bound {
-                    cut_short = true;
+                if !budget.enter() {
                     break;
                 }
                 node.intersect_ray(&ray, state.oct_inv4)
@@ -162,7 +182,7 @@ pub(crate) fn any(
             }
         );
     }
-    if cut_short {
+    if budget.cut_short {
         guards.cut_short();
         return false;
     }

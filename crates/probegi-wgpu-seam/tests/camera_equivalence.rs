@@ -13,6 +13,10 @@
 //! floor (plus 0.005) where it is not, and the image means must agree within 2 %.
 //! The GPU keeps the field on the device (`keeping_field`), as `--backend wgpu` does.
 
+mod common;
+
+use common::shared;
+
 use std::sync::Arc;
 
 use glam::UVec3;
@@ -25,14 +29,6 @@ use probegi_cpu::probe_trace::{ProbeBatchTracer, ProbeTracerHandle};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 use probegi_wgpu::GpuContext;
 use probegi_wgpu_seam::WgpuProbeTracer;
-
-fn shared(path: &str) -> String {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/scenes")
-        .join(path)
-        .to_string_lossy()
-        .into_owned()
-}
 
 /// Area-light samples per pixel per frame: above the default 16, so that the
 /// seed noise of the comparison stays small.

@@ -10,6 +10,10 @@
 //! through the instanced forest's top level.
 //! `PROBEGI_FUZZ_SEAM_SECONDS` (default 8 in all) and `PROBEGI_FUZZ_SEED`.
 
+mod common;
+
+use common::shared;
+
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -21,14 +25,6 @@ use probegi_scene::bvh_walk::ray_is_traced;
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayHit, RayTracer, Scene, load_scene};
 use probegi_wgpu::GpuContext;
 use probegi_wgpu_seam::WgpuProbeTracer;
-
-fn shared(path: &str) -> String {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/scenes")
-        .join(path)
-        .to_string_lossy()
-        .into_owned()
-}
 
 fn component(rng: &mut Pcg32) -> f32 {
     let palette = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0, 1e-40, f32::MIN_POSITIVE, 1e38, -3e38];
