@@ -12,7 +12,7 @@ use glam::{Vec2, Vec3};
 use probegi_core::image::Image;
 use probegi_core::irradiance_encoding::decode_irradiance;
 use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_index};
-use probegi_cpu::ddgi::DdgiVolume;
+use probegi_field::ddgi_volume::DdgiVolume;
 
 fn atlas_image<T: probegi_core::probe_atlas::Texel>(
     atlas: &ProbeAtlas<T>,

@@ -102,10 +102,12 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
 /// (seed 000 Table 2), with the bare closest-hit rate of the same rays measured
 /// in the same run.
 fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
-    use probegi_cpu::ddgi::{DdgiVolume, ddgi_volume_bytes};
-    use probegi_cpu::ddgi_field_set::DdgiFieldSet;
+    use probegi_cpu::field_update::FieldSetUpdate;
     use probegi_cpu::frame_loop::FIELD_UPDATE_PASSES;
+    use probegi_cpu::probe_trace::ddgi_volume_bytes;
     use probegi_cpu::{DirectLighting, DirectSettings};
+    use probegi_field::ddgi_field_set::DdgiFieldSet;
+    use probegi_field::ddgi_volume::DdgiVolume;
     use std::collections::BTreeMap;
 
     if args.frames == 0 {
@@ -121,7 +123,7 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
         crate::gpu_backend::Backend::Cpu => None,
         crate::gpu_backend::Backend::Wgpu => Some(crate::gpu_backend::wgpu_probe_tracer(&scene, &bvh)?),
     };
-    let batch_tracer = gpu.as_ref().map(|g| g as &dyn probegi_cpu::probe_trace::ProbeBatchTracer);
+    let batch_tracer = gpu.as_ref().map(|g| g as &dyn probegi_field::ProbeBatchTracer);
     let mut rows = Vec::new();
     for grid in &grids {
         for &rays in &ray_counts {
@@ -217,7 +219,7 @@ fn bench_volume_settings(
             .with_context(|| format!("--set {a}"))?;
     }
     settings.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
-    crate::check_memory(probegi_cpu::ddgi::ddgi_volume_bytes(&settings), "the DDGI volume")?;
+    crate::check_memory(probegi_cpu::probe_trace::ddgi_volume_bytes(&settings), "the DDGI volume")?;
     Ok(settings)
 }
 

@@ -8,7 +8,7 @@
 //! bookkeeping (probe states, hysteresis ramps).
 
 use anyhow::{Context, Result};
-use probegi_cpu::ddgi_field_set::ProbeRayBatch;
+use probegi_field::ddgi_field_set::ProbeRayBatch;
 use probegi_scene::{BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
 
@@ -19,7 +19,7 @@ pub enum Backend {
     Wgpu,
 }
 
-pub use probegi_wgpu_seam::WgpuProbeTracer;
+pub use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 
 /// A headless device with the scene on it; a clear error when there is no
 /// adapter. Moving objects and instanced meshes go through the top level the
@@ -50,7 +50,7 @@ pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTrac
 /// per probe and per probe ray.
 pub fn time_gpu_passes(
     gpu: &WgpuProbeTracer,
-    set: &probegi_cpu::ddgi_field_set::DdgiFieldSet,
+    set: &probegi_field::ddgi_field_set::DdgiFieldSet,
     batch: &ProbeRayBatch,
     repeat: u32,
 ) -> Result<serde_json::Value> {
@@ -64,7 +64,7 @@ pub fn time_gpu_passes(
     // The batch's probes (their relocated origins), their rays generated on the device.
     let origins: Vec<glam::Vec3> = batch.probes.iter().map(|p| batch.origins_m[p.first_ray as usize]).collect();
     let max_m = batch.max_distances_m.first().copied().unwrap_or(f32::INFINITY);
-    let rotation = probegi_cpu::probe_ray_gen::probe_ray_rotation(volume.stream_seed(1), 1);
+    let rotation = probegi_field::probe_ray_gen::probe_ray_rotation(volume.stream_seed(1), 1);
     let ray_gen = probegi_wgpu::probe_ray_gen::GpuProbeRayGen::new(ctx);
     let atlases = GpuVolumeAtlases::new(ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
     atlases.upload(ctx, &volume.irradiance, &volume.distance);

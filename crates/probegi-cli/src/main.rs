@@ -16,14 +16,14 @@ use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
-use probegi_cpu::probe_trace::{ProbeBatchTracer, ProbeTracerHandle};
 use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
+use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 
 use args::{Cli, Command, GiArg, ReferenceArgs, RenderArgs, SceneArgs, VolumeArgs};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_core::sh_settings::ShProbeSettings;
-use probegi_cpu::ddgi::ddgi_volume_bytes;
+use probegi_cpu::probe_trace::ddgi_volume_bytes;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -330,7 +330,7 @@ struct RenderRun<'a> {
     args: &'a RenderArgs,
     scene: &'a Scene,
     bvh: &'a BvhTracer,
-    gpu: Option<&'a probegi_wgpu_seam::WgpuProbeTracer>,
+    gpu: Option<&'a probegi_wgpu::wgpu_field_backend::WgpuProbeTracer>,
     image: &'a probegi_core::image::Image,
     stats: &'a probegi_cpu::frame_loop::RenderStats,
 }

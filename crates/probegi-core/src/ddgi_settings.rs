@@ -238,7 +238,7 @@ impl DdgiVolumeSettings {
     }
 }
 
-/// A set of DDGI volumes (`probegi_cpu::ddgi_field_set::DdgiFieldSet`): the volumes
+/// A set of DDGI volumes (`probegi_field::ddgi_field_set::DdgiFieldSet`): the volumes
 /// in any order (the set samples them densest or finest first) and how they blend.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct DdgiFieldSetSettings {

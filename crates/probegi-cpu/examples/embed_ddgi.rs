@@ -1,6 +1,6 @@
 //! Embedding probegi's DDGI in an engine: this program owns its triangles, its
 //! ray caster and its shading, and drives a DDGI field set through the seam
-//! (`probegi_cpu::ddgi_field_set`). It uses no probegi scene types.
+//! (`probegi_field::ddgi_field_set`). It uses no probegi scene types.
 //!
 //! The world is a white furnace: a closed 4 m cube whose inside faces all emit
 //! Le = 1 W·m⁻²·sr⁻¹ and reflect ρ = 0.5. Every bounce must accumulate, so the
@@ -13,7 +13,7 @@
 
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
-use probegi_cpu::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, UpdateStep};
+use probegi_field::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, UpdateStep};
 
 /// The application's own geometry: triangles with their inward (front) normal.
 struct Triangle {

@@ -21,14 +21,15 @@ use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_scene::{Ray, RayTracer, Scene};
 use std::f32::consts::FRAC_1_PI;
 
-use crate::ddgi_field_set::DdgiFieldSet;
 use crate::direct::{DirectLighting, DirectSettings};
+use crate::field_update::FieldSetUpdate;
 use crate::gbuffer::{GBuffer, trace_gbuffer};
 use crate::scene_events::SceneChangeDetector;
 use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
 use crate::shading::{ShadingContext, lambert_cos};
 use probegi_core::sh_cascades::ShCascades;
 use probegi_core::sh_settings::ShProbeSettings;
+use probegi_field::ddgi_field_set::DdgiFieldSet;
 
 /// Which global illumination runs on top of direct light.
 #[derive(Clone, Debug, PartialEq)]
@@ -72,8 +73,8 @@ pub struct RenderSettings {
     /// passed to [`render_frames`]. Frames past the end hold the last entry.
     pub camera_path: Vec<CameraRays>,
     /// Who traces the DDGI probe ray batches: `None` for the CPU tracer, or a
-    /// [`crate::probe_trace::ProbeBatchTracer`] (the CLI's `--backend wgpu`).
-    pub probe_tracer: Option<crate::probe_trace::ProbeTracerHandle>,
+    /// [`probegi_field::ProbeBatchTracer`] (the CLI's `--backend wgpu`).
+    pub probe_tracer: Option<probegi_field::ProbeTracerHandle>,
 }
 
 /// Measurements of a render; serialised by the CLI's `--stats`.

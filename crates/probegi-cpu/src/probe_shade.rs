@@ -29,11 +29,11 @@ use probegi_scene::Scene;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
 
-use crate::ddgi::DdgiVolume;
-use crate::ddgi_field_set::ProbeRayBatch;
 use crate::direct::{DirectLighting, DirectSettings};
 use crate::probe_trace::Surfel;
 use crate::shading::ShadingContext;
+use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_field::seam::ProbeRayBatch;
 
 pub struct ProbeShadeInputs<'a> {
     pub scene: &'a Scene,

@@ -12,9 +12,9 @@ use probegi_core::camera::CameraRays;
 use probegi_core::octahedral::oct_encode;
 use probegi_core::probe_classification::ProbeState;
 
-use crate::ddgi::DdgiVolume;
 use crate::gbuffer::GBuffer;
 use probegi_core::irradiance_encoding::decode_irradiance;
+use probegi_field::ddgi_volume::DdgiVolume;
 
 /// Sphere radius as a fraction of the smallest probe spacing.
 pub const PROBE_SPHERE_RADIUS_REL: f32 = 0.1;

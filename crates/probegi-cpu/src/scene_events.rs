@@ -13,8 +13,8 @@
 use glam::{UVec3, Vec3};
 use probegi_scene::Scene;
 
-use crate::ddgi::SceneEvent;
-use crate::ddgi_field_set::DdgiFieldSet;
+use probegi_field::ddgi_field_set::DdgiFieldSet;
+use probegi_field::ddgi_volume::SceneEvent;
 
 /// What one observation changed.
 #[derive(Clone, Debug, Default, PartialEq)]

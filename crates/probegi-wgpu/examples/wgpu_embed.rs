@@ -1,6 +1,6 @@
 //! Embedding probegi's DDGI in a wgpu engine. This program owns its device, its
 //! triangles, its shading and its shader, and uses probegi for three things:
-//! - the field set's seam (`probegi_cpu::ddgi_field_set`): probe placement,
+//! - the field set's seam (`probegi_field::ddgi_field_set`): probe placement,
 //!   relocation, states, blending with hysteresis, border, classification;
 //! - the GPU trace (`probegi_wgpu::bvh_trace`): the seam's probe rays, the
 //!   shadow rays of its own shading and its camera's primary rays, through the
@@ -22,7 +22,7 @@
 
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
-use probegi_cpu::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, UpdateStep};
+use probegi_field::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, UpdateStep};
 use probegi_wgpu::GpuContext;
 use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayHit, GpuRayTrace};
 use probegi_wgpu::ddgi_query::{GpuDdgiField, query_wgsl};

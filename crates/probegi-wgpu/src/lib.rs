@@ -22,12 +22,14 @@
 //! - [`probe_ray_gen`]: rotated spherical Fibonacci rays written straight into
 //!   a trace batch.
 //!
-//! `probegi-wgpu-seam` drives these passes through the field set's seam, the
-//! atlases kept on the device; moving objects and instanced meshes go through
+//! [`wgpu_field_backend`] drives these passes through the field set's seam
+//! (`probegi-field`'s `ProbeBatchTracer` and `DeviceField`), the atlases kept
+//! on the device; moving objects and instanced meshes go through
 //! the CPU's top level, placed on the device each frame ([`bvh_trace::GpuBvh::place`]).
 //! Not built: a ray-query trace path (the compute traversal runs everywhere).
-//! This crate depends on `probegi-core` (settings, layouts, encodings) and
-//! `probegi-scene` (the BVH and the scene), and never on the CPU backend.
+//! This crate depends on `probegi-core` (settings, layouts, encodings),
+//! `probegi-scene` (the BVH and the scene) and `probegi-field` (the field's host
+//! side), and never on the CPU backend, its peer.
 
 pub mod bvh_trace;
 pub mod camera_frame;
@@ -41,5 +43,7 @@ pub mod probe_ray_gen;
 pub mod probe_relocation;
 pub mod probe_shade;
 pub mod probe_usage;
+pub mod wgpu_field_backend;
 
 pub use gpu_context::{GpuContext, GpuError};
+pub use wgpu_field_backend::WgpuProbeTracer;

@@ -15,7 +15,7 @@
 //!
 //! The per-ray inputs are one `vec4<f32>` per batch ray: radiance in xyz and the
 //! signed blend distance in w (backface −0.2·t, miss the ray's max distance:
-//! `probegi_cpu::ddgi::blend_inputs`), as the shade pass writes them, so a batch
+//! `probegi_field::ddgi_volume::blend_inputs`), as the shade pass writes them, so a batch
 //! shaded on the device is blended without leaving it ([`GpuProbeBlend::prepare_resident`]).
 //! Per probe the passes read its first ray in the batch and its hysteresis.
 
@@ -184,7 +184,7 @@ pub struct ResidentBlend<'a> {
     pub settings: &'a DdgiVolumeSettings,
     /// Rays per probe this frame.
     pub rays_per_probe: u32,
-    /// The frame's weight tables (`probegi_cpu::probe_ray_gen::generate_probe_rays`).
+    /// The frame's weight tables (`probegi_field::probe_ray_gen::generate_probe_rays`).
     pub irradiance_weights: &'a BlendWeights,
     pub distance_weights: &'a BlendWeights,
     /// One `vec4<f32>` per batch ray: radiance, signed blend distance.

@@ -2,13 +2,13 @@
 //! rotated spherical Fibonacci rays written straight into a trace batch, so a
 //! device-resident update uploads 16 bytes per probe instead of 32 per ray. The
 //! frame's rotation is drawn on the CPU from (seed, frame) exactly as
-//! `probegi_cpu::probe_ray_gen::probe_ray_directions` draws it; the directions
+//! `probegi_field::probe_ray_gen::probe_ray_directions` draws it; the directions
 //! agree with the CPU's to the rounding of sin and cos, 2.4e-5 on lavapipe
 //! (`tests/ray_gen_equivalence.rs`).
 //!
 //! The seam's update batches are planned on the CPU (which probes trace, their
 //! relocated origins), and record how their rays were made
-//! (`probegi_cpu::ddgi_field_set::GeneratedProbeRays`), so the device-resident
+//! (`probegi_field::ddgi_field_set::GeneratedProbeRays`), so the device-resident
 //! update generates them here ([`GpuProbeRayGen::generate_into`]) instead of
 //! receiving them; `bench --backend wgpu` times this pass alone.
 

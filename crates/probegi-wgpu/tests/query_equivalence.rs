@@ -10,6 +10,7 @@
 
 mod common;
 
+use probegi_cpu::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;
 
 use glam::{UVec3, Vec3};
@@ -18,8 +19,8 @@ use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, SetMember, VolumeBlending, field_set_irradiance};
 use probegi_core::rng::Pcg32;
 use probegi_core::sampling::sample_uniform_sphere;
-use probegi_cpu::ddgi_field_set::DdgiFieldSet;
 use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene};
 use probegi_wgpu::GpuContext;
 use probegi_wgpu::ddgi_query::{GpuDdgiField, GpuFieldQuery, QueryPoint};

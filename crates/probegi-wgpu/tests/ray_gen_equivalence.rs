@@ -1,5 +1,5 @@
 //! The GPU ray generation (`probe_ray_gen.wgsl`) against the CPU's
-//! (`probegi_cpu::probe_ray_gen::probe_ray_directions`): the same rotated
+//! (`probegi_field::probe_ray_gen::probe_ray_directions`): the same rotated
 //! spherical Fibonacci directions for every probe, from the same (seed, frame)
 //! rotation, within 1e-4: frac(i/Φ) is exact to 2⁻³² in 0.32 fixed point where
 //! the CPU uses f64, but Vulkan lets sin and cos be off by 2⁻¹¹ absolute
@@ -10,7 +10,7 @@ mod common;
 
 use glam::Vec3;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
-use probegi_cpu::probe_ray_gen::{probe_ray_directions, probe_ray_rotation};
+use probegi_field::probe_ray_gen::{probe_ray_directions, probe_ray_rotation};
 use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayTrace};
 use probegi_wgpu::probe_ray_gen::GpuProbeRayGen;
 

@@ -2,7 +2,7 @@
 
 use probegi_core::irradiance_encoding::decode_irradiance;
 use probegi_core::probe_atlas::interior_texel_index;
-use probegi_cpu::ddgi::DdgiVolume;
+use probegi_field::ddgi_volume::DdgiVolume;
 
 /// Mean of the decoded irradiance atlas over every interior texel of every probe:
 /// a field-wide energy figure (mean radiance per texel, summed over RGB, linear).

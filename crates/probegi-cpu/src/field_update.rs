@@ -1,6 +1,7 @@
-//! The convenience update: the field set's seam (`ddgi_field_set`) driven with
-//! probegi's own scene, ray tracer and shading, the way an engine would drive it
-//! with its own. One call per frame; per-pass milliseconds go to `pass_ms` under
+//! The convenience update: the field set's seam (`probegi_field::ddgi_field_set`)
+//! driven with probegi's own scene, ray tracer and shading, the way an engine
+//! would drive it with its own; [`FieldSetUpdate`] and [`VolumeUpdate`] add it
+//! to the field's types. One call per frame; per-pass milliseconds go to `pass_ms` under
 //! `ray_gen`, `probe_init` (initialisation rounds: trace and apply), `trace`
 //! (update rays, plus the usage classification), `shade`, `blend` and `border`.
 
@@ -10,21 +11,77 @@ use std::time::Instant;
 use glam::Vec3;
 use probegi_scene::{RayTracer, Scene};
 
-use crate::ddgi::DdgiVolume;
-use crate::ddgi_field_set::{DdgiFieldSet, HostHits, ProbeRayHit, UpdateStep};
-use crate::direct::DirectLighting;
-use crate::probe_ray_gen::probe_ray_directions;
-use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
-use crate::probe_trace::{
-    ProbeBatchTracer, Surfel, surfel_hit, surfels_from_hits, trace_probe_batch, trace_probe_distances,
-};
+use probegi_field::backend::{BackendError, ProbeBatchTracer};
+use probegi_field::ddgi_field_set::{DdgiFieldSet, HostHits, ProbeRayHit, UpdateStep};
+use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_field::probe_ray_gen::probe_ray_directions;
 
-impl DdgiFieldSet {
+use crate::direct::DirectLighting;
+use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
+use crate::probe_trace::{Surfel, surfel_hit, surfels_from_hits, trace_probe_batch, trace_probe_distances};
+
+/// The convenience update on a [`DdgiFieldSet`] (see the module docs).
+pub trait FieldSetUpdate {
     /// One field update of every volume through the seam. Returns the rays traced
     /// (probe rays plus shading shadow rays). A set whose field a device holds
     /// (`field_on_device`) needs [`Self::update_traced_by`] with that device:
     /// here the update is skipped (a debug assertion names it).
-    pub fn update(
+    fn update(
+        &mut self,
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        direct: &DirectLighting<'_>,
+        seed: u64,
+        frame: u32,
+        pass_ms: &mut BTreeMap<&'static str, f64>,
+    ) -> u64;
+
+    /// [`Self::update`] with the probe ray batches traced by `batch_tracer`
+    /// when given (a GPU trace), and shaded by it when it shades
+    /// ([`ProbeBatchTracer::shade_batch`]; otherwise the CPU shades, its shadow
+    /// rays going to `tracer` through `direct`); with its
+    /// [`ProbeBatchTracer::device_field`] the whole update stays on the device.
+    /// Returns the rays traced on the CPU plus the batch rays; shadow rays traced
+    /// elsewhere are not counted. An error of the batch tracer, or hits of the
+    /// wrong count, end the update with it.
+    #[allow(clippy::too_many_arguments)]
+    fn update_traced_by(
+        &mut self,
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        batch_tracer: Option<&dyn ProbeBatchTracer>,
+        direct: &DirectLighting<'_>,
+        seed: u64,
+        frame: u32,
+        pass_ms: &mut BTreeMap<&'static str, f64>,
+    ) -> Result<u64, BackendError>;
+}
+
+/// The convenience update on one [`DdgiVolume`], and a fresh count of its probes inside geometry.
+pub trait VolumeUpdate {
+    /// One field update of this volume alone (a set of one; see [`FieldSetUpdate::update`]).
+    /// A tracking volume does not move here: drive it through a [`DdgiFieldSet`]
+    /// and `set_tracking_target`.
+    fn update(
+        &mut self,
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        direct: &DirectLighting<'_>,
+        seed: u64,
+        frame: u32,
+        pass_ms: &mut BTreeMap<&'static str, f64>,
+    ) -> u64;
+
+    /// Probes inside geometry by their rays (> 25 % backfaces), from a fresh trace.
+    fn count_probes_inside_geometry(&self, tracer: &dyn RayTracer, seed: u64) -> usize;
+}
+
+impl FieldSetUpdate for DdgiFieldSet {
+    /// One field update of every volume through the seam. Returns the rays traced
+    /// (probe rays plus shading shadow rays). A set whose field a device holds
+    /// (`field_on_device`) needs [`Self::update_traced_by`] with that device:
+    /// here the update is skipped (a debug assertion names it).
+    fn update(
         &mut self,
         scene: &Scene,
         tracer: &dyn RayTracer,
@@ -47,7 +104,7 @@ impl DdgiFieldSet {
     /// CPU plus the batch rays; shadow rays traced elsewhere are not counted. An
     /// error of the batch tracer, or hits of the wrong count, end the update with it.
     #[allow(clippy::too_many_arguments)]
-    pub fn update_traced_by(
+    fn update_traced_by(
         &mut self,
         scene: &Scene,
         tracer: &dyn RayTracer,
@@ -56,7 +113,7 @@ impl DdgiFieldSet {
         seed: u64,
         frame: u32,
         pass_ms: &mut BTreeMap<&'static str, f64>,
-    ) -> Result<u64, String> {
+    ) -> Result<u64, BackendError> {
         let mut traced = 0;
         let mut batch_hits = Vec::new();
         let mut surfels: Vec<Surfel> = Vec::new();
@@ -68,9 +125,10 @@ impl DdgiFieldSet {
         };
         let static_part = tracer.static_part();
         let mut on_device = false;
+        let device = batch_tracer.and_then(|bt| bt.device_field());
         let mut step = self.begin_update(seed, frame);
         // Any seam error here is a bug of this driver, not of the caller's input.
-        let fail = |e: crate::ddgi_field_set::SeamError| -> UpdateStep {
+        let fail = |e: probegi_field::SeamError| -> UpdateStep {
             debug_assert!(false, "field set seam: {e}");
             UpdateStep::Done
         };
@@ -80,9 +138,9 @@ impl DdgiFieldSet {
                     let t = Instant::now();
                     let init = self.ray_batch().static_geometry_only();
                     // A relocation round on a device that runs it: only offsets come back.
-                    if let (Some(bt), HostHits::Relocation) = (batch_tracer, self.hits_needed_on_host()) {
-                        let plan = self.device_relocation_plan().map_err(|e| e.to_string())?;
-                        if let Some(offsets) = bt.relocate_on_device(self.ray_batch(), &plan) {
+                    if let (Some(bt), HostHits::Relocation) = (device, self.hits_needed_on_host()) {
+                        let plan = self.device_relocation_plan()?;
+                        if let Some(offsets) = bt.relocate(self.ray_batch(), &plan) {
                             traced += self.ray_batch().len() as u64;
                             step = self.submit_device_relocation(&offsets?).unwrap_or_else(fail);
                             time("probe_init", t, &mut own_ms);
@@ -90,9 +148,9 @@ impl DdgiFieldSet {
                         }
                     }
                     // A classification round on a device that runs it: 16 bytes a probe come back.
-                    if let (Some(bt), HostHits::Classification) = (batch_tracer, self.hits_needed_on_host()) {
-                        let plan = self.device_classification_plan().map_err(|e| e.to_string())?;
-                        if let Some(results) = bt.classify_on_device(self.ray_batch(), &plan) {
+                    if let (Some(bt), HostHits::Classification) = (device, self.hits_needed_on_host()) {
+                        let plan = self.device_classification_plan()?;
+                        if let Some(results) = bt.classify(self.ray_batch(), &plan) {
                             drop(plan);
                             traced += self.ray_batch().len() as u64;
                             step = self.submit_device_classification(&results?).unwrap_or_else(fail);
@@ -101,10 +159,10 @@ impl DdgiFieldSet {
                         }
                     }
                     // The update batch on a device that keeps the field: the hits stay there.
-                    if let (Some(bt), false) = (batch_tracer, init) {
+                    if let (Some(bt), false) = (device, init) {
                         let usage = (self.hits_needed_on_host() == HostHits::ProbeUsage)
                             .then(|| self.volumes().iter().map(|v| v.grid.spacing_m.length()).collect::<Vec<_>>());
-                        if let Some(counts) = bt.trace_on_device(self.ray_batch(), usage.as_deref()) {
+                        if let Some(counts) = bt.trace_resident(self.ray_batch(), usage.as_deref()) {
                             traced += self.ray_batch().len() as u64;
                             step = self.submit_device_hits(&counts?).unwrap_or_else(fail);
                             on_device = true;
@@ -118,11 +176,11 @@ impl DdgiFieldSet {
                         Some(bt) => {
                             bt.closest_hits(self.ray_batch(), init, &mut batch_hits)?;
                             if batch_hits.len() != self.ray_batch().len() {
-                                return Err(format!(
-                                    "the batch tracer returned {} hits for {} rays",
-                                    batch_hits.len(),
-                                    self.ray_batch().len()
-                                ));
+                                return Err(BackendError::Seam(probegi_field::SeamError::WrongLength {
+                                    what: "the batch tracer's hits",
+                                    expected: self.ray_batch().len(),
+                                    got: batch_hits.len(),
+                                }));
                             }
                             surfels_from_hits(scene, self.ray_batch(), &batch_hits, &mut surfels);
                             self.ray_batch().len() as u64
@@ -135,10 +193,12 @@ impl DdgiFieldSet {
                     time(if init { "probe_init" } else { "trace" }, t, &mut own_ms);
                 }
                 UpdateStep::ShadeRays if on_device => {
-                    let bt = batch_tracer.ok_or("the device that traced the batch is gone")?;
-                    let plan = self.device_blend_plan().map_err(|e| e.to_string())?;
+                    let bt = batch_tracer
+                        .and_then(|bt| bt.device_field())
+                        .ok_or_else(|| BackendError::Unsupported("the device that traced the batch is gone".into()))?;
+                    let plan = self.device_blend_plan()?;
                     let view = self.view();
-                    let device_ms = bt.shade_and_blend_on_device(
+                    let device_ms = bt.shade_and_blend(
                         self.ray_batch(),
                         &view,
                         !self.field_on_device(),
@@ -193,23 +253,13 @@ impl DdgiFieldSet {
         }
         Ok(traced)
     }
-
-    /// Makes the volumes' own atlases current: when a device holds the field
-    /// (`field_on_device`), copies its atlases back through `batch_tracer`.
-    pub fn sync_host_atlases(&mut self, batch_tracer: Option<&dyn ProbeBatchTracer>) -> Result<(), String> {
-        if !self.field_on_device() {
-            return Ok(());
-        }
-        let bt = batch_tracer.ok_or("the field's atlases are on a device this caller does not reach")?;
-        self.accept_host_atlases(|i, v| bt.download_field(i, v))
-    }
 }
 
-impl DdgiVolume {
+impl VolumeUpdate for DdgiVolume {
     /// One field update of this volume alone (a set of one; see [`DdgiFieldSet::update`]).
     /// A tracking volume does not move here: drive it through a [`DdgiFieldSet`]
     /// and `set_tracking_target`.
-    pub fn update(
+    fn update(
         &mut self,
         scene: &Scene,
         tracer: &dyn RayTracer,
@@ -235,7 +285,7 @@ impl DdgiVolume {
     }
 
     /// Probes inside geometry by their rays (> 25 % backfaces), from a fresh trace.
-    pub fn count_probes_inside_geometry(&self, tracer: &dyn RayTracer, seed: u64) -> usize {
+    fn count_probes_inside_geometry(&self, tracer: &dyn RayTracer, seed: u64) -> usize {
         use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats};
         let n = self.settings.probe_rays_per_probe as usize;
         let dirs = probe_ray_directions(&self.settings, seed, u32::MAX - 2000);

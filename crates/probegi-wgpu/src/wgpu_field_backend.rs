@@ -1,7 +1,7 @@
-//! The field set's seam (`probegi_cpu::ddgi_field_set`) driven by the wgpu
-//! backend: [`WgpuProbeTracer`] is a `ProbeBatchTracer` whose probe ray batches
-//! are traced by `probegi_wgpu::bvh_trace` (the WGSL CWBVH traversal) and, where
-//! the scene allows, shaded by `probegi_wgpu::probe_shade`. Two ways to run an
+//! The field set's seam (`probegi_field::ddgi_field_set`) driven by the wgpu
+//! passes: [`WgpuProbeTracer`] is a `ProbeBatchTracer` (and, keeping the field,
+//! a `DeviceField`) whose probe ray batches are traced by `bvh_trace` (the WGSL
+//! CWBVH traversal) and, where the scene allows, shaded by `probe_shade`. Two ways to run an
 //! update batch:
 //!
 //! - **field on the device** ([`WgpuProbeTracer::keeping_field`], what
@@ -22,8 +22,8 @@
 //! set are at different kinds of initialisation round, or the adapter binds too
 //! few storage buffers for the classification pass ([`WgpuProbeTracer::classification_note`]).
 //!
-//! This crate exists so that neither backend depends on the other: `probegi-cpu`
-//! knows nothing of wgpu, `probegi-wgpu` nothing of the CPU backend.
+//! The CPU backend is this backend's peer: both implement `probegi-field`'s
+//! traits, neither depends on the other.
 
 use std::sync::Mutex;
 
@@ -31,23 +31,36 @@ use glam::Vec3;
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_volume_blend::DdgiFieldSetView;
 use probegi_core::probe_classification::ProbeUsageCounts;
-use probegi_cpu::ddgi::{
-    DdgiVolume, DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
+use probegi_field::backend::{BackendError, DeviceField, ProbeBatchTracer};
+use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_field::device_plans::{
+    DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
 };
-use probegi_cpu::ddgi_field_set::ProbeRayBatch;
-use probegi_cpu::probe_trace::ProbeBatchTracer;
+use probegi_field::seam::ProbeRayBatch;
 use probegi_scene::{BvhTracer, RayHit, Scene, TlasLayout};
-use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace};
-use probegi_wgpu::camera_frame::{CameraFrame, GpuCameraPass};
-use probegi_wgpu::ddgi_query::GpuDdgiField;
-use probegi_wgpu::gpu_scene::GpuScene;
-use probegi_wgpu::probe_blend::{GpuProbeBlend, ResidentBlend};
-use probegi_wgpu::probe_classification::{ClassifyRound, GpuProbeClassification};
-use probegi_wgpu::probe_ray_gen::GpuProbeRayGen;
-use probegi_wgpu::probe_relocation::{GpuProbeRelocation, GpuRelocationProbe};
-use probegi_wgpu::probe_shade::{GpuProbeShade, shade_info};
-use probegi_wgpu::probe_usage::{GpuProbeUsage, UsageProbe};
-use probegi_wgpu::{GpuContext, GpuError};
+
+use crate::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace};
+use crate::camera_frame::{CameraFrame, GpuCameraPass};
+use crate::ddgi_query::GpuDdgiField;
+use crate::gpu_scene::GpuScene;
+use crate::probe_blend::{GpuProbeBlend, ResidentBlend};
+use crate::probe_classification::{ClassifyRound, GpuProbeClassification};
+use crate::probe_ray_gen::GpuProbeRayGen;
+use crate::probe_relocation::{GpuProbeRelocation, GpuRelocationProbe};
+use crate::probe_shade::{GpuProbeShade, shade_info};
+use crate::probe_usage::{GpuProbeUsage, UsageProbe};
+use crate::{GpuContext, GpuError};
+
+impl From<GpuError> for BackendError {
+    fn from(e: GpuError) -> Self {
+        BackendError::Device(e.to_string())
+    }
+}
+
+/// A poisoned lock of the tracer's resident state (a pass panicked earlier).
+fn poisoned<T>(_: T) -> BackendError {
+    BackendError::Device("a GPU pass panicked earlier; the tracer's resident state is lost".into())
+}
 
 /// A batch's rays as the GPU trace reads them.
 pub fn batch_rays(batch: &ProbeRayBatch) -> Vec<GpuRay> {
@@ -280,23 +293,20 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         batch: &ProbeRayBatch,
         static_only: bool,
         hits: &mut Vec<Option<RayHit>>,
-    ) -> Result<(), String> {
+    ) -> Result<(), BackendError> {
         let rays = batch_rays(batch);
         hits.clear();
         if rays.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
             // Larger than one binding: trace in pieces, shade on the CPU.
-            let gpu = self
-                .trace
-                .trace_static_only(&self.ctx, &self.bvh, &rays, false, static_only)
-                .map_err(|e| e.to_string())?;
+            let gpu = self.trace.trace_static_only(&self.ctx, &self.bvh, &rays, false, static_only)?;
             hits.extend(gpu.iter().map(|h| h.ray_hit()));
-            *self.last.lock().map_err(|e| e.to_string())? = None;
+            *self.last.lock().map_err(poisoned)? = None;
             return Ok(());
         }
-        let resident = self.trace_resident(batch, static_only).map_err(|e| e.to_string())?;
-        let gpu = self.trace.download(&self.ctx, &resident).map_err(|e| e.to_string())?;
+        let resident = self.trace_resident(batch, static_only)?;
+        let gpu = self.trace.download(&self.ctx, &resident)?;
         hits.extend(gpu.iter().map(|h| h.ray_hit()));
-        *self.last.lock().map_err(|e| e.to_string())? = Some(resident);
+        *self.last.lock().map_err(poisoned)? = Some(resident);
         Ok(())
     }
 
@@ -308,7 +318,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         seed: u64,
         frame: u32,
         radiance: &mut Vec<Vec3>,
-    ) -> Option<Result<(), String>> {
+    ) -> Option<Result<(), BackendError>> {
         let (shade, scene) = self.shading.as_ref()?;
         let last = self.last.lock().ok()?;
         let resident = last.as_ref().filter(|b| b.ray_count as usize == batch.len())?;
@@ -318,21 +328,102 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             let seed32 = (seed ^ (seed >> 32)) as u32;
             shade.shade(&self.ctx, &self.bvh, &gpu_field, scene, resident, &info, seed32, frame, None)
         };
-        Some(run().map(|l| *radiance = l).map_err(|e| e.to_string()))
+        Some(run().map(|l| *radiance = l).map_err(BackendError::from))
     }
 
-    fn trace_on_device(
+    fn pose_scene(&self, scene: &Scene, frame: f32) -> Result<(), BackendError> {
+        if scene.has_moving_geometry() {
+            let Some((layout, roots)) = self.tlas.as_ref().filter(|(l, _)| l.moves()) else {
+                return Err(BackendError::Unsupported(format!(
+                    "scene {} moves, but this tracer was made without its moving objects",
+                    scene.name
+                )));
+            };
+            let tlas = layout.export_at(scene, frame).map_err(BackendError::Device)?;
+            self.bvh.place(&self.ctx, &tlas, roots)?;
+        }
+        match &self.shading {
+            Some((_, gpu_scene)) => {
+                gpu_scene.pose_lights(&self.ctx, scene)?;
+                gpu_scene.pose_geometry(&self.ctx, scene).map_err(BackendError::from)
+            }
+            None => Ok(()),
+        }
+    }
+
+    fn camera_frame(
+        &self,
+        camera: &CameraRays,
+        field: &DdgiFieldSetView<'_>,
+        field_on_device: bool,
+        area_samples: u32,
+        second_order: bool,
+        frame: u32,
+        seed: u64,
+        direct: &mut [Vec3],
+        indirect: &mut [Vec3],
+    ) -> Option<Result<(usize, usize), BackendError>> {
+        let pass = self.camera.as_ref()?;
+        let (_, scene) = self.shading.as_ref()?;
+        let ([_, _, _], [_, _, w, h]) = camera.basis();
+        let resident = self.field.lock().ok()?;
+        let mut run = || -> Result<(usize, usize), GpuError> {
+            // The field the device holds (its atlases current), or the host's uploaded.
+            let uploaded;
+            let gpu_field = match (field_on_device, resident.as_ref()) {
+                (true, Some(f)) => {
+                    f.refresh(&self.ctx, field, false)?;
+                    f
+                }
+                (true, None) => return Err(GpuError::Input("the device lost the field it held".into())),
+                (false, _) => {
+                    uploaded = GpuDdgiField::upload(&self.ctx, field)?;
+                    &uploaded
+                }
+            };
+            let f = CameraFrame {
+                camera,
+                width: w as u32,
+                height: h as u32,
+                frame,
+                seed: (seed ^ (seed >> 32)) as u32,
+                area_samples,
+                second_order,
+                sky_radiance: self.sky_radiance,
+            };
+            let image = pass.render(&self.ctx, &self.bvh, gpu_field, scene, &f)?;
+            if image.direct.len() != direct.len() || image.indirect.len() != indirect.len() {
+                return Err(GpuError::Input(format!(
+                    "{} camera pixels for a {}-pixel frame",
+                    image.direct.len(),
+                    direct.len()
+                )));
+            }
+            direct.copy_from_slice(&image.direct);
+            indirect.copy_from_slice(&image.indirect);
+            Ok((image.surfaces, image.unlit))
+        };
+        Some(run().map_err(BackendError::from))
+    }
+
+    fn device_field(&self) -> Option<&dyn DeviceField> {
+        self.resident_passes.is_some().then_some(self as &dyn DeviceField)
+    }
+}
+
+impl DeviceField for WgpuProbeTracer {
+    fn trace_resident(
         &self,
         batch: &ProbeRayBatch,
         usage_cage_diagonals_m: Option<&[f32]>,
-    ) -> Option<Result<Vec<ProbeUsageCounts>, String>> {
+    ) -> Option<Result<Vec<ProbeUsageCounts>, BackendError>> {
         let (_, usage, _) = self.resident_passes.as_ref()?;
         if batch.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
             return None;
         }
-        let run = || -> Result<Vec<ProbeUsageCounts>, String> {
-            let resident = self.trace_resident(batch, false).map_err(|e| e.to_string())?;
-            self.ctx.wait().map_err(|e| e.to_string())?;
+        let run = || -> Result<Vec<ProbeUsageCounts>, BackendError> {
+            let resident = self.trace_resident(batch, false)?;
+            self.ctx.wait()?;
             let counts = match usage_cage_diagonals_m {
                 Some(diagonals) => {
                     let probes: Vec<UsageProbe> = batch
@@ -344,21 +435,20 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                             cage_diagonal_m: diagonals.get(p.volume as usize).copied().unwrap_or(0.0),
                         })
                         .collect();
-                    usage.counts(&self.ctx, &resident, &probes).map_err(|e| e.to_string())?
+                    usage.counts(&self.ctx, &resident, &probes)?
                 }
                 None => vec![],
             };
-            *self.last.lock().map_err(|e| e.to_string())? = Some(resident);
+            *self.last.lock().map_err(poisoned)? = Some(resident);
             Ok(counts)
         };
         Some(run())
     }
-
-    fn relocate_on_device(
+    fn relocate(
         &self,
         batch: &ProbeRayBatch,
         probes: &[DeviceRelocationProbe],
-    ) -> Option<Result<Vec<Vec3>, String>> {
+    ) -> Option<Result<Vec<Vec3>, BackendError>> {
         let (_, _, relocation) = self.resident_passes.as_ref()?;
         if batch.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
             return None;
@@ -381,14 +471,13 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             self.rounds_on_device[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             Ok(offsets)
         };
-        Some(run().map_err(|e| e.to_string()))
+        Some(run().map_err(BackendError::from))
     }
-
-    fn classify_on_device(
+    fn classify(
         &self,
         batch: &ProbeRayBatch,
         plan: &[Option<DeviceClassification<'_>>],
-    ) -> Option<Result<DeviceClassificationResults, String>> {
+    ) -> Option<Result<DeviceClassificationResults, BackendError>> {
         let classification = self.classification.as_ref()?;
         let (_, scene) = self.shading.as_ref()?;
         if batch.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
@@ -416,10 +505,9 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                     self.rounds_on_device[1].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 })
         };
-        Some(run().map_err(|e| e.to_string()))
+        Some(run().map_err(BackendError::from))
     }
-
-    fn shade_and_blend_on_device(
+    fn shade_and_blend(
         &self,
         batch: &ProbeRayBatch,
         field: &DdgiFieldSetView<'_>,
@@ -428,18 +516,21 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         volumes: &[DdgiVolume],
         seed: u64,
         frame: u32,
-    ) -> Result<Vec<(&'static str, f64)>, String> {
-        let ((shade, scene), Some((blend, _, _))) =
-            (self.shading.as_ref().ok_or("the GPU does not shade this scene")?, self.resident_passes.as_ref())
-        else {
-            return Err("this tracer does not keep the field on the device".into());
+    ) -> Result<Vec<(&'static str, f64)>, BackendError> {
+        let ((shade, scene), Some((blend, _, _))) = (
+            self.shading
+                .as_ref()
+                .ok_or_else(|| BackendError::Unsupported("the GPU does not shade this scene".into()))?,
+            self.resident_passes.as_ref(),
+        ) else {
+            return Err(BackendError::Unsupported("this tracer does not keep the field on the device".into()));
         };
-        let last = self.last.lock().map_err(|e| e.to_string())?;
+        let last = self.last.lock().map_err(poisoned)?;
         let resident = last
             .as_ref()
             .filter(|b| b.ray_count as usize == batch.len())
-            .ok_or("the batch to shade is not the one traced on the device")?;
-        let mut gpu_field = self.field.lock().map_err(|e| e.to_string())?;
+            .ok_or_else(|| BackendError::Device("the batch to shade is not the one traced on the device".into()))?;
+        let mut gpu_field = self.field.lock().map_err(poisoned)?;
         let run = |gpu_field: &mut Option<GpuDdgiField>| -> Result<Vec<(&'static str, f64)>, GpuError> {
             let t = std::time::Instant::now();
             // The field: uploaded whole when the host's atlases are current, else
@@ -495,95 +586,22 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             self.ctx.wait()?;
             Ok(vec![("shade", shade_ms), ("blend", t.elapsed().as_secs_f64() * 1e3)])
         };
-        run(&mut gpu_field).map_err(|e| e.to_string())
+        run(&mut gpu_field).map_err(BackendError::from)
     }
-
-    fn download_field(&self, index: usize, volume: &mut DdgiVolume) -> Result<(), String> {
-        let field = self.field.lock().map_err(|e| e.to_string())?;
+    fn download_field(&self, index: usize, volume: &mut DdgiVolume) -> Result<(), BackendError> {
+        let field = self.field.lock().map_err(poisoned)?;
         let atlases = field
             .as_ref()
             .and_then(|f| f.member_atlases(index))
-            .ok_or_else(|| format!("the device holds no field for volume {index}"))?;
-        let (irradiance, distance) = atlases.download(&self.ctx).map_err(|e| e.to_string())?;
+            .ok_or_else(|| BackendError::Unsupported(format!("the device holds no field for volume {index}")))?;
+        let (irradiance, distance) = atlases.download(&self.ctx)?;
         if irradiance.texels.len() != volume.irradiance.texels.len()
             || distance.texels.len() != volume.distance.texels.len()
         {
-            return Err(format!("the device's atlases of volume {index} do not match its grid"));
+            return Err(BackendError::Device(format!("the device's atlases of volume {index} do not match its grid")));
         }
         volume.irradiance = irradiance;
         volume.distance = distance;
         Ok(())
-    }
-
-    fn pose_scene(&self, scene: &Scene, frame: f32) -> Result<(), String> {
-        if scene.has_moving_geometry() {
-            let Some((layout, roots)) = self.tlas.as_ref().filter(|(l, _)| l.moves()) else {
-                return Err(format!("scene {} moves, but this tracer was made without its moving objects", scene.name));
-            };
-            let tlas = layout.export_at(scene, frame)?;
-            self.bvh.place(&self.ctx, &tlas, roots).map_err(|e| e.to_string())?;
-        }
-        match &self.shading {
-            Some((_, gpu_scene)) => {
-                gpu_scene.pose_lights(&self.ctx, scene).map_err(|e| e.to_string())?;
-                gpu_scene.pose_geometry(&self.ctx, scene).map_err(|e| e.to_string())
-            }
-            None => Ok(()),
-        }
-    }
-
-    fn camera_frame(
-        &self,
-        camera: &CameraRays,
-        field: &DdgiFieldSetView<'_>,
-        field_on_device: bool,
-        area_samples: u32,
-        second_order: bool,
-        frame: u32,
-        seed: u64,
-        direct: &mut [Vec3],
-        indirect: &mut [Vec3],
-    ) -> Option<Result<(usize, usize), String>> {
-        let pass = self.camera.as_ref()?;
-        let (_, scene) = self.shading.as_ref()?;
-        let ([_, _, _], [_, _, w, h]) = camera.basis();
-        let resident = self.field.lock().ok()?;
-        let mut run = || -> Result<(usize, usize), GpuError> {
-            // The field the device holds (its atlases current), or the host's uploaded.
-            let uploaded;
-            let gpu_field = match (field_on_device, resident.as_ref()) {
-                (true, Some(f)) => {
-                    f.refresh(&self.ctx, field, false)?;
-                    f
-                }
-                (true, None) => return Err(GpuError::Input("the device lost the field it held".into())),
-                (false, _) => {
-                    uploaded = GpuDdgiField::upload(&self.ctx, field)?;
-                    &uploaded
-                }
-            };
-            let f = CameraFrame {
-                camera,
-                width: w as u32,
-                height: h as u32,
-                frame,
-                seed: (seed ^ (seed >> 32)) as u32,
-                area_samples,
-                second_order,
-                sky_radiance: self.sky_radiance,
-            };
-            let image = pass.render(&self.ctx, &self.bvh, gpu_field, scene, &f)?;
-            if image.direct.len() != direct.len() || image.indirect.len() != indirect.len() {
-                return Err(GpuError::Input(format!(
-                    "{} camera pixels for a {}-pixel frame",
-                    image.direct.len(),
-                    direct.len()
-                )));
-            }
-            direct.copy_from_slice(&image.direct);
-            indirect.copy_from_slice(&image.indirect);
-            Ok((image.surfaces, image.unlit))
-        };
-        Some(run().map_err(|e| e.to_string()))
     }
 }

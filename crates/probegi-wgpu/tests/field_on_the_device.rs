@@ -14,18 +14,19 @@
 //! the device computes from the initialisation rounds' hits (to 1e-6 m); reruns
 //! bit-identical.
 
+use probegi_cpu::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;
 
 use glam::UVec3;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::probe_classification::probe_usage;
-use probegi_cpu::ddgi::DdgiVolume;
-use probegi_cpu::ddgi_field_set::{DdgiFieldSet, HostHits, UpdateStep};
-use probegi_cpu::probe_trace::ProbeBatchTracer;
 use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_field::ProbeBatchTracer;
+use probegi_field::ddgi_field_set::{DdgiFieldSet, HostHits, UpdateStep};
+use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_scene::{BvhSettings, BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
-use probegi_wgpu_seam::WgpuProbeTracer;
+use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 
 fn gpu(scene: &Scene, bvh: &BvhTracer, keep: bool) -> Option<WgpuProbeTracer> {
     gpu_generating(scene, bvh, keep, false)
@@ -173,7 +174,9 @@ fn gpu_usage_counts_equal_the_core_function_over_the_same_hits() {
     assert_eq!(set.hits_needed_on_host(), HostHits::ProbeUsage);
     let diagonal = set.volumes()[0].grid.spacing_m.length();
     let batch = set.ray_batch();
-    let counts = device.trace_on_device(batch, Some(&[diagonal])).expect("keeps the field").expect("trace");
+    let counts = probegi_field::DeviceField::trace_resident(&device, batch, Some(&[diagonal]))
+        .expect("keeps the field")
+        .expect("trace");
     let mut hits = Vec::new();
     device.closest_hits(batch, false, &mut hits).expect("trace");
     assert_eq!(counts.len(), batch.probes.len());
@@ -235,7 +238,7 @@ fn cascades_kept_on_the_gpu_converge_in_the_furnace() {
     use probegi_core::camera::CameraRays;
     use probegi_core::ddgi_settings::DdgiFieldSetSettings;
     use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
-    use probegi_cpu::probe_trace::ProbeTracerHandle;
+    use probegi_field::ProbeTracerHandle;
     let scene = probegi_scene::builtin::furnace_box(0.5, 1.0);
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };

@@ -25,10 +25,10 @@ use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
 use probegi_cpu::DirectSettings;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
-use probegi_cpu::probe_trace::{ProbeBatchTracer, ProbeTracerHandle};
+use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 use probegi_wgpu::GpuContext;
-use probegi_wgpu_seam::WgpuProbeTracer;
+use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 
 /// Area-light samples per pixel per frame: above the default 16, so that the
 /// seed noise of the comparison stays small.

@@ -13,6 +13,7 @@
 //!   after 1 frame and after 100; the furnace converges to its analytic answer;
 //!   images agree within HDR-FLIP 0.02.
 
+use probegi_cpu::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -20,14 +21,14 @@ use glam::UVec3;
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
-use probegi_cpu::ddgi::DdgiVolume;
-use probegi_cpu::ddgi_field_set::DdgiFieldSet;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
-use probegi_cpu::probe_trace::{ProbeBatchTracer, ProbeTracerHandle};
 use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_field::ddgi_field_set::DdgiFieldSet;
+use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
 use probegi_scene::{BvhSettings, BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
-use probegi_wgpu_seam::WgpuProbeTracer;
+use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 
 fn gpu(scene: &Scene, shade: bool) -> Option<WgpuProbeTracer> {
     let ctx = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set")?;

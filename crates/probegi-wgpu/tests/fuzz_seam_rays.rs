@@ -19,12 +19,12 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use probegi_core::rng::Pcg32;
-use probegi_cpu::ddgi_field_set::ProbeRayBatch;
-use probegi_cpu::probe_trace::ProbeBatchTracer;
+use probegi_field::ProbeBatchTracer;
+use probegi_field::ddgi_field_set::ProbeRayBatch;
 use probegi_scene::bvh_walk::ray_is_traced;
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayHit, RayTracer, Scene, load_scene};
 use probegi_wgpu::GpuContext;
-use probegi_wgpu_seam::WgpuProbeTracer;
+use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 
 fn component(rng: &mut Pcg32) -> f32 {
     let palette = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 0.0, -0.0, 1e-40, f32::MIN_POSITIVE, 1e38, -3e38];

@@ -27,7 +27,7 @@ use std::collections::BTreeMap;
 use glam::{IVec3, UVec3, Vec2, Vec3};
 use probegi_core::ddgi_query::{DdgiFieldView, max_surface_bias_m, nearest_usable_probes};
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
-use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_count};
+use probegi_core::probe_atlas::ProbeAtlas;
 use probegi_core::probe_blend::{TexelThresholds, blend_distance_tile, blend_irradiance_tile};
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::probe_classification::{
@@ -39,8 +39,9 @@ use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats, reloca
 use probegi_core::rng::hash_combine;
 use rayon::prelude::*;
 
-use crate::ddgi_field_set::{ProbeRayBatch, ProbeRayHit};
+use crate::device_plans::{DeviceClassification, DeviceRelocationProbe, DeviceVolumeBlend};
 use crate::probe_ray_gen::{ProbeRayDirections, generate_probe_rays, probe_ray_directions};
+use crate::seam::{ProbeRayBatch, ProbeRayHit};
 
 /// Scene changes the application reports so the field reacts faster (seed 004 §4.3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -101,60 +102,6 @@ pub struct DdgiVolume {
     probes_reset_since_blend: Vec<u32>,
 }
 
-/// One volume's share of an update blended on another device (see
-/// `DdgiFieldSet::device_blend_plan`): what `blend_results` would do, as data.
-#[derive(Clone, Debug)]
-pub struct DeviceVolumeBlend<'a> {
-    pub settings: &'a DdgiVolumeSettings,
-    /// The frame's unit ray directions (every probe's, in ray order) and the
-    /// blend's texel-to-ray weights for them.
-    pub ray_dirs: &'a [Vec3],
-    pub irradiance_weights: &'a probegi_core::probe_blend::BlendWeights,
-    pub distance_weights: &'a probegi_core::probe_blend::BlendWeights,
-    /// Per probe: its first ray in the batch and its blend hysteresis (before the
-    /// scene-event scales), or `None` when it does not blend this frame.
-    pub probe_blend: Vec<Option<(u32, f32)>>,
-    /// The scene-event reductions (`probe_fast_convergence`; 1 otherwise).
-    pub irradiance_scale: f32,
-    pub visibility_scale: f32,
-    /// The distance limit of the blend ([`DdgiVolume::distance_clamp_m`]).
-    pub distance_clamp_m: f32,
-    /// Probes whose tiles the host cleared since the last blend (scrolled in):
-    /// the device clears its copies before blending.
-    pub reset_probes: &'a [u32],
-}
-
-/// One probe of an initialisation batch whose relocation iteration runs on another
-/// device (`DdgiFieldSet::device_relocation_plan`): seed 004 Listing 4's inputs,
-/// as `probegi_core::probe_relocation::relocation_step` takes them.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DeviceRelocationProbe {
-    pub first_ray: u32,
-    pub ray_count: u32,
-    /// The probe's current offset from its grid point (m).
-    pub offset_m: Vec3,
-    pub spacing_m: Vec3,
-    pub offset_limit_rel: f32,
-    pub min_frontface_rel: f32,
-}
-
-/// One volume's classification round run on another device
-/// (`DdgiFieldSet::device_classification_plan`): the grid, the watch box
-/// (`probe_classification_reach_rel`, the query's largest surface bias) and
-/// every probe of the volume.
-#[derive(Clone, Debug)]
-pub struct DeviceClassification<'a> {
-    pub grid: &'a ProbeGrid,
-    pub rays_per_probe: u32,
-    pub reach_rel: f32,
-    pub bias_m: f32,
-    pub probes: Vec<ClassificationProbe>,
-}
-
-/// Per volume of a [`DeviceClassification`] plan (`None`: not classified), per
-/// probe (inside geometry, kept): what a device returns for the round.
-pub type DeviceClassificationResults = Vec<Option<Vec<(bool, bool)>>>;
-
 /// One volume's per-frame scratch.
 #[derive(Clone, Debug, Default)]
 pub struct VolumeFrame {
@@ -177,19 +124,6 @@ pub struct VolumeFrame {
 enum InitRound {
     Relocation(u32),
     Classification,
-}
-
-/// Bytes a volume with these settings holds (atlases, per-probe state and the
-/// per-ray batch and hit buffers of one frame).
-pub fn ddgi_volume_bytes(settings: &DdgiVolumeSettings) -> u64 {
-    let probes = settings.probe_count();
-    let rays = probes * settings.probe_rays_per_probe as u64;
-    let per_ray = std::mem::size_of::<crate::probe_trace::Surfel>() + 3 * 12 + 4 + 16 + 1;
-    rays * per_ray as u64
-        + probes
-            * (tile_texel_count(settings.probe_irradiance_texels) as u64 * 12
-                + tile_texel_count(settings.probe_distance_texels) as u64 * 8
-                + 64)
 }
 
 /// Pseudo-frames for initialisation rounds, far from real ones, so their
@@ -683,7 +617,7 @@ impl DdgiVolume {
                 );
             }
         }
-        batch.generated.push(crate::ddgi_field_set::GeneratedProbeRays {
+        batch.generated.push(crate::seam::GeneratedProbeRays {
             volume,
             first_probe,
             probe_count: batch.probes.len() as u32 - first_probe,

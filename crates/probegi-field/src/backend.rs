@@ -1,0 +1,191 @@
+//! The traits a backend implements to run the field's update on its device,
+//! split by responsibility (RTXGI's per-API peers of one volume base):
+//!
+//! - [`ProbeBatchTracer`]: trace a probe ray batch (and optionally shade it, pose
+//!   the scene, render the camera frame) while the host keeps the atlases;
+//! - [`DeviceField`]: the passes of a device that keeps the field resident:
+//!   trace with the hits kept there, the relocation and classification rounds,
+//!   shade + blend + border into its own atlases, and the copy back.
+//!
+//! A tracer that can keep the field says so through
+//! [`ProbeBatchTracer::device_field`]. Every method that may decline returns
+//! `None` ("go the host way"); a failure is a [`BackendError`].
+
+use glam::Vec3;
+use probegi_core::camera::CameraRays;
+use probegi_core::ddgi_volume_blend::DdgiFieldSetView;
+use probegi_core::probe_classification::ProbeUsageCounts;
+use probegi_scene::{RayHit, Scene};
+
+use crate::ddgi_volume::DdgiVolume;
+use crate::device_plans::{
+    DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
+};
+use crate::seam::{ProbeRayBatch, SeamError};
+
+/// Why a backend could not do what the field asked of it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum BackendError {
+    /// The backend cannot run this at all (e.g. it holds no field, or does not
+    /// shade this scene).
+    Unsupported(String),
+    /// The device failed or refused an input (out of memory, a lost device, a
+    /// buffer over the adapter's limits, results of the wrong size).
+    Device(String),
+    /// The backend's results do not fit the seam's exchange (e.g. hits of the
+    /// wrong count).
+    Seam(SeamError),
+}
+
+impl From<SeamError> for BackendError {
+    fn from(e: SeamError) -> Self {
+        BackendError::Seam(e)
+    }
+}
+
+impl std::fmt::Display for BackendError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BackendError::Unsupported(what) => write!(f, "not supported by this backend: {what}"),
+            BackendError::Device(what) => f.write_str(what),
+            BackendError::Seam(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for BackendError {}
+
+/// Trace (and optionally shade) work a render hands to another device: every
+/// probe ray batch's trace, its shade and the camera frame. The CLI's
+/// `--backend wgpu` plugs `probegi_wgpu::wgpu_field_backend::WgpuProbeTracer`
+/// in here. The hits must be what `RayTracer::closest_hit` returns for the ray
+/// `Ray::segment(origin, direction, max_distance)` (both faces).
+pub trait ProbeBatchTracer: Sync {
+    /// Closest hits of every ray of `batch`, in batch order, into `hits` (resized).
+    /// `static_only`: an initialisation round, which must see static geometry only.
+    fn closest_hits(
+        &self,
+        batch: &ProbeRayBatch,
+        static_only: bool,
+        hits: &mut Vec<Option<RayHit>>,
+    ) -> Result<(), BackendError>;
+
+    /// Shades the update batch this tracer traced last (the shade pass of
+    /// `probegi_cpu::probe_shade` on another device) into `radiance` (one per
+    /// batch ray), or returns `None` to leave the shading to the CPU. `field` is
+    /// the set as queries read it, `volumes` the set's volumes (for their shading settings).
+    fn shade_batch(
+        &self,
+        _batch: &ProbeRayBatch,
+        _field: &DdgiFieldSetView<'_>,
+        _volumes: &[DdgiVolume],
+        _seed: u64,
+        _frame: u32,
+        _radiance: &mut Vec<Vec3>,
+    ) -> Option<Result<(), BackendError>> {
+        None
+    }
+
+    /// The scene as it is at frame `frame` (an animated scene, posed by
+    /// `Scene::set_frame_from`), before the frame's update: a device that keeps
+    /// its own copy of what changes (the lights, the moving objects' triangles
+    /// and their placement in the top level) updates it here.
+    fn pose_scene(&self, _scene: &Scene, _frame: f32) -> Result<(), BackendError> {
+        Ok(())
+    }
+
+    /// Renders the frame's camera image on the other device (the G-buffer and
+    /// camera passes of `probegi_cpu::frame_loop` under DDGI): per pixel the
+    /// direct term (emission, direct light, glossy reflections) into `direct` and
+    /// the field term into `indirect`, returning (pixels on a surface with a
+    /// diffuse albedo, those of them the field left unlit), or `None` to leave
+    /// the camera to the CPU. With `field_on_device` the device's own atlases are
+    /// the current ones (`field`'s are stale; its per-probe data is current).
+    #[allow(clippy::too_many_arguments)]
+    fn camera_frame(
+        &self,
+        _camera: &CameraRays,
+        _field: &DdgiFieldSetView<'_>,
+        _field_on_device: bool,
+        _area_samples: u32,
+        _second_order: bool,
+        _frame: u32,
+        _seed: u64,
+        _direct: &mut [Vec3],
+        _indirect: &mut [Vec3],
+    ) -> Option<Result<(usize, usize), BackendError>> {
+        None
+    }
+
+    /// The field-resident passes, when this tracer can keep the field on its device.
+    fn device_field(&self) -> Option<&dyn DeviceField> {
+        None
+    }
+}
+
+/// The passes of a device that keeps an update's hits and the field's atlases
+/// where it computes them (seed 003 §4.3–4.5 on the device), so that neither
+/// the rays' results nor the atlases cross to the host. Each `None` leaves that
+/// step to the host way ([`ProbeBatchTracer::closest_hits`]): a batch too large
+/// for the device, a pass the adapter cannot bind.
+pub trait DeviceField: Sync {
+    /// Traces the update batch and keeps its hits on the device, for
+    /// [`Self::shade_and_blend`]. With `usage_cage_diagonals_m` (one per
+    /// volume), returns per entry of `batch.probes` seed 003's usage counts
+    /// (usage, relevant, backfaces; `probegi_core::probe_classification::probe_usage`)
+    /// with its volume's cage diagonal; otherwise an empty vector.
+    fn trace_resident(
+        &self,
+        batch: &ProbeRayBatch,
+        usage_cage_diagonals_m: Option<&[f32]>,
+    ) -> Option<Result<Vec<ProbeUsageCounts>, BackendError>>;
+
+    /// Traces an initialisation batch that is a relocation round
+    /// (`HostHits::Relocation`) and runs the iteration on the device: per entry
+    /// of `batch.probes` (inputs in `probes`, same order) the new offset.
+    fn relocate(
+        &self,
+        batch: &ProbeRayBatch,
+        probes: &[DeviceRelocationProbe],
+    ) -> Option<Result<Vec<Vec3>, BackendError>>;
+
+    /// Traces an initialisation batch that is the classification round
+    /// (`HostHits::Classification`) and runs it on the device: per volume of
+    /// `plan` (`None`: not classified this round), per probe (inside geometry, kept).
+    fn classify(
+        &self,
+        batch: &ProbeRayBatch,
+        plan: &[Option<DeviceClassification<'_>>],
+    ) -> Option<Result<DeviceClassificationResults, BackendError>>;
+
+    /// Shades the batch [`Self::trace_resident`] traced and blends and borders
+    /// it by `plan` into the atlases the device holds. `field` is the set as
+    /// queries read it (grids, relocation offsets, usable probes); with
+    /// `upload_atlases` its atlases are current on the host and replace the
+    /// device's first. Returns wall milliseconds by pass (`shade`, `blend`: blend
+    /// and border), the host having waited for each.
+    #[allow(clippy::too_many_arguments)]
+    fn shade_and_blend(
+        &self,
+        batch: &ProbeRayBatch,
+        field: &DdgiFieldSetView<'_>,
+        upload_atlases: bool,
+        plan: &[DeviceVolumeBlend<'_>],
+        volumes: &[DdgiVolume],
+        seed: u64,
+        frame: u32,
+    ) -> Result<Vec<(&'static str, f64)>, BackendError>;
+
+    /// Copies the atlases of volume `index` as the device holds them into `volume`'s own.
+    fn download_field(&self, index: usize, volume: &mut DdgiVolume) -> Result<(), BackendError>;
+}
+
+/// Shareable handle of a [`ProbeBatchTracer`] for render settings.
+#[derive(Clone)]
+pub struct ProbeTracerHandle(pub std::sync::Arc<dyn ProbeBatchTracer>);
+
+impl std::fmt::Debug for ProbeTracerHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ProbeTracerHandle")
+    }
+}

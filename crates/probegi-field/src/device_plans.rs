@@ -1,0 +1,62 @@
+//! What a device that keeps the hits (and the field) needs to run the
+//! relocation, classification and blend passes where the hits lie: each plan is
+//! what the host pass would do, as data (`DdgiFieldSet::device_*_plan`).
+
+use glam::Vec3;
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::probe_classification::ClassificationProbe;
+use probegi_core::probe_grid::ProbeGrid;
+
+/// One volume's share of an update blended on another device (see
+/// `DdgiFieldSet::device_blend_plan`): what `blend_results` would do, as data.
+#[derive(Clone, Debug)]
+pub struct DeviceVolumeBlend<'a> {
+    pub settings: &'a DdgiVolumeSettings,
+    /// The frame's unit ray directions (every probe's, in ray order) and the
+    /// blend's texel-to-ray weights for them.
+    pub ray_dirs: &'a [Vec3],
+    pub irradiance_weights: &'a probegi_core::probe_blend::BlendWeights,
+    pub distance_weights: &'a probegi_core::probe_blend::BlendWeights,
+    /// Per probe: its first ray in the batch and its blend hysteresis (before the
+    /// scene-event scales), or `None` when it does not blend this frame.
+    pub probe_blend: Vec<Option<(u32, f32)>>,
+    /// The scene-event reductions (`probe_fast_convergence`; 1 otherwise).
+    pub irradiance_scale: f32,
+    pub visibility_scale: f32,
+    /// The distance limit of the blend ([`DdgiVolume::distance_clamp_m`]).
+    pub distance_clamp_m: f32,
+    /// Probes whose tiles the host cleared since the last blend (scrolled in):
+    /// the device clears its copies before blending.
+    pub reset_probes: &'a [u32],
+}
+
+/// One probe of an initialisation batch whose relocation iteration runs on another
+/// device (`DdgiFieldSet::device_relocation_plan`): seed 004 Listing 4's inputs,
+/// as `probegi_core::probe_relocation::relocation_step` takes them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DeviceRelocationProbe {
+    pub first_ray: u32,
+    pub ray_count: u32,
+    /// The probe's current offset from its grid point (m).
+    pub offset_m: Vec3,
+    pub spacing_m: Vec3,
+    pub offset_limit_rel: f32,
+    pub min_frontface_rel: f32,
+}
+
+/// One volume's classification round run on another device
+/// (`DdgiFieldSet::device_classification_plan`): the grid, the watch box
+/// (`probe_classification_reach_rel`, the query's largest surface bias) and
+/// every probe of the volume.
+#[derive(Clone, Debug)]
+pub struct DeviceClassification<'a> {
+    pub grid: &'a ProbeGrid,
+    pub rays_per_probe: u32,
+    pub reach_rel: f32,
+    pub bias_m: f32,
+    pub probes: Vec<ClassificationProbe>,
+}
+
+/// Per volume of a [`DeviceClassification`] plan (`None`: not classified), per
+/// probe (inside geometry, kept): what a device returns for the round.
+pub type DeviceClassificationResults = Vec<Option<Vec<(bool, bool)>>>;

@@ -1,0 +1,205 @@
+//! The seam's vocabulary: what a field set and its caller (an engine, a
+//! backend) hand each other during one update (see `ddgi_field_set` for the
+//! exchange): the ray batch, the caller's hits, the next step and what can go
+//! wrong.
+
+use glam::Vec3;
+
+#[allow(unused_imports)]
+use crate::ddgi_field_set::DdgiFieldSet;
+
+/// What a device that keeps an update batch's hits must read back for the set
+/// ([`DdgiFieldSet::hits_needed_on_host`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HostHits {
+    /// Every hit, through [`DdgiFieldSet::submit_hits`] (the classification
+    /// round of initialisation reads the hit points).
+    All,
+    /// An initialisation round that is a relocation iteration for every volume
+    /// in it: per probe of the batch, its new offset, through
+    /// [`DdgiFieldSet::submit_device_relocation`] (inputs from
+    /// [`DdgiFieldSet::device_relocation_plan`]).
+    Relocation,
+    /// An initialisation round that is the jcgt classification round for every
+    /// volume in it: per probe, (inside geometry, kept), through
+    /// [`DdgiFieldSet::submit_device_classification`] (inputs from
+    /// [`DdgiFieldSet::device_classification_plan`]).
+    Classification,
+    /// Per probe of the batch, seed 003's usage counts, through
+    /// [`DdgiFieldSet::submit_device_hits`] (a volume under the usage scheme).
+    ProbeUsage,
+    /// Nothing: call [`DdgiFieldSet::submit_device_hits`] with no counts.
+    None,
+}
+
+/// Which seam call comes next.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UpdateStep {
+    /// Trace [`DdgiFieldSet::ray_batch`] and call [`DdgiFieldSet::submit_hits`].
+    TraceRays,
+    /// Shade the rays with `needs_radiance` and call [`DdgiFieldSet::submit_radiance`].
+    ShadeRays,
+    /// The frame's update is complete.
+    Done,
+}
+
+/// What a batch is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum ProbeRayBatchKind {
+    /// Distance-only rays of initialisation (relocation, classification) against
+    /// static geometry; no shading follows.
+    Initialization,
+    /// The frame's update rays of every volume.
+    #[default]
+    Update,
+}
+
+/// One probe's rays in a batch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BatchProbe {
+    pub volume: u32,
+    /// The probe's storage index in its volume.
+    pub probe: u32,
+    pub first_ray: u32,
+    pub ray_count: u32,
+}
+
+/// How one volume's update rays in a batch were made: each probe of
+/// `probes[first_probe..first_probe + probe_count]` casts `rays_per_probe`
+/// rays from its origin along the spherical Fibonacci set rotated by
+/// `rotation` (`probe_ray_gen::probe_ray_directions`), up to `max_distance_m`.
+/// A device that traces the batch can make them where it traces instead of
+/// receiving them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GeneratedProbeRays {
+    pub volume: u32,
+    pub first_probe: u32,
+    pub probe_count: u32,
+    pub rays_per_probe: u32,
+    pub rotation: glam::Quat,
+    pub max_distance_m: f32,
+}
+
+/// One frame's probe rays for every volume: structure of arrays, probe-major.
+///
+/// **The ray rule at the seam** (`probegi_scene::bvh_walk`, the same in
+/// `bvh.wgsl`): a ray whose origin or direction is NaN or infinite, whose
+/// direction is zero (denormal components count as zero), or whose max
+/// distance is NaN or negative, is a miss on both backends — never an error,
+/// never a hang — and the tracers count it (`--stats`: `trace_guards_*`). Every
+/// walk is bounded by its BVH's node count. A batch a tracer hands back must
+/// keep that rule for the rays an engine puts here itself.
+#[derive(Clone, Debug, Default)]
+pub struct ProbeRayBatch {
+    pub kind: ProbeRayBatchKind,
+    pub origins_m: Vec<Vec3>,
+    /// Unit directions.
+    pub directions: Vec<Vec3>,
+    /// Hits beyond this distance are misses.
+    pub max_distances_m: Vec<f32>,
+    /// Set by [`DdgiFieldSet::submit_hits`] on update batches: the rays whose
+    /// radiance the caller must supply (others are ignored).
+    pub needs_radiance: Vec<bool>,
+    pub probes: Vec<BatchProbe>,
+    /// Update batches: how each volume's rays were made (see [`GeneratedProbeRays`]).
+    pub generated: Vec<GeneratedProbeRays>,
+}
+
+impl ProbeRayBatch {
+    pub fn len(&self) -> usize {
+        self.origins_m.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.origins_m.is_empty()
+    }
+
+    /// Initialisation rays see static geometry only (moving objects wake probes instead).
+    pub fn static_geometry_only(&self) -> bool {
+        self.kind == ProbeRayBatchKind::Initialization
+    }
+
+    /// Rays per volume (`volumes` entries).
+    pub fn rays_per_volume(&self, volumes: usize) -> Vec<u64> {
+        let mut v = vec![0u64; volumes];
+        for p in &self.probes {
+            v[p.volume as usize] += p.ray_count as u64;
+        }
+        v
+    }
+
+    pub(crate) fn clear(&mut self, kind: ProbeRayBatchKind) {
+        self.kind = kind;
+        self.origins_m.clear();
+        self.directions.clear();
+        self.max_distances_m.clear();
+        self.needs_radiance.clear();
+        self.probes.clear();
+        self.generated.clear();
+    }
+
+    /// Appends one probe's rays; returns its first ray index.
+    pub(crate) fn push_probe(&mut self, volume: u32, probe: u32, origin: Vec3, dirs: &[Vec3], max_m: f32) -> u32 {
+        let first = self.origins_m.len() as u32;
+        self.origins_m.extend(std::iter::repeat_n(origin, dirs.len()));
+        self.directions.extend_from_slice(dirs);
+        self.max_distances_m.extend(std::iter::repeat_n(max_m, dirs.len()));
+        self.probes.push(BatchProbe { volume, probe, first_ray: first, ray_count: dirs.len() as u32 });
+        first
+    }
+}
+
+/// One traced probe ray, as the caller reports it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProbeRayHit {
+    /// Signed hit distance in metres: `t` on a front face, `−t` on a back face,
+    /// `+∞` for a miss (nothing within the ray's max distance).
+    pub distance_m: f32,
+    /// Unit normal at the hit on the side facing the ray's origin (read by the
+    /// jcgt classification); anything for a miss.
+    pub normal: Vec3,
+}
+
+impl ProbeRayHit {
+    pub const MISS: Self = Self { distance_m: f32::INFINITY, normal: Vec3::ZERO };
+
+    /// A front-face hit at `t` with facing normal `normal`.
+    pub fn front(t: f32, normal: Vec3) -> Self {
+        Self { distance_m: t, normal }
+    }
+
+    /// A back-face hit at `t` (the ray's origin is behind the surface).
+    pub fn back(t: f32, normal: Vec3) -> Self {
+        Self { distance_m: -t, normal }
+    }
+}
+
+/// A seam call that does not fit the exchange.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum SeamError {
+    /// The call does not follow the step the set asked for.
+    OutOfOrder { expected: UpdateStep, called: &'static str },
+    /// A results buffer does not have one entry per batch ray.
+    WrongLength { what: &'static str, expected: usize, got: usize },
+    /// A host blend while another device holds the current atlases: copy them
+    /// back first ([`DdgiFieldSet::accept_host_atlases`]).
+    FieldOnDevice,
+}
+
+impl std::fmt::Display for SeamError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SeamError::OutOfOrder { expected, called } => {
+                write!(f, "{called} called while the field set expects {expected:?}")
+            }
+            SeamError::WrongLength { what, expected, got } => {
+                write!(f, "{what} has {got} entries but the ray batch has {expected}")
+            }
+            SeamError::FieldOnDevice => {
+                write!(f, "the host blend needs the field's atlases, which are on another device")
+            }
+        }
+    }
+}
+
+impl std::error::Error for SeamError {}
