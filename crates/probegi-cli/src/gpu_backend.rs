@@ -1,4 +1,4 @@
-//! `--backend wgpu`: what of a frame runs on the GPU today (`probegi-wgpu-seam`
+//! `--backend wgpu`: what of a frame runs on the GPU today (`probegi_wgpu::wgpu_field_backend`
 //! with the field kept on the device). The DDGI probe ray batches are traced by
 //! probegi-wgpu's compute-shader CWBVH traversal over the same BVH the CPU
 //! builds; the update batch is shaded, blended and bordered there into atlases

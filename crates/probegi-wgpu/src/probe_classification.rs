@@ -1,5 +1,5 @@
 //! The classification round of seed 004's jcgt probe states on the GPU
-//! (`shaders/probe_classification.wgsl`), mirroring `probegi_cpu::ddgi`'s
+//! (`shaders/probe_classification.wgsl`), mirroring `probegi_field::ddgi_volume`'s
 //! `classify_jcgt_pending` with `probegi_core::probe_classification::{probe_watches,
 //! uncovered_point_probe}`: per probe of one volume, whether it is inside geometry
 //! and whether it is kept (it watches a front face, or the covering pass chose it
