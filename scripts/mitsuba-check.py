@@ -7,7 +7,7 @@ For each `--scene` (a Wavefront `.obj`, a glTF 2.0 `.gltf` or `.glb`, a probegi
 `.toml` scene file, whose [[meshes]] may be any of those, or `builtin:NAME` for
 the built-in scenes whose source is in this repository) the
 script builds the same scene in Mitsuba 3 *by reading the files itself*,
-following probegi's documented scene semantics (README "Scene conventions",
+following probegi's documented scene semantics (docs/SCENES.md,
 `crates/probegi-scene`), not by asking probegi for its geometry. It renders
 
   1. Mitsuba's `path` integrator (`volpath` when the scene has alpha cutouts,
