@@ -77,10 +77,6 @@ pub trait VolumeUpdate {
 }
 
 impl FieldSetUpdate for DdgiFieldSet {
-    /// One field update of every volume through the seam. Returns the rays traced
-    /// (probe rays plus shading shadow rays). A set whose field a device holds
-    /// (`field_on_device`) needs [`Self::update_traced_by`] with that device:
-    /// here the update is skipped (a debug assertion names it).
     fn update(
         &mut self,
         scene: &Scene,
@@ -97,12 +93,6 @@ impl FieldSetUpdate for DdgiFieldSet {
         })
     }
 
-    /// [`DdgiFieldSet::update`] with the probe ray batches traced by `batch_tracer`
-    /// when given (a GPU trace), and shaded by it when it shades
-    /// ([`ProbeBatchTracer::shade_batch`]; otherwise the CPU shades, its shadow
-    /// rays going to `tracer` through `direct`). Returns the rays traced on the
-    /// CPU plus the batch rays; shadow rays traced elsewhere are not counted. An
-    /// error of the batch tracer, or hits of the wrong count, end the update with it.
     #[allow(clippy::too_many_arguments)]
     fn update_traced_by(
         &mut self,
@@ -256,9 +246,6 @@ impl FieldSetUpdate for DdgiFieldSet {
 }
 
 impl VolumeUpdate for DdgiVolume {
-    /// One field update of this volume alone (a set of one; see [`DdgiFieldSet::update`]).
-    /// A tracking volume does not move here: drive it through a [`DdgiFieldSet`]
-    /// and `set_tracking_target`.
     fn update(
         &mut self,
         scene: &Scene,
@@ -284,7 +271,6 @@ impl VolumeUpdate for DdgiVolume {
         traced
     }
 
-    /// Probes inside geometry by their rays (> 25 % backfaces), from a fresh trace.
     fn count_probes_inside_geometry(&self, tracer: &dyn RayTracer, seed: u64) -> usize {
         use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats};
         let n = self.settings.probe_rays_per_probe as usize;
