@@ -82,6 +82,7 @@ pub struct DdgiFieldSet {
     /// Private so that the per-volume scratch and sampling order stay in step;
     /// see [`Self::volumes`] and [`Self::volumes_mut`].
     volumes: Vec<DdgiVolume>,
+    /// How overlapping volumes are weighted at a shading point (multiple volumes, cascades).
     pub blending: VolumeBlending,
     /// Volume indices in sampling order: densest (or finest) first.
     order: Vec<usize>,
@@ -104,8 +105,9 @@ pub struct DdgiFieldSet {
     frame: u32,
     /// Milliseconds of the set's own work in the last update, by pass.
     pub last_pass_ms: BTreeMap<&'static str, f64>,
-    /// Rays in the last update batch, and per volume.
+    /// Rays in the last update batch.
     pub last_batch_rays: u64,
+    /// Rays in the last update batch, per volume (in volume order).
     pub last_batch_rays_per_volume: Vec<u64>,
     /// Initialisation rays in the last update.
     pub last_init_rays: u64,
@@ -220,6 +222,7 @@ impl DdgiFieldSet {
         self.volumes.iter_mut().map(|v| v.scroll_to(target_m)).sum()
     }
 
+    /// The point tracking windows follow now (the camera), if one was given.
     pub fn tracking_target(&self) -> Option<Vec3> {
         self.tracking_target_m
     }

@@ -11,17 +11,21 @@ use probegi_core::probe_grid::ProbeGrid;
 /// `DdgiFieldSet::device_blend_plan`): what `blend_results` would do, as data.
 #[derive(Clone, Debug)]
 pub struct DeviceVolumeBlend<'a> {
+    /// The volume's settings (atlas sizes, encoding, thresholds).
     pub settings: &'a DdgiVolumeSettings,
     /// The frame's unit ray directions (every probe's, in ray order) and the
     /// blend's texel-to-ray weights for them.
     pub ray_dirs: &'a [Vec3],
+    /// Texel-to-ray weights of the irradiance tiles.
     pub irradiance_weights: &'a probegi_core::probe_blend::BlendWeights,
+    /// Texel-to-ray weights of the distance tiles.
     pub distance_weights: &'a probegi_core::probe_blend::BlendWeights,
     /// Per probe: its first ray in the batch and its blend hysteresis (before the
     /// scene-event scales), or `None` when it does not blend this frame.
     pub probe_blend: Vec<Option<(u32, f32)>>,
-    /// The scene-event reductions (`probe_fast_convergence`; 1 otherwise).
+    /// The scene-event reduction of the irradiance hysteresis (`probe_fast_convergence`; 1 otherwise).
     pub irradiance_scale: f32,
+    /// The scene-event reduction of the distance (visibility) hysteresis.
     pub visibility_scale: f32,
     /// The distance limit of the blend ([`DdgiVolume::distance_clamp_m`]).
     pub distance_clamp_m: f32,
@@ -35,12 +39,18 @@ pub struct DeviceVolumeBlend<'a> {
 /// as `probegi_core::probe_relocation::relocation_step` takes them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DeviceRelocationProbe {
+    /// The probe's first ray in the batch.
     pub first_ray: u32,
+    /// The probe's rays in the batch.
     pub ray_count: u32,
     /// The probe's current offset from its grid point (m).
     pub offset_m: Vec3,
+    /// The grid spacing (m): offsets and limits are relative to it.
     pub spacing_m: Vec3,
+    /// The largest offset per axis, as a fraction of the spacing (`probe_relocation_offset_limit_rel`).
     pub offset_limit_rel: f32,
+    /// A front face closer than this × the minimum spacing pushes the probe away
+    /// (`probe_relocation_min_frontface_rel`).
     pub min_frontface_rel: f32,
 }
 
@@ -50,10 +60,16 @@ pub struct DeviceRelocationProbe {
 /// every probe of the volume.
 #[derive(Clone, Debug)]
 pub struct DeviceClassification<'a> {
+    /// The volume's probe lattice.
     pub grid: &'a ProbeGrid,
+    /// Rays each probe cast in the round.
     pub rays_per_probe: u32,
+    /// The watch box's half-size per axis, as a fraction of the spacing
+    /// (`probe_classification_reach_rel`).
     pub reach_rel: f32,
+    /// The query's largest surface bias (m), which grows the watch box.
     pub bias_m: f32,
+    /// Every probe of the volume: its ray range, init and trace state, and position.
     pub probes: Vec<ClassificationProbe>,
 }
 

@@ -21,6 +21,8 @@
 //! Depends on `probegi-core` (maths, layouts, settings) and `probegi-scene`
 //! (the backend trait hands hits as the scene's `RayHit` and poses the scene).
 
+#![warn(missing_docs)]
+
 pub mod backend;
 pub mod ddgi_field_set;
 pub mod ddgi_volume;

@@ -37,6 +37,8 @@ pub fn probe_ray_rotation(seed: u64, frame: u32) -> glam::Quat {
     sample_uniform_rotation(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()))
 }
 
+/// The frame's rotated spherical Fibonacci directions for a volume and the
+/// blend weights of each direction (what the host plan traces).
 pub fn generate_probe_rays(settings: &DdgiVolumeSettings, seed: u64, frame: u32) -> ProbeRayDirections {
     let dirs = probe_ray_directions(settings, seed, frame);
     ProbeRayDirections {

@@ -57,10 +57,13 @@ pub enum ProbeRayBatchKind {
 /// One probe's rays in a batch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BatchProbe {
+    /// The probe's volume (its index in the field set).
     pub volume: u32,
     /// The probe's storage index in its volume.
     pub probe: u32,
+    /// The probe's first ray in the batch.
     pub first_ray: u32,
+    /// The probe's rays in the batch, consecutive from `first_ray`.
     pub ray_count: u32,
 }
 
@@ -72,11 +75,17 @@ pub struct BatchProbe {
 /// receiving them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GeneratedProbeRays {
+    /// The volume whose rays these are.
     pub volume: u32,
+    /// The volume's first entry in the batch's `probes`.
     pub first_probe: u32,
+    /// The volume's entries in the batch's `probes`, consecutive.
     pub probe_count: u32,
+    /// Rays each probe casts.
     pub rays_per_probe: u32,
+    /// The frame's rotation of the spherical Fibonacci set (`probe_ray_gen::probe_ray_rotation`).
     pub rotation: glam::Quat,
+    /// Hits beyond this distance are misses (the volume's trace limit).
     pub max_distance_m: f32,
 }
 
@@ -91,7 +100,9 @@ pub struct GeneratedProbeRays {
 /// keep that rule for the rays an engine puts here itself.
 #[derive(Clone, Debug, Default)]
 pub struct ProbeRayBatch {
+    /// What the batch is for (initialisation or the frame's update).
     pub kind: ProbeRayBatchKind,
+    /// Ray origins in world space: the probes' positions with their relocation offsets.
     pub origins_m: Vec<Vec3>,
     /// Unit directions.
     pub directions: Vec<Vec3>,
@@ -100,16 +111,19 @@ pub struct ProbeRayBatch {
     /// Set by [`DdgiFieldSet::submit_hits`] on update batches: the rays whose
     /// radiance the caller must supply (others are ignored).
     pub needs_radiance: Vec<bool>,
+    /// The probes that trace in this batch and their ray ranges, volume by volume.
     pub probes: Vec<BatchProbe>,
     /// Update batches: how each volume's rays were made (see [`GeneratedProbeRays`]).
     pub generated: Vec<GeneratedProbeRays>,
 }
 
 impl ProbeRayBatch {
+    /// Rays in the batch.
     pub fn len(&self) -> usize {
         self.origins_m.len()
     }
 
+    /// Whether the batch has no rays.
     pub fn is_empty(&self) -> bool {
         self.origins_m.is_empty()
     }
@@ -161,6 +175,7 @@ pub struct ProbeRayHit {
 }
 
 impl ProbeRayHit {
+    /// A miss: nothing within the ray's max distance.
     pub const MISS: Self = Self { distance_m: f32::INFINITY, normal: Vec3::ZERO };
 
     /// A front-face hit at `t` with facing normal `normal`.
@@ -178,9 +193,21 @@ impl ProbeRayHit {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum SeamError {
     /// The call does not follow the step the set asked for.
-    OutOfOrder { expected: UpdateStep, called: &'static str },
+    OutOfOrder {
+        /// The step the set asked for.
+        expected: UpdateStep,
+        /// The seam call that came instead.
+        called: &'static str,
+    },
     /// A results buffer does not have one entry per batch ray.
-    WrongLength { what: &'static str, expected: usize, got: usize },
+    WrongLength {
+        /// The buffer (e.g. "hits", "radiance").
+        what: &'static str,
+        /// The batch's ray count.
+        expected: usize,
+        /// The buffer's length.
+        got: usize,
+    },
     /// A host blend while another device holds the current atlases: copy them
     /// back first ([`DdgiFieldSet::accept_host_atlases`]).
     FieldOnDevice,

@@ -1,0 +1,216 @@
+//! Blend inputs and the blend: scene events lower the hysteresis for a few
+//! frames (seed 004 §4.3); `blend_inputs` applies the backface rule once per ray
+//! (zero radiance, distance −0.2·t, seed 004 §4.1); `blend_results` blends
+//! (`probegi_core::probe_blend`, hysteresis with seed 004 Listing 3's thresholds
+//! and the scene-event reductions) and fixes borders (`probegi_core::probe_border`)
+//! only for the probes that update this frame. `device_blend` /
+//! `accept_device_blend` are the same step when the device holds the atlases.
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+use probegi_core::probe_blend::{TexelThresholds, blend_distance_tile, blend_irradiance_tile};
+use probegi_core::probe_border::update_tile_border;
+use probegi_core::probe_classification::ProbeState;
+use rayon::prelude::*;
+
+use crate::device_plans::DeviceVolumeBlend;
+use crate::seam::{ProbeRayBatch, ProbeRayHit};
+
+use super::{DdgiVolume, HysteresisReduction, SceneEvent, VolumeFrame};
+
+impl DdgiVolume {
+    /// Reports a scene change (seed 004 §4.3 per-probe heuristics; they apply to all
+    /// probes). No effect unless `probe_fast_convergence` is on. Repeating an event
+    /// while its reduction lasts restarts the reduction's window.
+    pub fn notify_scene_event(&mut self, event: SceneEvent) {
+        let (irr, vis) = match event {
+            SceneEvent::SmallLightChange => (Some((0.85, 4)), None),
+            SceneEvent::LargeLightChange => (Some((0.5, 10)), None),
+            SceneEvent::LargeObjectChange => (Some((0.5, 10)), Some((0.5, 7))),
+        };
+        // The same reduction reported again (an object moving on every frame) restarts
+        // its window rather than compounding: different reductions still multiply.
+        let add = |events: &mut Vec<HysteresisReduction>, (scale, frames_left): (f32, u32)| match events
+            .iter_mut()
+            .find(|e| e.scale == scale)
+        {
+            Some(e) => e.frames_left = e.frames_left.max(frames_left),
+            None => events.push(HysteresisReduction { scale, frames_left }),
+        };
+        if let Some(r) = irr {
+            add(&mut self.irradiance_events, r);
+        }
+        if let Some(r) = vis {
+            add(&mut self.visibility_events, r);
+        }
+    }
+
+    /// Blend and border (seed 003 §4.5, seed 004 §2.3–4.3) for the probes that
+    /// update this frame, from the batch's per-ray blend inputs (radiance and
+    /// signed distance after the backface rule, [`blend_inputs`]). Adds
+    /// milliseconds to `pass_ms` under `blend` and `border`.
+    pub(crate) fn blend_results(
+        &mut self,
+        frame: &VolumeFrame,
+        ray_radiance: &[Vec3],
+        ray_distance: &[f32],
+        pass_ms: &mut BTreeMap<&'static str, f64>,
+    ) {
+        let t = std::time::Instant::now();
+        let n = frame.ray_count;
+        let (base, irr_scale, vis_scale) = self.blend_plan(frame);
+        let thresholds = self.settings.probe_fast_convergence.then_some(TexelThresholds {
+            significant: self.settings.probe_significant_change_threshold,
+            new_distribution: self.settings.probe_new_distribution_threshold,
+        });
+        let (irr_n, dist_n) = (self.irradiance.interior, self.distance.interior);
+        let gamma = self.settings.probe_irradiance_gamma;
+        let clamp = self.distance_clamp_m();
+        let irr_len = self.irradiance.tile_len();
+        let dist_len = self.distance.tile_len();
+        let weights = &frame.rays;
+        self.irradiance.texels.par_chunks_mut(irr_len).zip(base.par_iter()).for_each(|(tile, b)| {
+            if let Some((first, h)) = *b {
+                blend_irradiance_tile(
+                    tile,
+                    irr_n,
+                    &weights.irradiance_weights,
+                    &ray_radiance[first..first + n],
+                    h * irr_scale,
+                    gamma,
+                    thresholds.as_ref(),
+                );
+            }
+        });
+        self.distance.texels.par_chunks_mut(dist_len).zip(base.par_iter()).for_each(|(tile, b)| {
+            if let Some((first, h)) = *b {
+                blend_distance_tile(
+                    tile,
+                    dist_n,
+                    &weights.distance_weights,
+                    &ray_distance[first..first + n],
+                    h * vis_scale,
+                    clamp,
+                );
+            }
+        });
+        *pass_ms.entry("blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
+
+        let t = std::time::Instant::now();
+        let updated: Vec<bool> = base.iter().map(|b| b.is_some()).collect();
+        self.irradiance.texels.par_chunks_mut(irr_len).zip(updated.par_iter()).for_each(|(tile, a)| {
+            if *a {
+                update_tile_border(tile, irr_n)
+            }
+        });
+        self.distance.texels.par_chunks_mut(dist_len).zip(updated.par_iter()).for_each(|(tile, a)| {
+            if *a {
+                update_tile_border(tile, dist_n)
+            }
+        });
+        *pass_ms.entry("border").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        self.after_update(&updated);
+        #[cfg(debug_assertions)]
+        self.validate();
+    }
+
+    /// Per probe, its first ray and the hysteresis of its blend this frame (`None`:
+    /// no blend), and the scene events' irradiance and visibility scales.
+    fn blend_plan(&self, frame: &VolumeFrame) -> (Vec<Option<(usize, f32)>>, f32, f32) {
+        let event_scale = |events: &[HysteresisReduction]| events.iter().map(|e| e.scale).product::<f32>();
+        let (irr_scale, vis_scale) = if self.settings.probe_fast_convergence {
+            (event_scale(&self.irradiance_events), event_scale(&self.visibility_events))
+        } else {
+            (1.0, 1.0)
+        };
+        let base = (0..self.grid.probe_count())
+            .map(|p| {
+                let first = frame.first_ray[p];
+                (frame.active[p] && first != u32::MAX).then(|| {
+                    let h = if !self.probe_has_history[p] || self.probe_states[p].is_new() {
+                        0.0
+                    } else {
+                        self.probe_hysteresis[p]
+                    };
+                    (first as usize, h)
+                })
+            })
+            .collect();
+        (base, irr_scale, vis_scale)
+    }
+
+    /// This frame's blend as data, for a device that holds the atlases.
+    pub(crate) fn device_blend<'a>(&'a self, frame: &'a VolumeFrame) -> DeviceVolumeBlend<'a> {
+        let (base, irradiance_scale, visibility_scale) = self.blend_plan(frame);
+        DeviceVolumeBlend {
+            settings: &self.settings,
+            ray_dirs: &frame.rays.dirs,
+            irradiance_weights: &frame.rays.irradiance_weights,
+            distance_weights: &frame.rays.distance_weights,
+            probe_blend: base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect(),
+            irradiance_scale,
+            visibility_scale,
+            distance_clamp_m: self.distance_clamp_m(),
+            reset_probes: &self.probes_reset_since_blend,
+        }
+    }
+
+    /// The bookkeeping of a blend another device ran by [`Self::device_blend`].
+    pub(crate) fn accept_device_blend(&mut self, frame: &VolumeFrame) {
+        let updated: Vec<bool> = self.blend_plan(frame).0.iter().map(|b| b.is_some()).collect();
+        self.after_update(&updated);
+    }
+
+    /// State transitions and hysteresis ramps after a blend.
+    fn after_update(&mut self, updated: &[bool]) {
+        self.frames_updated += 1;
+        self.probes_reset_since_blend.clear();
+        let max_h = self.settings.probe_hysteresis;
+        self.active_probes_last = updated.iter().filter(|a| **a).count();
+        for (p, _) in updated.iter().enumerate().filter(|(_, u)| **u) {
+            self.probe_has_history[p] = true;
+            let state = self.probe_states[p].after_update();
+            if matches!(state, ProbeState::Alive | ProbeState::UsageSleeping) {
+                let target = if state == ProbeState::Alive { max_h } else { 0.5 * max_h };
+                self.probe_hysteresis[p] += 0.1 * (target - self.probe_hysteresis[p]);
+            }
+            self.probe_states[p] = state;
+        }
+        self.refresh_usable();
+        for events in [&mut self.irradiance_events, &mut self.visibility_events] {
+            for e in events.iter_mut() {
+                e.frames_left = e.frames_left.saturating_sub(1);
+            }
+            events.retain(|e| e.frames_left > 0);
+        }
+    }
+}
+
+/// The blend's per-ray inputs from a batch's hits and the caller's radiance, the
+/// backface rule applied once per ray (seed 004 §4.1; RTXGI stores −0.2·t): a
+/// backface hit gets zero radiance and a short negative distance, so the probe
+/// reads as shadowed there; a miss keeps the caller's radiance (the sky) and the
+/// ray's max distance. Fills `radiance_out` and `distance_out`.
+pub(crate) fn blend_inputs(
+    batch: &ProbeRayBatch,
+    hits: &[ProbeRayHit],
+    radiance: &[Vec3],
+    radiance_out: &mut Vec<Vec3>,
+    distance_out: &mut Vec<f32>,
+) {
+    radiance_out.clear();
+    distance_out.clear();
+    for ((h, &l), &max) in hits.iter().zip(radiance).zip(&batch.max_distances_m) {
+        let d = h.distance_m;
+        let (l, d) = if d < 0.0 {
+            (Vec3::ZERO, 0.2 * d)
+        } else if d.is_finite() {
+            (l, d)
+        } else {
+            (l, max)
+        };
+        radiance_out.push(l);
+        distance_out.push(d);
+    }
+}

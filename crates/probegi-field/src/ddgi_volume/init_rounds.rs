@@ -1,0 +1,272 @@
+//! Initialisation rounds of a volume (seed 004 Listing 5, first step): before a
+//! probe traces for the field it is placed and classified against the static
+//! geometry in distance-only rounds, `probe_relocation_iterations` rounds of the
+//! position optimizer (`probegi_core::probe_relocation`), then with jcgt states
+//! one classification round (`probegi_core::probe_classification`). The rounds
+//! run for every probe when the volume is created, and for the planes a tracking
+//! window scrolls in. `plan_init_round` / `accept_init_round` are the host path;
+//! `device_relocation` / `device_classification` and their `accept_*` twins the
+//! field-resident device path.
+
+use glam::Vec3;
+use probegi_core::ddgi_query::max_surface_bias_m;
+use probegi_core::ddgi_settings::ProbeStatesMode;
+use probegi_core::probe_classification::{
+    ClassificationProbe, ProbeState, classify_jcgt, probe_watches, uncovered_point_probe,
+};
+use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats, relocation_step};
+use rayon::prelude::*;
+
+use crate::device_plans::{DeviceClassification, DeviceRelocationProbe};
+use crate::probe_ray_gen::probe_ray_directions;
+use crate::seam::{ProbeRayBatch, ProbeRayHit};
+
+use super::{DdgiVolume, VolumeFrame};
+
+impl DdgiVolume {
+    /// The initialisation rounds this volume runs for its pending probes.
+    fn init_rounds(&self) -> Vec<InitRound> {
+        let mut rounds = Vec::new();
+        if self.settings.probe_relocation {
+            rounds.extend((0..self.settings.probe_relocation_iterations).map(InitRound::Relocation));
+        }
+        if self.settings.probe_states == ProbeStatesMode::Jcgt {
+            rounds.push(InitRound::Classification);
+        }
+        rounds
+    }
+
+    /// Whether this volume's initialisation round `round` is its classification round.
+    pub(crate) fn init_round_is_classification(&self, round: usize) -> bool {
+        matches!(self.init_rounds().get(round), Some(InitRound::Classification))
+    }
+
+    /// The classification round's inputs, for a device that runs it.
+    pub(crate) fn device_classification<'a>(&'a self, frame: &VolumeFrame) -> DeviceClassification<'a> {
+        DeviceClassification {
+            grid: &self.grid,
+            rays_per_probe: frame.ray_count as u32,
+            reach_rel: self.settings.probe_classification_reach_rel,
+            bias_m: max_surface_bias_m(&self.settings, &self.grid),
+            probes: (0..self.grid.probe_count())
+                .map(|p| ClassificationProbe {
+                    first_ray: frame.first_ray.get(p).copied().filter(|f| *f != u32::MAX),
+                    pending: self.probe_pending_init[p],
+                    traces: self.probe_states[p].traces(),
+                    position_m: self.probe_positions[p],
+                })
+                .collect(),
+        }
+    }
+
+    /// Applies a classification round a device ran: per probe (inside geometry, kept).
+    pub(crate) fn accept_device_classification(&mut self, results: &[(bool, bool)]) {
+        for (p, &(inside, kept)) in results.iter().enumerate().take(self.grid.probe_count()) {
+            if self.probe_pending_init[p] {
+                self.probe_states[p] = classify_jcgt(inside, kept);
+            }
+        }
+    }
+
+    /// Whether this volume's initialisation round `round` is a relocation iteration.
+    pub(crate) fn init_round_is_relocation(&self, round: usize) -> bool {
+        matches!(self.init_rounds().get(round), Some(InitRound::Relocation(_)))
+    }
+
+    /// The device's inputs for probe `p`'s relocation iteration in the current
+    /// initialisation batch (`None` when it has no rays there).
+    pub(crate) fn device_relocation(&self, frame: &VolumeFrame, p: usize) -> Option<DeviceRelocationProbe> {
+        let first = *frame.first_ray.get(p)?;
+        (first != u32::MAX && self.probe_pending_init[p]).then(|| DeviceRelocationProbe {
+            first_ray: first,
+            ray_count: frame.ray_count as u32,
+            offset_m: self.probe_offsets[p],
+            spacing_m: self.grid.spacing_m,
+            offset_limit_rel: self.settings.probe_relocation_offset_limit_rel,
+            min_frontface_rel: self.settings.probe_relocation_min_frontface_rel,
+        })
+    }
+
+    /// Applies a relocation iteration another device ran: `offsets` are (probe, new offset).
+    pub(crate) fn accept_device_relocation(&mut self, offsets: &[(u32, Vec3)]) {
+        for &(p, o) in offsets {
+            let p = p as usize;
+            if p < self.probe_offsets.len() && self.probe_pending_init[p] {
+                self.probe_offsets[p] = o;
+                self.probe_positions[p] = self.grid.probe_position(self.grid.probe_coords(p)) + o;
+            }
+        }
+    }
+
+    /// Whether the volume has probes waiting for initialisation.
+    pub(crate) fn needs_init(&self) -> bool {
+        self.probe_pending_init.iter().any(|p| *p)
+    }
+
+    /// Adds this volume's rays for initialisation round `round` to `batch`, for its
+    /// pending probes. Returns false when the volume has no such round (it then
+    /// finishes its initialisation at once).
+    pub(crate) fn plan_init_round(
+        &self,
+        frame: &mut VolumeFrame,
+        round: usize,
+        seed: u64,
+        volume: u32,
+        batch: &mut ProbeRayBatch,
+    ) -> bool {
+        let Some(&kind) = self.init_rounds().get(round) else {
+            return false;
+        };
+        frame.init_dirs = probe_ray_directions(&self.settings, self.stream_seed(seed), init_frame(kind));
+        frame.ray_count = frame.init_dirs.len();
+        frame.first_ray = vec![u32::MAX; self.grid.probe_count()];
+        for p in 0..self.grid.probe_count() {
+            if self.probe_pending_init[p] {
+                frame.first_ray[p] = batch.push_probe(
+                    volume,
+                    p as u32,
+                    self.probe_positions[p],
+                    &frame.init_dirs,
+                    self.settings.probe_max_ray_distance_m,
+                );
+            }
+        }
+        true
+    }
+
+    /// Applies the hits of initialisation round `round` (see [`Self::plan_init_round`]).
+    /// `distances` are the hits' signed distances (one per batch ray).
+    pub(crate) fn accept_init_round(
+        &mut self,
+        frame: &VolumeFrame,
+        round: usize,
+        batch: &ProbeRayBatch,
+        hits: &[ProbeRayHit],
+        distances: &[f32],
+    ) {
+        let Some(&kind) = self.init_rounds().get(round) else {
+            return;
+        };
+        let n = frame.ray_count;
+        let dirs = &frame.init_dirs;
+        let rays_of = |p: usize| {
+            let first = frame.first_ray[p] as usize;
+            first..first + n
+        };
+        match kind {
+            InitRound::Relocation(_) => {
+                let spacing = self.grid.spacing_m;
+                let settings = &self.settings;
+                let pending = &self.probe_pending_init;
+                let planned = &frame.first_ray;
+                self.probe_offsets.par_iter_mut().enumerate().for_each(|(p, offset)| {
+                    if !pending[p] || planned[p] == u32::MAX {
+                        return;
+                    }
+                    *offset =
+                        relocation_step(*offset, &probe_ray_stats(dirs, &distances[rays_of(p)]), spacing, settings);
+                });
+                for p in 0..self.grid.probe_count() {
+                    self.probe_positions[p] =
+                        self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
+                }
+            }
+            InitRound::Classification => self.classify_jcgt_pending(frame, batch, hits, distances),
+        }
+    }
+
+    /// Seed 004 Listing 5's classification of the pending probes from one
+    /// distance round (see `probegi_core::probe_classification`): a first pass per
+    /// probe (inside geometry → Off; watching a front face → kept), then a covering
+    /// pass in probe and ray order (sequential, so deterministic and greedy) that
+    /// keeps a front-side cage probe for every surface point a pending probe saw.
+    /// Probes that are not pending keep their states and count as covering when
+    /// they are kept already (they trace: not Off or Sleeping).
+    fn classify_jcgt_pending(
+        &mut self,
+        frame: &VolumeFrame,
+        batch: &ProbeRayBatch,
+        hits: &[ProbeRayHit],
+        distances: &[f32],
+    ) {
+        let n = frame.ray_count;
+        let bias = max_surface_bias_m(&self.settings, &self.grid);
+        let reach = self.settings.probe_classification_reach_rel;
+        let (grid, pending) = (&self.grid, &self.probe_pending_init);
+        let dirs = &frame.init_dirs;
+        // Front-face hits of probe p as (position, facing normal).
+        let front_hits = |p: usize| {
+            let first = frame.first_ray[p] as usize;
+            (first..first + n).filter_map(move |r| {
+                let h = hits[r];
+                (h.distance_m > 0.0 && h.distance_m.is_finite())
+                    .then(|| (batch.origins_m[r] + batch.directions[r] * h.distance_m, h.normal))
+            })
+        };
+        let first: Vec<(bool, bool)> = (0..grid.probe_count())
+            .into_par_iter()
+            .map(|p| {
+                if !pending[p] || frame.first_ray[p] == u32::MAX {
+                    return (false, false);
+                }
+                let f = frame.first_ray[p] as usize;
+                let d = &distances[f..f + n];
+                let coords = grid.probe_coords(p);
+                let grid_point = grid.probe_position(coords);
+                let watches = front_hits(p).any(|(pos, _)| probe_watches(grid, coords, pos - grid_point, reach, bias));
+                (is_inside_geometry(&probe_ray_stats(dirs, d)), watches)
+            })
+            .collect();
+        let eligible: Vec<bool> = (0..grid.probe_count()).map(|p| pending[p] && !first[p].0).collect();
+        let mut kept: Vec<bool> = (0..grid.probe_count())
+            .map(|p| if pending[p] { !first[p].0 && first[p].1 } else { self.probe_states[p].traces() })
+            .collect();
+        let positions = &self.probe_positions;
+        for p in (0..grid.probe_count()).filter(|&p| pending[p] && frame.first_ray[p] != u32::MAX) {
+            for (pos, normal) in front_hits(p) {
+                if let Some(q) = uncovered_point_probe(grid, positions, &kept, &eligible, pos, normal) {
+                    kept[q] = true;
+                }
+            }
+        }
+        for p in 0..grid.probe_count() {
+            if pending[p] {
+                self.probe_states[p] = classify_jcgt(first[p].0, kept[p]);
+            }
+        }
+    }
+
+    /// Ends initialisation: pending probes take their starting state (jcgt: set by
+    /// the classification round).
+    pub(crate) fn finish_init(&mut self) {
+        for p in 0..self.grid.probe_count() {
+            if !self.probe_pending_init[p] {
+                continue;
+            }
+            match self.settings.probe_states {
+                ProbeStatesMode::AllActive => self.probe_states[p] = ProbeState::Active,
+                ProbeStatesMode::Usage => self.probe_states[p] = ProbeState::Alive,
+                ProbeStatesMode::Jcgt => {}
+            }
+            self.probe_pending_init[p] = false;
+        }
+        self.initialized = true;
+        self.refresh_usable();
+    }
+}
+
+/// What an initialisation round of a volume does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum InitRound {
+    Relocation(u32),
+    Classification,
+}
+
+/// Pseudo-frames for initialisation rounds, far from real ones, so their
+/// directions differ from frame 0's.
+pub(super) fn init_frame(round: InitRound) -> u32 {
+    match round {
+        InitRound::Relocation(i) => u32::MAX - i,
+        InitRound::Classification => u32::MAX - 1000,
+    }
+}

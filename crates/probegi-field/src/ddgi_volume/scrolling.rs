@@ -1,0 +1,67 @@
+//! Scrolling: a tracking window's whole-cell move over the circular buffer of
+//! probe storage slots (seed 004's camera-following volume). Probes that scroll
+//! in are reset: their history is cleared, queries skip them until their first
+//! blend, and they wait for initialisation like new probes.
+
+use glam::{IVec3, Vec2, Vec3};
+use probegi_core::ddgi_query::nearest_usable_probes;
+use probegi_core::probe_classification::ProbeState;
+
+use super::DdgiVolume;
+
+impl DdgiVolume {
+    /// Moves a tracking window so that `target_m` stays within a cell of its
+    /// centre (seed 004 §7.3). Only the grid origin and the circular buffer's phase
+    /// change; the probes of the planes that enter are reset (atlas tiles cleared,
+    /// offset 0, no history, so they blend with hysteresis 0 and are not read
+    /// before that) and queued for initialisation. Returns the probes reset.
+    pub(crate) fn scroll_to(&mut self, target_m: Vec3) -> usize {
+        if !self.settings.volume_tracks_camera || !target_m.is_finite() {
+            return 0;
+        }
+        let cells = self.grid.tracking_scroll_cells(target_m);
+        if cells == IVec3::ZERO {
+            return 0;
+        }
+        self.grid.scroll(cells);
+        let mut reset = 0;
+        for p in 0..self.grid.probe_count() {
+            let coords = self.grid.probe_coords(p);
+            if self.grid.scrolled_in(cells, coords) {
+                self.reset_probe(p);
+                reset += 1;
+            }
+            self.probe_positions[p] = self.grid.probe_position(coords) + self.probe_offsets[p];
+        }
+        self.probes_scrolled_in += reset as u64;
+        self.refresh_usable();
+        // The slots changed places on the grid: the nearest usable probe of each is
+        // another one now, whether or not the usable set changed.
+        self.probe_fallback = nearest_usable_probes(&self.grid, &self.probe_usable);
+        reset
+    }
+
+    /// Clears again the tiles of the probes reset since the last blend (after the
+    /// atlases were copied back from a device that had not cleared them yet).
+    pub(crate) fn clear_reset_tiles(&mut self) {
+        for &p in &self.probes_reset_since_blend {
+            if (p as usize) < self.grid.probe_count() {
+                self.irradiance.tile_mut(p as usize).fill(Vec3::ZERO);
+                self.distance.tile_mut(p as usize).fill(Vec2::ZERO);
+            }
+        }
+    }
+
+    /// Forgets everything probe `p` knew: it is a new probe at its grid point.
+    fn reset_probe(&mut self, p: usize) {
+        self.irradiance.tile_mut(p).fill(Vec3::ZERO);
+        self.distance.tile_mut(p).fill(Vec2::ZERO);
+        self.probe_offsets[p] = Vec3::ZERO;
+        self.probe_states[p] = ProbeState::Active;
+        self.probe_hysteresis[p] = self.settings.probe_hysteresis;
+        self.probe_has_history[p] = false;
+        self.probe_alive_frames[p] = 0;
+        self.probe_pending_init[p] = true;
+        self.probes_reset_since_blend.push(p as u32);
+    }
+}

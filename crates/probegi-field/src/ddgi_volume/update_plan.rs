@@ -1,0 +1,116 @@
+//! Update planning: the frame's rays (`probe_ray_gen`) for the probes whose state
+//! traces (jcgt: not Off or Sleeping; usage: all), and the acceptance of the
+//! frame's hits, from a host batch or from the device. With the usage scheme the
+//! hits classify every probe (see `usage_states`); the accepted hits mark which
+//! rays' radiance the blend needs.
+
+use probegi_core::ddgi_settings::ProbeStatesMode;
+use probegi_core::probe_classification::probe_usage;
+
+use crate::probe_ray_gen::generate_probe_rays;
+use crate::seam::{ProbeRayBatch, ProbeRayHit};
+
+use super::{DdgiVolume, VolumeFrame};
+
+impl DdgiVolume {
+    /// Adds the frame's update rays (seed 003 §4.2) of the probes whose state
+    /// traces, and decides which probes update this frame.
+    pub(crate) fn plan_update(
+        &mut self,
+        frame: &mut VolumeFrame,
+        seed: u64,
+        frame_index: u32,
+        volume: u32,
+        batch: &mut ProbeRayBatch,
+    ) {
+        let probes = self.grid.probe_count();
+        let interval = self.settings.probe_sleeping_update_interval;
+        frame.tracing = self.probe_states.iter().map(|s| s.traces()).collect();
+        frame.active = self.probe_states.iter().map(|s| s.updates_in_frame(frame_index, interval)).collect();
+        frame.rays = generate_probe_rays(&self.settings, self.stream_seed(seed), frame_index);
+        frame.ray_count = frame.rays.dirs.len();
+        frame.first_ray = vec![u32::MAX; probes];
+        let first_probe = batch.probes.len() as u32;
+        for p in 0..probes {
+            if frame.tracing[p] {
+                frame.first_ray[p] = batch.push_probe(
+                    volume,
+                    p as u32,
+                    self.probe_positions[p],
+                    &frame.rays.dirs,
+                    self.settings.probe_max_ray_distance_m,
+                );
+            }
+        }
+        batch.generated.push(crate::seam::GeneratedProbeRays {
+            volume,
+            first_probe,
+            probe_count: batch.probes.len() as u32 - first_probe,
+            rays_per_probe: frame.ray_count as u32,
+            rotation: crate::probe_ray_gen::probe_ray_rotation(self.stream_seed(seed), frame_index),
+            max_distance_m: self.settings.probe_max_ray_distance_m,
+        });
+        self.traced_probes_last = frame.tracing.iter().filter(|t| **t).count();
+    }
+
+    /// After the trace: the usage scheme's classification from the hits (seed 003
+    /// §6.1), then which rays the caller must shade (those of probes that update
+    /// this frame, except backface hits, whose radiance is zero by rule).
+    pub(crate) fn accept_update_hits(
+        &mut self,
+        frame: &mut VolumeFrame,
+        frame_index: u32,
+        hits: &[ProbeRayHit],
+        needs_radiance: &mut [bool],
+    ) {
+        let n = frame.ray_count;
+        if self.settings.probe_states == ProbeStatesMode::Usage {
+            let cage_diagonal = self.grid.spacing_m.length();
+            let counts: Vec<Option<(i32, u32, u32)>> = frame
+                .first_ray
+                .iter()
+                .map(|&first| {
+                    (first != u32::MAX).then(|| {
+                        let rays = &hits[first as usize..first as usize + n];
+                        probe_usage(rays.iter().map(|h| h.distance_m), cage_diagonal)
+                    })
+                })
+                .collect();
+            self.classify_usage_states(frame, frame_index, &counts);
+        }
+        for p in 0..self.grid.probe_count() {
+            let first = frame.first_ray[p];
+            if first == u32::MAX || !frame.active[p] {
+                continue;
+            }
+            let first = first as usize;
+            for r in first..first + n {
+                needs_radiance[r] = hits[r].distance_m >= 0.0; // hits are sanitised: no NaN
+            }
+        }
+    }
+
+    /// As [`Self::accept_update_hits`] for hits that stayed on another device:
+    /// `usage_counts` holds, per probe that traced, seed 003's (usage, relevant,
+    /// backfaces) counted there (`probegi_core::probe_classification::probe_usage`;
+    /// read only under the usage scheme). Every ray of an updating probe is
+    /// marked: the device zeroes backface radiance itself.
+    pub(crate) fn accept_device_hits(
+        &mut self,
+        frame: &mut VolumeFrame,
+        frame_index: u32,
+        usage_counts: &[Option<(i32, u32, u32)>],
+        needs_radiance: &mut [bool],
+    ) {
+        let n = frame.ray_count;
+        if self.settings.probe_states == ProbeStatesMode::Usage {
+            self.classify_usage_states(frame, frame_index, usage_counts);
+        }
+        for p in 0..self.grid.probe_count() {
+            let first = frame.first_ray[p];
+            if first != u32::MAX && frame.active[p] {
+                needs_radiance[first as usize..first as usize + n].fill(true);
+            }
+        }
+    }
+}

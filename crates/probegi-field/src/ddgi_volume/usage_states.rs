@@ -1,0 +1,97 @@
+//! Probe usage states: which probes queries may read (and the fallback table for
+//! empty cages), the state counts a caller reports, waking probes near dynamic
+//! objects, and the usage scheme's classification of every probe from the
+//! frame's hits (seed 003 §6.1).
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+use probegi_core::ddgi_query::nearest_usable_probes;
+use probegi_core::ddgi_settings::ProbeStatesMode;
+use probegi_core::probe_classification::{ProbeState, classify_usage, inside_grown_aabb};
+
+use super::{DdgiVolume, VolumeFrame};
+
+impl DdgiVolume {
+    /// Recomputes which probes queries may read, and the fallback table if that changed.
+    pub(super) fn refresh_usable(&mut self) {
+        let mut changed = false;
+        for (p, u) in self.probe_usable.iter_mut().enumerate() {
+            let now = self.probe_states[p].usable_in_queries() && self.probe_has_history[p];
+            changed |= *u != now;
+            *u = now;
+        }
+        if changed {
+            self.probe_fallback = nearest_usable_probes(&self.grid, &self.probe_usable);
+        }
+    }
+
+    /// Number of probes per state name.
+    pub fn state_counts(&self) -> BTreeMap<&'static str, usize> {
+        let mut m = BTreeMap::new();
+        for s in &self.probe_states {
+            *m.entry(s.name()).or_default() += 1;
+        }
+        m
+    }
+
+    /// Wakes Sleeping probes inside the AABBs of dynamic objects, grown by one cell
+    /// plus the self-shadow bias (seed 004 Listing 5); Awake probes no longer inside
+    /// any go back to sleep. jcgt states only. Returns the number of probes woken.
+    pub fn wake_probes_near(&mut self, dynamic_aabbs: &[(Vec3, Vec3)]) -> usize {
+        if self.settings.probe_states != ProbeStatesMode::Jcgt || !self.initialized {
+            return 0;
+        }
+        let bias = 0.75 * self.grid.min_spacing_m() * self.settings.probe_self_shadow_bias;
+        let grow = self.grid.spacing_m + Vec3::splat(bias);
+        let mut woken = 0;
+        for (p, state) in self.probe_states.iter_mut().enumerate() {
+            let pos = self.probe_positions[p];
+            let inside = dynamic_aabbs.iter().any(|&(lo, hi)| inside_grown_aabb(pos, lo, hi, grow));
+            match *state {
+                ProbeState::Sleeping if inside => {
+                    *state = ProbeState::NewlyAwake;
+                    woken += 1;
+                }
+                ProbeState::Awake if !inside => *state = ProbeState::Sleeping,
+                _ => {}
+            }
+        }
+        self.refresh_usable();
+        woken
+    }
+
+    /// Usage scheme (seed 003 §6.1): every probe's state from this frame's usage
+    /// counts (per probe, `None` when it did not trace), and which probes blend
+    /// this frame (see `probegi_core::probe_classification`).
+    pub(super) fn classify_usage_states(
+        &mut self,
+        frame: &mut VolumeFrame,
+        frame_index: u32,
+        counts: &[Option<(i32, u32, u32)>],
+    ) {
+        let (interval, min_alive) =
+            (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
+        for p in 0..self.grid.probe_count() {
+            let Some(&Some((usage, relevant, backfaces))) = counts.get(p) else {
+                continue;
+            };
+            let prev = self.probe_states[p];
+            let mut next = classify_usage(usage, relevant, backfaces);
+            if prev == ProbeState::Alive && next == ProbeState::UsageSleeping && self.probe_alive_frames[p] < min_alive
+            {
+                next = ProbeState::Alive;
+            }
+            self.probe_alive_frames[p] = if next == ProbeState::Alive { self.probe_alive_frames[p] + 1 } else { 0 };
+            if prev == ProbeState::Dead && next != ProbeState::Dead {
+                // Uncovered: the atlas holds light from before, so start over.
+                self.probe_has_history[p] = false;
+            }
+            frame.active[p] = match next {
+                ProbeState::Dead => prev != ProbeState::Dead,
+                s => s.updates_in_frame(frame_index, interval) || !self.probe_has_history[p],
+            };
+            self.probe_states[p] = next;
+        }
+    }
+}
