@@ -238,12 +238,23 @@ impl DdgiVolumeSettings {
     }
 }
 
+/// How a set of volumes is sampled (the weights are `ddgi_volume_blend`'s).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum VolumeBlending {
+    /// Seed 004 §7.4: densest first, one-cell falloff, camera-aware for tracking volumes.
+    #[default]
+    Density,
+    /// Seed 003 §6.2 Algorithms 1–2: nested cascades, finest first.
+    Cascades,
+}
+
 /// A set of DDGI volumes (`probegi_field::ddgi_field_set::DdgiFieldSet`): the volumes
 /// in any order (the set samples them densest or finest first) and how they blend.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct DdgiFieldSetSettings {
     pub volumes: Vec<DdgiVolumeSettings>,
-    pub blending: crate::ddgi_volume_blend::VolumeBlending,
+    pub blending: VolumeBlending,
 }
 
 /// Spacing ratio between neighbouring cascades (seed 003 §6.2: each coarser
@@ -269,7 +280,7 @@ impl DdgiFieldSetSettings {
                 ..base.clone()
             })
             .collect();
-        Self { volumes, blending: crate::ddgi_volume_blend::VolumeBlending::Cascades }
+        Self { volumes, blending: VolumeBlending::Cascades }
     }
 
     /// The first volume setting that makes no sense, as `(volume index, field, reason)`.

@@ -35,21 +35,10 @@
 //!   algorithm's loop), not a geometric mean as the prose says.
 
 use glam::Vec3;
-use serde::{Deserialize, Serialize};
 
 use crate::ddgi_query::{DdgiFieldView, irradiance};
+pub use crate::ddgi_settings::VolumeBlending;
 use crate::probe_grid::ProbeGrid;
-
-/// How a set of volumes is sampled.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum VolumeBlending {
-    /// Seed 004 §7.4: densest first, one-cell falloff, camera-aware for tracking volumes.
-    #[default]
-    Density,
-    /// Seed 003 §6.2 Algorithms 1–2: nested cascades, finest first.
-    Cascades,
-}
 
 /// Seed 004 §7.4 weight of `point` for one volume: 1 inside the full-weight box,
 /// falling linearly to 0 one cell outside it on each axis (the axes' factors

@@ -3,12 +3,36 @@
 //! Nothing here knows about threads, files or scenes, so that a GPU backend can
 //! reuse every function as-is (STYLE.md, "Layout shows the architecture").
 //!
+//! Shared maths:
 //! - [`color`]: luminance, sRGB transfer functions and the one tone-mapping operator.
 //! - [`sampling`]: Monte Carlo sampling sets (`sample_x`, `x_pdf`, `invert_x`).
 //! - [`rng`]: a small deterministic PCG32 and seed hashing.
 //! - [`camera`]: pinhole camera maths.
 //! - [`image`]: the linear-RGB float image every renderer writes.
 //! - [`punctual`]: glTF KHR_lights_punctual attenuation maths.
+//! - [`bsdf`]: the shared surface BSDF (Lambert plus GGX with Smith masking).
+//! - [`fibonacci`]: spherical Fibonacci point sets, the probe-ray directions.
+//! - [`octahedral`]: octahedral mapping of the unit sphere to a square.
+//!
+//! DDGI (seeds 003 and 004):
+//! - [`ddgi_settings`]: per-volume and per-set settings with the papers' defaults.
+//! - [`probe_grid`]: the uniform probe grid of a volume and its circular storage.
+//! - [`probe_atlas`]: octahedral tiles per probe with a 1-texel guard border.
+//! - [`irradiance_encoding`]: the perceptual (gamma) encoding of irradiance texels.
+//! - [`probe_blend`]: the blend pass, one frame folded in with hysteresis.
+//! - [`probe_border`]: the border pass, guard texels from their interior sources.
+//! - [`probe_relocation`]: the probe-position optimizer.
+//! - [`probe_classification`]: probe states (jcgt and usage schemes).
+//! - [`ddgi_query`]: irradiance at a point from the 8-probe cage.
+//! - [`ddgi_volume_blend`]: which volumes of a set shade a point, and how much.
+//!
+//! Screen-space SH probes (seed 001):
+//! - [`sh`]: real spherical harmonics to band 2 and their irradiance convolution.
+//! - [`sh_settings`]: the method's settings with the paper's defaults.
+//! - [`sh_cascades`]: nested camera-centred probe grids and their interpolation.
+//! - [`sh_probe_update`]: the screen-space splat of lit samples into the probes.
+
+
 
 pub mod bsdf;
 pub mod camera;
@@ -30,8 +54,8 @@ pub mod punctual;
 pub mod rng;
 pub mod sampling;
 pub mod sh;
-
-pub use glam::{Vec2, Vec3, Vec4};
 pub mod sh_cascades;
 pub mod sh_probe_update;
 pub mod sh_settings;
+
+pub use glam::{Vec2, Vec3, Vec4};
