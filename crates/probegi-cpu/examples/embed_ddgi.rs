@@ -13,7 +13,8 @@
 
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
-use probegi_field::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, UpdateStep};
+use probegi_core::ddgi_volume_blend::field_set_irradiance;
+use probegi_field::{DdgiFieldSet, ProbeRayBatch, ProbeRayHit, SeamError, UpdateStep};
 
 /// The application's own geometry: triangles with their inward (front) normal.
 struct Triangle {
@@ -76,10 +77,46 @@ fn closest_hit(tris: &[Triangle], origin: Vec3, dir: Vec3, max_t: f32) -> Option
 const EMISSION: f32 = 1.0;
 const ALBEDO: f32 = 0.5;
 
-pub fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// The application traces the set's batch with its own ray caster: one
+/// `ProbeRayHit` per ray (a miss, or a front or back face at `t` with the normal
+/// that faces the ray's origin).
+fn trace(world: &[Triangle], batch: &ProbeRayBatch) -> Vec<ProbeRayHit> {
+    (0..batch.len())
+        .map(|i| {
+            let (o, d) = (batch.origins_m[i], batch.directions[i]);
+            match closest_hit(world, o, d, batch.max_distances_m[i]) {
+                None => ProbeRayHit::MISS,
+                Some((t, tri)) if tri.normal.dot(d) < 0.0 => ProbeRayHit::front(t, tri.normal),
+                Some((t, tri)) => ProbeRayHit::back(t, -tri.normal),
+            }
+        })
+        .collect()
+}
+
+/// The application shades the hits: emission plus the diffuse bounce of the
+/// field's previous irradiance. Only front hits and misses need radiance; the set
+/// zeroes backfaces.
+fn shade(set: &DdgiFieldSet, hits: &[ProbeRayHit]) -> Vec<Vec3> {
+    let (batch, view) = (set.ray_batch(), set.view());
+    let radiance = hits.iter().enumerate().map(|(i, h)| {
+        if !batch.needs_radiance[i] || !h.distance_m.is_finite() {
+            return Vec3::ZERO; // no sky: the box is closed
+        }
+        let dir = batch.directions[i];
+        let p = batch.origins_m[i] + dir * h.distance_m;
+        let e = field_set_irradiance(&view, p, h.normal, -dir);
+        Vec3::splat(EMISSION) + ALBEDO * std::f32::consts::FRAC_1_PI * e
+    });
+    radiance.collect()
+}
+
+/// The furnace: the field's irradiance at the middle of the floor after 80
+/// frames, and the probe rays the application traced.
+fn furnace_irradiance() -> Result<(Vec3, u64), SeamError> {
     let (lo, hi) = (Vec3::ZERO, Vec3::splat(4.0));
     let world = cube(lo, hi);
-    // One volume of 4³ probes fitted to the box, 64 rays each. A short hysteresis
+    // README: cpu-field begin
+    // One volume of 4³ probes fitted to the box, 64 rays each; a short hysteresis
     // so that 80 frames converge; everything else is the papers' defaults.
     let volume = DdgiVolumeSettings {
         probe_counts: UVec3::splat(4),
@@ -88,55 +125,31 @@ pub fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..Default::default()
     };
     let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::single(volume), (lo, hi), None);
-    let mut hits: Vec<ProbeRayHit> = Vec::new();
-    let mut radiance: Vec<Vec3> = Vec::new();
-    let mut rays_traced = 0u64;
+    let (mut hits, mut rays_traced) = (Vec::new(), 0u64);
     for frame in 0..80 {
         let mut step = set.begin_update(7, frame);
-        loop {
-            match step {
+        while step != UpdateStep::Done {
+            step = match step {
                 UpdateStep::TraceRays => {
-                    let batch = set.ray_batch();
-                    hits.clear();
-                    for i in 0..batch.len() {
-                        let (o, d) = (batch.origins_m[i], batch.directions[i]);
-                        hits.push(match closest_hit(&world, o, d, batch.max_distances_m[i]) {
-                            None => ProbeRayHit::MISS,
-                            Some((t, tri)) if tri.normal.dot(d) < 0.0 => ProbeRayHit::front(t, tri.normal),
-                            Some((t, tri)) => ProbeRayHit::back(t, -tri.normal),
-                        });
-                    }
-                    rays_traced += batch.len() as u64;
-                    step = set.submit_hits(&hits)?;
+                    hits = trace(&world, set.ray_batch()); // your ray caster
+                    rays_traced += hits.len() as u64;
+                    set.submit_hits(&hits)?
                 }
-                UpdateStep::ShadeRays => {
-                    // Only front hits and misses need radiance; the set zeroes backfaces.
-                    let batch = set.ray_batch();
-                    let view = set.view();
-                    radiance.clear();
-                    for (i, &h) in hits.iter().enumerate() {
-                        radiance.push(if !batch.needs_radiance[i] || !h.distance_m.is_finite() {
-                            Vec3::ZERO // no sky: the box is closed
-                        } else {
-                            let dir = batch.directions[i];
-                            let p = batch.origins_m[i] + dir * h.distance_m;
-                            // Emission plus the diffuse bounce of the previous field.
-                            let e = probegi_core::ddgi_volume_blend::field_set_irradiance(&view, p, h.normal, -dir);
-                            Vec3::splat(EMISSION) + ALBEDO * std::f32::consts::FRAC_1_PI * e
-                        });
-                    }
-                    drop(view);
-                    step = set.submit_radiance(&radiance)?;
-                }
-                UpdateStep::Done => break,
-            }
+                UpdateStep::ShadeRays => set.submit_radiance(&shade(&set, &hits))?, // your shading
+                UpdateStep::Done => UpdateStep::Done,
+            };
         }
     }
-    let point = Vec3::new(2.0, 0.0, 2.0);
-    let e = set.irradiance(point, Vec3::Y, Vec3::Y);
+    let e = set.irradiance(Vec3::new(2.0, 0.0, 2.0), Vec3::Y, Vec3::Y); // at the middle of the floor
+    // README: cpu-field end
+    Ok((e, rays_traced))
+}
+
+pub fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let (e, rays_traced) = furnace_irradiance()?;
     let want = std::f32::consts::PI * EMISSION / (1.0 - ALBEDO);
     println!(
-        "irradiance at the middle of the floor {point}: {:.4} {:.4} {:.4} W/m² (analytic {want:.4}), \
+        "irradiance at the middle of the floor: {:.4} {:.4} {:.4} W/m² (analytic {want:.4}), \
          {rays_traced} probe rays traced by the application",
         e.x, e.y, e.z
     );
