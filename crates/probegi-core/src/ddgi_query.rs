@@ -28,6 +28,23 @@ use glam::{IVec3, UVec3, Vec2, Vec3};
 use std::f32::consts::PI;
 
 use crate::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
+
+/// The backface weight's floor, `((dir·n + 1)/2)² + floor` (RTXGI's 0.2), so no
+/// probe is rejected by angle alone. `ddgi_query.wgsl` reads it from the
+/// constants prelude probegi-wgpu generates from this value.
+pub const BACKFACE_WEIGHT_FLOOR: f32 = 0.2;
+
+/// The floor of the Chebyshev visibility weight (RTXGI's 0.05); also in
+/// `ddgi_query.wgsl`'s generated prelude.
+pub const CHEBYSHEV_WEIGHT_FLOOR: f32 = 0.05;
+
+/// The smallest weight a cage probe keeps before the crush, so Σw never vanishes;
+/// also in `ddgi_query.wgsl`'s generated prelude.
+pub const MIN_PROBE_WEIGHT: f32 = 1e-6;
+
+/// The floor of each trilinear factor, so a probe at the far corner of the cage
+/// still counts a little; also in `ddgi_query.wgsl`'s generated prelude.
+pub const TRILINEAR_WEIGHT_FLOOR: f32 = 0.001;
 use crate::irradiance_encoding::{decode_irradiance_half, finish_half_decode};
 use crate::octahedral::oct_encode;
 use crate::probe_atlas::{BilinearFootprint, ProbeAtlas};
@@ -122,7 +139,7 @@ pub fn chebyshev_weight(moments: Vec2, distance: f32) -> f32 {
 /// Wrap-shading backface weight for the direction from the surface to a probe.
 pub fn backface_weight(dir_to_probe: Vec3, normal: Vec3) -> f32 {
     let wrap = (dir_to_probe.dot(normal) + 1.0) * 0.5;
-    wrap * wrap + 0.2
+    wrap * wrap + BACKFACE_WEIGHT_FLOOR
 }
 
 /// Irradiance (W·m⁻²) arriving at `position` on a surface with unit `normal`.
@@ -149,15 +166,15 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
             // oct_encode normalises by the L1 norm itself, so the direction need not be unit.
             let uv = oct_encode(-to_probe);
             let moments = field.distance.sample_bilinear(probe, uv);
-            weight *= chebyshev_weight(moments, dist).max(0.05);
+            weight *= chebyshev_weight(moments, dist).max(CHEBYSHEV_WEIGHT_FLOOR);
         }
-        weight = weight.max(1e-6);
+        weight = weight.max(MIN_PROBE_WEIGHT);
         if s.probe_crush_weight && weight < s.probe_crush_threshold {
             let c = s.probe_crush_threshold;
             weight *= weight * weight / (c * c);
         }
         if s.probe_trilinear_weight {
-            let t = cage.trilinear(i).max(Vec3::splat(0.001));
+            let t = cage.trilinear(i).max(Vec3::splat(TRILINEAR_WEIGHT_FLOOR));
             weight *= t.x * t.y * t.z;
         }
         let e = normal_texels.sample(field.irradiance.tile(probe)).max(Vec3::ZERO);

@@ -27,6 +27,12 @@ use crate::probe_atlas::interior_texel_index;
 /// of the normalised mean.
 pub const BLEND_WEIGHT_EPSILON: f32 = 1e-6;
 
+/// The backface rule of the blend's distances (seed 004 §4.1; RTXGI stores
+/// −0.2·t): a ray that hits a back face at distance t is blended with distance
+/// `−BACKFACE_DISTANCE_SCALE · t`, so the probe reads as shadowed there.
+/// `probe_shade.wgsl` reads it from probegi-wgpu's generated prelude.
+pub const BACKFACE_DISTANCE_SCALE: f32 = 0.2;
+
 /// Sparse texel × ray weight table for one frame's ray directions.
 #[derive(Clone, Debug, Default)]
 pub struct BlendWeights {

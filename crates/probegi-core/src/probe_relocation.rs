@@ -17,6 +17,16 @@ use glam::Vec3;
 
 use crate::ddgi_settings::DdgiVolumeSettings;
 
+/// A probe whose rays see more than this fraction of backfaces is inside geometry
+/// (seed 004 Listing 4's 25 %); `probe_relocation.wgsl` and
+/// `probe_classification.wgsl` read it from probegi-wgpu's generated prelude.
+pub const INSIDE_GEOMETRY_BACKFACE_FRACTION: f32 = 0.25;
+
+/// The front-face step's limit as a fraction of the minimum spacing (seed 004
+/// Listing 4's `min(0.2, d)`, here relative; see the module docs); also in
+/// `probe_relocation.wgsl`'s generated prelude.
+pub const FRONTFACE_STEP_LIMIT_REL: f32 = 0.2;
+
 /// What one probe's rays saw: directions with hit distances.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ProbeRayStats {
@@ -56,7 +66,7 @@ pub fn probe_ray_stats(dirs: &[Vec3], signed_distance: &[f32]) -> ProbeRayStats 
 
 /// Whether the probe's rays say it is inside geometry (seed 004 Listing 4's 25 %).
 pub fn is_inside_geometry(stats: &ProbeRayStats) -> bool {
-    stats.backface_fraction > 0.25
+    stats.backface_fraction > INSIDE_GEOMETRY_BACKFACE_FRACTION
 }
 
 /// One optimizer iteration: the probe's new offset from its grid point.
@@ -79,7 +89,7 @@ pub fn relocation_step(offset: Vec3, stats: &ProbeRayStats, spacing_m: Vec3, set
         && cdist < settings.probe_relocation_min_frontface_rel * min_spacing
         && cdir.dot(fdir) <= 0.5
     {
-        full = offset + fdir * fdist.min(0.2 * min_spacing);
+        full = offset + fdir * fdist.min(FRONTFACE_STEP_LIMIT_REL * min_spacing);
     }
     if within(full) { full } else { offset }
 }

@@ -37,22 +37,29 @@ pub struct DeviceVolumeBlend<'a> {
 /// One probe of an initialisation batch whose relocation iteration runs on another
 /// device (`DdgiFieldSet::device_relocation_plan`): seed 004 Listing 4's inputs,
 /// as `probegi_core::probe_relocation::relocation_step` takes them.
-#[derive(Clone, Copy, Debug, PartialEq)]
+///
+/// `#[repr(C)]` + `Pod`, 40 bytes with no padding, so a device uploads a plan as
+/// it is: must match `RelocationProbe` in probegi-wgpu's `probe_relocation.wgsl`
+/// (whose vectors are `array<f32, 3>` for that reason; its unit tests compare the
+/// sizes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct DeviceRelocationProbe {
-    /// The probe's first ray in the batch.
-    pub first_ray: u32,
-    /// The probe's rays in the batch.
-    pub ray_count: u32,
     /// The probe's current offset from its grid point (m).
     pub offset_m: Vec3,
+    /// The probe's first ray in the batch.
+    pub first_ray: u32,
     /// The grid spacing (m): offsets and limits are relative to it.
     pub spacing_m: Vec3,
+    /// The probe's rays in the batch.
+    pub ray_count: u32,
     /// The largest offset per axis, as a fraction of the spacing (`probe_relocation_offset_limit_rel`).
     pub offset_limit_rel: f32,
     /// A front face closer than this × the minimum spacing pushes the probe away
     /// (`probe_relocation_min_frontface_rel`).
     pub min_frontface_rel: f32,
 }
+const _: () = assert!(std::mem::size_of::<DeviceRelocationProbe>() == 40);
 
 /// One volume's classification round run on another device
 /// (`DdgiFieldSet::device_classification_plan`): the grid, the watch box

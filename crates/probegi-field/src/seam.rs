@@ -54,8 +54,11 @@ pub enum ProbeRayBatchKind {
     Update,
 }
 
-/// One probe's rays in a batch.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// One probe's rays in a batch. `#[repr(C)]` + `Pod` (16 bytes) so a device
+/// uploads a batch's probes as they are: must match `UsageProbe` in
+/// probegi-wgpu's `probe_usage.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct BatchProbe {
     /// The probe's volume (its index in the field set).
     pub volume: u32,
@@ -66,6 +69,7 @@ pub struct BatchProbe {
     /// The probe's rays in the batch, consecutive from `first_ray`.
     pub ray_count: u32,
 }
+const _: () = assert!(std::mem::size_of::<BatchProbe>() == 16);
 
 /// How one volume's update rays in a batch were made: each probe of
 /// `probes[first_probe..first_probe + probe_count]` casts `rays_per_probe`

@@ -225,13 +225,7 @@ pub fn main() -> Result<(), Error> {
 }
 
 pub fn main_to(out: &std::path::Path) -> Result<(), Error> {
-    // The application's device.
-    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))?;
-    let (device, queue) = pollster::block_on(
-        adapter.request_device(&wgpu::DeviceDescriptor { required_limits: adapter.limits(), ..Default::default() }),
-    )?;
-    let ctx = GpuContext::from_device(device, queue, adapter.get_info().name);
+    let ctx = application_device()?;
     println!("adapter: {}", ctx.adapter_name);
 
     // Its triangles, on the device as a CWBVH.
@@ -251,6 +245,44 @@ pub fn main_to(out: &std::path::Path) -> Result<(), Error> {
     // The camera: primary rays through the library's trace, direct light by the
     // application, the field term by its own shader with the included query.
     let (width, height) = (128u32, 96u32);
+    let pixels = camera_pixels(&ctx, &trace, &bvh, &world, width, height)?;
+    let field = GpuDdgiField::upload(&ctx, &set.view())?;
+    let image = shade_on_gpu(&ctx, &field, &pixels)?;
+    check_against_the_cpu(&set, &pixels, &image)?;
+
+    // Tone-map (exposure 1, Reinhard) and write.
+    let mut img = probegi_core::image::Image::new(width, height);
+    for (k, c) in image.iter().enumerate() {
+        img.pixels[k] = *c / (Vec3::ONE + *c);
+    }
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    probegi_image::write_image(out, &img)?;
+    println!("wrote {}", out.display());
+    Ok(())
+}
+
+/// The application's device (an engine's would already exist), wrapped for the library.
+fn application_device() -> Result<GpuContext, Error> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))?;
+    let (device, queue) = pollster::block_on(
+        adapter.request_device(&wgpu::DeviceDescriptor { required_limits: adapter.limits(), ..Default::default() }),
+    )?;
+    Ok(GpuContext::from_device(device, queue, adapter.get_info().name))
+}
+
+/// The camera's `width × height` pixels: primary rays through the library's
+/// trace, the surfaces they hit and the application's direct light there.
+fn camera_pixels(
+    ctx: &GpuContext,
+    trace: &GpuRayTrace,
+    bvh: &GpuBvh,
+    world: &World,
+    width: u32,
+    height: u32,
+) -> Result<Vec<Pixel>, Error> {
     let eye = Vec3::new(2.0, 1.6, 9.0);
     let forward = (Vec3::new(2.0, 1.2, 0.0) - eye).normalize();
     let right = forward.cross(Vec3::Y).normalize();
@@ -264,16 +296,16 @@ pub fn main_to(out: &std::path::Path) -> Result<(), Error> {
             GpuRay::new(eye, (forward + right * sx + up * sy).normalize(), 0.0, f32::INFINITY)
         })
         .collect();
-    let camera_hits = trace.trace(&ctx, &bvh, &camera_rays, false)?;
+    let camera_hits = trace.trace(ctx, bvh, &camera_rays, false)?;
     let surfaces: Vec<Option<Surface>> =
-        camera_rays.iter().zip(&camera_hits).map(|(r, h)| h.is_hit().then(|| surface(&world, r, h))).collect();
+        camera_rays.iter().zip(&camera_hits).map(|(r, h)| h.is_hit().then(|| surface(world, r, h))).collect();
     let lit: Vec<Surface> = surfaces
         .iter()
         .flatten()
         .map(|s| Surface { position: s.position, normal: s.normal, albedo: s.albedo })
         .collect();
-    let mut direct = direct_light(&ctx, &trace, &bvh, &lit)?.into_iter();
-    let pixels: Vec<Pixel> = surfaces
+    let mut direct = direct_light(ctx, trace, bvh, &lit)?.into_iter();
+    Ok(surfaces
         .iter()
         .zip(&camera_rays)
         .map(|(s, r)| match s {
@@ -290,16 +322,16 @@ pub fn main_to(out: &std::path::Path) -> Result<(), Error> {
                 }
             }
         })
-        .collect();
+        .collect())
+}
 
-    let field = GpuDdgiField::upload(&ctx, &set.view())?;
-    let image = shade_on_gpu(&ctx, &field, &pixels)?;
-
-    // What it drew, checked against the CPU query at the same points.
+/// What the application's shader drew, checked against the CPU query at the
+/// same points, and the colour the walls bleed onto the floor.
+fn check_against_the_cpu(set: &DdgiFieldSet, pixels: &[Pixel], image: &[Vec3]) -> Result<(), Error> {
     let mut worst = 0f32;
     let mut largest = 0f32;
     let (mut left, mut right_side) = (Vec3::ZERO, Vec3::ZERO);
-    for (k, (p, c)) in pixels.iter().zip(&image).enumerate() {
+    for (k, (p, c)) in pixels.iter().zip(image).enumerate() {
         if !c.is_finite() {
             return Err(format!("pixel {k} is not finite: {c}").into());
         }
@@ -332,56 +364,13 @@ pub fn main_to(out: &std::path::Path) -> Result<(), Error> {
     if !(left.x > 1.1 * left.y && right_side.y > 1.1 * right_side.x) {
         return Err(format!("no colour bleeding: {left} near red, {right_side} near green").into());
     }
-
-    // Tone-map (exposure 1, Reinhard) and write.
-    let mut img = probegi_core::image::Image::new(width, height);
-    for (k, c) in image.iter().enumerate() {
-        img.pixels[k] = *c / (Vec3::ONE + *c);
-    }
-    if let Some(dir) = out.parent() {
-        std::fs::create_dir_all(dir)?;
-    }
-    probegi_image::write_image(out, &img)?;
-    println!("wrote {}", out.display());
     Ok(())
 }
 
 /// Runs `SHADE_WGSL` (with the included query at group 1) over `pixels`.
 fn shade_on_gpu(ctx: &GpuContext, field: &GpuDdgiField, pixels: &[Pixel]) -> Result<Vec<Vec3>, Error> {
     let device = &ctx.device;
-    let source = format!("{}\n{}", query_wgsl(1), SHADE_WGSL);
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("application shader"),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    });
-    let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    };
-    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("pixels"),
-        entries: &[storage(0, true), storage(1, false)],
-    });
-    let field_layout = GpuDdgiField::bind_group_layout(device);
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("application shader"),
-        bind_group_layouts: &[Some(&layout), Some(&field_layout)],
-        immediate_size: 0,
-    });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("shade"),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some("shade"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let (layout, pipeline) = shade_pipeline(device);
     let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("pixels"),
         contents: bytemuck::cast_slice(pixels),
@@ -428,4 +417,43 @@ fn shade_on_gpu(ctx: &GpuContext, field: &GpuDdgiField, pixels: &[Pixel]) -> Res
     let bytes = slice.get_mapped_range()?.to_vec();
     let texels: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
     Ok(texels.iter().map(|t| Vec3::new(t[0], t[1], t[2])).collect())
+}
+
+/// `SHADE_WGSL` after the included query (its bindings in group 1): the
+/// pixels' layout (group 0) and the pipeline.
+fn shade_pipeline(device: &wgpu::Device) -> (wgpu::BindGroupLayout, wgpu::ComputePipeline) {
+    let source = format!("{}\n{}", query_wgsl(1), SHADE_WGSL);
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("application shader"),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("pixels"),
+        entries: &[storage(0, true), storage(1, false)],
+    });
+    let field_layout = GpuDdgiField::bind_group_layout(device);
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("application shader"),
+        bind_group_layouts: &[Some(&layout), Some(&field_layout)],
+        immediate_size: 0,
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("shade"),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some("shade"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    (layout, pipeline)
 }

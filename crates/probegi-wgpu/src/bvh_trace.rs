@@ -19,28 +19,27 @@ use probegi_scene::{BvhExport, RayHit, TlasExport, TraceGuardCounts};
 use wgpu::util::DeviceExt;
 
 use crate::gpu_context::{GpuContext, GpuError};
+use crate::shader_registry::{BVH_INSTANCE_IDENTITY, BVH_INSTANCE_MOVING, BVH_STORAGE_BUFFERS, TRACE_RAYS};
 
 /// The trace pass's uniform block; must match `TraceParams` in `trace_rays.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct TraceParams {
-    pub ray_count: u32,
-    pub groups_x: u32,
-    pub any_hit: u32,
+pub(crate) struct TraceParams {
+    pub(crate) ray_count: u32,
+    pub(crate) groups_x: u32,
+    pub(crate) any_hit: u32,
     /// `bvh.wgsl`'s `BVH_INSTANCE_*` flags of instances left out.
-    pub skip: u32,
+    pub(crate) skip: u32,
 }
-
-/// `bvh.wgsl`'s flag of a moving object's instance (left out of a static-only trace).
-pub const BVH_INSTANCE_MOVING: u32 = 2;
-const BVH_INSTANCE_IDENTITY: u32 = 1;
 const _: () = assert!(std::mem::size_of::<TraceParams>() == 16);
 
 /// One ray; must match `GpuRay` in `trace_rays.wgsl` (vec3 + f32, twice).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct GpuRay {
+    /// Origin (world space, m).
     pub origin: [f32; 3],
+    /// Hits nearer than this are ignored.
     pub t_min: f32,
     /// Unit direction.
     pub dir: [f32; 3],
@@ -51,6 +50,7 @@ pub struct GpuRay {
 const _: () = assert!(std::mem::size_of::<GpuRay>() == 32);
 
 impl GpuRay {
+    /// A ray from `origin` along unit `dir`, hits between `t_min` and `t_max`.
     pub fn new(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Self {
         // Only +∞ becomes f32::MAX: a NaN stays NaN, for the ray rule to refuse.
         let t_max = if t_max == f32::INFINITY { f32::MAX } else { t_max };
@@ -70,11 +70,13 @@ pub struct GpuRayHit {
     pub bary: [f32; 2],
     /// `Scene::instances` index (`RayHit::instance`), `u32::MAX` for the scene's own mesh.
     pub instance: u32,
+    /// Keeps the 8-byte alignment of `bary` (always 0).
     pub _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuRayHit>() == 24);
 
 impl GpuRayHit {
+    /// Whether the ray hit a triangle.
     pub fn is_hit(&self) -> bool {
         self.triangle != u32::MAX
     }
@@ -95,13 +97,9 @@ impl GpuRayHit {
 const MAX_GROUPS: u32 = 65_535;
 const WORKGROUP: u32 = 64;
 
-/// Storage buffers of `bvh.wgsl`'s group: nodes, triangles, cutouts,
-/// instances (read-only), and the guard counters (read-write).
-pub const BVH_STORAGE_BUFFERS: u32 = 5;
-
-/// The bind-group layout of `bvh.wgsl` (group 1): [`BVH_STORAGE_BUFFERS`]
+/// The bind-group layout of `bvh.wgsl` (`BVH_GROUP`): `BVH_STORAGE_BUFFERS`
 /// storage buffers, all read-only but the last (`bvh_guards`).
-pub fn bvh_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+pub(crate) fn bvh_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     let entries: Vec<_> = (0..BVH_STORAGE_BUFFERS).map(|b| storage_entry(b, b + 1 < BVH_STORAGE_BUFFERS)).collect();
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("bvh"), entries: &entries })
 }
@@ -147,10 +145,14 @@ pub(crate) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
-/// A scene's BVH on the device, with its bind group (group 1 of `bvh.wgsl`).
+/// A scene's BVH on the device, with its bind group (`bvh.wgsl`'s group,
+/// `shader_registry::BVH_GROUP`).
 pub struct GpuBvh {
+    /// Nodes of the bottom levels.
     pub node_count: usize,
+    /// Leaf triangles (each leaf's triangles, in the tree's order).
     pub leaf_count: usize,
+    /// Triangles with an alpha cutout.
     pub cut_triangle_count: usize,
     /// Instances of the top level (0: none, rays go straight to the bottom level).
     pub instance_count: usize,
@@ -207,32 +209,42 @@ fn rebased_tlas_nodes(tlas: &TlasExport, tlas_base: u32) -> Vec<u32> {
     words
 }
 
+/// `bvh_triangles` of `bvh.wgsl` (one zero vec4 for an empty tree), after
+/// checking that `export`'s per-leaf arrays agree.
+fn pack_leaf_triangles(export: &BvhExport) -> Result<Vec<[f32; 4]>, GpuError> {
+    check_node_words(&export.node_words, "the bottom levels")?;
+    if let Some(t) = &export.tlas {
+        check_node_words(&t.node_words, "the top level")?;
+    }
+    let leaves = export.leaf_triangles.len();
+    if export.leaf_triangle_ids.len() != leaves
+        || (!export.leaf_cutouts.is_empty() && export.leaf_cutouts.len() != leaves)
+    {
+        return Err(GpuError::Input(format!(
+            "BVH export: {leaves} leaf triangles, {} ids, {} cutout entries",
+            export.leaf_triangle_ids.len(),
+            export.leaf_cutouts.len()
+        )));
+    }
+    let mut triangles: Vec<[f32; 4]> = Vec::with_capacity(leaves * 4);
+    for (k, t) in export.leaf_triangles.iter().enumerate() {
+        let id = f32::from_bits(export.leaf_triangle_ids[k]);
+        let cut = f32::from_bits(export.leaf_cutouts.get(k).copied().unwrap_or(u32::MAX));
+        triangles.push([t[0].x, t[0].y, t[0].z, id]);
+        triangles.push([t[1].x, t[1].y, t[1].z, cut]);
+        triangles.push([t[2].x, t[2].y, t[2].z, 0.0]);
+        triangles.push([t[3].x, t[3].y, t[3].z, 0.0]);
+    }
+    if triangles.is_empty() {
+        triangles.push([0.0; 4]);
+    }
+    Ok(triangles)
+}
+
 impl GpuBvh {
     /// Uploads `export` in `bvh.wgsl`'s layout.
     pub fn upload(ctx: &GpuContext, export: &BvhExport) -> Result<Self, GpuError> {
-        check_node_words(&export.node_words, "the bottom levels")?;
-        if let Some(t) = &export.tlas {
-            check_node_words(&t.node_words, "the top level")?;
-        }
-        let leaves = export.leaf_triangles.len();
-        if export.leaf_triangle_ids.len() != leaves
-            || (!export.leaf_cutouts.is_empty() && export.leaf_cutouts.len() != leaves)
-        {
-            return Err(GpuError::Input(format!(
-                "BVH export: {leaves} leaf triangles, {} ids, {} cutout entries",
-                export.leaf_triangle_ids.len(),
-                export.leaf_cutouts.len()
-            )));
-        }
-        let mut triangles: Vec<[f32; 4]> = Vec::with_capacity(leaves * 4);
-        for (k, t) in export.leaf_triangles.iter().enumerate() {
-            let id = f32::from_bits(export.leaf_triangle_ids[k]);
-            let cut = f32::from_bits(export.leaf_cutouts.get(k).copied().unwrap_or(u32::MAX));
-            triangles.push([t[0].x, t[0].y, t[0].z, id]);
-            triangles.push([t[1].x, t[1].y, t[1].z, cut]);
-            triangles.push([t[2].x, t[2].y, t[2].z, 0.0]);
-            triangles.push([t[3].x, t[3].y, t[3].z, 0.0]);
-        }
+        let triangles = pack_leaf_triangles(export)?;
         let cutouts = pack_cutouts(export);
         let mut nodes = export.node_words.clone();
         // The top level's region after the bottom levels: a CWBVH over n
@@ -248,9 +260,6 @@ impl GpuBvh {
         }
         if nodes.is_empty() {
             nodes.push(0); // shorter than a node: `bvh_trace` sees an empty tree
-        }
-        if triangles.is_empty() {
-            triangles.push([0.0; 4]);
         }
         for (what, bytes) in [
             ("the BVH nodes", nodes.len() * 4),
@@ -405,6 +414,7 @@ pub struct GpuRayTrace {
 
 /// Rays and hits resident on the device, for repeated traces of one batch.
 pub struct GpuRayBatch {
+    /// Rays in the batch.
     pub ray_count: u32,
     any_hit: bool,
     rays: wgpu::Buffer,
@@ -450,30 +460,11 @@ impl GpuRayBatch {
 }
 
 impl GpuRayTrace {
+    /// The trace pipeline on `ctx` (rays and hits in group 0, the BVH in group 1).
     pub fn new(ctx: &GpuContext) -> Self {
-        let source = format!("{}\n{}", include_str!("shaders/bvh.wgsl"), include_str!("shaders/trace_rays.wgsl"));
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("trace_rays.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
-        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("trace rays"),
-            entries: &[uniform_entry(0), storage_entry(1, true), storage_entry(2, false)],
-        });
+        let layout = ctx.pass_layout("trace rays", &[true, false]);
         let bvh_layout = bvh_bind_group_layout(&ctx.device);
-        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("trace rays"),
-            bind_group_layouts: &[Some(&layout), Some(&bvh_layout)],
-            immediate_size: 0,
-        });
-        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("trace_rays"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("trace_rays"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let [pipeline] = ctx.compute_pipelines(&TRACE_RAYS, &[Some(&layout), Some(&bvh_layout)], ["trace_rays"]);
         Self { layout, pipeline }
     }
 

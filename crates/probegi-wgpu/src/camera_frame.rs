@@ -15,43 +15,61 @@ use glam::Vec3;
 use probegi_core::camera::CameraRays;
 use wgpu::util::DeviceExt;
 
-use crate::bvh_trace::{GpuBvh, bvh_bind_group_layout, storage_entry, uniform_entry};
-use crate::ddgi_query::{GpuDdgiField, query_wgsl};
+use crate::bvh_trace::{GpuBvh, bvh_bind_group_layout};
+use crate::ddgi_query::GpuDdgiField;
 use crate::gpu_context::{GpuContext, GpuError};
 use crate::gpu_scene::{GpuScene, scene_bind_group_layout};
+use crate::shader_registry::{
+    BVH_GROUP, BVH_STORAGE_BUFFERS, CAMERA_FRAME, FIELD_GROUP, FIELD_STORAGE_BUFFERS, PASS_GROUP, SCENE_GROUP,
+    SCENE_STORAGE_BUFFERS,
+};
 
 /// The camera pass's uniform block; must match `CameraParams` in `camera_frame.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct CameraParams {
-    pub origin: [f32; 4],
-    pub forward: [f32; 4],
-    pub right: [f32; 4],
-    pub up: [f32; 4],
-    pub info: [u32; 4],
-    pub sky: [f32; 4],
+pub(crate) struct CameraParams {
+    /// xyz: the eye (m); w: tan(fov_y / 2).
+    pub(crate) origin: [f32; 4],
+    /// xyz: the view direction; w: the aspect ratio.
+    pub(crate) forward: [f32; 4],
+    /// xyz: the right axis; w: the width (pixels).
+    pub(crate) right: [f32; 4],
+    /// xyz: the up axis; w: the height (pixels).
+    pub(crate) up: [f32; 4],
+    /// Frame, seed, area-light samples, second-order glossy.
+    pub(crate) info: [u32; 4],
+    /// xyz: the sky's radiance.
+    pub(crate) sky: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<CameraParams>() == 96);
 
 /// One frame's camera settings.
 #[derive(Clone, Copy, Debug)]
 pub struct CameraFrame<'a> {
+    /// The camera's rays (its basis and resolution).
     pub camera: &'a CameraRays,
+    /// The image's width in pixels (the camera's).
     pub width: u32,
+    /// The image's height in pixels (the camera's).
     pub height: u32,
+    /// The frame number (subpixel jitter after frame 0, random streams).
     pub frame: u32,
+    /// The render's seed.
     pub seed: u32,
     /// Area-light samples per pixel (stratified).
     pub area_samples: u32,
     /// Second-order glossy on glossy rays' hits.
     pub second_order: bool,
+    /// Radiance of the sky for rays that miss.
     pub sky_radiance: Vec3,
 }
 
 /// One camera frame read back.
 #[derive(Clone, Debug, Default)]
 pub struct CameraImage {
+    /// Direct light per pixel, row-major.
     pub direct: Vec<Vec3>,
+    /// Indirect diffuse from the field per pixel, row-major.
     pub indirect: Vec<Vec3>,
     /// Pixels on a surface with a diffuse albedo.
     pub surfaces: usize,
@@ -59,6 +77,8 @@ pub struct CameraImage {
     pub unlit: usize,
 }
 
+/// The camera pass's pipeline (`camera_frame.wgsl` with the BVH, the field and
+/// the scene in their groups, `shader_registry`).
 pub struct GpuCameraPass {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
@@ -66,44 +86,21 @@ pub struct GpuCameraPass {
 
 impl GpuCameraPass {
     /// Storage buffers the pass binds per stage: its own 2, the BVH's, the
-    /// field's 4 and the scene's 4.
-    pub const STORAGE_BUFFERS: u32 = 2 + crate::bvh_trace::BVH_STORAGE_BUFFERS + 4 + 4;
+    /// field's and the scene's.
+    pub const STORAGE_BUFFERS: u32 = 2 + BVH_STORAGE_BUFFERS + FIELD_STORAGE_BUFFERS + SCENE_STORAGE_BUFFERS;
 
+    /// The pipeline on `ctx`; an error where the device binds too few storage buffers.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         ctx.check_pipeline(Self::STORAGE_BUFFERS, "the camera pass")?;
-        let source = format!(
-            "{}\n{}\n{}\n{}",
-            include_str!("shaders/bvh.wgsl"),
-            query_wgsl(2),
-            include_str!("shaders/scene.wgsl"),
-            include_str!("shaders/camera_frame.wgsl")
+        let layout = ctx.pass_layout("camera frame", &[false, false]);
+        let bvh = bvh_bind_group_layout(&ctx.device);
+        let field = GpuDdgiField::bind_group_layout(&ctx.device);
+        let scene = scene_bind_group_layout(&ctx.device);
+        let [pipeline] = ctx.compute_pipelines(
+            &CAMERA_FRAME,
+            &[Some(&layout), Some(&bvh), Some(&field), Some(&scene)],
+            ["shade_camera"],
         );
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("camera_frame.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
-        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("camera frame"),
-            entries: &[uniform_entry(0), storage_entry(1, false), storage_entry(2, false)],
-        });
-        let others = [
-            bvh_bind_group_layout(&ctx.device),
-            GpuDdgiField::bind_group_layout(&ctx.device),
-            scene_bind_group_layout(&ctx.device),
-        ];
-        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("camera frame"),
-            bind_group_layouts: &[Some(&layout), Some(&others[0]), Some(&others[1]), Some(&others[2])],
-            immediate_size: 0,
-        });
-        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("shade_camera"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("shade_camera"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
         Ok(Self { layout, pipeline })
     }
 
@@ -162,10 +159,10 @@ impl GpuCameraPass {
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.set_bind_group(1, bvh.bind_group(), &[]);
-            pass.set_bind_group(2, field.bind_group(), &[]);
-            pass.set_bind_group(3, scene.bind_group(), &[]);
+            pass.set_bind_group(PASS_GROUP, &bind_group, &[]);
+            pass.set_bind_group(BVH_GROUP, bvh.bind_group(), &[]);
+            pass.set_bind_group(FIELD_GROUP, field.bind_group(), &[]);
+            pass.set_bind_group(SCENE_GROUP, scene.bind_group(), &[]);
             pass.dispatch_workgroups(f.width.div_ceil(8), f.height.div_ceil(8), 1);
         }
         ctx.queue.submit([encoder.finish()]);

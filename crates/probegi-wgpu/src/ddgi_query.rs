@@ -7,7 +7,8 @@
 //! (each cites its original); `tests/query_equivalence.rs` holds them together.
 //!
 //! Bind-group layout ([`GpuDdgiField::bind_group_layout`], visible to compute and
-//! fragment stages), all read-only storage buffers:
+//! fragment stages; group 2 in the crate's own passes, `shader_registry`), all
+//! read-only storage buffers:
 //! - binding 0: `DdgiSet` — header (member count, blending 0 density / 1
 //!   cascades, has camera), the camera position, then one [`GpuDdgiVolume`] per
 //!   member in sampling order;
@@ -22,46 +23,52 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use probegi_core::ddgi_query::DdgiFieldView;
 use probegi_core::ddgi_settings::ProbeBiasMode;
 use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, VolumeBlending};
 use wgpu::util::DeviceExt;
 
-use crate::bvh_trace::{dispatch_2d, uniform_entry};
+use crate::bvh_trace::dispatch_2d;
 use crate::gpu_context::{GpuContext, GpuError};
+use crate::shader_registry::{FIELD_GROUP, FIELD_QUERY, FIELD_STORAGE_BUFFERS, PASS_GROUP};
 
-/// The query library's WGSL source with its bindings in group `group`.
+/// The query library's WGSL source with its bindings in group `group`: the
+/// constants prelude it reads (`shader_registry`) and `ddgi_query.wgsl`, for
+/// an engine to put before its own shader. The prelude's `const` names are
+/// taken.
 pub fn query_wgsl(group: u32) -> String {
-    include_str!("shaders/ddgi_query.wgsl").replace("DDGI_GROUP", &group.to_string())
+    crate::shader_registry::query_library(group)
 }
 
 /// One member volume; must match `DdgiVolume` in `ddgi_query.wgsl` (112 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct GpuDdgiVolume {
+pub(crate) struct GpuDdgiVolume {
     /// xyz: probe (0, 0, 0) before scrolling; w: min spacing (m).
-    pub origin_m: [f32; 4],
+    pub(crate) origin_m: [f32; 4],
     /// xyz: spacing (m); w: irradiance γ.
-    pub spacing_m: [f32; 4],
+    pub(crate) spacing_m: [f32; 4],
     /// xyz: probes per axis; w: weight flags (1 backface, 2 Chebyshev, 4 crush, 8 trilinear).
-    pub probe_counts: [u32; 4],
+    pub(crate) probe_counts: [u32; 4],
     /// xyz: circular-buffer phase; w: bias mode (0 none, 1 self-shadow, 2 normal).
-    pub scroll_offsets: [u32; 4],
+    pub(crate) scroll_offsets: [u32; 4],
     /// Irradiance interior, distance interior, first irradiance texel, first distance texel.
-    pub texels: [u32; 4],
+    pub(crate) texels: [u32; 4],
     /// Self-shadow bias, normal bias (m), crush threshold, energy conservation.
-    pub params: [f32; 4],
+    pub(crate) params: [f32; 4],
     /// First probe in the probe buffer, tracks the camera, 0, 0.
-    pub extra: [u32; 4],
+    pub(crate) extra: [u32; 4],
 }
 const _: () = assert!(std::mem::size_of::<GpuDdgiVolume>() == 112);
 
 /// The set's header; must match the first 32 bytes of `DdgiSet` in `ddgi_query.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct GpuDdgiSetHeader {
+pub(crate) struct GpuDdgiSetHeader {
     /// Member count, blending (0 density, 1 cascades), has camera, 0.
-    pub header: [u32; 4],
-    pub camera_m: [f32; 4],
+    pub(crate) header: [u32; 4],
+    /// xyz: the camera (m), for a set that blends around it.
+    pub(crate) camera_m: [f32; 4],
 }
 const _: () = assert!(std::mem::size_of::<GpuDdgiSetHeader>() == 32);
 
@@ -72,7 +79,9 @@ const NO_PROBE: u32 = 0x7fff_ffff;
 /// then stays resident and only its per-probe data is refreshed each frame
 /// ([`Self::refresh`]).
 pub struct GpuDdgiField {
+    /// Member volumes.
     pub volumes: usize,
+    /// Probes of all members (at least 1: an empty set keeps one entry).
     pub probes: usize,
     bytes: u64,
     /// Per member in sampling order: probes, irradiance / distance interior,
@@ -95,6 +104,41 @@ struct PackedField {
     members: Vec<[u32; 6]>,
 }
 
+/// A member's `DdgiVolume` (grid, weights, bias, atlas interiors) with its first
+/// irradiance and distance texels; `extra` left for the caller.
+fn gpu_volume(f: &DdgiFieldView<'_>, [irr_first, dist_first]: [u32; 2]) -> GpuDdgiVolume {
+    let (g, s) = (f.grid, f.settings);
+    let flags = s.probe_backface_weight as u32
+        | (s.probe_chebyshev_weight as u32) << 1
+        | (s.probe_crush_weight as u32) << 2
+        | (s.probe_trilinear_weight as u32) << 3;
+    let bias = match s.probe_bias_mode {
+        ProbeBiasMode::None => 0,
+        ProbeBiasMode::SelfShadow => 1,
+        ProbeBiasMode::Normal => 2,
+    };
+    GpuDdgiVolume {
+        origin_m: [g.origin_m.x, g.origin_m.y, g.origin_m.z, g.min_spacing_m()],
+        spacing_m: [g.spacing_m.x, g.spacing_m.y, g.spacing_m.z, s.probe_irradiance_gamma],
+        probe_counts: [g.probe_counts.x, g.probe_counts.y, g.probe_counts.z, flags],
+        scroll_offsets: [g.probe_scroll_offsets.x, g.probe_scroll_offsets.y, g.probe_scroll_offsets.z, bias],
+        texels: [f.irradiance.interior, f.distance.interior, irr_first, dist_first],
+        params: [s.probe_self_shadow_bias, s.probe_normal_bias_m, s.probe_crush_threshold, s.probe_energy_conservation],
+        extra: [0; 4],
+    }
+}
+
+/// `ddgi_probes`' rows of a member: offset, and the usable flag with the fallback.
+fn push_probe_rows(f: &DdgiFieldView<'_>, probes: &mut Vec<[f32; 4]>) {
+    for p in 0..f.grid.probe_count() {
+        let usable = f.probe_usable.get(p).copied().unwrap_or(true);
+        let fallback = f.probe_fallback.get(p).copied().unwrap_or(u32::MAX);
+        let fallback = if fallback == u32::MAX || fallback >= NO_PROBE { NO_PROBE } else { fallback };
+        let o = f.probe_offsets_m.get(p).copied().unwrap_or(Vec3::ZERO);
+        probes.push([o.x, o.y, o.z, f32::from_bits(fallback | (usable as u32) << 31)]);
+    }
+}
+
 fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedField, GpuError> {
     let header = GpuDdgiSetHeader {
         header: [
@@ -113,8 +157,7 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
     let mut members = vec![];
     for m in &set.members {
         let f = &m.field;
-        let (g, s) = (f.grid, f.settings);
-        let n = g.probe_count();
+        let n = f.grid.probe_count();
         if f.irradiance.texels.len() != n * f.irradiance.tile_len()
             || f.distance.texels.len() != n * f.distance.tile_len()
         {
@@ -123,44 +166,18 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
                 f.irradiance.probe_count
             )));
         }
-        let flags = s.probe_backface_weight as u32
-            | (s.probe_chebyshev_weight as u32) << 1
-            | (s.probe_crush_weight as u32) << 2
-            | (s.probe_trilinear_weight as u32) << 3;
-        let bias = match s.probe_bias_mode {
-            ProbeBiasMode::None => 0,
-            ProbeBiasMode::SelfShadow => 1,
-            ProbeBiasMode::Normal => 2,
-        };
         let (irr_first, dist_first) = (irradiance_texels as u32, distance_texels as u32);
         members.push([n as u32, f.irradiance.interior, f.distance.interior, irr_first, dist_first, m.volume as u32]);
-        volumes.push(GpuDdgiVolume {
-            origin_m: [g.origin_m.x, g.origin_m.y, g.origin_m.z, g.min_spacing_m()],
-            spacing_m: [g.spacing_m.x, g.spacing_m.y, g.spacing_m.z, s.probe_irradiance_gamma],
-            probe_counts: [g.probe_counts.x, g.probe_counts.y, g.probe_counts.z, flags],
-            scroll_offsets: [g.probe_scroll_offsets.x, g.probe_scroll_offsets.y, g.probe_scroll_offsets.z, bias],
-            texels: [f.irradiance.interior, f.distance.interior, irr_first, dist_first],
-            params: [
-                s.probe_self_shadow_bias,
-                s.probe_normal_bias_m,
-                s.probe_crush_threshold,
-                s.probe_energy_conservation,
-            ],
-            extra: [probes.len() as u32, m.tracks_camera as u32, 0, 0],
-        });
+        let mut v = gpu_volume(f, [irr_first, dist_first]);
+        v.extra = [probes.len() as u32, m.tracks_camera as u32, 0, 0];
+        volumes.push(v);
         irradiance_texels += f.irradiance.texels.len();
         distance_texels += f.distance.texels.len();
         if with_atlases {
             irradiance.extend(f.irradiance.texels.iter().map(|t| [t.x, t.y, t.z, 0.0]));
             distance.extend(f.distance.texels.iter().map(|t| [t.x, t.y]));
         }
-        for p in 0..n {
-            let usable = f.probe_usable.get(p).copied().unwrap_or(true);
-            let fallback = f.probe_fallback.get(p).copied().unwrap_or(u32::MAX);
-            let fallback = if fallback == u32::MAX || fallback >= NO_PROBE { NO_PROBE } else { fallback };
-            let o = f.probe_offsets_m.get(p).copied().unwrap_or(Vec3::ZERO);
-            probes.push([o.x, o.y, o.z, f32::from_bits(fallback | (usable as u32) << 31)]);
-        }
+        push_probe_rows(f, &mut probes);
     }
     let mut set_bytes = bytemuck::bytes_of(&header).to_vec();
     if volumes.is_empty() {
@@ -193,10 +210,9 @@ impl GpuDdgiField {
             },
             count: None,
         };
-        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("ddgi query"),
-            entries: &[entry(0), entry(1), entry(2), entry(3)],
-        })
+        let entries: Vec<_> = (0..FIELD_STORAGE_BUFFERS).map(entry).collect();
+        device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("ddgi query"), entries: &entries })
     }
 
     /// Uploads every member of `set` (grids, settings, atlases, relocation offsets,
@@ -294,6 +310,7 @@ impl GpuDdgiField {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct QueryPoint {
+    /// xyz: the surface point (m).
     pub position: [f32; 4],
     /// Unit surface normal.
     pub normal: [f32; 4],
@@ -303,6 +320,7 @@ pub struct QueryPoint {
 const _: () = assert!(std::mem::size_of::<QueryPoint>() == 48);
 
 impl QueryPoint {
+    /// A query at `position` with unit `normal`, seen along unit `view_dir` (surface → viewer).
     pub fn new(position: Vec3, normal: Vec3, view_dir: Vec3) -> Self {
         Self {
             position: position.extend(0.0).into(),
@@ -315,48 +333,27 @@ impl QueryPoint {
 /// `field_query.wgsl`'s uniform block.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct FieldQueryParams {
-    pub point_count: u32,
-    pub groups_x: u32,
-    pub _pad: [u32; 2],
+pub(crate) struct FieldQueryParams {
+    pub(crate) point_count: u32,
+    pub(crate) groups_x: u32,
+    pub(crate) _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<FieldQueryParams>() == 16);
 
-/// The query over a batch of points (`field_query.wgsl` with `ddgi_query.wgsl` at group 1).
+/// The query over a batch of points (`field_query.wgsl` with `ddgi_query.wgsl`
+/// in the field's group, `shader_registry::FIELD_GROUP`).
 pub struct GpuFieldQuery {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
 }
 
 impl GpuFieldQuery {
+    /// The query pipeline on `ctx`.
     pub fn new(ctx: &GpuContext) -> Self {
-        let source = format!("{}\n{}", query_wgsl(1), include_str!("shaders/field_query.wgsl"));
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("field_query.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
-        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("field query"),
-            entries: &[
-                uniform_entry(0),
-                crate::bvh_trace::storage_entry(1, true),
-                crate::bvh_trace::storage_entry(2, false),
-            ],
-        });
+        let layout = ctx.pass_layout("field query", &[true, false]);
         let field_layout = GpuDdgiField::bind_group_layout(&ctx.device);
-        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("field query"),
-            bind_group_layouts: &[Some(&layout), Some(&field_layout)],
-            immediate_size: 0,
-        });
-        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("query_field"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("query_field"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let [pipeline] =
+            ctx.compute_pipelines(&FIELD_QUERY, &[Some(&layout), None, Some(&field_layout)], ["query_field"]);
         Self { layout, pipeline }
     }
 
@@ -398,8 +395,8 @@ impl GpuFieldQuery {
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.set_bind_group(1, field.bind_group(), &[]);
+            pass.set_bind_group(PASS_GROUP, &bind_group, &[]);
+            pass.set_bind_group(FIELD_GROUP, field.bind_group(), &[]);
             pass.dispatch_workgroups(groups_x, groups_y, 1);
         }
         ctx.queue.submit([encoder.finish()]);

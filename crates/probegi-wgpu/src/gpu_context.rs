@@ -4,6 +4,9 @@
 use std::fmt;
 use wgpu::util::DeviceExt;
 
+use crate::bvh_trace::{storage_entry, uniform_entry};
+use crate::shader_registry::{BIND_GROUPS, PassShader, compose};
+
 /// Why no device could be used.
 #[derive(Debug)]
 pub enum GpuError {
@@ -36,7 +39,9 @@ impl std::error::Error for GpuError {}
 
 /// A device, its queue and what the adapter says about itself.
 pub struct GpuContext {
+    /// The device every pass runs on.
     pub device: wgpu::Device,
+    /// Its queue.
     pub queue: wgpu::Queue,
     /// The adapter's name and driver, e.g. "llvmpipe (LLVM 15.0.6)".
     pub adapter_name: String,
@@ -115,14 +120,14 @@ impl GpuContext {
         Ok(())
     }
 
-    /// An error when a pipeline binding `n` storage buffers per stage (and four
-    /// bind groups) exceeds the device's limits (WebGPU's defaults are 8 and 4;
-    /// `headless` asks for what the adapter has).
+    /// An error when a pipeline binding `n` storage buffers per stage (and
+    /// [`BIND_GROUPS`] bind groups) exceeds the device's limits (WebGPU's
+    /// defaults are 8 and 4; `headless` asks for what the adapter has).
     pub(crate) fn check_pipeline(&self, storage_buffers: u32, what: &str) -> Result<(), GpuError> {
         let l = self.device.limits();
-        if storage_buffers > l.max_storage_buffers_per_shader_stage || l.max_bind_groups < 4 {
+        if storage_buffers > l.max_storage_buffers_per_shader_stage || l.max_bind_groups < BIND_GROUPS {
             return Err(GpuError::Device(format!(
-                "{what} binds {storage_buffers} storage buffers in 4 groups; this device allows {} and {} \
+                "{what} binds {storage_buffers} storage buffers in {BIND_GROUPS} groups; this device allows {} and {} \
                  (create it with the adapter's limits)",
                 l.max_storage_buffers_per_shader_stage, l.max_bind_groups
             )));
@@ -130,18 +135,28 @@ impl GpuContext {
         Ok(())
     }
 
-    /// Compute pipelines for `entries` of one WGSL module over `layouts` (one per
-    /// bind group; `None` for a group the module does not use).
+    /// A pass's own group ([`crate::shader_registry::PASS_GROUP`]): its uniform
+    /// block at binding 0, then one storage buffer per entry of `read_only`
+    /// (whether the pass only reads it) from binding 1 on.
+    pub(crate) fn pass_layout(&self, label: &str, read_only: &[bool]) -> wgpu::BindGroupLayout {
+        let mut entries = vec![uniform_entry(0)];
+        entries.extend(read_only.iter().enumerate().map(|(i, r)| storage_entry(i as u32 + 1, *r)));
+        self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries })
+    }
+
+    /// Compute pipelines for `entries` of `shader` (composed by
+    /// [`crate::shader_registry`]) over `layouts` (one per bind group; `None`
+    /// for a group the module does not use).
     pub(crate) fn compute_pipelines<const N: usize>(
         &self,
-        label: &str,
-        source: String,
+        shader: &PassShader,
         layouts: &[Option<&wgpu::BindGroupLayout>],
         entries: [&str; N],
     ) -> [wgpu::ComputePipeline; N] {
+        let label = shader.label;
         let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
+            source: wgpu::ShaderSource::Wgsl(compose(shader).into()),
         });
         let layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some(label),

@@ -15,14 +15,13 @@ use probegi_scene::{LightKind, Scene};
 use wgpu::util::DeviceExt;
 
 use crate::gpu_context::{GpuContext, GpuError};
+use crate::shader_registry::SCENE_STORAGE_BUFFERS;
 
-/// The bind-group layout of `scene.wgsl` (group 3): four read-only storage buffers.
-pub fn scene_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    let e = |b| crate::bvh_trace::storage_entry(b, true);
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("scene"),
-        entries: &[e(0), e(1), e(2), e(3)],
-    })
+/// The bind-group layout of `scene.wgsl` (`shader_registry::SCENE_GROUP`):
+/// `SCENE_STORAGE_BUFFERS` read-only storage buffers.
+pub(crate) fn scene_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    let entries: Vec<_> = (0..SCENE_STORAGE_BUFFERS).map(|b| crate::bvh_trace::storage_entry(b, true)).collect();
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("scene"), entries: &entries })
 }
 
 /// `scene_triangles`' 15 vec4s of triangle `t` of `mesh`.
@@ -153,7 +152,9 @@ fn emitter_moves(scene: &Scene) -> bool {
 
 /// The scene's shading data on the device.
 pub struct GpuScene {
+    /// Triangles of the scene's own mesh.
     pub triangles: usize,
+    /// Emitting triangles (the area lights).
     pub emitters: usize,
     bytes: u64,
     bind_group: wgpu::BindGroup,
@@ -183,38 +184,45 @@ fn pack_punctual_lights(scene: &Scene) -> Vec<[f32; 4]> {
     lights
 }
 
+/// `scene_triangles`: the scene mesh's triangles, each prototype's, then the
+/// instance records; and where the instance records start (in vec4s).
+fn pack_scene_triangles(scene: &Scene) -> (Vec<[f32; 4]>, u32) {
+    let mesh = &scene.mesh;
+    let nt = mesh.triangle_count();
+    let stored = nt + scene.prototypes.iter().map(|p| p.mesh.triangle_count()).sum::<usize>();
+    let mut triangles: Vec<[f32; 4]> = Vec::with_capacity(stored.max(1) * TRIANGLE_VEC4S + scene.instances.len() * 7);
+    for t in 0..nt {
+        pack_triangle(mesh, t, &mut triangles);
+    }
+    // Each prototype's triangles once, then a placement per instance.
+    let mut first_triangle = vec![];
+    for proto in &scene.prototypes {
+        first_triangle.push((triangles.len() / TRIANGLE_VEC4S) as u32);
+        for t in 0..proto.mesh.triangle_count() {
+            pack_triangle(&proto.mesh, t, &mut triangles);
+        }
+    }
+    if triangles.is_empty() {
+        triangles.push([0.0; 4]);
+    }
+    let instance_records = triangles.len() as u32;
+    for inst in &scene.instances {
+        let m = inst.world_from_local.matrix3;
+        let first = first_triangle.get(inst.prototype as usize).copied().unwrap_or(0);
+        triangles.push(glam::Vec3::from(m.x_axis).extend(f32::from_bits(first)).into());
+        triangles.push(glam::Vec3::from(m.y_axis).extend(0.0).into());
+        triangles.push(glam::Vec3::from(m.z_axis).extend(0.0).into());
+        triangles.push(glam::Vec3::from(inst.world_from_local.translation).extend(0.0).into());
+        let n = inst.normal_from_local;
+        triangles.extend([n.x_axis, n.y_axis, n.z_axis].map(|c| glam::Vec3::from(c).extend(0.0).to_array()));
+    }
+    (triangles, instance_records)
+}
+
 impl GpuScene {
+    /// Uploads `scene`'s triangles, materials, textures and lights in `scene.wgsl`'s layout.
     pub fn upload(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
-        let mesh = &scene.mesh;
-        let nt = mesh.triangle_count();
-        let stored = nt + scene.prototypes.iter().map(|p| p.mesh.triangle_count()).sum::<usize>();
-        let mut triangles: Vec<[f32; 4]> =
-            Vec::with_capacity(stored.max(1) * TRIANGLE_VEC4S + scene.instances.len() * 7);
-        for t in 0..nt {
-            pack_triangle(mesh, t, &mut triangles);
-        }
-        // Each prototype's triangles once, then a placement per instance.
-        let mut first_triangle = vec![];
-        for proto in &scene.prototypes {
-            first_triangle.push((triangles.len() / TRIANGLE_VEC4S) as u32);
-            for t in 0..proto.mesh.triangle_count() {
-                pack_triangle(&proto.mesh, t, &mut triangles);
-            }
-        }
-        if triangles.is_empty() {
-            triangles.push([0.0; 4]);
-        }
-        let instance_records = triangles.len() as u32;
-        for inst in &scene.instances {
-            let m = inst.world_from_local.matrix3;
-            let first = first_triangle.get(inst.prototype as usize).copied().unwrap_or(0);
-            triangles.push(glam::Vec3::from(m.x_axis).extend(f32::from_bits(first)).into());
-            triangles.push(glam::Vec3::from(m.y_axis).extend(0.0).into());
-            triangles.push(glam::Vec3::from(m.z_axis).extend(0.0).into());
-            triangles.push(glam::Vec3::from(inst.world_from_local.translation).extend(0.0).into());
-            let n = inst.normal_from_local;
-            triangles.extend([n.x_axis, n.y_axis, n.z_axis].map(|c| glam::Vec3::from(c).extend(0.0).to_array()));
-        }
+        let (triangles, instance_records) = pack_scene_triangles(scene);
         let materials = pack_materials(scene);
         let words = pack_textures(scene, instance_records);
         // Lights: punctual lights, then the emitters' power-weighted distribution
@@ -254,7 +262,7 @@ impl GpuScene {
         let moving = scene.objects.iter().filter(|o| o.is_animated()).map(|o| o.triangles()).collect();
         let [triangle_buffer, _, _, lights] = buffers;
         Ok(Self {
-            triangles: nt,
+            triangles: scene.mesh.triangle_count(),
             emitters,
             bytes,
             bind_group,
@@ -325,6 +333,7 @@ impl GpuScene {
         !self.moving.is_empty()
     }
 
+    /// Device memory of the scene's buffers.
     pub fn bytes(&self) -> u64 {
         self.bytes
     }

@@ -12,6 +12,7 @@ pub struct GpuTimer {
 }
 
 impl GpuTimer {
+    /// Timestamps for `passes` passes (none where the device has no timestamp queries).
     pub fn new(ctx: &GpuContext, passes: u32) -> Self {
         let queries = (ctx.timestamps && passes > 0).then(|| {
             let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {

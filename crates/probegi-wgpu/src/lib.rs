@@ -1,26 +1,34 @@
 //! probegi-wgpu: DDGI on the GPU as wgpu compute shaders (WGSL), on any adapter,
 //! software ones included (issue "The whole frame on the GPU…").
 //!
-//! Built, and tested against the CPU path on Mesa's lavapipe:
-//! - [`gpu_context`]: a headless device on any adapter, or a device and queue
-//!   the caller owns; [`gpu_timer`]: per-pass GPU times from timestamp queries;
+//! Built, and tested against the CPU path on Mesa's lavapipe, one module per pass:
 //! - [`bvh_trace`]: the trace: the CPU's compressed-wide BVH (obvhs) uploaded as
 //!   it is and traversed in `bvh.wgsl`, closest and any hit, alpha cutouts
 //!   inside the traversal; also over a caller's own triangle soup;
-//! - [`gpu_scene`], [`probe_shade`]: the shade pass of the probe rays (sky,
-//!   back faces, direct light with shadow rays, the previous field, second-order
-//!   glossy), materials with textures, normal and bump maps;
 //! - [`camera_frame`]: the camera frame (primary rays, direct light, glossy
 //!   rays, the field query);
-//! - [`ddgi_query`]: the query of a set of volumes as WGSL an engine includes;
+//! - [`ddgi_query`]: the query of a set of volumes as WGSL an engine includes,
+//!   the field on the device, and a batch query over points;
+//! - [`gpu_context`]: a headless device on any adapter, or a device and queue
+//!   the caller owns;
+//! - [`gpu_scene`]: a scene's surfaces, materials, textures and lights in
+//!   `scene.wgsl`'s layout;
+//! - [`gpu_timer`]: per-pass GPU times from timestamp queries;
 //! - [`probe_blend`]: the blend (γ encoding, seed 004 Listing 3's thresholds,
 //!   distance moments, over the CPU's own weight tables) and border passes over
 //!   device-resident atlases (a volume's own, or its range of a resident field);
-//! - [`probe_relocation`], [`probe_classification`], [`probe_usage`]: seed 004
-//!   Listing 4's relocation iteration, Listing 5's classification round and seed
-//!   003's usage counts over a traced batch where it lies;
+//! - [`probe_classification`]: seed 004 Listing 5's classification round;
 //! - [`probe_ray_gen`]: rotated spherical Fibonacci rays written straight into
-//!   a trace batch.
+//!   a trace batch;
+//! - [`probe_relocation`]: seed 004 Listing 4's relocation iteration;
+//! - [`probe_shade`]: the shade pass of the probe rays (sky, back faces, direct
+//!   light with shadow rays, the previous field, second-order glossy);
+//! - [`probe_usage`]: seed 003's usage counts over a traced batch where it lies;
+//! - `shader_registry` (crate-private): the one owner of the WGSL: each pass's
+//!   files in order, the constants prelude generated from the Rust `const`s,
+//!   and the bind-group convention (0 the pass, 1 the BVH, 2 the field, 3 the
+//!   scene) with each shared group's storage-buffer count;
+//! - [`wgpu_field_backend`]: the field set's seam driven by these passes.
 //!
 //! [`wgpu_field_backend`] drives these passes through the field set's seam
 //! (`probegi-field`'s `ProbeBatchTracer` and `DeviceField`), the atlases kept
@@ -30,6 +38,8 @@
 //! This crate depends on `probegi-core` (settings, layouts, encodings),
 //! `probegi-scene` (the BVH and the scene) and `probegi-field` (the field's host
 //! side), and never on the CPU backend, its peer.
+
+#![warn(missing_docs)]
 
 pub mod bvh_trace;
 pub mod camera_frame;
@@ -43,6 +53,7 @@ pub mod probe_ray_gen;
 pub mod probe_relocation;
 pub mod probe_shade;
 pub mod probe_usage;
+pub(crate) mod shader_registry;
 pub mod wgpu_field_backend;
 
 pub use gpu_context::{GpuContext, GpuError};

@@ -26,31 +26,33 @@ use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_count};
 use probegi_core::probe_blend::BlendWeights;
 use wgpu::util::DeviceExt;
 
-use crate::bvh_trace::{storage_entry, uniform_entry};
+use probegi_field::device_plans::DeviceVolumeBlend;
+
 use crate::gpu_context::{GpuContext, GpuError};
+use crate::shader_registry::PROBE_BLEND;
 
 /// The blend passes' uniform block; must match `BlendParams` in `probe_blend.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct BlendParams {
-    pub probe_count: u32,
-    pub rays_per_probe: u32,
-    pub irradiance_interior: u32,
-    pub distance_interior: u32,
-    pub gamma: f32,
-    pub irradiance_scale: f32,
-    pub visibility_scale: f32,
-    pub use_thresholds: u32,
-    pub significant: f32,
-    pub new_distribution: f32,
-    pub distance_exponent: f32,
-    pub distance_clamp_m: f32,
-    pub probes_per_row: u32,
+pub(crate) struct BlendParams {
+    pub(crate) probe_count: u32,
+    pub(crate) rays_per_probe: u32,
+    pub(crate) irradiance_interior: u32,
+    pub(crate) distance_interior: u32,
+    pub(crate) gamma: f32,
+    pub(crate) irradiance_scale: f32,
+    pub(crate) visibility_scale: f32,
+    pub(crate) use_thresholds: u32,
+    pub(crate) significant: f32,
+    pub(crate) new_distribution: f32,
+    pub(crate) distance_exponent: f32,
+    pub(crate) distance_clamp_m: f32,
+    pub(crate) probes_per_row: u32,
     /// The volume's first texel in the irradiance / distance buffer.
-    pub irradiance_first: u32,
-    pub distance_first: u32,
+    pub(crate) irradiance_first: u32,
+    pub(crate) distance_first: u32,
     /// Where the (ray, weight) entries start in the weights buffer.
-    pub weight_entries_first: u32,
+    pub(crate) weight_entries_first: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<BlendParams>() == 64);
@@ -62,10 +64,15 @@ const WORKGROUP: u32 = 64;
 /// One volume's atlases on the device: `probe_count` tiles from texel
 /// `irradiance_first` / `distance_first` of the two buffers.
 pub struct GpuVolumeAtlases {
+    /// Probes (tiles) of the volume.
     pub probe_count: usize,
+    /// Interior texels per side of an irradiance tile.
     pub irradiance_interior: u32,
+    /// Interior texels per side of a distance tile.
     pub distance_interior: u32,
+    /// The volume's first texel in the irradiance buffer.
     pub irradiance_first: u32,
+    /// The volume's first texel in the distance buffer.
     pub distance_first: u32,
     pub(crate) irradiance: wgpu::Buffer,
     pub(crate) distance: wgpu::Buffer,
@@ -163,6 +170,7 @@ impl GpuVolumeAtlases {
 
 /// One frame's blend inputs for one volume, probe-major like the CPU's.
 pub struct BlendFrame<'a> {
+    /// The volume's settings (γ, thresholds, distance exponent).
     pub settings: &'a DdgiVolumeSettings,
     /// The frame's unit ray directions (shared by every probe).
     pub ray_dirs: &'a [Vec3],
@@ -174,26 +182,9 @@ pub struct BlendFrame<'a> {
     pub probe_hysteresis: &'a [Option<f32>],
     /// Scene-event reductions of the irradiance and distance hysteresis.
     pub irradiance_scale: f32,
+    /// The same for the distance (visibility) hysteresis.
     pub visibility_scale: f32,
     /// The distance limit of the blend (`DdgiVolume::distance_clamp_m`).
-    pub distance_clamp_m: f32,
-}
-
-/// One volume's blend of a batch whose per-ray results are on the device.
-pub struct ResidentBlend<'a> {
-    pub settings: &'a DdgiVolumeSettings,
-    /// Rays per probe this frame.
-    pub rays_per_probe: u32,
-    /// The frame's weight tables (`probegi_field::probe_ray_gen::generate_probe_rays`).
-    pub irradiance_weights: &'a BlendWeights,
-    pub distance_weights: &'a BlendWeights,
-    /// One `vec4<f32>` per batch ray: radiance, signed blend distance.
-    pub ray_results: &'a wgpu::Buffer,
-    /// Per probe: its first ray in the batch and its blend hysteresis, or `None`
-    /// when it does not update this frame.
-    pub probe_blend: &'a [Option<(u32, f32)>],
-    pub irradiance_scale: f32,
-    pub visibility_scale: f32,
     pub distance_clamp_m: f32,
 }
 
@@ -204,24 +195,10 @@ pub struct GpuProbeBlend {
 }
 
 impl GpuProbeBlend {
+    /// The pipelines on `ctx`.
     pub fn new(ctx: &GpuContext) -> Self {
-        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("probe blend"),
-            entries: &[
-                uniform_entry(0),
-                storage_entry(1, true),
-                storage_entry(2, true),
-                storage_entry(3, true),
-                storage_entry(4, false),
-                storage_entry(5, false),
-            ],
-        });
-        let pipelines = ctx.compute_pipelines(
-            "probe_blend.wgsl",
-            include_str!("shaders/probe_blend.wgsl").into(),
-            &[Some(&layout)],
-            PASS_NAMES,
-        );
+        let layout = ctx.pass_layout("probe blend", &[true, true, true, false, false]);
+        let pipelines = ctx.compute_pipelines(&PROBE_BLEND, &[Some(&layout)], PASS_NAMES);
         Self { layout, pipelines }
     }
 
@@ -264,93 +241,47 @@ impl GpuProbeBlend {
             contents: bytemuck::cast_slice(&results),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let probe_blend: Vec<Option<(u32, f32)>> =
-            (0..probes).map(|p| frame.probe_hysteresis[p].map(|h| ((p * rays) as u32, h))).collect();
         let irradiance_weights = BlendWeights::new(frame.ray_dirs, atlases.irradiance_interior, 1.0);
         let distance_weights =
             BlendWeights::new(frame.ray_dirs, atlases.distance_interior, frame.settings.probe_distance_exponent);
-        let resident = ResidentBlend {
+        let plan = DeviceVolumeBlend {
             settings: frame.settings,
-            rays_per_probe: rays as u32,
+            ray_dirs: frame.ray_dirs,
             irradiance_weights: &irradiance_weights,
             distance_weights: &distance_weights,
-            ray_results: &results,
-            probe_blend: &probe_blend,
+            probe_blend: (0..probes).map(|p| frame.probe_hysteresis[p].map(|h| ((p * rays) as u32, h))).collect(),
             irradiance_scale: frame.irradiance_scale,
             visibility_scale: frame.visibility_scale,
             distance_clamp_m: frame.distance_clamp_m,
+            reset_probes: &[],
         };
-        self.prepare_resident(ctx, atlases, &resident)
+        self.prepare_resident(ctx, atlases, &plan, &results)
     }
 
-    /// Binds a batch's per-ray results where they lie on the device (the shade
-    /// pass's output) with `atlases`, uploading only the per-probe inputs.
+    /// Binds a batch's per-ray results where they lie on the device
+    /// (`ray_results`, the shade pass's output: one `vec4<f32>` per batch ray,
+    /// radiance and signed blend distance) with `atlases`, uploading only
+    /// `plan`'s per-probe inputs and weight tables. The plan is the field's own
+    /// (`DdgiFieldSet::device_blend_plan`); its `reset_probes` are the caller's
+    /// to clear first ([`GpuVolumeAtlases::zero_tiles`]). It is packed, not
+    /// uploaded as it is: its tables are `Vec`s and its per-probe entries
+    /// `Option`s.
     pub fn prepare_resident(
         &self,
         ctx: &GpuContext,
         atlases: &GpuVolumeAtlases,
-        frame: &ResidentBlend<'_>,
+        plan: &DeviceVolumeBlend<'_>,
+        ray_results: &wgpu::Buffer,
     ) -> Result<BlendBindings, GpuError> {
+        check_resident(atlases, plan, ray_results.size() / 16)?;
         let probes = atlases.probe_count;
-        let rays = frame.rays_per_probe as usize;
         let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
-        let (iw, dw) = (frame.irradiance_weights, frame.distance_weights);
-        if iw.offsets.len() != (ni * ni + 1) as usize || dw.offsets.len() != (nd * nd + 1) as usize {
-            return Err(GpuError::Input(format!(
-                "weight tables of {} and {} texels for {ni}² and {nd}² interiors",
-                iw.offsets.len().saturating_sub(1),
-                dw.offsets.len().saturating_sub(1)
-            )));
-        }
-        if let Some((r, _)) = iw.entries.iter().chain(&dw.entries).find(|(r, _)| *r as usize >= rays) {
-            return Err(GpuError::Input(format!("a weight names ray {r} of {rays}")));
-        }
-        if frame.probe_blend.len() != probes || probes == 0 || rays == 0 {
-            return Err(GpuError::Input(format!(
-                "{} blend entries for {probes} probes with {rays} rays each",
-                frame.probe_blend.len()
-            )));
-        }
-        let batch_rays = frame.ray_results.size() / 16;
-        if let Some(p) = frame.probe_blend.iter().flatten().find(|(first, _)| *first as u64 + rays as u64 > batch_rays)
-        {
-            return Err(GpuError::Input(format!(
-                "a probe's rays {}..{} lie past the batch's {batch_rays} rays",
-                p.0,
-                p.0 as u64 + rays as u64
-            )));
-        }
-        let s = frame.settings;
         let per_row = (probes as u32).min(MAX_GROUPS);
-        let params = BlendParams {
-            probe_count: probes as u32,
-            rays_per_probe: rays as u32,
-            irradiance_interior: atlases.irradiance_interior,
-            distance_interior: atlases.distance_interior,
-            gamma: s.probe_irradiance_gamma,
-            irradiance_scale: frame.irradiance_scale,
-            visibility_scale: frame.visibility_scale,
-            use_thresholds: s.probe_fast_convergence as u32,
-            significant: s.probe_significant_change_threshold,
-            new_distribution: s.probe_new_distribution_threshold,
-            distance_exponent: s.probe_distance_exponent,
-            distance_clamp_m: frame.distance_clamp_m,
-            probes_per_row: per_row,
-            irradiance_first: atlases.irradiance_first,
-            distance_first: atlases.distance_first,
-            weight_entries_first: (iw.offsets.len() + dw.offsets.len()) as u32,
-        };
+        let params = blend_params(atlases, plan, per_row);
         let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
             ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
         };
-        // Offsets of both tables (the distance entries after the irradiance ones), then the entries.
-        let shift = iw.entries.len() as u32;
-        let mut weights: Vec<u32> = iw.offsets.clone();
-        weights.extend(dw.offsets.iter().map(|o| o + shift));
-        for (r, w) in iw.entries.iter().chain(&dw.entries) {
-            weights.extend([*r, w.to_bits()]);
-        }
-        let per_probe: Vec<[u32; 2]> = frame
+        let per_probe: Vec<[u32; 2]> = plan
             .probe_blend
             .iter()
             .map(|b| match b {
@@ -360,9 +291,10 @@ impl GpuProbeBlend {
             .collect();
         let storage = wgpu::BufferUsages::STORAGE;
         let params = init("blend params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let weights = pack_weights(plan.irradiance_weights, plan.distance_weights);
         let weights = init("blend weights", bytemuck::cast_slice(&weights), storage);
         let per_probe = init("probe blend", bytemuck::cast_slice(&per_probe), storage);
-        let buffers = [&params, &weights, frame.ray_results, &per_probe, &atlases.irradiance, &atlases.distance];
+        let buffers = [&params, &weights, ray_results, &per_probe, &atlases.irradiance, &atlases.distance];
         let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
             .iter()
             .enumerate()
@@ -410,4 +342,72 @@ pub struct BlendBindings {
     dispatches: [u32; 4],
     per_row: u32,
     rows: u32,
+}
+
+/// An error unless `plan` fits `atlases` and a batch of `batch_rays` rays: its
+/// weight tables the interiors, its rays the batch, one entry per probe.
+fn check_resident(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, batch_rays: u64) -> Result<(), GpuError> {
+    let probes = atlases.probe_count;
+    let rays = plan.ray_dirs.len();
+    let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
+    let (iw, dw) = (plan.irradiance_weights, plan.distance_weights);
+    if iw.offsets.len() != (ni * ni + 1) as usize || dw.offsets.len() != (nd * nd + 1) as usize {
+        return Err(GpuError::Input(format!(
+            "weight tables of {} and {} texels for {ni}² and {nd}² interiors",
+            iw.offsets.len().saturating_sub(1),
+            dw.offsets.len().saturating_sub(1)
+        )));
+    }
+    if let Some((r, _)) = iw.entries.iter().chain(&dw.entries).find(|(r, _)| *r as usize >= rays) {
+        return Err(GpuError::Input(format!("a weight names ray {r} of {rays}")));
+    }
+    if plan.probe_blend.len() != probes || probes == 0 || rays == 0 {
+        return Err(GpuError::Input(format!(
+            "{} blend entries for {probes} probes with {rays} rays each",
+            plan.probe_blend.len()
+        )));
+    }
+    if let Some(p) = plan.probe_blend.iter().flatten().find(|(first, _)| *first as u64 + rays as u64 > batch_rays) {
+        return Err(GpuError::Input(format!(
+            "a probe's rays {}..{} lie past the batch's {batch_rays} rays",
+            p.0,
+            p.0 as u64 + rays as u64
+        )));
+    }
+    Ok(())
+}
+
+/// The blend passes' uniform block for `plan` into `atlases`.
+fn blend_params(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, probes_per_row: u32) -> BlendParams {
+    let s = plan.settings;
+    BlendParams {
+        probe_count: atlases.probe_count as u32,
+        rays_per_probe: plan.ray_dirs.len() as u32,
+        irradiance_interior: atlases.irradiance_interior,
+        distance_interior: atlases.distance_interior,
+        gamma: s.probe_irradiance_gamma,
+        irradiance_scale: plan.irradiance_scale,
+        visibility_scale: plan.visibility_scale,
+        use_thresholds: s.probe_fast_convergence as u32,
+        significant: s.probe_significant_change_threshold,
+        new_distribution: s.probe_new_distribution_threshold,
+        distance_exponent: s.probe_distance_exponent,
+        distance_clamp_m: plan.distance_clamp_m,
+        probes_per_row,
+        irradiance_first: atlases.irradiance_first,
+        distance_first: atlases.distance_first,
+        weight_entries_first: (plan.irradiance_weights.offsets.len() + plan.distance_weights.offsets.len()) as u32,
+    }
+}
+
+/// `blend_weights` of `probe_blend.wgsl`: both tables' offsets (the distance
+/// entries after the irradiance ones), then the (ray, weight bits) entries.
+fn pack_weights(iw: &BlendWeights, dw: &BlendWeights) -> Vec<u32> {
+    let shift = iw.entries.len() as u32;
+    let mut weights: Vec<u32> = iw.offsets.clone();
+    weights.extend(dw.offsets.iter().map(|o| o + shift));
+    for (r, w) in iw.entries.iter().chain(&dw.entries) {
+        weights.extend([*r, w.to_bits()]);
+    }
+    weights
 }

@@ -6,52 +6,49 @@
 //! for a surface point no front-side cage probe served). The covering pass runs
 //! one invocation at a time over chunks of probes (about 4096 rays each), in the
 //! CPU's probe and ray order, so both backends keep the same probes (a single
-//! invocation over the shared Sponza's 131 072 rays was cut short on lavapipe). The rays and hits stay where the trace left them; the host reads
-//! back 16 bytes a probe.
+//! invocation over the shared Sponza's 131 072 rays was cut short on lavapipe).
+//! The rays and hits stay where the trace left them; the host reads back 16
+//! bytes a probe.
+//!
+//! The round is the field's own plan (`probegi_field::device_plans::DeviceClassification`).
+//! Its probes are packed into two rows each, not uploaded as they are:
+//! `probegi_core::probe_classification::ClassificationProbe` holds an
+//! `Option<u32>`, two `bool`s and a `Vec3`, which have no GPU layout.
 
 use bytemuck::{Pod, Zeroable};
-use probegi_core::probe_grid::ProbeGrid;
+use probegi_field::device_plans::DeviceClassification;
 
-use crate::bvh_trace::{GpuBvh, GpuRayBatch, bvh_bind_group_layout, dispatch_2d, storage_entry, uniform_entry};
+use crate::bvh_trace::{GpuBvh, GpuRayBatch, bvh_bind_group_layout, dispatch_2d};
 use crate::gpu_context::{GpuContext, GpuError};
 use crate::gpu_scene::{GpuScene, scene_bind_group_layout};
+use crate::shader_registry::{
+    BVH_GROUP, BVH_STORAGE_BUFFERS, PROBE_CLASSIFICATION, SCENE_GROUP, SCENE_STORAGE_BUFFERS,
+};
 
 /// Must match `ClassifyParams` in `probe_classification.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct ClassifyParams {
-    pub origin_m: [f32; 3],
-    pub probe_count: u32,
-    pub spacing_m: [f32; 3],
-    pub rays_per_probe: u32,
-    pub probe_counts: [u32; 3],
-    pub groups_x: u32,
-    pub scroll_offsets: [u32; 3],
+pub(crate) struct ClassifyParams {
+    pub(crate) origin_m: [f32; 3],
+    pub(crate) probe_count: u32,
+    pub(crate) spacing_m: [f32; 3],
+    pub(crate) rays_per_probe: u32,
+    pub(crate) probe_counts: [u32; 3],
+    pub(crate) groups_x: u32,
+    pub(crate) scroll_offsets: [u32; 3],
     /// The covering pass's chunk: first probe and probe count.
-    pub cover_first: u32,
-    pub reach_rel: f32,
-    pub bias_m: f32,
-    pub cover_count: u32,
-    pub _pad: f32,
+    pub(crate) cover_first: u32,
+    pub(crate) reach_rel: f32,
+    pub(crate) bias_m: f32,
+    pub(crate) cover_count: u32,
+    pub(crate) _pad: f32,
 }
 const _: () = assert!(std::mem::size_of::<ClassifyParams>() == 80);
-
-/// One probe of the volume for the classification round.
-pub use probegi_core::probe_classification::ClassificationProbe as ClassifyProbe;
-
-/// One volume's round: its grid, the watch box and the probes.
-pub struct ClassifyRound<'a> {
-    pub grid: &'a ProbeGrid,
-    pub rays_per_probe: u32,
-    /// `probe_classification_reach_rel` and the query's largest surface bias.
-    pub reach_rel: f32,
-    pub bias_m: f32,
-    pub probes: &'a [ClassifyProbe],
-}
 
 /// Rays one invocation of the covering pass walks per dispatch.
 const COVER_CHUNK_RAYS: u32 = 4096;
 
+/// The classification round's two pipelines (the first pass, the covering pass).
 pub struct GpuProbeClassification {
     layout: wgpu::BindGroupLayout,
     first: wgpu::ComputePipeline,
@@ -59,46 +56,31 @@ pub struct GpuProbeClassification {
 }
 
 impl GpuProbeClassification {
-    /// Storage buffers per stage: its own 5, the BVH's and the scene's 4.
-    pub const STORAGE_BUFFERS: u32 = 5 + crate::bvh_trace::BVH_STORAGE_BUFFERS + 4;
+    /// Storage buffers per stage: its own 5, the BVH's and the scene's.
+    pub const STORAGE_BUFFERS: u32 = 5 + BVH_STORAGE_BUFFERS + SCENE_STORAGE_BUFFERS;
 
+    /// The pipelines on `ctx`; an error where the device binds too few storage buffers.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         ctx.check_pipeline(Self::STORAGE_BUFFERS, "the probe classification pass")?;
-        let source = format!(
-            "{}\n{}\n{}",
-            include_str!("shaders/bvh.wgsl"),
-            include_str!("shaders/scene.wgsl"),
-            include_str!("shaders/probe_classification.wgsl")
-        );
-        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("probe classification"),
-            entries: &[
-                uniform_entry(0),
-                storage_entry(1, true),
-                storage_entry(2, true),
-                storage_entry(3, true),
-                storage_entry(4, true),
-                storage_entry(5, false),
-            ],
-        });
+        let layout = ctx.pass_layout("probe classification", &[true, true, true, true, false]);
         let (bvh_layout, scene_layout) = (bvh_bind_group_layout(&ctx.device), scene_bind_group_layout(&ctx.device));
         let [first, cover] = ctx.compute_pipelines(
-            "probe_classification.wgsl",
-            source,
+            &PROBE_CLASSIFICATION,
             &[Some(&layout), Some(&bvh_layout), None, Some(&scene_layout)],
             ["classify_first", "classify_cover"],
         );
         Ok(Self { first, cover, layout })
     }
 
-    /// Per probe of `round`: (inside geometry, kept), from `batch`'s rays and hits.
+    /// Per probe of `round` (the field's plan for one volume): (inside
+    /// geometry, kept), from `batch`'s rays and hits.
     pub fn classify(
         &self,
         ctx: &GpuContext,
         bvh: &GpuBvh,
         scene: &GpuScene,
         batch: &GpuRayBatch,
-        round: &ClassifyRound<'_>,
+        round: &DeviceClassification<'_>,
     ) -> Result<Vec<(bool, bool)>, GpuError> {
         let g = round.grid;
         let n = round.probes.len();
@@ -159,7 +141,10 @@ impl GpuProbeClassification {
             .enumerate()
             .map(|(k, g)| {
                 let (pipeline, groups) = if k == 0 { (&self.first, (gx, gy)) } else { (&self.cover, (1, 1)) };
-                (pipeline, vec![Some(g), Some(bvh.bind_group()), None, Some(scene.bind_group())], groups)
+                let mut bind = vec![Some(g), None, None, None];
+                bind[BVH_GROUP as usize] = Some(bvh.bind_group());
+                bind[SCENE_GROUP as usize] = Some(scene.bind_group());
+                (pipeline, bind, groups)
             })
             .collect();
         ctx.run_passes("probe classification", &steps);

@@ -16,50 +16,35 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Quat, Vec3};
 use wgpu::util::DeviceExt;
 
-use crate::bvh_trace::{GpuRayBatch, GpuRayTrace, dispatch_2d, storage_entry, uniform_entry};
+use crate::bvh_trace::{GpuRayBatch, GpuRayTrace, dispatch_2d};
 use crate::gpu_context::{GpuContext, GpuError};
+use crate::shader_registry::PROBE_RAY_GEN;
 
 /// The pass's uniform block; must match `RayGenParams` in `probe_ray_gen.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct RayGenParams {
-    pub rotation: [f32; 4],
-    pub rays_per_probe: u32,
-    pub probe_count: u32,
-    pub groups_x: u32,
+pub(crate) struct RayGenParams {
+    /// The frame's rotation quaternion (x, y, z, w).
+    pub(crate) rotation: [f32; 4],
+    pub(crate) rays_per_probe: u32,
+    pub(crate) probe_count: u32,
+    pub(crate) groups_x: u32,
     /// Where the probes' rays start in the batch.
-    pub first_ray: u32,
+    pub(crate) first_ray: u32,
 }
 const _: () = assert!(std::mem::size_of::<RayGenParams>() == 32);
 
+/// The ray generation pipeline.
 pub struct GpuProbeRayGen {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
 }
 
 impl GpuProbeRayGen {
+    /// The pipeline on `ctx`.
     pub fn new(ctx: &GpuContext) -> Self {
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("probe_ray_gen.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shaders/probe_ray_gen.wgsl").into()),
-        });
-        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("probe ray gen"),
-            entries: &[uniform_entry(0), storage_entry(1, true), storage_entry(2, false)],
-        });
-        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("probe ray gen"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("generate_probe_rays"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("generate_probe_rays"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let layout = ctx.pass_layout("probe ray gen", &[true, false]);
+        let [pipeline] = ctx.compute_pipelines(&PROBE_RAY_GEN, &[Some(&layout)], ["generate_probe_rays"]);
         Self { layout, pipeline }
     }
 

@@ -3,63 +3,39 @@
 //! initialisation batch, mirroring `probegi_core::probe_relocation::{probe_ray_stats,
 //! relocation_step}` (RTXGI `ProbeRelocationCS`). The rays and hits stay where the
 //! trace left them; the host reads back one offset per probe (16 bytes) instead
-//! of one hit per ray.
+//! of one hit per ray. The probes are the field's own plan
+//! (`probegi_field::device_plans::DeviceRelocationProbe`, `#[repr(C)]` + `Pod`),
+//! uploaded as they are.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use probegi_field::device_plans::DeviceRelocationProbe;
 
-use crate::bvh_trace::{GpuRayBatch, dispatch_2d, storage_entry, uniform_entry};
+use crate::bvh_trace::{GpuRayBatch, dispatch_2d};
 use crate::gpu_context::{GpuContext, GpuError};
+use crate::shader_registry::PROBE_RELOCATION;
 
 /// Must match `RelocationParams` in `probe_relocation.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct RelocationParams {
-    pub probe_count: u32,
-    pub groups_x: u32,
-    pub _pad: [u32; 2],
+pub(crate) struct RelocationParams {
+    pub(crate) probe_count: u32,
+    pub(crate) groups_x: u32,
+    pub(crate) _pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<RelocationParams>() == 16);
 
-/// One probe of the batch; must match `RelocationProbe` in `probe_relocation.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct GpuRelocationProbe {
-    /// The probe's current offset from its grid point (m).
-    pub offset_m: [f32; 3],
-    pub first_ray: u32,
-    pub spacing_m: [f32; 3],
-    pub ray_count: u32,
-    /// `probe_relocation_offset_limit_rel`, `probe_relocation_min_frontface_rel`.
-    pub offset_limit_rel: f32,
-    pub min_frontface_rel: f32,
-    pub _pad: [f32; 2],
-}
-const _: () = assert!(std::mem::size_of::<GpuRelocationProbe>() == 48);
-
+/// The relocation iteration's pipeline.
 pub struct GpuProbeRelocation {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
 }
 
 impl GpuProbeRelocation {
+    /// The pipeline on `ctx`.
     pub fn new(ctx: &GpuContext) -> Self {
-        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("probe relocation"),
-            entries: &[
-                uniform_entry(0),
-                storage_entry(1, true),
-                storage_entry(2, true),
-                storage_entry(3, true),
-                storage_entry(4, false),
-            ],
-        });
-        let [pipeline] = ctx.compute_pipelines(
-            "probe_relocation.wgsl",
-            include_str!("shaders/probe_relocation.wgsl").into(),
-            &[Some(&layout)],
-            ["relocate_probes"],
-        );
+        let layout = ctx.pass_layout("probe relocation", &[true, true, true, false]);
+        let [pipeline] = ctx.compute_pipelines(&PROBE_RELOCATION, &[Some(&layout)], ["relocate_probes"]);
         Self { layout, pipeline }
     }
 
@@ -68,7 +44,7 @@ impl GpuProbeRelocation {
         &self,
         ctx: &GpuContext,
         batch: &GpuRayBatch,
-        probes: &[GpuRelocationProbe],
+        probes: &[DeviceRelocationProbe],
     ) -> Result<Vec<Vec3>, GpuError> {
         if probes.is_empty() {
             return Ok(vec![]);

@@ -14,27 +14,35 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use wgpu::util::DeviceExt;
 
-use crate::bvh_trace::{GpuBvh, GpuRayBatch, bvh_bind_group_layout, dispatch_2d, storage_entry, uniform_entry};
-use crate::ddgi_query::{GpuDdgiField, query_wgsl};
+use crate::bvh_trace::{GpuBvh, GpuRayBatch, bvh_bind_group_layout, dispatch_2d};
+use crate::ddgi_query::GpuDdgiField;
 use crate::gpu_context::{GpuContext, GpuError};
 use crate::gpu_scene::{GpuScene, scene_bind_group_layout};
+use crate::shader_registry::{
+    BVH_GROUP, BVH_STORAGE_BUFFERS, FIELD_GROUP, FIELD_STORAGE_BUFFERS, PASS_GROUP, PROBE_SHADE, SCENE_GROUP,
+    SCENE_STORAGE_BUFFERS,
+};
 
 /// The shade pass's uniform block; must match `ShadeParams` in `probe_shade.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct ShadeParams {
-    pub ray_count: u32,
-    pub groups_x: u32,
-    pub seed: u32,
-    pub frame: u32,
+pub(crate) struct ShadeParams {
+    pub(crate) ray_count: u32,
+    pub(crate) groups_x: u32,
+    pub(crate) seed: u32,
+    pub(crate) frame: u32,
 }
 const _: () = assert!(std::mem::size_of::<ShadeParams>() == 16);
 
-/// Per-ray shading flags of `probe_shade.wgsl`'s `shade_info`.
+/// Per-ray shading flags of `probe_shade.wgsl`'s `shade_info`: whether the
+/// ray's radiance is needed (bit 31), second-order glossy (bit 30) and the
+/// area-light samples (low 16 bits).
 pub fn shade_info(needs_radiance: bool, glossy_second_order: bool, area_samples: u32) -> u32 {
     (needs_radiance as u32) << 31 | (glossy_second_order as u32) << 30 | area_samples.min(0xffff)
 }
 
+/// The shade pass's pipeline (`probe_shade.wgsl` with the BVH, the field and
+/// the scene in their groups, `shader_registry`).
 pub struct GpuProbeShade {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
@@ -42,52 +50,18 @@ pub struct GpuProbeShade {
 
 impl GpuProbeShade {
     /// Storage buffers the pass binds per stage: its own 4, the BVH's, the
-    /// field's 4 and the scene's 4.
-    pub const STORAGE_BUFFERS: u32 = 4 + crate::bvh_trace::BVH_STORAGE_BUFFERS + 4 + 4;
+    /// field's and the scene's.
+    pub const STORAGE_BUFFERS: u32 = 4 + BVH_STORAGE_BUFFERS + FIELD_STORAGE_BUFFERS + SCENE_STORAGE_BUFFERS;
 
+    /// The pipeline on `ctx`; an error where the device binds too few storage buffers.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         ctx.check_pipeline(Self::STORAGE_BUFFERS, "the probe shade pass")?;
-        let source = format!(
-            "{}\n{}\n{}\n{}",
-            include_str!("shaders/bvh.wgsl"),
-            query_wgsl(2),
-            include_str!("shaders/scene.wgsl"),
-            include_str!("shaders/probe_shade.wgsl")
-        );
-        let module = ctx.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("probe_shade.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
-        });
-        let layout = ctx.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("probe shade"),
-            entries: &[
-                uniform_entry(0),
-                storage_entry(1, true),
-                storage_entry(2, true),
-                storage_entry(3, true),
-                storage_entry(4, false),
-            ],
-        });
-        let layouts = [
-            layout,
-            bvh_bind_group_layout(&ctx.device),
-            GpuDdgiField::bind_group_layout(&ctx.device),
-            scene_bind_group_layout(&ctx.device),
-        ];
-        let pipeline_layout = ctx.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("probe shade"),
-            bind_group_layouts: &[Some(&layouts[0]), Some(&layouts[1]), Some(&layouts[2]), Some(&layouts[3])],
-            immediate_size: 0,
-        });
-        let pipeline = ctx.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("shade_probe_rays"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("shade_probe_rays"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let [layout, ..] = layouts;
+        let layout = ctx.pass_layout("probe shade", &[true, true, true, false]);
+        let bvh = bvh_bind_group_layout(&ctx.device);
+        let field = GpuDdgiField::bind_group_layout(&ctx.device);
+        let scene = scene_bind_group_layout(&ctx.device);
+        let layouts = [Some(&layout), Some(&bvh), Some(&field), Some(&scene)];
+        let [pipeline] = ctx.compute_pipelines(&PROBE_SHADE, &layouts, ["shade_probe_rays"]);
         Ok(Self { layout, pipeline })
     }
 
@@ -172,10 +146,10 @@ impl GpuProbeShade {
                 timestamp_writes: timer.and_then(|(t, i)| t.writes(i)),
             });
             pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.set_bind_group(1, bvh.bind_group(), &[]);
-            pass.set_bind_group(2, field.bind_group(), &[]);
-            pass.set_bind_group(3, scene.bind_group(), &[]);
+            pass.set_bind_group(PASS_GROUP, &bind_group, &[]);
+            pass.set_bind_group(BVH_GROUP, bvh.bind_group(), &[]);
+            pass.set_bind_group(FIELD_GROUP, field.bind_group(), &[]);
+            pass.set_bind_group(SCENE_GROUP, scene.bind_group(), &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
         ctx.queue.submit([encoder.finish()]);

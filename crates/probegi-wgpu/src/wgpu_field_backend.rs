@@ -43,12 +43,12 @@ use crate::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace};
 use crate::camera_frame::{CameraFrame, GpuCameraPass};
 use crate::ddgi_query::GpuDdgiField;
 use crate::gpu_scene::GpuScene;
-use crate::probe_blend::{GpuProbeBlend, ResidentBlend};
-use crate::probe_classification::{ClassifyRound, GpuProbeClassification};
+use crate::probe_blend::GpuProbeBlend;
+use crate::probe_classification::GpuProbeClassification;
 use crate::probe_ray_gen::GpuProbeRayGen;
-use crate::probe_relocation::{GpuProbeRelocation, GpuRelocationProbe};
+use crate::probe_relocation::GpuProbeRelocation;
 use crate::probe_shade::{GpuProbeShade, shade_info};
-use crate::probe_usage::{GpuProbeUsage, UsageProbe};
+use crate::probe_usage::GpuProbeUsage;
 use crate::{GpuContext, GpuError};
 
 impl From<GpuError> for BackendError {
@@ -63,7 +63,7 @@ fn poisoned<T>(_: T) -> BackendError {
 }
 
 /// A batch's rays as the GPU trace reads them.
-pub fn batch_rays(batch: &ProbeRayBatch) -> Vec<GpuRay> {
+pub(crate) fn batch_rays(batch: &ProbeRayBatch) -> Vec<GpuRay> {
     (0..batch.len())
         .map(|i| GpuRay::new(batch.origins_m[i], batch.directions[i], 0.0, batch.max_distances_m[i]))
         .collect()
@@ -71,8 +71,11 @@ pub fn batch_rays(batch: &ProbeRayBatch) -> Vec<GpuRay> {
 
 /// The GPU behind the seam: trace always, shade where [`WgpuProbeTracer::shades`].
 pub struct WgpuProbeTracer {
+    /// The device the passes run on.
     pub ctx: GpuContext,
+    /// The trace pipeline.
     pub trace: GpuRayTrace,
+    /// The scene's BVH on the device.
     pub bvh: GpuBvh,
     /// The top level's layout and the bottom levels' root nodes, for a scene
     /// with moving objects or instanced meshes (`pose_scene` places them).
@@ -111,6 +114,8 @@ impl WgpuProbeTracer {
         Self::with_camera(ctx, scene, bvh, gpu_shading, gpu_shading)
     }
 
+    /// [`Self::new`], with the camera frame on the GPU only where `gpu_camera`
+    /// (and `gpu_shading`).
     pub fn with_camera(
         ctx: GpuContext,
         scene: &Scene,
@@ -267,6 +272,38 @@ impl WgpuProbeTracer {
         Ok(resident)
     }
 
+    /// The resident field for an update's shade and blend: uploaded whole when
+    /// the host's atlases are current (`upload_atlases`), else only its
+    /// per-probe data (the device's blend wrote the atlases last frame), and
+    /// the tiles of the probes `plan` reset cleared on the device.
+    fn resident_field<'f>(
+        &self,
+        gpu_field: &'f mut Option<GpuDdgiField>,
+        field: &DdgiFieldSetView<'_>,
+        upload_atlases: bool,
+        plan: &[DeviceVolumeBlend<'_>],
+    ) -> Result<&'f GpuDdgiField, GpuError> {
+        match (gpu_field.as_ref(), upload_atlases) {
+            (Some(f), _) if f.refresh(&self.ctx, field, upload_atlases).is_ok() => {}
+            // First frame, or the set changed shape while the host held the field.
+            (_, true) => *gpu_field = Some(GpuDdgiField::upload(&self.ctx, field)?),
+            (Some(f), false) => f.refresh(&self.ctx, field, false)?,
+            (None, false) => return Err(GpuError::Input("the device lost the field it held".into())),
+        }
+        let f = gpu_field.as_ref().ok_or_else(|| GpuError::Input("no field".into()))?;
+        if plan.len() != f.volumes {
+            return Err(GpuError::Input(format!("{} volume plans for {} volumes", plan.len(), f.volumes)));
+        }
+        for (i, p) in plan.iter().enumerate() {
+            if !p.reset_probes.is_empty() && !upload_atlases {
+                f.member_atlases(i)
+                    .ok_or_else(|| GpuError::Input("member".into()))?
+                    .zero_tiles(&self.ctx, p.reset_probes);
+            }
+        }
+        Ok(f)
+    }
+
     /// Whether the camera frame is rendered on the GPU.
     pub fn renders_camera(&self) -> bool {
         self.camera.is_some()
@@ -282,6 +319,7 @@ impl WgpuProbeTracer {
         self.shading.as_ref().map(|(p, s)| (p, s))
     }
 
+    /// The adapter's name and driver.
     pub fn adapter_name(&self) -> &str {
         &self.ctx.adapter_name
     }
@@ -425,18 +463,7 @@ impl DeviceField for WgpuProbeTracer {
             let resident = self.trace_resident(batch, false)?;
             self.ctx.wait()?;
             let counts = match usage_cage_diagonals_m {
-                Some(diagonals) => {
-                    let probes: Vec<UsageProbe> = batch
-                        .probes
-                        .iter()
-                        .map(|p| UsageProbe {
-                            first_ray: p.first_ray,
-                            ray_count: p.ray_count,
-                            cage_diagonal_m: diagonals.get(p.volume as usize).copied().unwrap_or(0.0),
-                        })
-                        .collect();
-                    usage.counts(&self.ctx, &resident, &probes)?
-                }
+                Some(diagonals) => usage.counts(&self.ctx, &resident, &batch.probes, diagonals)?,
                 None => vec![],
             };
             *self.last.lock().map_err(poisoned)? = Some(resident);
@@ -455,19 +482,7 @@ impl DeviceField for WgpuProbeTracer {
         }
         let run = || -> Result<Vec<Vec3>, GpuError> {
             let resident = self.trace_resident(batch, true)?;
-            let rows: Vec<GpuRelocationProbe> = probes
-                .iter()
-                .map(|p| GpuRelocationProbe {
-                    offset_m: p.offset_m.into(),
-                    first_ray: p.first_ray,
-                    spacing_m: p.spacing_m.into(),
-                    ray_count: p.ray_count,
-                    offset_limit_rel: p.offset_limit_rel,
-                    min_frontface_rel: p.min_frontface_rel,
-                    _pad: [0.0; 2],
-                })
-                .collect();
-            let offsets = relocation.relocate(&self.ctx, &resident, &rows)?;
+            let offsets = relocation.relocate(&self.ctx, &resident, probes)?;
             self.rounds_on_device[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             Ok(offsets)
         };
@@ -488,16 +503,7 @@ impl DeviceField for WgpuProbeTracer {
             plan.iter()
                 .map(|v| {
                     v.as_ref()
-                        .map(|v| {
-                            let round = ClassifyRound {
-                                grid: v.grid,
-                                rays_per_probe: v.rays_per_probe,
-                                reach_rel: v.reach_rel,
-                                bias_m: v.bias_m,
-                                probes: &v.probes,
-                            };
-                            classification.classify(&self.ctx, &self.bvh, scene, &resident, &round)
-                        })
+                        .map(|round| classification.classify(&self.ctx, &self.bvh, scene, &resident, round))
                         .transpose()
                 })
                 .collect::<Result<DeviceClassificationResults, GpuError>>()
@@ -533,26 +539,7 @@ impl DeviceField for WgpuProbeTracer {
         let mut gpu_field = self.field.lock().map_err(poisoned)?;
         let run = |gpu_field: &mut Option<GpuDdgiField>| -> Result<Vec<(&'static str, f64)>, GpuError> {
             let t = std::time::Instant::now();
-            // The field: uploaded whole when the host's atlases are current, else
-            // only its per-probe data (the blend below wrote the atlases last frame).
-            match (gpu_field.as_ref(), upload_atlases) {
-                (Some(f), _) if f.refresh(&self.ctx, field, upload_atlases).is_ok() => {}
-                // First frame, or the set changed shape while the host held the field.
-                (_, true) => *gpu_field = Some(GpuDdgiField::upload(&self.ctx, field)?),
-                (Some(f), false) => f.refresh(&self.ctx, field, false)?,
-                (None, false) => return Err(GpuError::Input("the device lost the field it held".into())),
-            }
-            let f = gpu_field.as_ref().ok_or_else(|| GpuError::Input("no field".into()))?;
-            if plan.len() != f.volumes {
-                return Err(GpuError::Input(format!("{} volume plans for {} volumes", plan.len(), f.volumes)));
-            }
-            for (i, p) in plan.iter().enumerate() {
-                if !p.reset_probes.is_empty() && !upload_atlases {
-                    f.member_atlases(i)
-                        .ok_or_else(|| GpuError::Input("member".into()))?
-                        .zero_tiles(&self.ctx, p.reset_probes);
-                }
-            }
+            let f = self.resident_field(gpu_field, field, upload_atlases, plan)?;
             let info = Self::shading_flags(batch, volumes);
             let seed32 = (seed ^ (seed >> 32)) as u32;
             let results =
@@ -568,18 +555,7 @@ impl DeviceField for WgpuProbeTracer {
                     continue;
                 }
                 let atlases = f.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
-                let frame = ResidentBlend {
-                    settings: p.settings,
-                    rays_per_probe: p.ray_dirs.len() as u32,
-                    irradiance_weights: p.irradiance_weights,
-                    distance_weights: p.distance_weights,
-                    ray_results: &results,
-                    probe_blend: &p.probe_blend,
-                    irradiance_scale: p.irradiance_scale,
-                    visibility_scale: p.visibility_scale,
-                    distance_clamp_m: p.distance_clamp_m,
-                };
-                let bindings = blend.prepare_resident(&self.ctx, &atlases, &frame)?;
+                let bindings = blend.prepare_resident(&self.ctx, &atlases, p, &results)?;
                 blend.record(&mut encoder, &bindings, None);
             }
             self.ctx.queue.submit([encoder.finish()]);

@@ -9,7 +9,7 @@
 use std::collections::BTreeMap;
 
 use glam::Vec3;
-use probegi_core::probe_blend::{TexelThresholds, blend_distance_tile, blend_irradiance_tile};
+use probegi_core::probe_blend::{BACKFACE_DISTANCE_SCALE, TexelThresholds, blend_distance_tile, blend_irradiance_tile};
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::probe_classification::ProbeState;
 use rayon::prelude::*;
@@ -204,7 +204,7 @@ pub(crate) fn blend_inputs(
     for ((h, &l), &max) in hits.iter().zip(radiance).zip(&batch.max_distances_m) {
         let d = h.distance_m;
         let (l, d) = if d < 0.0 {
-            (Vec3::ZERO, 0.2 * d)
+            (Vec3::ZERO, BACKFACE_DISTANCE_SCALE * d)
         } else if d.is_finite() {
             (l, d)
         } else {

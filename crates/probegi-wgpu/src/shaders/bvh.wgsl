@@ -50,8 +50,7 @@ const BVH_MISS: f32 = -1.0;
 // stacks on top of its top level's.
 const BVH_STACK_SIZE: u32 = 64u;
 // bvh_instances flags: the identity transform (the static part); a moving object.
-const BVH_INSTANCE_IDENTITY: u32 = 1u;
-const BVH_INSTANCE_MOVING: u32 = 2u;
+// BVH_INSTANCE_IDENTITY and BVH_INSTANCE_MOVING: the prelude's (probegi_wgpu::shader_registry).
 
 struct BvhRay {
     origin: vec3<f32>,
@@ -283,136 +282,175 @@ fn bvh_intersect_leaf(leaf: u32, ray: BvhRay, bary: ptr<function, vec2<f32>>) ->
     return t;
 }
 
+// One walk's state over both levels (`bvh_trace_skipping` and its steps below).
+struct BvhWalk {
+    hit: BvhHit,
+    // The world ray (its t_max the closest hit so far) and the ray of the level walked.
+    world: BvhRay,
+    ray: BvhRay,
+    in_bottom: bool,
+    // The top-level leaf of the instance walked below (BVH_NO_HIT: none).
+    instance: u32,
+    stack: array<vec2<u32>, BVH_STACK_SIZE>,
+    sp: u32,
+    current: vec2<u32>,
+    prims: vec2<u32>,
+    // Nodes entered in the level walked.
+    entered: u32,
+    // Where the bottom level's stack starts, and the top level's state left there.
+    bottom_floor: u32,
+    top_entered: u32,
+    top_current: vec2<u32>,
+    top_prims: vec2<u32>,
+};
+
+// A bottom-level leaf: a closer hit becomes the walk's and shortens both rays
+// (true when it hit).
+fn bvh_walk_leaf(w: ptr<function, BvhWalk>, leaf: u32) -> bool {
+    var bary = vec2<f32>(0.0);
+    let t = bvh_intersect_leaf(leaf, (*w).ray, &bary);
+    if (t >= 0.0 && t < (*w).ray.t_max) {
+        let back = dot(bvh_triangles[leaf * 4u + 3u].xyz, (*w).ray.dir) < 0.0;
+        var scene_instance = BVH_NO_HIT;
+        if ((*w).instance != BVH_NO_HIT) {
+            scene_instance = bitcast<u32>(bvh_instances[1u + (*w).instance * 4u + 1u].w);
+        }
+        (*w).hit = BvhHit(t, leaf, bary, scene_instance, back);
+        (*w).ray.t_max = t;
+        (*w).world.t_max = t;
+        return true;
+    }
+    return false;
+}
+
+// A top-level leaf, an instance: into its bottom level (BvhTracer::closest_in,
+// Instance::to_local) unless its flags share a bit with `skip`; true when the
+// walk went down.
+fn bvh_walk_enter(w: ptr<function, BvhWalk>, leaf: u32, skip: u32) -> bool {
+    let base = 1u + leaf * 4u;
+    let c0 = bvh_instances[base];
+    let c1 = bvh_instances[base + 1u];
+    let c2 = bvh_instances[base + 2u];
+    let flags = bitcast<u32>(c2.w);
+    let root = bitcast<u32>(c0.w);
+    if ((flags & skip) != 0u || root == BVH_NO_HIT) {
+        return false;
+    }
+    if ((flags & BVH_INSTANCE_IDENTITY) != 0u) {
+        (*w).ray = (*w).world;
+    } else {
+        let tr = bvh_instances[base + 3u].xyz;
+        let world = (*w).world;
+        let o = world.origin;
+        let d = world.dir;
+        // glam's Affine3A::transform_point3a / transform_vector3a, in its order.
+        let origin = ((c0.xyz * o.x + c1.xyz * o.y) + c2.xyz * o.z) + tr;
+        let dir = (c0.xyz * d.x + c1.xyz * d.y) + c2.xyz * d.z;
+        (*w).ray = bvh_make_ray(origin, dir, world.t_min, world.t_max);
+    }
+    (*w).instance = leaf;
+    (*w).top_entered = (*w).entered;
+    (*w).entered = 0u;
+    (*w).top_current = (*w).current;
+    (*w).top_prims = (*w).prims;
+    (*w).bottom_floor = (*w).sp;
+    (*w).in_bottom = true;
+    (*w).current = vec2<u32>(root, 0x80000000u);
+    (*w).prims = vec2<u32>(0u, 0u);
+    return true;
+}
+
+// Into the next child of the current node group, nearest first (the rest stay
+// on the stack); false when the level walked would enter more than `bound` nodes.
+fn bvh_walk_node(w: ptr<function, BvhWalk>, bound: u32) -> bool {
+    let hits_imask = (*w).current.y;
+    let offset = firstLeadingBit(hits_imask);
+    (*w).current.y &= ~(1u << offset);
+    if (((*w).current.y & 0xff000000u) != 0u && (*w).sp < BVH_STACK_SIZE) {
+        (*w).stack[(*w).sp] = (*w).current;
+        (*w).sp++;
+    }
+    let slot = (offset - 24u) ^ (*w).ray.oct_inv;
+    let relative = countOneBits(hits_imask & ~(0xffffffffu << slot));
+    let node = (*w).current.x + relative;
+    (*w).entered++;
+    if ((*w).entered > bound) {
+        return false;
+    }
+    let hitmask = bvh_intersect_node(node, (*w).ray);
+    let base = node * BVH_NODE_WORDS;
+    (*w).current = vec2<u32>(bvh_nodes[base + 4u], (hitmask & 0xff000000u) | (bvh_nodes[base + 3u] >> 24u));
+    (*w).prims = vec2<u32>(bvh_nodes[base + 5u], hitmask & 0x00ffffffu);
+    return true;
+}
+
+// Back up to the top level where the walk left it.
+fn bvh_walk_leave(w: ptr<function, BvhWalk>) {
+    (*w).in_bottom = false;
+    (*w).entered = (*w).top_entered;
+    (*w).ray = (*w).world;
+    (*w).current = (*w).top_current;
+    (*w).prims = (*w).top_prims;
+    (*w).bottom_floor = 0u;
+}
+
 // The closest hit (`any_hit` false) or the first hit found (`any_hit` true, for
 // shadow rays) of `ray`: obvhs's `traverse!` loop with an explicit stack, over
 // both levels. Instances whose flags share a bit with `skip` are left out
 // (BVH_INSTANCE_MOVING: static geometry only, for initialisation rounds).
 fn bvh_trace_skipping(ray_in: BvhRay, any_hit: bool, skip: u32) -> BvhHit {
-    var hit = BvhHit(ray_in.t_max, BVH_NO_HIT, vec2<f32>(0.0), BVH_NO_HIT, false);
+    let miss = BvhHit(ray_in.t_max, BVH_NO_HIT, vec2<f32>(0.0), BVH_NO_HIT, false);
     if (!bvh_ray_usable(ray_in)) {
         atomicAdd(&bvh_guards[0], 1u);
-        return hit;
+        return miss;
     }
     if (arrayLength(&bvh_nodes) < BVH_NODE_WORDS) {
-        return hit;
+        return miss;
     }
-    let miss = hit;
-    // Nodes entered in the level walked (and the top level's count while below it).
     let bound = arrayLength(&bvh_nodes) / BVH_NODE_WORDS;
-    var entered = 0u;
-    var top_entered = 0u;
     let top_level = bitcast<u32>(bvh_instances[0].x) > 0u;
-    // The world ray (its t_max the closest hit so far) and the ray of the level walked.
-    var world = ray_in;
-    var ray = ray_in;
-    var in_bottom = !top_level;
-    var instance = BVH_NO_HIT;
-    var stack: array<vec2<u32>, BVH_STACK_SIZE>;
-    var sp = 0u;
-    // Where the bottom level's stack starts, and the top level's state left there.
-    var bottom_floor = 0u;
-    var top_current = vec2<u32>(0u, 0u);
-    var top_prims = vec2<u32>(0u, 0u);
-    var current = vec2<u32>(select(0u, bitcast<u32>(bvh_instances[0].y), top_level), 0x80000000u);
-    var prims = vec2<u32>(0u, 0u);
+    var w: BvhWalk;
+    w.hit = miss;
+    w.world = ray_in;
+    w.ray = ray_in;
+    w.in_bottom = !top_level;
+    w.instance = BVH_NO_HIT;
+    w.current = vec2<u32>(select(0u, bitcast<u32>(bvh_instances[0].y), top_level), 0x80000000u);
     loop {
-        while (prims.y != 0u) {
-            let local = firstLeadingBit(prims.y);
-            prims.y &= ~(1u << local);
-            let leaf = prims.x + local;
-            if (in_bottom) {
-                var bary = vec2<f32>(0.0);
-                let t = bvh_intersect_leaf(leaf, ray, &bary);
-                if (t >= 0.0 && t < ray.t_max) {
-                    let back = dot(bvh_triangles[leaf * 4u + 3u].xyz, ray.dir) < 0.0;
-                    var scene_instance = BVH_NO_HIT;
-                    if (instance != BVH_NO_HIT) {
-                        scene_instance = bitcast<u32>(bvh_instances[1u + instance * 4u + 1u].w);
-                    }
-                    hit = BvhHit(t, leaf, bary, scene_instance, back);
-                    ray.t_max = t;
-                    world.t_max = t;
-                    if (any_hit) {
-                        return hit;
-                    }
+        while (w.prims.y != 0u) {
+            let local = firstLeadingBit(w.prims.y);
+            w.prims.y &= ~(1u << local);
+            let leaf = w.prims.x + local;
+            if (w.in_bottom) {
+                if (bvh_walk_leaf(&w, leaf) && any_hit) {
+                    return w.hit;
                 }
-            } else {
-                // An instance: into its bottom level (BvhTracer::closest_in, Instance::to_local).
-                let base = 1u + leaf * 4u;
-                let c0 = bvh_instances[base];
-                let c1 = bvh_instances[base + 1u];
-                let c2 = bvh_instances[base + 2u];
-                let flags = bitcast<u32>(c2.w);
-                let root = bitcast<u32>(c0.w);
-                if ((flags & skip) != 0u || root == BVH_NO_HIT) {
-                    continue;
-                }
-                if ((flags & BVH_INSTANCE_IDENTITY) != 0u) {
-                    ray = world;
-                } else {
-                    let tr = bvh_instances[base + 3u].xyz;
-                    let o = world.origin;
-                    let d = world.dir;
-                    // glam's Affine3A::transform_point3a / transform_vector3a, in its order.
-                    let origin = ((c0.xyz * o.x + c1.xyz * o.y) + c2.xyz * o.z) + tr;
-                    let dir = (c0.xyz * d.x + c1.xyz * d.y) + c2.xyz * d.z;
-                    ray = bvh_make_ray(origin, dir, world.t_min, world.t_max);
-                }
-                instance = leaf;
-                top_entered = entered;
-                entered = 0u;
-                top_current = current;
-                top_prims = prims;
-                bottom_floor = sp;
-                in_bottom = true;
-                current = vec2<u32>(root, 0x80000000u);
-                prims = vec2<u32>(0u, 0u);
+            } else if (bvh_walk_enter(&w, leaf, skip)) {
                 break;
             }
         }
-        prims = vec2<u32>(0u, 0u);
-        if ((current.y & 0xff000000u) != 0u) {
-            let hits_imask = current.y;
-            let offset = firstLeadingBit(hits_imask);
-            current.y &= ~(1u << offset);
-            if ((current.y & 0xff000000u) != 0u && sp < BVH_STACK_SIZE) {
-                stack[sp] = current;
-                sp++;
-            }
-            let slot = (offset - 24u) ^ ray.oct_inv;
-            let relative = countOneBits(hits_imask & ~(0xffffffffu << slot));
-            let node = current.x + relative;
-            entered++;
-            if (entered > bound) {
+        w.prims = vec2<u32>(0u, 0u);
+        if ((w.current.y & 0xff000000u) != 0u) {
+            if (!bvh_walk_node(&w, bound)) {
                 atomicAdd(&bvh_guards[1], 1u);
                 return miss;
             }
-            let hitmask = bvh_intersect_node(node, ray);
-            let base = node * BVH_NODE_WORDS;
-            current = vec2<u32>(bvh_nodes[base + 4u], (hitmask & 0xff000000u) | (bvh_nodes[base + 3u] >> 24u));
-            prims = vec2<u32>(bvh_nodes[base + 5u], hitmask & 0x00ffffffu);
         } else {
-            current = vec2<u32>(0u, 0u);
+            w.current = vec2<u32>(0u, 0u);
         }
-        if (prims.y == 0u && (current.y & 0xff000000u) == 0u) {
-            if (sp == bottom_floor) {
-                if (in_bottom && top_level) {
-                    // Back up to the top level where it was left.
-                    in_bottom = false;
-                    entered = top_entered;
-                    ray = world;
-                    current = top_current;
-                    prims = top_prims;
-                    bottom_floor = 0u;
+        if (w.prims.y == 0u && (w.current.y & 0xff000000u) == 0u) {
+            if (w.sp == w.bottom_floor) {
+                if (w.in_bottom && top_level) {
+                    bvh_walk_leave(&w);
                     continue;
                 }
                 break;
             }
-            sp--;
-            current = stack[sp];
+            w.sp--;
+            w.current = w.stack[w.sp];
         }
     }
-    return hit;
+    return w.hit;
 }
 
 fn bvh_trace(ray: BvhRay, any_hit: bool) -> BvhHit {

@@ -10,8 +10,10 @@
 //   probegi_core::probe_atlas::BilinearFootprint, probegi_core::octahedral::oct_encode,
 //   probegi_core::irradiance_encoding::{decode_irradiance_half, finish_half_decode} (seed 004 Listing 2).
 //
-// Bind-group layout (group DDGI_GROUP, 2 by default; `probegi_wgpu::ddgi_query::query_wgsl`
-// renumbers it), all read-only storage buffers written by `probegi_wgpu::ddgi_query::GpuDdgiField`:
+// Its weight floors (BACKFACE_WEIGHT_FLOOR, CHEBYSHEV_WEIGHT_FLOOR, MIN_PROBE_WEIGHT,
+// TRILINEAR_WEIGHT_FLOOR) are the constants prelude's, generated from probegi_core::ddgi_query.
+// Bind-group layout (group DDGI_GROUP: `probegi_wgpu::shader_registry` fills it with 2 in
+// probegi's passes, `probegi_wgpu::ddgi_query::query_wgsl` with an engine's), all read-only storage buffers written by `probegi_wgpu::ddgi_query::GpuDdgiField`:
 //   @binding(0) ddgi_set:        DdgiSet (header, camera, one DdgiVolume per member in sampling order)
 //   @binding(1) ddgi_irradiance_atlas: array<vec4<f32>>, every member's irradiance atlas, tile-major
 //                                (probegi_core::probe_atlas layout), xyz = γ-encoded mean radiance
@@ -131,7 +133,7 @@ fn ddgi_chebyshev_weight(moments: vec2<f32>, distance: f32) -> f32 {
 // probegi_core::ddgi_query::backface_weight (eq. 4.4 with RTXGI's 0.2 floor).
 fn ddgi_backface_weight(dir_to_probe: vec3<f32>, normal: vec3<f32>) -> f32 {
     let wrap = (dot(dir_to_probe, normal) + 1.0) * 0.5;
-    return wrap * wrap + 0.2;
+    return wrap * wrap + BACKFACE_WEIGHT_FLOOR;
 }
 
 // probegi_core::irradiance_encoding::decode_irradiance_half (γ = 5: e²·√e exactly).
@@ -167,16 +169,16 @@ fn ddgi_weigh(v: DdgiVolume, position: vec3<f32>, normal: vec3<f32>, biased: vec
         let side = v.texels.y + 2u;
         let f = ddgi_footprint(v.texels.y, ddgi_oct_encode(-to_probe));
         let moments = ddgi_sample_distance(f, v.texels.w + probe * side * side);
-        weight *= max(ddgi_chebyshev_weight(moments, dist), 0.05);
+        weight *= max(ddgi_chebyshev_weight(moments, dist), CHEBYSHEV_WEIGHT_FLOOR);
     }
-    weight = max(weight, 1e-6);
+    weight = max(weight, MIN_PROBE_WEIGHT);
     let c = v.params.z;
     if ((flags & 4u) != 0u && weight < c) {
         weight *= weight * weight / (c * c);
     }
     if ((flags & 8u) != 0u) {
         let o = vec3<f32>(f32(corner & 1u), f32((corner >> 1u) & 1u), f32((corner >> 2u) & 1u));
-        let t = max((vec3<f32>(1.0) - alpha) * (vec3<f32>(1.0) - o) + alpha * o, vec3<f32>(0.001));
+        let t = max((vec3<f32>(1.0) - alpha) * (vec3<f32>(1.0) - o) + alpha * o, vec3<f32>(TRILINEAR_WEIGHT_FLOOR));
         weight *= t.x * t.y * t.z;
     }
     let side = v.texels.x + 2u;

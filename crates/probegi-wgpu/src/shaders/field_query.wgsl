@@ -1,4 +1,4 @@
-// Batch query of the DDGI field (`ddgi_query.wgsl`, included with DDGI_GROUP = 1):
+// Batch query of the DDGI field (`ddgi_query.wgsl`, its group 2 by `shader_registry`):
 // one thread per point. Must match `probegi_wgpu::ddgi_query::{FieldQueryParams, QueryPoint}`.
 
 struct FieldQueryParams {

@@ -137,7 +137,7 @@ fn classify_first(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
         }
     }
     // probegi_core::probe_relocation::is_inside_geometry
-    let inside = f32(backfaces) / f32(max(n, 1u)) > 0.25;
+    let inside = f32(backfaces) / f32(max(n, 1u)) > INSIDE_GEOMETRY_BACKFACE_FRACTION;
     classify_out[p] = vec4<u32>(u32(inside), u32(!inside && watches), u32(!inside), 0u);
 }
 

@@ -1,8 +1,10 @@
 // The probe-position optimizer (seed 004 §5, Listing 4), one thread per probe of an
 // initialisation batch: probegi_core::probe_relocation::probe_ray_stats over the
 // probe's rays (directions from the trace's rays, signed distances from its hits),
-// then relocation_step. Must match `probegi_wgpu::probe_relocation::{RelocationParams,
-// GpuRelocationProbe}` and the trace pass's `GpuRay` (32 bytes) / `GpuRayHit` (24).
+// then relocation_step. Must match `probegi_wgpu::probe_relocation::RelocationParams`,
+// `probegi_field::device_plans::DeviceRelocationProbe` (uploaded as the field plans it,
+// 40 bytes: its vectors are three f32 each, hence `array<f32, 3>` here) and the trace
+// pass's `GpuRay` (32 bytes) / `GpuRayHit` (24).
 
 struct RelocationParams {
     probe_count: u32,
@@ -27,14 +29,12 @@ struct RelocationHit {
 };
 
 struct RelocationProbe {
-    offset_m: vec3<f32>,
+    offset_m: array<f32, 3>,
     first_ray: u32,
-    spacing_m: vec3<f32>,
+    spacing_m: array<f32, 3>,
     ray_count: u32,
     offset_limit_rel: f32,
     min_frontface_rel: f32,
-    _pad0: f32,
-    _pad1: f32,
 };
 
 @group(0) @binding(0) var<uniform> relocation_params: RelocationParams;
@@ -45,6 +45,10 @@ struct RelocationProbe {
 @group(0) @binding(4) var<storage, read_write> relocation_offsets: array<vec4<f32>>;
 
 const RELOCATION_NO_HIT: u32 = 0xffffffffu;
+
+fn relocation_vec3(v: array<f32, 3>) -> vec3<f32> {
+    return vec3<f32>(v[0], v[1], v[2]);
+}
 
 fn relocation_within(o: vec3<f32>, limit: vec3<f32>) -> bool {
     return all(abs(o) < limit);
@@ -96,11 +100,12 @@ fn relocate_probes(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocat
     }
     let backface_fraction = f32(backfaces) / f32(max(probe.ray_count, 1u));
     // probegi_core::probe_relocation::relocation_step
-    let offset = probe.offset_m;
-    let limit = probe.spacing_m * probe.offset_limit_rel;
-    let min_spacing = min(min(probe.spacing_m.x, probe.spacing_m.y), probe.spacing_m.z);
+    let offset = relocation_vec3(probe.offset_m);
+    let spacing_m = relocation_vec3(probe.spacing_m);
+    let limit = spacing_m * probe.offset_limit_rel;
+    let min_spacing = min(min(spacing_m.x, spacing_m.y), spacing_m.z);
     var full = offset;
-    if (backface_fraction > 0.25) {
+    if (backface_fraction > INSIDE_GEOMETRY_BACKFACE_FRACTION) {
         if (has_back) {
             let v = back_dir * back_d;
             for (var i = 1u; i <= 100u; i++) {
@@ -111,7 +116,7 @@ fn relocate_probes(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocat
             }
         }
     } else if (has_front && close_d < probe.min_frontface_rel * min_spacing && dot(close_dir, far_dir) <= 0.5) {
-        full = offset + far_dir * min(far_d, 0.2 * min_spacing);
+        full = offset + far_dir * min(far_d, FRONTFACE_STEP_LIMIT_REL * min_spacing);
     }
     if (!relocation_within(full, limit)) {
         full = offset;

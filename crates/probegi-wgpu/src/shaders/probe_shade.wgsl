@@ -54,7 +54,7 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     if (h.triangle == BVH_NO_HIT) {
         d = r.t_max;
     } else if (back) {
-        d = -0.2 * h.t;
+        d = -BACKFACE_DISTANCE_SCALE * h.t;
     }
     if ((info & 0x80000000u) == 0u || back) {
         shade_radiance[i] = vec4<f32>(0.0, 0.0, 0.0, d);

@@ -2,8 +2,9 @@
 // Usage(P) = Σ R(dᵢ) over the probe's rays, R = −1 for a backface, +1 for a front
 // hit within the cage diagonal r, 0 otherwise; with the relevant and backface
 // counts the usage scheme's states come from. One thread per batch probe.
-// Must match `probegi_wgpu::probe_usage::{UsageParams, UsageProbe}` and the trace
-// pass's `GpuRayHit` (24 bytes; triangle bit 31 = backface, all ones = miss).
+// Must match `probegi_wgpu::probe_usage::UsageParams`, `probegi_field::seam::BatchProbe`
+// (the batch's probes uploaded as they are) and the trace pass's `GpuRayHit` (24 bytes;
+// triangle bit 31 = backface, all ones = miss).
 
 struct UsageParams {
     probe_count: u32,
@@ -20,12 +21,22 @@ struct UsageHit {
     _pad: u32,
 };
 
+// probegi_field::seam::BatchProbe.
+struct UsageProbe {
+    volume: u32,
+    probe: u32,
+    first_ray: u32,
+    ray_count: u32,
+};
+
 @group(0) @binding(0) var<uniform> usage_params: UsageParams;
 @group(0) @binding(1) var<storage, read> usage_hits: array<UsageHit>;
-// Per batch probe: first ray, ray count, bits of the cage diagonal r (m), 0.
-@group(0) @binding(2) var<storage, read> usage_probes: array<vec4<u32>>;
+// The batch's probes.
+@group(0) @binding(2) var<storage, read> usage_probes: array<UsageProbe>;
+// Per volume: its cage diagonal r (m); a volume past the end has r = 0.
+@group(0) @binding(3) var<storage, read> usage_cage_diagonals_m: array<f32>;
 // Per batch probe: usage, relevant samples, backfaces, 0.
-@group(0) @binding(3) var<storage, read_write> usage_counts: array<vec4<i32>>;
+@group(0) @binding(4) var<storage, read_write> usage_counts: array<vec4<i32>>;
 
 const USAGE_NO_HIT: u32 = 0xffffffffu;
 
@@ -36,11 +47,14 @@ fn probe_usage(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
         return;
     }
     let probe = usage_probes[p];
-    let r = bitcast<f32>(probe.z);
+    var r = 0.0;
+    if (probe.volume < arrayLength(&usage_cage_diagonals_m)) {
+        r = usage_cage_diagonals_m[probe.volume];
+    }
     var usage = 0i;
     var relevant = 0i;
     var backfaces = 0i;
-    for (var i = probe.x; i < probe.x + probe.y; i++) {
+    for (var i = probe.first_ray; i < probe.first_ray + probe.ray_count; i++) {
         let h = usage_hits[i];
         if (h.triangle == USAGE_NO_HIT) {
             continue;

@@ -585,6 +585,27 @@ fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, specu
     let header = scene_lights[0];
     let punctual = bitcast<u32>(header.x);
     let emitters = bitcast<u32>(header.y);
+    var l = scene_direct_punctual(sp, fr, wo, bsdf, punctual);
+    if (emitters > 0u && area_samples > 0u) {
+        let k = u32(ceil(sqrt(f32(area_samples))));
+        let n = k * k;
+        let first = 2u + punctual * 4u;
+        var sum = vec3<f32>(0.0);
+        for (var i = 0u; i < n; i++) {
+            let u = vec2<f32>((f32(i % k) + rng_next(rng)) / f32(k), (f32(i / k) + rng_next(rng)) / f32(k));
+            let u_select = rng_next(rng);
+            var c = vec3<f32>(0.0);
+            if (scene_emitter_sample(sp, fr, wo, bsdf, specular_area, u, u_select, first, emitters, &c)) {
+                sum += c;
+            }
+        }
+        l += sum / f32(n);
+    }
+    return l;
+}
+
+// scene_direct's punctual lights (punctual_direct), each with a shadow ray.
+fn scene_direct_punctual(sp: SurfacePoint, fr: Frame, wo: vec3<f32>, bsdf: Bsdf, punctual: u32) -> vec3<f32> {
     var l = vec3<f32>(0.0);
     for (var k = 0u; k < punctual; k++) {
         var e = vec3<f32>(0.0);
@@ -605,71 +626,69 @@ fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, specu
             l += bsdf_eval(bsdf, wo, frame_to_local(fr, inc.xyz)) * e * cos;
         }
     }
-    if (emitters > 0u && area_samples > 0u) {
-        let k = u32(ceil(sqrt(f32(area_samples))));
-        let n = k * k;
-        let first = 2u + punctual * 4u;
-        var sum = vec3<f32>(0.0);
-        for (var i = 0u; i < n; i++) {
-            let u = vec2<f32>((f32(i % k) + rng_next(rng)) / f32(k), (f32(i / k) + rng_next(rng)) / f32(k));
-            let u_select = rng_next(rng);
-            // Distribution1d::sample_discrete: the first CDF entry above u.
-            var lo = 0u;
-            var hi = emitters;
-            while (lo < hi) {
-                let mid = (lo + hi) / 2u;
-                if (scene_lights[first + mid].y <= u_select) { lo = mid + 1u; } else { hi = mid; }
-            }
-            let em = scene_lights[first + min(lo, emitters - 1u)];
-            let tri = bitcast<u32>(em.x) * SCENE_TRIANGLE_VEC4S;
-            let su = sqrt(u.x);
-            let b0 = 1.0 - su;
-            let b1 = u.y * su;
-            let b = vec3<f32>(b0, b1, 1.0 - b0 - b1);
-            let p0 = scene_triangles[tri].xyz;
-            let p1 = scene_triangles[tri + 1u].xyz;
-            let p2 = scene_triangles[tri + 2u].xyz;
-            let point = p0 * b.x + p1 * b.y + p2 * b.z;
-            let to = point - sp.position;
-            let dist2 = dot(to, to);
-            if (dist2 <= 0.0) {
-                continue;
-            }
-            let wi = to / sqrt(dist2);
-            let nl = scene_normalize_or_zero(cross(p1 - p0, p2 - p0));
-            let cos_light = -dot(wi, nl);
-            if (cos_light <= 0.0) {
-                continue;
-            }
-            // Mesh::attributes_at
-            let uv01 = scene_triangles[tri + 6u];
-            let uv2 = scene_triangles[tri + 7u];
-            let set1 = scene_triangles[tri + 11u];
-            let uv = uv01.xy * b.x + uv01.zw * b.y + uv2.xy * b.z;
-            let uv1 = uv2.zw * b.x + set1.xy * b.y + set1.zw * b.z;
-            let radiance = scene_emission(bitcast<u32>(scene_triangles[tri].w), uv, uv1);
-            let pdf = em.z * dist2 / cos_light;
-            let cos = scene_lambert_cos(sp, wi);
-            if (cos <= 0.0 || all(radiance == vec3<f32>(0.0)) || pdf <= 0.0) {
-                continue;
-            }
-            // probegi_cpu::shading::shadow_ray_to
-            let origin = scene_spawn_origin(sp, point - sp.position);
-            let to_point = point - origin;
-            let d = length(to_point);
-            let shadow = bvh_trace(bvh_make_ray(origin, to_point / d, 0.0, d * (1.0 - 1e-4)), true);
-            if (shadow.leaf == BVH_NO_HIT) {
-                let wl = frame_to_local(fr, wi);
-                var f = bsdf_diffuse_albedo(bsdf) / SCENE_PI;
-                if (specular_area) {
-                    f = bsdf_eval(bsdf, wo, wl);
-                } else if (wl.z <= 0.0) {
-                    f = vec3<f32>(0.0);
-                }
-                sum += f * radiance * (cos / pdf);
-            }
-        }
-        l += sum / f32(n);
-    }
     return l;
+}
+
+// One of scene_direct's area-light samples (AreaLights::sample with `u` on the
+// triangle, `u_select` choosing the emitter among the `emitters` from light
+// vec4 `first`): false when it adds nothing, else its estimate in `out`.
+fn scene_emitter_sample(sp: SurfacePoint, fr: Frame, wo: vec3<f32>, bsdf: Bsdf, specular_area: bool, u: vec2<f32>,
+                        u_select: f32, first: u32, emitters: u32, out: ptr<function, vec3<f32>>) -> bool {
+    // Distribution1d::sample_discrete: the first CDF entry above u.
+    var lo = 0u;
+    var hi = emitters;
+    while (lo < hi) {
+        let mid = (lo + hi) / 2u;
+        if (scene_lights[first + mid].y <= u_select) { lo = mid + 1u; } else { hi = mid; }
+    }
+    let em = scene_lights[first + min(lo, emitters - 1u)];
+    let tri = bitcast<u32>(em.x) * SCENE_TRIANGLE_VEC4S;
+    let su = sqrt(u.x);
+    let b0 = 1.0 - su;
+    let b1 = u.y * su;
+    let b = vec3<f32>(b0, b1, 1.0 - b0 - b1);
+    let p0 = scene_triangles[tri].xyz;
+    let p1 = scene_triangles[tri + 1u].xyz;
+    let p2 = scene_triangles[tri + 2u].xyz;
+    let point = p0 * b.x + p1 * b.y + p2 * b.z;
+    let to = point - sp.position;
+    let dist2 = dot(to, to);
+    if (dist2 <= 0.0) {
+        return false;
+    }
+    let wi = to / sqrt(dist2);
+    let nl = scene_normalize_or_zero(cross(p1 - p0, p2 - p0));
+    let cos_light = -dot(wi, nl);
+    if (cos_light <= 0.0) {
+        return false;
+    }
+    // Mesh::attributes_at
+    let uv01 = scene_triangles[tri + 6u];
+    let uv2 = scene_triangles[tri + 7u];
+    let set1 = scene_triangles[tri + 11u];
+    let uv = uv01.xy * b.x + uv01.zw * b.y + uv2.xy * b.z;
+    let uv1 = uv2.zw * b.x + set1.xy * b.y + set1.zw * b.z;
+    let radiance = scene_emission(bitcast<u32>(scene_triangles[tri].w), uv, uv1);
+    let pdf = em.z * dist2 / cos_light;
+    let cos = scene_lambert_cos(sp, wi);
+    if (cos <= 0.0 || all(radiance == vec3<f32>(0.0)) || pdf <= 0.0) {
+        return false;
+    }
+    // probegi_cpu::shading::shadow_ray_to
+    let origin = scene_spawn_origin(sp, point - sp.position);
+    let to_point = point - origin;
+    let d = length(to_point);
+    let shadow = bvh_trace(bvh_make_ray(origin, to_point / d, 0.0, d * (1.0 - 1e-4)), true);
+    if (shadow.leaf == BVH_NO_HIT) {
+        let wl = frame_to_local(fr, wi);
+        var f = bsdf_diffuse_albedo(bsdf) / SCENE_PI;
+        if (specular_area) {
+            f = bsdf_eval(bsdf, wo, wl);
+        } else if (wl.z <= 0.0) {
+            f = vec3<f32>(0.0);
+        }
+        *out = f * radiance * (cos / pdf);
+        return true;
+    }
+    return false;
 }
