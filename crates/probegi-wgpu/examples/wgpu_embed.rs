@@ -227,7 +227,7 @@ pub fn main() -> Result<(), Error> {
 pub fn main_to(out: &std::path::Path) -> Result<(), Error> {
     let ctx = application_device()?;
     println!("adapter: {}", ctx.adapter_name);
-
+    // README: gpu-field begin
     // Its triangles, on the device as a CWBVH.
     let world = World::room();
     let bvh = GpuBvh::from_triangles(&ctx, &world.triangles)?;
@@ -249,6 +249,7 @@ pub fn main_to(out: &std::path::Path) -> Result<(), Error> {
     let field = GpuDdgiField::upload(&ctx, &set.view())?;
     let image = shade_on_gpu(&ctx, &field, &pixels)?;
     check_against_the_cpu(&set, &pixels, &image)?;
+    // README: gpu-field end
 
     // Tone-map (exposure 1, Reinhard) and write.
     let mut img = probegi_core::image::Image::new(width, height);
