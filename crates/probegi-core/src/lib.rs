@@ -32,7 +32,7 @@
 //! - [`sh_cascades`]: nested camera-centred probe grids and their interpolation.
 //! - [`sh_probe_update`]: the screen-space splat of lit samples into the probes.
 
-
+#![warn(missing_docs)]
 
 pub mod bsdf;
 pub mod camera;
