@@ -6,6 +6,7 @@
 //!   and the bounded walks every ray goes through.
 
 pub mod animation;
+mod bounds;
 pub mod builtin;
 pub mod bvh;
 pub mod bvh_walk;

@@ -530,7 +530,7 @@ impl Scene {
         let placed = self.instances.iter().filter_map(|i| {
             if !tight {
                 let (lo, hi) = boxes.get(i.prototype as usize).copied().flatten()?;
-                return Some(crate::bvh::transformed_bounds(&i.world_from_local, lo, hi));
+                return Some(crate::bounds::transformed_bounds(&i.world_from_local, lo, hi));
             }
             let m = &self.prototypes.get(i.prototype as usize)?.mesh;
             let mut points = m.positions.iter().map(|&p| i.world_from_local.transform_point3(p));
