@@ -27,6 +27,8 @@ use crate::sampling::{cosine_hemisphere_pdf, sample_cosine_hemisphere};
 /// GGX α below this is treated as this (a near-mirror, still a finite density).
 pub const MIN_ALPHA: f32 = 1e-3;
 
+/// A surface's BSDF: the Lambertian lobe plus the GGX specular lobe of the module docs,
+/// in the local shading frame (+z = normal).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfaceBsdf {
     /// Diffuse albedo (before the 1 − max(F0) scale).
@@ -59,6 +61,8 @@ pub fn smith_g2(cos_o: f32, cos_i: f32, alpha: f32) -> f32 {
     2.0 * cos_o * cos_i / (lo + li)
 }
 
+/// Schlick's Fresnel approximation `F0 + (1 − F0)·(1 − cos)⁵` per channel, `cos`
+/// (half-vector · light direction) clamped to [0, 1].
 pub fn fresnel_schlick(f0: Vec3, cos: f32) -> Vec3 {
     let m = (1.0 - cos.clamp(0.0, 1.0)).powi(5);
     f0 + (Vec3::ONE - f0) * m
@@ -158,10 +162,13 @@ fn reflect(wo: Vec3, h: Vec3) -> Vec3 {
 }
 
 impl SurfaceBsdf {
+    /// A purely diffuse BSDF of albedo `albedo`: F0 = 0, so no specular lobe and
+    /// `f = albedo/π` exactly.
     pub fn lambertian(albedo: Vec3) -> Self {
         Self { diffuse: albedo, specular_f0: Vec3::ZERO, alpha: 1.0 }
     }
 
+    /// Whether the specular lobe exists: some channel of `specular_f0` is above zero.
     pub fn has_specular(&self) -> bool {
         self.specular_f0.max_element() > 0.0
     }

@@ -79,8 +79,13 @@ const PARALLEL_SIN2: f32 = 1e-8;
 /// continues from (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewBasis {
+    /// Unit view direction, from `position` toward `target`, world space.
     pub forward_world: Vec3,
+    /// Unit image right (pixel x grows along it), world space, orthogonal to
+    /// `forward_world` and `up_world`.
     pub right_world: Vec3,
+    /// Unit image up (pixel y grows against it), world space:
+    /// `right_world × forward_world`.
     pub up_world: Vec3,
     /// The unit up hint this frame used (zero for a zero hint).
     pub hint_world: Vec3,
@@ -160,6 +165,7 @@ fn fallback_up(forward: Vec3, hint: Vec3) -> Vec3 {
 /// A camera prepared for one image size: maps continuous pixel coordinates to world rays.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraRays {
+    /// Origin of every ray: the camera's eye position, metres, world space.
     pub origin_world: Vec3,
     forward_world: Vec3,
     right_world: Vec3,

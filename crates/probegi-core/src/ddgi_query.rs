@@ -54,9 +54,19 @@ use crate::probe_grid::ProbeGrid;
 /// its relocation offset and whether queries may use it.
 #[derive(Clone, Copy)]
 pub struct DdgiFieldView<'a> {
+    /// The volume's probe grid: probe grid points, spacing, the cage lookup and the
+    /// storage slot of each probe, which indexes both atlases.
     pub grid: &'a ProbeGrid,
+    /// The volume's settings the query reads: bias mode and amount, irradiance γ, which
+    /// weights apply (backface, Chebyshev, crush and its threshold, trilinear) and the
+    /// energy-conservation factor.
     pub settings: &'a DdgiVolumeSettings,
+    /// Per probe, the octahedral irradiance tile looked up in the surface normal's
+    /// direction: mean radiance encoded as `mean^(1/γ)` (seed 004 Listing 1).
     pub irradiance: &'a ProbeAtlas<Vec3>,
+    /// Per probe, the octahedral distance tile looked up in the probe-to-point
+    /// direction: (mean, mean²) of the ray hit distance in metres, the Chebyshev
+    /// moments (seed 003 eq. 4.5–4.9, 4.14–4.16).
     pub distance: &'a ProbeAtlas<Vec2>,
     /// Offset of each probe from its grid point (seed 004 §5); empty = none.
     pub probe_offsets_m: &'a [Vec3],

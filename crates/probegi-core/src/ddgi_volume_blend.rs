@@ -67,6 +67,8 @@ pub fn cascade_field_weight(grid: &ProbeGrid, point: Vec3) -> f32 {
 /// One volume of a set as the set query reads it.
 #[derive(Clone, Copy)]
 pub struct SetMember<'a> {
+    /// The volume's probe data, queried with [`crate::ddgi_query::irradiance`] wherever
+    /// the member has weight.
     pub field: DdgiFieldView<'a>,
     /// The member's index among the set's volumes as given (its place in
     /// sampling order may differ: densest first).
@@ -78,8 +80,14 @@ pub struct SetMember<'a> {
 /// Everything the set query reads: the members in sampling order (densest or
 /// finest first), the scheme, and the camera position for camera-aware blending.
 pub struct DdgiFieldSetView<'a> {
+    /// The set's volumes in sampling order: densest first under `Density`, finest
+    /// cascade first under `Cascades`.
     pub members: Vec<SetMember<'a>>,
+    /// The weighting scheme: seed 004 §7.4 density order or seed 003 Algorithms 1–2
+    /// cascades (module docs).
     pub blending: VolumeBlending,
+    /// Camera position, metres, world space, for camera-aware blending of members that
+    /// track the camera (`Density` only); `None` turns it off.
     pub camera_m: Option<Vec3>,
 }
 

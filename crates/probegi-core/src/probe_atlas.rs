@@ -43,15 +43,23 @@ impl Texel for glam::Vec2 {}
 impl Texel for glam::Vec3 {}
 impl Texel for f32 {}
 
+/// One octahedral tile per probe, `(interior + 2)²` texels each with the guard border,
+/// stored tile-major (layout in the module docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ProbeAtlas<T> {
+    /// Number of tiles: one per probe, tile `p` for the probe in the grid's storage
+    /// slot `p`.
     pub probe_count: usize,
     /// Interior texels per side.
     pub interior: u32,
+    /// Every tile's texels: probe `p`'s tile is
+    /// `texels[p · tile_len() .. (p + 1) · tile_len()]`, row-major, border included.
     pub texels: Vec<T>,
 }
 
 impl<T: Texel> ProbeAtlas<T> {
+    /// An atlas of `probe_count` tiles with `interior × interior` interior texels each,
+    /// every texel `T::default()` (zero).
     pub fn new(probe_count: usize, interior: u32) -> Self {
         Self { probe_count, interior, texels: vec![T::default(); probe_count * tile_texel_count(interior)] }
     }
@@ -61,6 +69,7 @@ impl<T: Texel> ProbeAtlas<T> {
         tile_side(self.interior)
     }
 
+    /// Texels in one tile, border included: `(interior + 2)²`.
     pub fn tile_len(&self) -> usize {
         tile_texel_count(self.interior)
     }
@@ -70,11 +79,15 @@ impl<T: Texel> ProbeAtlas<T> {
         tile_texel_count(interior) * std::mem::size_of::<T>()
     }
 
+    /// The tile of the probe in storage slot `probe`, border included, row-major;
+    /// panics past the last probe.
     pub fn tile(&self, probe: usize) -> &[T] {
         let n = self.tile_len();
         &self.texels[probe * n..(probe + 1) * n]
     }
 
+    /// The tile of the probe in storage slot `probe`, for writing (border included,
+    /// row-major); panics past the last probe.
     pub fn tile_mut(&mut self, probe: usize) -> &mut [T] {
         let n = self.tile_len();
         &mut self.texels[probe * n..(probe + 1) * n]
@@ -102,10 +115,14 @@ impl<T: Texel> ProbeAtlas<T> {
 pub struct BilinearFootprint {
     /// Tile-local indices of texels (x0,y0), (x0+1,y0), (x0,y0+1), (x0+1,y0+1).
     pub indices: [usize; 4],
+    /// Bilinear weights of the texels in `indices`, in the same order: each in [0, 1],
+    /// summing to 1.
     pub weights: [f32; 4],
 }
 
 impl BilinearFootprint {
+    /// The footprint of a lookup at octahedral coordinates `uv` (clamped to [-1, 1]²)
+    /// in a tile with `interior` texels per side.
     pub fn new(interior: u32, uv: Vec2) -> Self {
         let size = tile_side(interior);
         let n = interior as f32;
@@ -124,6 +141,8 @@ impl BilinearFootprint {
         }
     }
 
+    /// The filtered value of `tile` (one probe's tile, of the interior this footprint
+    /// was built for): Σ weight · texel.
     pub fn sample<T: Texel>(&self, tile: &[T]) -> T {
         tile[self.indices[0]] * self.weights[0]
             + tile[self.indices[1]] * self.weights[1]

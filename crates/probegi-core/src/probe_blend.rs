@@ -83,7 +83,11 @@ fn interior_index(t: usize, interior: u32) -> usize {
 /// above `new_distribution` to 0. Irradiance only; visibility is too unstable.
 #[derive(Clone, Copy, Debug)]
 pub struct TexelThresholds {
+    /// Change above which the texel's hysteresis drops by 0.15 (Listing 3's
+    /// `significantChangeThreshold`, default 0.25).
     pub significant: f32,
+    /// Change above which the hysteresis drops to 0, replacing the texel (Listing 3's
+    /// `newDistributionChangeThreshold`, default 0.8).
     pub new_distribution: f32,
 }
 

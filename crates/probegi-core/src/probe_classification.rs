@@ -66,6 +66,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::probe_grid::ProbeGrid;
 
+/// Which probe-state scheme a volume runs: the `probe_states` setting (module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ProbeStatesMode {
@@ -77,21 +78,45 @@ pub enum ProbeStatesMode {
     Usage,
 }
 
+/// A probe's state: `Active` under all-active, seed 004 Listing 5's six states under
+/// jcgt, seed 003 §6.1's three under usage.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum ProbeState {
+    /// All-active: traces and updates every frame; also a new or reset probe's state
+    /// until its scheme classifies it.
     Active,
+    /// jcgt: inside geometry after relocation; neither traces nor updates, and queries
+    /// skip it.
     Off,
+    /// jcgt: serves no surface; neither traces nor updates, and queries skip it, until
+    /// a dynamic object nearby wakes it.
     Sleeping,
+    /// jcgt: a Sleeping probe inside a dynamic object's grown AABB; updates once with
+    /// hysteresis 0, then becomes Awake.
     NewlyAwake,
+    /// jcgt: just found to serve a surface; updates once with hysteresis 0, then
+    /// becomes Vigilant.
     NewlyVigilant,
+    /// jcgt: woken by a nearby dynamic object; traces and updates until no dynamic
+    /// object is near, then sleeps again.
     Awake,
+    /// jcgt: serves a surface; traces and updates every frame.
     Vigilant,
+    /// usage (seed 003 §6.1, eq. 6.1–6.2): usage > 0; blended every frame, hysteresis
+    /// raised toward the volume's `probe_hysteresis`.
     Alive,
+    /// usage: usage ≤ 0 without a backface majority; blended every
+    /// `probe_sleeping_update_interval` frames, hysteresis lowered toward half of
+    /// `probe_hysteresis`.
     UsageSleeping,
+    /// usage: more than half of its relevant samples are backfaces (inside geometry);
+    /// culled from queries, blended only in the frame it turns DEAD.
     Dead,
 }
 
 impl ProbeState {
+    /// The state's snake-case name (`"newly_awake"`, `"usage_sleeping"`, …), the key of
+    /// per-state probe counts.
     pub fn name(self) -> &'static str {
         match self {
             Self::Active => "active",

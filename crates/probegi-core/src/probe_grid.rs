@@ -14,10 +14,13 @@
 
 use glam::{IVec3, UVec3, Vec3};
 
+/// A DDGI volume's uniform probe grid: logical probe `(x, y, z)` at
+/// `origin_m + spacing_m · (x, y, z)`, stored circularly (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProbeGrid {
     /// World position of probe (0, 0, 0), metres.
     pub origin_m: Vec3,
+    /// Probes per axis (any count, not only powers of two).
     pub probe_counts: UVec3,
     /// Distance between neighbouring probes per axis, metres.
     pub spacing_m: Vec3,
@@ -65,6 +68,7 @@ impl ProbeGrid {
         Self::new(lo + spacing_m * 0.5, counts, spacing_m)
     }
 
+    /// Total number of probes: the product of `probe_counts`.
     pub fn probe_count(&self) -> usize {
         self.probe_counts.x as usize * self.probe_counts.y as usize * self.probe_counts.z as usize
     }
@@ -151,6 +155,8 @@ impl ProbeGrid {
 /// A point's 8-probe cage: corner `i` has offset bit 0 = x, bit 1 = y, bit 2 = z.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cage {
+    /// Grid coordinates of the cage's lowest corner probe (corner 0), clamped into the
+    /// grid.
     pub base: IVec3,
     /// The point's fraction across the cell per axis, in [0, 1].
     pub alpha: Vec3,

@@ -30,10 +30,16 @@ pub const FRONTFACE_STEP_LIMIT_REL: f32 = 0.2;
 /// What one probe's rays saw: directions with hit distances.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ProbeRayStats {
+    /// Fraction of all the probe's rays (misses included) that hit a backface, in
+    /// [0, 1]; above 0.25 it is inside geometry.
     pub backface_fraction: f32,
     /// (unit direction, distance) of the closest backface hit.
     pub closest_backface: Option<(Vec3, f32)>,
+    /// (unit direction, distance in metres) of the closest front-face hit; `None` when
+    /// no ray hit a front face.
     pub closest_frontface: Option<(Vec3, f32)>,
+    /// (unit direction, distance in metres) of the farthest front-face hit (misses
+    /// excluded), which a probe steps toward.
     pub farthest_frontface: Option<(Vec3, f32)>,
 }
 

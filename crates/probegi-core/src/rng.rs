@@ -21,6 +21,8 @@ impl Pcg32 {
         rng
     }
 
+    /// The stream's next uniformly distributed 32-bit output (XSH-RR of the current
+    /// state, then one LCG step).
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
         self.state = old.wrapping_mul(Self::MULT).wrapping_add(self.inc);
@@ -35,6 +37,8 @@ impl Pcg32 {
         (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
     }
 
+    /// Two successive [`Self::next_f32`] draws as `(x, y)`, each uniform in `[0, 1)`:
+    /// one 2D sample for the `sample_*` maps.
     pub fn next_vec2(&mut self) -> glam::Vec2 {
         let x = self.next_f32();
         glam::Vec2::new(x, self.next_f32())

@@ -9,12 +9,16 @@ use std::f32::consts::{FRAC_1_PI, PI};
 /// orthonormal basis, revisited"): branchless and continuous except at n.z = -1.
 #[derive(Clone, Copy, Debug)]
 pub struct Frame {
+    /// Unit tangent, the frame's local +x, orthogonal to `bitangent` and `normal`.
     pub tangent: Vec3,
+    /// Unit bitangent, the frame's local +y, orthogonal to `tangent` and `normal`.
     pub bitangent: Vec3,
+    /// The unit normal the frame was built around, its local +z.
     pub normal: Vec3,
 }
 
 impl Frame {
+    /// The frame around `normal`, which must already be unit length (Duff et al. 2017).
     pub fn from_normal(normal: Vec3) -> Self {
         let sign = 1.0f32.copysign(normal.z);
         let a = -1.0 / (sign + normal.z);
@@ -146,10 +150,13 @@ impl Distribution1d {
         Self { cdf, total }
     }
 
+    /// Whether no weight is positive, so [`Self::sample_discrete`] returns `None`;
+    /// unlike `len() == 0`, zero weights count as empty.
     pub fn is_empty(&self) -> bool {
         self.total <= 0.0
     }
 
+    /// Number of weights the distribution was built from, zero ones included.
     pub fn len(&self) -> usize {
         self.cdf.len()
     }

@@ -40,6 +40,8 @@ fn band_of(i: usize) -> usize {
 /// RGB radiance in SH, 9 coefficients per channel.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ShRgb9 {
+    /// Coefficient `l² + l + m` in the module docs' basis order, one `Vec3` of RGB per
+    /// basis function.
     pub c: [Vec3; 9],
 }
 
@@ -65,12 +67,14 @@ impl ShRgb9 {
         }
     }
 
+    /// Multiplies every coefficient by `s`, scaling the radiance the SH represents.
     pub fn scale(&mut self, s: f32) {
         for c in &mut self.c {
             *c *= s;
         }
     }
 
+    /// Whether every coefficient is finite (no NaN or infinity).
     pub fn is_finite(&self) -> bool {
         self.c.iter().all(|c| c.is_finite())
     }

@@ -28,7 +28,10 @@ use crate::sh::ShRgb9;
 /// One cascade: a camera-centred grid of SH probes with toroidal storage.
 #[derive(Clone, Debug)]
 pub struct ShCascade {
+    /// Distance between neighbouring probes on every axis, metres (`s₀ · ratioᵏ` for
+    /// cascade k).
     pub spacing_m: f32,
+    /// Probes per axis of the grid, and storage slots per axis of its torus.
     pub counts: UVec3,
     /// Lattice index of the grid's minimum-corner probe.
     pub origin_lattice: IVec3,
@@ -39,6 +42,8 @@ pub struct ShCascade {
 }
 
 impl ShCascade {
+    /// An unplaced cascade of `counts` probes `spacing_m` apart with zero SH; it
+    /// contains no point until [`ShCascades::recentre`] places it.
     pub fn new(spacing_m: f32, counts: UVec3) -> Self {
         let n = counts.x as usize * counts.y as usize * counts.z as usize;
         Self {
@@ -126,6 +131,8 @@ pub struct ShCascades {
 }
 
 impl ShCascades {
+    /// `count` nested cascades (at least one) of `counts` probes each, cascade k spaced
+    /// `spacing_m · spacing_ratioᵏ` metres; unplaced until [`Self::recentre`].
     pub fn new(count: u32, counts: UVec3, spacing_m: f32, spacing_ratio: f32) -> Self {
         let cascades =
             (0..count.max(1)).map(|k| ShCascade::new(spacing_m * spacing_ratio.powi(k as i32), counts)).collect();
@@ -203,6 +210,7 @@ impl ShCascades {
         self.radiance_sh(position_m).irradiance(n).max(Vec3::ZERO)
     }
 
+    /// Total number of probes (storage slots) over all cascades.
     pub fn probe_count(&self) -> usize {
         self.cascades.iter().map(|c| c.coeffs.len()).sum()
     }

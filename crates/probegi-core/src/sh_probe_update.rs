@@ -33,6 +33,8 @@ pub const MAX_SAMPLE_SOLID_ANGLE_SR: f32 = 4.0 * PI / 9.0;
 /// A sample of the lit frame, or of an emitter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShSample {
+    /// World position of the sample's surface point (or of the point on the emitter),
+    /// metres.
     pub position_m: Vec3,
     /// Unit normal on the side that emits/reflects toward the probe.
     pub normal: Vec3,

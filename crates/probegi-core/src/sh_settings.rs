@@ -22,6 +22,8 @@
 use glam::{UVec2, UVec3};
 use serde::{Deserialize, Serialize};
 
+/// Settings of seed 001's screen-space SH probe method; `Default` gives the paper's
+/// values where it states them (module docs for the rest).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ShProbeSettings {
