@@ -24,7 +24,7 @@ use glam::{UVec2, Vec3, Vec3A};
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::Ray as ObRay;
 
-use crate::tracer::Ray;
+use crate::ray::Ray;
 
 /// Rays a tracer answered without a full walk, since it was built.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]

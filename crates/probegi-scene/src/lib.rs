@@ -18,8 +18,10 @@ pub mod load;
 pub mod material;
 pub mod mesh;
 pub mod obj;
+pub mod ray;
 pub mod scene;
 pub mod scene_file;
+pub mod shapes;
 pub mod texture;
 pub mod tracer;
 
@@ -30,5 +32,6 @@ pub use error::SceneError;
 pub use light::{LightKind, PunctualLight};
 pub use load::load_scene;
 pub use material::Material;
+pub use ray::{Ray, RayHit};
 pub use scene::{CameraKeyframe, Scene, SurfacePoint};
-pub use tracer::{Ray, RayHit, RayTracer};
+pub use tracer::RayTracer;

@@ -377,7 +377,7 @@ mod tests {
     /// A unit cube's 8 shared corners, outward-facing, 12 triangles.
     fn shared_corner_cube() -> Mesh {
         let mut m = Mesh::default();
-        crate::builtin::add_box(&mut m, Vec3::ZERO, Vec3::ONE, 0);
+        crate::shapes::add_box(&mut m, Vec3::ZERO, Vec3::ONE, 0);
         // Weld the box's per-face corners into 8 shared vertices, as an OBJ without vn has them.
         let mut ids: HashMap<[u32; 3], u32> = HashMap::new();
         let mut positions = vec![];

@@ -20,8 +20,8 @@ use crate::animation::SceneObject;
 use crate::light::PunctualLight;
 use crate::material::{Material, VertexAttributes};
 use crate::mesh::Mesh;
+use crate::ray::RayHit;
 use crate::texture::Texture;
-use crate::tracer::RayHit;
 
 #[derive(Clone, Debug)]
 pub struct Scene {

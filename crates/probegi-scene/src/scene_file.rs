@@ -651,15 +651,15 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
     } else {
         let albedo = o.albedo.unwrap_or(Vec3::splat(0.8));
         let material = match o.emission {
-            Some(e) => crate::Material::emissive(&name, albedo, e),
-            None => crate::Material::diffuse(&name, albedo),
+            Some(e) => crate::material::Material::emissive(&name, albedo, e),
+            None => crate::material::Material::diffuse(&name, albedo),
         };
         let mut mesh = crate::mesh::Mesh::default();
         if let Some(poly) = &o.polygon_m {
             if poly.len() < 3 || poly.iter().any(|p| !p.is_finite()) {
                 return Err("polygon_m needs at least 3 finite corners".to_string().into());
             }
-            crate::builtin::add_polygon(&mut mesh, poly, 0);
+            crate::shapes::add_polygon(&mut mesh, poly, 0);
         } else {
             let (Some(lo), Some(hi)) = (o.box_min_m, o.box_max_m) else {
                 return Err("a box needs both box_min_m and box_max_m".to_string().into());
@@ -668,9 +668,9 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
                 return Err(format!("box_min_m {lo} must be below box_max_m {hi} on every axis").into());
             }
             if o.box_inward {
-                crate::builtin::add_room(&mut mesh, lo, hi, 0);
+                crate::shapes::add_room(&mut mesh, lo, hi, 0);
             } else {
-                crate::builtin::add_box(&mut mesh, lo, hi, 0);
+                crate::shapes::add_box(&mut mesh, lo, hi, 0);
             }
         }
         if o.translation != Vec3::ZERO || o.rotation_deg != Vec3::ZERO || o.scale != Vec3::ONE {

@@ -17,7 +17,7 @@ use super::BvhSettings;
 use super::cutouts::{CoverageMask, CutTriangle, Cutouts};
 use crate::bvh_walk::{self, TraceGuards};
 use crate::mesh::Mesh;
-use crate::tracer::RayHit;
+use crate::ray::RayHit;
 
 /// A BVH over some of the mesh's triangles, in one space (world for the static
 /// part, rest space for a moving object).

@@ -41,8 +41,9 @@ use obvhs::ray::Ray as ObRay;
 
 use crate::bvh_walk::{self, TraceGuardCounts, TraceGuards};
 use crate::mesh::Mesh;
+use crate::ray::{Ray, RayHit};
 use crate::scene::Scene;
-use crate::tracer::{Ray, RayHit, RayTracer};
+use crate::tracer::RayTracer;
 use blas::{Blas, pad_m};
 use cutouts::Cutouts;
 pub use gpu_export::{BvhCutTriangle, BvhCutoutMask, BvhExport, TlasExport, TlasInstance};
@@ -351,7 +352,7 @@ mod tests {
     /// A static floor and box, and a box that slides, turns and grows.
     fn moving_scene() -> Scene {
         use crate::animation::{ObjectAnimation, TransformKeyframe};
-        use crate::builtin::{add_box, add_polygon};
+        use crate::shapes::{add_box, add_polygon};
         let mut s = Scene { materials: vec![crate::Material::diffuse("m", Vec3::ONE)], ..Default::default() };
         let floor = [
             Vec3::new(-5.0, 0.0, -5.0),
@@ -425,7 +426,7 @@ mod tests {
     #[test]
     fn directions_with_negative_zeros_hit() {
         let mut mesh = Mesh::default();
-        crate::builtin::add_box(&mut mesh, Vec3::ZERO, Vec3::ONE, 0);
+        crate::shapes::add_box(&mut mesh, Vec3::ZERO, Vec3::ONE, 0);
         let bvh = BvhTracer::build(&mesh, BvhSettings::default());
         for a in [Vec3::X, Vec3::Y, Vec3::Z, Vec3::NEG_X, Vec3::NEG_Y, Vec3::NEG_Z] {
             let origin = Vec3::splat(0.5) + a * 3.0 + Vec3::new(0.13, 0.21, 0.17) * (Vec3::ONE - a.abs());
