@@ -9,9 +9,9 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use glam::Vec3;
-use probegi_scene::{RayTracer, Scene};
+use probegi_scene::{RayHit, RayTracer, Scene};
 
-use probegi_field::backend::{BackendError, ProbeBatchTracer};
+use probegi_field::backend::{BackendError, DeviceField, ProbeBatchTracer};
 use probegi_field::ddgi_field_set::{DdgiFieldSet, HostHits, ProbeRayHit, UpdateStep};
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::probe_ray_gen::probe_ray_directions;
@@ -104,132 +104,15 @@ impl FieldSetUpdate for DdgiFieldSet {
         frame: u32,
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) -> Result<u64, BackendError> {
-        let mut traced = 0;
-        let mut batch_hits = Vec::new();
-        let mut surfels: Vec<Surfel> = Vec::new();
-        let mut hits: Vec<ProbeRayHit> = Vec::new();
-        let mut radiance: Vec<Vec3> = Vec::new();
-        let mut own_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
-        let time = |name: &'static str, t: Instant, ms: &mut BTreeMap<&'static str, f64>| {
-            *ms.entry(name).or_default() += t.elapsed().as_secs_f64() * 1e3
-        };
-        let static_part = tracer.static_part();
-        let mut on_device = false;
-        let device = batch_tracer.and_then(|bt| bt.device_field());
+        let mut driver = SeamDriver::new(scene, tracer, batch_tracer, direct, seed, frame);
         let mut step = self.begin_update(seed, frame);
-        // Any seam error here is a bug of this driver, not of the caller's input.
-        let fail = |e: probegi_field::SeamError| -> UpdateStep {
-            debug_assert!(false, "field set seam: {e}");
-            UpdateStep::Done
-        };
         loop {
-            match step {
-                UpdateStep::TraceRays => {
-                    let t = Instant::now();
-                    let init = self.ray_batch().static_geometry_only();
-                    // A relocation round on a device that runs it: only offsets come back.
-                    if let (Some(bt), HostHits::Relocation) = (device, self.hits_needed_on_host()) {
-                        let plan = self.device_relocation_plan()?;
-                        if let Some(offsets) = bt.relocate(self.ray_batch(), &plan) {
-                            traced += self.ray_batch().len() as u64;
-                            step = self.submit_device_relocation(&offsets?).unwrap_or_else(fail);
-                            time("probe_init", t, &mut own_ms);
-                            continue;
-                        }
-                    }
-                    // A classification round on a device that runs it: 16 bytes a probe come back.
-                    if let (Some(bt), HostHits::Classification) = (device, self.hits_needed_on_host()) {
-                        let plan = self.device_classification_plan()?;
-                        if let Some(results) = bt.classify(self.ray_batch(), &plan) {
-                            drop(plan);
-                            traced += self.ray_batch().len() as u64;
-                            step = self.submit_device_classification(&results?).unwrap_or_else(fail);
-                            time("probe_init", t, &mut own_ms);
-                            continue;
-                        }
-                    }
-                    // The update batch on a device that keeps the field: the hits stay there.
-                    if let (Some(bt), false) = (device, init) {
-                        let usage = (self.hits_needed_on_host() == HostHits::ProbeUsage)
-                            .then(|| self.volumes().iter().map(|v| v.grid.spacing_m.length()).collect::<Vec<_>>());
-                        if let Some(counts) = bt.trace_resident(self.ray_batch(), usage.as_deref()) {
-                            traced += self.ray_batch().len() as u64;
-                            step = self.submit_device_hits(&counts?).unwrap_or_else(fail);
-                            on_device = true;
-                            time("trace", t, &mut own_ms);
-                            continue;
-                        }
-                    }
-                    // Initialisation sees static geometry only: moving objects wake probes instead.
-                    let tr: &dyn RayTracer = if init { static_part.as_deref().unwrap_or(tracer) } else { tracer };
-                    traced += match batch_tracer {
-                        Some(bt) => {
-                            bt.closest_hits(self.ray_batch(), init, &mut batch_hits)?;
-                            if batch_hits.len() != self.ray_batch().len() {
-                                return Err(BackendError::Seam(probegi_field::SeamError::WrongLength {
-                                    what: "the batch tracer's hits",
-                                    expected: self.ray_batch().len(),
-                                    got: batch_hits.len(),
-                                }));
-                            }
-                            surfels_from_hits(scene, self.ray_batch(), &batch_hits, &mut surfels);
-                            self.ray_batch().len() as u64
-                        }
-                        None => trace_probe_batch(scene, tr, self.ray_batch(), &mut surfels),
-                    };
-                    hits.clear();
-                    hits.extend(surfels.iter().map(surfel_hit));
-                    step = self.submit_hits(&hits).unwrap_or_else(fail);
-                    time(if init { "probe_init" } else { "trace" }, t, &mut own_ms);
-                }
-                UpdateStep::ShadeRays if on_device => {
-                    let bt = batch_tracer
-                        .and_then(|bt| bt.device_field())
-                        .ok_or_else(|| BackendError::Unsupported("the device that traced the batch is gone".into()))?;
-                    let plan = self.device_blend_plan()?;
-                    let view = self.view();
-                    let device_ms = bt.shade_and_blend(
-                        self.ray_batch(),
-                        &view,
-                        !self.field_on_device(),
-                        &plan,
-                        self.volumes(),
-                        seed,
-                        frame,
-                    )?;
-                    drop((view, plan));
-                    for (pass, ms) in device_ms {
-                        *own_ms.entry(pass).or_default() += ms;
-                    }
-                    step = self.submit_device_blend().unwrap_or_else(fail);
-                }
-                UpdateStep::ShadeRays => {
-                    let t = Instant::now();
-                    // The host shades (the field's previous light) and blends.
-                    self.sync_host_atlases(batch_tracer)?;
-                    let view = self.view();
-                    let inputs = ProbeShadeInputs {
-                        scene,
-                        direct,
-                        field: &view,
-                        volumes: self.volumes(),
-                        batch: self.ray_batch(),
-                        surfels: &surfels,
-                        seed,
-                        frame,
-                    };
-                    let on_device = batch_tracer
-                        .and_then(|bt| bt.shade_batch(inputs.batch, &view, inputs.volumes, seed, frame, &mut radiance));
-                    match on_device {
-                        Some(result) => result?,
-                        None => traced += shade_probe_rays(&inputs, &mut radiance),
-                    }
-                    drop(view);
-                    time("shade", t, &mut own_ms);
-                    step = self.submit_radiance(&radiance).unwrap_or_else(fail);
-                }
+            step = match step {
+                UpdateStep::TraceRays => driver.trace_rays(self)?,
+                UpdateStep::ShadeRays if driver.on_device => driver.shade_and_blend_on_device(self)?,
+                UpdateStep::ShadeRays => driver.shade_on_host(self)?,
                 UpdateStep::Done => break,
-            }
+            };
         }
         // The set's own passes (ray_gen, blend, border; init and classify bookkeeping
         // are inside the timed trace steps above).
@@ -238,10 +121,207 @@ impl FieldSetUpdate for DdgiFieldSet {
                 *pass_ms.entry(k).or_default() += v;
             }
         }
-        for (k, v) in own_ms {
+        for (k, v) in driver.own_ms {
             *pass_ms.entry(k).or_default() += v;
         }
-        Ok(traced)
+        Ok(driver.traced)
+    }
+}
+
+/// Adds the milliseconds since `t` to pass `name` in `ms`.
+fn time(name: &'static str, t: Instant, ms: &mut BTreeMap<&'static str, f64>) {
+    *ms.entry(name).or_default() += t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Any seam error here is a bug of this driver, not of the caller's input.
+fn seam_bug(e: probegi_field::SeamError) -> UpdateStep {
+    debug_assert!(false, "field set seam: {e}");
+    UpdateStep::Done
+}
+
+/// [`FieldSetUpdate::update_traced_by`] between the seam's steps: the caller's
+/// scene, tracers and shading, the buffers every round reuses, the rays traced
+/// and this driver's own pass milliseconds.
+struct SeamDriver<'u> {
+    scene: &'u Scene,
+    tracer: &'u dyn RayTracer,
+    batch_tracer: Option<&'u dyn ProbeBatchTracer>,
+    direct: &'u DirectLighting<'u>,
+    seed: u64,
+    frame: u32,
+    /// Static geometry alone, for initialisation rounds (`None`: all of it is).
+    static_part: Option<Box<dyn RayTracer + 'u>>,
+    /// The device that keeps the field, when the batch tracer has one.
+    device: Option<&'u dyn DeviceField>,
+    traced: u64,
+    batch_hits: Vec<Option<RayHit>>,
+    surfels: Vec<Surfel>,
+    hits: Vec<ProbeRayHit>,
+    radiance: Vec<Vec3>,
+    own_ms: BTreeMap<&'static str, f64>,
+    /// The update batch was traced on the device, which keeps its hits.
+    on_device: bool,
+}
+
+impl<'u> SeamDriver<'u> {
+    fn new(
+        scene: &'u Scene,
+        tracer: &'u dyn RayTracer,
+        batch_tracer: Option<&'u dyn ProbeBatchTracer>,
+        direct: &'u DirectLighting<'u>,
+        seed: u64,
+        frame: u32,
+    ) -> Self {
+        Self {
+            scene,
+            tracer,
+            batch_tracer,
+            direct,
+            seed,
+            frame,
+            static_part: tracer.static_part(),
+            device: batch_tracer.and_then(|bt| bt.device_field()),
+            traced: 0,
+            batch_hits: Vec::new(),
+            surfels: Vec::new(),
+            hits: Vec::new(),
+            radiance: Vec::new(),
+            own_ms: BTreeMap::new(),
+            on_device: false,
+        }
+    }
+
+    /// `UpdateStep::TraceRays`: one round of the set's batch, on the device when
+    /// it runs that round, else closest hits (from the batch tracer or the CPU)
+    /// into surfels and hits.
+    fn trace_rays(&mut self, set: &mut DdgiFieldSet) -> Result<UpdateStep, BackendError> {
+        let t = Instant::now();
+        let init = set.ray_batch().static_geometry_only();
+        if let Some(step) = self.trace_on_device(set, init, t)? {
+            return Ok(step);
+        }
+        // Initialisation sees static geometry only: moving objects wake probes instead.
+        let tr: &dyn RayTracer = if init { self.static_part.as_deref().unwrap_or(self.tracer) } else { self.tracer };
+        self.traced += match self.batch_tracer {
+            Some(bt) => {
+                bt.closest_hits(set.ray_batch(), init, &mut self.batch_hits)?;
+                if self.batch_hits.len() != set.ray_batch().len() {
+                    return Err(BackendError::Seam(probegi_field::SeamError::WrongLength {
+                        what: "the batch tracer's hits",
+                        expected: set.ray_batch().len(),
+                        got: self.batch_hits.len(),
+                    }));
+                }
+                surfels_from_hits(self.scene, set.ray_batch(), &self.batch_hits, &mut self.surfels);
+                set.ray_batch().len() as u64
+            }
+            None => trace_probe_batch(self.scene, tr, set.ray_batch(), &mut self.surfels),
+        };
+        self.hits.clear();
+        self.hits.extend(self.surfels.iter().map(surfel_hit));
+        let step = set.submit_hits(&self.hits).unwrap_or_else(seam_bug);
+        time(if init { "probe_init" } else { "trace" }, t, &mut self.own_ms);
+        Ok(step)
+    }
+
+    /// The rounds a device that keeps the field runs itself: relocation,
+    /// classification and the update batch. `None` when this round is not one
+    /// of them (or the device leaves it to the host).
+    fn trace_on_device(
+        &mut self,
+        set: &mut DdgiFieldSet,
+        init: bool,
+        t: Instant,
+    ) -> Result<Option<UpdateStep>, BackendError> {
+        // A relocation round on a device that runs it: only offsets come back.
+        if let (Some(bt), HostHits::Relocation) = (self.device, set.hits_needed_on_host()) {
+            let plan = set.device_relocation_plan()?;
+            if let Some(offsets) = bt.relocate(set.ray_batch(), &plan) {
+                self.traced += set.ray_batch().len() as u64;
+                let step = set.submit_device_relocation(&offsets?).unwrap_or_else(seam_bug);
+                time("probe_init", t, &mut self.own_ms);
+                return Ok(Some(step));
+            }
+        }
+        // A classification round on a device that runs it: 16 bytes a probe come back.
+        if let (Some(bt), HostHits::Classification) = (self.device, set.hits_needed_on_host()) {
+            let plan = set.device_classification_plan()?;
+            if let Some(results) = bt.classify(set.ray_batch(), &plan) {
+                drop(plan);
+                self.traced += set.ray_batch().len() as u64;
+                let step = set.submit_device_classification(&results?).unwrap_or_else(seam_bug);
+                time("probe_init", t, &mut self.own_ms);
+                return Ok(Some(step));
+            }
+        }
+        // The update batch on a device that keeps the field: the hits stay there.
+        if let (Some(bt), false) = (self.device, init) {
+            let usage = (set.hits_needed_on_host() == HostHits::ProbeUsage)
+                .then(|| set.volumes().iter().map(|v| v.grid.spacing_m.length()).collect::<Vec<_>>());
+            if let Some(counts) = bt.trace_resident(set.ray_batch(), usage.as_deref()) {
+                self.traced += set.ray_batch().len() as u64;
+                let step = set.submit_device_hits(&counts?).unwrap_or_else(seam_bug);
+                self.on_device = true;
+                time("trace", t, &mut self.own_ms);
+                return Ok(Some(step));
+            }
+        }
+        Ok(None)
+    }
+
+    /// `UpdateStep::ShadeRays` after a trace on the device: it shades and blends
+    /// there; its per-pass milliseconds join this driver's.
+    fn shade_and_blend_on_device(&mut self, set: &mut DdgiFieldSet) -> Result<UpdateStep, BackendError> {
+        let bt = self
+            .batch_tracer
+            .and_then(|bt| bt.device_field())
+            .ok_or_else(|| BackendError::Unsupported("the device that traced the batch is gone".into()))?;
+        let plan = set.device_blend_plan()?;
+        let view = set.view();
+        let device_ms = bt.shade_and_blend(
+            set.ray_batch(),
+            &view,
+            !set.field_on_device(),
+            &plan,
+            set.volumes(),
+            self.seed,
+            self.frame,
+        )?;
+        drop((view, plan));
+        for (pass, ms) in device_ms {
+            *self.own_ms.entry(pass).or_default() += ms;
+        }
+        Ok(set.submit_device_blend().unwrap_or_else(seam_bug))
+    }
+
+    /// `UpdateStep::ShadeRays` after a trace whose surfels are on the host: the
+    /// batch tracer shades when it does, else the CPU; the set blends.
+    fn shade_on_host(&mut self, set: &mut DdgiFieldSet) -> Result<UpdateStep, BackendError> {
+        let (seed, frame) = (self.seed, self.frame);
+        let t = Instant::now();
+        // The host shades (the field's previous light) and blends.
+        set.sync_host_atlases(self.batch_tracer)?;
+        let view = set.view();
+        let inputs = ProbeShadeInputs {
+            scene: self.scene,
+            direct: self.direct,
+            field: &view,
+            volumes: set.volumes(),
+            batch: set.ray_batch(),
+            surfels: &self.surfels,
+            seed,
+            frame,
+        };
+        let on_device = self
+            .batch_tracer
+            .and_then(|bt| bt.shade_batch(inputs.batch, &view, inputs.volumes, seed, frame, &mut self.radiance));
+        match on_device {
+            Some(result) => result?,
+            None => self.traced += shade_probe_rays(&inputs, &mut self.radiance),
+        }
+        drop(view);
+        time("shade", t, &mut self.own_ms);
+        Ok(set.submit_radiance(&self.radiance).unwrap_or_else(seam_bug))
     }
 }
 

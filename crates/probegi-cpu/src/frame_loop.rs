@@ -8,26 +8,29 @@
 //! The direct term (emission + direct light) of a static scene accumulates over
 //! frames; the indirect term is the last frame's, so the image shows the field as
 //! it stands after N updates.
+//!
+//! [`render_frames`] drives a private frame-loop type with one method per step
+//! of ARCHITECTURE.md's per-frame data flow (pose, field update, camera image),
+//! then composes the output; the `camera` pass itself is in `camera_pass`.
+
+mod camera_pass;
 
 use std::collections::BTreeMap;
+use std::ops::ControlFlow::{self, Break, Continue};
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
-use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance};
 use probegi_core::image::Image;
-use probegi_core::rng::{Pcg32, hash_combine};
-use probegi_scene::{Ray, RayTracer, Scene};
-use std::f32::consts::FRAC_1_PI;
+use probegi_scene::{RayTracer, Scene};
 
 use crate::direct::{DirectLighting, DirectSettings};
 use crate::field_update::FieldSetUpdate;
 use crate::gbuffer::{GBuffer, trace_gbuffer};
 use crate::scene_events::SceneChangeDetector;
 use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
-use crate::shading::{ShadingContext, lambert_cos};
-use probegi_core::sh_cascades::ShCascades;
+use camera_pass::{CameraPasses, IndirectField, shade_camera};
 use probegi_core::sh_settings::ShProbeSettings;
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 
@@ -42,21 +45,6 @@ pub enum GiMethod {
     DdgiSet(Box<DdgiFieldSetSettings>),
     /// Screen-space GI with progressive SH probes (seed 001).
     Sh(Box<ShProbeSettings>),
-}
-
-/// Where the camera pass reads indirect irradiance.
-enum IndirectField<'a> {
-    Ddgi(DdgiFieldSetView<'a>),
-    Sh(&'a ShCascades),
-}
-
-impl IndirectField<'_> {
-    fn irradiance(&self, position: Vec3, normal: Vec3, view_dir: Vec3) -> Vec3 {
-        match self {
-            IndirectField::Ddgi(f) => field_set_irradiance(f, position, normal, view_dir),
-            IndirectField::Sh(c) => c.irradiance(position, normal),
-        }
-    }
 }
 
 #[derive(Clone, Debug)]
@@ -203,6 +191,12 @@ impl Accumulation {
     }
 }
 
+/// The camera of frame `f`: its entry of `settings.camera_path`, the path's last
+/// past its end, or the fixed `camera` when there is no path.
+fn frame_camera<'c>(settings: &'c RenderSettings, camera: &'c CameraRays, f: u32) -> &'c CameraRays {
+    settings.camera_path.get(f as usize).or(settings.camera_path.last()).unwrap_or(camera)
+}
+
 /// The DDGI field set a render's settings ask for.
 fn make_field_set(gi: &GiMethod, scene: &Scene, camera_m: Vec3) -> Option<DdgiFieldSet> {
     let bounds = scene.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::ONE));
@@ -232,174 +226,320 @@ pub fn render_frames(
     settings: &RenderSettings,
     mut on_frame_done: impl FnMut(u32, &dyn Fn() -> Image),
 ) -> RenderOutput {
-    let animated = base_scene.is_animated();
-    let moving_camera = settings.camera_path.len() > 1;
-    let camera_at = |f: u32| settings.camera_path.get(f as usize).or(settings.camera_path.last()).unwrap_or(camera);
-    let mut frame_scene = animated.then(|| base_scene.clone());
+    let mut frame_scene = base_scene.is_animated().then(|| base_scene.clone());
     let static_direct = DirectLighting::new(base_scene, tracer, settings.direct);
-    let mut field = make_field_set(&settings.gi, base_scene, camera_at(0).origin_world);
-    let mut sh = match &settings.gi {
-        GiMethod::Sh(s) => Some(ShProbes::new((**s).clone(), base_scene, camera_at(0).origin_world)),
-        _ => None,
-    };
-    // The field carries the sky under DDGI (see `probe_shade`); SH probes carry
-    // emitters and sky with light injection; direct-only renders sample both.
-    let camera_direct = match (&field, &sh) {
-        (Some(_), _) => DirectSettings { direct_sky_samples: 0, ..settings.direct },
-        (_, Some(p)) => p.camera_direct_settings(settings.direct),
-        _ => settings.direct,
-    };
-    let mut acc = Accumulation::new(settings.width as usize * settings.height as usize);
-    let mut stats = RenderStats::default();
-    let mut pass_totals: BTreeMap<&'static str, f64> = BTreeMap::new();
-    let frames = settings.frames.max(1);
-    let mut last_gbuffer: Option<GBuffer> = None;
-    let mut detector = SceneChangeDetector::new();
-    for f in 0..frames {
-        let camera = camera_at(f);
-        if let Some(fs) = frame_scene.as_mut() {
-            fs.set_frame_from(base_scene, f as f32);
+    let mut frame_loop = FrameLoop::new(base_scene, camera, settings);
+    for f in 0..settings.frames.max(1) {
+        let Continue((scene, frame_tracer)) = frame_loop.pose(tracer, &mut frame_scene, f) else { break };
+        let tracer: &dyn RayTracer = frame_tracer.as_deref().unwrap_or(tracer);
+        let frame_direct_lighting = frame_loop.animated.then(|| static_direct.for_frame(scene, tracer));
+        let direct = frame_direct_lighting.as_ref().unwrap_or(&static_direct);
+        let frame = Frame { index: f, scene, tracer, direct, camera: frame_loop.camera_at(f) };
+        if frame_loop.update_field(&frame).is_break() {
+            break;
         }
-        let scene: &Scene = frame_scene.as_ref().unwrap_or(base_scene);
-        if let (true, Some(h)) = (animated, &settings.probe_tracer)
+        if frame_loop.camera_image(&frame, &mut on_frame_done).is_break() {
+            break;
+        }
+    }
+    frame_loop.finish()
+}
+
+/// What one frame's passes read: the frame, the scene posed at it, the tracer
+/// that places its moving objects, its direct lighting and its camera.
+struct Frame<'f> {
+    index: u32,
+    scene: &'f Scene,
+    tracer: &'f dyn RayTracer,
+    direct: &'f DirectLighting<'f>,
+    camera: &'f CameraRays,
+}
+
+/// [`render_frames`] between frames: the settings, the field (DDGI set or SH
+/// probes), the running sums of the image and the statistics. One method per
+/// step of a frame as ARCHITECTURE.md's per-frame data flow reads: [`Self::pose`],
+/// [`Self::update_field`], [`Self::camera_image`]; then [`Self::finish`].
+struct FrameLoop<'a> {
+    base_scene: &'a Scene,
+    camera: &'a CameraRays,
+    settings: &'a RenderSettings,
+    animated: bool,
+    moving_camera: bool,
+    field: Option<DdgiFieldSet>,
+    sh: Option<ShProbes>,
+    /// The camera pass's direct-light settings (see [`FrameLoop::new`]).
+    camera_direct: DirectSettings,
+    acc: Accumulation,
+    stats: RenderStats,
+    pass_totals: BTreeMap<&'static str, f64>,
+    last_gbuffer: Option<GBuffer>,
+    detector: SceneChangeDetector,
+}
+
+impl<'a> FrameLoop<'a> {
+    /// The field the settings ask for, placed around the first frame's camera.
+    fn new(base_scene: &'a Scene, camera: &'a CameraRays, settings: &'a RenderSettings) -> Self {
+        let animated = base_scene.is_animated();
+        let moving_camera = settings.camera_path.len() > 1;
+        let field = make_field_set(&settings.gi, base_scene, frame_camera(settings, camera, 0).origin_world);
+        let sh = match &settings.gi {
+            GiMethod::Sh(s) => {
+                Some(ShProbes::new((**s).clone(), base_scene, frame_camera(settings, camera, 0).origin_world))
+            }
+            _ => None,
+        };
+        // The field carries the sky under DDGI (see `probe_shade`); SH probes carry
+        // emitters and sky with light injection; direct-only renders sample both.
+        let camera_direct = match (&field, &sh) {
+            (Some(_), _) => DirectSettings { direct_sky_samples: 0, ..settings.direct },
+            (_, Some(p)) => p.camera_direct_settings(settings.direct),
+            _ => settings.direct,
+        };
+        Self {
+            base_scene,
+            camera,
+            settings,
+            animated,
+            moving_camera,
+            field,
+            sh,
+            camera_direct,
+            acc: Accumulation::new(settings.width as usize * settings.height as usize),
+            stats: RenderStats::default(),
+            pass_totals: BTreeMap::new(),
+            last_gbuffer: None,
+            detector: SceneChangeDetector::new(),
+        }
+    }
+
+    /// The camera of frame `f` (see [`frame_camera`]).
+    fn camera_at(&self, f: u32) -> &'a CameraRays {
+        frame_camera(self.settings, self.camera, f)
+    }
+
+    /// Poses an animated scene at frame `f` (`frame_scene`, and on the device)
+    /// and places its moving objects for the frame (TLAS rebuild): the frame's
+    /// scene and, when `tracer` places them, the frame's tracer. `Break` when the
+    /// device could not pose the scene.
+    #[allow(clippy::type_complexity)]
+    fn pose<'s>(
+        &mut self,
+        tracer: &'s dyn RayTracer,
+        frame_scene: &'s mut Option<Scene>,
+        f: u32,
+    ) -> ControlFlow<(), (&'s Scene, Option<Box<dyn RayTracer + 's>>)>
+    where
+        'a: 's,
+    {
+        let animated = self.animated;
+        if let Some(fs) = frame_scene.as_mut() {
+            fs.set_frame_from(self.base_scene, f as f32);
+        }
+        let scene: &Scene = frame_scene.as_ref().unwrap_or(self.base_scene);
+        if let (true, Some(h)) = (animated, &self.settings.probe_tracer)
             && let Err(e) = h.0.pose_scene(scene, f as f32)
         {
-            stats.error = Some(format!("frame {f}: posing the scene on the device: {e}"));
-            break;
+            self.stats.error = Some(format!("frame {f}: posing the scene on the device: {e}"));
+            return Break(());
         }
         // Moving geometry: place the instances for this frame (TLAS rebuild).
         let t = Instant::now();
         let frame_tracer = if animated { tracer.at_frame(scene, f as f32) } else { None };
-        let tracer: &dyn RayTracer = frame_tracer.as_deref().unwrap_or(tracer);
         if animated {
-            *pass_totals.entry("instances").or_default() += t.elapsed().as_secs_f64() * 1e3;
+            *self.pass_totals.entry("instances").or_default() += t.elapsed().as_secs_f64() * 1e3;
         }
-        let frame_direct_lighting = animated.then(|| static_direct.for_frame(scene, tracer));
-        let direct = frame_direct_lighting.as_ref().unwrap_or(&static_direct);
-        if let Some(set) = field.as_mut() {
-            stats.probes_scrolled_in += set.set_tracking_target(camera.origin_world) as u64;
-            if animated {
-                stats.probes_woken += detector.observe(scene, set).probes_woken as u64;
+        Continue((scene, frame_tracer))
+    }
+
+    /// The DDGI field update of the frame (`--gi ddgi`): tracking windows follow
+    /// the camera, scene changes reach the set, then one update through the seam.
+    /// `Break` when the probe trace failed.
+    fn update_field(&mut self, frame: &Frame<'_>) -> ControlFlow<()> {
+        let (f, settings) = (frame.index, self.settings);
+        if let Some(set) = self.field.as_mut() {
+            self.stats.probes_scrolled_in += set.set_tracking_target(frame.camera.origin_world) as u64;
+            if self.animated {
+                self.stats.probes_woken += self.detector.observe(frame.scene, set).probes_woken as u64;
             }
             let batch_tracer = settings.probe_tracer.as_ref().map(|h| &*h.0);
-            match set.update_traced_by(scene, tracer, batch_tracer, direct, settings.seed, f, &mut pass_totals) {
-                Ok(rays) => stats.rays_traced += rays,
+            let (scene, tracer, direct, pass_totals) = (frame.scene, frame.tracer, frame.direct, &mut self.pass_totals);
+            match set.update_traced_by(scene, tracer, batch_tracer, direct, settings.seed, f, pass_totals) {
+                Ok(rays) => self.stats.rays_traced += rays,
                 Err(e) => {
-                    stats.error = Some(format!("frame {f}: probe trace: {e}"));
-                    break;
+                    self.stats.error = Some(format!("frame {f}: probe trace: {e}"));
+                    return Break(());
                 }
             }
         }
+        Continue(())
+    }
 
-        // The camera frame on another device, where the backend renders it
-        // (`show_probes` draws on the CPU's G-buffer, so it keeps the CPU camera).
-        if let (Some(h), Some(set), false) = (&settings.probe_tracer, field.as_ref(), settings.show_probes) {
-            let t = Instant::now();
-            let second_order = set.volumes().iter().any(|v| v.settings.glossy_second_order);
-            let view = set.view();
-            let on_device = h.0.camera_frame(
-                camera,
-                &view,
-                set.field_on_device(),
-                camera_direct.direct_area_samples,
-                second_order,
-                f,
-                settings.seed,
-                &mut acc.frame_direct,
-                &mut acc.indirect,
-            );
-            drop(view);
-            match on_device {
-                Some(Ok((surfaces, unlit))) => {
-                    // Primary rays; the device's shadow and glossy rays are not counted.
-                    stats.rays_traced += settings.width as u64 * settings.height as u64;
-                    stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
-                    let camera_moved = moving_camera && f > 0 && camera_at(f - 1) != camera;
-                    acc.add_frame(animated || camera_moved);
-                    acc.check_black(f, scene, surfaces, &mut stats);
-                    *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
-                    acc.finish_frame(f, settings, &mut stats, &mut on_frame_done);
-                    continue;
-                }
-                Some(Err(e)) => {
-                    stats.error = Some(format!("frame {f}: camera frame: {e}"));
-                    break;
-                }
-                None => {}
-            }
+    /// The frame's camera image, on the device where the backend renders it,
+    /// else on the CPU; the frame then goes to `on_frame_done`. `Break` when a
+    /// backend failed.
+    fn camera_image(
+        &mut self,
+        frame: &Frame<'_>,
+        on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
+    ) -> ControlFlow<()> {
+        match self.camera_image_on_device(frame, on_frame_done) {
+            Some(done) => done,
+            None => self.camera_image_on_cpu(frame, on_frame_done),
         }
+    }
 
+    /// The camera frame on another device, where the backend renders it
+    /// (`show_probes` draws on the CPU's G-buffer, so it keeps the CPU camera):
+    /// `None` when the CPU renders it.
+    fn camera_image_on_device(
+        &mut self,
+        frame: &Frame<'_>,
+        on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
+    ) -> Option<ControlFlow<()>> {
+        let (f, camera, settings) = (frame.index, frame.camera, self.settings);
+        let (Some(h), Some(set), false) = (&settings.probe_tracer, self.field.as_ref(), settings.show_probes) else {
+            return None;
+        };
+        let t = Instant::now();
+        let second_order = set.volumes().iter().any(|v| v.settings.glossy_second_order);
+        let view = set.view();
+        let on_device = h.0.camera_frame(
+            camera,
+            &view,
+            set.field_on_device(),
+            self.camera_direct.direct_area_samples,
+            second_order,
+            f,
+            settings.seed,
+            &mut self.acc.frame_direct,
+            &mut self.acc.indirect,
+        );
+        drop(view);
+        match on_device {
+            Some(Ok((surfaces, unlit))) => {
+                // Primary rays; the device's shadow and glossy rays are not counted.
+                self.stats.rays_traced += settings.width as u64 * settings.height as u64;
+                self.stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
+                self.acc.add_frame(self.restarts_direct(frame));
+                self.acc.check_black(f, frame.scene, surfaces, &mut self.stats);
+                *self.pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
+                self.acc.finish_frame(f, settings, &mut self.stats, on_frame_done);
+                Some(Continue(()))
+            }
+            Some(Err(e)) => {
+                self.stats.error = Some(format!("frame {f}: camera frame: {e}"));
+                Some(Break(()))
+            }
+            None => None,
+        }
+    }
+
+    /// The camera image on the CPU: `gbuffer`, then `camera` (reading the DDGI
+    /// set or the SH probes); with SH probes their update from this frame.
+    /// `Break` when the field could not be read back from a device.
+    fn camera_image_on_cpu(
+        &mut self,
+        frame: &Frame<'_>,
+        on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
+    ) -> ControlFlow<()> {
+        let Frame { index: f, scene, tracer, direct, camera } = *frame;
+        let settings = self.settings;
         let t = Instant::now();
         let (gbuffer, rays) = trace_gbuffer(scene, tracer, camera, settings.width, settings.height, f, settings.seed);
-        *pass_totals.entry("gbuffer").or_default() += t.elapsed().as_secs_f64() * 1e3;
-        stats.rays_traced += rays;
+        *self.pass_totals.entry("gbuffer").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        self.stats.rays_traced += rays;
 
-        if let Some(p) = sh.as_mut() {
+        if let Some(p) = self.sh.as_mut() {
             p.recentre(camera.origin_world, camera.forward_world());
         }
         // The CPU camera reads the field's atlases on the host.
-        if let Some(set) = field.as_mut()
+        if let Some(set) = self.field.as_mut()
             && let Err(e) = set.sync_host_atlases(settings.probe_tracer.as_ref().map(|h| &*h.0))
         {
-            stats.error = Some(format!("frame {f}: reading the field back: {e}"));
-            break;
+            self.stats.error = Some(format!("frame {f}: reading the field back: {e}"));
+            return Break(());
         }
-        let indirect_field = match (&field, &sh) {
+        let indirect_field = match (&self.field, &self.sh) {
             (Some(set), _) => Some(IndirectField::Ddgi(set.view())),
             (_, Some(p)) => Some(IndirectField::Sh(&p.cascades)),
             _ => None,
         };
         let indirect_field_used = indirect_field.is_some();
-        let second_order = field.as_ref().is_some_and(|s| s.volumes().iter().any(|v| v.settings.glossy_second_order));
+        let second_order =
+            self.field.as_ref().is_some_and(|s| s.volumes().iter().any(|v| v.settings.glossy_second_order));
         let t = Instant::now();
-        let passes = CameraPasses { scene, tracer, direct, direct_settings: camera_direct, second_order };
+        let passes = CameraPasses { scene, tracer, direct, direct_settings: self.camera_direct, second_order };
         let nonfinite = std::sync::atomic::AtomicU64::new(0);
         let (rays, surfaces, unlit) =
-            shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut acc, &nonfinite);
-        stats.nonfinite_pixels += nonfinite.into_inner();
-        stats.rays_traced += rays;
+            shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut self.acc, &nonfinite);
+        self.stats.nonfinite_pixels += nonfinite.into_inner();
+        self.stats.rays_traced += rays;
         if indirect_field_used {
-            stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
+            self.stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
         }
-        // The direct term restarts when the scene or the camera changed since the
-        // last frame (a camera that holds at its last key accumulates again).
-        let camera_moved = moving_camera && f > 0 && camera_at(f - 1) != camera;
-        acc.add_frame(animated || camera_moved);
-        acc.check_black(f, scene, surfaces, &mut stats);
+        self.acc.add_frame(self.restarts_direct(frame));
+        self.acc.check_black(f, scene, surfaces, &mut self.stats);
 
-        *pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
-        if let Some(p) = sh.as_mut() {
-            stats.rays_traced +=
-                p.update(scene, tracer, direct, settings.direct, camera, &gbuffer, settings.seed, f, &mut pass_totals);
+        *self.pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        if let Some(p) = self.sh.as_mut() {
+            self.stats.rays_traced += p.update(
+                scene,
+                tracer,
+                direct,
+                settings.direct,
+                camera,
+                &gbuffer,
+                settings.seed,
+                f,
+                &mut self.pass_totals,
+            );
         }
-        last_gbuffer = Some(gbuffer);
-        acc.finish_frame(f, settings, &mut stats, &mut on_frame_done);
+        self.last_gbuffer = Some(gbuffer);
+        self.acc.finish_frame(f, settings, &mut self.stats, on_frame_done);
+        Continue(())
     }
-    // The field as the render leaves it, on the host (a device may hold it).
-    if let Some(set) = field.as_mut()
-        && let Err(e) = set.sync_host_atlases(settings.probe_tracer.as_ref().map(|h| &*h.0))
-    {
-        stats.error.get_or_insert(format!("reading the field back after the last frame: {e}"));
+
+    /// Whether the direct term restarts at this frame: the scene or the camera
+    /// changed since the last frame (a camera that holds at its last key
+    /// accumulates again).
+    fn restarts_direct(&self, frame: &Frame<'_>) -> bool {
+        let f = frame.index;
+        let camera_moved = self.moving_camera && f > 0 && self.camera_at(f - 1) != frame.camera;
+        self.animated || camera_moved
     }
-    // Frames that completed (all of them unless a backend failed).
-    let frames = stats.frame_means.len().max(1) as u32;
-    stats.frames = stats.frame_means.len() as u32;
-    stats.pass_ms = pass_totals.into_iter().map(|(k, v)| (k, v / frames as f64)).collect();
-    if let Some(set) = &field {
-        field_stats(set, &mut stats);
-    }
-    if let Some(p) = &sh {
-        stats.probes = Some(p.cascades.probe_count());
-        stats.field_update_ms = Some(SH_UPDATE_PASSES.iter().filter_map(|k| stats.pass_ms.get(k)).sum());
-    }
-    let mut pixels = acc.pixels();
-    if let (true, Some(set), Some(g)) = (settings.show_probes, &field, &last_gbuffer) {
-        for v in set.volumes() {
-            crate::probe_vis::draw_probes(v, camera_at(frames - 1), g, &mut pixels);
+
+    /// After the last frame: the field back on the host, the statistics, the
+    /// composed image (with `show_probes`, the probes drawn on it).
+    fn finish(mut self) -> RenderOutput {
+        let settings = self.settings;
+        // The field as the render leaves it, on the host (a device may hold it).
+        if let Some(set) = self.field.as_mut()
+            && let Err(e) = set.sync_host_atlases(settings.probe_tracer.as_ref().map(|h| &*h.0))
+        {
+            self.stats.error.get_or_insert(format!("reading the field back after the last frame: {e}"));
         }
+        // Frames that completed (all of them unless a backend failed).
+        let frames = self.stats.frame_means.len().max(1) as u32;
+        let last_camera = self.camera_at(frames - 1);
+        let FrameLoop { field, sh, acc, mut stats, pass_totals, last_gbuffer, .. } = self;
+        stats.frames = stats.frame_means.len() as u32;
+        stats.pass_ms = pass_totals.into_iter().map(|(k, v)| (k, v / frames as f64)).collect();
+        if let Some(set) = &field {
+            field_stats(set, &mut stats);
+        }
+        if let Some(p) = &sh {
+            stats.probes = Some(p.cascades.probe_count());
+            stats.field_update_ms = Some(SH_UPDATE_PASSES.iter().filter_map(|k| stats.pass_ms.get(k)).sum());
+        }
+        let mut pixels = acc.pixels();
+        if let (true, Some(set), Some(g)) = (settings.show_probes, &field, &last_gbuffer) {
+            for v in set.volumes() {
+                crate::probe_vis::draw_probes(v, last_camera, g, &mut pixels);
+            }
+        }
+        let image = Image { width: settings.width, height: settings.height, pixels };
+        RenderOutput { image, stats, ddgi: field, sh }
     }
-    let image = Image { width: settings.width, height: settings.height, pixels };
-    RenderOutput { image, stats, ddgi: field, sh }
 }
 
 /// The DDGI figures of `--stats` after the last frame.
@@ -425,139 +565,4 @@ fn field_stats(set: &DdgiFieldSet, stats: &mut RenderStats) {
 /// Mean direct term over the accumulated frames plus the last frame's indirect term.
 fn compose_pixels(direct_sum: &[DVec3], accumulated: u32, indirect: &[Vec3]) -> Vec<Vec3> {
     direct_sum.iter().zip(indirect).map(|(d, i)| (*d / accumulated.max(1) as f64).as_vec3() + *i).collect()
-}
-
-/// What the camera pass shades with.
-struct CameraPasses<'a> {
-    scene: &'a Scene,
-    tracer: &'a dyn RayTracer,
-    direct: &'a DirectLighting<'a>,
-    direct_settings: DirectSettings,
-    /// Second-order glossy from probes on glossy rays' hits.
-    second_order: bool,
-}
-
-/// The camera pass: per pixel, emission + direct light into `direct_out` and, with
-/// a DDGI volume or SH probes, the diffuse albedo/π × the field's irradiance into
-/// `indirect_out`.
-/// Glossy pixels under DDGI also trace one reflected ray per frame (seed 004 §4.4),
-/// importance-sampled from the GGX lobe, whose hit is shaded with direct light plus
-/// probe irradiance (and, with `glossy_second_order`, the hit's own specular
-/// reflection read from the probes); that term accumulates with the direct one.
-/// Area lights' specular highlights then come from reflected rays that hit the
-/// emitter, so the direct NEE uses the diffuse lobe only for them (no double count).
-/// Pixels that see nothing get the sky. Returns rays traced and, for the
-/// `frame_unlit_fraction` statistic, (surface pixels with a diffuse albedo, those
-/// of them that got no indirect light). A pixel whose direct radiance comes out
-/// non-finite is written as 0 and counted in `nonfinite` (never silently).
-fn shade_camera(
-    passes: &CameraPasses<'_>,
-    field: Option<IndirectField<'_>>,
-    gbuffer: &GBuffer,
-    frame: u32,
-    seed: u64,
-    acc: &mut Accumulation,
-    nonfinite: &std::sync::atomic::AtomicU64,
-) -> (u64, usize, usize) {
-    let CameraPasses { scene, tracer, direct, direct_settings, second_order } = *passes;
-    let (direct_out, indirect_out) = (&mut acc.frame_direct, &mut acc.indirect);
-    use rayon::prelude::*;
-    let w = gbuffer.width as usize;
-    let ddgi = match &field {
-        Some(IndirectField::Ddgi(f)) => Some(f),
-        _ => None,
-    };
-    direct_out
-        .par_chunks_mut(w)
-        .zip(indirect_out.par_chunks_mut(w))
-        .enumerate()
-        .map(|(y, (drow, irow))| {
-            let (mut rays, mut surfaces, mut unlit) = (0u64, 0usize, 0usize);
-            for (x, (d, i)) in drow.iter_mut().zip(irow.iter_mut()).enumerate() {
-                let texel = &gbuffer.texels[y * w + x];
-                let Some(sp) = &texel.surface else {
-                    *d = scene.sky_radiance;
-                    *i = Vec3::ZERO;
-                    continue;
-                };
-                let pixel = (y * w + x) as u64;
-                let mut rng = Pcg32::new(hash_combine(&[seed, pixel, frame as u64, 0xd1]), pixel);
-                let ctx = ShadingContext::new(scene, sp, texel.view_dir_world);
-                let glossy_rays = ddgi.is_some() && ctx.bsdf.has_specular();
-                let (l, k) = direct.reflected(sp, &ctx, direct_settings, !glossy_rays, &mut rng);
-                rays += k;
-                let mut l = scene.emitted(sp) + l;
-                if let (true, Some(f)) = (glossy_rays, ddgi)
-                    && let Some((wi_local, weight)) = ctx.bsdf.sample_specular(ctx.wo, rng.next_vec2())
-                {
-                    let wi = ctx.frame.to_world(wi_local);
-                    if lambert_cos(sp, wi).is_some() {
-                        rays += 1;
-                        let ray = Ray::new(sp.spawn_origin(wi), wi);
-                        let lr = match tracer.closest_hit(&ray) {
-                            None => scene.sky_radiance,
-                            Some(hit) => {
-                                let (lh, kh) = shade_glossy_hit(
-                                    scene,
-                                    direct,
-                                    direct_settings,
-                                    f,
-                                    &scene.surface_point(&hit),
-                                    wi,
-                                    second_order,
-                                    &mut rng,
-                                );
-                                rays += kh;
-                                lh
-                            }
-                        };
-                        l += weight * lr;
-                    }
-                }
-                *d = if l.is_finite() {
-                    l
-                } else {
-                    nonfinite.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    Vec3::ZERO
-                };
-                let albedo = ctx.bsdf.diffuse_albedo();
-                let diffuse = albedo.max_element() > 0.0;
-                surfaces += diffuse as usize;
-                *i = match &field {
-                    Some(f) => {
-                        let e = f.irradiance(sp.position, sp.facing_normal(), texel.view_dir_world);
-                        unlit += (diffuse && e.max_element() <= 0.0) as usize;
-                        albedo * FRAC_1_PI * e
-                    }
-                    None => Vec3::ZERO,
-                };
-            }
-            (rays, surfaces, unlit)
-        })
-        .reduce(|| (0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2))
-}
-
-/// Radiance leaving the hit of a camera glossy ray toward the camera surface:
-/// emission + direct light + diffuse albedo/π × probe irradiance, plus with
-/// `second_order` its specular reflection taken from the probes
-/// (`glossy::second_order_specular`).
-#[allow(clippy::too_many_arguments)]
-fn shade_glossy_hit(
-    scene: &Scene,
-    direct: &DirectLighting<'_>,
-    direct_settings: DirectSettings,
-    field: &DdgiFieldSetView<'_>,
-    sp: &probegi_scene::SurfacePoint,
-    ray_dir: Vec3,
-    second_order: bool,
-    rng: &mut Pcg32,
-) -> (Vec3, u64) {
-    let ctx = ShadingContext::new(scene, sp, -ray_dir);
-    let (l, rays) = direct.reflected(sp, &ctx, direct_settings, true, rng);
-    let e = field_set_irradiance(field, sp.position, sp.facing_normal(), -ray_dir);
-    let mut out = scene.emitted(sp) + l + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e;
-    if second_order {
-        out += crate::glossy::second_order_specular(field, sp, &ctx, ray_dir);
-    }
-    (out, rays)
 }
