@@ -150,6 +150,13 @@ impl Default for DdgiVolumeSettings {
 impl DdgiVolumeSettings {
     /// The first setting that makes no sense, as `(field, reason)`.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        self.validate_grid_and_atlas()?;
+        self.validate_update_parameters()
+    }
+
+    /// `validate`'s first checks: the probe grid (counts, spacing, origin,
+    /// bounds), the rays per probe and the atlas tile sizes.
+    fn validate_grid_and_atlas(&self) -> Result<(), (&'static str, String)> {
         let c = self.probe_counts;
         if c.min_element() == 0 {
             return Err(("probe_counts", format!("{c} has a zero count; every axis needs at least 1 probe")));
@@ -188,6 +195,12 @@ impl DdgiVolumeSettings {
                 return Err((name, format!("{v} must be in 1..=64")));
             }
         }
+        Ok(())
+    }
+
+    /// `validate`'s remaining checks: the blend, bias, relocation,
+    /// classification, probe-state and area-light parameters.
+    fn validate_update_parameters(&self) -> Result<(), (&'static str, String)> {
         let unit = |name: &'static str, v: f32| {
             if (0.0..=1.0).contains(&v) { Ok(()) } else { Err((name, format!("{v} must be in [0, 1]"))) }
         };
