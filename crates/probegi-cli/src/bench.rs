@@ -213,23 +213,23 @@ fn bench_volume_settings(
         probe_rays_per_probe: rays,
         ..Default::default()
     };
-    for a in crate::probe_settings(&args.set) {
+    for a in crate::render_settings::probe_settings(&args.set) {
         settings = probegi_scene::scene_file::apply_volume_override(&settings, a)
             .map_err(anyhow::Error::msg)
             .with_context(|| format!("--set {a}"))?;
     }
     settings.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
-    crate::check_memory(probegi_cpu::probe_trace::ddgi_volume_bytes(&settings), "the DDGI volume")?;
+    crate::memory::check_memory(probegi_cpu::probe_trace::ddgi_volume_bytes(&settings), "the DDGI volume")?;
     Ok(settings)
 }
 
 /// The scene of `--scene` with the scene-level `--set` keys applied.
 fn bench_scene(args: &BenchArgs) -> Result<probegi_scene::Scene> {
     let mut scene = load_scene(&args.scene).with_context(|| format!("loading scene {}", args.scene))?;
-    crate::apply_scene_settings(&mut scene, &args.set)?;
+    crate::render_settings::apply_scene_settings(&mut scene, &args.set)?;
     // The last frame any bench mode poses: the frame loop's, or the instancing run's.
     let last_frame = (args.frames as f32 + 1.0).max(7.0 + args.repeat as f32);
-    crate::check_posed_bounds(&scene, last_frame)?;
+    crate::scene_setup::check_posed_bounds(&scene, last_frame)?;
     Ok(scene)
 }
 
@@ -245,7 +245,7 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     if args.rays_per_probe == 0 || args.repeat == 0 {
         bail!("--rays-per-probe and --repeat must be at least 1");
     }
-    crate::check_memory(ray_count * std::mem::size_of::<Ray>() as u64, "bench rays")?;
+    crate::memory::check_memory(ray_count * std::mem::size_of::<Ray>() as u64, "bench rays")?;
     if !(args.aabb_pad_rel.is_finite() && args.aabb_pad_rel >= 0.0 && args.aabb_pad_rel < 0.1) {
         bail!("--aabb-pad-rel {} must be in [0, 0.1)", args.aabb_pad_rel);
     }

@@ -7,7 +7,10 @@
 //! rays, the field query). The host plans the batches and keeps the set's
 //! bookkeeping (probe states, hysteresis ramps).
 
-use anyhow::{Context, Result};
+use std::sync::Arc;
+
+use anyhow::{Context, Result, bail};
+use probegi_cpu::frame_loop::GiMethod;
 use probegi_field::ddgi_field_set::ProbeRayBatch;
 use probegi_scene::{BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
@@ -38,6 +41,25 @@ pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTrac
         }
     }
     Ok(g)
+}
+
+/// The probe tracer of `render --backend`: none on the CPU; with wgpu, the
+/// device with the scene on it (`wgpu_probe_tracer`), which needs DDGI.
+pub fn render_probe_tracer(
+    backend: Backend,
+    gi: &GiMethod,
+    scene: &Scene,
+    bvh: &BvhTracer,
+) -> Result<Option<Arc<WgpuProbeTracer>>> {
+    Ok(match backend {
+        Backend::Cpu => None,
+        Backend::Wgpu => {
+            if !matches!(gi, GiMethod::Ddgi(_) | GiMethod::DdgiSet(_)) {
+                bail!("--backend wgpu runs the DDGI field and its camera frame on the GPU: it needs --gi ddgi");
+            }
+            Some(Arc::new(wgpu_probe_tracer(scene, bvh)?))
+        }
+    })
 }
 
 /// `bench --backend wgpu`: the GPU passes alone on one volume's last update batch,

@@ -128,7 +128,7 @@ pub fn run(args: &LagArgs) -> Result<()> {
     );
     // Each rendered frame of the sequence is kept (RGB f32) for the FLIP curve.
     let frames = args.frames_before as u64 + args.frames_after as u64 + 1;
-    crate::check_memory(frames * args.size as u64 * args.size as u64 * 12 * 2, "the lag sequences")?;
+    crate::memory::check_memory(frames * args.size as u64 * args.size as u64 * 12 * 2, "the lag sequences")?;
     anyhow::ensure!(args.hysteresis.iter().all(|h| (0.0..1.0).contains(h)), "--hysteresis values must lie in [0, 1)");
     let mut volume = load_scene("builtin:door-room")?.volume.context("door room volume")?;
     volume.probe_rays_per_probe = args.rays_per_probe;
