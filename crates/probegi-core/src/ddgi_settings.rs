@@ -19,6 +19,9 @@ pub enum ProbeBiasMode {
     None,
 }
 
+/// One DDGI volume: its probe grid, rays, atlas tiles, blending, bias,
+/// relocation, classification and probe states. Each field's doc gives the
+/// source of its default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DdgiVolumeSettings {
@@ -246,6 +249,7 @@ impl DdgiVolumeSettings {
         Ok(())
     }
 
+    /// Probes in the grid: the product of `probe_counts`.
     pub fn probe_count(&self) -> u64 {
         self.probe_counts.as_u64vec3().element_product()
     }
@@ -266,7 +270,9 @@ pub enum VolumeBlending {
 /// in any order (the set samples them densest or finest first) and how they blend.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct DdgiFieldSetSettings {
+    /// Each volume's settings, in any order.
     pub volumes: Vec<DdgiVolumeSettings>,
+    /// How the set samples and blends its volumes.
     pub blending: VolumeBlending,
 }
 
