@@ -10,10 +10,15 @@
 use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_cpu::frame_loop::GiMethod;
 use probegi_field::ddgi_field_set::ProbeRayBatch;
+use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_scene::{BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
+use probegi_wgpu::bvh_trace::GpuRayBatch;
+use probegi_wgpu::gpu_timer::GpuTimer;
+use probegi_wgpu::probe_blend::{BlendBindings, BlendFrame, GpuProbeBlend, GpuVolumeAtlases, PASS_NAMES};
 
 /// Which device traces the probe rays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -77,35 +82,15 @@ pub fn time_gpu_passes(
     repeat: u32,
 ) -> Result<serde_json::Value> {
     let volume = &set.volumes()[0];
-    use probegi_wgpu::gpu_timer::GpuTimer;
-    use probegi_wgpu::probe_blend::{BlendFrame, GpuProbeBlend, GpuVolumeAtlases, PASS_NAMES};
     let ctx = &gpu.ctx;
     let s = &volume.settings;
-    let probes = volume.grid.probe_count();
     let n = s.probe_rays_per_probe as usize;
     // The batch's probes (their relocated origins), their rays generated on the device.
     let origins: Vec<glam::Vec3> = batch.probes.iter().map(|p| batch.origins_m[p.first_ray as usize]).collect();
     let max_m = batch.max_distances_m.first().copied().unwrap_or(f32::INFINITY);
     let rotation = probegi_field::probe_ray_gen::probe_ray_rotation(volume.stream_seed(1), 1);
     let ray_gen = probegi_wgpu::probe_ray_gen::GpuProbeRayGen::new(ctx);
-    let atlases = GpuVolumeAtlases::new(ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
-    atlases.upload(ctx, &volume.irradiance, &volume.distance);
-    let dirs: Vec<glam::Vec3> = batch.directions.iter().take(n).copied().collect();
-    let radiance = vec![glam::Vec3::splat(0.5); probes * n];
-    let distance: Vec<f32> = (0..probes * n).map(|i| 1.0 + (i % 7) as f32).collect();
-    let hysteresis = vec![Some(s.probe_hysteresis); probes];
-    let frame = BlendFrame {
-        settings: s,
-        ray_dirs: &dirs,
-        ray_radiance: &radiance,
-        ray_distance: &distance,
-        probe_hysteresis: &hysteresis,
-        irradiance_scale: 1.0,
-        visibility_scale: 1.0,
-        distance_clamp_m: volume.distance_clamp_m(),
-    };
-    let blend = GpuProbeBlend::new(ctx);
-    let bindings = blend.prepare(ctx, &atlases, &frame)?;
+    let (_atlases, blend, bindings) = blend_pass(ctx, volume, batch)?;
     let timer = GpuTimer::new(ctx, 7);
     let names = ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], PASS_NAMES[3], "shade", "ray_gen"];
     let traced = ray_gen.generate(ctx, &gpu.trace, &origins, max_m, rotation, n as u32, Some((&timer, 6)))?;
@@ -147,6 +132,54 @@ pub fn time_gpu_passes(
             });
         }
     }
+    Ok(gpu_passes_json(gpu, s, &traced, names, best, wall_trace_ms))
+}
+
+/// The blend and border passes of `time_gpu_passes` ready to record: `volume`'s
+/// atlases on the device, and every one of its probes blending the rays of
+/// `batch`'s directions with made-up radiance and distances (the passes' cost
+/// does not depend on them). The atlases are returned so that they outlive the
+/// bindings.
+fn blend_pass(
+    ctx: &GpuContext,
+    volume: &DdgiVolume,
+    batch: &ProbeRayBatch,
+) -> Result<(GpuVolumeAtlases, GpuProbeBlend, BlendBindings)> {
+    let s = &volume.settings;
+    let probes = volume.grid.probe_count();
+    let n = s.probe_rays_per_probe as usize;
+    let atlases = GpuVolumeAtlases::new(ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
+    atlases.upload(ctx, &volume.irradiance, &volume.distance);
+    let dirs: Vec<glam::Vec3> = batch.directions.iter().take(n).copied().collect();
+    let radiance = vec![glam::Vec3::splat(0.5); probes * n];
+    let distance: Vec<f32> = (0..probes * n).map(|i| 1.0 + (i % 7) as f32).collect();
+    let hysteresis = vec![Some(s.probe_hysteresis); probes];
+    let frame = BlendFrame {
+        settings: s,
+        ray_dirs: &dirs,
+        ray_radiance: &radiance,
+        ray_distance: &distance,
+        probe_hysteresis: &hysteresis,
+        irradiance_scale: 1.0,
+        visibility_scale: 1.0,
+        distance_clamp_m: volume.distance_clamp_m(),
+    };
+    let blend = GpuProbeBlend::new(ctx);
+    let bindings = blend.prepare(ctx, &atlases, &frame)?;
+    Ok((atlases, blend, bindings))
+}
+
+/// The report of `time_gpu_passes`: the best time of each pass (timestamp
+/// queries; the trace's wall clock where the adapter has none), throughput over
+/// the rays of `traced`, and device memory per probe and per probe ray.
+fn gpu_passes_json(
+    gpu: &WgpuProbeTracer,
+    s: &DdgiVolumeSettings,
+    traced: &GpuRayBatch,
+    names: [&str; 7],
+    best: Option<Vec<f64>>,
+    wall_trace_ms: f64,
+) -> serde_json::Value {
     let ray_count = traced.ray_count as f64;
     let (pass_ms, source) = match &best {
         Some(ms) => (
@@ -167,7 +200,7 @@ pub fn time_gpu_passes(
     let atlas_bytes_per_probe = (probegi_core::probe_atlas::tile_texel_count(s.probe_irradiance_texels) * 16
         + probegi_core::probe_atlas::tile_texel_count(s.probe_distance_texels) * 8)
         as f64;
-    Ok(serde_json::json!({
+    serde_json::json!({
         "adapter": gpu.adapter_name(),
         "pass_ms": pass_ms,
         "pass_ms_source": source,
@@ -183,5 +216,5 @@ pub fn time_gpu_passes(
         "bvh_mib": gpu.bvh.bytes() as f64 / (1u64 << 20) as f64,
         "device_bytes_per_probe": atlas_bytes_per_probe,
         "device_bytes_per_probe_ray": traced.bytes() as f64 / ray_count.max(1.0),
-    }))
+    })
 }
