@@ -3,17 +3,28 @@
 //! spread over the scene bounds, the workload of DDGI's trace pass. Any-hit rays
 //! are the same rays limited to one grid cell (a typical visibility query).
 
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_core::sampling::sample_uniform_sphere;
-use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, load_scene};
+use probegi_cpu::field_update::FieldSetUpdate;
+use probegi_cpu::frame_loop::FIELD_UPDATE_PASSES;
+use probegi_cpu::probe_trace::ddgi_volume_bytes;
+use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_field::ddgi_field_set::DdgiFieldSet;
+use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene, load_scene};
 use rayon::prelude::*;
 use serde_json::json;
 
 use crate::args::BenchArgs;
+use crate::gpu_backend::WgpuProbeTracer;
+use crate::memory::check_memory;
+use crate::render_settings::{apply_scene_settings, probe_settings};
+use crate::scene_setup::check_posed_bounds;
 
 pub fn run(args: &BenchArgs) -> Result<serde_json::Value> {
     match args.gi {
@@ -31,7 +42,6 @@ pub fn run(args: &BenchArgs) -> Result<serde_json::Value> {
 fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
     use probegi_core::camera::CameraRays;
     use probegi_core::sh_settings::ShProbeSettings;
-    use probegi_cpu::DirectSettings;
     use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 
     if args.frames == 0 {
@@ -102,14 +112,6 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
 /// (seed 000 Table 2), with the bare closest-hit rate of the same rays measured
 /// in the same run.
 fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
-    use probegi_cpu::field_update::FieldSetUpdate;
-    use probegi_cpu::frame_loop::FIELD_UPDATE_PASSES;
-    use probegi_cpu::probe_trace::ddgi_volume_bytes;
-    use probegi_cpu::{DirectLighting, DirectSettings};
-    use probegi_field::ddgi_field_set::DdgiFieldSet;
-    use probegi_field::ddgi_volume::DdgiVolume;
-    use std::collections::BTreeMap;
-
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
@@ -124,67 +126,11 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
         crate::gpu_backend::Backend::Wgpu => Some(crate::gpu_backend::wgpu_probe_tracer(&scene, &bvh)?),
     };
     let batch_tracer = gpu.as_ref().map(|g| g as &dyn probegi_field::ProbeBatchTracer);
+    let sweep = DdgiSweep { args, scene: &scene, bvh: &bvh, direct: &direct, bounds, gpu: gpu.as_ref(), batch_tracer };
     let mut rows = Vec::new();
     for grid in &grids {
         for &rays in &ray_counts {
-            let settings = bench_volume_settings(args, *grid, rays)?;
-            let mut set = DdgiFieldSet::single(DdgiVolume::new(settings.clone(), bounds));
-            let mut warmup = BTreeMap::new();
-            set.update_traced_by(&scene, &bvh, batch_tracer, &direct, args.seed, 0, &mut warmup)
-                .map_err(anyhow::Error::msg)?;
-            let init_ms = warmup.get("probe_init").copied().unwrap_or(0.0);
-            let mut pass_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
-            for f in 1..=args.frames {
-                set.update_traced_by(&scene, &bvh, batch_tracer, &direct, args.seed, f, &mut pass_ms)
-                    .map_err(anyhow::Error::msg)?;
-            }
-            // After the timed frames: the field back on the host, as the update left
-            // it (the GPU passes alone below start from it).
-            set.sync_host_atlases(batch_tracer).map_err(anyhow::Error::msg)?;
-            let volume = &set.volumes()[0];
-            for v in pass_ms.values_mut() {
-                *v /= args.frames as f64;
-            }
-            let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| pass_ms.get(p)).sum();
-            let n = volume.rays_per_frame() as f64;
-            // The same rays, bare: the last update batch (its origins, directions and
-            // max distances), closest hit only, no surfel. Both rates divide by the
-            // rays of that batch, so they compare the same work.
-            let batch = set.ray_batch();
-            let t = Instant::now();
-            let hits: usize = (0..batch.len())
-                .into_par_iter()
-                .filter(|&i| {
-                    let ray = Ray::segment(batch.origins_m[i], batch.directions[i], batch.max_distances_m[i]);
-                    bvh.closest_hit(&ray).is_some()
-                })
-                .count();
-            let bare_s = t.elapsed().as_secs_f64();
-            let bare_rays = batch.len() as f64;
-            let get = |k: &str| pass_ms.get(k).copied().unwrap_or(0.0);
-            let gpu_row = match &gpu {
-                Some(g) => crate::gpu_backend::time_gpu_passes(g, &set, batch, args.repeat.max(1))?,
-                None => json!(null),
-            };
-            rows.push(json!({
-                "probes": grid,
-                "probe_count": volume.grid.probe_count(),
-                "probe_states": volume.state_counts(),
-                "active_probes": volume.active_probe_count(),
-                "probe_init_ms": init_ms,
-                "volume_mib": ddgi_volume_bytes(&settings) as f64 / (1u64 << 20) as f64,
-                "rays_per_probe": rays,
-                "rays_per_frame": n as u64,
-                "bare_rays": bare_rays as u64,
-                "pass_ms": pass_ms,
-                "field_update_ms": update_ms,
-                "field_update_mrays_per_s": n / (update_ms * 1e-3) / 1e6,
-                "bare_closest_hit_mrays_per_s": bare_rays / bare_s / 1e6,
-                "bare_hit_fraction": hits as f64 / bare_rays,
-                "trace_mrays_per_s": n / (get("trace") * 1e-3) / 1e6,
-                "shade_blend_border_over_trace": (get("shade") + get("blend") + get("border")) / get("trace"),
-                "gpu": gpu_row,
-            }));
+            rows.push(sweep.row(*grid, rays)?);
         }
     }
     Ok(json!({
@@ -201,6 +147,86 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     }))
 }
 
+/// What every configuration of a `bench --gi ddgi` sweep shares: the scene,
+/// its BVH and direct light, and the GPU where `--backend wgpu` traces.
+#[derive(Clone, Copy)]
+struct DdgiSweep<'a> {
+    args: &'a BenchArgs,
+    scene: &'a Scene,
+    bvh: &'a BvhTracer,
+    direct: &'a DirectLighting<'a>,
+    bounds: (Vec3, Vec3),
+    gpu: Option<&'a WgpuProbeTracer>,
+    batch_tracer: Option<&'a dyn probegi_field::ProbeBatchTracer>,
+}
+
+impl DdgiSweep<'_> {
+    /// One row of the sweep: a volume of `grid` probes and `rays` rays per probe
+    /// initialised, then `--frames` field updates timed per pass, the bare
+    /// closest-hit rate of the last update batch, and the GPU passes alone.
+    fn row(&self, grid: [u32; 3], rays: u32) -> Result<serde_json::Value> {
+        let DdgiSweep { args, scene, bvh, direct, bounds, gpu, batch_tracer } = *self;
+        let settings = bench_volume_settings(args, grid, rays)?;
+        let mut set = DdgiFieldSet::single(DdgiVolume::new(settings.clone(), bounds));
+        let mut warmup = BTreeMap::new();
+        set.update_traced_by(scene, bvh, batch_tracer, direct, args.seed, 0, &mut warmup)
+            .map_err(anyhow::Error::msg)?;
+        let init_ms = warmup.get("probe_init").copied().unwrap_or(0.0);
+        let mut pass_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
+        for f in 1..=args.frames {
+            set.update_traced_by(scene, bvh, batch_tracer, direct, args.seed, f, &mut pass_ms)
+                .map_err(anyhow::Error::msg)?;
+        }
+        // After the timed frames: the field back on the host, as the update left
+        // it (the GPU passes alone below start from it).
+        set.sync_host_atlases(batch_tracer).map_err(anyhow::Error::msg)?;
+        let volume = &set.volumes()[0];
+        for v in pass_ms.values_mut() {
+            *v /= args.frames as f64;
+        }
+        let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| pass_ms.get(p)).sum();
+        let n = volume.rays_per_frame() as f64;
+        // The same rays, bare: the last update batch (its origins, directions and
+        // max distances), closest hit only, no surfel. Both rates divide by the
+        // rays of that batch, so they compare the same work.
+        let batch = set.ray_batch();
+        let t = Instant::now();
+        let hits: usize = (0..batch.len())
+            .into_par_iter()
+            .filter(|&i| {
+                let ray = Ray::segment(batch.origins_m[i], batch.directions[i], batch.max_distances_m[i]);
+                bvh.closest_hit(&ray).is_some()
+            })
+            .count();
+        let bare_s = t.elapsed().as_secs_f64();
+        let bare_rays = batch.len() as f64;
+        let get = |k: &str| pass_ms.get(k).copied().unwrap_or(0.0);
+        let gpu_row = match &gpu {
+            Some(g) => crate::gpu_backend::time_gpu_passes(g, &set, batch, args.repeat.max(1))?,
+            None => json!(null),
+        };
+        Ok(json!({
+            "probes": grid,
+            "probe_count": volume.grid.probe_count(),
+            "probe_states": volume.state_counts(),
+            "active_probes": volume.active_probe_count(),
+            "probe_init_ms": init_ms,
+            "volume_mib": ddgi_volume_bytes(&settings) as f64 / (1u64 << 20) as f64,
+            "rays_per_probe": rays,
+            "rays_per_frame": n as u64,
+            "bare_rays": bare_rays as u64,
+            "pass_ms": pass_ms,
+            "field_update_ms": update_ms,
+            "field_update_mrays_per_s": n / (update_ms * 1e-3) / 1e6,
+            "bare_closest_hit_mrays_per_s": bare_rays / bare_s / 1e6,
+            "bare_hit_fraction": hits as f64 / bare_rays,
+            "trace_mrays_per_s": n / (get("trace") * 1e-3) / 1e6,
+            "shade_blend_border_over_trace": (get("shade") + get("blend") + get("border")) / get("trace"),
+            "gpu": gpu_row,
+        }))
+    }
+}
+
 /// DDGI settings of one bench configuration: defaults, the grid and ray count,
 /// then every `--set`; validated and checked against available memory.
 fn bench_volume_settings(
@@ -213,23 +239,23 @@ fn bench_volume_settings(
         probe_rays_per_probe: rays,
         ..Default::default()
     };
-    for a in crate::render_settings::probe_settings(&args.set) {
+    for a in probe_settings(&args.set) {
         settings = probegi_scene::scene_file::apply_volume_override(&settings, a)
             .map_err(anyhow::Error::msg)
             .with_context(|| format!("--set {a}"))?;
     }
     settings.validate().map_err(|(f, why)| anyhow::anyhow!("volume setting {f}: {why}"))?;
-    crate::memory::check_memory(probegi_cpu::probe_trace::ddgi_volume_bytes(&settings), "the DDGI volume")?;
+    check_memory(probegi_cpu::probe_trace::ddgi_volume_bytes(&settings), "the DDGI volume")?;
     Ok(settings)
 }
 
 /// The scene of `--scene` with the scene-level `--set` keys applied.
 fn bench_scene(args: &BenchArgs) -> Result<probegi_scene::Scene> {
     let mut scene = load_scene(&args.scene).with_context(|| format!("loading scene {}", args.scene))?;
-    crate::render_settings::apply_scene_settings(&mut scene, &args.set)?;
+    apply_scene_settings(&mut scene, &args.set)?;
     // The last frame any bench mode poses: the frame loop's, or the instancing run's.
     let last_frame = (args.frames as f32 + 1.0).max(7.0 + args.repeat as f32);
-    crate::scene_setup::check_posed_bounds(&scene, last_frame)?;
+    check_posed_bounds(&scene, last_frame)?;
     Ok(scene)
 }
 
@@ -245,7 +271,7 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     if args.rays_per_probe == 0 || args.repeat == 0 {
         bail!("--rays-per-probe and --repeat must be at least 1");
     }
-    crate::memory::check_memory(ray_count * std::mem::size_of::<Ray>() as u64, "bench rays")?;
+    check_memory(ray_count * std::mem::size_of::<Ray>() as u64, "bench rays")?;
     if !(args.aabb_pad_rel.is_finite() && args.aabb_pad_rel >= 0.0 && args.aabb_pad_rel < 0.1) {
         bail!("--aabb-pad-rel {} must be in [0, 0.1)", args.aabb_pad_rel);
     }
@@ -254,45 +280,12 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     let load_ms = t.elapsed().as_secs_f64() * 1e3;
     let (lo, hi) = scene.bounds().context("scene has no geometry")?;
 
-    let mut build_ms = f64::INFINITY;
-    let mut bvh = None;
-    for _ in 0..args.repeat.min(3) {
-        let b = BvhTracer::for_scene(&scene, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
-        build_ms = build_ms.min(b.build_time.as_secs_f64() * 1e3);
-        bvh = Some(b);
-    }
-    let bvh = bvh.context("no BVH built")?;
+    let (bvh, build_ms) = best_bvh_build(args, &scene)?;
 
-    let [nx, ny, nz] = args.probes;
-    let cell = (hi - lo) / Vec3::new(nx as f32, ny as f32, nz as f32);
-    let rays: Vec<Ray> = (0..nx * ny * nz)
-        .into_par_iter()
-        .flat_map_iter(|p| {
-            let (ix, iy, iz) = (p % nx, (p / nx) % ny, p / (nx * ny));
-            let origin = lo + cell * (Vec3::new(ix as f32, iy as f32, iz as f32) + 0.5);
-            let mut rng = Pcg32::new(hash_combine(&[args.seed, p as u64]), p as u64);
-            (0..args.rays_per_probe).map(move |_| Ray::new(origin, sample_uniform_sphere(rng.next_vec2())))
-        })
-        .collect();
+    let (rays, cell) = probe_grid_rays(args, lo, hi);
     let any_hit_len = cell.min_element();
 
-    let time_best = |f: &(dyn Fn() -> u64 + Sync)| {
-        let mut best = f64::INFINITY;
-        let mut hits = 0;
-        for _ in 0..args.repeat {
-            let t = Instant::now();
-            hits = f();
-            best = best.min(t.elapsed().as_secs_f64());
-        }
-        (best, hits)
-    };
-    let rates = |bvh: &BvhTracer| {
-        let (closest_s, closest_hits) =
-            time_best(&|| rays.par_iter().filter(|r| bvh.closest_hit(r).is_some()).count() as u64);
-        let (any_s, any_hits) =
-            time_best(&|| rays.par_iter().filter(|r| bvh.occluded(&Ray { t_max: any_hit_len, ..**r })).count() as u64);
-        (closest_s, closest_hits, any_s, any_hits)
-    };
+    let rates = |bvh: &BvhTracer| hit_rates(bvh, &rays, any_hit_len, args.repeat);
     let (closest_s, closest_hits, any_s, any_hits) = rates(&bvh);
     let n = rays.len() as f64;
     // Alpha testing's cost: the same rays through the same triangles, all opaque.
@@ -335,6 +328,60 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
         "instancing": if args.moving_objects > 0 { bench_instancing(args, scene, &rays)? } else { json!(null) },
         "peak_rss_mib": peak_rss_mib(),
     }))
+}
+
+/// The BVH of `scene`, built `--repeat` times (at most 3), and the best build time (ms).
+fn best_bvh_build(args: &BenchArgs, scene: &Scene) -> Result<(BvhTracer, f64)> {
+    let mut build_ms = f64::INFINITY;
+    let mut bvh = None;
+    for _ in 0..args.repeat.min(3) {
+        let b = BvhTracer::for_scene(scene, BvhSettings { bvh_aabb_pad_rel: args.aabb_pad_rel });
+        build_ms = build_ms.min(b.build_time.as_secs_f64() * 1e3);
+        bvh = Some(b);
+    }
+    let bvh = bvh.context("no BVH built")?;
+    Ok((bvh, build_ms))
+}
+
+/// The bench rays: `--rays-per-probe` uniformly random directions from the
+/// centre of each cell of a `--probes` grid over `[lo, hi]`, seeded per probe;
+/// and the size of a cell.
+fn probe_grid_rays(args: &BenchArgs, lo: Vec3, hi: Vec3) -> (Vec<Ray>, Vec3) {
+    let [nx, ny, nz] = args.probes;
+    let cell = (hi - lo) / Vec3::new(nx as f32, ny as f32, nz as f32);
+    let rays: Vec<Ray> = (0..nx * ny * nz)
+        .into_par_iter()
+        .flat_map_iter(|p| {
+            let (ix, iy, iz) = (p % nx, (p / nx) % ny, p / (nx * ny));
+            let origin = lo + cell * (Vec3::new(ix as f32, iy as f32, iz as f32) + 0.5);
+            let mut rng = Pcg32::new(hash_combine(&[args.seed, p as u64]), p as u64);
+            (0..args.rays_per_probe).map(move |_| Ray::new(origin, sample_uniform_sphere(rng.next_vec2())))
+        })
+        .collect();
+    (rays, cell)
+}
+
+/// The best of `repeat` runs of `f` (seconds), and what its last run returned.
+fn time_best(repeat: u32, f: &(dyn Fn() -> u64 + Sync)) -> (f64, u64) {
+    let mut best = f64::INFINITY;
+    let mut hits = 0;
+    for _ in 0..repeat {
+        let t = Instant::now();
+        hits = f();
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    (best, hits)
+}
+
+/// Closest-hit and any-hit (rays cut to `any_hit_len`) over `rays` through
+/// `bvh`: `(closest_s, closest_hits, any_s, any_hits)`, best of `repeat`.
+fn hit_rates(bvh: &BvhTracer, rays: &[Ray], any_hit_len: f32, repeat: u32) -> (f64, u64, f64, u64) {
+    let (closest_s, closest_hits) =
+        time_best(repeat, &|| rays.par_iter().filter(|r| bvh.closest_hit(r).is_some()).count() as u64);
+    let (any_s, any_hits) = time_best(repeat, &|| {
+        rays.par_iter().filter(|r| bvh.occluded(&Ray { t_max: any_hit_len, ..**r })).count() as u64
+    });
+    (closest_s, closest_hits, any_s, any_hits)
 }
 
 /// `--moving-objects K`: K boxes (a twentieth of the scene's extent) orbiting the
