@@ -466,92 +466,93 @@ impl Loader<'_> {
 
     /// Reads every animation's TRS channels into `self.channels`.
     fn read_animations(&mut self, doc: &gltf::Document) -> Result<()> {
-        use gltf::animation::util::ReadOutputs;
-        use gltf::animation::{Interpolation, Property};
         for anim in doc.animations() {
             for ch in anim.channels() {
-                let node = ch.target().node().index();
-                let what = format!("animation {} channel {}", anim.index(), ch.index());
-                {
-                    use gltf::accessor::{DataType as T, Dimensions as D};
-                    let sampler = ch.sampler();
-                    check_accessor(self.path, &self.buffers, &sampler.input(), &[(T::F32, D::Scalar)], &what)?;
-                    let out: &[(T, D)] = match ch.target().property() {
-                        Property::Rotation => &[
-                            (T::F32, D::Vec4),
-                            (T::I8, D::Vec4),
-                            (T::U8, D::Vec4),
-                            (T::I16, D::Vec4),
-                            (T::U16, D::Vec4),
-                        ],
-                        Property::MorphTargetWeights => &[
-                            (T::F32, D::Scalar),
-                            (T::I8, D::Scalar),
-                            (T::U8, D::Scalar),
-                            (T::I16, D::Scalar),
-                            (T::U16, D::Scalar),
-                        ],
-                        _ => &[(T::F32, D::Vec3)],
-                    };
-                    check_accessor(self.path, &self.buffers, &sampler.output(), out, &what)?;
-                }
-                let buffers = &self.buffers;
-                let reader = ch.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
-                let times: Vec<f32> =
-                    reader.read_inputs().ok_or_else(|| self.err(format!("{what}: no input times")))?.collect();
-                if times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| w[1] < w[0]) {
-                    return Err(self.err(format!("{what}: key times must be finite and increasing")));
-                }
-                let interpolation = ch.sampler().interpolation();
-                if interpolation == Interpolation::CubicSpline {
-                    self.scene.warnings.push(format!(
-                        "{}: {what}: CUBICSPLINE interpolated linearly between its key values",
-                        self.path.display()
-                    ));
-                }
-                // CUBICSPLINE outputs are (in-tangent, value, out-tangent) triples.
-                let pick = |k: usize| if interpolation == Interpolation::CubicSpline { 3 * k + 1 } else { k };
-                let outputs = reader.read_outputs().ok_or_else(|| self.err(format!("{what}: no outputs")))?;
-                let keys_of = |values: Vec<[f32; 4]>| -> Option<Vec<(f32, [f32; 4])>> {
-                    let mut keys = Vec::new();
-                    for (k, &t) in times.iter().enumerate() {
-                        let v = *values.get(pick(k))?;
-                        if interpolation == Interpolation::Step
-                            && let Some(&(_, prev)) = keys.last()
-                        {
-                            // Hold the previous value up to just before this key.
-                            keys.push(((t - 1e-4).max(0.0), prev));
-                        }
-                        keys.push((t, v));
-                    }
-                    Some(keys)
-                };
-                let path = self.path;
-                let short = || SceneError::Gltf {
-                    path: path.to_path_buf(),
-                    message: format!("{what}: fewer output values than key times"),
-                };
-                let entry = self.channels.entry(node).or_default();
-                match (ch.target().property(), outputs) {
-                    (Property::Translation, ReadOutputs::Translations(it)) => {
-                        let keys = keys_of(it.map(|v| [v[0], v[1], v[2], 0.0]).collect()).ok_or_else(short)?;
-                        entry.translation = keys.into_iter().map(|(t, v)| (t, Vec3::new(v[0], v[1], v[2]))).collect();
-                    }
-                    (Property::Rotation, ReadOutputs::Rotations(it)) => {
-                        let keys = keys_of(it.into_f32().collect()).ok_or_else(short)?;
-                        entry.rotation = keys.into_iter().map(|(t, v)| (t, Quat::from_array(v).normalize())).collect();
-                    }
-                    (Property::Scale, ReadOutputs::Scales(it)) => {
-                        let keys = keys_of(it.map(|v| [v[0], v[1], v[2], 0.0]).collect()).ok_or_else(short)?;
-                        entry.scale = keys.into_iter().map(|(t, v)| (t, Vec3::new(v[0], v[1], v[2]))).collect();
-                    }
-                    _ => self
-                        .scene
-                        .warnings
-                        .push(format!("{}: {what}: morph-target weights are not animated", path.display())),
-                }
+                self.read_channel(&anim, &ch)?;
             }
         }
+        Ok(())
+    }
+
+    /// Reads one animation channel's key times and values into `self.channels`.
+    fn read_channel(&mut self, anim: &gltf::Animation<'_>, ch: &gltf::animation::Channel<'_>) -> Result<()> {
+        use gltf::animation::util::ReadOutputs;
+        use gltf::animation::{Interpolation, Property};
+        let node = ch.target().node().index();
+        let what = format!("animation {} channel {}", anim.index(), ch.index());
+        self.check_channel_accessors(ch, &what)?;
+        let buffers = &self.buffers;
+        let reader = ch.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+        let times: Vec<f32> =
+            reader.read_inputs().ok_or_else(|| self.err(format!("{what}: no input times")))?.collect();
+        if times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| w[1] < w[0]) {
+            return Err(self.err(format!("{what}: key times must be finite and increasing")));
+        }
+        let interpolation = ch.sampler().interpolation();
+        if interpolation == Interpolation::CubicSpline {
+            self.scene.warnings.push(format!(
+                "{}: {what}: CUBICSPLINE interpolated linearly between its key values",
+                self.path.display()
+            ));
+        }
+        // CUBICSPLINE outputs are (in-tangent, value, out-tangent) triples.
+        let pick = |k: usize| if interpolation == Interpolation::CubicSpline { 3 * k + 1 } else { k };
+        let outputs = reader.read_outputs().ok_or_else(|| self.err(format!("{what}: no outputs")))?;
+        let keys_of = |values: Vec<[f32; 4]>| -> Option<Vec<(f32, [f32; 4])>> {
+            let mut keys = Vec::new();
+            for (k, &t) in times.iter().enumerate() {
+                let v = *values.get(pick(k))?;
+                if interpolation == Interpolation::Step
+                    && let Some(&(_, prev)) = keys.last()
+                {
+                    // Hold the previous value up to just before this key.
+                    keys.push(((t - 1e-4).max(0.0), prev));
+                }
+                keys.push((t, v));
+            }
+            Some(keys)
+        };
+        let path = self.path;
+        let short = || SceneError::Gltf {
+            path: path.to_path_buf(),
+            message: format!("{what}: fewer output values than key times"),
+        };
+        let entry = self.channels.entry(node).or_default();
+        match (ch.target().property(), outputs) {
+            (Property::Translation, ReadOutputs::Translations(it)) => {
+                let keys = keys_of(it.map(|v| [v[0], v[1], v[2], 0.0]).collect()).ok_or_else(short)?;
+                entry.translation = keys.into_iter().map(|(t, v)| (t, Vec3::new(v[0], v[1], v[2]))).collect();
+            }
+            (Property::Rotation, ReadOutputs::Rotations(it)) => {
+                let keys = keys_of(it.into_f32().collect()).ok_or_else(short)?;
+                entry.rotation = keys.into_iter().map(|(t, v)| (t, Quat::from_array(v).normalize())).collect();
+            }
+            (Property::Scale, ReadOutputs::Scales(it)) => {
+                let keys = keys_of(it.map(|v| [v[0], v[1], v[2], 0.0]).collect()).ok_or_else(short)?;
+                entry.scale = keys.into_iter().map(|(t, v)| (t, Vec3::new(v[0], v[1], v[2]))).collect();
+            }
+            _ => self.scene.warnings.push(format!("{}: {what}: morph-target weights are not animated", path.display())),
+        }
+        Ok(())
+    }
+
+    /// Checks a channel's input (times) and output (values) accessors against
+    /// the types its target property allows.
+    fn check_channel_accessors(&self, ch: &gltf::animation::Channel<'_>, what: &str) -> Result<()> {
+        use gltf::accessor::{DataType as T, Dimensions as D};
+        use gltf::animation::Property;
+        let sampler = ch.sampler();
+        check_accessor(self.path, &self.buffers, &sampler.input(), &[(T::F32, D::Scalar)], what)?;
+        let out: &[(T, D)] = match ch.target().property() {
+            Property::Rotation => {
+                &[(T::F32, D::Vec4), (T::I8, D::Vec4), (T::U8, D::Vec4), (T::I16, D::Vec4), (T::U16, D::Vec4)]
+            }
+            Property::MorphTargetWeights => {
+                &[(T::F32, D::Scalar), (T::I8, D::Scalar), (T::U8, D::Scalar), (T::I16, D::Scalar), (T::U16, D::Scalar)]
+            }
+            _ => &[(T::F32, D::Vec3)],
+        };
+        check_accessor(self.path, &self.buffers, &sampler.output(), out, what)?;
         Ok(())
     }
 

@@ -141,17 +141,10 @@ pub fn load_obj(path: &Path) -> Result<Scene> {
     let mut textures = TextureCache::default();
     let mut material_ids: HashMap<String, u32> = HashMap::new();
 
-    let mut v: Vec<Vec3> = Vec::new();
-    let mut vt: Vec<Vec2> = Vec::new();
-    let mut vn: Vec<Vec3> = Vec::new();
-    let mut mesh = Mesh::default();
-    let mut needs_normal: Vec<bool> = Vec::new();
-    let mut vertex_of: HashMap<(u32, u32, u32), u32> = HashMap::new();
+    let mut geometry = ObjGeometry::new();
     let mut current_material: Option<u32> = None;
-    let mut face: Vec<u32> = Vec::with_capacity(8);
     // Smoothing group of the faces that follow; 0 = off (the specification's default).
     let mut smoothing_group: u32 = 0;
-    let mut normal_sources: Vec<NormalSource> = Vec::new();
 
     for (line_idx, raw) in text.lines().enumerate() {
         let ctx = LineCtx { path, line: line_idx + 1 };
@@ -159,42 +152,18 @@ pub fn load_obj(path: &Path) -> Result<Scene> {
         let mut toks = line.split_whitespace();
         let Some(keyword) = toks.next() else { continue };
         match keyword {
-            "v" => v.push(ctx.vec3(&mut toks, "vertex coordinate")?),
-            "vn" => vn.push(ctx.vec3(&mut toks, "normal component")?),
+            "v" => geometry.v.push(ctx.vec3(&mut toks, "vertex coordinate")?),
+            "vn" => geometry.vn.push(ctx.vec3(&mut toks, "normal component")?),
             "vt" => {
                 let u = ctx.float(toks.next(), "texture coordinate")?;
                 let tv = match toks.next() {
                     Some(t) => ctx.float(Some(t), "texture coordinate")?,
                     None => 0.0,
                 };
-                vt.push(Vec2::new(u, 1.0 - tv));
+                geometry.vt.push(Vec2::new(u, 1.0 - tv));
             }
             "f" => {
-                face.clear();
-                for tok in toks {
-                    let mut parts = tok.split('/');
-                    let pi = ctx.index(parts.next().unwrap_or(""), v.len(), "vertex")?;
-                    let ti = match parts.next() {
-                        Some("") | None => u32::MAX,
-                        Some(t) => ctx.index(t, vt.len(), "texture coordinate")?,
-                    };
-                    let ni = match parts.next() {
-                        Some("") | None => u32::MAX,
-                        Some(t) => ctx.index(t, vn.len(), "normal")?,
-                    };
-                    let id = *vertex_of.entry((pi, ti, ni)).or_insert_with(|| {
-                        mesh.positions.push(v[pi as usize]);
-                        mesh.uvs.push(if ti == u32::MAX { Vec2::ZERO } else { vt[ti as usize] });
-                        let n = if ni == u32::MAX { Vec3::ZERO } else { vn[ni as usize].normalize_or_zero() };
-                        mesh.normals.push(n);
-                        needs_normal.push(n == Vec3::ZERO);
-                        (mesh.positions.len() - 1) as u32
-                    });
-                    face.push(id);
-                }
-                if face.len() < 3 {
-                    return Err(ctx.err(format!("face has {} vertices; at least 3 are needed", face.len())));
-                }
+                geometry.read_face(&ctx, toks)?;
                 let mat = match current_material {
                     Some(m) => m,
                     None => {
@@ -207,11 +176,7 @@ pub fn load_obj(path: &Path) -> Result<Scene> {
                     0 => NormalSource::Flat,
                     g => NormalSource::Smooth(g),
                 };
-                for k in 1..face.len() - 1 {
-                    mesh.triangles.push([face[0], face[k], face[k + 1]]);
-                    mesh.triangle_materials.push(mat);
-                    normal_sources.push(source);
-                }
+                geometry.add_face_triangles(mat, source);
             }
             "s" => {
                 smoothing_group = match toks.next() {
@@ -227,37 +192,124 @@ pub fn load_obj(path: &Path) -> Result<Scene> {
                 let warn = format!("{}:{}: material `{name}` is not defined; using grey", path.display(), ctx.line);
                 current_material = Some(material_id(&mut scene, &mut material_ids, name, Some(warn)));
             }
-            "mtllib" => {
-                // One library name with spaces, or several separated by spaces.
-                let rest = line["mtllib".len()..].trim();
-                let names: Vec<&str> = if resolve_case_insensitive(&base_dir, rest).is_some() {
-                    vec![rest]
-                } else {
-                    rest.split_whitespace().collect()
-                };
-                for name in names {
-                    match resolve_case_insensitive(&base_dir, name) {
-                        Some(mtl_path) => load_mtl(&mtl_path, &mut scene, &mut material_ids, &mut textures)?,
-                        None => scene.warnings.push(format!(
-                            "{}:{}: material library `{name}` not found; materials fall back to grey",
-                            path.display(),
-                            ctx.line
-                        )),
-                    }
-                }
-            }
+            "mtllib" => load_mtllib_line(line, &ctx, &base_dir, &mut scene, &mut material_ids, &mut textures)?,
             _ => {}
         }
     }
 
-    if mesh.triangles.is_empty() {
-        return Err(SceneError::Invalid { path: path.to_path_buf(), message: "no faces".into() });
-    }
-    if needs_normal.iter().any(|&b| b) {
-        mesh.derive_normals(&normal_sources, &needs_normal, 180.0);
-    }
-    scene.mesh = mesh;
+    scene.mesh = geometry.into_mesh(path)?;
     Ok(scene)
+}
+
+/// The vertex lists an OBJ file has declared so far (`v`, `vt`, `vn`) and the
+/// mesh its faces build, one mesh vertex per distinct corner triple.
+struct ObjGeometry {
+    v: Vec<Vec3>,
+    vt: Vec<Vec2>,
+    vn: Vec<Vec3>,
+    mesh: Mesh,
+    needs_normal: Vec<bool>,
+    vertex_of: HashMap<(u32, u32, u32), u32>,
+    /// The mesh vertices of the face being read.
+    face: Vec<u32>,
+    normal_sources: Vec<NormalSource>,
+}
+
+impl ObjGeometry {
+    fn new() -> Self {
+        Self {
+            v: Vec::new(),
+            vt: Vec::new(),
+            vn: Vec::new(),
+            mesh: Mesh::default(),
+            needs_normal: Vec::new(),
+            vertex_of: HashMap::new(),
+            face: Vec::with_capacity(8),
+            normal_sources: Vec::new(),
+        }
+    }
+
+    /// Reads an `f` statement's corners into `face`, adding the mesh vertices it
+    /// is the first to use.
+    fn read_face(&mut self, ctx: &LineCtx<'_>, toks: std::str::SplitWhitespace<'_>) -> Result<()> {
+        let Self { v, vt, vn, mesh, needs_normal, vertex_of, face, .. } = self;
+        face.clear();
+        for tok in toks {
+            let mut parts = tok.split('/');
+            let pi = ctx.index(parts.next().unwrap_or(""), v.len(), "vertex")?;
+            let ti = match parts.next() {
+                Some("") | None => u32::MAX,
+                Some(t) => ctx.index(t, vt.len(), "texture coordinate")?,
+            };
+            let ni = match parts.next() {
+                Some("") | None => u32::MAX,
+                Some(t) => ctx.index(t, vn.len(), "normal")?,
+            };
+            let id = *vertex_of.entry((pi, ti, ni)).or_insert_with(|| {
+                mesh.positions.push(v[pi as usize]);
+                mesh.uvs.push(if ti == u32::MAX { Vec2::ZERO } else { vt[ti as usize] });
+                let n = if ni == u32::MAX { Vec3::ZERO } else { vn[ni as usize].normalize_or_zero() };
+                mesh.normals.push(n);
+                needs_normal.push(n == Vec3::ZERO);
+                (mesh.positions.len() - 1) as u32
+            });
+            face.push(id);
+        }
+        if face.len() < 3 {
+            return Err(ctx.err(format!("face has {} vertices; at least 3 are needed", face.len())));
+        }
+        Ok(())
+    }
+
+    /// Fan-triangulates `face` with material `mat` and normal source `source`.
+    fn add_face_triangles(&mut self, mat: u32, source: NormalSource) {
+        let Self { mesh, face, normal_sources, .. } = self;
+        for k in 1..face.len() - 1 {
+            mesh.triangles.push([face[0], face[k], face[k + 1]]);
+            mesh.triangle_materials.push(mat);
+            normal_sources.push(source);
+        }
+    }
+
+    /// The finished mesh, normals derived where no `vn` gave one; an error without faces.
+    fn into_mesh(self, path: &Path) -> Result<Mesh> {
+        let Self { mut mesh, needs_normal, normal_sources, .. } = self;
+        if mesh.triangles.is_empty() {
+            return Err(SceneError::Invalid { path: path.to_path_buf(), message: "no faces".into() });
+        }
+        if needs_normal.iter().any(|&b| b) {
+            mesh.derive_normals(&normal_sources, &needs_normal, 180.0);
+        }
+        Ok(mesh)
+    }
+}
+
+/// An `mtllib` statement: loads each library it names (one name with spaces,
+/// or several); a missing one is a warning.
+fn load_mtllib_line(
+    line: &str,
+    ctx: &LineCtx<'_>,
+    base_dir: &Path,
+    scene: &mut Scene,
+    material_ids: &mut HashMap<String, u32>,
+    textures: &mut TextureCache,
+) -> Result<()> {
+    let path = ctx.path;
+    // One library name with spaces, or several separated by spaces.
+    let rest = line["mtllib".len()..].trim();
+    let names: Vec<&str> =
+        if resolve_case_insensitive(base_dir, rest).is_some() { vec![rest] } else { rest.split_whitespace().collect() };
+    for name in names {
+        match resolve_case_insensitive(base_dir, name) {
+            Some(mtl_path) => load_mtl(&mtl_path, scene, material_ids, textures)?,
+            None => scene.warnings.push(format!(
+                "{}:{}: material library `{name}` not found; materials fall back to grey",
+                path.display(),
+                ctx.line
+            )),
+        }
+    }
+    Ok(())
 }
 
 /// The id of material `name`, creating a grey one (and recording `warn_if_new`) if unknown.

@@ -705,7 +705,6 @@ impl Scene {
         })
     }
 
-    /// Invariants every loader must establish; returns the first broken one.
     /// Warnings about values that are valid but physically suspect: a diffuse
     /// colour above 1 reflects more energy than it receives.
     pub fn energy_warnings(&self) -> Vec<String> {
@@ -722,7 +721,33 @@ impl Scene {
             .collect()
     }
 
+    /// Invariants every loader must establish; returns the first broken one.
     pub fn validate(&self) -> Result<(), String> {
+        self.validate_mesh()?;
+        if !self.sky_radiance.is_finite() || self.sky_radiance.min_element() < 0.0 {
+            return Err("sky_radiance must be finite and non-negative".into());
+        }
+        for (i, l) in self.lights.iter().enumerate() {
+            l.validate().map_err(|e| format!("light {i}: {e}"))?;
+        }
+        self.validate_materials()?;
+        if let Some(c) = &self.camera {
+            c.validate()?;
+        }
+        if let Some((i, why)) = camera_keyframe_error(&self.camera_keyframes) {
+            return Err(format!("camera.keyframes[{i}]: {why}"));
+        }
+        self.validate_objects()?;
+        self.validate_prototypes()?;
+        self.validate_instances()?;
+        if !(self.frames_per_second.is_finite() && self.frames_per_second > 0.0) {
+            return Err(format!("frames_per_second must be positive, got {}", self.frames_per_second));
+        }
+        Ok(())
+    }
+
+    /// The scene mesh's arrays, vertices, indices and material ids.
+    fn validate_mesh(&self) -> Result<(), String> {
         let m = &self.mesh;
         if m.normals.len() != m.positions.len()
             || m.uvs.len() != m.positions.len()
@@ -755,12 +780,11 @@ impl Scene {
         if let Some(i) = m.triangle_materials.iter().position(|&mat| mat as usize >= self.materials.len()) {
             return Err(format!("triangle {i} has an unknown material"));
         }
-        if !self.sky_radiance.is_finite() || self.sky_radiance.min_element() < 0.0 {
-            return Err("sky_radiance must be finite and non-negative".into());
-        }
-        for (i, l) in self.lights.iter().enumerate() {
-            l.validate().map_err(|e| format!("light {i}: {e}"))?;
-        }
+        Ok(())
+    }
+
+    /// Colours, emission, factors and cutoffs of every material.
+    fn validate_materials(&self) -> Result<(), String> {
         for mat in &self.materials {
             let vals = [mat.base_color_factor, mat.emissive_factor * mat.emissive_strength];
             if vals.iter().any(|v| !v.is_finite() || v.min_element() < 0.0) {
@@ -792,12 +816,13 @@ impl Scene {
                 return Err(format!("material `{}`: alpha cutoff {cutoff} is not finite", mat.name));
             }
         }
-        if let Some(c) = &self.camera {
-            c.validate()?;
-        }
-        if let Some((i, why)) = camera_keyframe_error(&self.camera_keyframes) {
-            return Err(format!("camera.keyframes[{i}]: {why}"));
-        }
+        Ok(())
+    }
+
+    /// Objects: inside the mesh, disjoint, closed over their vertex ranges, valid
+    /// animations and bounds at frame 0; no loose triangle uses an object's vertices.
+    fn validate_objects(&self) -> Result<(), String> {
+        let m = &self.mesh;
         let mut claimed = vec![false; m.triangles.len()];
         for o in &self.objects {
             let name = &o.name;
@@ -824,6 +849,11 @@ impl Scene {
         {
             return Err(format!("triangle {t} is in no object but uses an object's vertices"));
         }
+        Ok(())
+    }
+
+    /// Prototype meshes: their arrays, vertices and indices, and known, non-emissive materials.
+    fn validate_prototypes(&self) -> Result<(), String> {
         for (k, proto) in self.prototypes.iter().enumerate() {
             let pm = &proto.mesh;
             let name = &proto.name;
@@ -858,6 +888,11 @@ impl Scene {
                 None => {}
             }
         }
+        Ok(())
+    }
+
+    /// Instances: an existing prototype, a finite transform, a sane extent.
+    fn validate_instances(&self) -> Result<(), String> {
         if let Some(i) = self.instances.iter().position(|i| i.prototype as usize >= self.prototypes.len()) {
             return Err(format!("instance {i} names a missing prototype"));
         }
@@ -876,9 +911,6 @@ impl Scene {
                 "instance {i} is placed beyond ±{MAX_COORDINATE_M:e} m or scaled by more than 1e6: \
                  the scene's extent is absurd (wrong units?)"
             ));
-        }
-        if !(self.frames_per_second.is_finite() && self.frames_per_second > 0.0) {
-            return Err(format!("frames_per_second must be positive, got {}", self.frames_per_second));
         }
         Ok(())
     }

@@ -489,49 +489,8 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
     if file.meshes.is_empty() && file.objects.is_empty() && file.instances.is_empty() {
         return Err(toml_err("no [[meshes]], [[instances]] or [[objects]] entries".into()));
     }
-    for (i, m) in file.meshes.iter().enumerate() {
-        let xf = placement(m.world_from_local()).map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
-        let mut sub = load_sub_scene(&m.path, base_dir)?;
-        m.normals.apply(&mut sub, m.crease_angle_deg).map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
-        sub.mesh.transform(xf);
-        place_lights_and_camera(&mut sub, xf);
-        for inst in &mut sub.instances {
-            *inst = crate::scene::MeshInstance::new(inst.prototype, xf * Mat4::from(inst.world_from_local))
-                .map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
-        }
-        for o in &mut sub.objects {
-            o.placement = xf * o.placement;
-        }
-        scene.warnings.append(&mut sub.warnings);
-        merge_into(&mut scene, sub);
-    }
-    for (i, entry) in file.instances.iter().enumerate() {
-        let err = |e: String| toml_err(format!("instances[{i}]: {e}"));
-        let placements = entry.placements().map_err(err)?;
-        let mut sub = load_sub_scene(&entry.path, base_dir)?;
-        if sub.has_moving_geometry() {
-            return Err(err(format!("{} is animated; instances are still copies", entry.path)));
-        }
-        if !sub.lights.is_empty() {
-            sub.warnings.push(format!("instances[{i}]: the lights of {} are not copied", entry.path));
-            sub.lights.clear();
-        }
-        if !sub.instances.is_empty() {
-            return Err(err(format!(
-                "{} has [[instances]] itself; instances of instances are not supported",
-                entry.path
-            )));
-        }
-        entry.normals.apply(&mut sub, entry.crease_angle_deg).map_err(err)?;
-        sub.objects.clear();
-        let mut mesh = std::mem::take(&mut sub.mesh);
-        let material_offset = scene.materials.len() as u32;
-        mesh.triangle_materials.iter_mut().for_each(|m| *m += material_offset);
-        scene.warnings.append(&mut sub.warnings);
-        merge_into(&mut scene, sub);
-        // One prototype, drawn once per placement: the tracer shares its BVH.
-        scene.add_instanced_mesh(&entry.path, mesh, &placements).map_err(err)?;
-    }
+    place_meshes(&mut scene, &file.meshes, path, base_dir)?;
+    place_instances(&mut scene, &file.instances, path, base_dir)?;
     for (i, o) in file.objects.iter().enumerate() {
         let sub = object_scene(o, base_dir).map_err(|e| match e {
             ObjectError::Message(m) => toml_err(format!("objects[{i}]: {m}")),
@@ -575,6 +534,62 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
     }
     scene.validate().map_err(toml_err)?;
     Ok(scene)
+}
+
+/// Merges each `[[meshes]]` entry's file into `scene`, placed by its transform.
+fn place_meshes(scene: &mut Scene, meshes: &[MeshRef], path: &Path, base_dir: &Path) -> Result<()> {
+    let toml_err = |message: String| SceneError::Toml { path: path.to_path_buf(), message };
+    for (i, m) in meshes.iter().enumerate() {
+        let xf = placement(m.world_from_local()).map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
+        let mut sub = load_sub_scene(&m.path, base_dir)?;
+        m.normals.apply(&mut sub, m.crease_angle_deg).map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
+        sub.mesh.transform(xf);
+        place_lights_and_camera(&mut sub, xf);
+        for inst in &mut sub.instances {
+            *inst = crate::scene::MeshInstance::new(inst.prototype, xf * Mat4::from(inst.world_from_local))
+                .map_err(|e| toml_err(format!("meshes[{i}]: {e}")))?;
+        }
+        for o in &mut sub.objects {
+            o.placement = xf * o.placement;
+        }
+        scene.warnings.append(&mut sub.warnings);
+        merge_into(scene, sub);
+    }
+    Ok(())
+}
+
+/// Adds each `[[instances]]` entry's file to `scene` as one prototype drawn at
+/// each of its placements.
+fn place_instances(scene: &mut Scene, instances: &[InstanceEntry], path: &Path, base_dir: &Path) -> Result<()> {
+    let toml_err = |message: String| SceneError::Toml { path: path.to_path_buf(), message };
+    for (i, entry) in instances.iter().enumerate() {
+        let err = |e: String| toml_err(format!("instances[{i}]: {e}"));
+        let placements = entry.placements().map_err(err)?;
+        let mut sub = load_sub_scene(&entry.path, base_dir)?;
+        if sub.has_moving_geometry() {
+            return Err(err(format!("{} is animated; instances are still copies", entry.path)));
+        }
+        if !sub.lights.is_empty() {
+            sub.warnings.push(format!("instances[{i}]: the lights of {} are not copied", entry.path));
+            sub.lights.clear();
+        }
+        if !sub.instances.is_empty() {
+            return Err(err(format!(
+                "{} has [[instances]] itself; instances of instances are not supported",
+                entry.path
+            )));
+        }
+        entry.normals.apply(&mut sub, entry.crease_angle_deg).map_err(err)?;
+        sub.objects.clear();
+        let mut mesh = std::mem::take(&mut sub.mesh);
+        let material_offset = scene.materials.len() as u32;
+        mesh.triangle_materials.iter_mut().for_each(|m| *m += material_offset);
+        scene.warnings.append(&mut sub.warnings);
+        merge_into(scene, sub);
+        // One prototype, drawn once per placement: the tracer shares its BVH.
+        scene.add_instanced_mesh(&entry.path, mesh, &placements).map_err(err)?;
+    }
+    Ok(())
 }
 
 /// Intrinsic Euler angles X, Y, Z in degrees, as scene files write rotations.
@@ -630,56 +645,8 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
     if o.box_inward && !shapes[0] {
         return Err("box_inward applies to a box (box_min_m + box_max_m)".to_string().into());
     }
-    let mut sub = if let Some(spec) = &o.path {
-        if o.albedo.is_some() || o.emission.is_some() {
-            return Err("albedo and emission apply to boxes and polygons; a file brings its materials"
-                .to_string()
-                .into());
-        }
-        let mut sub = load_sub_scene(spec, base_dir).map_err(ObjectError::Scene)?;
-        if !sub.instances.is_empty() {
-            return Err(format!("{spec} has [[instances]]; place it with [[meshes]] instead").into());
-        }
-        if sub.has_moving_geometry() {
-            return Err(format!("{spec} is animated itself; place it with [[meshes]] instead").into());
-        }
-        let xf = placement(placement_matrix(o.translation, o.rotation_deg, o.scale))?;
-        sub.mesh.transform(xf);
-        place_lights_and_camera(&mut sub, xf);
-        sub.objects.clear();
-        sub
-    } else {
-        let albedo = o.albedo.unwrap_or(Vec3::splat(0.8));
-        let material = match o.emission {
-            Some(e) => crate::material::Material::emissive(&name, albedo, e),
-            None => crate::material::Material::diffuse(&name, albedo),
-        };
-        let mut mesh = crate::mesh::Mesh::default();
-        if let Some(poly) = &o.polygon_m {
-            if poly.len() < 3 || poly.iter().any(|p| !p.is_finite()) {
-                return Err("polygon_m needs at least 3 finite corners".to_string().into());
-            }
-            crate::shapes::add_polygon(&mut mesh, poly, 0);
-        } else {
-            let (Some(lo), Some(hi)) = (o.box_min_m, o.box_max_m) else {
-                return Err("a box needs both box_min_m and box_max_m".to_string().into());
-            };
-            if !(lo.is_finite() && hi.is_finite() && lo.cmplt(hi).all()) {
-                return Err(format!("box_min_m {lo} must be below box_max_m {hi} on every axis").into());
-            }
-            if o.box_inward {
-                crate::shapes::add_room(&mut mesh, lo, hi, 0);
-            } else {
-                crate::shapes::add_box(&mut mesh, lo, hi, 0);
-            }
-        }
-        if o.translation != Vec3::ZERO || o.rotation_deg != Vec3::ZERO || o.scale != Vec3::ONE {
-            return Err("translation / rotation_deg / scale place files; give a box or polygon in place"
-                .to_string()
-                .into());
-        }
-        Scene { materials: vec![material], mesh, ..Default::default() }
-    };
+    let mut sub =
+        if let Some(spec) = &o.path { file_object_scene(o, spec, base_dir)? } else { shape_object_scene(o, &name)? };
     let animation = ObjectAnimation {
         keyframes: o
             .keyframes
@@ -708,6 +675,60 @@ fn object_scene(o: &ObjectEntry, base_dir: &Path) -> std::result::Result<Scene, 
     object.validate()?;
     sub.objects = vec![object];
     Ok(sub)
+}
+
+/// The geometry of an `[[objects]]` entry that names a file: the file, placed.
+fn file_object_scene(o: &ObjectEntry, spec: &str, base_dir: &Path) -> std::result::Result<Scene, ObjectError> {
+    if o.albedo.is_some() || o.emission.is_some() {
+        return Err("albedo and emission apply to boxes and polygons; a file brings its materials".to_string().into());
+    }
+    let mut sub = load_sub_scene(spec, base_dir).map_err(ObjectError::Scene)?;
+    if !sub.instances.is_empty() {
+        return Err(format!("{spec} has [[instances]]; place it with [[meshes]] instead").into());
+    }
+    if sub.has_moving_geometry() {
+        return Err(format!("{spec} is animated itself; place it with [[meshes]] instead").into());
+    }
+    let xf = placement(placement_matrix(o.translation, o.rotation_deg, o.scale))?;
+    sub.mesh.transform(xf);
+    place_lights_and_camera(&mut sub, xf);
+    sub.objects.clear();
+    Ok(sub)
+}
+
+/// The geometry of an `[[objects]]` entry that gives a box or a polygon in
+/// place, with its one material.
+fn shape_object_scene(o: &ObjectEntry, name: &str) -> std::result::Result<Scene, ObjectError> {
+    let albedo = o.albedo.unwrap_or(Vec3::splat(0.8));
+    let material = match o.emission {
+        Some(e) => crate::material::Material::emissive(name, albedo, e),
+        None => crate::material::Material::diffuse(name, albedo),
+    };
+    let mut mesh = crate::mesh::Mesh::default();
+    if let Some(poly) = &o.polygon_m {
+        if poly.len() < 3 || poly.iter().any(|p| !p.is_finite()) {
+            return Err("polygon_m needs at least 3 finite corners".to_string().into());
+        }
+        crate::shapes::add_polygon(&mut mesh, poly, 0);
+    } else {
+        let (Some(lo), Some(hi)) = (o.box_min_m, o.box_max_m) else {
+            return Err("a box needs both box_min_m and box_max_m".to_string().into());
+        };
+        if !(lo.is_finite() && hi.is_finite() && lo.cmplt(hi).all()) {
+            return Err(format!("box_min_m {lo} must be below box_max_m {hi} on every axis").into());
+        }
+        if o.box_inward {
+            crate::shapes::add_room(&mut mesh, lo, hi, 0);
+        } else {
+            crate::shapes::add_box(&mut mesh, lo, hi, 0);
+        }
+    }
+    if o.translation != Vec3::ZERO || o.rotation_deg != Vec3::ZERO || o.scale != Vec3::ONE {
+        return Err("translation / rotation_deg / scale place files; give a box or polygon in place"
+            .to_string()
+            .into());
+    }
+    Ok(Scene { materials: vec![material], mesh, ..Default::default() })
 }
 
 /// Appends `sub`'s geometry, materials, textures and lights; keeps the first
