@@ -12,6 +12,8 @@ use probegi_scene::{RayTracer, Scene, SurfacePoint};
 use crate::light_sampling::AreaLights;
 use crate::shading::{ShadingContext, lambert_cos, punctual_direct, shadow_ray_along, shadow_ray_to};
 
+/// Sample counts of [`DirectLighting`]'s stratified estimates, per pixel (or
+/// probe-ray hit) per frame.
 #[derive(Clone, Copy, Debug)]
 pub struct DirectSettings {
     /// Area-light shadow samples per pixel per frame, stratified on a √n × √n grid
@@ -33,6 +35,8 @@ fn stratum(i: u32, k: u32, u: Vec2) -> Vec2 {
     Vec2::new(((i % k) as f32 + u.x) / k as f32, ((i / k) as f32 + u.y) / k as f32)
 }
 
+/// Direct light reflected at a surface point: punctual lights exactly, area
+/// lights and the sky by stratified samples, each with a shadow ray.
 pub struct DirectLighting<'a> {
     scene: &'a Scene,
     tracer: &'a dyn RayTracer,
@@ -41,6 +45,8 @@ pub struct DirectLighting<'a> {
 }
 
 impl<'a> DirectLighting<'a> {
+    /// Lighting of `scene` with shadow rays traced by `tracer`; builds the
+    /// power-weighted emitter distribution once.
     pub fn new(scene: &'a Scene, tracer: &'a dyn RayTracer, settings: DirectSettings) -> Self {
         Self { scene, tracer, area_lights: std::borrow::Cow::Owned(AreaLights::new(scene)), settings }
     }

@@ -47,13 +47,23 @@ pub enum GiMethod {
     Sh(Box<ShProbeSettings>),
 }
 
+/// What [`render_frames`] renders: image size, frames, seed, the GI method and
+/// who traces.
 #[derive(Clone, Debug)]
 pub struct RenderSettings {
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
+    /// Frames to run, at least one: a static scene's direct term accumulates
+    /// over them, the field updates once per frame.
     pub frames: u32,
+    /// Random seed of every sampling stream.
     pub seed: u64,
+    /// Global illumination on top of direct light.
     pub gi: GiMethod,
+    /// Direct-light sample counts; the camera pass leaves out what the field
+    /// carries (the sky under DDGI).
     pub direct: DirectSettings,
     /// Draw DDGI probes as spheres in the final image.
     pub show_probes: bool,
@@ -75,11 +85,14 @@ pub struct RenderStats {
     /// Rays traced on the CPU, plus the probe batches and camera primary rays a
     /// `probe_tracer` traced; the shadow and glossy rays it traced are not counted.
     pub rays_traced: u64,
-    /// DDGI and SH: probes; DDGI only: probe rays per frame, mean field-update ms (the four
-    /// update passes plus border) and probe rays per second over it.
+    /// DDGI and SH: the field's probes.
     pub probes: Option<usize>,
+    /// DDGI only: probe rays per frame.
     pub rays_per_frame: Option<u64>,
+    /// Mean milliseconds per frame of the field update: DDGI's four update passes
+    /// plus border ([`FIELD_UPDATE_PASSES`]), SH's `SH_UPDATE_PASSES`.
     pub field_update_ms: Option<f64>,
+    /// DDGI only: millions of probe rays per second over the field update.
     pub field_update_mrays_per_s: Option<f64>,
     /// DDGI only: probes per state name after the last frame.
     pub probe_states: Option<BTreeMap<&'static str, usize>>,
@@ -87,15 +100,17 @@ pub struct RenderStats {
     pub active_probes: Option<usize>,
     /// DDGI with moving objects: Sleeping probes woken around them, summed over frames.
     pub probes_woken: u64,
-    /// DDGI: volumes in the set, the last frame's ray batch (all volumes, one
-    /// trace) and its split per volume, and probes scrolled into tracking windows.
+    /// DDGI: volumes in the set.
     pub volumes: Option<usize>,
+    /// DDGI: rays of the last frame's batch (all volumes, one trace).
     pub batch_rays: Option<u64>,
+    /// DDGI: the last frame's batch rays, per volume.
     pub batch_rays_per_volume: Option<Vec<u64>>,
+    /// DDGI: probes scrolled into tracking windows, summed over frames.
     pub probes_scrolled_in: u64,
-    /// Per frame: the mean of that frame's image (what `--sequence` writes), and
-    /// of its indirect (field) term alone.
+    /// Per frame: the mean of that frame's image (what `--sequence` writes).
     pub frame_means: Vec<Vec3>,
+    /// Per frame: the mean of its indirect (field) term alone.
     pub frame_indirect_means: Vec<Vec3>,
     /// Per frame, with a DDGI or SH field: the fraction of pixels that see a
     /// surface whose diffuse albedo is non-zero but get no indirect light from the
@@ -114,8 +129,13 @@ pub struct RenderStats {
     pub error: Option<String>,
 }
 
+/// What [`render_frames`] returns: the image, its measurements and the field
+/// as the last frame left it.
 pub struct RenderOutput {
+    /// The final image: the mean direct term over the accumulated frames plus the
+    /// last frame's indirect term (with `show_probes`, the probes drawn on it).
     pub image: Image,
+    /// Measurements of the render.
     pub stats: RenderStats,
     /// The DDGI volumes after the last update (for atlas dumps).
     pub ddgi: Option<DdgiFieldSet>,

@@ -15,10 +15,14 @@ pub struct GBufferTexel {
     pub view_dir_world: Vec3,
 }
 
+/// One frame's primary-ray hits: what each pixel sees.
 #[derive(Clone, Debug)]
 pub struct GBuffer {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
+    /// One texel per pixel, row-major (`y * width + x`).
     pub texels: Vec<GBufferTexel>,
 }
 

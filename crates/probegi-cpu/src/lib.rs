@@ -1,9 +1,30 @@
 //! probegi-cpu: the CPU renderers. Threads live here (rayon), never in the core.
 //!
+//! The frame of `probegi render`:
+//! - [`frame_loop`]: the per-frame loop, its passes in order ([`render_frames`]).
+//! - [`gbuffer`]: the G-buffer pass, one primary ray per pixel.
+//! - [`direct`]: direct light (emission, punctual, area lights and sky).
+//! - [`glossy`]: second-order glossy reflections read from the probes.
+//! - [`probe_vis`]: `--show-probes`, probes drawn as spheres in the image.
+//!
+//! The DDGI field update on the CPU (seeds 003 and 004):
+//! - [`field_update`]: the field set's seam driven with this crate's tracing and shading.
+//! - [`probe_trace`]: the trace pass, probe rays to surfels.
+//! - [`probe_shade`]: the shade pass, the radiance each probe ray brings back.
+//! - [`scene_events`]: scene changes (light toggles, moving objects) reported to the field.
+//!
+//! Screen-space SH probes (seed 001):
+//! - [`sh_probes`]: the cascades and their per-frame update.
+//! - [`sh_screen_samples`]: the screen-sample pass, one lit sample per tile.
+//! - [`sh_inject`]: light injection of emitters and sky into the probes.
+//!
+//! The reference and what every renderer shares:
 //! - [`path_tracer`]: the unbiased reference (`probegi reference`).
-//! - [`gbuffer`], [`direct`], [`frame_loop`]: the real-time-style frame: primary
-//!   rays into a G-buffer, then shading passes (`probegi render`).
-//! - [`light_sampling`], [`shading`]: light sampling and the surface model they share.
+//! - [`light_sampling`]: emitter sampling by power and punctual light irradiance.
+//! - [`shading`]: the surface model, shadow rays and punctual direct light.
+//! - [`parallel`]: row-parallel image loops, bit-identical for any thread count.
+
+#![warn(missing_docs)]
 
 pub mod direct;
 pub mod frame_loop;

@@ -10,9 +10,11 @@ use probegi_scene::{LightKind, PunctualLight, Scene};
 /// A point sampled on an area light, seen from a shading point.
 #[derive(Clone, Copy, Debug)]
 pub struct AreaLightSample {
+    /// The sampled point on the emitter, world space.
     pub point: Vec3,
     /// Unit direction from the shading point to `point`.
     pub wi: Vec3,
+    /// Distance from the shading point to `point`, metres.
     pub distance: f32,
     /// Radiance leaving `point` toward the shading point (zero from the back face).
     pub radiance: Vec3,
@@ -31,6 +33,7 @@ pub struct AreaLights {
 }
 
 impl AreaLights {
+    /// The emissive triangles of `scene` with a positive, finite emitted power.
     pub fn new(scene: &Scene) -> Self {
         let mesh = &scene.mesh;
         let (emitters, weights) = scene.emitter_powers();
@@ -42,10 +45,12 @@ impl AreaLights {
         Self { emitters, distribution, pdf_area_by_triangle }
     }
 
+    /// Whether there is no emitter to sample.
     pub fn is_empty(&self) -> bool {
         self.emitters.is_empty()
     }
 
+    /// Number of emissive triangles in the distribution.
     pub fn len(&self) -> usize {
         self.emitters.len()
     }

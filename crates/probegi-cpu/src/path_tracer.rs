@@ -28,6 +28,7 @@ use probegi_scene::{Ray, RayTracer, Scene, SurfacePoint};
 use crate::light_sampling::AreaLights;
 use crate::shading::{ShadingContext, lambert_cos, punctual_direct, shadow_ray_to};
 
+/// Settings of the reference path tracer (`probegi reference`).
 #[derive(Clone, Copy, Debug)]
 pub struct PathTracerSettings {
     /// Samples per pixel.
@@ -41,6 +42,7 @@ pub struct PathTracerSettings {
     /// Next-event estimation with MIS on area lights. Off = BSDF sampling only, an
     /// independent unbiased estimator kept for testing the MIS weights.
     pub pt_light_sampling: bool,
+    /// Random seed of every pixel's stream (see the module docs).
     pub seed: u64,
 }
 
@@ -53,9 +55,11 @@ impl Default for PathTracerSettings {
 /// What a render produced besides the image.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RenderCounters {
+    /// Rays traced: camera, bounce and shadow rays.
     pub rays_traced: u64,
 }
 
+/// The unbiased reference renderer over a scene and its ray tracer.
 pub struct PathTracer<'a> {
     scene: &'a Scene,
     tracer: &'a dyn RayTracer,
@@ -64,6 +68,7 @@ pub struct PathTracer<'a> {
 }
 
 impl<'a> PathTracer<'a> {
+    /// A path tracer of `scene` whose rays `tracer` traces.
     pub fn new(scene: &'a Scene, tracer: &'a dyn RayTracer, settings: PathTracerSettings) -> Self {
         Self { scene, tracer, area_lights: AreaLights::new(scene), settings }
     }

@@ -35,16 +35,23 @@ use crate::shading::ShadingContext;
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::seam::ProbeRayBatch;
 
+/// What the shade pass reads.
 pub struct ProbeShadeInputs<'a> {
+    /// The scene the batch was traced in (materials, sky).
     pub scene: &'a Scene,
+    /// Direct light at the hits, with its shadow rays.
     pub direct: &'a DirectLighting<'a>,
     /// The set as queries read it (the previous frame's field).
     pub field: &'a DdgiFieldSetView<'a>,
     /// The set's volumes, for per-volume settings and RNG streams.
     pub volumes: &'a [DdgiVolume],
+    /// The probe ray batch: rays, and which of them need radiance.
     pub batch: &'a ProbeRayBatch,
+    /// The hit of each batch ray, in batch order.
     pub surfels: &'a [Surfel],
+    /// The render's seed, mixed into each volume's streams.
     pub seed: u64,
+    /// The frame index, mixed into every probe's stream.
     pub frame: u32,
 }
 

@@ -19,6 +19,7 @@ use probegi_field::ddgi_volume::SceneEvent;
 /// What one observation changed.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SceneChanges {
+    /// A punctual light switched on or off since the last observation.
     pub light_toggled: bool,
     /// Volumes told of a large object change.
     pub object_jumps: Vec<usize>,
@@ -34,6 +35,7 @@ pub struct SceneChangeDetector {
 }
 
 impl SceneChangeDetector {
+    /// A detector that has observed no frame yet.
     pub fn new() -> Self {
         Self::default()
     }

@@ -50,6 +50,8 @@ pub struct EmitterGrid {
 const EMITTER_GRID_DIMS: u32 = 8;
 
 impl EmitterGrid {
+    /// The emissive triangles of `scene`, each listed in the grid cells within
+    /// the range where its irradiance stays above `cutoff_irradiance`.
     pub fn new(scene: &Scene, cutoff_irradiance: f32) -> Self {
         let mesh = &scene.mesh;
         let mut emitters = Vec::new();
@@ -94,6 +96,7 @@ impl EmitterGrid {
         Self { emitters, lo, cell_m, dims, cells }
     }
 
+    /// Whether the scene has no emitter to inject.
     pub fn is_empty(&self) -> bool {
         self.emitters.is_empty()
     }

@@ -33,12 +33,16 @@ use crate::sh_screen_samples::{ScreenSample, ScreenSampleInputs, take_screen_sam
 /// Names of the passes that make up an SH probe update.
 pub const SH_UPDATE_PASSES: [&str; 2] = ["sh_screen_samples", "sh_update"];
 
+/// Seed 001's SH probes on the CPU: the cascades and what their update needs.
 pub struct ShProbes {
+    /// The settings the probes were made with.
     pub settings: ShProbeSettings,
+    /// The probe cascades the camera pass reads.
     pub cascades: ShCascades,
     emitters: EmitterGrid,
     /// Screen samples of the last update (for tests and statistics).
     pub last_sample_count: usize,
+    /// Updates run so far.
     pub frames_updated: u32,
 }
 

@@ -28,21 +28,33 @@ use crate::shading::ShadingContext;
 /// A screen sample and the surface it came from (for occlusion rays).
 #[derive(Clone, Copy, Debug)]
 pub struct ScreenSample {
+    /// What the probes project: radiance, position, normal and area.
     pub sample: ShSample,
+    /// The surface the sample's pixel sees.
     pub surface: SurfacePoint,
 }
 
+/// What the screen-sample pass reads.
 pub struct ScreenSampleInputs<'a> {
+    /// The scene as this frame sees it.
     pub scene: &'a Scene,
+    /// Direct light at the sampled surfaces.
     pub direct: &'a DirectLighting<'a>,
     /// The camera pass's light sampling.
     pub direct_settings: DirectSettings,
+    /// The probes as they stand (albedo/π × their irradiance is the bounce).
     pub probes: &'a ShCascades,
+    /// Add the surface's emission (with `sh_light_injection`).
     pub include_emission: bool,
+    /// The frame's camera (each sample's pixel footprint, eq. 10).
     pub camera: &'a CameraRays,
+    /// The frame's G-buffer.
     pub gbuffer: &'a GBuffer,
+    /// Tiles across and down; one sample per tile.
     pub tiles: glam::UVec2,
+    /// The render's seed.
     pub seed: u64,
+    /// The frame index (per-frame sample positions).
     pub frame: u32,
 }
 

@@ -20,13 +20,16 @@ pub fn lambert_cos(sp: &SurfacePoint, wi: Vec3) -> Option<f32> {
 /// A surface point ready for BSDF queries with world-space directions.
 #[derive(Clone, Copy, Debug)]
 pub struct ShadingContext {
+    /// Orthonormal frame around the facing shading normal.
     pub frame: Frame,
     /// Direction toward the viewer, local frame (+z = facing normal).
     pub wo: Vec3,
+    /// The surface's BSDF at the point.
     pub bsdf: SurfaceBsdf,
 }
 
 impl ShadingContext {
+    /// The context at `sp` seen from the unit direction `to_viewer_world`.
     pub fn new(scene: &Scene, sp: &SurfacePoint, to_viewer_world: Vec3) -> Self {
         let frame = Frame::from_normal(sp.facing_normal());
         let mut wo = frame.to_local(to_viewer_world);
@@ -35,14 +38,17 @@ impl ShadingContext {
         Self { frame, wo: wo.normalize(), bsdf: scene.bsdf(sp) }
     }
 
+    /// The BSDF for light arriving from `wi_world`, toward the viewer (no cosine).
     pub fn eval(&self, wi_world: Vec3) -> Vec3 {
         self.bsdf.eval(self.wo, self.frame.to_local(wi_world))
     }
 
+    /// The diffuse lobe alone for light arriving from `wi_world` (no cosine).
     pub fn eval_diffuse(&self, wi_world: Vec3) -> Vec3 {
         self.bsdf.eval_diffuse(self.frame.to_local(wi_world))
     }
 
+    /// Density of sampling `wi_world` from the BSDF, per steradian.
     pub fn pdf(&self, wi_world: Vec3) -> f32 {
         self.bsdf.pdf(self.wo, self.frame.to_local(wi_world))
     }

@@ -13,8 +13,11 @@ use crate::io::{ImageError, LoadedImage, read_image, write_png};
 /// FLIP's default viewing condition: 0.7 m from a 0.68 m wide 3840-pixel monitor.
 pub const FLIP_PIXELS_PER_DEGREE: f32 = nv_flip::DEFAULT_PIXELS_PER_DEGREE;
 
+/// FLIP between two images: the mean and the per-pixel error map.
 pub struct FlipResult {
+    /// Width of the compared images in pixels.
     pub width: u32,
+    /// Height of the compared images in pixels.
     pub height: u32,
     /// Mean of the per-pixel FLIP error, in [0, 1].
     pub mean_flip: f32,

@@ -15,6 +15,7 @@ use probegi_core::color::tonemap_rgb8;
 
 use crate::io::{ImageError, check_extension, check_finite, io_err, temp_path};
 
+/// A looping GIF preview being written, one frame at a time.
 pub struct AnimatedGif {
     path: PathBuf,
     tmp: PathBuf,

@@ -11,28 +11,70 @@ use glam::Vec3;
 use probegi_core::color::{srgb_to_linear, tonemap_rgb8};
 use probegi_core::image::Image;
 
+/// Why an image file could not be read, written or compared; each names its file.
 #[derive(Debug, thiserror::Error)]
 pub enum ImageError {
+    /// Reading, decoding, encoding or writing the file failed.
     #[error("{path}: {message}")]
-    Io { path: PathBuf, message: String },
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What failed.
+        message: String,
+    },
+    /// The extension is neither `.exr` nor `.png`.
     #[error("{path}: unsupported image extension (expected .exr or .png)")]
-    UnsupportedFormat { path: PathBuf },
+    UnsupportedFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A pixel to be written is NaN, infinite or negative.
     #[error("{path}: pixel ({x}, {y}) is {value} (radiance must be finite and non-negative)")]
-    NonFinite { path: PathBuf, x: u32, y: u32, value: String },
+    NonFinite {
+        /// The file that was not written.
+        path: PathBuf,
+        /// Column of the first such pixel.
+        x: u32,
+        /// Row of the first such pixel.
+        y: u32,
+        /// Its value, as text.
+        value: String,
+    },
+    /// The output's extension is not the one this output needs.
     #[error("{path}: the file name must end in .{expected} for this output")]
-    WrongExtension { path: PathBuf, expected: &'static str },
+    WrongExtension {
+        /// The file.
+        path: PathBuf,
+        /// The extension it needs, without the dot.
+        expected: &'static str,
+    },
+    /// Two images to compare differ in size.
     #[error("image sizes differ: {reference} is {rw}×{rh}, {test} is {tw}×{th}")]
-    SizeMismatch { reference: PathBuf, rw: u32, rh: u32, test: PathBuf, tw: u32, th: u32 },
+    SizeMismatch {
+        /// The reference image.
+        reference: PathBuf,
+        /// The reference's width in pixels.
+        rw: u32,
+        /// The reference's height in pixels.
+        rh: u32,
+        /// The test image.
+        test: PathBuf,
+        /// The test image's width in pixels.
+        tw: u32,
+        /// The test image's height in pixels.
+        th: u32,
+    },
 }
 
+/// The file formats this crate reads and writes, by extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ImageFormat {
+pub(crate) enum ImageFormat {
     Exr,
     Png,
 }
 
 impl ImageFormat {
-    pub fn from_path(path: &Path) -> Result<Self, ImageError> {
+    pub(crate) fn from_path(path: &Path) -> Result<Self, ImageError> {
         match path.extension().map(|e| e.to_string_lossy().to_lowercase()).as_deref() {
             Some("exr") => Ok(Self::Exr),
             Some("png") => Ok(Self::Png),
@@ -44,11 +86,21 @@ impl ImageFormat {
 /// An image file's content: HDR radiance (EXR) or display-referred 8-bit sRGB (PNG).
 #[derive(Clone, Debug)]
 pub enum LoadedImage {
+    /// Linear HDR radiance, from an `.exr`.
     Hdr(Image),
-    Srgb8 { width: u32, height: u32, rgb: Vec<u8> },
+    /// Display-referred 8-bit sRGB, from a `.png`.
+    Srgb8 {
+        /// Width in pixels.
+        width: u32,
+        /// Height in pixels.
+        height: u32,
+        /// RGB bytes, row-major, three per pixel.
+        rgb: Vec<u8>,
+    },
 }
 
 impl LoadedImage {
+    /// Width and height in pixels.
     pub fn size(&self) -> (u32, u32) {
         match self {
             Self::Hdr(i) => (i.width, i.height),
@@ -209,11 +261,11 @@ fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: Vec<u8>) -> Result<
     buf.save_with_format(path, image::ImageFormat::Png).map_err(|e| e.to_string())
 }
 
-/// Reads an `.exr` (first RGB(A) layer, linear) or `.png` (8-bit sRGB).
 /// The largest image `read_image` loads, in pixels (8192 × 4096), so a header
 /// claiming more cannot exhaust memory.
 pub const MAX_READ_PIXELS: u64 = 1 << 25;
 
+/// Reads an `.exr` (first RGB(A) layer, linear) or `.png` (8-bit sRGB).
 pub fn read_image(path: &Path) -> Result<LoadedImage, ImageError> {
     if !path.exists() {
         return Err(io_err(path, "file not found"));

@@ -1,5 +1,12 @@
 //! probegi-image: image files (EXR, PNG, animated GIF previews), FLIP comparison and
 //! line plots.
+//!
+//! - [`io`]: reading and writing `.exr` (linear) and `.png` (tone-mapped sRGB) files.
+//! - [`compare`]: FLIP between two images and the contact sheet (`probegi compare`).
+//! - [`gif`]: looping animated GIF previews (`probegi render --gif`).
+//! - [`plot`]: line plots as PNG (`probegi lag`).
+
+#![warn(missing_docs)]
 
 pub mod compare;
 pub mod gif;

@@ -10,18 +10,26 @@ use crate::io::ImageError;
 /// One curve.
 #[derive(Clone, Debug)]
 pub struct Series {
+    /// Its name in the legend.
     pub label: String,
+    /// Line and marker colour (see [`PALETTE`]).
     pub rgb: [u8; 3],
+    /// Data points `(x, y)`, joined in order.
     pub points: Vec<(f64, f64)>,
     /// Draw as a dashed line.
     pub dashed: bool,
 }
 
+/// A line plot: title, axis labels, curves and guide lines.
 #[derive(Clone, Debug, Default)]
 pub struct LinePlot {
+    /// Title above the plot.
     pub title: String,
+    /// Label of the horizontal axis.
     pub x_label: String,
+    /// Label of the vertical axis.
     pub y_label: String,
+    /// The curves, in legend order.
     pub series: Vec<Series>,
     /// Horizontal guide lines `(y, label)`.
     pub guides: Vec<(f64, String)>,
@@ -230,6 +238,7 @@ impl LinePlot {
         (W as u32, H as u32, cv.rgb)
     }
 
+    /// Draws the plot and writes it as a PNG to `path`.
     pub fn write_png(&self, path: &Path) -> Result<(), ImageError> {
         let (w, h, rgb) = self.render_rgb8();
         crate::io::write_png(path, w, h, rgb)
