@@ -68,6 +68,7 @@ pub(crate) fn validate_key_frames<K: Keyed>(keys: &[K]) -> Result<(), String> {
 /// One key of an object's animation; any channel may be absent.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TransformKeyframe {
+    /// When this key applies, in the units of the animation's [`KeyClock`].
     pub frame: f32,
     /// Offset from the rest pose, metres.
     pub translation: Option<Vec3>,
@@ -89,12 +90,27 @@ impl Keyed for TransformKeyframe {
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum MotionPath {
     /// Constant velocity from the rest pose at frame 0.
-    Translate { velocity_m_per_frame: Vec3 },
+    Translate {
+        /// Displacement per frame, metres.
+        velocity_m_per_frame: Vec3,
+    },
     /// The whole object revolves about the axis through `centre_m`, one turn per
     /// `period_frames` (it keeps facing the centre, like a moon).
-    Orbit { centre_m: Vec3, axis: Vec3, period_frames: f32 },
+    Orbit {
+        /// A point on the axis, metres.
+        centre_m: Vec3,
+        /// The axis direction (any non-zero length).
+        axis: Vec3,
+        /// Frames per full turn.
+        period_frames: f32,
+    },
     /// The object spins about its pivot, one turn per `period_frames`.
-    Rotate { axis: Vec3, period_frames: f32 },
+    Rotate {
+        /// The spin axis direction through the pivot (any non-zero length).
+        axis: Vec3,
+        /// Frames per full turn.
+        period_frames: f32,
+    },
 }
 
 impl MotionPath {
@@ -142,18 +158,25 @@ pub enum KeyClock {
     #[default]
     Frames,
     /// Seconds (glTF), played at `frames_per_second` (the scene's clock).
-    Seconds { frames_per_second: f32 },
+    Seconds {
+        /// Frames per second of animation time.
+        frames_per_second: f32,
+    },
 }
 
 /// How an object moves; `Default` is still.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ObjectAnimation {
+    /// Keyed offsets from the rest pose, in increasing `frame` order; empty when not keyed.
     pub keyframes: Vec<TransformKeyframe>,
+    /// What the keys' `frame` counts.
     pub clock: KeyClock,
+    /// A closed-form path, applied on top of the keyed pose.
     pub motion: Option<MotionPath>,
 }
 
 impl ObjectAnimation {
+    /// Whether there is neither a key nor a motion path.
     pub fn is_still(&self) -> bool {
         self.keyframes.is_empty() && self.motion.is_none()
     }
@@ -162,23 +185,31 @@ impl ObjectAnimation {
 /// A rigid object: a contiguous range of the scene mesh and its animation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneObject {
+    /// For messages: the name the file gave it.
     pub name: String,
+    /// First index into `Scene::mesh.triangles`.
     pub first_triangle: u32,
+    /// Triangles in the range.
     pub triangle_count: u32,
+    /// First index into the mesh's per-vertex arrays.
     pub first_vertex: u32,
+    /// Vertices in the range.
     pub vertex_count: u32,
     /// Rotation and scale centre in rest space, metres.
     pub pivot_m: Vec3,
+    /// How the object moves over frames.
     pub animation: ObjectAnimation,
     /// The transform a scene file placed this object's source with (see module docs).
     pub placement: Mat4,
 }
 
 impl SceneObject {
+    /// The object's range of `Scene::mesh.triangles`.
     pub fn triangles(&self) -> std::ops::Range<usize> {
         self.first_triangle as usize..(self.first_triangle + self.triangle_count) as usize
     }
 
+    /// The object's range of the mesh's per-vertex arrays.
     pub fn vertices(&self) -> std::ops::Range<usize> {
         self.first_vertex as usize..(self.first_vertex + self.vertex_count) as usize
     }

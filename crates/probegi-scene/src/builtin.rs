@@ -20,6 +20,7 @@ use crate::mesh::Mesh;
 use crate::scene::Scene;
 pub use crate::shapes::{add_box, add_polygon, add_room};
 
+/// Every name `builtin:NAME` accepts.
 pub const BUILTIN_NAMES: &[&str] =
     &["cornell-box", "furnace-box", "color-bleed", "door-room", "flood-room", "sponza-sun", "forest"];
 
@@ -33,6 +34,8 @@ const SCENE_FILES: &[(&str, &str)] = &[
     ("forest", include_str!("../../../scenes/builtin/forest.toml")),
 ];
 
+/// The built-in scene `name` (without the `builtin:` prefix); an error listing
+/// [`BUILTIN_NAMES`] for an unknown one.
 pub fn load_builtin(name: &str) -> Result<Scene> {
     match name {
         "cornell-box" => Ok(cornell_box()),
@@ -53,6 +56,7 @@ fn v(x: f32, y: f32, z: f32) -> Vec3 {
     Vec3::new(x, y, z)
 }
 
+/// `builtin:cornell-box`: CornellBox-Original (see the module doc) with the default camera.
 pub fn cornell_box() -> Scene {
     let white = Vec3::new(0.725, 0.71, 0.68);
     let materials = vec![

@@ -383,6 +383,7 @@ fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
     })
 }
 
+/// Loads a glTF or GLB file (its buffers, textures, lights, camera and animations) as a scene.
 pub fn load_gltf(path: &Path) -> Result<Scene> {
     guarded(path, || load_gltf_unguarded(path))
 }

@@ -1,9 +1,31 @@
 //! probegi-scene: the scene model, its loaders and ray casting.
 //!
-//! - [`scene`], [`animation`] (rigid objects over frames), [`mesh`], [`material`], [`texture`], [`light`]: the model.
-//! - [`obj`], [`gltf_file`], [`scene_file`], [`builtin`], [`load`]: loaders.
-//! - [`tracer`]: the ray-casting trait; [`bvh`]: its obvhs CWBVH implementation; [`bvh_walk`]: the ray rule
-//!   and the bounded walks every ray goes through.
+//! The model:
+//! - [`scene`]: the [`Scene`]: one merged mesh, materials, textures, lights, sky, camera, instances.
+//! - [`animation`]: rigid objects over frames (keyframes and closed-form motion paths).
+//! - [`mesh`]: indexed triangle meshes and their shading normals.
+//! - [`material`]: metallic-roughness materials with the OBJ/MTL fields beside them.
+//! - [`texture`]: 8-bit textures, their samplers and lookups.
+//! - [`light`]: punctual lights (KHR_lights_punctual semantics and units).
+//! - [`shapes`]: hand-made geometry: polygons, boxes, rooms.
+//! - `bounds`: axis-aligned bounds under a transform (crate-internal).
+//!
+//! The loaders:
+//! - [`load`]: the one entry point, [`load_scene`], choosing by prefix and extension.
+//! - [`obj`]: Wavefront OBJ/MTL.
+//! - [`gltf_file`]: glTF 2.0 (.gltf and .glb).
+//! - [`scene_file`]: the TOML scene file, which places other files (through [`load`]).
+//! - [`builtin`]: the scenes compiled in, `builtin:NAME`.
+//! - [`file_lookup`]: file names inside scene files (separators, case, the shared folder).
+//! - [`error`]: the typed loader error, [`SceneError`].
+//!
+//! Ray casting:
+//! - [`ray`]: the ray and hit records.
+//! - [`tracer`]: the [`RayTracer`] trait renderers trace through.
+//! - [`bvh`]: its obvhs CWBVH implementation, [`BvhTracer`], and the flat form a GPU reads.
+//! - [`bvh_walk`]: the ray rule and the bounded walks every ray goes through.
+
+#![warn(missing_docs)]
 
 pub mod animation;
 mod bounds;

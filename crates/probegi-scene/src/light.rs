@@ -7,17 +7,23 @@ use serde::{Deserialize, Serialize};
 
 use crate::animation::channel;
 
+/// The kind of a punctual light (glTF KHR_lights_punctual `type`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LightKind {
+    /// Emits in every direction from `position`.
     Point,
+    /// Emits from `position` along `direction`, within the cone angles.
     Spot,
+    /// Parallel light along `direction` from infinitely far away (a sun).
     Directional,
 }
 
+/// A point, spot or directional light, a `[[lights]]` entry of a scene file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PunctualLight {
+    /// Point, spot or directional.
     pub kind: LightKind,
     /// World position, metres (point and spot).
     #[serde(default)]
@@ -55,10 +61,13 @@ pub struct PunctualLight {
 pub struct LightKeyframe {
     /// Frame number (fractional frames allowed); keys must be in increasing order.
     pub frame: f32,
+    /// World position from this key on, metres.
     #[serde(default)]
     pub position: Option<Vec3>,
+    /// Direction the light travels from this key on.
     #[serde(default)]
     pub direction: Option<Vec3>,
+    /// Intensity from this key on (0: off), in the units of `PunctualLight::intensity`.
     #[serde(default)]
     pub intensity: Option<f32>,
 }
@@ -96,6 +105,7 @@ impl PunctualLight {
         l
     }
 
+    /// A still point light at `position` with colour `color` and radiant intensity `intensity` (W·sr⁻¹).
     pub fn point(position: Vec3, color: Vec3, intensity: f32) -> Self {
         Self {
             kind: LightKind::Point,

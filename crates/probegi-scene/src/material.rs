@@ -73,6 +73,7 @@ impl VertexAttributes {
 pub struct UvMapping {
     /// 0 or 1: which of [`VertexAttributes::uv`] it reads.
     pub set: u32,
+    /// The two rows of the 2×3 affine matrix applied to `(u, v, 1)`.
     pub rows: [Vec3; 2],
 }
 
@@ -133,7 +134,10 @@ pub enum AlphaMode {
     /// Alpha ignored: every point is opaque.
     Opaque,
     /// Opaque where coverage ≥ `cutoff`, absent elsewhere.
-    Mask { cutoff: f32 },
+    Mask {
+        /// Coverage at or above this is opaque.
+        cutoff: f32,
+    },
 }
 
 /// Height of a white texel in a height map, as a fraction of the map's larger
@@ -146,8 +150,11 @@ pub const BUMP_WHITE_HEIGHT_REL: f32 = 0.02;
 /// The cutoff glTF gives `alphaCutoff` when absent, and the one MTL cutouts use.
 pub const DEFAULT_ALPHA_CUTOFF: f32 = 0.5;
 
+/// A surface's appearance: diffuse base colour, emission, specular lobe, alpha
+/// cutout and normal perturbation, each a factor and an optional texture.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
+    /// The name the file gave it, for messages.
     pub name: String,
     /// Linear base colour factor (glTF `baseColorFactor.rgb`, MTL `Kd`).
     pub base_color_factor: Vec3,
@@ -156,6 +163,7 @@ pub struct Material {
     pub base_color_texture: Option<usize>,
     /// Linear emissive factor (glTF `emissiveFactor`, MTL `Ke`), W·sr⁻¹·m⁻² per channel.
     pub emissive_factor: Vec3,
+    /// Index into `Scene::textures`; multiplied by `emissive_factor` (glTF `emissiveTexture`, MTL `map_Ke`).
     pub emissive_texture: Option<usize>,
     /// KHR_materials_emissive_strength multiplier; 1 when absent.
     pub emissive_strength: f32,
@@ -163,12 +171,15 @@ pub struct Material {
     /// Phong exponent via the Beckmann equivalence α = sqrt(2 / (Ns + 2)), i.e.
     /// r = (2 / (Ns + 2))^¼.
     pub roughness: f32,
+    /// Metalness in [0, 1] (glTF `metallicFactor`; 0 for MTL).
     pub metallic: f32,
     /// MTL `Ks`, kept verbatim.
     pub specular_color: Vec3,
     /// MTL `Ns` (Phong exponent), kept verbatim.
     pub specular_exponent: f32,
+    /// How the specular lobe is derived from the fields above.
     pub specular_model: SpecularModel,
+    /// Whether coverage cuts points out.
     pub alpha_mode: AlphaMode,
     /// Constant coverage factor (glTF `baseColorFactor.a`, MTL `d` or 1 − `Tr`).
     pub alpha_factor: f32,
@@ -254,10 +265,12 @@ impl Material {
         self.normal_texture.is_some() || self.bump_texture.is_some()
     }
 
+    /// A plain Lambertian material of albedo `base_color`.
     pub fn diffuse(name: &str, base_color: Vec3) -> Self {
         Self { base_color_factor: base_color, ..Self::default_grey(name) }
     }
 
+    /// A Lambertian material of albedo `base_color` that emits radiance `emission` (W·sr⁻¹·m⁻²).
     pub fn emissive(name: &str, base_color: Vec3, emission: Vec3) -> Self {
         Self { emissive_factor: emission, ..Self::diffuse(name, base_color) }
     }

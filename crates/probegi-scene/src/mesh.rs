@@ -10,8 +10,10 @@ use glam::{Mat4, Vec2, Vec3, Vec4};
 
 use crate::material::VertexAttributes;
 
+/// An indexed triangle mesh with per-vertex attributes and a material id per triangle.
 #[derive(Clone, Debug, Default)]
 pub struct Mesh {
+    /// Vertex positions, metres.
     pub positions: Vec<Vec3>,
     /// Unit shading normals, one per vertex.
     pub normals: Vec<Vec3>,
@@ -22,6 +24,7 @@ pub struct Mesh {
     pub uvs1: Vec<Vec2>,
     /// Linear vertex colours (glTF `COLOR_0`'s RGB). Vertices past its end are white.
     pub colors: Vec<Vec3>,
+    /// Vertex indices, counter-clockwise seen from the front face.
     pub triangles: Vec<[u32; 3]>,
     /// Index into `Scene::materials`, one per triangle.
     pub triangle_materials: Vec<u32>,
@@ -47,10 +50,12 @@ pub enum NormalSource {
 }
 
 impl Mesh {
+    /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.triangles.len()
     }
 
+    /// The positions of triangle `tri`'s corners, in winding order.
     pub fn vertices(&self, tri: usize) -> [Vec3; 3] {
         let [a, b, c] = self.triangles[tri];
         [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
@@ -62,6 +67,7 @@ impl Mesh {
         (b - a).cross(c - a)
     }
 
+    /// Area of triangle `tri`, square metres.
     pub fn area(&self, tri: usize) -> f32 {
         0.5 * self.face_normal_scaled(tri).length()
     }

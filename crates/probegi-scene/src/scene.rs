@@ -23,13 +23,19 @@ use crate::mesh::Mesh;
 use crate::ray::RayHit;
 use crate::texture::Texture;
 
+/// A loaded scene: the world geometry and its materials, lights, sky, camera,
+/// instances and the GI settings its file asked for (see the module doc).
 #[derive(Clone, Debug)]
 pub struct Scene {
     /// For messages: the path or built-in name it was loaded from.
     pub name: String,
+    /// The world geometry, every loader's meshes merged (instances apart).
     pub mesh: Mesh,
+    /// Indexed by the meshes' per-triangle material ids.
     pub materials: Vec<Material>,
+    /// Indexed by the materials' texture references.
     pub textures: Vec<Texture>,
+    /// Point, spot and directional lights (area lights are the emissive triangles).
     pub lights: Vec<PunctualLight>,
     /// Named mesh ranges, animated or not; ranges do not overlap.
     pub objects: Vec<SceneObject>,
@@ -64,6 +70,7 @@ pub struct Scene {
 pub struct CameraKeyframe {
     /// Frame number (fractional frames allowed), finite and ≥ 0.
     pub frame: f32,
+    /// The camera at that frame.
     pub camera: Camera,
 }
 
@@ -114,7 +121,9 @@ const MAX_CAMERA_WALK_STEPS: f32 = 1e6;
 /// index `Scene::materials`.
 #[derive(Clone, Debug, Default)]
 pub struct MeshPrototype {
+    /// For messages: the file it came from.
     pub name: String,
+    /// The geometry, in the prototype's local space.
     pub mesh: Mesh,
 }
 
@@ -123,6 +132,7 @@ pub struct MeshPrototype {
 pub struct MeshInstance {
     /// Index into `Scene::prototypes`.
     pub prototype: u32,
+    /// Places the prototype's local space in the world.
     pub world_from_local: glam::Affine3A,
     /// Inverse transpose of the linear part, for normals.
     pub normal_from_local: glam::Mat3A,
@@ -178,6 +188,7 @@ impl Corners {
 /// Everything a shader needs about a ray-surface intersection.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfacePoint {
+    /// The hit point, world space.
     pub position: Vec3,
     /// Unit counter-clockwise (front-face) geometric normal.
     pub geometric_normal: Vec3,
@@ -189,6 +200,7 @@ pub struct SurfacePoint {
     pub uv1: Vec2,
     /// Linear vertex colour (white where the mesh has none).
     pub vertex_color: Vec3,
+    /// Index into `Scene::materials`.
     pub material: u32,
     /// Index of the triangle in `Scene::mesh`, or in its prototype's mesh when
     /// `instance` is set.
@@ -373,6 +385,7 @@ impl Scene {
         n
     }
 
+    /// Material `id` (an index into `materials`).
     pub fn material(&self, id: u32) -> &Material {
         &self.materials[id as usize]
     }

@@ -90,16 +90,20 @@ use crate::error::{Result, SceneError};
 use crate::light::PunctualLight;
 use crate::scene::{CameraKeyframe, Scene};
 
+/// A whole scene file, as parsed (the module doc shows every table).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneFile {
+    /// Files merged into the scene, each placed once.
     #[serde(default)]
     pub meshes: Vec<MeshRef>,
     /// Copies of one file each.
     #[serde(default)]
     pub instances: Vec<InstanceEntry>,
+    /// Punctual lights, in world space.
     #[serde(default)]
     pub lights: Vec<PunctualLight>,
+    /// Constant radiance of rays that leave the scene; black when absent.
     #[serde(default)]
     pub sky_radiance: Option<Vec3>,
     /// `[camera]`, with its span for error lines.
@@ -114,6 +118,7 @@ pub struct SceneFile {
     /// The SH probes of `--gi sh` (`probegi_core::sh_settings::ShProbeSettings` field names).
     #[serde(default)]
     pub sh: Option<ShProbeSettings>,
+    /// Rigid objects, still or animated, each a box, a polygon or a file.
     #[serde(default)]
     pub objects: Vec<ObjectEntry>,
     /// The animation clock for animations authored in seconds (glTF).
@@ -127,15 +132,19 @@ pub struct SceneFile {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraEntry {
+    /// Eye position, metres.
     #[serde(default)]
     pub position: Option<Vec3>,
+    /// The point looked at, metres.
     #[serde(default)]
     pub target: Option<Vec3>,
     /// Default +Y.
     #[serde(default)]
     pub up: Option<Vec3>,
+    /// Vertical field of view, degrees.
     #[serde(default)]
     pub fov_y_deg: Option<f32>,
+    /// The camera's animation, keys in strictly increasing frame order.
     #[serde(default)]
     pub keyframes: Vec<Spanned<CameraKeyEntry>>,
 }
@@ -147,12 +156,16 @@ pub struct CameraEntry {
 pub struct CameraKeyEntry {
     /// Frame number, ≥ 0 (fractional frames allowed).
     pub frame: f32,
+    /// Eye position from this key on, metres.
     #[serde(default)]
     pub position: Option<Vec3>,
+    /// The point looked at from this key on, metres.
     #[serde(default)]
     pub target: Option<Vec3>,
+    /// Up direction from this key on.
     #[serde(default)]
     pub up: Option<Vec3>,
+    /// Vertical field of view from this key on, degrees.
     #[serde(default)]
     pub fov_y_deg: Option<f32>,
 }
@@ -213,24 +226,31 @@ fn line_of(text: &str, offset: usize) -> usize {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ObjectEntry {
+    /// For messages; default `object`.
     #[serde(default)]
     pub name: Option<String>,
+    /// A box's lowest corner, metres (with `box_max_m`).
     #[serde(default)]
     pub box_min_m: Option<Vec3>,
+    /// A box's highest corner, metres (with `box_min_m`).
     #[serde(default)]
     pub box_max_m: Option<Vec3>,
     /// The box's faces point inward (a closed room seen from inside).
     #[serde(default)]
     pub box_inward: bool,
+    /// One planar polygon's corners, metres, counter-clockwise seen from the front.
     #[serde(default)]
     pub polygon_m: Option<Vec<Vec3>>,
     /// A mesh file (as in `[[meshes]]`), placed by translation / rotation_deg / scale.
     #[serde(default)]
     pub path: Option<String>,
+    /// A file's placement: translation, metres.
     #[serde(default)]
     pub translation: Vec3,
+    /// A file's placement: intrinsic Euler angles X, Y, Z in degrees.
     #[serde(default)]
     pub rotation_deg: Vec3,
+    /// A file's placement: scale per axis.
     #[serde(default = "one")]
     pub scale: Vec3,
     /// Diffuse albedo of a box or polygon (default 0.8 grey).
@@ -242,8 +262,10 @@ pub struct ObjectEntry {
     /// Rotation and scale centre; default the centre of the object's bounds.
     #[serde(default)]
     pub pivot_m: Option<Vec3>,
+    /// Keyed offsets from the authored pose, in increasing frame order.
     #[serde(default)]
     pub keyframes: Vec<ObjectKeyframe>,
+    /// A closed-form motion path on top of the keys.
     #[serde(default)]
     pub motion: Option<MotionPath>,
 }
@@ -252,26 +274,33 @@ pub struct ObjectEntry {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ObjectKeyframe {
+    /// Frame number (fractional frames allowed); keys in increasing order.
     pub frame: f32,
+    /// Offset from the authored position, metres.
     #[serde(default)]
     pub translation: Option<Vec3>,
     /// Intrinsic Euler angles X, Y, Z in degrees, about the pivot.
     #[serde(default)]
     pub rotation_deg: Option<Vec3>,
+    /// Scale about the pivot, per axis.
     #[serde(default)]
     pub scale: Option<Vec3>,
 }
 
+/// One `[[meshes]]` entry: a file merged into the scene, placed by scale,
+/// rotation, then translation.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeshRef {
     /// OBJ, glTF/GLB, or `builtin:NAME`; relative paths are relative to the TOML file.
     pub path: String,
+    /// Translation, metres.
     #[serde(default)]
     pub translation: Vec3,
     /// Intrinsic Euler angles X, Y, Z in degrees.
     #[serde(default)]
     pub rotation_deg: Vec3,
+    /// Scale per axis.
     #[serde(default = "one")]
     pub scale: Vec3,
     /// Shading normals: as the file says, or overridden.
@@ -324,29 +353,42 @@ impl NormalsRule {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct InstanceEntry {
+    /// The file copied, named as in `[[meshes]]`; it may not be animated or have instances itself.
     pub path: String,
+    /// Every copy's own placement first: translation, metres.
     #[serde(default)]
     pub translation: Vec3,
+    /// Every copy's own placement first: intrinsic Euler angles X, Y, Z in degrees.
     #[serde(default)]
     pub rotation_deg: Vec3,
+    /// Every copy's own placement first: scale per axis.
     #[serde(default = "one")]
     pub scale: Vec3,
+    /// Shading normals, as for `[[meshes]]`.
     #[serde(default)]
     pub normals: NormalsRule,
+    /// For `normals = "smooth"`, as for `[[meshes]]`.
     #[serde(default = "no_crease")]
     pub crease_angle_deg: f32,
+    /// One copy per transform.
     #[serde(default)]
     pub transforms: Vec<InstanceTransform>,
+    /// Copies on a jittered grid, after those of `transforms`.
     pub grid: Option<InstanceGrid>,
 }
 
+/// One entry of `[[instances]].transforms`: a copy's placement, applied after the
+/// entry's own.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct InstanceTransform {
+    /// Translation, metres.
     #[serde(default)]
     pub translation: Vec3,
+    /// Intrinsic Euler angles X, Y, Z in degrees.
     #[serde(default)]
     pub rotation_deg: Vec3,
+    /// Scale per axis.
     #[serde(default = "one")]
     pub scale: Vec3,
 }
@@ -371,6 +413,7 @@ pub struct InstanceGrid {
     /// Uniform scale per copy, drawn from this range.
     #[serde(default = "unit_range")]
     pub scale_range: [f32; 2],
+    /// Seed of the jitter, yaw and scale draws; the same seed gives the same copies.
     #[serde(default = "seed_one")]
     pub seed: u64,
 }
@@ -430,6 +473,7 @@ impl InstanceEntry {
 }
 
 impl MeshRef {
+    /// The entry's placement: scale, then rotation, then translation.
     pub fn world_from_local(&self) -> Mat4 {
         placement_matrix(self.translation, self.rotation_deg, self.scale)
     }
@@ -452,6 +496,8 @@ impl Drop for IncludeGuard {
     }
 }
 
+/// Loads a TOML scene file and everything it names; a file that names itself,
+/// directly or not, or nests deeper than [`MAX_SCENE_FILE_DEPTH`] is an error.
 pub fn load_scene_file(path: &Path) -> Result<Scene> {
     let text =
         std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: path.to_path_buf(), cause: source })?;

@@ -57,12 +57,16 @@ pub struct Sampler {
     pub wrap_u: Wrap,
     /// Along `v` (glTF `wrapT`).
     pub wrap_v: Wrap,
+    /// How the texels around a lookup are combined, on both axes.
     pub filter: Filter,
 }
 
+/// A decoded image a material reads: sRGB texels, an optional alpha plane and its sampler.
 #[derive(Clone, Debug)]
 pub struct Texture {
+    /// Width in texels.
     pub width: u32,
+    /// Height in texels.
     pub height: u32,
     /// Row-major sRGB-encoded RGB8, row 0 at the top.
     pub texels: Vec<[u8; 3]>,
@@ -87,6 +91,8 @@ impl Texture {
         Ok(Self::from_dynamic(img, path.display().to_string()))
     }
 
+    /// A texture from a decoded image, named `source` in messages; an alpha plane
+    /// with every texel opaque is dropped.
     pub fn from_dynamic(img: image::DynamicImage, source: String) -> Self {
         let alpha = img.color().has_alpha().then(|| img.to_rgba8().pixels().map(|p| p.0[3]).collect::<Vec<u8>>());
         let rgb = img.to_rgb8();
@@ -194,7 +200,7 @@ fn grey(t: [u8; 3]) -> f32 {
 /// The four texels (wrap addressing) and weights of a bilinear lookup at `uv`;
 /// texel centres at half-integers. A non-finite `uv` reads texel (0, 0).
 #[derive(Clone, Copy, Debug)]
-pub struct Footprint {
+pub(crate) struct Footprint {
     /// Row-major indices of (x0, y0), (x0 + 1, y0), (x0, y0 + 1), (x0 + 1, y0 + 1).
     pub texel: [usize; 4],
     pub fx: f32,

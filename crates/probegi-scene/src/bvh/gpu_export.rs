@@ -12,18 +12,24 @@ use super::cutouts::CoverageMask;
 /// bilinear coverage (wrap addressing, texel centres at half-integers) ≥ `cutoff`.
 #[derive(Clone, Debug)]
 pub struct BvhCutoutMask {
+    /// Coverage texture width in texels (1 for a constant coverage).
     pub width: u32,
+    /// Coverage texture height in texels (1 for a constant coverage).
     pub height: u32,
     /// One unorm byte per texel, row-major; empty for a constant coverage of 1.
     pub coverage: Vec<u8>,
+    /// The material's alpha factor, multiplied into the coverage.
     pub factor: f32,
+    /// The alpha-mask cutoff: a hit counts where factor × coverage ≥ this.
     pub cutoff: f32,
 }
 
 /// A cut-out triangle of [`BvhExport`]: its mask and corner UVs.
 #[derive(Clone, Copy, Debug)]
 pub struct BvhCutTriangle {
+    /// Index into `BvhExport::cutout_masks`.
     pub mask: u32,
+    /// The triangle's corner UVs, vertices 0, 1, 2.
     pub uv: [Vec2; 3],
 }
 
@@ -50,7 +56,9 @@ pub struct BvhExport {
     pub leaf_triangle_ids: Vec<u32>,
     /// Per leaf: index into `cut_triangles`, or `u32::MAX`; empty when nothing is cut out.
     pub leaf_cutouts: Vec<u32>,
+    /// The cut-out triangles, indexed by `leaf_cutouts`.
     pub cut_triangles: Vec<BvhCutTriangle>,
+    /// One coverage mask per cut-out material, indexed by `BvhCutTriangle::mask`.
     pub cutout_masks: Vec<BvhCutoutMask>,
     /// The top level in the rest pose: moving objects at rest, the still
     /// instances; `None` when rays go straight to `blases[0]`.
@@ -117,6 +125,7 @@ impl BvhExport {
         self.cut_triangles.extend(blas.cut.iter().map(|c| BvhCutTriangle { mask: c.mask, uv: c.uv }));
     }
 
+    /// Nodes in `node_words` (20 words each), every bottom level together.
     pub fn node_count(&self) -> usize {
         self.node_words.len() / 20
     }
@@ -140,11 +149,14 @@ pub struct TlasInstance {
 /// `instances` in leaf order.
 #[derive(Clone, Debug, Default)]
 pub struct TlasExport {
+    /// The top-level nodes, 20 words each, laid out as `BvhExport::node_words`.
     pub node_words: Vec<u32>,
+    /// The placed bottom levels, in leaf order: the top level's primitive id indexes this.
     pub instances: Vec<TlasInstance>,
 }
 
 impl TlasExport {
+    /// Nodes in `node_words` (20 words each).
     pub fn node_count(&self) -> usize {
         self.node_words.len() / 20
     }

@@ -82,6 +82,7 @@ pub struct BvhTracer {
     cutouts: Cutouts,
     /// Shared with the tracers [`RayTracer::at_frame`] rebuilds.
     guards: Arc<TraceGuards>,
+    /// Wall time the bottom levels and the rest-pose top level took to build.
     pub build_time: Duration,
 }
 
@@ -156,6 +157,7 @@ impl BvhTracer {
         tracer
     }
 
+    /// Triangles over all bottom levels (a prototype's count once, however often it is placed).
     pub fn triangle_count(&self) -> usize {
         self.blases.iter().map(|b| b.triangles.len()).sum()
     }

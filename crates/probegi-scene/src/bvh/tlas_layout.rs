@@ -47,7 +47,7 @@ pub(super) struct Tlas {
 /// What a tracer's top level is built from: the bounds of its bottom levels,
 /// its moving objects and its still instances. A device that traces the two
 /// levels itself (`probegi-wgpu`) keeps this and places the instances for each
-/// frame with [`TlasLayout::export_at`], as [`RayTracer::at_frame`] does.
+/// frame with [`TlasLayout::export_at`], as [`RayTracer::at_frame`](crate::RayTracer::at_frame) does.
 #[derive(Clone, Debug)]
 pub struct TlasLayout {
     /// Bounds of `BvhTracer::blases[k]` (`None`: no triangles).
@@ -72,7 +72,7 @@ impl TlasLayout {
     }
 
     /// The top level with the moving objects of `posed` placed at `frame` (the
-    /// one [`RayTracer::at_frame`] traces); an error when `posed` is not the
+    /// one [`RayTracer::at_frame`](crate::RayTracer::at_frame) traces); an error when `posed` is not the
     /// scene this layout's tracer was built for.
     pub fn export_at(&self, posed: &Scene, frame: f32) -> Result<TlasExport, String> {
         if !self.follows(posed) {
