@@ -48,31 +48,50 @@ pub enum GiMethod {
 }
 
 /// What [`render_frames`] renders: image size, frames, seed, the GI method and
-/// who traces.
+/// who traces. `Default` is the CLI's `probegi render` without options.
 #[derive(Clone, Debug)]
 pub struct RenderSettings {
-    /// Image width in pixels.
+    /// Image width in pixels (default 512, the CLI's `--width`).
     pub width: u32,
-    /// Image height in pixels.
+    /// Image height in pixels (default 512, the CLI's `--height`).
     pub height: u32,
-    /// Frames to run, at least one: a static scene's direct term accumulates
-    /// over them, the field updates once per frame.
+    /// Frames to run, at least one (default 1, the CLI's `--frames`): a static
+    /// scene's direct term accumulates over them, the field updates once per frame.
     pub frames: u32,
-    /// Random seed of every sampling stream.
+    /// Random seed of every sampling stream (default 0, the CLI's `--seed`).
     pub seed: u64,
-    /// Global illumination on top of direct light.
+    /// Global illumination on top of direct light (default none, the CLI's `--gi`).
     pub gi: GiMethod,
-    /// Direct-light sample counts; the camera pass leaves out what the field
-    /// carries (the sky under DDGI).
+    /// Direct-light sample counts (default [`DirectSettings::default`], as the
+    /// CLI's); the camera pass leaves out what the field carries (the sky under DDGI).
     pub direct: DirectSettings,
-    /// Draw DDGI probes as spheres in the final image.
+    /// Draw DDGI probes as spheres in the final image (default off, the CLI's
+    /// `--show-probes`).
     pub show_probes: bool,
     /// The camera of each frame (a keyframed flythrough); empty = the fixed camera
-    /// passed to [`render_frames`]. Frames past the end hold the last entry.
+    /// passed to [`render_frames`] (the default). Frames past the end hold the last entry.
     pub camera_path: Vec<CameraRays>,
-    /// Who traces the DDGI probe ray batches: `None` for the CPU tracer, or a
-    /// [`probegi_field::ProbeBatchTracer`] (the CLI's `--backend wgpu`).
+    /// Who traces the DDGI probe ray batches: `None` for the CPU tracer (the
+    /// default), or a [`probegi_field::ProbeBatchTracer`] (the CLI's `--backend wgpu`).
     pub probe_tracer: Option<probegi_field::ProbeTracerHandle>,
+}
+
+impl Default for RenderSettings {
+    /// The CLI's `probegi render` defaults: one 512 × 512 frame at seed 0,
+    /// direct light only, traced on the CPU.
+    fn default() -> Self {
+        Self {
+            width: 512,
+            height: 512,
+            frames: 1,
+            seed: 0,
+            gi: GiMethod::None,
+            direct: DirectSettings::default(),
+            show_probes: false,
+            camera_path: Vec::new(),
+            probe_tracer: None,
+        }
+    }
 }
 
 /// Measurements of a render; serialised by the CLI's `--stats`.

@@ -4,8 +4,8 @@
 use glam::Vec3;
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
-use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
+use probegi_cpu::frame_loop::{RenderSettings, render_frames};
+use probegi_cpu::{PathTracer, PathTracerSettings};
 use probegi_scene::builtin::{add_polygon, furnace_box};
 use probegi_scene::{BvhSettings, BvhTracer, LightKind, Material, PunctualLight, Scene};
 use std::f32::consts::PI;
@@ -19,17 +19,7 @@ fn reference(scene: &Scene, camera: &Camera, size: u32, settings: PathTracerSett
 fn direct(scene: &Scene, camera: &Camera, size: u32, frames: u32) -> Image {
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let rays = CameraRays::new(camera, size, size);
-    let settings = RenderSettings {
-        width: size,
-        height: size,
-        frames,
-        seed: 1,
-        gi: GiMethod::None,
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
-        probe_tracer: None,
-    };
+    let settings = RenderSettings { width: size, height: size, frames, seed: 1, ..Default::default() };
     render_frames(scene, &bvh, &rays, &settings, |_, _| {}).image
 }
 

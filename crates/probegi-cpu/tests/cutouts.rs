@@ -9,7 +9,6 @@ use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::image::Image;
 use probegi_core::sh_settings::ShProbeSettings;
-use probegi_cpu::DirectSettings;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::path_tracer::{PathTracer, PathTracerSettings};
 use probegi_scene::builtin::{add_polygon, cornell_box};
@@ -41,17 +40,7 @@ fn with_wall(opaque: bool) -> Scene {
 fn frames(scene: &Scene, gi: GiMethod, n: u32) -> Image {
     let bvh = BvhTracer::for_scene(scene, BvhSettings::default());
     let rays = CameraRays::new(&scene.default_camera(), SIZE, SIZE);
-    let settings = RenderSettings {
-        width: SIZE,
-        height: SIZE,
-        frames: n,
-        seed: 5,
-        gi,
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
-        probe_tracer: None,
-    };
+    let settings = RenderSettings { width: SIZE, height: SIZE, frames: n, seed: 5, gi, ..Default::default() };
     render_frames(scene, &bvh, &rays, &settings, |_, _| {}).image
 }
 

@@ -20,17 +20,7 @@ use probegi_scene::{BvhSettings, BvhTracer, Scene};
 fn render(scene: &Scene, size: u32, frames: u32, gi: GiMethod) -> RenderOutput {
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let camera = CameraRays::new(&scene.camera.expect("camera"), size, size);
-    let settings = RenderSettings {
-        width: size,
-        height: size,
-        frames,
-        seed: 11,
-        gi,
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
-        probe_tracer: None,
-    };
+    let settings = RenderSettings { width: size, height: size, frames, seed: 11, gi, ..Default::default() };
     render_frames(scene, &bvh, &camera, &settings, |_, _| {})
 }
 

@@ -10,7 +10,6 @@ use glam::{UVec3, Vec3};
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
-use probegi_cpu::DirectSettings;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::builtin::cornell_box;
@@ -27,10 +26,7 @@ fn ddgi_render(scene: &Scene, frames: u32, rays: u32, sequence: &mut Vec<Image>)
         frames,
         seed: 5,
         gi: GiMethod::Ddgi(Box::new(volume)),
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
-        probe_tracer: None,
+        ..Default::default()
     };
     render_frames(scene, &bvh, &camera, &settings, |_, image| sequence.push(image())).image
 }

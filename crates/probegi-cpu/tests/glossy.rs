@@ -7,7 +7,7 @@ use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
-use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
+use probegi_cpu::{PathTracer, PathTracerSettings};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 
@@ -55,17 +55,7 @@ fn second_order_glossy_brings_the_glossy_box_closer_to_the_reference() {
         .render(&cam, size, size, &|| {})
         .0;
     let render = |gi: GiMethod| {
-        let rs = RenderSettings {
-            width: size,
-            height: size,
-            frames: 80,
-            seed: 8,
-            gi,
-            direct: DirectSettings::default(),
-            show_probes: false,
-            camera_path: Vec::new(),
-            probe_tracer: None,
-        };
+        let rs = RenderSettings { width: size, height: size, frames: 80, seed: 8, gi, ..Default::default() };
         render_frames(&scene, &bvh, &cam, &rs, |_, _| {}).image
     };
     let base = DdgiVolumeSettings { probe_rays_per_probe: 128, probe_hysteresis: 0.9, ..Default::default() };

@@ -7,7 +7,7 @@ use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeBiasMode};
 use probegi_core::image::Image;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
-use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
+use probegi_cpu::{PathTracer, PathTracerSettings};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::{BvhSettings, BvhTracer, Scene};
 
@@ -67,10 +67,7 @@ fn leak_weights_bring_the_interior_monotonically_closer_to_the_reference() {
             frames: 60,
             seed: 3,
             gi: GiMethod::Ddgi(Box::new(settings)),
-            direct: DirectSettings::default(),
-            show_probes: false,
-            camera_path: Vec::new(),
-            probe_tracer: None,
+            ..Default::default()
         };
         let img = render_frames(&scene, &bvh, &camera, &rs, |_, _| {}).image;
         let f = flip(&reference, &img);

@@ -8,7 +8,7 @@ use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
 use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
-use probegi_cpu::{DirectSettings, PathTracer, PathTracerSettings};
+use probegi_cpu::{PathTracer, PathTracerSettings};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::builtin::add_box;
 use probegi_scene::{BvhSettings, BvhTracer, ObjectAnimation, Scene, TransformKeyframe, load_scene};
@@ -24,10 +24,7 @@ fn render(scene: &Scene, frames: u32, volume: DdgiVolumeSettings, mut each: impl
         frames,
         seed: 9,
         gi: GiMethod::Ddgi(Box::new(volume)),
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
-        probe_tracer: None,
+        ..Default::default()
     };
     render_frames(scene, &bvh, &camera, &settings, |f, image| each(f, image()))
 }

@@ -10,7 +10,6 @@ use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::color::luminance;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::image::Image;
-use probegi_cpu::DirectSettings;
 use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
@@ -29,10 +28,7 @@ fn render(scene: &Scene, volume: DdgiVolumeSettings) -> RenderOutput {
         frames: 40,
         seed: 1,
         gi: GiMethod::Ddgi(Box::new(volume)),
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
-        probe_tracer: None,
+        ..Default::default()
     };
     render_frames(scene, &bvh, &camera, &settings, |_, _| {})
 }

@@ -7,7 +7,6 @@ use glam::Vec3;
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::image::Image;
 use probegi_core::sh_settings::ShProbeSettings;
-use probegi_cpu::DirectSettings;
 use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
 use probegi_image::{LoadedImage, mean_flip_hdr, read_image};
 use probegi_scene::builtin::{cornell_box, furnace_box};
@@ -16,17 +15,7 @@ use probegi_scene::{BvhSettings, BvhTracer, Scene};
 fn render_with(scene: &Scene, camera: &Camera, size: u32, frames: u32, gi: GiMethod, seed: u64) -> RenderOutput {
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let rays = CameraRays::new(camera, size, size);
-    let settings = RenderSettings {
-        width: size,
-        height: size,
-        frames,
-        seed,
-        gi,
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
-        probe_tracer: None,
-    };
+    let settings = RenderSettings { width: size, height: size, frames, seed, gi, ..Default::default() };
     render_frames(scene, &bvh, &rays, &settings, |_, _| {})
 }
 

@@ -245,10 +245,7 @@ fn cascades_converge_in_the_furnace_and_trace_in_one_batch() {
         frames: 80,
         seed: 2,
         gi: GiMethod::DdgiSet(Box::new(set)),
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
-        probe_tracer: None,
+        ..Default::default()
     };
     let out = render_frames(&scene, &bvh, &rays, &settings, |_, _| {});
     let mean = out.image.mean();

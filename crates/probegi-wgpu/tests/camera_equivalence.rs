@@ -51,9 +51,8 @@ fn render(
         seed,
         gi: GiMethod::Ddgi(Box::new(s.clone())),
         direct: DirectSettings { direct_area_samples: AREA_SAMPLES, ..Default::default() },
-        show_probes: false,
-        camera_path: Vec::new(),
         probe_tracer: gpu.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
+        ..Default::default()
     };
     let out = render_frames(scene, &cpu, &camera, &rs, |_, _| {});
     assert!(out.stats.error.is_none(), "{:?}", out.stats.error);
@@ -356,10 +355,8 @@ fn a_keyframed_light_moves_and_switches_off_on_the_gpu_as_on_the_cpu() {
             frames: 72,
             seed: 3,
             gi: GiMethod::Ddgi(Box::new(small(UVec3::splat(4)))),
-            direct: DirectSettings::default(),
-            show_probes: false,
-            camera_path: Vec::new(),
             probe_tracer: g.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
+            ..Default::default()
         };
         let out = render_frames(&scene, &cpu, &camera, &rs, |_, _| {});
         assert!(out.stats.error.is_none(), "{:?}", out.stats.error);

@@ -149,10 +149,8 @@ fn render(scene: &Scene, size: u32, frames: u32, s: DdgiVolumeSettings, gpu: Opt
         frames,
         seed: 3,
         gi: GiMethod::Ddgi(Box::new(s)),
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
         probe_tracer: gpu.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
+        ..Default::default()
     };
     let out = render_frames(scene, &cpu, &camera, &rs, |_, _| {});
     assert!(out.stats.error.is_none(), "{:?}", out.stats.error);
@@ -232,10 +230,8 @@ fn a_moving_box_gives_the_same_field_through_the_gpu_top_level() {
             frames: 40,
             seed: 3,
             gi: GiMethod::Ddgi(Box::new(s.clone())),
-            direct: DirectSettings::default(),
-            show_probes: false,
-            camera_path: Vec::new(),
             probe_tracer: tracer.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
+            ..Default::default()
         };
         let out = render_frames(&scene, &cpu, &camera, &rs, |_, _| {});
         assert!(out.stats.error.is_none(), "{:?}", out.stats.error);

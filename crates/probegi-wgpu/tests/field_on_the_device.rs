@@ -261,10 +261,8 @@ fn cascades_kept_on_the_gpu_converge_in_the_furnace() {
         frames: 80,
         seed: 2,
         gi: GiMethod::DdgiSet(Box::new(set)),
-        direct: DirectSettings::default(),
-        show_probes: false,
-        camera_path: Vec::new(),
         probe_tracer: Some(ProbeTracerHandle(gpu.clone())),
+        ..Default::default()
     };
     let out = render_frames(&scene, &bvh, &rays, &settings, |_, _| {});
     assert_eq!(out.stats.error, None);
