@@ -13,11 +13,24 @@ use obvhs::{
     rt_triangle::RtTriangle,
 };
 
-use super::BvhSettings;
 use super::cutouts::{CoverageMask, CutTriangle, Cutouts};
 use crate::bvh_walk::{self, TraceGuards};
 use crate::mesh::Mesh;
 use crate::ray::RayHit;
+
+/// How the BVH is built.
+#[derive(Clone, Copy, Debug)]
+pub struct BvhSettings {
+    /// Each primitive AABB grows by this fraction of the scene's largest extent on
+    /// every side. 0 disables padding (only useful to measure what it buys).
+    pub bvh_aabb_pad_rel: f32,
+}
+
+impl Default for BvhSettings {
+    fn default() -> Self {
+        Self { bvh_aabb_pad_rel: 1e-5 }
+    }
+}
 
 /// A BVH over some of the mesh's triangles, in one space (world for the static
 /// part, rest space for a moving object).

@@ -24,8 +24,9 @@
 //! zero-direction and empty-range rays are misses, counted) and every walk of
 //! either level is bounded by its BVH's node count.
 //!
+//! This module holds [`BvhTracer`] and its per-frame and static-part views; its children:
 //! - `cutouts`: alpha-tested traversal support, the cut-out materials' coverage masks.
-//! - `blas`: the bottom levels, one CWBVH per mesh part (static, moving object, prototype).
+//! - `blas`: the bottom levels, one CWBVH per mesh part (static, moving object, prototype), and [`BvhSettings`].
 //! - `tlas_layout`: the top level over the moving objects and the still instances.
 //! - `gpu_export`: the flat form of every level that a GPU traversal reads.
 
@@ -44,25 +45,12 @@ use crate::mesh::Mesh;
 use crate::ray::{Ray, RayHit};
 use crate::scene::Scene;
 use crate::tracer::RayTracer;
+pub use blas::BvhSettings;
 use blas::{Blas, pad_m};
 use cutouts::Cutouts;
 pub use gpu_export::{BvhCutTriangle, BvhCutoutMask, BvhExport, TlasExport, TlasInstance};
 pub use tlas_layout::TlasLayout;
 use tlas_layout::{Instance, Tlas};
-
-/// How the BVH is built.
-#[derive(Clone, Copy, Debug)]
-pub struct BvhSettings {
-    /// Each primitive AABB grows by this fraction of the scene's largest extent on
-    /// every side. 0 disables padding (only useful to measure what it buys).
-    pub bvh_aabb_pad_rel: f32,
-}
-
-impl Default for BvhSettings {
-    fn default() -> Self {
-        Self { bvh_aabb_pad_rel: 1e-5 }
-    }
-}
 
 /// The scene's ray tracer. Static triangles share one BVH built once; each moving
 /// object (`BvhTracer::for_scene`) has its own BVH in rest space, built once, and
