@@ -9,7 +9,7 @@
 //! near `f32::MAX`, traced closest and any hit through the static BVH and the
 //! two-level BVH of `scenes/moving-box.toml`. Each batch must return within
 //! a bound (a hang fails the test instead of stalling the suite).
-//! `PROBEGI_FUZZ_CAMERA_SECONDS` (default 10 in all) and `PROBEGI_FUZZ_SEED`.
+//! `PROBEGI_FUZZ_CAMERA_SECONDS` (default 5 in all; `scripts/long-checks.sh`: 5 minutes) and `PROBEGI_FUZZ_SEED`.
 
 use std::path::PathBuf;
 use std::sync::mpsc;
@@ -21,7 +21,7 @@ use probegi_core::rng::Pcg32;
 use probegi_scene::{BvhSettings, BvhTracer, CameraKeyframe, Ray, RayTracer, Scene, load_scene};
 
 fn budget_s() -> f64 {
-    std::env::var("PROBEGI_FUZZ_CAMERA_SECONDS").ok().and_then(|v| v.parse().ok()).unwrap_or(10.0)
+    std::env::var("PROBEGI_FUZZ_CAMERA_SECONDS").ok().and_then(|v| v.parse().ok()).unwrap_or(5.0)
 }
 
 fn seed() -> u64 {
