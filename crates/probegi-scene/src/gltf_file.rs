@@ -961,7 +961,7 @@ impl Loader<'_> {
     }
 
     /// Alpha cutouts are tested inside traversal with `TEXCOORD_0`, repeat
-    /// addressing, bilinear filtering and no transform (`bvh.rs`): a warning
+    /// addressing, bilinear filtering and no transform (`bvh/cutouts.rs`): a warning
     /// where a cut-out material's base-colour texture asks for more.
     fn warn_cutout_sampling(&mut self, m: &Material) {
         let Some(t) = m.alpha_texture.filter(|_| m.has_cutout()) else { return };

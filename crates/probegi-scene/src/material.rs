@@ -15,7 +15,7 @@
 //! texture's coverage (its alpha channel, else its grey level), filtered
 //! bilinearly in unorm (not sRGB-decoded); a point is opaque when coverage ≥
 //! the cutoff, else every ray passes through it (the tracers test it inside
-//! traversal, see `bvh.rs`). glTF: `alphaMode` MASK with `alphaCutoff`
+//! traversal, see `bvh/cutouts.rs`). glTF: `alphaMode` MASK with `alphaCutoff`
 //! (default 0.5), BLEND treated as MASK at 0.5 (a ray tracer without ordered
 //! compositing; RTXGI and most path tracers do the same for any-hit alpha),
 //! OPAQUE ignores alpha. MTL: `map_d`, else the alpha channel of `map_Kd`

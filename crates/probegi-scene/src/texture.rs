@@ -10,7 +10,7 @@
 //! no mipmaps: the sampler's filter is glTF's `magFilter`, or, where that is
 //! undefined, the §3.8.4.2 fallback of its `minFilter` (the mipmap modes fall
 //! back to nearest or linear), else linear. OBJ textures repeat and filter
-//! linearly. Alpha cutouts are tested inside traversal (`bvh.rs`) with repeat
+//! linearly. Alpha cutouts are tested inside traversal (`bvh/cutouts.rs`) with repeat
 //! addressing and bilinear filtering whatever the sampler; the glTF loader
 //! warns where a cut-out material's sampler says otherwise.
 //!
@@ -154,7 +154,7 @@ impl Texture {
 
     /// Coverage for alpha testing, one byte per texel: the alpha channel when
     /// the texture has one, else the stored grey level (an MTL `map_d` saved as
-    /// a grey image). The tracer filters it bilinearly (`bvh.rs`).
+    /// a grey image). The tracer filters it bilinearly (`bvh/cutouts.rs`).
     pub fn coverage_plane(&self) -> Vec<u8> {
         match &self.alpha {
             Some(a) => a.clone(),

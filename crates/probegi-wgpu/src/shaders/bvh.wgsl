@@ -3,7 +3,7 @@
 // BVHs"), mirroring what the CPU runs: obvhs 0.4 `CwBvhNode::intersect_ray_basic`,
 // `CwBvh::ray_traverse` / `ray_traverse_miss` (the `traverse!` loop),
 // `RtTriangle::intersect` and `compute_barycentric`, and probegi-scene's alpha
-// cutouts (`bvh.rs` `Blas::intersect`, `texture.rs` `Footprint`).
+// cutouts (probegi-scene `bvh/blas.rs` `Blas::intersect`, `texture.rs` `Footprint`).
 // With a top level (moving objects, instanced meshes: probegi-scene's `BvhTracer`
 // `closest_in` / `occluded_in`), one loop walks both levels: at a top-level leaf
 // the ray moves into the instance's space (unnormalised direction, so t is the
@@ -218,7 +218,7 @@ fn wrap_blend(v: vec4<f32>, f: vec2<f32>) -> f32 {
     return (v.x * (1.0 - f.x) + v.y * f.x) * (1.0 - f.y) + (v.z * (1.0 - f.x) + v.w * f.x) * f.y;
 }
 
-// The cutout rule (probegi-scene `bvh.rs` `CoverageMask::opaque_at`'s left side):
+// The cutout rule (probegi-scene `bvh/cutouts.rs` `CoverageMask::opaque_at`'s left side):
 // factor × the bilinear coverage.
 fn bvh_coverage(mask: u32, uv: vec2<f32>) -> f32 {
     let m = 4u + mask * 6u;

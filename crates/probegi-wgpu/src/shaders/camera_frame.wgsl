@@ -1,4 +1,4 @@
-// The camera pass on the GPU (probegi_cpu::gbuffer::trace_gbuffer + frame_loop's
+// The camera pass on the GPU (probegi_cpu::gbuffer::trace_gbuffer + frame_loop::camera_pass::
 // shade_camera under DDGI): per pixel a primary ray through `bvh.wgsl` (pixel
 // centre on frame 0, jittered inside the pixel after), then
 //   direct   = emission + direct light (scene.wgsl; the emitters' specular lobe left
@@ -74,7 +74,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let g = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, SCENE_F32_MAX), false);
                 var lr = camera.sky.xyz;
                 if (g.leaf != BVH_NO_HIT) {
-                    // frame_loop's shade_glossy_hit
+                    // frame_loop::camera_pass::shade_glossy_hit
                     let sh = scene_surface_point(bvh_triangle_id(g.leaf), g.instance, g.bary, g.backface);
                     let bh = scene_bsdf(sh);
                     let nh = scene_facing_normal(sh);
