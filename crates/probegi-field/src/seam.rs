@@ -5,39 +5,36 @@
 
 use glam::Vec3;
 
-#[allow(unused_imports)]
-use crate::ddgi_field_set::DdgiFieldSet;
-
 /// What a device that keeps an update batch's hits must read back for the set
-/// ([`DdgiFieldSet::hits_needed_on_host`]).
+/// ([`DdgiFieldSet::hits_needed_on_host`](crate::DdgiFieldSet::hits_needed_on_host)).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum HostHits {
-    /// Every hit, through [`DdgiFieldSet::submit_hits`] (the classification
+    /// Every hit, through [`DdgiFieldSet::submit_hits`](crate::DdgiFieldSet::submit_hits) (the classification
     /// round of initialisation reads the hit points).
     All,
     /// An initialisation round that is a relocation iteration for every volume
     /// in it: per probe of the batch, its new offset, through
-    /// [`DdgiFieldSet::submit_device_relocation`] (inputs from
-    /// [`DdgiFieldSet::device_relocation_plan`]).
+    /// [`DdgiFieldSet::submit_device_relocation`](crate::DdgiFieldSet::submit_device_relocation) (inputs from
+    /// [`DdgiFieldSet::device_relocation_plan`](crate::DdgiFieldSet::device_relocation_plan)).
     Relocation,
     /// An initialisation round that is the jcgt classification round for every
     /// volume in it: per probe, (inside geometry, kept), through
-    /// [`DdgiFieldSet::submit_device_classification`] (inputs from
-    /// [`DdgiFieldSet::device_classification_plan`]).
+    /// [`DdgiFieldSet::submit_device_classification`](crate::DdgiFieldSet::submit_device_classification) (inputs from
+    /// [`DdgiFieldSet::device_classification_plan`](crate::DdgiFieldSet::device_classification_plan)).
     Classification,
     /// Per probe of the batch, seed 003's usage counts, through
-    /// [`DdgiFieldSet::submit_device_hits`] (a volume under the usage scheme).
+    /// [`DdgiFieldSet::submit_device_hits`](crate::DdgiFieldSet::submit_device_hits) (a volume under the usage scheme).
     ProbeUsage,
-    /// Nothing: call [`DdgiFieldSet::submit_device_hits`] with no counts.
+    /// Nothing: call [`DdgiFieldSet::submit_device_hits`](crate::DdgiFieldSet::submit_device_hits) with no counts.
     None,
 }
 
 /// Which seam call comes next.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum UpdateStep {
-    /// Trace [`DdgiFieldSet::ray_batch`] and call [`DdgiFieldSet::submit_hits`].
+    /// Trace [`DdgiFieldSet::ray_batch`](crate::DdgiFieldSet::ray_batch) and call [`DdgiFieldSet::submit_hits`](crate::DdgiFieldSet::submit_hits).
     TraceRays,
-    /// Shade the rays with `needs_radiance` and call [`DdgiFieldSet::submit_radiance`].
+    /// Shade the rays with `needs_radiance` and call [`DdgiFieldSet::submit_radiance`](crate::DdgiFieldSet::submit_radiance).
     ShadeRays,
     /// The frame's update is complete.
     Done,
@@ -112,7 +109,7 @@ pub struct ProbeRayBatch {
     pub directions: Vec<Vec3>,
     /// Hits beyond this distance are misses.
     pub max_distances_m: Vec<f32>,
-    /// Set by [`DdgiFieldSet::submit_hits`] on update batches: the rays whose
+    /// Set by [`DdgiFieldSet::submit_hits`](crate::DdgiFieldSet::submit_hits) on update batches: the rays whose
     /// radiance the caller must supply (others are ignored).
     pub needs_radiance: Vec<bool>,
     /// The probes that trace in this batch and their ray ranges, volume by volume.
@@ -213,7 +210,7 @@ pub enum SeamError {
         got: usize,
     },
     /// A host blend while another device holds the current atlases: copy them
-    /// back first ([`DdgiFieldSet::accept_host_atlases`]).
+    /// back first ([`DdgiFieldSet::accept_host_atlases`](crate::DdgiFieldSet::accept_host_atlases)).
     FieldOnDevice,
 }
 

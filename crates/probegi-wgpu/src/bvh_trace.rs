@@ -18,7 +18,7 @@ use glam::{Vec2, Vec3};
 use probegi_scene::{BvhExport, RayHit, TlasExport, TraceGuardCounts};
 use wgpu::util::DeviceExt;
 
-use crate::gpu_context::{GpuContext, GpuError};
+use crate::gpu_context::{GpuContext, GpuError, buffers_bind_group, storage_entry};
 use crate::shader_registry::{BVH_INSTANCE_IDENTITY, BVH_INSTANCE_MOVING, BVH_STORAGE_BUFFERS, TRACE_RAYS};
 
 /// The trace pass's uniform block; must match `TraceParams` in `trace_rays.wgsl`.
@@ -102,47 +102,6 @@ const WORKGROUP: u32 = 64;
 pub(crate) fn bvh_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     let entries: Vec<_> = (0..BVH_STORAGE_BUFFERS).map(|b| storage_entry(b, b + 1 < BVH_STORAGE_BUFFERS)).collect();
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("bvh"), entries: &entries })
-}
-
-pub(crate) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// A bind group of `buffers` at bindings 0, 1, … (a layout of storage buffers).
-pub(crate) fn buffers_bind_group(
-    device: &wgpu::Device,
-    label: &str,
-    layout: &wgpu::BindGroupLayout,
-    buffers: &[wgpu::Buffer],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-        .collect();
-    device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
-}
-
-pub(crate) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
 }
 
 /// A scene's BVH on the device, with its bind group (`bvh.wgsl`'s group,

@@ -239,7 +239,7 @@ impl GpuDdgiField {
             init("ddgi distance", bytemuck::cast_slice(&packed.distance)),
             init("ddgi probes", bytemuck::cast_slice(&packed.probes)),
         ];
-        let bind_group = crate::bvh_trace::buffers_bind_group(
+        let bind_group = crate::gpu_context::buffers_bind_group(
             &ctx.device,
             "ddgi query",
             &Self::bind_group_layout(&ctx.device),

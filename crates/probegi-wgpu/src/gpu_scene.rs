@@ -20,7 +20,7 @@ use crate::shader_registry::SCENE_STORAGE_BUFFERS;
 /// The bind-group layout of `scene.wgsl` (`shader_registry::SCENE_GROUP`):
 /// `SCENE_STORAGE_BUFFERS` read-only storage buffers.
 pub(crate) fn scene_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    let entries: Vec<_> = (0..SCENE_STORAGE_BUFFERS).map(|b| crate::bvh_trace::storage_entry(b, true)).collect();
+    let entries: Vec<_> = (0..SCENE_STORAGE_BUFFERS).map(|b| crate::gpu_context::storage_entry(b, true)).collect();
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("scene"), entries: &entries })
 }
 
@@ -256,8 +256,12 @@ impl GpuScene {
             init("scene textures", bytemuck::cast_slice(&words)),
             init_rw("scene lights", bytemuck::cast_slice(&lights)),
         ];
-        let bind_group =
-            crate::bvh_trace::buffers_bind_group(&ctx.device, "scene", &scene_bind_group_layout(&ctx.device), &buffers);
+        let bind_group = crate::gpu_context::buffers_bind_group(
+            &ctx.device,
+            "scene",
+            &scene_bind_group_layout(&ctx.device),
+            &buffers,
+        );
         let bytes = buffers.iter().map(|b| b.size()).sum();
         let moving = scene.objects.iter().filter(|o| o.is_animated()).map(|o| o.triangles()).collect();
         let [triangle_buffer, _, _, lights] = buffers;

@@ -127,7 +127,7 @@ impl GpuProbeClassification {
         let bind = |params: wgpu::Buffer| {
             let buffers = [params, batch.rays_buffer().clone(), batch.hits_buffer().clone()];
             let buffers = [buffers.as_slice(), &[rows.clone(), positions.clone(), out.clone()]].concat();
-            crate::bvh_trace::buffers_bind_group(&ctx.device, "probe classification", &self.layout, &buffers)
+            crate::gpu_context::buffers_bind_group(&ctx.device, "probe classification", &self.layout, &buffers)
         };
         let mut bind_groups = vec![bind(params)];
         for c in &chunks {

@@ -57,7 +57,7 @@ impl GpuProbeRelocation {
         let params = ctx.buffer_with("relocation params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let rows = ctx.buffer_with("relocation probes", bytemuck::cast_slice(probes), wgpu::BufferUsages::STORAGE);
         let out = ctx.output_buffer("relocation offsets", probes.len() as u64 * 16);
-        let bind_group = crate::bvh_trace::buffers_bind_group(
+        let bind_group = crate::gpu_context::buffers_bind_group(
             &ctx.device,
             "probe relocation",
             &self.layout,

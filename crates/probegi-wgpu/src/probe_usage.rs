@@ -63,7 +63,7 @@ impl GpuProbeUsage {
         let diagonals = if cage_diagonals_m.is_empty() { &[0.0][..] } else { cage_diagonals_m };
         let diagonals = ctx.buffer_with("usage cage diagonals", bytemuck::cast_slice(diagonals), storage);
         let out = ctx.output_buffer("usage counts", probes.len() as u64 * 16);
-        let bind_group = crate::bvh_trace::buffers_bind_group(
+        let bind_group = crate::gpu_context::buffers_bind_group(
             &ctx.device,
             "probe usage",
             &self.layout,
