@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Long checks: what the test suite (scripts/test.sh) runs briefly, run for
 # minutes in release. Every fuzzer with a long budget and a fresh seed (printed,
-# so a failure can be replayed with PROBEGI_FUZZ_SEED=N), and the soak runs at
-# full length. Each test prints its figures (--nocapture).
+# so a failure can be replayed with PROBEGI_FUZZ_SEED=N), and the drift soak five times as
+# long as the suite's. Each test prints its figures (--nocapture).
 # Usage: scripts/long-checks.sh [MINUTES_PER_FUZZER]   (default 5; the loaders get twice that)
 # Needs what scripts/test.sh needs: ../shared/scenes, and a Vulkan driver
 # (lavapipe) for the seam fuzzer.
@@ -27,5 +27,5 @@ long probegi-scene fuzz_cameras_and_rays PROBEGI_FUZZ_CAMERA_SECONDS="$secs"
 long probegi-image fuzz_images PROBEGI_FUZZ_IMAGE_SECONDS="$secs"
 long probegi-cli fuzz_args PROBEGI_FUZZ_ARGS_SECONDS="$secs"
 long probegi-wgpu fuzz_seam_rays PROBEGI_FUZZ_SEAM_SECONDS="$secs"
-long probegi-cpu soak PROBEGI_SOAK_FRAMES=10000
+long probegi-cpu soak PROBEGI_SOAK_FRAMES=50000
 echo "long checks passed (seed ${seed})" >&2

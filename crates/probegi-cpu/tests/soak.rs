@@ -1,4 +1,6 @@
-//! Long runs: a static field must not drift, and a light toggled for 2 000 frames
+//! Long runs: a static field must not drift (10 000 frames in the suite, 50 000 in
+//! `scripts/long-checks.sh`; at 2 000 the early window is not yet settled and the
+//! drift reads +0.42 % against the 0.5 % bound), and a light toggled for 2 000 frames
 //! must leave nothing behind. Tiny volumes (the Cornell box, 3 × 3 × 3 probes,
 //! 32 rays) so thousands of frames take seconds; the atlas invariants (finite,
 //! non-negative, borders equal to their source texels) are checked as it runs.
@@ -26,31 +28,43 @@ fn assert_atlases_sound(v: &DdgiVolume, frame: u32) {
     v.validate();
 }
 
+/// The drift soak's length in the test suite.
+const SOAK_FRAMES_IN_SUITE: u32 = 10_000;
+
+/// Frames of the drift soak: `PROBEGI_SOAK_FRAMES`, default SOAK_FRAMES_IN_SUITE;
+/// `scripts/long-checks.sh` runs 50 000. Energy is compared between the second
+/// tenth and the last tenth of the run.
+fn soak_frames() -> u32 {
+    std::env::var("PROBEGI_SOAK_FRAMES").ok().and_then(|v| v.parse().ok()).unwrap_or(SOAK_FRAMES_IN_SUITE).max(100)
+}
+
 #[test]
-fn a_static_field_does_not_drift_over_10_000_frames() {
+fn a_static_field_does_not_drift_over_a_long_run() {
     let scene = cornell_box();
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let mut v = tiny_volume(scene.bounds().expect("bounds"));
     let mut passes = Default::default();
     let (mut early, mut late) = (0.0f64, 0.0f64);
-    for f in 0..10_000u32 {
+    let n = soak_frames();
+    let (early_frames, late_frames) = (n / 10..n / 5, n - n / 10..n);
+    for f in 0..n {
         v.update(&scene, &bvh, &direct, 17, f, &mut passes);
-        match f {
-            1_000..2_000 => early += field_energy(&v),
-            9_000..10_000 => late += field_energy(&v),
-            _ => {}
+        if early_frames.contains(&f) {
+            early += field_energy(&v);
+        } else if late_frames.contains(&f) {
+            late += field_energy(&v);
         }
         if f % 500 == 0 {
             assert_atlases_sound(&v, f);
         }
     }
-    assert_atlases_sound(&v, 10_000);
+    assert_atlases_sound(&v, n);
     let drift = late / early - 1.0;
     eprintln!(
-        "field energy frames 1000–1999 {:.5}, 9000–9999 {:.5}: drift {:+.3} %",
-        early / 1e3,
-        late / 1e3,
+        "{n} frames: field energy frames {early_frames:?} {:.5}, {late_frames:?} {:.5}: drift {:+.3} %",
+        early / early_frames.len() as f64,
+        late / late_frames.len() as f64,
         100.0 * drift
     );
     assert!(early > 0.0);

@@ -6,6 +6,10 @@
 //! at a frame. Rays the rule refuses are misses and are counted; the others
 //! hit or miss as they may, but never hang.
 
+mod common;
+
+use common::shared;
+
 use std::path::PathBuf;
 use std::sync::mpsc;
 use std::time::Duration;
@@ -13,12 +17,6 @@ use std::time::Duration;
 use glam::Vec3;
 use probegi_scene::bvh_walk::hostile_rays;
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene, load_scene};
-
-fn shared(rel: &str) -> String {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes").join(rel);
-    assert!(p.exists(), "{} is missing: the tests read the shared scenes from ../shared", p.display());
-    p.to_string_lossy().into_owned()
-}
 
 fn repo(rel: &str) -> String {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel).to_string_lossy().into_owned()

@@ -2,20 +2,14 @@
 //! Archive). CI has them beside the repository; a missing folder is a failure,
 //! not a skip.
 
+mod common;
+
+use common::shared;
+
 use std::path::PathBuf;
 
 use glam::Vec3;
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, load_scene};
-
-fn shared(rel: &str) -> String {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes").join(rel);
-    assert!(
-        p.exists(),
-        "{} is missing: the tests read the shared scenes from ../shared beside the repository",
-        p.display()
-    );
-    p.to_string_lossy().into_owned()
-}
 
 #[test]
 fn cornell_box_original_obj_matches_the_builtin() {

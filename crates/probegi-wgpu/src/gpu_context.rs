@@ -53,7 +53,7 @@ pub struct GpuContext {
 pub(crate) type PassStep<'a> = (&'a wgpu::ComputePipeline, Vec<Option<&'a wgpu::BindGroup>>, (u32, u32));
 
 impl GpuContext {
-    /// A headless device on the default backends (Vulkan, Metal, DX12, GL).
+    /// A headless device on the compiled backends (Vulkan, Metal, DX12).
     pub fn headless() -> Result<Self, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
