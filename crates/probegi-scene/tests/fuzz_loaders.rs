@@ -2,7 +2,7 @@
 //! on the stable toolchain: seeds (small hand-made files and the shared
 //! CornellBox-Original), mutated byte-wise and number-wise by a seeded PCG, each
 //! result loaded under `catch_unwind`. Any panic fails the test and prints the
-//! inputs that caused it. The suite runs it for `PROBEGI_FUZZ_SECONDS` (default 20 in
+//! inputs that caused it. The suite runs it for `PROBEGI_FUZZ_SECONDS` (default 10 in
 //! all); `scripts/long-checks.sh` runs it in release for 10 minutes, and any
 //! budget and seed can be given, e.g. `PROBEGI_FUZZ_SECONDS=1800
 //! PROBEGI_FUZZ_SEED=7 cargo test --release -p probegi-scene --test fuzz_loaders`.
@@ -177,7 +177,7 @@ fn load_target(dir: &Path, t: &Target) -> std::thread::Result<()> {
 
 #[test]
 fn loaders_survive_mutated_inputs_without_panicking() {
-    let budget = std::env::var("PROBEGI_FUZZ_SECONDS").ok().and_then(|v| v.parse().ok()).unwrap_or(20.0f64);
+    let budget = std::env::var("PROBEGI_FUZZ_SECONDS").ok().and_then(|v| v.parse().ok()).unwrap_or(10.0f64);
     let seed = std::env::var("PROBEGI_FUZZ_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(1u64);
     let targets = targets();
     let dir = std::env::temp_dir().join(format!("probegi-fuzz-{}", std::process::id()));
