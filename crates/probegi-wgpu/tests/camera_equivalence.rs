@@ -94,7 +94,7 @@ fn small(counts: UVec3) -> DdgiVolumeSettings {
 
 #[test]
 fn cornell_box_frame_on_the_gpu() {
-    check("cornell box", probegi_scene::builtin::cornell_box(), small(UVec3::splat(6)), 64, 24);
+    check("cornell box", probegi_scene::builtin::cornell_box(), small(UVec3::splat(6)), 64, 48);
 }
 
 #[test]
@@ -115,7 +115,7 @@ fn glossy_cornell_box_frame_on_the_gpu() {
     light.emissive_factor = glam::Vec3::new(17.0, 12.0, 4.0);
     scene.camera = Some(probegi_core::camera::Camera::default());
     assert!(scene.materials.iter().any(|m| m.specular_color.max_element() > 0.5), "glossy");
-    check("glossy cornell box", scene, small(UVec3::splat(6)), 64, 24);
+    check("glossy cornell box", scene, small(UVec3::splat(6)), 64, 48);
 }
 
 #[test]
