@@ -187,7 +187,7 @@ impl DdgiSweep<'_> {
         let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| pass_ms.get(p)).sum();
         let n = volume.rays_per_frame() as f64;
         // The same rays, bare: the last update batch (its origins, directions and
-        // max distances), closest hit only, no surfel. Both rates divide by the
+        // max distances), closest hit only, as the update's trace pass. Both rates divide by the
         // rays of that batch, so they compare the same work.
         let batch = set.ray_batch();
         let t = Instant::now();

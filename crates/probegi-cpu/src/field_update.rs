@@ -18,7 +18,7 @@ use probegi_field::probe_ray_gen::probe_ray_directions;
 
 use crate::direct::DirectLighting;
 use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
-use crate::probe_trace::{Surfel, surfel_hit, surfels_from_hits, trace_probe_batch, trace_probe_distances};
+use crate::probe_trace::{probe_ray_hits, trace_probe_batch, trace_probe_distances};
 
 /// The convenience update on a [`DdgiFieldSet`] (see the module docs).
 pub trait FieldSetUpdate {
@@ -154,8 +154,8 @@ struct SeamDriver<'u> {
     /// The device that keeps the field, when the batch tracer has one.
     device: Option<&'u dyn DeviceField>,
     traced: u64,
+    /// The closest hits of the last batch traced on the host side.
     batch_hits: Vec<Option<RayHit>>,
-    surfels: Vec<Surfel>,
     hits: Vec<ProbeRayHit>,
     radiance: Vec<Vec3>,
     own_ms: BTreeMap<&'static str, f64>,
@@ -183,7 +183,6 @@ impl<'u> SeamDriver<'u> {
             device: batch_tracer.and_then(|bt| bt.device_field()),
             traced: 0,
             batch_hits: Vec::new(),
-            surfels: Vec::new(),
             hits: Vec::new(),
             radiance: Vec::new(),
             own_ms: BTreeMap::new(),
@@ -193,7 +192,7 @@ impl<'u> SeamDriver<'u> {
 
     /// `UpdateStep::TraceRays`: one round of the set's batch, on the device when
     /// it runs that round, else closest hits (from the batch tracer or the CPU)
-    /// into surfels and hits.
+    /// into the seam's hits.
     fn trace_rays(&mut self, set: &mut DdgiFieldSet) -> Result<UpdateStep, BackendError> {
         let t = Instant::now();
         let init = set.ray_batch().static_geometry_only();
@@ -212,13 +211,11 @@ impl<'u> SeamDriver<'u> {
                         got: self.batch_hits.len(),
                     }));
                 }
-                surfels_from_hits(self.scene, set.ray_batch(), &self.batch_hits, &mut self.surfels);
                 set.ray_batch().len() as u64
             }
-            None => trace_probe_batch(self.scene, tr, set.ray_batch(), &mut self.surfels),
+            None => trace_probe_batch(tr, set.ray_batch(), &mut self.batch_hits),
         };
-        self.hits.clear();
-        self.hits.extend(self.surfels.iter().map(surfel_hit));
+        probe_ray_hits(self.scene, &self.batch_hits, set.hit_normals_needed(), &mut self.hits);
         let step = set.submit_hits(&self.hits).unwrap_or_else(seam_bug);
         time(if init { "probe_init" } else { "trace" }, t, &mut self.own_ms);
         Ok(step)
@@ -294,7 +291,7 @@ impl<'u> SeamDriver<'u> {
         Ok(set.submit_device_blend().unwrap_or_else(seam_bug))
     }
 
-    /// `UpdateStep::ShadeRays` after a trace whose surfels are on the host: the
+    /// `UpdateStep::ShadeRays` after a trace whose hits are on the host: the
     /// batch tracer shades when it does, else the CPU; the set blends.
     fn shade_on_host(&mut self, set: &mut DdgiFieldSet) -> Result<UpdateStep, BackendError> {
         let (seed, frame) = (self.seed, self.frame);
@@ -308,7 +305,7 @@ impl<'u> SeamDriver<'u> {
             field: &view,
             volumes: set.volumes(),
             batch: set.ray_batch(),
-            surfels: &self.surfels,
+            hits: &self.batch_hits,
             seed,
             frame,
         };

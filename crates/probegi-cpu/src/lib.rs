@@ -9,7 +9,7 @@
 //!
 //! The DDGI field update on the CPU (seeds 003 and 004):
 //! - [`field_update`]: the field set's seam driven with this crate's tracing and shading.
-//! - [`probe_trace`]: the trace pass, probe rays to surfels.
+//! - [`probe_trace`]: the trace pass, probe rays to closest hits and seam hits.
 //! - [`probe_shade`]: the shade pass, the radiance each probe ray brings back.
 //! - [`scene_events`]: scene changes (light toggles, moving objects) reported to the field.
 //!

@@ -25,12 +25,11 @@
 use glam::Vec3;
 use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance};
 use probegi_core::rng::{Pcg32, hash_combine};
-use probegi_scene::Scene;
+use probegi_scene::{RayHit, Scene};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
 
 use crate::direct::{DirectLighting, DirectSettings};
-use crate::probe_trace::Surfel;
 use crate::shading::ShadingContext;
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::seam::ProbeRayBatch;
@@ -47,8 +46,9 @@ pub struct ProbeShadeInputs<'a> {
     pub volumes: &'a [DdgiVolume],
     /// The probe ray batch: rays, and which of them need radiance.
     pub batch: &'a ProbeRayBatch,
-    /// The hit of each batch ray, in batch order.
-    pub surfels: &'a [Surfel],
+    /// The closest hit of each batch ray, in batch order (`None`: a miss). The
+    /// shade pass builds the surface point of each front hit it shades.
+    pub hits: &'a [Option<RayHit>],
     /// The render's seed, mixed into each volume's streams.
     pub seed: u64,
     /// The frame index, mixed into every probe's stream.
@@ -87,11 +87,11 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                     continue;
                 }
                 let dir = batch.directions[i];
-                let s = &inputs.surfels[i];
-                *r = match &s.surface {
+                *r = match &inputs.hits[i] {
                     None => inputs.scene.sky_radiance,
-                    Some(sp) if !sp.front_face => Vec3::ZERO,
-                    Some(sp) => {
+                    Some(hit) if hit.backface => Vec3::ZERO,
+                    Some(hit) => {
+                        let sp = &inputs.scene.surface_point(hit);
                         let ctx = ShadingContext::new(inputs.scene, sp, -dir);
                         let (direct, k) = inputs.direct.reflected(sp, &ctx, area, true, &mut rng);
                         rays += k;

@@ -1,71 +1,53 @@
 //! Trace pass (seed 003 §4.3): every ray of the frame's probe ray batch finds its
 //! closest hit, both faces (backface culling off, so probes inside geometry
-//! notice), and writes a surfel: the surface it hit (position, normal, material,
-//! which face) and the distance. Rays that travel beyond their max distance are
-//! misses. The surfels become the seam's hits ([`surfel_hit`]) and feed the shade
-//! pass.
+//! notice). Rays that travel beyond their max distance are misses. The pass
+//! keeps the hits as the tracer returns them (distance, triangle, barycentrics,
+//! face): the surfel buffer of seed 003 §4.3 in compact form. The surface point
+//! a hit stands for (position, shading normal, material inputs) is built by the
+//! pass that reads it: the shade pass for the rays it shades, and
+//! [`probe_ray_hit`] for the rounds whose seam hits carry normals. A steady
+//! frame's trace therefore costs what the bare closest-hit query costs.
 
 use glam::Vec3;
-use probegi_scene::{Ray, RayHit, RayTracer, Scene, SurfacePoint};
+use probegi_scene::{Ray, RayHit, RayTracer, Scene};
 use rayon::prelude::*;
 
 use probegi_field::seam::{ProbeRayBatch, ProbeRayHit};
 
-/// One probe ray's hit record (the surfel buffer of seed 003 §4.3).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Surfel {
-    /// `None` for a miss.
-    pub surface: Option<SurfacePoint>,
-    /// Hit distance in metres (the maximum ray distance for a miss).
-    pub distance: f32,
-}
+/// Rays per parallel work item of the trace pass.
+const TRACE_CHUNK_RAYS: usize = 256;
 
-/// Traces every ray of `batch` into `surfels` (resized to the batch). Returns the
-/// number of rays traced.
-pub fn trace_probe_batch(
-    scene: &Scene,
-    tracer: &dyn RayTracer,
-    batch: &ProbeRayBatch,
-    surfels: &mut Vec<Surfel>,
-) -> u64 {
-    surfels.clear();
-    surfels.resize(batch.len(), Surfel::default());
-    surfels.par_chunks_mut(256).enumerate().for_each(|(c, out)| {
-        for (k, s) in out.iter_mut().enumerate() {
-            let r = c * 256 + k;
-            let max = batch.max_distances_m[r];
-            let ray = Ray::segment(batch.origins_m[r], batch.directions[r], max);
-            *s = match tracer.closest_hit(&ray) {
-                Some(hit) => Surfel { surface: Some(scene.surface_point(&hit)), distance: hit.t },
-                None => Surfel { surface: None, distance: max },
-            };
+/// Traces every ray of `batch` into `hits` (resized to the batch; `None` for a
+/// miss). Returns the number of rays traced.
+pub fn trace_probe_batch(tracer: &dyn RayTracer, batch: &ProbeRayBatch, hits: &mut Vec<Option<RayHit>>) -> u64 {
+    hits.resize(batch.len(), None);
+    hits.par_chunks_mut(TRACE_CHUNK_RAYS).enumerate().for_each(|(c, out)| {
+        let first = c * TRACE_CHUNK_RAYS;
+        for (k, h) in out.iter_mut().enumerate() {
+            let r = first + k;
+            *h = tracer.closest_hit(&Ray::segment(batch.origins_m[r], batch.directions[r], batch.max_distances_m[r]));
         }
     });
     batch.len() as u64
 }
 
-/// The surfels of `hits` (one per batch ray, as a [`probegi_field::ProbeBatchTracer`] returns them).
-pub fn surfels_from_hits(scene: &Scene, batch: &ProbeRayBatch, hits: &[Option<RayHit>], surfels: &mut Vec<Surfel>) {
-    surfels.clear();
-    surfels.resize(batch.len(), Surfel::default());
-    surfels.par_chunks_mut(256).enumerate().for_each(|(c, out)| {
-        for (k, s) in out.iter_mut().enumerate() {
-            let r = c * 256 + k;
-            *s = match hits[r] {
-                Some(hit) => Surfel { surface: Some(scene.surface_point(&hit)), distance: hit.t },
-                None => Surfel { surface: None, distance: batch.max_distances_m[r] },
-            };
+/// The seam's record of one traced ray: signed distance and, when `with_normal`
+/// (the rounds that read it, [`probegi_field::DdgiFieldSet::hit_normals_needed`]),
+/// the shading normal facing the ray's origin; zero otherwise.
+pub fn probe_ray_hit(scene: &Scene, hit: &Option<RayHit>, with_normal: bool) -> ProbeRayHit {
+    match hit {
+        None => ProbeRayHit::MISS,
+        Some(h) => {
+            let normal = if with_normal { scene.surface_point(h).facing_normal() } else { Vec3::ZERO };
+            if h.backface { ProbeRayHit::back(h.t, normal) } else { ProbeRayHit::front(h.t, normal) }
         }
-    });
+    }
 }
 
-/// The seam's record of a surfel: signed distance and facing normal.
-pub fn surfel_hit(s: &Surfel) -> ProbeRayHit {
-    match &s.surface {
-        None => ProbeRayHit::MISS,
-        Some(sp) if !sp.front_face => ProbeRayHit::back(s.distance, sp.facing_normal()),
-        Some(sp) => ProbeRayHit::front(s.distance, sp.facing_normal()),
-    }
+/// The seam hits of `hits` into `out` (see [`probe_ray_hit`]), in parallel.
+pub fn probe_ray_hits(scene: &Scene, hits: &[Option<RayHit>], with_normal: bool, out: &mut Vec<ProbeRayHit>) {
+    out.clear();
+    hits.par_iter().map(|h| probe_ray_hit(scene, h, with_normal)).collect_into_vec(out);
 }
 
 /// Traces `dirs` from every probe position (distance only, no surface point);
@@ -92,11 +74,11 @@ pub fn trace_probe_distances(
 }
 
 /// Bytes a volume with these settings holds on the CPU backend (atlases,
-/// per-probe state, and the per-ray batch, hit and surfel buffers of one frame).
+/// per-probe state, and the per-ray batch and hit buffers of one frame).
 pub fn ddgi_volume_bytes(settings: &probegi_core::ddgi_settings::DdgiVolumeSettings) -> u64 {
     let probes = settings.probe_count();
     let rays = probes * settings.probe_rays_per_probe as u64;
-    let per_ray = std::mem::size_of::<Surfel>() + 3 * 12 + 4 + 16 + 1;
+    let per_ray = std::mem::size_of::<Option<RayHit>>() + 3 * 12 + 4 + 16 + 1;
     rays * per_ray as u64
         + probes
             * (probegi_core::probe_atlas::tile_texel_count(settings.probe_irradiance_texels) as u64 * 12

@@ -10,7 +10,6 @@ use probegi_core::irradiance_encoding::decode_irradiance;
 use probegi_cpu::field_update::{FieldSetUpdate, VolumeUpdate};
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::probe_shade::{ProbeShadeInputs, shade_probe_rays};
-use probegi_cpu::probe_trace::Surfel;
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, SeamError, UpdateStep};
 use probegi_field::ddgi_volume::DdgiVolume;
@@ -33,28 +32,23 @@ fn drive_by_hand(
     frame: u32,
 ) -> Vec<UpdateStep> {
     let mut steps = vec![];
-    let mut surfels: Vec<Surfel> = vec![];
+    let mut closest: Vec<Option<probegi_scene::RayHit>> = vec![];
     let mut step = set.begin_update(seed, frame);
     loop {
         steps.push(step);
         match step {
             UpdateStep::TraceRays => {
                 let b = set.ray_batch();
-                surfels = (0..b.len())
-                    .map(|i| {
-                        let ray = Ray::segment(b.origins_m[i], b.directions[i], b.max_distances_m[i]);
-                        match bvh.closest_hit(&ray) {
-                            Some(h) => Surfel { surface: Some(scene.surface_point(&h)), distance: h.t },
-                            None => Surfel { surface: None, distance: b.max_distances_m[i] },
-                        }
-                    })
+                closest = (0..b.len())
+                    .map(|i| bvh.closest_hit(&Ray::segment(b.origins_m[i], b.directions[i], b.max_distances_m[i])))
                     .collect();
-                let hits: Vec<ProbeRayHit> = surfels
+                // Every hit with its facing shading normal, whether the round reads it or not.
+                let hits: Vec<ProbeRayHit> = closest
                     .iter()
-                    .map(|s| match &s.surface {
+                    .map(|h| match h {
                         None => ProbeRayHit::MISS,
-                        Some(sp) if sp.front_face => ProbeRayHit::front(s.distance, sp.facing_normal()),
-                        Some(sp) => ProbeRayHit::back(s.distance, sp.facing_normal()),
+                        Some(h) if !h.backface => ProbeRayHit::front(h.t, scene.surface_point(h).facing_normal()),
+                        Some(h) => ProbeRayHit::back(h.t, scene.surface_point(h).facing_normal()),
                     })
                     .collect();
                 step = set.submit_hits(&hits).expect("hits");
@@ -68,7 +62,7 @@ fn drive_by_hand(
                     field: &view,
                     volumes: set.volumes(),
                     batch: set.ray_batch(),
-                    surfels: &surfels,
+                    hits: &closest,
                     seed,
                     frame,
                 };

@@ -423,6 +423,15 @@ impl DdgiFieldSet {
         }
     }
 
+    /// Whether the current batch's round reads [`ProbeRayHit::normal`]: an
+    /// initialisation round that classifies (seed 004 Listing 5 reads the hit
+    /// points' facing normals). Relocation rounds and update batches read
+    /// distances only, so a caller may submit any finite normal there (zero)
+    /// and skip building the surface point of every hit.
+    pub fn hit_normals_needed(&self) -> bool {
+        self.batch.kind == ProbeRayBatchKind::Initialization && self.hits_needed_on_host() != HostHits::Relocation
+    }
+
     /// Seed 004 Listing 4's inputs per entry of `ray_batch().probes`, for a
     /// relocation round run on another device ([`HostHits::Relocation`]).
     pub fn device_relocation_plan(&self) -> Result<Vec<DeviceRelocationProbe>, SeamError> {
