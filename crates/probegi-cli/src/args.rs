@@ -315,4 +315,10 @@ pub struct BenchArgs {
     /// `--set alpha_cutouts=false`, `--set normal_maps=false`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Ray bench (`--gi none`): also write the scene's triangles, the bench rays and
+    /// probegi's closest-hit distances to this folder as raw little-endian f32
+    /// (`triangles.f32`, `rays.f32`, `closest_t.f32`) with `meta.json`, for
+    /// `scripts/embree-compare.py` to trace the same rays with Embree.
+    #[arg(long, value_name = "DIR")]
+    pub dump_rays: Option<PathBuf>,
 }

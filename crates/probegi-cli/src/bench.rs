@@ -307,7 +307,7 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     } else {
         json!(null)
     };
-    Ok(json!({
+    let report = json!({
         "scene": args.scene,
         "triangles": scene.drawn_triangle_count(),
         "stored_triangles": scene.stored_triangle_count(),
@@ -325,9 +325,47 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
         "any_hit_mrays_per_s": n / any_s / 1e6,
         "any_hit_fraction": any_hits as f64 / n,
         "alpha_cutouts": cutouts,
-        "instancing": if args.moving_objects > 0 { bench_instancing(args, scene, &rays)? } else { json!(null) },
         "peak_rss_mib": peak_rss_mib(),
-    }))
+    });
+    if let Some(dir) = &args.dump_rays {
+        dump_rays(dir, &scene, &bvh, &rays, &report)?;
+    }
+    let mut report = report;
+    report["instancing"] = if args.moving_objects > 0 { bench_instancing(args, scene, &rays)? } else { json!(null) };
+    report["peak_rss_mib"] = json!(peak_rss_mib());
+    Ok(report)
+}
+
+/// `--dump-rays DIR`: the scene's triangles (9 f32 each, world space), the bench
+/// rays (origin, direction: 6 f32 each; closest-hit rays are unbounded and
+/// any-hit rays end at `any_hit_max_distance_m`), probegi's closest-hit
+/// distance per ray (+∞ for a miss) and `meta.json` (this bench's report), all
+/// little-endian. Only scenes whose every triangle the BVH holds as they are:
+/// no instances and no alpha cutouts (`--set alpha_cutouts=false`).
+fn dump_rays(
+    dir: &std::path::Path,
+    scene: &Scene,
+    bvh: &BvhTracer,
+    rays: &[Ray],
+    report: &serde_json::Value,
+) -> Result<()> {
+    if !scene.instances.is_empty() || bvh.cutout_triangle_count() > 0 {
+        bail!("--dump-rays needs a scene without instances and alpha cutouts (try --set alpha_cutouts=false)");
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let write = |name: &str, values: &mut dyn Iterator<Item = f32>| -> Result<()> {
+        let bytes: Vec<u8> = values.flat_map(f32::to_le_bytes).collect();
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).with_context(|| format!("writing {}", path.display()))
+    };
+    let mesh = &scene.mesh;
+    let corners = mesh.triangles.iter().flat_map(|t| t.map(|v| mesh.positions[v as usize].to_array()));
+    write("triangles.f32", &mut corners.flatten())?;
+    write("rays.f32", &mut rays.iter().flat_map(|r| [r.origin.to_array(), r.dir.to_array()]).flatten())?;
+    let closest: Vec<f32> = rays.par_iter().map(|r| bvh.closest_hit(r).map_or(f32::INFINITY, |h| h.t)).collect();
+    write("closest_t.f32", &mut closest.into_iter())?;
+    let meta = dir.join("meta.json");
+    std::fs::write(&meta, serde_json::to_string_pretty(report)?).with_context(|| format!("writing {}", meta.display()))
 }
 
 /// The BVH of `scene`, built `--repeat` times (at most 3), and the best build time (ms).

@@ -188,6 +188,33 @@ fn bench_prints_json_with_throughput() {
     assert!(json["peak_rss_mib"].as_f64().expect("peak rss") > 0.0);
 }
 
+/// `--dump-rays` writes what `scripts/embree-compare.py` reads: every triangle and
+/// ray as raw f32, probegi's closest hits agreeing with the report, and the report.
+#[test]
+fn bench_dumps_its_rays_and_triangles_for_another_tracer() {
+    let dir = tmp("dump-rays");
+    let d = dir.to_string_lossy();
+    let o = probegi(&["bench", "--probes", "3,3,3", "--rays-per-probe", "16", "--repeat", "1", "--dump-rays", &d]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("bench prints JSON");
+    let floats = |name: &str| -> Vec<f32> {
+        let bytes = std::fs::read(dir.join(name)).expect(name);
+        bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+    };
+    let (tris, rays, t) = (floats("triangles.f32"), floats("rays.f32"), floats("closest_t.f32"));
+    assert_eq!(tris.len() as u64, 9 * json["triangles"].as_u64().expect("triangles"));
+    assert_eq!(rays.len(), 6 * 27 * 16);
+    assert_eq!(t.len(), 27 * 16);
+    let hits = t.iter().filter(|t| t.is_finite()).count() as f64 / t.len() as f64;
+    assert_eq!(hits, json["closest_hit_fraction"].as_f64().expect("fraction"));
+    assert!(t.iter().all(|t| *t > 0.0), "hit distances are positive, misses +∞");
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("meta.json")).expect("meta")).expect("meta is JSON");
+    assert_eq!(meta["rays"], json["rays"]);
+    // Another tracer could not reproduce instances or alpha tests from the dump.
+    fails_with(&["bench", "--scene", "builtin:forest", "--probes", "2,2,2", "--dump-rays", &d], "without instances");
+}
+
 /// The DDGI sweep's bare rate traces exactly the rays of the field update's batch:
 /// both rates divide by the same ray count (it once divided the bare trace of every
 /// probe by the field's traced probes only).
