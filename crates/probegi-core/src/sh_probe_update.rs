@@ -9,6 +9,9 @@
 //!   Ω z² the exact footprint of a fronto-parallel pixel; the paper's constant Ω
 //!   with view depth is the same at the image centre. A stratified sample stands
 //!   for its whole tile, so Ω is the pixel's solid angle × pixels per tile.
+//! - [`progressive_update_toward`]: eq. 7 over a frame's samples for one probe,
+//!   [`SH_SAMPLE_LANES`] samples at a time from [`ShSampleBlocks`] (every probe
+//!   of every cascade reads the same samples, so they are laid out once).
 //! - eq. 11, [`sample_toward_probe`]: w = A (n·d̂)/(d·d) with d from the sample to
 //!   the (jittered) probe. Samples facing away from the probe (n·d̂ ≤ 0) send it
 //!   nothing and are skipped.
@@ -26,6 +29,8 @@
 
 use glam::Vec3;
 use std::f32::consts::PI;
+
+use crate::sh::ShRgb9;
 
 /// Largest weight one sample may carry (see the module doc).
 pub const MAX_SAMPLE_SOLID_ANGLE_SR: f32 = 4.0 * PI / 9.0;
@@ -68,12 +73,181 @@ pub fn sample_toward_probe(sample: &ShSample, probe_m: Vec3) -> Option<(Vec3, f3
     Some((-d_hat, w))
 }
 
+/// Lanes of one [`ShSampleBlocks`] block: the samples one probe's update
+/// processes side by side.
+pub const SH_SAMPLE_LANES: usize = 8;
+
+/// One block of samples, each field one value per lane. Padding lanes have zero
+/// area, so they weigh nothing.
+#[derive(Clone, Copy, Debug, Default)]
+struct ShSampleBlock {
+    position_m: [[f32; SH_SAMPLE_LANES]; 3],
+    normal: [[f32; SH_SAMPLE_LANES]; 3],
+    radiance: [[f32; SH_SAMPLE_LANES]; 3],
+    area_m2: [f32; SH_SAMPLE_LANES],
+}
+
+/// A frame's screen samples in structure-of-arrays blocks, built once and read
+/// by every probe's [`progressive_update_toward`]. Samples whose radiance is not
+/// finite are left out, as [`crate::sh::progressive_update`] skips them.
+#[derive(Clone, Debug, Default)]
+pub struct ShSampleBlocks {
+    blocks: Vec<ShSampleBlock>,
+    len: usize,
+}
+
+impl ShSampleBlocks {
+    /// The blocks of `samples`, in order.
+    pub fn new<'a>(samples: impl IntoIterator<Item = &'a ShSample>) -> Self {
+        let mut out = Self::default();
+        for s in samples.into_iter().filter(|s| s.radiance.is_finite()) {
+            let lane = out.len % SH_SAMPLE_LANES;
+            if lane == 0 {
+                out.blocks.push(ShSampleBlock::default());
+            }
+            let Some(b) = out.blocks.last_mut() else { continue };
+            for (field, v) in
+                [(&mut b.position_m, s.position_m), (&mut b.normal, s.normal), (&mut b.radiance, s.radiance)]
+            {
+                for (k, x) in v.to_array().into_iter().enumerate() {
+                    field[k][lane] = x;
+                }
+            }
+            b.area_m2[lane] = s.area_m2;
+            out.len += 1;
+        }
+        out
+    }
+
+    /// Samples held.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether no sample is held.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+/// [`crate::sh::progressive_update`] of `c` with every sample of `blocks` as
+/// [`sample_toward_probe`] weighs it toward a probe at `probe_m`, computed
+/// [`SH_SAMPLE_LANES`] samples at a time (the compiler vectorises the lanes).
+/// Every step reads the coefficients from before the update, so the samples are
+/// independent and their sum may be taken in any order: the result differs from
+/// the one-sample-at-a-time loop only by float rounding of that sum.
+// Lane loops index several arrays by lane, which is what lets them vectorise.
+#[allow(clippy::needless_range_loop)]
+pub fn progressive_update_toward(c: &mut ShRgb9, probe_m: Vec3, blocks: &ShSampleBlocks, hysteresis: f32) {
+    const L: usize = SH_SAMPLE_LANES;
+    let coeffs: [[f32; 3]; 9] = c.c.map(|v| v.to_array());
+    let mut acc = [[[0.0f32; L]; 3]; 9];
+    for b in &blocks.blocks {
+        let (dir, w) = lanes_toward_probe(b, probe_m);
+        let y = lanes_sh9_basis(&dir);
+        for ch in 0..3 {
+            let mut step = [0.0f32; L];
+            for l in 0..L {
+                let mut predicted = 0.0;
+                for (k, yk) in y.iter().enumerate() {
+                    predicted += coeffs[k][ch] * yk[l];
+                }
+                step[l] = (b.radiance[ch][l] - predicted) * (w[l] * hysteresis);
+            }
+            for (acc_k, yk) in acc.iter_mut().zip(&y) {
+                for l in 0..L {
+                    acc_k[ch][l] += step[l] * yk[l];
+                }
+            }
+        }
+    }
+    let mut next = *c;
+    for (n, acc_k) in next.c.iter_mut().zip(&acc) {
+        *n += Vec3::from_array(acc_k.map(|lanes| lanes.iter().sum()));
+    }
+    if next.is_finite() {
+        *c = next;
+    }
+}
+
+/// [`sample_toward_probe`] per lane: the direction from the probe to the sample
+/// and eq. 11's weight; a lane that sends the probe nothing gets weight 0 and a
+/// zero direction.
+// Lane loops index several arrays by lane, which is what lets them vectorise.
+#[allow(clippy::needless_range_loop)]
+fn lanes_toward_probe(b: &ShSampleBlock, probe_m: Vec3) -> ([[f32; SH_SAMPLE_LANES]; 3], [f32; SH_SAMPLE_LANES]) {
+    const L: usize = SH_SAMPLE_LANES;
+    let probe = probe_m.to_array();
+    let (mut dir, mut w) = ([[0.0f32; L]; 3], [0.0f32; L]);
+    for l in 0..L {
+        let d = [0, 1, 2].map(|k| probe[k] - b.position_m[k][l]);
+        let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        let len = dd.sqrt();
+        let d_hat = d.map(|x| x / len);
+        let cos = b.normal[0][l] * d_hat[0] + b.normal[1][l] * d_hat[1] + b.normal[2][l] * d_hat[2];
+        let faces = dd > 0.0 && dd.is_finite() && cos > 0.0;
+        w[l] = if faces { (b.area_m2[l] * cos / dd).min(MAX_SAMPLE_SOLID_ANGLE_SR) } else { 0.0 };
+        for k in 0..3 {
+            dir[k][l] = if faces { -d_hat[k] } else { 0.0 };
+        }
+    }
+    (dir, w)
+}
+
+/// [`crate::sh::sh9_basis`] per lane.
+// Lane loops index several arrays by lane, which is what lets them vectorise.
+#[allow(clippy::needless_range_loop)]
+fn lanes_sh9_basis(dir: &[[f32; SH_SAMPLE_LANES]; 3]) -> [[f32; SH_SAMPLE_LANES]; 9] {
+    let mut y = [[0.0f32; SH_SAMPLE_LANES]; 9];
+    for l in 0..SH_SAMPLE_LANES {
+        let v = crate::sh::sh9_basis(Vec3::new(dir[0][l], dir[1][l], dir[2][l]));
+        for k in 0..9 {
+            y[k][l] = v[k];
+        }
+    }
+    y
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::fibonacci::spherical_fibonacci;
     use crate::rng::Pcg32;
     use crate::sh::{ShRgb9, progressive_update};
+
+    /// The lane update is the one-sample loop up to the rounding of its sum: on
+    /// samples facing toward and away from the probe, one at the probe itself,
+    /// non-finite radiance, and a count that leaves a block half full.
+    #[test]
+    fn the_update_in_lanes_is_the_one_sample_update() {
+        let mut rng = Pcg32::new(11, 3);
+        let mut samples: Vec<ShSample> = (0..203)
+            .map(|_| {
+                let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - Vec3::splat(2.0);
+                let n = spherical_fibonacci(rng.next_u32() % 1000, 1000);
+                let radiance = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 3.0;
+                ShSample { position_m: p, normal: n, radiance, area_m2: rng.next_f32() * 0.05 }
+            })
+            .collect();
+        let probe = Vec3::new(0.1, -0.2, 0.3);
+        samples.push(ShSample { position_m: probe, ..samples[0] });
+        samples.push(ShSample { radiance: Vec3::new(f32::NAN, 0.0, 1.0), ..samples[1] });
+        let blocks = ShSampleBlocks::new(&samples);
+        assert_eq!(blocks.len(), samples.len() - 1, "the NaN sample is left out");
+        let mut start = ShRgb9::default();
+        start.add_sample(Vec3::Y, Vec3::new(0.5, 0.2, 0.1), 2.0);
+        for hysteresis in [0.02, 0.5] {
+            let (mut one, mut lanes) = (start, start);
+            let weighted =
+                samples.iter().filter_map(|s| sample_toward_probe(s, probe).map(|(d, w)| (d, s.radiance, w)));
+            progressive_update(&mut one, weighted, hysteresis);
+            progressive_update_toward(&mut lanes, probe, &blocks, hysteresis);
+            assert!(one != start, "the samples move the probe");
+            for (a, b) in one.c.iter().zip(&lanes.c) {
+                assert!((*a - *b).abs().max_element() <= 1e-5 * a.abs().max_element().max(1.0), "{a} vs {b}");
+            }
+        }
+    }
 
     #[test]
     fn eq_10_and_11_give_the_solid_angle_of_a_small_patch() {

@@ -5,8 +5,10 @@
 //!    ([`crate::sh_screen_samples`]);
 //! 2. `sh_update`: every probe, jittered within its cell (§6.2), projects the
 //!    prediction error of every sample that faces it, weighted by eq. 11
-//!    (`probegi_core::sh_probe_update`, eq. 7), optionally testing visibility
-//!    with a shadow ray (`sh_occlusion`, §7.3);
+//!    (`probegi_core::sh_probe_update`, eq. 7), eight samples at a time from
+//!    structure-of-arrays blocks built once per frame
+//!    (`progressive_update_toward`); or, with `sh_occlusion` (§7.3), one sample
+//!    at a time, each testing visibility with a shadow ray;
 //! 3. `sh_inject`: with `sh_light_injection`, each probe then projects samples of
 //!    nearby emitters and of the sky ([`crate::sh_inject`], §5.2).
 //!
@@ -20,7 +22,7 @@ use probegi_core::camera::CameraRays;
 use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_core::sh::progressive_update;
 use probegi_core::sh_cascades::ShCascades;
-use probegi_core::sh_probe_update::sample_toward_probe;
+use probegi_core::sh_probe_update::{ShSampleBlocks, progressive_update_toward, sample_toward_probe};
 use probegi_core::sh_settings::ShProbeSettings;
 use probegi_scene::{Ray, RayTracer, Scene};
 use rayon::prelude::*;
@@ -114,6 +116,12 @@ impl ShProbes {
         let t = Instant::now();
         let settings = &self.settings;
         let emitters = &self.emitters;
+        // Without occlusion every probe reads the same samples: once, in lanes.
+        let blocks = if settings.sh_occlusion {
+            ShSampleBlocks::default()
+        } else {
+            ShSampleBlocks::new(samples.iter().map(|s| &s.sample))
+        };
         for (k, cascade) in self.cascades.cascades.iter_mut().enumerate() {
             let spacing = cascade.spacing_m;
             let slots = &cascade.slot_lattice;
@@ -131,7 +139,8 @@ impl ShProbes {
                         Vec3::ZERO
                     };
                     let probe = (lattice.as_vec3() + jitter) * spacing;
-                    let probe_inputs = ProbeInputs { scene, tracer, emitters, settings, samples: &samples };
+                    let probe_inputs =
+                        ProbeInputs { scene, tracer, emitters, settings, samples: &samples, blocks: &blocks };
                     update_probe(&probe_inputs, probe, coeffs, &mut rng, light_samples)
                 })
                 .sum::<u64>();
@@ -149,6 +158,8 @@ struct ProbeInputs<'a> {
     emitters: &'a EmitterGrid,
     settings: &'a ShProbeSettings,
     samples: &'a [ScreenSample],
+    /// `samples` in lanes (empty with `sh_occlusion`, whose shadow rays go one sample at a time).
+    blocks: &'a ShSampleBlocks,
 }
 
 /// Screen update then light injection of one probe; `light` is a reused buffer.
@@ -160,26 +171,35 @@ fn update_probe(
     rng: &mut Pcg32,
     light: &mut Vec<(Vec3, Vec3, f32)>,
 ) -> u64 {
-    let ProbeInputs { scene, tracer, emitters, settings, samples } = *inputs;
+    let ProbeInputs { scene, tracer, emitters, settings, blocks, .. } = *inputs;
     let mut rays = 0u64;
-    let weighted = samples.iter().filter_map(|s| {
-        let (dir, w) = sample_toward_probe(&s.sample, probe)?;
-        if settings.sh_occlusion {
-            rays += 1;
-            let origin = s.surface.spawn_origin(-dir);
-            let to = probe - origin;
-            let d = to.length();
-            if tracer.occluded(&Ray::segment(origin, to / d, d * (1.0 - 1e-4))) {
-                return None;
-            }
-        }
-        Some((dir, s.sample.radiance, w))
-    });
-    progressive_update(coeffs, weighted, settings.sh_hysteresis);
+    if settings.sh_occlusion {
+        rays += occluded_screen_update(inputs, probe, coeffs);
+    } else {
+        progressive_update_toward(coeffs, probe, blocks, settings.sh_hysteresis);
+    }
     if settings.sh_light_injection && (!emitters.is_empty() || scene.sky_radiance != Vec3::ZERO) {
         light.clear();
         rays += injection_samples(scene, tracer, emitters, settings, probe, rng, light);
         progressive_update(coeffs, light.iter().copied(), settings.sh_hysteresis);
     }
+    rays
+}
+
+/// The screen update with `sh_occlusion` (§7.3): a shadow ray from each sample
+/// that faces the probe; occluded samples send nothing. Returns rays traced.
+fn occluded_screen_update(inputs: &ProbeInputs<'_>, probe: Vec3, coeffs: &mut probegi_core::sh::ShRgb9) -> u64 {
+    let ProbeInputs { tracer, settings, samples, .. } = *inputs;
+    let mut rays = 0u64;
+    let weighted = samples.iter().filter_map(|s| {
+        let (dir, w) = sample_toward_probe(&s.sample, probe)?;
+        rays += 1;
+        let origin = s.surface.spawn_origin(-dir);
+        let to = probe - origin;
+        let d = to.length();
+        let occluded = tracer.occluded(&Ray::segment(origin, to / d, d * (1.0 - 1e-4)));
+        (!occluded).then_some((dir, s.sample.radiance, w))
+    });
+    progressive_update(coeffs, weighted, settings.sh_hysteresis);
     rays
 }
