@@ -158,69 +158,124 @@ pub fn irradiance(field: &DdgiFieldView<'_>, position: Vec3, normal: Vec3, view_
     let g = field.grid;
     let biased = position + surface_bias(s, g, normal, view_dir);
     let cage = g.cage(biased);
-    let normal_texels = BilinearFootprint::new(field.irradiance.interior, oct_encode(normal));
-    let gamma = s.probe_irradiance_gamma;
-
-    // One cage probe's (weight, decoded irradiance) for corner `i`; `probe` (at grid
-    // coordinates `coords`) may be the corner's fallback, weighted like the corner.
-    let weigh = |i: usize, probe: usize, coords: UVec3| {
-        let probe_pos = g.probe_position(coords) + field.probe_offsets_m.get(probe).copied().unwrap_or(Vec3::ZERO);
-        let mut weight = 1.0f32;
-        if s.probe_backface_weight {
-            let dir = (probe_pos - position).normalize_or_zero();
-            weight *= backface_weight(dir, normal);
-        }
-        if s.probe_chebyshev_weight {
-            let to_probe = probe_pos - biased;
-            let dist = to_probe.length();
-            // oct_encode normalises by the L1 norm itself, so the direction need not be unit.
-            let uv = oct_encode(-to_probe);
-            let moments = field.distance.sample_bilinear(probe, uv);
-            weight *= chebyshev_weight(moments, dist).max(CHEBYSHEV_WEIGHT_FLOOR);
-        }
-        weight = weight.max(MIN_PROBE_WEIGHT);
-        if s.probe_crush_weight && weight < s.probe_crush_threshold {
-            let c = s.probe_crush_threshold;
-            weight *= weight * weight / (c * c);
-        }
-        if s.probe_trilinear_weight {
-            let t = cage.trilinear(i).max(Vec3::splat(TRILINEAR_WEIGHT_FLOOR));
-            weight *= t.x * t.y * t.z;
-        }
-        let e = normal_texels.sample(field.irradiance.tile(probe)).max(Vec3::ZERO);
-        (weight, decode_irradiance_half(e, gamma))
+    let at = QueryPoint {
+        position,
+        normal,
+        biased,
+        normal_texels: BilinearFootprint::new(field.irradiance.interior, oct_encode(normal)),
     };
-
-    let mut sum = Vec3::ZERO;
-    let mut wsum = 0.0f32;
-    for i in 0..8 {
+    let mut corners = [CageCorner::NONE; 8];
+    for (i, c) in corners.iter_mut().enumerate() {
         let coords = cage.corner(i);
         let probe = g.probe_index(coords);
-        if field.probe_usable.get(probe).is_some_and(|u| !u) {
-            continue;
+        if field.probe_usable.get(probe).is_none_or(|u| *u) {
+            *c = CageCorner { probe, coords, trilinear: cage.trilinear(i) };
         }
-        let (w, e) = weigh(i, probe, coords);
-        sum += e * w;
-        wsum += w;
     }
+    let (mut sum, mut wsum) = weigh_corners(field, &at, &corners);
     if !(wsum.is_finite() && wsum > 0.0) {
         // No usable probe in the cage: each corner's nearest usable probe stands in
         // for it, with the same weights (so visibility still picks among them).
-        for i in 0..8 {
-            if let Some(&q) = field.probe_fallback.get(g.probe_index(cage.corner(i)))
-                && q != u32::MAX
-            {
-                let (w, e) = weigh(i, q as usize, g.probe_coords(q as usize));
-                sum += e * w;
-                wsum += w;
-            }
+        for (i, c) in corners.iter_mut().enumerate() {
+            *c = match field.probe_fallback.get(g.probe_index(cage.corner(i))) {
+                Some(&q) if q != u32::MAX => {
+                    CageCorner { probe: q as usize, coords: g.probe_coords(q as usize), trilinear: cage.trilinear(i) }
+                }
+                _ => CageCorner::NONE,
+            };
         }
+        let (fallback_sum, fallback_wsum) = weigh_corners(field, &at, &corners);
+        sum += fallback_sum;
+        wsum += fallback_wsum;
     }
     if !(wsum.is_finite() && wsum > 0.0) {
         return Vec3::ZERO;
     }
     let e = finish_half_decode(sum / wsum) * PI * s.probe_energy_conservation;
     if e.is_finite() { e } else { Vec3::ZERO }
+}
+
+/// What every cage corner's weight reads about the shaded point.
+struct QueryPoint {
+    position: Vec3,
+    normal: Vec3,
+    /// `position` moved by the surface bias: where visibility is tested from.
+    biased: Vec3,
+    /// The irradiance texels in the normal's direction, the same in every tile.
+    normal_texels: BilinearFootprint,
+}
+
+/// One corner of the cage as a query reads it: the probe that stands there (the
+/// corner's own, or its fallback), its grid coordinates and the corner's
+/// trilinear factors. `probe == usize::MAX`: no probe, the corner is skipped.
+#[derive(Clone, Copy)]
+struct CageCorner {
+    probe: usize,
+    coords: UVec3,
+    trilinear: Vec3,
+}
+
+impl CageCorner {
+    const NONE: Self = Self { probe: usize::MAX, coords: UVec3::ZERO, trilinear: Vec3::ZERO };
+}
+
+/// Σ weight · half-decoded irradiance and Σ weight over the corners that have a
+/// probe, summed in corner order. Each step runs for all eight corners before
+/// the next (positions, then visibility, then irradiance), so the corners'
+/// lookups and square roots overlap instead of waiting on one another; every
+/// corner's arithmetic is the same as one corner at a time.
+fn weigh_corners(field: &DdgiFieldView<'_>, at: &QueryPoint, corners: &[CageCorner; 8]) -> (Vec3, f32) {
+    let (s, g) = (field.settings, field.grid);
+    let used = corners.map(|c| c.probe != usize::MAX);
+    let probe_pos = corners.map(|c| {
+        let offset = field.probe_offsets_m.get(c.probe).copied().unwrap_or(Vec3::ZERO);
+        g.probe_position(c.coords) + offset
+    });
+    let mut weight = [1.0f32; 8];
+    if s.probe_backface_weight {
+        for i in 0..8 {
+            let dir = (probe_pos[i] - at.position).normalize_or_zero();
+            weight[i] *= backface_weight(dir, at.normal);
+        }
+    }
+    if s.probe_chebyshev_weight {
+        let mut uv = [Vec2::ZERO; 8];
+        let mut dist = [0.0f32; 8];
+        for i in 0..8 {
+            let to_probe = probe_pos[i] - at.biased;
+            dist[i] = to_probe.length();
+            // oct_encode normalises by the L1 norm itself, so the direction need not be unit.
+            uv[i] = oct_encode(-to_probe);
+        }
+        let moments = std::array::from_fn::<Vec2, 8, _>(|i| {
+            if used[i] { field.distance.sample_bilinear(corners[i].probe, uv[i]) } else { Vec2::ZERO }
+        });
+        for i in 0..8 {
+            weight[i] *= chebyshev_weight(moments[i], dist[i]).max(CHEBYSHEV_WEIGHT_FLOOR);
+        }
+    }
+    let mut e = [Vec3::ZERO; 8];
+    for i in 0..8 {
+        let mut w = weight[i].max(MIN_PROBE_WEIGHT);
+        if s.probe_crush_weight && w < s.probe_crush_threshold {
+            let c = s.probe_crush_threshold;
+            w *= w * w / (c * c);
+        }
+        if s.probe_trilinear_weight {
+            let t = corners[i].trilinear.max(Vec3::splat(TRILINEAR_WEIGHT_FLOOR));
+            w *= t.x * t.y * t.z;
+        }
+        weight[i] = w;
+        if used[i] {
+            e[i] = at.normal_texels.sample(field.irradiance.tile(corners[i].probe)).max(Vec3::ZERO);
+        }
+    }
+    let (mut sum, mut wsum) = (Vec3::ZERO, 0.0f32);
+    for i in (0..8).filter(|&i| used[i]) {
+        sum += decode_irradiance_half(e[i], s.probe_irradiance_gamma) * weight[i];
+        wsum += weight[i];
+    }
+    (sum, wsum)
 }
 
 #[cfg(test)]
