@@ -25,7 +25,7 @@
 use glam::Vec3;
 use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance};
 use probegi_core::rng::{Pcg32, hash_combine};
-use probegi_scene::{RayHit, Scene};
+use probegi_scene::{RayHit, Scene, SurfacePoint};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
 
@@ -58,8 +58,16 @@ pub struct ProbeShadeInputs<'a> {
 /// Fills `radiance` (one per batch ray; rays not asked for get zero). Returns the
 /// shadow rays traced. Each probe's rays draw from their own PCG stream, seeded
 /// from (volume's seed, frame, probe), so results do not depend on threads.
+///
+/// Three steps, each parallel: the surface point of every front hit to shade;
+/// the field's irradiance at those points, queried in the order of the cell
+/// they lie in ([`batched_field_irradiance`]); then per probe, direct light and
+/// the BSDF. The query is a pure function of the point, so its order changes
+/// no result, only how often the 8-probe cages' atlas tiles are still in cache.
 pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>) -> u64 {
     let batch = inputs.batch;
+    let points = shaded_surface_points(inputs);
+    let field_e = batched_field_irradiance(inputs, &points);
     radiance.clear();
     radiance.resize(batch.len(), Vec3::ZERO);
     // Split the output per batch probe (contiguous, in order).
@@ -87,16 +95,14 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                     continue;
                 }
                 let dir = batch.directions[i];
-                *r = match &inputs.hits[i] {
-                    None => inputs.scene.sky_radiance,
-                    Some(hit) if hit.backface => Vec3::ZERO,
-                    Some(hit) => {
-                        let sp = &inputs.scene.surface_point(hit);
+                *r = match (&inputs.hits[i], &points[i]) {
+                    (None, _) => inputs.scene.sky_radiance,
+                    (Some(_), None) => Vec3::ZERO,
+                    (Some(_), Some(sp)) => {
                         let ctx = ShadingContext::new(inputs.scene, sp, -dir);
                         let (direct, k) = inputs.direct.reflected(sp, &ctx, area, true, &mut rng);
                         rays += k;
-                        let e = field_set_irradiance(inputs.field, sp.position, sp.facing_normal(), -dir);
-                        let mut l = direct + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e;
+                        let mut l = direct + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * field_e[i];
                         if settings.glossy_second_order {
                             l += crate::glossy::second_order_specular(inputs.field, sp, &ctx, dir);
                         }
@@ -107,4 +113,71 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
             rays
         })
         .sum()
+}
+
+/// Rays per parallel work item of the per-ray steps.
+const SHADE_CHUNK_RAYS: usize = 512;
+
+/// The surface point of every ray the shade pass shades at a surface: asked for
+/// (`needs_radiance`) and a front hit; `None` for every other ray (misses take
+/// the sky, back faces zero).
+fn shaded_surface_points(inputs: &ProbeShadeInputs<'_>) -> Vec<Option<SurfacePoint>> {
+    let batch = inputs.batch;
+    let mut points = vec![None; batch.len()];
+    points.par_chunks_mut(SHADE_CHUNK_RAYS).enumerate().for_each(|(c, out)| {
+        for (k, p) in out.iter_mut().enumerate() {
+            let i = c * SHADE_CHUNK_RAYS + k;
+            if let (true, Some(hit)) = (batch.needs_radiance[i], &inputs.hits[i])
+                && !hit.backface
+            {
+                *p = Some(inputs.scene.surface_point(hit));
+            }
+        }
+    });
+    points
+}
+
+/// The field set's irradiance (`field_set_irradiance`, the previous frame's
+/// field) at every point of `points`, in batch order (zero where there is none).
+/// The points are queried grouped by the cell of the first member's grid they
+/// lie in (a counting sort): probe rays of one probe scatter over the scene, so
+/// in batch order consecutive queries read unrelated cages, while in cell order
+/// they read the same eight probes' tiles.
+fn batched_field_irradiance(inputs: &ProbeShadeInputs<'_>, points: &[Option<SurfacePoint>]) -> Vec<Vec3> {
+    let mut field_e = vec![Vec3::ZERO; points.len()];
+    let Some(first) = inputs.field.members.first() else { return field_e };
+    let grid = first.field.grid;
+    let cell_of = |p: Vec3| {
+        let b = grid.base_probe(p).as_uvec3();
+        b.x as usize + grid.probe_counts.x as usize * (b.y as usize + grid.probe_counts.y as usize * b.z as usize)
+    };
+    let cells = grid.probe_count();
+    let keys: Vec<u32> =
+        points.par_iter().map(|p| p.as_ref().map_or(u32::MAX, |sp| cell_of(sp.position) as u32)).collect();
+    let mut starts = vec![0u32; cells + 1];
+    for &k in keys.iter().filter(|&&k| k != u32::MAX) {
+        starts[k as usize + 1] += 1;
+    }
+    for c in 0..cells {
+        starts[c + 1] += starts[c];
+    }
+    let mut order = vec![0u32; starts[cells] as usize];
+    let mut next = starts;
+    for (i, &k) in keys.iter().enumerate().filter(|(_, k)| **k != u32::MAX) {
+        order[next[k as usize] as usize] = i as u32;
+        next[k as usize] += 1;
+    }
+    let sorted: Vec<Vec3> = order
+        .par_iter()
+        .with_min_len(SHADE_CHUNK_RAYS)
+        .map(|&i| {
+            let (sp, dir) = (&points[i as usize], inputs.batch.directions[i as usize]);
+            sp.as_ref()
+                .map_or(Vec3::ZERO, |sp| field_set_irradiance(inputs.field, sp.position, sp.facing_normal(), -dir))
+        })
+        .collect();
+    for (&i, e) in order.iter().zip(sorted) {
+        field_e[i as usize] = e;
+    }
+    field_e
 }

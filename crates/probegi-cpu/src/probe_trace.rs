@@ -74,11 +74,15 @@ pub fn trace_probe_distances(
 }
 
 /// Bytes a volume with these settings holds on the CPU backend (atlases,
-/// per-probe state, and the per-ray batch and hit buffers of one frame).
+/// per-probe state, and the per-ray batch, hit and shading buffers of one frame).
 pub fn ddgi_volume_bytes(settings: &probegi_core::ddgi_settings::DdgiVolumeSettings) -> u64 {
     let probes = settings.probe_count();
     let rays = probes * settings.probe_rays_per_probe as u64;
-    let per_ray = std::mem::size_of::<Option<RayHit>>() + 3 * 12 + 4 + 16 + 1;
+    // Batch (origins, directions, max distances, needs_radiance), seam hit,
+    // closest hit, and the shade pass's surface point, query cell, order and
+    // field irradiance.
+    let shade = std::mem::size_of::<Option<probegi_scene::SurfacePoint>>() + 4 + 4 + 12;
+    let per_ray = 3 * 12 + 4 + 1 + 16 + std::mem::size_of::<Option<RayHit>>() + shade;
     rays * per_ray as u64
         + probes
             * (probegi_core::probe_atlas::tile_texel_count(settings.probe_irradiance_texels) as u64 * 12
