@@ -27,6 +27,9 @@ use crate::render_settings::{apply_scene_settings, probe_settings};
 use crate::scene_setup::check_posed_bounds;
 
 pub fn run(args: &BenchArgs) -> Result<serde_json::Value> {
+    if args.dump_rays.is_some() && args.gi != crate::args::GiArg::None {
+        bail!("--dump-rays dumps the ray bench's rays: it takes no --gi");
+    }
     match args.gi {
         crate::args::GiArg::None => run_rays(args),
         crate::args::GiArg::Ddgi => run_ddgi(args),
@@ -281,6 +284,9 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     let (lo, hi) = scene.bounds().context("scene has no geometry")?;
 
     let (bvh, build_ms) = best_bvh_build(args, &scene)?;
+    if args.dump_rays.is_some() {
+        check_dumpable(&scene, &bvh)?;
+    }
 
     let (rays, cell) = probe_grid_rays(args, lo, hi);
     let any_hit_len = cell.min_element();
@@ -336,6 +342,15 @@ fn run_rays(args: &BenchArgs) -> Result<serde_json::Value> {
     Ok(report)
 }
 
+/// Whether `--dump-rays` can write `scene` as plain triangles another tracer
+/// reproduces: no instances, no alpha cutouts.
+fn check_dumpable(scene: &Scene, bvh: &BvhTracer) -> Result<()> {
+    if !scene.instances.is_empty() || bvh.cutout_triangle_count() > 0 {
+        bail!("--dump-rays needs a scene without instances and alpha cutouts (try --set alpha_cutouts=false)");
+    }
+    Ok(())
+}
+
 /// `--dump-rays DIR`: the scene's triangles (9 f32 each, world space), the bench
 /// rays (origin, direction: 6 f32 each; closest-hit rays are unbounded and
 /// any-hit rays end at `any_hit_max_distance_m`), probegi's closest-hit
@@ -349,9 +364,7 @@ fn dump_rays(
     rays: &[Ray],
     report: &serde_json::Value,
 ) -> Result<()> {
-    if !scene.instances.is_empty() || bvh.cutout_triangle_count() > 0 {
-        bail!("--dump-rays needs a scene without instances and alpha cutouts (try --set alpha_cutouts=false)");
-    }
+    check_dumpable(scene, bvh)?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let write = |name: &str, values: &mut dyn Iterator<Item = f32>| -> Result<()> {
         let bytes: Vec<u8> = values.flat_map(f32::to_le_bytes).collect();

@@ -213,6 +213,7 @@ fn bench_dumps_its_rays_and_triangles_for_another_tracer() {
     assert_eq!(meta["rays"], json["rays"]);
     // Another tracer could not reproduce instances or alpha tests from the dump.
     fails_with(&["bench", "--scene", "builtin:forest", "--probes", "2,2,2", "--dump-rays", &d], "without instances");
+    fails_with(&["bench", "--gi", "ddgi", "--dump-rays", &d], "takes no --gi");
 }
 
 /// The DDGI sweep's bare rate traces exactly the rays of the field update's batch:

@@ -152,7 +152,8 @@ pub fn progressive_update_toward(c: &mut ShRgb9, probe_m: Vec3, blocks: &ShSampl
                 for (k, yk) in y.iter().enumerate() {
                     predicted += coeffs[k][ch] * yk[l];
                 }
-                step[l] = (b.radiance[ch][l] - predicted) * (w[l] * hysteresis);
+                // Lanes that send nothing add exactly nothing, whatever the prediction.
+                step[l] = if w[l] > 0.0 { (b.radiance[ch][l] - predicted) * (w[l] * hysteresis) } else { 0.0 };
             }
             for (acc_k, yk) in acc.iter_mut().zip(&y) {
                 for l in 0..L {
@@ -186,9 +187,12 @@ fn lanes_toward_probe(b: &ShSampleBlock, probe_m: Vec3) -> ([[f32; SH_SAMPLE_LAN
         let d_hat = d.map(|x| x / len);
         let cos = b.normal[0][l] * d_hat[0] + b.normal[1][l] * d_hat[1] + b.normal[2][l] * d_hat[2];
         let faces = dd > 0.0 && dd.is_finite() && cos > 0.0;
-        w[l] = if faces { (b.area_m2[l] * cos / dd).min(MAX_SAMPLE_SOLID_ANGLE_SR) } else { 0.0 };
+        let weight = (b.area_m2[l] * cos / dd).min(MAX_SAMPLE_SOLID_ANGLE_SR);
+        // A negative weight (negative area) is skipped, as `progressive_update` skips it.
+        let sends = faces && weight >= 0.0;
+        w[l] = if sends { weight } else { 0.0 };
         for k in 0..3 {
-            dir[k][l] = if faces { -d_hat[k] } else { 0.0 };
+            dir[k][l] = if sends { -d_hat[k] } else { 0.0 };
         }
     }
     (dir, w)

@@ -59,7 +59,8 @@ pub struct ProbeShadeInputs<'a> {
 /// shadow rays traced. Each probe's rays draw from their own PCG stream, seeded
 /// from (volume's seed, frame, probe), so results do not depend on threads.
 ///
-/// Three steps, each parallel: the surface point of every front hit to shade;
+/// Three steps, parallel but for the counting sort's two serial passes over the
+/// rays: the surface point of every front hit to shade;
 /// the field's irradiance at those points, queried in the order of the cell
 /// they lie in ([`batched_field_irradiance`]); then per probe, direct light and
 /// the BSDF. The query is a pure function of the point, so its order changes

@@ -78,10 +78,10 @@ pub fn trace_probe_distances(
 pub fn ddgi_volume_bytes(settings: &probegi_core::ddgi_settings::DdgiVolumeSettings) -> u64 {
     let probes = settings.probe_count();
     let rays = probes * settings.probe_rays_per_probe as u64;
-    // Batch (origins, directions, max distances, needs_radiance), seam hit,
-    // closest hit, and the shade pass's surface point, query cell, order and
-    // field irradiance.
-    let shade = std::mem::size_of::<Option<probegi_scene::SurfacePoint>>() + 4 + 4 + 12;
+    // Batch (origins, directions, max distances, needs_radiance), radiance, seam
+    // hit, closest hit, and the shade pass's surface point, query cell, order and
+    // field irradiance (sorted, then in batch order).
+    let shade = std::mem::size_of::<Option<probegi_scene::SurfacePoint>>() + 4 + 4 + 12 + 12;
     let per_ray = 3 * 12 + 4 + 1 + 16 + std::mem::size_of::<Option<RayHit>>() + shade;
     rays * per_ray as u64
         + probes

@@ -31,7 +31,8 @@
 //! blends, borders and classifies every volume.
 //!
 //! The caller's hits are signed distances (front face `t`, back face `−t`, miss
-//! `+∞`) and the facing unit normal at the hit. The set applies the backface rule
+//! `+∞`) and, in the rounds that read it ([`DdgiFieldSet::hit_normals_needed`]:
+//! classification), the facing unit normal at the hit. The set applies the backface rule
 //! itself (zero radiance, distance −0.2·t), so a caller shades only front hits and
 //! misses (misses: the sky or environment). Shading a front hit is direct light
 //! plus albedo/π × [`DdgiFieldSet::irradiance`] at the hit, the previous frame's

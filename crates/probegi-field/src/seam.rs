@@ -170,8 +170,10 @@ pub struct ProbeRayHit {
     /// Signed hit distance in metres: `t` on a front face, `−t` on a back face,
     /// `+∞` for a miss (nothing within the ray's max distance).
     pub distance_m: f32,
-    /// Unit normal at the hit on the side facing the ray's origin (read by the
-    /// jcgt classification); anything for a miss.
+    /// Unit normal at the hit on the side facing the ray's origin, read only by
+    /// the jcgt classification round
+    /// ([`DdgiFieldSet::hit_normals_needed`](crate::DdgiFieldSet::hit_normals_needed));
+    /// any finite value (zero) in other rounds and for a miss.
     pub normal: Vec3,
 }
 
