@@ -57,7 +57,7 @@ pub struct DdgiVolumeSettings {
     pub probe_self_shadow_bias: f32,
     /// k_n of seed 003 eq. 4.11, metres; in [0, 1] per the thesis (we use 0.25).
     pub probe_normal_bias_m: f32,
-    /// Energy conservation factor on sampled irradiance (seed 003 §4.4, in [0,1]).
+    /// Energy conservation factor on sampled irradiance (seed 003 §4.4, in 0–1).
     /// 1 = none, as RTXGI; lower it only for scenes whose bounces diverge.
     pub probe_energy_conservation: f32,
     /// Probe rays longer than this count as misses (RTXGI `probeMaxRayDistance`).

@@ -62,7 +62,7 @@ pub struct ProbeShadeInputs<'a> {
 /// Three steps, parallel but for the counting sort's two serial passes over the
 /// rays: the surface point of every front hit to shade;
 /// the field's irradiance at those points, queried in the order of the cell
-/// they lie in ([`batched_field_irradiance`]); then per probe, direct light and
+/// they lie in (`batched_field_irradiance`); then per probe, direct light and
 /// the BSDF. The query is a pure function of the point, so its order changes
 /// no result, only how often the 8-probe cages' atlas tiles are still in cache.
 pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>) -> u64 {

@@ -27,7 +27,7 @@ pub struct DeviceVolumeBlend<'a> {
     pub irradiance_scale: f32,
     /// The scene-event reduction of the distance (visibility) hysteresis.
     pub visibility_scale: f32,
-    /// The distance limit of the blend ([`DdgiVolume::distance_clamp_m`]).
+    /// The distance limit of the blend ([`crate::ddgi_volume::DdgiVolume::distance_clamp_m`]).
     pub distance_clamp_m: f32,
     /// Probes whose tiles the host cleared since the last blend (scrolled in):
     /// the device clears its copies before blending.

@@ -10,7 +10,7 @@
 //! fragment stages; group 2 in the crate's own passes, `shader_registry`), all
 //! read-only storage buffers:
 //! - binding 0: `DdgiSet` — header (member count, blending 0 density / 1
-//!   cascades, has camera), the camera position, then one [`GpuDdgiVolume`] per
+//!   cascades, has camera), the camera position, then one `GpuDdgiVolume` per
 //!   member in sampling order;
 //! - binding 1: every member's irradiance atlas, `vec4<f32>` texels (xyz γ-encoded),
 //!   tile-major as `probegi_core::probe_atlas` lays them out;
