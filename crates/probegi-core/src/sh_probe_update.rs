@@ -152,8 +152,9 @@ pub fn progressive_update_toward(c: &mut ShRgb9, probe_m: Vec3, blocks: &ShSampl
                 for (k, yk) in y.iter().enumerate() {
                     predicted += coeffs[k][ch] * yk[l];
                 }
-                // Lanes that send nothing add exactly nothing, whatever the prediction.
-                step[l] = if w[l] > 0.0 { (b.radiance[ch][l] - predicted) * (w[l] * hysteresis) } else { 0.0 };
+                // Lanes that send nothing have w = 0 and a zero direction (finite
+                // basis), so their step is 0; no branch, so the lanes vectorise.
+                step[l] = (b.radiance[ch][l] - predicted) * (w[l] * hysteresis);
             }
             for (acc_k, yk) in acc.iter_mut().zip(&y) {
                 for l in 0..L {
@@ -172,27 +173,24 @@ pub fn progressive_update_toward(c: &mut ShRgb9, probe_m: Vec3, blocks: &ShSampl
 }
 
 /// [`sample_toward_probe`] per lane: the direction from the probe to the sample
-/// and eq. 11's weight; a lane that sends the probe nothing gets weight 0 and a
-/// zero direction.
-// Lane loops index several arrays by lane, which is what lets them vectorise.
-#[allow(clippy::needless_range_loop)]
+/// and eq. 11's weight; a lane that sends the probe nothing (facing away, at
+/// the probe, or a negative weight, which `progressive_update` skips) gets
+/// weight 0 and a zero direction.
 fn lanes_toward_probe(b: &ShSampleBlock, probe_m: Vec3) -> ([[f32; SH_SAMPLE_LANES]; 3], [f32; SH_SAMPLE_LANES]) {
-    const L: usize = SH_SAMPLE_LANES;
-    let probe = probe_m.to_array();
-    let (mut dir, mut w) = ([[0.0f32; L]; 3], [0.0f32; L]);
-    for l in 0..L {
-        let d = [0, 1, 2].map(|k| probe[k] - b.position_m[k][l]);
-        let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        let len = dd.sqrt();
-        let d_hat = d.map(|x| x / len);
-        let cos = b.normal[0][l] * d_hat[0] + b.normal[1][l] * d_hat[1] + b.normal[2][l] * d_hat[2];
-        let faces = dd > 0.0 && dd.is_finite() && cos > 0.0;
-        let weight = (b.area_m2[l] * cos / dd).min(MAX_SAMPLE_SOLID_ANGLE_SR);
-        // A negative weight (negative area) is skipped, as `progressive_update` skips it.
-        let sends = faces && weight >= 0.0;
-        w[l] = if sends { weight } else { 0.0 };
-        for k in 0..3 {
-            dir[k][l] = if sends { -d_hat[k] } else { 0.0 };
+    let (mut dir, mut w) = ([[0.0f32; SH_SAMPLE_LANES]; 3], [0.0f32; SH_SAMPLE_LANES]);
+    for l in 0..SH_SAMPLE_LANES {
+        let lane = |v: &[[f32; SH_SAMPLE_LANES]; 3]| Vec3::new(v[0][l], v[1][l], v[2][l]);
+        let sample = ShSample {
+            position_m: lane(&b.position_m),
+            normal: lane(&b.normal),
+            radiance: lane(&b.radiance),
+            area_m2: b.area_m2[l],
+        };
+        if let Some((d, weight)) = sample_toward_probe(&sample, probe_m).filter(|(_, w)| *w >= 0.0) {
+            w[l] = weight;
+            for (k, x) in d.to_array().into_iter().enumerate() {
+                dir[k][l] = x;
+            }
         }
     }
     (dir, w)
