@@ -176,10 +176,12 @@ impl DdgiSweep<'_> {
             .map_err(anyhow::Error::msg)?;
         let init_ms = warmup.get("probe_init").copied().unwrap_or(0.0);
         let mut pass_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
+        let bus_before = gpu.map(|g| g.ctx.bytes_transferred());
         for f in 1..=args.frames {
             set.update_traced_by(scene, bvh, batch_tracer, direct, args.seed, f, &mut pass_ms)
                 .map_err(anyhow::Error::msg)?;
         }
+        let bus = bus_json(gpu, bus_before, args.frames, set.ray_batch());
         // After the timed frames: the field back on the host, as the update left
         // it (the GPU passes alone below start from it).
         set.sync_host_atlases(batch_tracer).map_err(anyhow::Error::msg)?;
@@ -193,11 +195,13 @@ impl DdgiSweep<'_> {
         // max distances), closest hit only, as the update's trace pass. Both rates divide by the
         // rays of that batch, so they compare the same work.
         let batch = set.ray_batch();
+        let bare_batch = batch.expanded();
         let t = Instant::now();
         let hits: usize = (0..batch.len())
             .into_par_iter()
             .filter(|&i| {
-                let ray = Ray::segment(batch.origins_m[i], batch.directions[i], batch.max_distances_m[i]);
+                let ray =
+                    Ray::segment(bare_batch.origins_m[i], bare_batch.directions[i], bare_batch.max_distances_m[i]);
                 bvh.closest_hit(&ray).is_some()
             })
             .count();
@@ -226,8 +230,33 @@ impl DdgiSweep<'_> {
             "trace_mrays_per_s": n / (get("trace") * 1e-3) / 1e6,
             "shade_blend_border_over_trace": (get("shade") + get("blend") + get("border")) / get("trace"),
             "gpu": gpu_row,
+            "bus_bytes_per_frame": bus,
         }))
     }
+}
+
+/// The bytes that crossed the bus per timed update frame on the GPU backend
+/// (`GpuContext::bytes_transferred` since `before`), each way, and per probe
+/// and per ray of the last batch: O(probes) when nothing per ray crosses.
+fn bus_json(
+    gpu: Option<&WgpuProbeTracer>,
+    before: Option<(u64, u64)>,
+    frames: u32,
+    batch: &probegi_field::seam::ProbeRayBatch,
+) -> serde_json::Value {
+    let (Some(g), Some((up0, down0))) = (gpu, before) else { return json!(null) };
+    let (up, down) = g.ctx.bytes_transferred();
+    let per_frame = |b: u64| b as f64 / frames as f64;
+    let (up, down) = (per_frame(up - up0), per_frame(down - down0));
+    json!({
+        "host_to_device": up,
+        "device_to_host": down,
+        "per_batch_probe": (up + down) / batch.probes.len().max(1) as f64,
+        "per_batch_ray": (up + down) / batch.len().max(1) as f64,
+        "batch_probes": batch.probes.len(),
+        "batch_rays": batch.len(),
+        "per_ray_arrays_on_host": batch.has_ray_arrays(),
+    })
 }
 
 /// DDGI settings of one bench configuration: defaults, the grid and ray count,

@@ -86,28 +86,49 @@ pub fn time_gpu_passes(
     let s = &volume.settings;
     let n = s.probe_rays_per_probe as usize;
     // The batch's probes (their relocated origins), their rays generated on the device.
-    let origins: Vec<glam::Vec3> = batch.probes.iter().map(|p| batch.origins_m[p.first_ray as usize]).collect();
-    let max_m = batch.max_distances_m.first().copied().unwrap_or(f32::INFINITY);
+    let origins = &batch.probe_origins_m;
+    let max_m = batch.generated.first().map_or(f32::INFINITY, |g| g.max_distance_m);
     let rotation = probegi_field::probe_ray_gen::probe_ray_rotation(volume.stream_seed(1), 1);
     let ray_gen = probegi_wgpu::probe_ray_gen::GpuProbeRayGen::new(ctx);
     let (_atlases, blend, bindings) = blend_pass(ctx, volume, batch)?;
-    let timer = GpuTimer::new(ctx, 7);
-    let names = ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], PASS_NAMES[3], "shade", "ray_gen"];
-    let traced = ray_gen.generate(ctx, &gpu.trace, &origins, max_m, rotation, n as u32, Some((&timer, 6)))?;
+    let timer = GpuTimer::new(ctx, 8);
+    let names =
+        ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], PASS_NAMES[3], "shade", "ray_gen", "trace_batch_order"];
+    // The update's thread order (direction-major per volume), and batch order for comparison.
+    let segment = probegi_wgpu::bvh_trace::TraceSegment {
+        first_ray: 0,
+        probe_count: origins.len() as u32,
+        rays_per_probe: n as u32,
+    };
+    let traced = ray_gen.generate(ctx, &gpu.trace, origins, max_m, rotation, n as u32, Some((&timer, 6)))?;
     ctx.wait()?;
     // The shade pass over every ray of the batch, with the set's field on the device.
     let field = probegi_wgpu::ddgi_query::GpuDdgiField::upload(ctx, &set.view())?;
-    let info: Vec<u32> = (0..batch.len())
-        .map(|_| probegi_wgpu::probe_shade::shade_info(true, s.glossy_second_order, s.probe_area_light_samples))
+    let info = probegi_wgpu::probe_shade::shade_info(true, s.glossy_second_order, s.probe_area_light_samples);
+    let shade_probes: Vec<probegi_wgpu::probe_shade::ShadeProbe> = batch
+        .probes
+        .iter()
+        .map(|p| probegi_wgpu::probe_shade::ShadeProbe {
+            first_ray: p.first_ray,
+            ray_count: p.ray_count,
+            info,
+            _pad: 0,
+        })
         .collect();
     let mut best: Option<Vec<f64>> = None;
     let mut wall_trace_ms = f64::INFINITY;
     for k in 0..repeat {
         if k > 0 {
             // Time the ray generation again, into the same kind of batch.
-            ray_gen.generate(ctx, &gpu.trace, &origins, max_m, rotation, n as u32, Some((&timer, 6)))?;
+            ray_gen.generate(ctx, &gpu.trace, origins, max_m, rotation, n as u32, Some((&timer, 6)))?;
             ctx.wait()?;
         }
+        traced.configure(ctx, false, &[]);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        gpu.trace.record(&mut encoder, &gpu.bvh, &traced, timer.writes(7));
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait()?;
+        traced.configure(ctx, false, &[segment]);
         let t = std::time::Instant::now();
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         gpu.trace.record(&mut encoder, &gpu.bvh, &traced, timer.writes(0));
@@ -119,7 +140,7 @@ pub fn time_gpu_passes(
         ctx.queue.submit([encoder.finish()]);
         ctx.wait()?;
         if let Some((shade, scene)) = gpu.shading() {
-            shade.shade(ctx, &gpu.bvh, &field, scene, &traced, &info, 1, 1, Some((&timer, 5)))?;
+            shade.shade(ctx, &gpu.bvh, &field, scene, &traced, &shade_probes, 1, 1, Some((&timer, 5)))?;
         }
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         timer.resolve(&mut encoder);
@@ -150,7 +171,7 @@ fn blend_pass(
     let n = s.probe_rays_per_probe as usize;
     let atlases = GpuVolumeAtlases::new(ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
     atlases.upload(ctx, &volume.irradiance, &volume.distance);
-    let dirs: Vec<glam::Vec3> = batch.directions.iter().take(n).copied().collect();
+    let dirs: Vec<glam::Vec3> = batch.expanded().directions.iter().take(n).copied().collect();
     let radiance = vec![glam::Vec3::splat(0.5); probes * n];
     let distance: Vec<f32> = (0..probes * n).map(|i| 1.0 + (i % 7) as f32).collect();
     let hysteresis = vec![Some(s.probe_hysteresis); probes];
@@ -176,7 +197,7 @@ fn gpu_passes_json(
     gpu: &WgpuProbeTracer,
     s: &DdgiVolumeSettings,
     traced: &GpuRayBatch,
-    names: [&str; 7],
+    names: [&str; 8],
     best: Option<Vec<f64>>,
     wall_trace_ms: f64,
 ) -> serde_json::Value {
@@ -196,7 +217,9 @@ fn gpu_passes_json(
         }
     };
     let trace_ms = pass_ms["trace"];
-    let all_ms: f64 = pass_ms.values().sum();
+    // The batch-order trace is the comparison, not a pass of the update.
+    let all_ms: f64 = pass_ms.iter().filter(|(k, _)| *k != "trace_batch_order").map(|(_, v)| v).sum();
+    let order_gain = pass_ms.get("trace_batch_order").map(|b| b / trace_ms);
     let atlas_bytes_per_probe = (probegi_core::probe_atlas::tile_texel_count(s.probe_irradiance_texels) * 16
         + probegi_core::probe_atlas::tile_texel_count(s.probe_distance_texels) * 8)
         as f64;
@@ -205,6 +228,8 @@ fn gpu_passes_json(
         "pass_ms": pass_ms,
         "pass_ms_source": source,
         "trace_mrays_per_s": ray_count / (trace_ms * 1e-3) / 1e6,
+        // Batch-order trace time over the direction-major one (`TraceSegment`): > 1 where the order pays.
+        "trace_order_speedup": order_gain,
         "gpu_passes_mrays_per_s": ray_count / (all_ms * 1e-3) / 1e6,
         "gpu_passes": pass_ms.keys().collect::<Vec<_>>(),
         // In the field update timed above (these pass times are the passes alone).

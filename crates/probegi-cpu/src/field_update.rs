@@ -105,6 +105,9 @@ impl FieldSetUpdate for DdgiFieldSet {
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) -> Result<u64, BackendError> {
         let mut driver = SeamDriver::new(scene, tracer, batch_tracer, direct, seed, frame);
+        // A device that makes the update rays itself gets them per probe: no
+        // O(rays) arrays on the host (filled after all if the host traces them).
+        self.set_update_rays_on_device(driver.device.is_some_and(|d| d.generates_update_rays()));
         let mut step = self.begin_update(seed, frame);
         loop {
             step = match step {
@@ -199,6 +202,8 @@ impl<'u> SeamDriver<'u> {
         if let Some(step) = self.trace_on_device(set, init, t)? {
             return Ok(step);
         }
+        // The host traces after all: the batch's rays in arrays.
+        set.fill_ray_arrays();
         // Initialisation sees static geometry only: moving objects wake probes instead.
         let tr: &dyn RayTracer = if init { self.static_part.as_deref().unwrap_or(self.tracer) } else { self.tracer };
         self.traced += match self.batch_tracer {

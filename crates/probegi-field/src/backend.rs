@@ -176,6 +176,14 @@ pub trait DeviceField: Sync {
         frame: u32,
     ) -> Result<Vec<(&'static str, f64)>, BackendError>;
 
+    /// Whether [`Self::trace_resident`] makes an update batch's rays on the
+    /// device from its `generated` records, so that the set can plan update
+    /// batches without per-ray arrays
+    /// ([`DdgiFieldSet::set_update_rays_on_device`](crate::DdgiFieldSet::set_update_rays_on_device)).
+    fn generates_update_rays(&self) -> bool {
+        false
+    }
+
     /// Copies the atlases of volume `index` as the device holds them into `volume`'s own.
     fn download_field(&self, index: usize, volume: &mut DdgiVolume) -> Result<(), BackendError>;
 }

@@ -115,6 +115,9 @@ pub struct DdgiFieldSet {
     /// True while another device holds the current atlases (it blended the last
     /// update there) and the volumes' own atlases are stale.
     field_on_device: bool,
+    /// Update batches leave their per-ray arrays empty: a device makes the rays
+    /// from the batch's `generated` records ([`Self::set_update_rays_on_device`]).
+    update_rays_on_device: bool,
 }
 
 impl DdgiFieldSet {
@@ -158,6 +161,7 @@ impl DdgiFieldSet {
             last_batch_rays_per_volume: vec![0; n],
             last_init_rays: 0,
             field_on_device: false,
+            update_rays_on_device: false,
         }
     }
 
@@ -253,6 +257,22 @@ impl DdgiFieldSet {
         self.volumes.iter().map(|v| v.rays_per_frame()).sum()
     }
 
+    /// With `on_device`, update batches from the next [`Self::begin_update`] on
+    /// carry their rays per probe only (origins and the `generated` records,
+    /// O(probes) on the host), for a device that makes the rays where it traces
+    /// them. A caller that then traces or shades on the host after all calls
+    /// [`Self::fill_ray_arrays`] first.
+    pub fn set_update_rays_on_device(&mut self, on_device: bool) {
+        self.update_rays_on_device = on_device;
+    }
+
+    /// Fills the current batch's per-ray arrays where it was planned without
+    /// them ([`Self::set_update_rays_on_device`]); the rays equal the host
+    /// plan's bit for bit.
+    pub fn fill_ray_arrays(&mut self) {
+        self.batch.fill_ray_arrays();
+    }
+
     /// Starts frame `frame`'s update: the first batch to trace.
     pub fn begin_update(&mut self, seed: u64, frame: u32) -> UpdateStep {
         self.seed = seed;
@@ -283,7 +303,7 @@ impl DdgiFieldSet {
             if pending.is_empty() {
                 break;
             }
-            self.batch.clear(ProbeRayBatchKind::Initialization);
+            self.batch.clear(ProbeRayBatchKind::Initialization, true);
             for &i in &pending {
                 let has_round = self.volumes[i].plan_init_round(
                     &mut self.frames[i],
@@ -301,7 +321,7 @@ impl DdgiFieldSet {
                 return UpdateStep::TraceRays;
             }
         }
-        self.batch.clear(ProbeRayBatchKind::Update);
+        self.batch.clear(ProbeRayBatchKind::Update, !self.update_rays_on_device);
         for i in 0..self.volumes.len() {
             self.volumes[i].plan_update(&mut self.frames[i], self.seed, self.frame, i as u32, &mut self.batch);
         }
@@ -309,6 +329,16 @@ impl DdgiFieldSet {
         self.last_batch_rays_per_volume = self.batch.rays_per_volume(self.volumes.len());
         self.expected = UpdateStep::TraceRays;
         UpdateStep::TraceRays
+    }
+
+    /// `probe_needs_radiance` of the update batch: the probes that blend this
+    /// frame (after the hits classified them).
+    fn mark_probes_needing_radiance(&mut self) {
+        let frames = &self.frames;
+        self.batch.probe_needs_radiance.clear();
+        self.batch
+            .probe_needs_radiance
+            .extend(self.batch.probes.iter().map(|bp| frames[bp.volume as usize].active[bp.probe as usize]));
     }
 
     fn expect(&self, step: UpdateStep, called: &'static str) -> Result<(), SeamError> {
@@ -365,6 +395,7 @@ impl DdgiFieldSet {
                         &mut self.batch.needs_radiance,
                     );
                 }
+                self.mark_probes_needing_radiance();
                 self.time("classify", t);
                 self.expected = UpdateStep::ShadeRays;
                 Ok(UpdateStep::ShadeRays)
@@ -548,8 +579,9 @@ impl DdgiFieldSet {
     /// In place of [`Self::submit_hits`] for an update batch whose hits stayed on
     /// another device: `usage_counts` holds one (usage, relevant, backfaces) per
     /// entry of `ray_batch().probes` when [`Self::hits_needed_on_host`] asked for
-    /// them (empty otherwise). Every ray of a probe that updates is then marked in
-    /// `needs_radiance`; the device applies the backface rule itself.
+    /// them (empty otherwise). Each probe that updates is then marked in
+    /// `probe_needs_radiance` (`needs_radiance` stays empty: O(probes), not
+    /// O(rays), on the host); the device applies the backface rule itself.
     pub fn submit_device_hits(&mut self, usage_counts: &[(i32, u32, u32)]) -> Result<UpdateStep, SeamError> {
         self.expect(UpdateStep::TraceRays, "submit_device_hits")?;
         if self.batch.kind != ProbeRayBatchKind::Update {
@@ -562,15 +594,16 @@ impl DdgiFieldSet {
         let t = std::time::Instant::now();
         self.hits.clear();
         self.distances.clear();
-        self.batch.needs_radiance = vec![false; self.batch.len()];
+        self.batch.needs_radiance.clear();
         let mut per_volume: Vec<Vec<Option<(i32, u32, u32)>>> =
             self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect();
         for (bp, c) in self.batch.probes.iter().zip(usage_counts) {
             per_volume[bp.volume as usize][bp.probe as usize] = Some(*c);
         }
         for ((v, f), counts) in self.volumes.iter_mut().zip(&mut self.frames).zip(&per_volume) {
-            v.accept_device_hits(f, self.frame, counts, &mut self.batch.needs_radiance);
+            v.accept_device_hits(f, self.frame, counts);
         }
+        self.mark_probes_needing_radiance();
         self.time("classify", t);
         self.expected = UpdateStep::ShadeRays;
         Ok(UpdateStep::ShadeRays)
@@ -633,5 +666,71 @@ impl DdgiFieldSet {
     /// The hits of the current batch, as submitted (sanitised).
     pub fn batch_hits(&self) -> &[ProbeRayHit] {
         &self.hits
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use probegi_core::ddgi_settings::DdgiVolumeSettings;
+
+    /// A set of two volumes (every probe active) past initialisation (every init ray a miss), its
+    /// frame-3 update batch planned with or without per-ray arrays.
+    fn update_batch(on_device: bool) -> DdgiFieldSet {
+        let volume = |n: u32, rays: u32| {
+            let s = DdgiVolumeSettings {
+                probe_counts: glam::UVec3::new(n, 2, 3),
+                probe_rays_per_probe: rays,
+                probe_states: probegi_core::ddgi_settings::ProbeStatesMode::AllActive,
+                ..Default::default()
+            };
+            DdgiVolume::new(s, (Vec3::ZERO, Vec3::splat(4.0)))
+        };
+        let mut set = DdgiFieldSet::from_volumes(vec![volume(3, 32), volume(2, 48)], VolumeBlending::default(), None);
+        set.set_update_rays_on_device(on_device);
+        let mut step = set.begin_update(5, 3);
+        while set.ray_batch().kind == ProbeRayBatchKind::Initialization {
+            let misses = vec![ProbeRayHit::MISS; set.ray_batch().len()];
+            step = set.submit_hits(&misses).expect("init round");
+        }
+        assert_eq!(step, UpdateStep::TraceRays);
+        set
+    }
+
+    #[test]
+    fn a_batch_planned_per_probe_expands_to_the_per_ray_plan() {
+        let (host, device) = (update_batch(false), update_batch(true));
+        let (a, b) = (host.ray_batch(), device.ray_batch());
+        assert!(a.has_ray_arrays() && !b.has_ray_arrays());
+        assert!(b.origins_m.is_empty() && b.directions.is_empty() && b.max_distances_m.is_empty());
+        assert_eq!((a.len(), &a.probes, &a.probe_origins_m), (b.len(), &b.probes, &b.probe_origins_m));
+        assert!(!a.is_empty());
+        let expanded = b.expanded();
+        assert_eq!(expanded.origins_m, a.origins_m);
+        assert_eq!(expanded.directions, a.directions);
+        assert_eq!(expanded.max_distances_m, a.max_distances_m);
+    }
+
+    #[test]
+    fn device_hits_mark_probes_not_rays() {
+        let mut set = update_batch(true);
+        let usage = match set.hits_needed_on_host() {
+            HostHits::ProbeUsage => vec![(0, 0, 0); set.ray_batch().probes.len()],
+            _ => vec![],
+        };
+        assert_eq!(set.submit_device_hits(&usage), Ok(UpdateStep::ShadeRays));
+        let batch = set.ray_batch();
+        assert!(batch.needs_radiance.is_empty());
+        assert_eq!(batch.probe_needs_radiance.len(), batch.probes.len());
+        // Host hits mark both, and agree per probe.
+        let mut host = update_batch(false);
+        let misses = vec![ProbeRayHit::MISS; host.ray_batch().len()];
+        host.submit_hits(&misses).expect("hits");
+        let hb = host.ray_batch();
+        for (k, p) in hb.probes.iter().enumerate() {
+            let rays = &hb.needs_radiance[p.first_ray as usize..(p.first_ray + p.ray_count) as usize];
+            assert!(rays.iter().all(|&r| r == hb.probe_needs_radiance[k]));
+        }
+        assert!(hb.probe_needs_radiance.iter().any(|&n| n));
     }
 }

@@ -25,8 +25,12 @@ pub struct ProbeRayDirections {
 /// The frame's rotated spherical Fibonacci directions alone (distance-only traces
 /// need no blend weights).
 pub fn probe_ray_directions(settings: &DdgiVolumeSettings, seed: u64, frame: u32) -> Vec<Vec3> {
-    let n = settings.probe_rays_per_probe;
-    let rotation = probe_ray_rotation(seed, frame);
+    rotated_fibonacci(probe_ray_rotation(seed, frame), settings.probe_rays_per_probe)
+}
+
+/// `n` spherical Fibonacci directions rotated by `rotation` (how a batch's
+/// `GeneratedProbeRays` are made into rays on the host).
+pub fn rotated_fibonacci(rotation: glam::Quat, n: u32) -> Vec<Vec3> {
     (0..n).map(|i| (rotation * spherical_fibonacci(i, n)).normalize()).collect()
 }
 

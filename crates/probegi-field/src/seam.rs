@@ -99,34 +99,63 @@ pub struct GeneratedProbeRays {
 /// never a hang — and the tracers count it (`--stats`: `trace_guards_*`). Every
 /// walk is bounded by its BVH's node count. A batch a tracer hands back must
 /// keep that rule for the rays an engine puts here itself.
+///
+/// **Per-ray or per-probe.** Every batch holds its probes (`probes`,
+/// `probe_origins_m`); the per-ray arrays (`origins_m`, `directions`,
+/// `max_distances_m`) are filled unless the set was told that a device makes
+/// the update rays itself
+/// ([`DdgiFieldSet::set_update_rays_on_device`](crate::DdgiFieldSet::set_update_rays_on_device)):
+/// then an update batch is O(probes) on the host, its rays described by
+/// `generated`, and [`Self::has_ray_arrays`] is false. [`Self::expanded`]
+/// gives a copy with the arrays for a caller that needs them.
 #[derive(Clone, Debug, Default)]
 pub struct ProbeRayBatch {
     /// What the batch is for (initialisation or the frame's update).
     pub kind: ProbeRayBatchKind,
-    /// Ray origins in world space: the probes' positions with their relocation offsets.
+    /// Ray origins in world space: the probes' positions with their relocation offsets
+    /// (empty when [`Self::has_ray_arrays`] is false).
     pub origins_m: Vec<Vec3>,
-    /// Unit directions.
+    /// Unit directions (empty when [`Self::has_ray_arrays`] is false).
     pub directions: Vec<Vec3>,
-    /// Hits beyond this distance are misses.
+    /// Hits beyond this distance are misses (empty when [`Self::has_ray_arrays`] is false).
     pub max_distances_m: Vec<f32>,
     /// Set by [`DdgiFieldSet::submit_hits`](crate::DdgiFieldSet::submit_hits) on update batches: the rays whose
-    /// radiance the caller must supply (others are ignored).
+    /// radiance the caller must supply (others are ignored). Empty after
+    /// [`DdgiFieldSet::submit_device_hits`](crate::DdgiFieldSet::submit_device_hits),
+    /// whose device reads [`Self::probe_needs_radiance`] instead.
     pub needs_radiance: Vec<bool>,
     /// The probes that trace in this batch and their ray ranges, volume by volume.
     pub probes: Vec<BatchProbe>,
+    /// Per entry of `probes`: the origin of its rays (the probe's relocated position).
+    pub probe_origins_m: Vec<Vec3>,
+    /// Per entry of `probes`, set with the hits on update batches: whether the
+    /// probe blends this frame, so that its rays' radiance is needed (back-face
+    /// hits aside, whose radiance is zero by rule).
+    pub probe_needs_radiance: Vec<bool>,
     /// Update batches: how each volume's rays were made (see [`GeneratedProbeRays`]).
     pub generated: Vec<GeneratedProbeRays>,
+    /// Rays in the batch (the per-ray arrays' length when they are filled).
+    ray_count: usize,
+    /// Whether `push_probe` fills the per-ray arrays.
+    ray_arrays: bool,
 }
 
 impl ProbeRayBatch {
-    /// Rays in the batch.
+    /// Rays in the batch: those planned, or those an engine put in the per-ray
+    /// arrays itself.
     pub fn len(&self) -> usize {
-        self.origins_m.len()
+        self.ray_count.max(self.origins_m.len())
     }
 
     /// Whether the batch has no rays.
     pub fn is_empty(&self) -> bool {
-        self.origins_m.is_empty()
+        self.len() == 0
+    }
+
+    /// Whether the per-ray arrays (`origins_m`, `directions`,
+    /// `max_distances_m`) hold every ray of the batch.
+    pub fn has_ray_arrays(&self) -> bool {
+        self.origins_m.len() == self.len()
     }
 
     /// Initialisation rays see static geometry only (moving objects wake probes instead).
@@ -143,23 +172,65 @@ impl ProbeRayBatch {
         v
     }
 
-    pub(crate) fn clear(&mut self, kind: ProbeRayBatchKind) {
+    /// The batch with its per-ray arrays: itself when it has them, else a copy
+    /// whose rays are made from `generated` as the device makes them
+    /// (`probe_ray_gen::probe_ray_directions`, bit for bit the host's).
+    pub fn expanded(&self) -> std::borrow::Cow<'_, ProbeRayBatch> {
+        if self.has_ray_arrays() {
+            return std::borrow::Cow::Borrowed(self);
+        }
+        let mut out = self.clone();
+        out.fill_ray_arrays();
+        std::borrow::Cow::Owned(out)
+    }
+
+    /// Fills the per-ray arrays from the probes and `generated` (see [`Self::expanded`]).
+    pub(crate) fn fill_ray_arrays(&mut self) {
+        if self.has_ray_arrays() {
+            return;
+        }
+        self.origins_m.clear();
+        self.directions.clear();
+        self.max_distances_m.clear();
+        for g in &self.generated {
+            let dirs = crate::probe_ray_gen::rotated_fibonacci(g.rotation, g.rays_per_probe);
+            let probes = g.first_probe as usize..(g.first_probe + g.probe_count) as usize;
+            for (bp, &origin) in self.probes[probes.clone()].iter().zip(&self.probe_origins_m[probes]) {
+                debug_assert_eq!(bp.first_ray as usize, self.origins_m.len());
+                self.origins_m.extend(std::iter::repeat_n(origin, dirs.len()));
+                self.directions.extend_from_slice(&dirs);
+                self.max_distances_m.extend(std::iter::repeat_n(g.max_distance_m, dirs.len()));
+            }
+        }
+        debug_assert_eq!(self.origins_m.len(), self.len());
+    }
+
+    pub(crate) fn clear(&mut self, kind: ProbeRayBatchKind, ray_arrays: bool) {
         self.kind = kind;
         self.origins_m.clear();
         self.directions.clear();
         self.max_distances_m.clear();
         self.needs_radiance.clear();
         self.probes.clear();
+        self.probe_origins_m.clear();
+        self.probe_needs_radiance.clear();
         self.generated.clear();
+        self.ray_count = 0;
+        self.ray_arrays = ray_arrays;
     }
 
-    /// Appends one probe's rays; returns its first ray index.
+    /// Appends one probe's rays (to the per-ray arrays where the batch keeps
+    /// them); returns its first ray index.
     pub(crate) fn push_probe(&mut self, volume: u32, probe: u32, origin: Vec3, dirs: &[Vec3], max_m: f32) -> u32 {
-        let first = self.origins_m.len() as u32;
-        self.origins_m.extend(std::iter::repeat_n(origin, dirs.len()));
-        self.directions.extend_from_slice(dirs);
-        self.max_distances_m.extend(std::iter::repeat_n(max_m, dirs.len()));
+        let first = self.ray_count as u32;
+        if self.ray_arrays {
+            self.origins_m.extend(std::iter::repeat_n(origin, dirs.len()));
+            self.directions.extend_from_slice(dirs);
+            self.max_distances_m.extend(std::iter::repeat_n(max_m, dirs.len()));
+        }
+        self.ray_count += dirs.len();
         self.probes.push(BatchProbe { volume, probe, first_ray: first, ray_count: dirs.len() as u32 });
+        self.probe_origins_m.push(origin);
         first
     }
 }

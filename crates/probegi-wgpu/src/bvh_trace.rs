@@ -16,7 +16,6 @@
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
 use probegi_scene::{BvhExport, RayHit, TlasExport, TraceGuardCounts};
-use wgpu::util::DeviceExt;
 
 use crate::gpu_context::{GpuContext, GpuError, buffers_bind_group, storage_entry};
 use crate::shader_registry::{BVH_INSTANCE_IDENTITY, BVH_INSTANCE_MOVING, BVH_STORAGE_BUFFERS, TRACE_RAYS};
@@ -30,8 +29,31 @@ pub(crate) struct TraceParams {
     pub(crate) any_hit: u32,
     /// `bvh.wgsl`'s `BVH_INSTANCE_*` flags of instances left out.
     pub(crate) skip: u32,
+    /// Entries of `segments` in use.
+    pub(crate) segment_count: u32,
+    pub(crate) _pad: [u32; 3],
+    /// [`TraceSegment`]s as (first ray, probes, rays per probe, 0).
+    pub(crate) segments: [[u32; 4]; TRACE_MAX_SEGMENTS],
 }
-const _: () = assert!(std::mem::size_of::<TraceParams>() == 16);
+const _: () = assert!(std::mem::size_of::<TraceParams>() == 160);
+
+/// Most [`TraceSegment`]s a batch's trace orders (one per volume of a field
+/// set; a batch with more traces the rest in batch order).
+pub const TRACE_MAX_SEGMENTS: usize = 8;
+
+/// Rays `first_ray..first_ray + probe_count × rays_per_probe` of a batch, stored
+/// probe-major: the trace runs them direction-major instead, neighbouring
+/// threads tracing the same direction from neighbouring probes
+/// (`trace_rays.wgsl`'s thread order). Hits are unchanged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TraceSegment {
+    /// The segment's first ray in the batch.
+    pub first_ray: u32,
+    /// Probes in the segment, consecutive.
+    pub probe_count: u32,
+    /// Rays each probe casts, consecutive per probe.
+    pub rays_per_probe: u32,
+}
 
 /// One ray; must match `GpuRay` in `trace_rays.wgsl` (vec3 + f32, twice).
 #[repr(C)]
@@ -230,11 +252,7 @@ impl GpuBvh {
         }
         let device = &ctx.device;
         let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | usage,
-            })
+            ctx.buffer_with(label, contents, wgpu::BufferUsages::STORAGE | usage)
         };
         let copy = wgpu::BufferUsages::COPY_DST;
         let buffers = [
@@ -280,9 +298,9 @@ impl GpuBvh {
         let nodes = rebased_tlas_nodes(tlas, self.tlas_base);
         let instances = pack_instances(tlas, blas_root_nodes, self.tlas_base)?;
         if !nodes.is_empty() {
-            ctx.queue.write_buffer(&self.nodes, self.tlas_base as u64 * 80, bytemuck::cast_slice(&nodes));
+            ctx.write_buffer(&self.nodes, self.tlas_base as u64 * 80, bytemuck::cast_slice(&nodes));
         }
-        ctx.queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&instances));
+        ctx.write_buffer(&self.instances, 0, bytemuck::cast_slice(&instances));
         Ok(())
     }
 
@@ -406,10 +424,35 @@ impl GpuRayBatch {
     /// With `static_only`, the batch's next traces leave moving objects out
     /// (initialisation rounds see static geometry only, as on the CPU).
     pub fn set_static_only(&self, ctx: &GpuContext, static_only: bool) {
+        self.configure(ctx, static_only, &[]);
+    }
+
+    /// The batch's next traces: with `static_only` without moving objects, and
+    /// the rays of each of `segments` (the first [`TRACE_MAX_SEGMENTS`]) in
+    /// direction-major thread order ([`TraceSegment`]). A segment that starts
+    /// before the previous one ends, or leaves the batch, is traced in batch order.
+    pub fn configure(&self, ctx: &GpuContext, static_only: bool, segments: &[TraceSegment]) {
         let (groups_x, _) = dispatch_2d(self.ray_count);
         let skip = if static_only { BVH_INSTANCE_MOVING } else { 0 };
-        let params = TraceParams { ray_count: self.ray_count, groups_x, any_hit: self.any_hit as u32, skip };
-        ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        let mut params = TraceParams {
+            ray_count: self.ray_count,
+            groups_x,
+            any_hit: self.any_hit as u32,
+            skip,
+            ..Default::default()
+        };
+        let mut end = 0u64;
+        for s in segments.iter().take(TRACE_MAX_SEGMENTS) {
+            let rays = s.probe_count as u64 * s.rays_per_probe as u64;
+            // Kept only in order, disjoint and inside the batch; others trace in batch order.
+            if (s.first_ray as u64) < end || s.first_ray as u64 + rays > self.ray_count as u64 || rays == 0 {
+                continue;
+            }
+            end = s.first_ray as u64 + rays;
+            params.segments[params.segment_count as usize] = [s.first_ray, s.probe_count, s.rays_per_probe, 0];
+            params.segment_count += 1;
+        }
+        ctx.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
     }
 
     /// Device memory of the rays and hits.
@@ -443,26 +486,25 @@ impl GpuRayTrace {
                 Self::max_batch_rays(ctx)
             )));
         }
-        let device = &ctx.device;
         let ray_bytes: &[u8] = if rays.is_empty() { &[0; 32] } else { bytemuck::cast_slice(rays) };
-        let ray_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("rays"),
-            contents: ray_bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-        });
+        let ray_buffer = ctx.buffer_with(
+            "rays",
+            ray_bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+        );
         Ok(self.bind_batch(ctx, ray_buffer, rays.len() as u32, any_hit))
     }
 
     /// A batch around `rays`: its parameters, a hit buffer and the bind group.
     fn bind_batch(&self, ctx: &GpuContext, rays: wgpu::Buffer, n: u32, any_hit: bool) -> GpuRayBatch {
         let (groups_x, _) = dispatch_2d(n);
-        let params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, skip: 0 };
+        let params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, ..Default::default() };
         let device = &ctx.device;
-        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("trace params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        });
+        let params = ctx.buffer_with(
+            "trace params",
+            bytemuck::bytes_of(&params),
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
         let hits = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("ray hits"),
             size: (n.max(1) as usize * std::mem::size_of::<GpuRayHit>()) as u64,

@@ -13,7 +13,6 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use probegi_core::camera::CameraRays;
-use wgpu::util::DeviceExt;
 
 use crate::bvh_trace::{GpuBvh, bvh_bind_group_layout};
 use crate::ddgi_query::GpuDdgiField;
@@ -132,11 +131,7 @@ impl GpuCameraPass {
             sky: f.sky_radiance.extend(0.0).into(),
         };
         let device = &ctx.device;
-        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("camera params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let params = ctx.buffer_with("camera params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let image = |label| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),

@@ -26,7 +26,6 @@ use glam::Vec3;
 use probegi_core::ddgi_query::DdgiFieldView;
 use probegi_core::ddgi_settings::ProbeBiasMode;
 use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, VolumeBlending};
-use wgpu::util::DeviceExt;
 
 use crate::bvh_trace::dispatch_2d;
 use crate::gpu_context::{GpuContext, GpuError};
@@ -227,11 +226,11 @@ impl GpuDdgiField {
             ctx.check_buffer(bytes as u64, what)?;
         }
         let init = |label: &str, contents: &[u8]| {
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
+            ctx.buffer_with(
+                label,
                 contents,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
-            })
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            )
         };
         let buffers = [
             init("ddgi set", &packed.set),
@@ -270,11 +269,11 @@ impl GpuDdgiField {
         if packed.members != self.members || sizes.iter().zip(&self.buffers).any(|(s, b)| *s != b.size()) {
             return Err(GpuError::Input("the field set changed shape since its upload".into()));
         }
-        ctx.queue.write_buffer(&self.buffers[0], 0, &packed.set);
-        ctx.queue.write_buffer(&self.buffers[3], 0, bytemuck::cast_slice(&packed.probes));
+        ctx.write_buffer(&self.buffers[0], 0, &packed.set);
+        ctx.write_buffer(&self.buffers[3], 0, bytemuck::cast_slice(&packed.probes));
         if atlases {
-            ctx.queue.write_buffer(&self.buffers[1], 0, bytemuck::cast_slice(&packed.irradiance));
-            ctx.queue.write_buffer(&self.buffers[2], 0, bytemuck::cast_slice(&packed.distance));
+            ctx.write_buffer(&self.buffers[1], 0, bytemuck::cast_slice(&packed.irradiance));
+            ctx.write_buffer(&self.buffers[2], 0, bytemuck::cast_slice(&packed.distance));
         }
         Ok(())
     }
@@ -366,16 +365,8 @@ impl GpuFieldQuery {
         let (groups_x, groups_y) = dispatch_2d(n);
         let device = &ctx.device;
         let params = FieldQueryParams { point_count: n, groups_x, _pad: [0; 2] };
-        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("query params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("query points"),
-            contents: bytemuck::cast_slice(points),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
+        let params = ctx.buffer_with("query params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let input = ctx.buffer_with("query points", bytemuck::cast_slice(points), wgpu::BufferUsages::STORAGE);
         let output = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("query irradiance"),
             size: points.len() as u64 * 16,

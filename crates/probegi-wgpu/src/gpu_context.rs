@@ -46,6 +46,18 @@ pub struct GpuContext {
     pub adapter_name: String,
     /// Whether the device records GPU timestamps (`Features::TIMESTAMP_QUERY`).
     pub timestamps: bool,
+    /// Bytes this crate's passes moved across the bus, host to device and back
+    /// (what `bench --backend wgpu` reports per frame).
+    transfers: TransferCounts,
+}
+
+/// Bytes uploaded (buffers made from host data, queue writes) and read back,
+/// counted where every pass moves them: [`GpuContext::buffer_with`],
+/// [`GpuContext::write_buffer`] and [`GpuContext::read_buffer`].
+#[derive(Debug, Default)]
+struct TransferCounts {
+    up: std::sync::atomic::AtomicU64,
+    down: std::sync::atomic::AtomicU64,
 }
 
 /// One compute pass of [`GpuContext::run_passes`]: the pipeline, its bind groups
@@ -77,6 +89,7 @@ impl GpuContext {
             queue,
             adapter_name: format!("{} ({:?}, {})", info.name, info.backend, info.driver),
             timestamps: !required_features.is_empty(),
+            transfers: TransferCounts::default(),
         })
     }
 
@@ -101,7 +114,7 @@ impl GpuContext {
     /// A device and queue the caller owns (an engine's).
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, adapter_name: impl Into<String>) -> Self {
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        Self { device, queue, adapter_name: adapter_name.into(), timestamps }
+        Self { device, queue, adapter_name: adapter_name.into(), timestamps, transfers: TransferCounts::default() }
     }
 
     /// An error, not wgpu's panic, when a storage buffer of `bytes` exceeds what
@@ -174,9 +187,23 @@ impl GpuContext {
         })
     }
 
-    /// A buffer holding `contents`.
+    /// Bytes the passes have uploaded and read back so far: (host to device,
+    /// device to host). Differences between two calls give a frame's traffic.
+    pub fn bytes_transferred(&self) -> (u64, u64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        (self.transfers.up.load(Relaxed), self.transfers.down.load(Relaxed))
+    }
+
+    /// A buffer holding `contents` (counted as uploaded).
     pub(crate) fn buffer_with(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
+        self.transfers.up.fetch_add(contents.len() as u64, std::sync::atomic::Ordering::Relaxed);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+    }
+
+    /// Writes `data` into `buffer` at `offset` through the queue (counted as uploaded).
+    pub(crate) fn write_buffer(&self, buffer: &wgpu::Buffer, offset: u64, data: &[u8]) {
+        self.transfers.up.fetch_add(data.len() as u64, std::sync::atomic::Ordering::Relaxed);
+        self.queue.write_buffer(buffer, offset, data);
     }
 
     /// A storage buffer of `bytes` a pass writes and the host reads back.
@@ -238,6 +265,7 @@ impl GpuContext {
         rx.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
         let bytes = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?.to_vec();
         buffer.unmap();
+        self.transfers.down.fetch_add(bytes.len() as u64, std::sync::atomic::Ordering::Relaxed);
         Ok(bytes)
     }
 }

@@ -12,7 +12,6 @@ use probegi_core::sampling::Distribution1d;
 use probegi_scene::material::{SpecularModel, UvMapping};
 use probegi_scene::texture::{Filter, Sampler, Wrap};
 use probegi_scene::{LightKind, Scene};
-use wgpu::util::DeviceExt;
 
 use crate::gpu_context::{GpuContext, GpuError};
 use crate::shader_registry::SCENE_STORAGE_BUFFERS;
@@ -236,19 +235,9 @@ impl GpuScene {
         ] {
             ctx.check_buffer(bytes as u64, &format!("scene {}: {what}", scene.name))?;
         }
-        let init = |label: &str, contents: &[u8]| {
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE,
-            })
-        };
+        let init = |label: &str, contents: &[u8]| ctx.buffer_with(label, contents, wgpu::BufferUsages::STORAGE);
         let init_rw = |label: &str, contents: &[u8]| {
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            })
+            ctx.buffer_with(label, contents, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST)
         };
         let buffers = [
             init_rw("scene triangles", bytemuck::cast_slice(&triangles)),
@@ -305,7 +294,7 @@ impl GpuScene {
                 (self.lights.size() as usize / 16).saturating_sub(2 + self.emitters) / 4
             )));
         }
-        ctx.queue.write_buffer(&self.lights, 0, bytes);
+        ctx.write_buffer(&self.lights, 0, bytes);
         Ok(())
     }
 
@@ -327,7 +316,7 @@ impl GpuScene {
                 pack_triangle(&scene.mesh, t, &mut words);
             }
             let offset = (range.start * TRIANGLE_VEC4S * 16) as u64;
-            ctx.queue.write_buffer(&self.triangle_buffer, offset, bytemuck::cast_slice(&words));
+            ctx.write_buffer(&self.triangle_buffer, offset, bytemuck::cast_slice(&words));
         }
         Ok(())
     }

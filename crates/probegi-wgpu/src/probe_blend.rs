@@ -24,7 +24,6 @@ use glam::{Vec2, Vec3};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_count};
 use probegi_core::probe_blend::BlendWeights;
-use wgpu::util::DeviceExt;
 
 use probegi_field::device_plans::DeviceVolumeBlend;
 
@@ -114,8 +113,8 @@ impl GpuVolumeAtlases {
     pub fn upload(&self, ctx: &GpuContext, irradiance: &ProbeAtlas<Vec3>, distance: &ProbeAtlas<Vec2>) {
         let irr: Vec<[f32; 4]> = irradiance.texels.iter().map(|t| [t.x, t.y, t.z, 0.0]).collect();
         let dist: Vec<[f32; 2]> = distance.texels.iter().map(|t| [t.x, t.y]).collect();
-        ctx.queue.write_buffer(&self.irradiance, self.irradiance_bytes().0, bytemuck::cast_slice(&irr));
-        ctx.queue.write_buffer(&self.distance, self.distance_bytes().0, bytemuck::cast_slice(&dist));
+        ctx.write_buffer(&self.irradiance, self.irradiance_bytes().0, bytemuck::cast_slice(&irr));
+        ctx.write_buffer(&self.distance, self.distance_bytes().0, bytemuck::cast_slice(&dist));
     }
 
     /// Zeroes the tiles of `probes` (probes the host reset: scrolled in, re-initialised).
@@ -125,16 +124,8 @@ impl GpuVolumeAtlases {
         let zeros = vec![0u8; irr_tile.max(dist_tile) as usize];
         for &p in probes.iter().filter(|p| (**p as usize) < self.probe_count) {
             let p = p as u64;
-            ctx.queue.write_buffer(
-                &self.irradiance,
-                self.irradiance_bytes().0 + p * irr_tile,
-                &zeros[..irr_tile as usize],
-            );
-            ctx.queue.write_buffer(
-                &self.distance,
-                self.distance_bytes().0 + p * dist_tile,
-                &zeros[..dist_tile as usize],
-            );
+            ctx.write_buffer(&self.irradiance, self.irradiance_bytes().0 + p * irr_tile, &zeros[..irr_tile as usize]);
+            ctx.write_buffer(&self.distance, self.distance_bytes().0 + p * dist_tile, &zeros[..dist_tile as usize]);
         }
     }
 
@@ -236,11 +227,7 @@ impl GpuProbeBlend {
         }
         let results: Vec<[f32; 4]> =
             frame.ray_radiance.iter().zip(frame.ray_distance).map(|(l, d)| [l.x, l.y, l.z, *d]).collect();
-        let results = ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("ray results"),
-            contents: bytemuck::cast_slice(&results),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
+        let results = ctx.buffer_with("ray results", bytemuck::cast_slice(&results), wgpu::BufferUsages::STORAGE);
         let irradiance_weights = BlendWeights::new(frame.ray_dirs, atlases.irradiance_interior, 1.0);
         let distance_weights =
             BlendWeights::new(frame.ray_dirs, atlases.distance_interior, frame.settings.probe_distance_exponent);
@@ -278,9 +265,7 @@ impl GpuProbeBlend {
         let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
         let per_row = (probes as u32).min(MAX_GROUPS);
         let params = blend_params(atlases, plan, per_row);
-        let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| {
-            ctx.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
-        };
+        let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| ctx.buffer_with(label, contents, usage);
         let per_probe: Vec<[u32; 2]> = plan
             .probe_blend
             .iter()

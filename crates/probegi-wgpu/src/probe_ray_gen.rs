@@ -14,7 +14,6 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Quat, Vec3};
-use wgpu::util::DeviceExt;
 
 use crate::bvh_trace::{GpuRayBatch, GpuRayTrace, dispatch_2d};
 use crate::gpu_context::{GpuContext, GpuError};
@@ -111,16 +110,8 @@ impl GpuProbeRayGen {
         let t_max = max_distance_m.min(f32::MAX);
         let probes: Vec<[f32; 4]> = origins.iter().map(|o| [o.x, o.y, o.z, t_max]).collect();
         let device = &ctx.device;
-        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("ray gen params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let probes = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("ray gen probes"),
-            contents: bytemuck::cast_slice(&probes),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
+        let params = ctx.buffer_with("ray gen params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let probes = ctx.buffer_with("ray gen probes", bytemuck::cast_slice(&probes), wgpu::BufferUsages::STORAGE);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("probe ray gen"),
             layout: &self.layout,

@@ -12,7 +12,6 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
-use wgpu::util::DeviceExt;
 
 use crate::bvh_trace::{GpuBvh, GpuRayBatch, bvh_bind_group_layout, dispatch_2d};
 use crate::ddgi_query::GpuDdgiField;
@@ -31,14 +30,57 @@ pub(crate) struct ShadeParams {
     pub(crate) groups_x: u32,
     pub(crate) seed: u32,
     pub(crate) frame: u32,
+    pub(crate) probe_count: u32,
+    pub(crate) _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<ShadeParams>() == 16);
+const _: () = assert!(std::mem::size_of::<ShadeParams>() == 32);
 
-/// Per-ray shading flags of `probe_shade.wgsl`'s `shade_info`: whether the
-/// ray's radiance is needed (bit 31), second-order glossy (bit 30) and the
+/// One probe's rays in a shade pass and its shading flags ([`shade_info`]):
+/// the pass reads flags per probe, so a frame uploads 16 bytes a probe, not 4
+/// a ray. Must match `ShadeProbe` in `probe_shade.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct ShadeProbe {
+    /// The probe's first ray in the batch; probes are given in increasing order of it.
+    pub first_ray: u32,
+    /// The probe's rays, consecutive from `first_ray`.
+    pub ray_count: u32,
+    /// The rays' shading flags ([`shade_info`]).
+    pub info: u32,
+    /// Padding to 16 bytes.
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<ShadeProbe>() == 16);
+
+/// Shading flags of `probe_shade.wgsl`'s `ShadeProbe::info`: whether the
+/// probe's radiance is needed (bit 31), second-order glossy (bit 30) and the
 /// area-light samples (low 16 bits).
 pub fn shade_info(needs_radiance: bool, glossy_second_order: bool, area_samples: u32) -> u32 {
     (needs_radiance as u32) << 31 | (glossy_second_order as u32) << 30 | area_samples.min(0xffff)
+}
+
+/// The [`ShadeProbe`] records of a seam batch: each probe's rays, flagged as
+/// needing radiance where `batch.probe_needs_radiance` says so, with its
+/// volume's glossy and area-light settings.
+pub fn batch_shade_probes(
+    batch: &probegi_field::seam::ProbeRayBatch,
+    volumes: &[probegi_field::ddgi_volume::DdgiVolume],
+) -> Vec<ShadeProbe> {
+    batch
+        .probes
+        .iter()
+        .enumerate()
+        .map(|(k, bp)| {
+            let s = &volumes[bp.volume as usize].settings;
+            let needed = batch.probe_needs_radiance.get(k).copied().unwrap_or(false);
+            ShadeProbe {
+                first_ray: bp.first_ray,
+                ray_count: bp.ray_count,
+                info: shade_info(needed, s.glossy_second_order, s.probe_area_light_samples),
+                _pad: 0,
+            }
+        })
+        .collect()
 }
 
 /// The shade pass's pipeline (`probe_shade.wgsl` with the BVH, the field and
@@ -65,7 +107,8 @@ impl GpuProbeShade {
         Ok(Self { layout, pipeline })
     }
 
-    /// Radiance of every ray of `batch` (traced already), by `info` ([`shade_info`]);
+    /// Radiance of every ray of `batch` (traced already), by its probe's record
+    /// in `probes` (sorted by first ray; a ray no probe holds gives zero);
     /// with `timer`, the pass writes its timestamps at index `timer.1`.
     #[allow(clippy::too_many_arguments)]
     pub fn shade(
@@ -75,15 +118,15 @@ impl GpuProbeShade {
         field: &GpuDdgiField,
         scene: &GpuScene,
         batch: &GpuRayBatch,
-        info: &[u32],
+        probes: &[ShadeProbe],
         seed: u32,
         frame: u32,
         timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
     ) -> Result<Vec<Vec3>, GpuError> {
-        if batch.ray_count == 0 && info.is_empty() {
+        if batch.ray_count == 0 {
             return Ok(vec![]);
         }
-        let results = self.shade_on_device(ctx, bvh, field, scene, batch, info, seed, frame, timer)?;
+        let results = self.shade_on_device(ctx, bvh, field, scene, batch, probes, seed, frame, timer)?;
         let bytes = ctx.read_back(&results)?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
         Ok(v.iter().take(batch.ray_count as usize).map(|l| Vec3::new(l[0], l[1], l[2])).collect())
@@ -100,28 +143,26 @@ impl GpuProbeShade {
         field: &GpuDdgiField,
         scene: &GpuScene,
         batch: &GpuRayBatch,
-        info: &[u32],
+        probes: &[ShadeProbe],
         seed: u32,
         frame: u32,
         timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
     ) -> Result<wgpu::Buffer, GpuError> {
         let n = batch.ray_count;
-        if info.len() != n as usize {
-            return Err(GpuError::Input(format!("{} shading flags for {n} rays", info.len())));
+        if probes.windows(2).any(|w| w[1].first_ray < w[0].first_ray) {
+            return Err(GpuError::Input("shade probes out of ray order".into()));
         }
         let (gx, gy) = dispatch_2d(n);
         let device = &ctx.device;
-        let params = ShadeParams { ray_count: n, groups_x: gx, seed, frame };
-        let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("shade params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
-        let info = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("shade info"),
-            contents: bytemuck::cast_slice(if info.is_empty() { &[0u32][..] } else { info }),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
+        let params =
+            ShadeParams { ray_count: n, groups_x: gx, seed, frame, probe_count: probes.len() as u32, _pad: [0; 3] };
+        let params = ctx.buffer_with("shade params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let empty = [ShadeProbe::default()];
+        let info = ctx.buffer_with(
+            "shade probes",
+            bytemuck::cast_slice(if probes.is_empty() { &empty[..] } else { probes }),
+            wgpu::BufferUsages::STORAGE,
+        );
         let radiance = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("probe ray radiance"),
             size: (n as u64).max(1) * 16,

@@ -142,8 +142,11 @@ const F32_CONSTANTS: [(&str, f32); 7] = [
 ];
 
 /// The `u32` constants of the prelude.
-const U32_CONSTANTS: [(&str, u32); 2] =
-    [("BVH_INSTANCE_IDENTITY", BVH_INSTANCE_IDENTITY), ("BVH_INSTANCE_MOVING", BVH_INSTANCE_MOVING)];
+const U32_CONSTANTS: [(&str, u32); 3] = [
+    ("BVH_INSTANCE_IDENTITY", BVH_INSTANCE_IDENTITY),
+    ("BVH_INSTANCE_MOVING", BVH_INSTANCE_MOVING),
+    ("TRACE_MAX_SEGMENTS", crate::bvh_trace::TRACE_MAX_SEGMENTS as u32),
+];
 
 /// The WGSL `const` declarations of the values the shaders share with Rust. An
 /// `f32` is printed as Rust's shortest round-trip decimal with WGSL's `f`
@@ -216,18 +219,19 @@ mod tests {
         use crate::probe_classification::ClassifyParams;
         use crate::probe_ray_gen::RayGenParams;
         use crate::probe_relocation::RelocationParams;
-        use crate::probe_shade::ShadeParams;
+        use crate::probe_shade::{ShadeParams, ShadeProbe};
         use crate::probe_usage::UsageParams;
         use probegi_field::device_plans::DeviceRelocationProbe;
         use probegi_field::seam::BatchProbe;
         let (ray, hit) = (size_of::<GpuRay>(), size_of::<GpuRayHit>());
-        let cases: [(&PassShader, &str, usize); 25] = [
+        let cases: [(&PassShader, &str, usize); 26] = [
             (&TRACE_RAYS, "TraceParams", size_of::<TraceParams>()),
             (&TRACE_RAYS, "GpuRay", ray),
             (&TRACE_RAYS, "GpuRayHit", hit),
             (&PROBE_RAY_GEN, "RayGenParams", size_of::<RayGenParams>()),
             (&PROBE_RAY_GEN, "GenRay", ray),
             (&PROBE_SHADE, "ShadeParams", size_of::<ShadeParams>()),
+            (&PROBE_SHADE, "ShadeProbe", size_of::<ShadeProbe>()),
             (&PROBE_SHADE, "ShadeRay", ray),
             (&PROBE_SHADE, "ShadeHit", hit),
             (&PROBE_SHADE, "DdgiVolume", size_of::<GpuDdgiVolume>()),

@@ -39,7 +39,7 @@ use probegi_field::device_plans::{
 use probegi_field::seam::ProbeRayBatch;
 use probegi_scene::{BvhTracer, RayHit, Scene, TlasLayout};
 
-use crate::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace};
+use crate::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace, TraceSegment};
 use crate::camera_frame::{CameraFrame, GpuCameraPass};
 use crate::ddgi_query::GpuDdgiField;
 use crate::gpu_scene::GpuScene;
@@ -47,7 +47,7 @@ use crate::probe_blend::GpuProbeBlend;
 use crate::probe_classification::GpuProbeClassification;
 use crate::probe_ray_gen::GpuProbeRayGen;
 use crate::probe_relocation::GpuProbeRelocation;
-use crate::probe_shade::{GpuProbeShade, shade_info};
+use crate::probe_shade::{GpuProbeShade, batch_shade_probes};
 use crate::probe_usage::GpuProbeUsage;
 use crate::{GpuContext, GpuError};
 
@@ -62,10 +62,33 @@ fn poisoned<T>(_: T) -> BackendError {
     BackendError::Device("a GPU pass panicked earlier; the tracer's resident state is lost".into())
 }
 
-/// A batch's rays as the GPU trace reads them.
+/// A batch's rays as the GPU trace reads them (made from its `generated`
+/// records where it has no per-ray arrays).
 pub(crate) fn batch_rays(batch: &ProbeRayBatch) -> Vec<GpuRay> {
+    let batch = batch.expanded();
     (0..batch.len())
         .map(|i| GpuRay::new(batch.origins_m[i], batch.directions[i], 0.0, batch.max_distances_m[i]))
+        .collect()
+}
+
+/// The update volumes of `batch` whose probes cast the same rays each and lie
+/// consecutively, as the trace's direction-major segments (`bvh_trace::TraceSegment`).
+fn trace_segments(batch: &ProbeRayBatch) -> Vec<TraceSegment> {
+    batch
+        .generated
+        .iter()
+        .filter_map(|g| {
+            let probes = batch.probes.get(g.first_probe as usize..(g.first_probe + g.probe_count) as usize)?;
+            let first = probes.first()?;
+            let uniform = probes.iter().enumerate().all(|(k, p)| {
+                p.ray_count == g.rays_per_probe && p.first_ray == first.first_ray + k as u32 * g.rays_per_probe
+            });
+            uniform.then_some(TraceSegment {
+                first_ray: first.first_ray,
+                probe_count: g.probe_count,
+                rays_per_probe: g.rays_per_probe,
+            })
+        })
         .collect()
 }
 
@@ -225,12 +248,13 @@ impl WgpuProbeTracer {
             if probes.iter().enumerate().any(|(k, p)| p.first_ray != first.first_ray + k as u32 * g.rays_per_probe) {
                 return Ok(None);
             }
-            let origins: Vec<Vec3> = probes.iter().map(|p| batch.origins_m[p.first_ray as usize]).collect();
+            let range = g.first_probe as usize..(g.first_probe + g.probe_count) as usize;
+            let Some(origins) = batch.probe_origins_m.get(range) else { return Ok(None) };
             ray_gen.generate_into(
                 &self.ctx,
                 &out,
                 first.first_ray,
-                &origins,
+                origins,
                 g.max_distance_m,
                 g.rotation,
                 g.rays_per_probe,
@@ -238,19 +262,6 @@ impl WgpuProbeTracer {
             )?;
         }
         Ok(Some(out))
-    }
-
-    /// The per-ray shading flags of `batch`.
-    fn shading_flags(batch: &ProbeRayBatch, volumes: &[DdgiVolume]) -> Vec<u32> {
-        let mut info = vec![0u32; batch.len()];
-        for bp in &batch.probes {
-            let s = &volumes[bp.volume as usize].settings;
-            for i in bp.first_ray..bp.first_ray + bp.ray_count {
-                let i = i as usize;
-                info[i] = shade_info(batch.needs_radiance[i], s.glossy_second_order, s.probe_area_light_samples);
-            }
-        }
-        info
     }
 
     /// Traces `batch` on the device and keeps it there as the last batch. An
@@ -263,9 +274,7 @@ impl WgpuProbeTracer {
             Some(generated) => generated,
             None => self.trace.batch(&self.ctx, &batch_rays(batch), false)?,
         };
-        if static_only {
-            resident.set_static_only(&self.ctx, true);
-        }
+        resident.configure(&self.ctx, static_only, &trace_segments(batch));
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         self.trace.record(&mut encoder, &self.bvh, &resident, None);
         self.ctx.queue.submit([encoder.finish()]);
@@ -361,10 +370,10 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         let last = self.last.lock().ok()?;
         let resident = last.as_ref().filter(|b| b.ray_count as usize == batch.len())?;
         let run = || -> Result<Vec<Vec3>, GpuError> {
-            let info = Self::shading_flags(batch, volumes);
+            let probes = batch_shade_probes(batch, volumes);
             let gpu_field = GpuDdgiField::upload(&self.ctx, field)?;
             let seed32 = (seed ^ (seed >> 32)) as u32;
-            shade.shade(&self.ctx, &self.bvh, &gpu_field, scene, resident, &info, seed32, frame, None)
+            shade.shade(&self.ctx, &self.bvh, &gpu_field, scene, resident, &probes, seed32, frame, None)
         };
         Some(run().map(|l| *radiance = l).map_err(BackendError::from))
     }
@@ -540,10 +549,10 @@ impl DeviceField for WgpuProbeTracer {
         let run = |gpu_field: &mut Option<GpuDdgiField>| -> Result<Vec<(&'static str, f64)>, GpuError> {
             let t = std::time::Instant::now();
             let f = self.resident_field(gpu_field, field, upload_atlases, plan)?;
-            let info = Self::shading_flags(batch, volumes);
+            let probes = batch_shade_probes(batch, volumes);
             let seed32 = (seed ^ (seed >> 32)) as u32;
             let results =
-                shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, &info, seed32, frame, None)?;
+                shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, &probes, seed32, frame, None)?;
             // The host waits after each pass so that its wall times are the device's
             // (`bench`); an engine that records the passes itself would not.
             self.ctx.wait()?;
@@ -563,6 +572,9 @@ impl DeviceField for WgpuProbeTracer {
             Ok(vec![("shade", shade_ms), ("blend", t.elapsed().as_secs_f64() * 1e3)])
         };
         run(&mut gpu_field).map_err(BackendError::from)
+    }
+    fn generates_update_rays(&self) -> bool {
+        self.ray_gen.is_some()
     }
     fn download_field(&self, index: usize, volume: &mut DdgiVolume) -> Result<(), BackendError> {
         let field = self.field.lock().map_err(poisoned)?;

@@ -4,14 +4,15 @@
 //! rotation, within 1e-4: frac(i/Φ) is exact to 2⁻³² in 0.32 fixed point where
 //! the CPU uses f64, but Vulkan lets sin and cos be off by 2⁻¹¹ absolute
 //! (lavapipe: 2.4e-5 at 1000 rays); origins and max distances exactly; and the
-//! generated batch traces exactly like the same rays uploaded.
+//! generated batch traces exactly like the same rays uploaded, in batch order
+//! or direction-major (`TraceSegment`).
 
 mod common;
 
 use glam::Vec3;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_field::probe_ray_gen::{probe_ray_directions, probe_ray_rotation};
-use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayTrace};
+use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayTrace, TraceSegment};
 use probegi_wgpu::probe_ray_gen::GpuProbeRayGen;
 
 #[test]
@@ -66,6 +67,25 @@ fn a_generated_batch_traces_like_the_same_rays_uploaded() {
         eprintln!("{differ} of {} differ, e.g. {a:?} vs {b:?}", generated.len());
     }
     assert_eq!(differ, 0);
+    // Direction-major thread order over two segments with a gap between them
+    // (probes 0..5, then 9..27; 5..9 in batch order): the same hit at every ray.
+    let segments = [
+        TraceSegment { first_ray: 0, probe_count: 5, rays_per_probe: 64 },
+        TraceSegment { first_ray: 9 * 64, probe_count: 18, rays_per_probe: 64 },
+    ];
+    for order in [&segments[..], &segments[1..], &[]] {
+        // A fresh batch each time, its hits zeroed: a ray no thread traced would show.
+        let batch = GpuProbeRayGen::new(&ctx)
+            .generate(&ctx, &trace, &origins, f32::INFINITY, probe_ray_rotation(1, 2), 64, None)
+            .expect("gen");
+        batch.configure(&ctx, false, order);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        trace.record(&mut encoder, &bvh, &batch, None);
+        ctx.queue.submit([encoder.finish()]);
+        let reordered = trace.download(&ctx, &batch).expect("hits");
+        let differ = reordered.iter().zip(&uploaded).filter(|(a, b)| a != b).count();
+        assert_eq!(differ, 0, "{} segments: {differ} of {} hits differ", order.len(), reordered.len());
+    }
     // Inside the box (open at the front) most rays hit.
     let hits = generated.iter().filter(|h| h.is_hit()).count();
     assert!(hits > generated.len() / 2, "{hits} of {} rays hit", generated.len());

@@ -93,24 +93,16 @@ impl DdgiVolume {
     /// As [`Self::accept_update_hits`] for hits that stayed on another device:
     /// `usage_counts` holds, per probe that traced, seed 003's (usage, relevant,
     /// backfaces) counted there (`probegi_core::probe_classification::probe_usage`;
-    /// read only under the usage scheme). Every ray of an updating probe is
-    /// marked: the device zeroes backface radiance itself.
+    /// read only under the usage scheme). Which probes blend is then
+    /// `frame.active`; the device zeroes backface radiance itself.
     pub(crate) fn accept_device_hits(
         &mut self,
         frame: &mut VolumeFrame,
         frame_index: u32,
         usage_counts: &[Option<(i32, u32, u32)>],
-        needs_radiance: &mut [bool],
     ) {
-        let n = frame.ray_count;
         if self.settings.probe_states == ProbeStatesMode::Usage {
             self.classify_usage_states(frame, frame_index, usage_counts);
-        }
-        for p in 0..self.grid.probe_count() {
-            let first = frame.first_ray[p];
-            if first != u32::MAX && frame.active[p] {
-                needs_radiance[first as usize..first as usize + n].fill(true);
-            }
         }
     }
 }

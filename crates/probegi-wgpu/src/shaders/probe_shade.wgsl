@@ -5,14 +5,27 @@
 // plus diffuse albedo/π × the set's previous irradiance (ddgi_query.wgsl at group
 // 2), plus with second-order glossy the hit's specular reflection of the field.
 // No emission (see probe_shade.rs on the CPU: emitters are sampled as area lights).
-// Must match `probegi_wgpu::probe_shade::ShadeParams` (#[repr(C)], 16 bytes) and
-// the trace pass's `GpuRay` / `GpuRayHit`.
+// Must match `probegi_wgpu::probe_shade::ShadeParams` (#[repr(C)], 32 bytes),
+// `ShadeProbe` (16 bytes) and the trace pass's `GpuRay` / `GpuRayHit`.
 
 struct ShadeParams {
     ray_count: u32,
     groups_x: u32,
     seed: u32,
     frame: u32,
+    probe_count: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+};
+
+// One probe's rays and how to shade them: per probe, not per ray, so the host
+// uploads O(probes) a frame.
+struct ShadeProbe {
+    first_ray: u32,
+    ray_count: u32,
+    info: u32,
+    _pad: u32,
 };
 
 struct ShadeRay {
@@ -33,10 +46,35 @@ struct ShadeHit {
 @group(0) @binding(0) var<uniform> shade_params: ShadeParams;
 @group(0) @binding(1) var<storage, read> shade_rays: array<ShadeRay>;
 @group(0) @binding(2) var<storage, read> shade_hits: array<ShadeHit>;
-// Per ray: bit 31 the set wants its radiance, bit 30 second-order glossy, bits 0..15 area samples.
+// Per probe, sorted by first_ray: its rays and its `info`: bit 31 the set wants
+// their radiance, bit 30 second-order glossy, bits 0..15 area samples.
 // Output per ray: xyz radiance, w the blend's signed distance (probe_blend.wgsl's ray_results).
-@group(0) @binding(3) var<storage, read> shade_info: array<u32>;
+@group(0) @binding(3) var<storage, read> shade_probes: array<ShadeProbe>;
 @group(0) @binding(4) var<storage, read_write> shade_radiance: array<vec4<f32>>;
+
+// The shading flags of ray i: its probe's (a binary search over the probes'
+// first rays), 0 for a ray no probe holds.
+fn ray_shade_info(i: u32) -> u32 {
+    var lo = 0u;
+    var hi = shade_params.probe_count;
+    // The last probe whose first ray is at or before i lies in [lo, hi).
+    while (hi - lo > 1u) {
+        let mid = (lo + hi) / 2u;
+        if (shade_probes[mid].first_ray <= i) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    if (shade_params.probe_count == 0u) {
+        return 0u;
+    }
+    let p = shade_probes[lo];
+    if (i < p.first_ray || i - p.first_ray >= p.ray_count) {
+        return 0u;
+    }
+    return p.info;
+}
 
 @compute @workgroup_size(64)
 fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
@@ -44,7 +82,7 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     if (i >= shade_params.ray_count) {
         return;
     }
-    let info = shade_info[i];
+    let info = ray_shade_info(i);
     let h = shade_hits[i];
     let r = shade_rays[i];
     let back = (h.triangle & 0x80000000u) != 0u && h.triangle != BVH_NO_HIT;
