@@ -107,6 +107,20 @@ pub struct DdgiVolumeSettings {
     /// Area-light next-event samples per probe-ray hit in the shade pass (stratified,
     /// rounded up to a square count).
     pub probe_area_light_samples: u32,
+    /// The shadowing field (seed 003 ch. 5, `probegi_core::shadow_field`): the
+    /// volume's probes also keep occlusion maps, fed by one shadow ray per light
+    /// from each of the last frame's front-face hits, and cameras read punctual
+    /// lights' visibility from them instead of tracing a shadow ray per pixel.
+    /// Off by default: the seeds' DDGI has no such field.
+    pub shadow_field: bool,
+    /// Occlusion map interior texels per side (seed 003 Fig. 5.1, 7.10: 16×16).
+    pub shadow_field_texels: u32,
+    /// The power the sampled visibility is raised to (seed 003 Fig. 7.10 shows 1, 2
+    /// and 3); 1 keeps it as blended.
+    pub shadow_field_sharpness: f32,
+    /// The lights a probe serves: the brightest this many punctual lights at the
+    /// volume's centre (the seed's scenes have one or two; it names no limit).
+    pub shadow_field_max_lights: u32,
 }
 
 impl Default for DdgiVolumeSettings {
@@ -146,6 +160,10 @@ impl Default for DdgiVolumeSettings {
             probe_alive_min_frames: 10,
             glossy_second_order: true,
             probe_area_light_samples: 1,
+            shadow_field: false,
+            shadow_field_texels: 16,
+            shadow_field_sharpness: 1.0,
+            shadow_field_max_lights: 8,
         }
     }
 }
@@ -193,6 +211,7 @@ impl DdgiVolumeSettings {
         for (name, v) in [
             ("probe_irradiance_texels", self.probe_irradiance_texels),
             ("probe_distance_texels", self.probe_distance_texels),
+            ("shadow_field_texels", self.shadow_field_texels),
         ] {
             if v == 0 || v > 64 {
                 return Err((name, format!("{v} must be in 1..=64")));
@@ -216,6 +235,10 @@ impl DdgiVolumeSettings {
         };
         positive("probe_distance_exponent", self.probe_distance_exponent)?;
         positive("probe_irradiance_gamma", self.probe_irradiance_gamma)?;
+        positive("shadow_field_sharpness", self.shadow_field_sharpness)?;
+        if self.shadow_field && self.shadow_field_max_lights == 0 {
+            return Err(("shadow_field_max_lights", "0: a shadow field must serve at least one light".into()));
+        }
         positive("probe_max_ray_distance_m", self.probe_max_ray_distance_m)?;
         let non_negative = |name: &'static str, v: f32| {
             if v.is_finite() && v >= 0.0 { Ok(()) } else { Err((name, format!("{v} must be finite and >= 0"))) }

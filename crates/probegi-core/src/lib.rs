@@ -29,6 +29,7 @@
 //! Screen-space SH probes (seed 001):
 //! - [`sh`]: real spherical harmonics to band 2 and their irradiance convolution.
 //! - [`sh_settings`]: the method's settings with the paper's defaults.
+//! - [`shadow_field`]: seed 003 ch. 5's occlusion maps: their blend (eq. 5.2–5.3) and sampling.
 //! - [`sh_cascades`]: nested camera-centred probe grids and their interpolation.
 //! - [`sh_probe_update`]: the screen-space splat of lit samples into the probes.
 
@@ -57,5 +58,6 @@ pub mod sh;
 pub mod sh_cascades;
 pub mod sh_probe_update;
 pub mod sh_settings;
+pub mod shadow_field;
 
 pub use glam::{Vec2, Vec3, Vec4};

@@ -10,7 +10,9 @@ use probegi_core::sampling::{Frame, sample_cosine_hemisphere};
 use probegi_scene::{RayTracer, Scene, SurfacePoint};
 
 use crate::light_sampling::AreaLights;
-use crate::shading::{ShadingContext, lambert_cos, punctual_direct, shadow_ray_along, shadow_ray_to};
+use crate::shading::{
+    PunctualVisibility, ShadingContext, lambert_cos, punctual_direct_with, shadow_ray_along, shadow_ray_to,
+};
 
 /// Sample counts of [`DirectLighting`]'s stratified estimates, per pixel (or
 /// probe-ray hit) per frame.
@@ -90,8 +92,22 @@ impl<'a> DirectLighting<'a> {
         specular_area: bool,
         rng: &mut Pcg32,
     ) -> (Vec3, u64) {
+        self.reflected_with(sp, ctx, settings, specular_area, None, rng)
+    }
+
+    /// [`Self::reflected`], with punctual lights' visibility from `visibility`
+    /// where it gives one (the shadowing field) instead of shadow rays.
+    pub fn reflected_with(
+        &self,
+        sp: &SurfacePoint,
+        ctx: &ShadingContext,
+        settings: DirectSettings,
+        specular_area: bool,
+        visibility: Option<&PunctualVisibility<'_>>,
+        rng: &mut Pcg32,
+    ) -> (Vec3, u64) {
         let scene = self.scene;
-        let (mut l, mut rays) = punctual_direct(scene, self.tracer, sp, ctx);
+        let (mut l, mut rays) = punctual_direct_with(scene, self.tracer, sp, ctx, visibility);
 
         if !self.area_lights.is_empty() && settings.direct_area_samples > 0 {
             let k = (settings.direct_area_samples as f32).sqrt().ceil() as u32;

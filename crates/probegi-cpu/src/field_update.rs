@@ -108,6 +108,8 @@ impl FieldSetUpdate for DdgiFieldSet {
         // A device that makes the update rays itself gets them per probe: no
         // O(rays) arrays on the host (filled after all if the host traces them).
         self.set_update_rays_on_device(driver.device.is_some_and(|d| d.generates_update_rays()));
+        // The shadowing field serves the lights as posed for this frame.
+        self.set_shadow_lights(&scene.lights);
         let mut step = self.begin_update(seed, frame);
         loop {
             step = match step {
@@ -257,7 +259,7 @@ impl<'u> SeamDriver<'u> {
             }
         }
         // The update batch on a device that keeps the field: the hits stay there.
-        if let (Some(bt), false) = (self.device, init) {
+        if let (Some(bt), false, false) = (self.device, init, set.hits_needed_on_host() == HostHits::All) {
             let usage = (set.hits_needed_on_host() == HostHits::ProbeUsage)
                 .then(|| set.volumes().iter().map(|v| v.grid.spacing_m.length()).collect::<Vec<_>>());
             if let Some(counts) = bt.trace_resident(set.ray_batch(), usage.as_deref()) {

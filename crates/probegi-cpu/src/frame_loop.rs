@@ -439,6 +439,10 @@ impl<'a> FrameLoop<'a> {
         let (Some(h), Some(set), false) = (&settings.probe_tracer, self.field.as_ref(), settings.show_probes) else {
             return None;
         };
+        // The shadowing field is sampled by the CPU camera only (no WGSL twin yet).
+        if set.has_shadow_field() {
+            return None;
+        }
         let t = Instant::now();
         let second_order = set.volumes().iter().any(|v| v.settings.glossy_second_order);
         let view = set.view();
@@ -507,7 +511,9 @@ impl<'a> FrameLoop<'a> {
         let second_order =
             self.field.as_ref().is_some_and(|s| s.volumes().iter().any(|v| v.settings.glossy_second_order));
         let t = Instant::now();
-        let passes = CameraPasses { scene, tracer, direct, direct_settings: self.camera_direct, second_order };
+        let shadow_field = self.field.as_ref().filter(|s| s.has_shadow_field());
+        let passes =
+            CameraPasses { scene, tracer, direct, direct_settings: self.camera_direct, second_order, shadow_field };
         let nonfinite = std::sync::atomic::AtomicU64::new(0);
         let (rays, surfaces, unlit) =
             shade_camera(&passes, indirect_field, &gbuffer, f, settings.seed, &mut self.acc, &nonfinite);

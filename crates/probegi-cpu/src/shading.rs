@@ -67,17 +67,41 @@ pub fn shadow_ray_along(sp: &SurfacePoint, wi: Vec3, distance: f32) -> Ray {
     Ray::segment(sp.spawn_origin(wi), wi, if distance.is_finite() { distance * (1.0 - 1e-4) } else { f32::INFINITY })
 }
 
+/// A punctual light's visibility in `[0, 1]` at a surface point toward unit
+/// direction `wi` from somewhere other than a shadow ray (the shadowing field,
+/// `DdgiFieldSet::shadow_visibility`); `None` where it has none, and a shadow
+/// ray decides.
+pub type PunctualVisibility<'a> = dyn Fn(&SurfacePoint, Vec3) -> Option<f32> + Sync + 'a;
+
 /// Radiance reflected toward the viewer from all punctual lights (exact, one shadow
 /// ray each). Returns the radiance and the number of rays traced.
 pub fn punctual_direct(scene: &Scene, tracer: &dyn RayTracer, sp: &SurfacePoint, ctx: &ShadingContext) -> (Vec3, u64) {
+    punctual_direct_with(scene, tracer, sp, ctx, None)
+}
+
+/// [`punctual_direct`], with each light's visibility from `visibility` where it
+/// gives one (no shadow ray then).
+pub fn punctual_direct_with(
+    scene: &Scene,
+    tracer: &dyn RayTracer,
+    sp: &SurfacePoint,
+    ctx: &ShadingContext,
+    visibility: Option<&PunctualVisibility<'_>>,
+) -> (Vec3, u64) {
     let mut l = Vec3::ZERO;
     let mut rays = 0;
     for light in &scene.lights {
         let Some(inc) = punctual_incident(light, sp.position) else { continue };
         let Some(cos) = lambert_cos(sp, inc.wi) else { continue };
-        rays += 1;
-        if !tracer.occluded(&shadow_ray_along(sp, inc.wi, inc.distance)) {
-            l += ctx.eval(inc.wi) * inc.irradiance * cos;
+        let v = match visibility.and_then(|v| v(sp, inc.wi)) {
+            Some(v) => v,
+            None => {
+                rays += 1;
+                if tracer.occluded(&shadow_ray_along(sp, inc.wi, inc.distance)) { 0.0 } else { 1.0 }
+            }
+        };
+        if v > 0.0 {
+            l += ctx.eval(inc.wi) * inc.irradiance * (cos * v);
         }
     }
     (l, rays)

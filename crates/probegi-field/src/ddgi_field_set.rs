@@ -118,6 +118,8 @@ pub struct DdgiFieldSet {
     /// Update batches leave their per-ray arrays empty: a device makes the rays
     /// from the batch's `generated` records ([`Self::set_update_rays_on_device`]).
     update_rays_on_device: bool,
+    /// The punctual lights the shadowing field serves ([`Self::set_shadow_lights`]).
+    shadow_lights: Vec<probegi_scene::PunctualLight>,
 }
 
 impl DdgiFieldSet {
@@ -162,6 +164,7 @@ impl DdgiFieldSet {
             last_init_rays: 0,
             field_on_device: false,
             update_rays_on_device: false,
+            shadow_lights: Vec::new(),
         }
     }
 
@@ -321,9 +324,15 @@ impl DdgiFieldSet {
                 return UpdateStep::TraceRays;
             }
         }
-        self.batch.clear(ProbeRayBatchKind::Update, !self.update_rays_on_device);
+        // Shadow rays are made on the host: a batch with them keeps per-ray arrays.
+        let per_ray = !self.update_rays_on_device || self.has_shadow_field();
+        self.batch.clear(ProbeRayBatchKind::Update, per_ray);
         for i in 0..self.volumes.len() {
             self.volumes[i].plan_update(&mut self.frames[i], self.seed, self.frame, i as u32, &mut self.batch);
+        }
+        // Then every volume's shadow rays, after all the probes' primary rays.
+        for i in 0..self.volumes.len() {
+            self.volumes[i].plan_shadow_rays(&mut self.frames[i], &self.shadow_lights, &mut self.batch);
         }
         self.last_batch_rays = self.batch.len() as u64;
         self.last_batch_rays_per_volume = self.batch.rays_per_volume(self.volumes.len());
@@ -394,6 +403,7 @@ impl DdgiFieldSet {
                         &self.hits,
                         &mut self.batch.needs_radiance,
                     );
+                    volumes[i].accept_shadow_hits(&mut frames[i], &self.batch, &self.hits);
                 }
                 self.mark_probes_needing_radiance();
                 self.time("classify", t);
@@ -444,6 +454,9 @@ impl DdgiFieldSet {
             } else {
                 HostHits::All
             }
+        } else if self.has_shadow_field() {
+            // The shadow field's shadow rays and surfels are read on the host.
+            HostHits::All
         } else if self
             .volumes
             .iter()
@@ -461,7 +474,50 @@ impl DdgiFieldSet {
     /// distances only, so a caller may submit any finite normal there (zero)
     /// and skip building the surface point of every hit.
     pub fn hit_normals_needed(&self) -> bool {
-        self.batch.kind == ProbeRayBatchKind::Initialization && self.hits_needed_on_host() != HostHits::Relocation
+        match self.batch.kind {
+            ProbeRayBatchKind::Initialization => self.hits_needed_on_host() != HostHits::Relocation,
+            // The shadow field keeps front hits as surfels, with their normals.
+            ProbeRayBatchKind::Update => self.has_shadow_field(),
+        }
+    }
+
+    /// Whether a volume of the set keeps a shadowing field (`shadow_field`).
+    pub fn has_shadow_field(&self) -> bool {
+        self.volumes.iter().any(|v| v.shadow.is_some())
+    }
+
+    /// The punctual lights the shadowing field's probes serve from the next
+    /// update on (the scene's, as posed for that frame; each volume picks its
+    /// brightest `shadow_field_max_lights`).
+    pub fn set_shadow_lights(&mut self, lights: &[probegi_scene::PunctualLight]) {
+        self.shadow_lights.clear();
+        self.shadow_lights.extend_from_slice(lights);
+    }
+
+    /// The shadowing field's light visibility in `[0, 1]` at `position` on a
+    /// surface with unit `normal`, toward unit `dir_to_light`
+    /// (`probegi_core::shadow_field::shadow_visibility`), from the densest volume
+    /// with a shadow field whose probe box, or the cell around it, holds the
+    /// point; `None` where no such volume covers it (the caller traces a shadow
+    /// ray there).
+    pub fn shadow_visibility(&self, position: Vec3, normal: Vec3, view_dir: Vec3, dir_to_light: Vec3) -> Option<f32> {
+        self.order.iter().map(|&i| &self.volumes[i]).find_map(|v| {
+            let shadow = v.shadow.as_ref()?;
+            // The probe box and one cell around it, where the volume's own
+            // irradiance fades out (`volume_blend_weight`).
+            if probegi_core::ddgi_volume_blend::volume_blend_weight(&v.grid, position, None) <= 0.0 {
+                return None;
+            }
+            probegi_core::shadow_field::shadow_visibility(
+                &v.view(),
+                &shadow.occlusion,
+                position,
+                normal,
+                view_dir,
+                dir_to_light,
+                v.settings.shadow_field_sharpness,
+            )
+        })
     }
 
     /// Seed 004 Listing 4's inputs per entry of `ray_batch().probes`, for a

@@ -219,6 +219,16 @@ impl ProbeRayBatch {
         self.ray_arrays = ray_arrays;
     }
 
+    /// Appends rays that belong to no probe entry (the shadow field's shadow
+    /// rays, seed 003 §5.1) after the probes' rays; the batch keeps per-ray arrays.
+    pub(crate) fn push_rays(&mut self, origins: &[Vec3], dirs: &[Vec3], max_m: &[f32]) {
+        debug_assert!(self.ray_arrays && self.has_ray_arrays());
+        self.origins_m.extend_from_slice(origins);
+        self.directions.extend_from_slice(dirs);
+        self.max_distances_m.extend_from_slice(max_m);
+        self.ray_count += origins.len();
+    }
+
     /// Appends one probe's rays (to the per-ray arrays where the batch keeps
     /// them); returns its first ray index.
     pub(crate) fn push_probe(&mut self, volume: u32, probe: u32, origin: Vec3, dirs: &[Vec3], max_m: f32) -> u32 {

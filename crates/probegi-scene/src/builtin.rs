@@ -22,7 +22,7 @@ pub use crate::shapes::{add_box, add_polygon, add_room};
 
 /// Every name `builtin:NAME` accepts.
 pub const BUILTIN_NAMES: &[&str] =
-    &["cornell-box", "furnace-box", "color-bleed", "door-room", "flood-room", "sponza-sun", "forest"];
+    &["cornell-box", "furnace-box", "color-bleed", "door-room", "flood-room", "sponza-sun", "forest", "shadow-box"];
 
 /// The seeds' test scenes (dynamic-scenes issue), compiled in from the scene files
 /// in `scenes/builtin/`, so `builtin:NAME` and the file are the same scene.
@@ -32,6 +32,7 @@ const SCENE_FILES: &[(&str, &str)] = &[
     ("flood-room", include_str!("../../../scenes/builtin/flood-room.toml")),
     ("sponza-sun", include_str!("../../../scenes/builtin/sponza-sun.toml")),
     ("forest", include_str!("../../../scenes/builtin/forest.toml")),
+    ("shadow-box", include_str!("../../../scenes/builtin/shadow-box.toml")),
 ];
 
 /// The built-in scene `name` (without the `builtin:` prefix); an error listing

@@ -37,6 +37,9 @@ pub(super) struct CameraPasses<'a> {
     pub(super) direct_settings: DirectSettings,
     /// Second-order glossy from probes on glossy rays' hits.
     pub(super) second_order: bool,
+    /// With a shadowing field (`shadow_field`), pixels read punctual lights'
+    /// visibility from it (seed 003 §5.2) instead of tracing shadow rays.
+    pub(super) shadow_field: Option<&'a probegi_field::DdgiFieldSet>,
 }
 
 /// The camera pass: per pixel, emission + direct light into `direct_out` and, with
@@ -86,7 +89,14 @@ pub(super) fn shade_camera(
                 let mut rng = Pcg32::new(hash_combine(&[seed, pixel, frame as u64, 0xd1]), pixel);
                 let ctx = ShadingContext::new(scene, sp, texel.view_dir_world);
                 let glossy_rays = ddgi.is_some() && ctx.bsdf.has_specular();
-                let (l, k) = direct.reflected(sp, &ctx, direct_settings, !glossy_rays, &mut rng);
+                let view_dir = texel.view_dir_world;
+                let field_visibility = passes.shadow_field.map(|set| {
+                    move |p: &probegi_scene::SurfacePoint, wi: Vec3| {
+                        set.shadow_visibility(p.position, p.facing_normal(), view_dir, wi)
+                    }
+                });
+                let visibility = field_visibility.as_ref().map(|v| v as &crate::shading::PunctualVisibility<'_>);
+                let (l, k) = direct.reflected_with(sp, &ctx, direct_settings, !glossy_rays, visibility, &mut rng);
                 rays += k;
                 let mut l = scene.emitted(sp) + l;
                 if let (true, Some(f)) = (glossy_rays, ddgi)
@@ -133,7 +143,7 @@ fn glossy_ray_radiance(
     wi: Vec3,
     rng: &mut Pcg32,
 ) -> (Vec3, u64) {
-    let CameraPasses { scene, tracer, direct, direct_settings, second_order } = *passes;
+    let CameraPasses { scene, tracer, direct, direct_settings, second_order, .. } = *passes;
     let ray = Ray::new(sp.spawn_origin(wi), wi);
     match tracer.closest_hit(&ray) {
         None => (scene.sky_radiance, 0),

@@ -110,6 +110,13 @@ impl DdgiVolume {
             }
         });
         *pass_ms.entry("border").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        if self.shadow.is_some() {
+            // A light that changes changes the shadows: the irradiance scale applies.
+            let t = std::time::Instant::now();
+            let hysteresis: Vec<Option<f32>> = base.iter().map(|b| b.map(|(_, h)| h * irr_scale)).collect();
+            self.blend_shadow_maps(frame, &hysteresis);
+            *pass_ms.entry("shadow_blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        }
         self.after_update(&updated);
         #[cfg(debug_assertions)]
         self.validate();

@@ -30,10 +30,12 @@ use crate::probe_ray_gen::ProbeRayDirections;
 mod blend_inputs;
 mod init_rounds;
 mod scrolling;
+mod shadow_rays;
 mod update_plan;
 mod usage_states;
 
 pub(crate) use blend_inputs::blend_inputs;
+pub use shadow_rays::ShadowField;
 
 /// Scene changes the application reports so the field reacts faster (seed 004 §4.3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -98,6 +100,8 @@ pub struct DdgiVolume {
     /// Probes whose tiles were cleared since the last blend (a device that holds
     /// the atlases clears its copies before its next blend).
     probes_reset_since_blend: Vec<u32>,
+    /// Seed 003 ch. 5's occlusion maps, with `settings.shadow_field`.
+    pub shadow: Option<ShadowField>,
 }
 
 /// One volume's per-frame scratch.
@@ -115,6 +119,12 @@ pub struct VolumeFrame {
     pub first_ray: Vec<u32>,
     /// Rays per probe when the batch was planned.
     pub ray_count: usize,
+    /// The shadow field's first shadow ray in the batch.
+    pub shadow_first_ray: usize,
+    /// The shadow field's samples planned this frame, in probe order.
+    pub(crate) shadow_slots: Vec<shadow_rays::ShadowSlot>,
+    /// The samples' probe and (direction, visibility) once the batch is traced.
+    pub(crate) shadow_samples: Vec<(u32, probegi_core::shadow_field::ShadowSample)>,
 }
 
 impl DdgiVolume {
@@ -159,6 +169,7 @@ impl DdgiVolume {
             traced_probes_last: 0,
             active_probes_last: 0,
             probes_reset_since_blend: Vec::new(),
+            shadow: settings.shadow_field.then(|| ShadowField::new(probes, settings.shadow_field_texels)),
             settings,
         }
     }
