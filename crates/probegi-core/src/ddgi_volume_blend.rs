@@ -75,6 +75,9 @@ pub struct SetMember<'a> {
     pub volume: usize,
     /// The volume tracks the camera (camera-aware blending under `Density`).
     pub tracks_camera: bool,
+    /// The volume's shadowing-field occlusion maps (seed 003 ch. 5,
+    /// `crate::shadow_field`), when it keeps them.
+    pub occlusion: Option<&'a crate::probe_atlas::ProbeAtlas<f32>>,
 }
 
 /// Everything the set query reads: the members in sampling order (densest or
@@ -189,6 +192,7 @@ mod tests {
 
         fn member(&self, tracks_camera: bool) -> SetMember<'_> {
             SetMember {
+                occlusion: None,
                 volume: 0,
                 field: DdgiFieldView {
                     grid: &self.grid,

@@ -56,7 +56,7 @@ pub fn blend_shadow_tile(tile: &mut [f32], interior: u32, samples: &[ShadowSampl
                 sum += w * s.visible;
                 wsum += w;
             }
-            if !(wsum > 0.0) {
+            if wsum.is_nan() || wsum <= 0.0 {
                 continue;
             }
             let dst = &mut tile[interior_texel_index(interior, i, j)];
@@ -116,7 +116,7 @@ pub fn shadow_visibility(
         (sum, wsum)
     };
     let (mut sum, mut wsum) = weigh(true);
-    if !(wsum > 0.0) {
+    if wsum.is_nan() || wsum <= 0.0 {
         (sum, wsum) = weigh(false);
     }
     if !(wsum > 0.0 && sum.is_finite()) {

@@ -439,10 +439,6 @@ impl<'a> FrameLoop<'a> {
         let (Some(h), Some(set), false) = (&settings.probe_tracer, self.field.as_ref(), settings.show_probes) else {
             return None;
         };
-        // The shadowing field is sampled by the CPU camera only (no WGSL twin yet).
-        if set.has_shadow_field() {
-            return None;
-        }
         let t = Instant::now();
         let second_order = set.volumes().iter().any(|v| v.settings.glossy_second_order);
         let view = set.view();

@@ -200,7 +200,12 @@ impl DdgiFieldSet {
                 .iter()
                 .map(|&i| {
                     let v = &self.volumes[i];
-                    SetMember { field: v.view(), volume: i, tracks_camera: v.settings.volume_tracks_camera }
+                    SetMember {
+                        field: v.view(),
+                        volume: i,
+                        tracks_camera: v.settings.volume_tracks_camera,
+                        occlusion: v.shadow.as_ref().map(|s| &s.occlusion),
+                    }
                 })
                 .collect(),
             blending: self.blending,

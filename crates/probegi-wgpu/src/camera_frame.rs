@@ -127,7 +127,7 @@ impl GpuCameraPass {
             forward: forward.extend(aspect).into(),
             right: right.extend(w).into(),
             up: up.extend(h).into(),
-            info: [f.frame, f.seed, f.area_samples, f.second_order as u32],
+            info: [f.frame, f.seed, f.area_samples, f.second_order as u32 | (field.shadow_field as u32) << 1],
             sky: f.sky_radiance.extend(0.0).into(),
         };
         let device = &ctx.device;

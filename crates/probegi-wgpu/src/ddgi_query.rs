@@ -39,7 +39,7 @@ pub fn query_wgsl(group: u32) -> String {
     crate::shader_registry::query_library(group)
 }
 
-/// One member volume; must match `DdgiVolume` in `ddgi_query.wgsl` (112 bytes).
+/// One member volume; must match `DdgiVolume` in `ddgi_query.wgsl` (128 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub(crate) struct GpuDdgiVolume {
@@ -57,8 +57,12 @@ pub(crate) struct GpuDdgiVolume {
     pub(crate) params: [f32; 4],
     /// First probe in the probe buffer, tracks the camera, 0, 0.
     pub(crate) extra: [u32; 4],
+    /// The shadowing field (seed 003 ch. 5): first occlusion texel in the
+    /// distance buffer (its `x`), occlusion interior (0: no field), sharpness
+    /// (f32 bits), 0.
+    pub(crate) shadow: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<GpuDdgiVolume>() == 112);
+const _: () = assert!(std::mem::size_of::<GpuDdgiVolume>() == 128);
 
 /// The set's header; must match the first 32 bytes of `DdgiSet` in `ddgi_query.wgsl`.
 #[repr(C)]
@@ -82,6 +86,8 @@ pub struct GpuDdgiField {
     pub volumes: usize,
     /// Probes of all members (at least 1: an empty set keeps one entry).
     pub probes: usize,
+    /// Whether a member keeps shadowing-field occlusion maps (`ddgi_shadow_visibility` reads them).
+    pub shadow_field: bool,
     bytes: u64,
     /// Per member in sampling order: probes, irradiance / distance interior,
     /// first irradiance / distance texel, its index among the set's volumes.
@@ -124,6 +130,7 @@ fn gpu_volume(f: &DdgiFieldView<'_>, [irr_first, dist_first]: [u32; 2]) -> GpuDd
         texels: [f.irradiance.interior, f.distance.interior, irr_first, dist_first],
         params: [s.probe_self_shadow_bias, s.probe_normal_bias_m, s.probe_crush_threshold, s.probe_energy_conservation],
         extra: [0; 4],
+        shadow: [0; 4],
     }
 }
 
@@ -177,6 +184,18 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
             distance.extend(f.distance.texels.iter().map(|t| [t.x, t.y]));
         }
         push_probe_rows(f, &mut probes);
+    }
+    // The shadowing field's occlusion maps follow every distance atlas in the
+    // distance buffer, one texel as (visibility, 0).
+    for (v, m) in volumes.iter_mut().zip(&set.members) {
+        if let Some(occlusion) = m.occlusion {
+            let s = m.field.settings.shadow_field_sharpness;
+            v.shadow = [distance_texels as u32, occlusion.interior, s.to_bits(), 0];
+            distance_texels += occlusion.texels.len();
+            if with_atlases {
+                distance.extend(occlusion.texels.iter().map(|&t| [t, 0.0]));
+            }
+        }
     }
     let mut set_bytes = bytemuck::bytes_of(&header).to_vec();
     if volumes.is_empty() {
@@ -246,6 +265,7 @@ impl GpuDdgiField {
         );
         Ok(Self {
             volumes: set.members.len(),
+            shadow_field: set.members.iter().any(|m| m.occlusion.is_some()),
             probes: packed.probes.len(),
             bytes: buffers.iter().map(|b| b.size()).sum(),
             members: packed.members,

@@ -138,7 +138,7 @@ fn cages_without_usable_probes_read_the_fallback_probes() {
     field.probe_usable = &usable;
     field.probe_fallback = &fallback;
     let view = DdgiFieldSetView {
-        members: vec![SetMember { field, volume: 0, tracks_camera: false }],
+        members: vec![SetMember { field, volume: 0, tracks_camera: false, occlusion: None }],
         blending: VolumeBlending::Density,
         camera_m: None,
     };

@@ -8,7 +8,8 @@
 //                                                 (seed 004 §7.4, seed 003 §6.2 Algorithms 1–2),
 //   probegi_core::probe_grid::{ProbeGrid::probe_index, ProbeGrid::cage} (circular tracking windows),
 //   probegi_core::probe_atlas::BilinearFootprint, probegi_core::octahedral::oct_encode,
-//   probegi_core::irradiance_encoding::{decode_irradiance_half, finish_half_decode} (seed 004 Listing 2).
+//   probegi_core::irradiance_encoding::{decode_irradiance_half, finish_half_decode} (seed 004 Listing 2),
+//   probegi_core::shadow_field::shadow_visibility and DdgiFieldSet::shadow_visibility (seed 003 §5.2).
 //
 // Its weight floors (BACKFACE_WEIGHT_FLOOR, CHEBYSHEV_WEIGHT_FLOOR, MIN_PROBE_WEIGHT,
 // TRILINEAR_WEIGHT_FLOOR) are the constants prelude's, generated from probegi_core::ddgi_query.
@@ -17,10 +18,13 @@
 //   @binding(0) ddgi_set:        DdgiSet (header, camera, one DdgiVolume per member in sampling order)
 //   @binding(1) ddgi_irradiance_atlas: array<vec4<f32>>, every member's irradiance atlas, tile-major
 //                                (probegi_core::probe_atlas layout), xyz = γ-encoded mean radiance
-//   @binding(2) ddgi_distance_atlas:   array<vec2<f32>>, every member's (mean, mean²) distance atlas
+//   @binding(2) ddgi_distance_atlas:   array<vec2<f32>>, every member's (mean, mean²) distance atlas,
+//                                then every shadowing-field member's occlusion maps (x = visibility)
 //   @binding(3) ddgi_probes:     array<vec4<f32>>, per probe: relocation offset xyz (m), w = bits:
 //                                31 = usable by queries, 0..30 = nearest usable probe (0x7fffffff: none)
 // Entry: `ddgi_irradiance(position, normal, view_dir) -> vec3<f32>` in W/m²; shade with albedo/π.
+// Entry: `ddgi_shadow_visibility(position, normal, view_dir, dir_to_light) -> f32`, a punctual
+// light's visibility in [0, 1] from the shadowing field, or −1 where no member has one.
 
 struct DdgiVolume {
     origin_m: vec4<f32>,       // xyz probe (0,0,0) before scrolling; w = min spacing (m)
@@ -30,6 +34,8 @@ struct DdgiVolume {
     texels: vec4<u32>,         // irradiance interior, distance interior, first irradiance texel, first distance texel
     params: vec4<f32>,         // self-shadow bias, normal bias (m), crush threshold, energy conservation
     extra: vec4<u32>,          // first probe in ddgi_probes, tracks the camera, 0, 0
+    shadow: vec4<u32>,         // first occlusion texel in ddgi_distance_atlas, occlusion interior (0: none),
+                               // sharpness (f32 bits), 0
 };
 
 struct DdgiSet {
@@ -301,4 +307,86 @@ fn ddgi_irradiance(position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>) 
         return only;
     }
     return sum / wsum;
+}
+
+// probegi_core::shadow_field::shadow_visibility for member `m` (seed 003 §5.2):
+// the cage with the cosine weight (the wrap weight where no probe faces the
+// point), Chebyshev visibility and the trilinear weight, the occlusion maps read
+// toward the light, sharpened; −1 when no probe of the cage nor a fallback is usable.
+fn ddgi_volume_shadow(m: u32, position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>,
+                      dir_to_light: vec3<f32>) -> f32 {
+    let v = ddgi_set.volumes[m];
+    let biased = position + ddgi_surface_bias(v, normal, view_dir);
+    let counts = vec3<i32>(v.probe_counts.xyz);
+    let max_c = max(counts - vec3<i32>(1), vec3<i32>(0));
+    let rel = (biased - v.origin_m.xyz) / v.spacing_m.xyz;
+    let base = clamp(vec3<i32>(floor(rel)), vec3<i32>(0), max_c);
+    let base_pos = v.origin_m.xyz + v.spacing_m.xyz * vec3<f32>(base);
+    let alpha = clamp((biased - base_pos) / v.spacing_m.xyz, vec3<f32>(0.0), vec3<f32>(1.0));
+    let occ_side = v.shadow.y + 2u;
+    let light_texels = ddgi_footprint(v.shadow.y, ddgi_oct_encode(dir_to_light));
+    let dist_side = v.texels.y + 2u;
+    var cos_sum = 0.0;
+    var cos_wsum = 0.0;
+    var wrap_sum = 0.0;
+    var wrap_wsum = 0.0;
+    for (var i = 0u; i < 8u; i++) {
+        let o = vec3<i32>(i32(i & 1u), i32((i >> 1u) & 1u), i32((i >> 2u) & 1u));
+        var coords = vec3<u32>(min(base + o, max_c));
+        var probe = ddgi_probe_index(v, coords);
+        let bits = bitcast<u32>(ddgi_probes[v.extra.x + probe].w);
+        if ((bits & 0x80000000u) == 0u) {
+            let q = bits & DDGI_NO_PROBE;
+            if (q == DDGI_NO_PROBE) {
+                continue;
+            }
+            probe = q;
+            coords = ddgi_probe_coords(v, q);
+        }
+        let probe_pos = v.origin_m.xyz + v.spacing_m.xyz * vec3<f32>(coords) + ddgi_probes[v.extra.x + probe].xyz;
+        let dir = ddgi_normalize_or_zero(probe_pos - position);
+        let to_probe = probe_pos - biased;
+        let f = ddgi_footprint(v.texels.y, ddgi_oct_encode(-to_probe));
+        let moments = ddgi_sample_distance(f, v.texels.w + probe * dist_side * dist_side);
+        let chebyshev = max(ddgi_chebyshev_weight(moments, length(to_probe)), CHEBYSHEV_WEIGHT_FLOOR);
+        let corner_f = vec3<f32>(o);
+        let t = max((vec3<f32>(1.0) - alpha) * (vec3<f32>(1.0) - corner_f) + alpha * corner_f, vec3<f32>(TRILINEAR_WEIGHT_FLOOR));
+        let trilinear = t.x * t.y * t.z;
+        let occ = clamp(ddgi_sample_distance(light_texels, v.shadow.x + probe * occ_side * occ_side).x, 0.0, 1.0);
+        let wc = max(dot(dir, normal), 0.0) * chebyshev * trilinear;
+        cos_sum += wc * occ;
+        cos_wsum += wc;
+        let ww = ddgi_backface_weight(dir, normal) * chebyshev * trilinear;
+        wrap_sum += ww * occ;
+        wrap_wsum += ww;
+    }
+    var r = -1.0;
+    if (cos_wsum > 0.0) {
+        r = cos_sum / cos_wsum;
+    } else if (wrap_wsum > 0.0) {
+        r = wrap_sum / wrap_wsum;
+    }
+    if (!(r >= 0.0 && r <= 3.4028235e38)) {
+        return -1.0;
+    }
+    return pow(clamp(r, 0.0, 1.0), max(bitcast<f32>(v.shadow.z), 0.0));
+}
+
+// DdgiFieldSet::shadow_visibility: the first member in sampling order with a
+// shadowing field that weighs the point (its probe box and one cell around it)
+// and has a usable probe; −1 where none does.
+fn ddgi_shadow_visibility(position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>,
+                          dir_to_light: vec3<f32>) -> f32 {
+    let n = ddgi_set.header.x;
+    for (var m = 0u; m < n; m++) {
+        let v = ddgi_set.volumes[m];
+        if (v.shadow.y == 0u || ddgi_volume_blend_weight(v, position, false) <= 0.0) {
+            continue;
+        }
+        let r = ddgi_volume_shadow(m, position, normal, view_dir, dir_to_light);
+        if (r >= 0.0) {
+            return r;
+        }
+    }
+    return -1.0;
 }

@@ -582,10 +582,23 @@ fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, specu
     wo.z = max(wo.z, 1e-4);
     wo = normalize(wo);
     let bsdf = scene_bsdf(sp);
+    let punctual = bitcast<u32>(scene_lights[0].x);
+    return scene_direct_punctual(sp, fr, wo, bsdf, punctual) + scene_direct_area(sp, to_viewer, area_samples, specular_area, rng);
+}
+
+// scene_direct's emitters alone (a caller that lights the punctual lights itself:
+// the camera pass with a shadowing field).
+fn scene_direct_area(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, specular_area: bool,
+                     rng: ptr<function, u32>) -> vec3<f32> {
+    let fr = frame_from_normal(scene_facing_normal(sp));
+    var wo = frame_to_local(fr, to_viewer);
+    wo.z = max(wo.z, 1e-4);
+    wo = normalize(wo);
+    let bsdf = scene_bsdf(sp);
     let header = scene_lights[0];
     let punctual = bitcast<u32>(header.x);
     let emitters = bitcast<u32>(header.y);
-    var l = scene_direct_punctual(sp, fr, wo, bsdf, punctual);
+    var l = vec3<f32>(0.0);
     if (emitters > 0u && area_samples > 0u) {
         let k = u32(ceil(sqrt(f32(area_samples))));
         let n = k * k;

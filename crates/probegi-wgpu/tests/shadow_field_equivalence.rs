@@ -1,0 +1,109 @@
+//! The shadowing field (seed 003 ch. 5) with `--backend wgpu`'s tracer (the
+//! field kept on the device where it can be): its shadow rays are traced on the
+//! GPU in the same batch as the probe rays, so on lavapipe, whose hits equal the
+//! CPU's, the occlusion maps agree with the CPU's to float reordering and the
+//! probe states are equal; and the GPU camera, reading the maps through
+//! `ddgi_query.wgsl`'s `ddgi_shadow_visibility`, renders the shadow box (seed
+//! 003 Fig. 7.10) within the CPU's own seed-to-seed HDR-FLIP.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+use glam::UVec3;
+use probegi_core::camera::CameraRays;
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::image::Image;
+use probegi_cpu::field_update::FieldSetUpdate;
+use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_field::ddgi_field_set::DdgiFieldSet;
+use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
+use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
+use probegi_wgpu::GpuContext;
+use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
+
+fn settings() -> DdgiVolumeSettings {
+    DdgiVolumeSettings {
+        probe_counts: UVec3::new(16, 4, 16),
+        probe_rays_per_probe: 64,
+        shadow_field: true,
+        shadow_field_sharpness: 2.0,
+        ..Default::default()
+    }
+}
+
+fn gpu(scene: &Scene) -> Option<WgpuProbeTracer> {
+    let ctx = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set")?;
+    let bvh = BvhTracer::for_scene(scene, BvhSettings::default());
+    let t = WgpuProbeTracer::new(ctx, scene, &bvh, true).expect("upload").keeping_field(true);
+    assert!(t.renders_camera(), "{:?}", t.shading_note);
+    Some(t)
+}
+
+#[test]
+fn gpu_traced_shadow_maps_match_the_cpus() {
+    let scene = load_scene("builtin:shadow-box").expect("builtin");
+    let Some(gpu) = gpu(&scene) else { return };
+    let cpu = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &cpu, DirectSettings::default());
+    let bounds = scene.bounds().expect("geometry");
+    let new_set = || DdgiFieldSet::single(DdgiVolume::new(settings(), bounds));
+    let (mut on_cpu, mut on_gpu) = (new_set(), new_set());
+    let mut ms = BTreeMap::new();
+    for f in 0..5 {
+        on_cpu.update_traced_by(&scene, &cpu, None, &direct, 5, f, &mut ms).expect("CPU");
+        on_gpu.update_traced_by(&scene, &cpu, Some(&gpu), &direct, 5, f, &mut ms).expect("GPU");
+    }
+    let (c, g) = (&on_cpu.volumes()[0], &on_gpu.volumes()[0]);
+    assert_eq!(c.probe_states, g.probe_states, "probe states");
+    let (oc, og) = (&c.shadow.as_ref().expect("cpu").occlusion, &g.shadow.as_ref().expect("gpu").occlusion);
+    let worst = oc.texels.iter().zip(&og.texels).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    let mean = oc.texels.iter().zip(&og.texels).map(|(a, b)| (a - b).abs()).sum::<f32>() / oc.texels.len() as f32;
+    let shadowed = oc.texels.iter().filter(|v| **v < 0.5).count();
+    eprintln!("occlusion maps: largest texel difference {worst:.2e}, mean {mean:.2e}; {shadowed} CPU texels below 0.5");
+    assert!(shadowed > 100, "the box's maps hold shadow: {shadowed} texels below 0.5");
+    assert!(worst < 1e-3, "occlusion maps differ by {worst}");
+}
+
+fn render(scene: &Scene, seed: u64, gpu: Option<Arc<WgpuProbeTracer>>) -> Image {
+    render_with(scene, seed, gpu, settings())
+}
+
+fn render_with(scene: &Scene, seed: u64, gpu: Option<Arc<WgpuProbeTracer>>, s: DdgiVolumeSettings) -> Image {
+    let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
+    let camera = CameraRays::new(&scene.camera.expect("camera"), 64, 48);
+    let rs = RenderSettings {
+        width: 64,
+        height: 48,
+        frames: 8,
+        seed,
+        gi: GiMethod::Ddgi(Box::new(s)),
+        probe_tracer: gpu.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
+        ..Default::default()
+    };
+    let out = render_frames(scene, &cpu, &camera, &rs, |_, _| {});
+    assert!(out.stats.error.is_none(), "{:?}", out.stats.error);
+    out.image
+}
+
+#[test]
+fn the_shadow_box_renders_with_the_field_on_the_gpu_as_on_the_cpu() {
+    let scene = load_scene("builtin:shadow-box").expect("builtin");
+    let Some(gpu) = gpu(&scene) else { return };
+    let (a, b) = (render(&scene, 3, None), render(&scene, 4, None));
+    let g = render(&scene, 3, Some(Arc::new(gpu)));
+    let flip = |x: &Image, y: &Image| probegi_image::mean_flip_hdr(x, y).expect("same size");
+    let (noise, f) = (flip(&a, &b), flip(&a, &g));
+    eprintln!("shadow box: HDR-FLIP CPU vs GPU {f:.4}; CPU seed 3 vs 4 {noise:.4}; means {} {}", a.mean(), g.mean());
+    assert!(g.first_invalid_pixel().is_none());
+    assert!(f < noise.max(0.02) + 0.005, "FLIP {f} above the seed noise {noise}");
+    let (ma, mg) = (a.mean(), g.mean());
+    assert!((ma - mg).abs().max_element() < 0.02 * ma.max_element(), "means {ma} vs {mg}");
+    // The GPU camera reads the field, not shadow rays: exact shadows are farther
+    // from the CPU's field image than the GPU's field image is.
+    let exact = render_with(&scene, 3, None, DdgiVolumeSettings { shadow_field: false, ..settings() });
+    let fe = flip(&a, &exact);
+    eprintln!("shadow box: HDR-FLIP field vs exact shadow rays (CPU) {fe:.4}");
+    assert!(f < 0.5 * fe, "the GPU image ({f}) is no closer to the field's than exact shadows are ({fe})");
+}
