@@ -197,6 +197,11 @@ pub struct RenderArgs {
     /// Draw each DDGI probe as a small sphere shaded by its irradiance.
     #[arg(long)]
     pub show_probes: bool,
+    /// Write the shadowing field's light-visibility image (seed 003 ch. 5; needs
+    /// `--set shadow_field=true`): per pixel the fraction of the punctual
+    /// lights' direct light the field lets through, 0..1 (.exr or .png).
+    #[arg(long)]
+    pub ao: Option<PathBuf>,
     /// Area-light shadow samples per pixel per frame (stratified).
     #[arg(long, default_value_t = 16)]
     pub area_samples: u32,
@@ -253,6 +258,10 @@ pub struct ReferenceArgs {
     /// Scene settings, e.g. `--set normal_maps=false`, `--set alpha_cutouts=false`.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Also write the punctual lights' exact light-visibility image (one shadow
+    /// ray per light per pixel), to compare with `render --ao` (.exr or .png).
+    #[arg(long)]
+    pub ao: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]

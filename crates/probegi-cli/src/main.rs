@@ -18,7 +18,7 @@ mod scene_setup;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use probegi_core::camera::CameraRays;
@@ -124,6 +124,13 @@ fn render(args: &RenderArgs) -> Result<()> {
     if let (Some(dir), Some(set)) = (&args.dump_atlases, &out.ddgi) {
         dump_set_atlases(dir, set)?;
     }
+    if let Some(path) = &args.ao {
+        let set = out.ddgi.as_ref().filter(|s| s.has_shadow_field());
+        let set = set.context("--ao writes the shadowing field's image: it needs --gi ddgi --set shadow_field=true")?;
+        let (w, h) = (args.scene.width, args.scene.height);
+        let ao = probegi_cpu::light_visibility::light_visibility_image(&scene, &bvh, &rays, w, h, Some(set));
+        probegi_image::write_image(path, &ao).with_context(|| format!("writing {}", path.display()))?;
+    }
     eprintln!(
         "wrote {} ({}×{}, {} frame{}, {:.2} s, scene {})",
         args.out.display(),
@@ -149,6 +156,9 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
         bail!("--max-depth must be in 1..=4096 (got {})", args.max_depth);
     }
     probegi_image::check_output_path(&args.out, true)?;
+    if let Some(p) = &args.ao {
+        probegi_image::check_output_path(p, true)?;
+    }
     if !args.frame.is_finite() {
         bail!("--frame must be a finite frame number");
     }
@@ -183,6 +193,17 @@ fn reference(args: &ReferenceArgs) -> Result<()> {
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     write_radiance(&args.out, &image)?;
+    if let Some(path) = &args.ao {
+        let ao = probegi_cpu::light_visibility::light_visibility_image(
+            &scene,
+            &bvh,
+            &rays,
+            args.scene.width,
+            args.scene.height,
+            None,
+        );
+        probegi_image::write_image(path, &ao).with_context(|| format!("writing {}", path.display()))?;
+    }
     eprintln!(
         "wrote {} ({}×{}, {} spp, {:.2} s, {:.2} Mrays/s, scene {})",
         args.out.display(),

@@ -26,6 +26,9 @@ pub fn check_render_outputs(args: &RenderArgs) -> Result<()> {
     if let Some(p) = &args.gif {
         probegi_image::check_output_path(p, false)?;
     }
+    if let Some(p) = &args.ao {
+        probegi_image::check_output_path(p, true)?;
+    }
     for dir in [&args.sequence, &args.dump_atlases].into_iter().flatten() {
         if dir.exists() && !dir.is_dir() {
             bail!("{}: exists and is not a directory", dir.display());

@@ -65,6 +65,14 @@ pub fn gi_method(scene: &Scene, args: &RenderArgs) -> Result<GiMethod> {
     if !matches!(gi, GiMethod::Ddgi(_) | GiMethod::DdgiSet(_)) && (args.dump_atlases.is_some() || args.show_probes) {
         bail!("--dump-atlases and --show-probes need --gi ddgi");
     }
+    let shadow_field = match &gi {
+        GiMethod::Ddgi(s) => s.shadow_field,
+        GiMethod::DdgiSet(set) => set.volumes.iter().any(|v| v.shadow_field),
+        _ => false,
+    };
+    if args.ao.is_some() && !shadow_field {
+        bail!("--ao writes the shadowing field's visibility: it needs --gi ddgi --set shadow_field=true");
+    }
     Ok(gi)
 }
 

@@ -6,6 +6,7 @@
 //! - [`direct`]: direct light (emission, punctual, area lights and sky).
 //! - [`glossy`]: second-order glossy reflections read from the probes.
 //! - [`probe_vis`]: `--show-probes`, probes drawn as spheres in the image.
+//! - [`light_visibility`]: `--ao`, punctual lights' visibility from the shadowing field or shadow rays.
 //!
 //! The DDGI field update on the CPU (seeds 003 and 004):
 //! - [`field_update`]: the field set's seam driven with this crate's tracing and shading.
@@ -31,6 +32,7 @@ pub mod frame_loop;
 pub mod gbuffer;
 pub mod glossy;
 pub mod light_sampling;
+pub mod light_visibility;
 pub mod parallel;
 pub mod path_tracer;
 pub mod shading;
