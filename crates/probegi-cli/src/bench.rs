@@ -221,6 +221,8 @@ impl DdgiSweep<'_> {
             "volume_mib": ddgi_volume_bytes(&settings) as f64 / (1u64 << 20) as f64,
             "rays_per_probe": rays,
             "rays_per_frame": n as u64,
+            // The shadowing field's shadow rays in the same batch (seed 003 §5.1).
+            "shadow_rays_per_frame": (batch.len() as u64).saturating_sub(n as u64),
             "bare_rays": bare_rays as u64,
             "pass_ms": pass_ms,
             "field_update_ms": update_ms,

@@ -110,6 +110,7 @@ impl FieldSetUpdate for DdgiFieldSet {
         self.set_update_rays_on_device(driver.device.is_some_and(|d| d.generates_update_rays()));
         // The shadowing field serves the lights as posed for this frame.
         self.set_shadow_lights(&scene.lights);
+        self.set_shadow_on_device(driver.device.is_some_and(|d| d.blends_shadow_field()));
         let mut step = self.begin_update(seed, frame);
         loop {
             step = match step {

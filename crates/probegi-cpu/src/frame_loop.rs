@@ -162,8 +162,9 @@ pub struct RenderOutput {
     pub sh: Option<ShProbes>,
 }
 
-/// Names of the passes that make up a DDGI field update.
-pub const FIELD_UPDATE_PASSES: [&str; 5] = ["ray_gen", "trace", "shade", "blend", "border"];
+/// Names of the passes that make up a DDGI field update (`shadow_blend`: the
+/// shadowing field's occlusion blend, where a volume keeps one).
+pub const FIELD_UPDATE_PASSES: [&str; 6] = ["ray_gen", "trace", "shade", "blend", "border", "shadow_blend"];
 
 /// The render's running sums between frames.
 struct Accumulation {

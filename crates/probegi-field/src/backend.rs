@@ -184,6 +184,15 @@ pub trait DeviceField: Sync {
         false
     }
 
+    /// Whether [`Self::shade_and_blend`] also runs the shadowing field's update
+    /// (`DeviceVolumeBlend::shadow`: shadow rays from the previous update
+    /// batch's hits, which the device keeps, and the occlusion blend), and
+    /// [`Self::download_field`] copies the occlusion maps back
+    /// ([`DdgiFieldSet::set_shadow_on_device`](crate::DdgiFieldSet::set_shadow_on_device)).
+    fn blends_shadow_field(&self) -> bool {
+        false
+    }
+
     /// Copies the atlases of volume `index` as the device holds them into `volume`'s own.
     fn download_field(&self, index: usize, volume: &mut DdgiVolume) -> Result<(), BackendError>;
 }

@@ -120,6 +120,8 @@ pub struct DdgiFieldSet {
     update_rays_on_device: bool,
     /// The punctual lights the shadowing field serves ([`Self::set_shadow_lights`]).
     shadow_lights: Vec<probegi_scene::PunctualLight>,
+    /// A device casts and blends the shadowing field's rays ([`Self::set_shadow_on_device`]).
+    shadow_on_device: bool,
 }
 
 impl DdgiFieldSet {
@@ -165,6 +167,7 @@ impl DdgiFieldSet {
             field_on_device: false,
             update_rays_on_device: false,
             shadow_lights: Vec::new(),
+            shadow_on_device: false,
         }
     }
 
@@ -330,14 +333,16 @@ impl DdgiFieldSet {
             }
         }
         // Shadow rays are made on the host: a batch with them keeps per-ray arrays.
-        let per_ray = !self.update_rays_on_device || self.has_shadow_field();
+        let per_ray = !self.update_rays_on_device || self.has_host_shadow_rays();
         self.batch.clear(ProbeRayBatchKind::Update, per_ray);
         for i in 0..self.volumes.len() {
             self.volumes[i].plan_update(&mut self.frames[i], self.seed, self.frame, i as u32, &mut self.batch);
         }
-        // Then every volume's shadow rays, after all the probes' primary rays.
+        // Then every volume's shadow rays, after all the probes' primary rays
+        // (none where a device casts them from the hits it kept).
+        let lights: &[probegi_scene::PunctualLight] = if self.shadow_on_device { &[] } else { &self.shadow_lights };
         for i in 0..self.volumes.len() {
-            self.volumes[i].plan_shadow_rays(&mut self.frames[i], &self.shadow_lights, &mut self.batch);
+            self.volumes[i].plan_shadow_rays(&mut self.frames[i], lights, &mut self.batch);
         }
         self.last_batch_rays = self.batch.len() as u64;
         self.last_batch_rays_per_volume = self.batch.rays_per_volume(self.volumes.len());
@@ -408,7 +413,7 @@ impl DdgiFieldSet {
                         &self.hits,
                         &mut self.batch.needs_radiance,
                     );
-                    volumes[i].accept_shadow_hits(&mut frames[i], &self.batch, &self.hits);
+                    volumes[i].accept_shadow_hits(&mut frames[i], self.frame, &self.batch, &self.hits);
                 }
                 self.mark_probes_needing_radiance();
                 self.time("classify", t);
@@ -459,7 +464,7 @@ impl DdgiFieldSet {
             } else {
                 HostHits::All
             }
-        } else if self.has_shadow_field() {
+        } else if self.has_host_shadow_rays() {
             // The shadow field's shadow rays and surfels are read on the host.
             HostHits::All
         } else if self
@@ -482,13 +487,27 @@ impl DdgiFieldSet {
         match self.batch.kind {
             ProbeRayBatchKind::Initialization => self.hits_needed_on_host() != HostHits::Relocation,
             // The shadow field keeps front hits as surfels, with their normals.
-            ProbeRayBatchKind::Update => self.has_shadow_field(),
+            ProbeRayBatchKind::Update => self.has_host_shadow_rays(),
         }
     }
 
     /// Whether a volume of the set keeps a shadowing field (`shadow_field`).
     pub fn has_shadow_field(&self) -> bool {
         self.volumes.iter().any(|v| v.shadow.is_some())
+    }
+
+    /// Whether the host plans and reads the shadowing field's rays (a volume
+    /// keeps a field, and no device casts them).
+    fn has_host_shadow_rays(&self) -> bool {
+        self.has_shadow_field() && !self.shadow_on_device
+    }
+
+    /// With `on_device`, from the next update on a device that keeps the update
+    /// batches' hits casts the shadowing field's shadow rays from them and
+    /// blends the occlusion maps it holds (`DeviceVolumeBlend::shadow`); the
+    /// host plans none.
+    pub fn set_shadow_on_device(&mut self, on_device: bool) {
+        self.shadow_on_device = on_device;
     }
 
     /// The punctual lights the shadowing field's probes serve from the next
@@ -676,7 +695,7 @@ impl DdgiFieldSet {
     /// device has run it.
     pub fn device_blend_plan(&self) -> Result<Vec<DeviceVolumeBlend<'_>>, SeamError> {
         self.expect(UpdateStep::ShadeRays, "device_blend_plan")?;
-        Ok(self.volumes.iter().zip(&self.frames).map(|(v, f)| v.device_blend(f)).collect())
+        Ok(self.volumes.iter().zip(&self.frames).map(|(v, f)| v.device_blend(f, &self.shadow_lights)).collect())
     }
 
     /// The set's bookkeeping after a device ran [`Self::device_blend_plan`]
@@ -685,7 +704,8 @@ impl DdgiFieldSet {
     pub fn submit_device_blend(&mut self) -> Result<UpdateStep, SeamError> {
         self.expect(UpdateStep::ShadeRays, "submit_device_blend")?;
         for i in 0..self.volumes.len() {
-            self.volumes[i].accept_device_blend(&self.frames[i]);
+            self.volumes[i].accept_device_blend(&self.frames[i], &self.shadow_lights);
+            self.volumes[i].record_shadow_batch(&self.frames[i], self.frame);
         }
         self.field_on_device = true;
         self.expected = UpdateStep::Done;

@@ -32,6 +32,26 @@ pub struct DeviceVolumeBlend<'a> {
     /// Probes whose tiles the host cleared since the last blend (scrolled in):
     /// the device clears its copies before blending.
     pub reset_probes: &'a [u32],
+    /// The shadowing field's share, for a volume that keeps one
+    /// ([`DeviceShadowBlend`]; `None` otherwise).
+    pub shadow: Option<DeviceShadowBlend>,
+}
+
+/// One volume's shadowing-field update on another device (seed 003 §5.1, eq.
+/// 5.2–5.3; `ddgi_volume::shadow_rays` on the host): shadow rays from the hits
+/// of the previous frame's update batch, which the device kept, toward
+/// `lights`, blended into the occlusion maps it holds.
+#[derive(Clone, Debug)]
+pub struct DeviceShadowBlend {
+    /// The frame whose update batch the rays below refer to: a device whose
+    /// kept batch is another frame's blends nothing this frame.
+    pub prev_frame: u32,
+    /// The lights the volume serves (its brightest `shadow_field_max_lights`).
+    pub lights: Vec<probegi_scene::PunctualLight>,
+    /// Per probe that blends this frame and traced in the previous one: its
+    /// storage slot, its first ray and ray count in that frame's batch, and its
+    /// occlusion hysteresis (0 for a first blend).
+    pub probes: Vec<(u32, u32, u32, f32)>,
 }
 
 /// One probe of an initialisation batch whose relocation iteration runs on another

@@ -92,6 +92,8 @@ pub struct GpuDdgiField {
     /// Per member in sampling order: probes, irradiance / distance interior,
     /// first irradiance / distance texel, its index among the set's volumes.
     members: Vec<[u32; 6]>,
+    /// Per shadowing-field member: volume, first occlusion texel, interior, probes.
+    occlusion: Vec<[u32; 4]>,
     /// Set, irradiance, distance, probes.
     buffers: [wgpu::Buffer; 4],
     bind_group: wgpu::BindGroup,
@@ -107,6 +109,9 @@ struct PackedField {
     irradiance_texels: usize,
     distance_texels: usize,
     members: Vec<[u32; 6]>,
+    /// Per shadowing-field member: its volume index, first occlusion texel,
+    /// interior and probes.
+    occlusion: Vec<[u32; 4]>,
 }
 
 /// A member's `DdgiVolume` (grid, weights, bias, atlas interiors) with its first
@@ -187,10 +192,17 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
     }
     // The shadowing field's occlusion maps follow every distance atlas in the
     // distance buffer, one texel as (visibility, 0).
+    let mut occlusion_rows = vec![];
     for (v, m) in volumes.iter_mut().zip(&set.members) {
         if let Some(occlusion) = m.occlusion {
             let s = m.field.settings.shadow_field_sharpness;
             v.shadow = [distance_texels as u32, occlusion.interior, s.to_bits(), 0];
+            occlusion_rows.push([
+                m.volume as u32,
+                distance_texels as u32,
+                occlusion.interior,
+                occlusion.probe_count as u32,
+            ]);
             distance_texels += occlusion.texels.len();
             if with_atlases {
                 distance.extend(occlusion.texels.iter().map(|&t| [t, 0.0]));
@@ -212,7 +224,16 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
         irradiance.resize(irradiance_texels, [0.0; 4]);
         distance.resize(distance_texels, [0.0; 2]);
     }
-    Ok(PackedField { set: set_bytes, irradiance, distance, probes, irradiance_texels, distance_texels, members })
+    Ok(PackedField {
+        set: set_bytes,
+        irradiance,
+        distance,
+        probes,
+        irradiance_texels,
+        distance_texels,
+        members,
+        occlusion: occlusion_rows,
+    })
 }
 
 impl GpuDdgiField {
@@ -269,6 +290,7 @@ impl GpuDdgiField {
             probes: packed.probes.len(),
             bytes: buffers.iter().map(|b| b.size()).sum(),
             members: packed.members,
+            occlusion: packed.occlusion,
             buffers,
             bind_group,
         })
@@ -286,7 +308,10 @@ impl GpuDdgiField {
             packed.distance_texels as u64 * 8,
             packed.probes.len() as u64 * 16,
         ];
-        if packed.members != self.members || sizes.iter().zip(&self.buffers).any(|(s, b)| *s != b.size()) {
+        if packed.members != self.members
+            || packed.occlusion != self.occlusion
+            || sizes.iter().zip(&self.buffers).any(|(s, b)| *s != b.size())
+        {
             return Err(GpuError::Input("the field set changed shape since its upload".into()));
         }
         ctx.write_buffer(&self.buffers[0], 0, &packed.set);
@@ -312,6 +337,22 @@ impl GpuDdgiField {
             irradiance: self.buffers[1].clone(),
             distance: self.buffers[2].clone(),
         })
+    }
+
+    /// Where volume `volume`'s occlusion maps lie (its index among the set's
+    /// volumes as given), when it keeps a shadowing field.
+    pub fn member_occlusion(&self, volume: usize) -> Option<crate::shadow_field::OcclusionTarget<'_>> {
+        let [_, first, interior, probes] = *self.occlusion.iter().find(|o| o[0] as usize == volume)?;
+        Some(crate::shadow_field::OcclusionTarget { buffer: &self.buffers[2], first, interior, probes })
+    }
+
+    /// Volume `volume`'s occlusion maps read back (`None` without a shadowing field).
+    pub fn download_occlusion(&self, ctx: &GpuContext, volume: usize) -> Result<Option<Vec<f32>>, GpuError> {
+        let Some(t) = self.member_occlusion(volume) else { return Ok(None) };
+        let texels = t.probes as u64 * (t.interior as u64 + 2).pow(2);
+        let bytes = ctx.read_back_range(t.buffer, t.first as u64 * 8, texels * 8)?;
+        let v: &[[f32; 2]] = bytemuck::cast_slice(&bytes);
+        Ok(Some(v.iter().map(|t| t[0]).collect()))
     }
 
     /// The bind group to set at the group `query_wgsl` was built for.

@@ -254,6 +254,22 @@ impl GpuContext {
         self.read_buffer(&staging)
     }
 
+    /// Reads `bytes` of a `COPY_SRC` buffer back from byte `offset` on.
+    pub(crate) fn read_back_range(&self, buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> Result<Vec<u8>, GpuError> {
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: bytes.max(4),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(buffer, offset, &staging, 0, bytes);
+        self.queue.submit([encoder.finish()]);
+        let mut out = self.read_buffer(&staging)?;
+        out.truncate(bytes as usize);
+        Ok(out)
+    }
+
     /// Copies `buffer` (a `MAP_READ | COPY_DST` staging buffer already filled) into a vector.
     pub(crate) fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
         let slice = buffer.slice(..);

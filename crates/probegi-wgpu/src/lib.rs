@@ -24,6 +24,7 @@
 //! - [`probe_shade`]: the shade pass of the probe rays (sky, back faces, direct
 //!   light with shadow rays, the previous field, second-order glossy);
 //! - [`probe_usage`]: seed 003's usage counts over a traced batch where it lies;
+//! - [`shadow_field`]: the shadowing field's shadow rays and occlusion blend (seed 003 ch. 5);
 //! - `shader_registry` (crate-private): the one owner of the WGSL: each pass's
 //!   files in order, the constants prelude generated from the Rust `const`s,
 //!   and the bind-group convention (0 the pass, 1 the BVH, 2 the field, 3 the
@@ -54,6 +55,7 @@ pub mod probe_relocation;
 pub mod probe_shade;
 pub mod probe_usage;
 pub(crate) mod shader_registry;
+pub mod shadow_field;
 pub mod wgpu_field_backend;
 
 pub use gpu_context::{GpuContext, GpuError};

@@ -241,6 +241,7 @@ impl GpuProbeBlend {
             visibility_scale: frame.visibility_scale,
             distance_clamp_m: frame.distance_clamp_m,
             reset_probes: &[],
+            shadow: None,
         };
         self.prepare_resident(ctx, atlases, &plan, &results)
     }

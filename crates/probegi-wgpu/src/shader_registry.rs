@@ -88,13 +88,17 @@ pub(crate) const PROBE_USAGE: PassShader =
 /// `camera_frame::GpuCameraPass`.
 pub(crate) const CAMERA_FRAME: PassShader =
     PassShader { label: "camera_frame.wgsl", files: &[BVH, DDGI_QUERY, SCENE, wgsl_file!("camera_frame.wgsl")] };
+/// `shadow_field::GpuShadowField`.
+pub(crate) const SHADOW_FIELD: PassShader =
+    PassShader { label: "shadow_field.wgsl", files: &[BVH, SCENE, wgsl_file!("shadow_field.wgsl")] };
 /// `ddgi_query::GpuFieldQuery`.
 pub(crate) const FIELD_QUERY: PassShader =
     PassShader { label: "field_query.wgsl", files: &[DDGI_QUERY, wgsl_file!("field_query.wgsl")] };
 
 /// Every pass of the crate (the unit tests compile each).
 #[cfg(test)]
-pub(crate) const PASSES: [&PassShader; 9] = [
+pub(crate) const PASSES: [&PassShader; 10] = [
+    &SHADOW_FIELD,
     &TRACE_RAYS,
     &PROBE_RAY_GEN,
     &PROBE_SHADE,
@@ -221,10 +225,15 @@ mod tests {
         use crate::probe_relocation::RelocationParams;
         use crate::probe_shade::{ShadeParams, ShadeProbe};
         use crate::probe_usage::UsageParams;
+        use crate::shadow_field::{ShadowParams, ShadowProbe};
         use probegi_field::device_plans::DeviceRelocationProbe;
         use probegi_field::seam::BatchProbe;
         let (ray, hit) = (size_of::<GpuRay>(), size_of::<GpuRayHit>());
-        let cases: [(&PassShader, &str, usize); 26] = [
+        let cases: [(&PassShader, &str, usize); 30] = [
+            (&SHADOW_FIELD, "ShadowParams", size_of::<ShadowParams>()),
+            (&SHADOW_FIELD, "ShadowProbe", size_of::<ShadowProbe>()),
+            (&SHADOW_FIELD, "ShadowRay", ray),
+            (&SHADOW_FIELD, "ShadowHit", hit),
             (&TRACE_RAYS, "TraceParams", size_of::<TraceParams>()),
             (&TRACE_RAYS, "GpuRay", ray),
             (&TRACE_RAYS, "GpuRayHit", hit),

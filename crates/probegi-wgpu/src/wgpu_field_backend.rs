@@ -49,6 +49,7 @@ use crate::probe_ray_gen::GpuProbeRayGen;
 use crate::probe_relocation::GpuProbeRelocation;
 use crate::probe_shade::{GpuProbeShade, batch_shade_probes};
 use crate::probe_usage::GpuProbeUsage;
+use crate::shadow_field::GpuShadowField;
 use crate::{GpuContext, GpuError};
 
 impl From<GpuError> for BackendError {
@@ -69,6 +70,29 @@ pub(crate) fn batch_rays(batch: &ProbeRayBatch) -> Vec<GpuRay> {
     (0..batch.len())
         .map(|i| GpuRay::new(batch.origins_m[i], batch.directions[i], 0.0, batch.max_distances_m[i]))
         .collect()
+}
+
+impl WgpuProbeTracer {
+    /// The shadowing field's update of every volume `plan` has one for, from the
+    /// kept previous batch when it is the frame the plan refers to.
+    fn shadow_update(
+        &self,
+        field: &GpuDdgiField,
+        scene: &GpuScene,
+        plan: &[DeviceVolumeBlend<'_>],
+    ) -> Result<(), GpuError> {
+        let Some(pass) = self.shadow.as_ref() else { return Ok(()) };
+        let prev = self.prev_update.lock().map_err(|_| GpuError::Input("a GPU pass panicked earlier".into()))?;
+        for (i, p) in plan.iter().enumerate() {
+            let (Some(shadow), Some((frame, batch))) = (p.shadow.as_ref(), prev.as_ref()) else { continue };
+            if *frame != shadow.prev_frame {
+                continue;
+            }
+            let target = field.member_occlusion(i).ok_or_else(|| GpuError::Input("no occlusion maps".into()))?;
+            pass.update(&self.ctx, &self.trace, &self.bvh, scene, batch, shadow, &target)?;
+        }
+        Ok(())
+    }
 }
 
 /// The update volumes of `batch` whose probes cast the same rays each and lie
@@ -127,6 +151,11 @@ pub struct WgpuProbeTracer {
     rounds_on_device: [std::sync::atomic::AtomicU32; 2],
     /// The resident field (atlases and per-probe data), once an update made it.
     field: Mutex<Option<GpuDdgiField>>,
+    /// The shadowing field's passes (with `keeping_field`, where the adapter binds enough buffers).
+    shadow: Option<GpuShadowField>,
+    /// The last update batch blended on the device, kept with its frame: the
+    /// shadowing field casts the next frame's shadow rays from its hits.
+    prev_update: Mutex<Option<(u32, GpuRayBatch)>>,
 }
 
 impl WgpuProbeTracer {
@@ -181,6 +210,8 @@ impl WgpuProbeTracer {
             ray_gen: None,
             rounds_on_device: Default::default(),
             field: Mutex::new(None),
+            shadow: None,
+            prev_update: Mutex::new(None),
         })
     }
 
@@ -201,6 +232,8 @@ impl WgpuProbeTracer {
             }
         }
         self.ray_gen = self.keep_field.then(|| GpuProbeRayGen::new(&self.ctx));
+        // Without it the shadowing field's rays and blend run on the host.
+        self.shadow = if self.keep_field { GpuShadowField::new(&self.ctx).ok() } else { None };
         self
     }
 
@@ -569,12 +602,26 @@ impl DeviceField for WgpuProbeTracer {
             }
             self.ctx.queue.submit([encoder.finish()]);
             self.ctx.wait()?;
-            Ok(vec![("shade", shade_ms), ("blend", t.elapsed().as_secs_f64() * 1e3)])
+            let blend_ms = t.elapsed().as_secs_f64() * 1e3;
+            let t = std::time::Instant::now();
+            self.shadow_update(f, scene, plan)?;
+            self.ctx.wait()?;
+            Ok(vec![("shade", shade_ms), ("blend", blend_ms), ("shadow_blend", t.elapsed().as_secs_f64() * 1e3)])
         };
-        run(&mut gpu_field).map_err(BackendError::from)
+        let result = run(&mut gpu_field).map_err(BackendError::from);
+        drop(last);
+        // This batch's hits are where the next frame's shadow rays start.
+        if let (Ok(_), Some(_)) = (&result, &self.shadow) {
+            let batch = self.last.lock().map_err(poisoned)?.take();
+            *self.prev_update.lock().map_err(poisoned)? = batch.map(|b| (frame, b));
+        }
+        result
     }
     fn generates_update_rays(&self) -> bool {
         self.ray_gen.is_some()
+    }
+    fn blends_shadow_field(&self) -> bool {
+        self.shadow.is_some()
     }
     fn download_field(&self, index: usize, volume: &mut DdgiVolume) -> Result<(), BackendError> {
         let field = self.field.lock().map_err(poisoned)?;
@@ -590,6 +637,14 @@ impl DeviceField for WgpuProbeTracer {
         }
         volume.irradiance = irradiance;
         volume.distance = distance;
+        if let (Some(shadow), Some(f)) = (volume.shadow.as_mut(), field.as_ref()) {
+            match f.download_occlusion(&self.ctx, index)? {
+                Some(maps) if maps.len() == shadow.occlusion.texels.len() => shadow.occlusion.texels = maps,
+                _ => {
+                    return Err(BackendError::Device(format!("the device holds no occlusion maps for volume {index}")));
+                }
+            }
+        }
         Ok(())
     }
 }

@@ -1,8 +1,9 @@
 //! The shadowing field (seed 003 ch. 5) with `--backend wgpu`'s tracer (the
-//! field kept on the device where it can be): its shadow rays are traced on the
-//! GPU in the same batch as the probe rays, so on lavapipe, whose hits equal the
-//! CPU's, the occlusion maps agree with the CPU's to float reordering and the
-//! probe states are equal; and the GPU camera, reading the maps through
+//! field kept on the device): the device casts the shadow rays from the hits of
+//! the previous update batch it kept and blends the occlusion maps it holds
+//! (`probegi_wgpu::shadow_field`), so on lavapipe, whose hits equal the CPU's,
+//! the maps read back agree with the CPU's to float rounding and the probe
+//! states are equal; and the GPU camera, reading the maps through
 //! `ddgi_query.wgsl`'s `ddgi_shadow_visibility`, renders the shadow box (seed
 //! 003 Fig. 7.10) within the CPU's own seed-to-seed HDR-FLIP.
 
@@ -55,6 +56,9 @@ fn gpu_traced_shadow_maps_match_the_cpus() {
         on_cpu.update_traced_by(&scene, &cpu, None, &direct, 5, f, &mut ms).expect("CPU");
         on_gpu.update_traced_by(&scene, &cpu, Some(&gpu), &direct, 5, f, &mut ms).expect("GPU");
     }
+    // The device cast the shadow rays and blended the maps it holds: read them back.
+    assert!(on_gpu.field_on_device(), "the GPU kept the field");
+    on_gpu.sync_host_atlases(Some(&gpu as &dyn ProbeBatchTracer)).expect("read back");
     let (c, g) = (&on_cpu.volumes()[0], &on_gpu.volumes()[0]);
     assert_eq!(c.probe_states, g.probe_states, "probe states");
     let (oc, og) = (&c.shadow.as_ref().expect("cpu").occlusion, &g.shadow.as_ref().expect("gpu").occlusion);

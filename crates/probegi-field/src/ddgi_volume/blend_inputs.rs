@@ -148,9 +148,15 @@ impl DdgiVolume {
     }
 
     /// This frame's blend as data, for a device that holds the atlases.
-    pub(crate) fn device_blend<'a>(&'a self, frame: &'a VolumeFrame) -> DeviceVolumeBlend<'a> {
+    pub(crate) fn device_blend<'a>(
+        &'a self,
+        frame: &'a VolumeFrame,
+        lights: &[probegi_scene::PunctualLight],
+    ) -> DeviceVolumeBlend<'a> {
         let (base, irradiance_scale, visibility_scale) = self.blend_plan(frame);
+        let shadow = self.device_shadow_blend(&base, irradiance_scale, lights);
         DeviceVolumeBlend {
+            shadow,
             settings: &self.settings,
             ray_dirs: &frame.rays.dirs,
             irradiance_weights: &frame.rays.irradiance_weights,
@@ -164,8 +170,12 @@ impl DdgiVolume {
     }
 
     /// The bookkeeping of a blend another device ran by [`Self::device_blend`].
-    pub(crate) fn accept_device_blend(&mut self, frame: &VolumeFrame) {
-        let updated: Vec<bool> = self.blend_plan(frame).0.iter().map(|b| b.is_some()).collect();
+    pub(crate) fn accept_device_blend(&mut self, frame: &VolumeFrame, lights: &[probegi_scene::PunctualLight]) {
+        let (base, irr_scale, _) = self.blend_plan(frame);
+        if let Some(plan) = self.device_shadow_blend(&base, irr_scale, lights) {
+            self.accept_device_shadow_blend(&plan);
+        }
+        let updated: Vec<bool> = base.iter().map(|b| b.is_some()).collect();
         self.after_update(&updated);
     }
 

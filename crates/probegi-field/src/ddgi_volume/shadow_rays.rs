@@ -26,6 +26,7 @@ use probegi_core::shadow_field::{ShadowSample, blend_shadow_tile};
 use probegi_scene::{LightKind, PunctualLight};
 use rayon::prelude::*;
 
+use crate::device_plans::DeviceShadowBlend;
 use crate::seam::{ProbeRayBatch, ProbeRayHit};
 
 use super::{DdgiVolume, VolumeFrame};
@@ -52,6 +53,12 @@ pub struct ShadowField {
     /// that has some replaces the initial 1 (hysteresis 0), as the irradiance
     /// blend's first does.
     has_history: Vec<bool>,
+    /// The last update batch: each probe's first ray in it (`u32::MAX`: none),
+    /// its rays per probe and its frame, which a device that kept that batch
+    /// casts this frame's shadow rays from ([`DeviceShadowBlend`]).
+    prev_first_ray: Vec<u32>,
+    prev_ray_count: u32,
+    prev_frame: Option<u32>,
 }
 
 impl ShadowField {
@@ -59,7 +66,14 @@ impl ShadowField {
     pub(crate) fn new(probes: usize, texels: u32) -> Self {
         let mut occlusion = ProbeAtlas::new(probes, texels);
         occlusion.texels.fill(1.0);
-        Self { occlusion, surfels: vec![Vec::new(); probes], has_history: vec![false; probes] }
+        Self {
+            occlusion,
+            surfels: vec![Vec::new(); probes],
+            has_history: vec![false; probes],
+            prev_first_ray: vec![u32::MAX; probes],
+            prev_ray_count: 0,
+            prev_frame: None,
+        }
     }
 
     /// Forgets probe `p`'s map and surfels (scrolled in, re-initialised).
@@ -67,6 +81,7 @@ impl ShadowField {
         self.occlusion.tile_mut(p).fill(1.0);
         self.surfels[p].clear();
         self.has_history[p] = false;
+        self.prev_first_ray[p] = u32::MAX;
     }
 }
 
@@ -151,7 +166,14 @@ impl DdgiVolume {
 
     /// After the trace: the shadow rays' visibility into the frame's samples,
     /// then this frame's primary hits kept as the next frame's surfels.
-    pub(crate) fn accept_shadow_hits(&mut self, frame: &mut VolumeFrame, batch: &ProbeRayBatch, hits: &[ProbeRayHit]) {
+    pub(crate) fn accept_shadow_hits(
+        &mut self,
+        frame: &mut VolumeFrame,
+        frame_index: u32,
+        batch: &ProbeRayBatch,
+        hits: &[ProbeRayHit],
+    ) {
+        self.record_shadow_batch(frame, frame_index);
         let Some(shadow) = self.shadow.as_mut() else { return };
         frame.shadow_samples.clear();
         frame.shadow_samples.extend(frame.shadow_slots.iter().map(|s| {
@@ -175,6 +197,60 @@ impl DdgiVolume {
                 }
             }));
         }
+    }
+
+    /// This frame's update batch as the one the next frame's shadow rays start
+    /// from on a device that keeps it.
+    pub(crate) fn record_shadow_batch(&mut self, frame: &VolumeFrame, frame_index: u32) {
+        if let Some(shadow) = self.shadow.as_mut() {
+            shadow.prev_first_ray.clone_from(&frame.first_ray);
+            shadow.prev_first_ray.resize(self.grid.probe_count(), u32::MAX);
+            shadow.prev_ray_count = frame.ray_count as u32;
+            shadow.prev_frame = Some(frame_index);
+        }
+    }
+
+    /// The shadowing field's update as data for a device that kept the last
+    /// update batch (`base`: this frame's blend plan, `irr_scale` its
+    /// scene-event scale): `None` without a field or a previous batch.
+    pub(crate) fn device_shadow_blend(
+        &self,
+        base: &[Option<(usize, f32)>],
+        irr_scale: f32,
+        lights: &[PunctualLight],
+    ) -> Option<DeviceShadowBlend> {
+        let shadow = self.shadow.as_ref()?;
+        let prev_frame = shadow.prev_frame?;
+        let centre = self.grid.origin_m + self.grid.spacing_m * (self.grid.probe_counts.as_vec3() - 1.0) * 0.5;
+        let probes = base
+            .iter()
+            .enumerate()
+            .filter_map(|(p, b)| {
+                let (_, h) = (*b)?;
+                let first = *shadow.prev_first_ray.get(p)?;
+                (first != u32::MAX).then(|| {
+                    let h = if shadow.has_history[p] { h * irr_scale } else { 0.0 };
+                    (p as u32, first, shadow.prev_ray_count, h)
+                })
+            })
+            .collect();
+        Some(DeviceShadowBlend {
+            prev_frame,
+            lights: served_lights(lights, centre, self.settings.shadow_field_max_lights),
+            probes,
+        })
+    }
+
+    /// The bookkeeping of a device's shadowing-field update by `plan`: the
+    /// probes it blended have history; the host's surfels are stale.
+    pub(crate) fn accept_device_shadow_blend(&mut self, plan: &DeviceShadowBlend) {
+        let Some(shadow) = self.shadow.as_mut() else { return };
+        if !plan.lights.is_empty() {
+            for &(p, ..) in &plan.probes {
+                shadow.has_history[p as usize] = true;
+            }
+        }
+        shadow.surfels.iter_mut().for_each(Vec::clear);
     }
 
     /// Eq. 5.2–5.3 into the occlusion maps of the probes that blend this frame
