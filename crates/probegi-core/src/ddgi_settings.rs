@@ -121,6 +121,11 @@ pub struct DdgiVolumeSettings {
     /// The lights a probe serves: the brightest this many punctual lights at the
     /// volume's centre (the seed's scenes have one or two; it names no limit).
     pub shadow_field_max_lights: u32,
+    /// Probe-ray hits, too, read punctual lights' visibility from the shadowing
+    /// field (the previous frame's) instead of tracing shadow rays: cheaper,
+    /// softer bounce light. Off by default: the seed uses the field for the
+    /// final image only.
+    pub shadow_field_probe_shading: bool,
 }
 
 impl Default for DdgiVolumeSettings {
@@ -164,6 +169,7 @@ impl Default for DdgiVolumeSettings {
             shadow_field_texels: 16,
             shadow_field_sharpness: 1.0,
             shadow_field_max_lights: 8,
+            shadow_field_probe_shading: false,
         }
     }
 }

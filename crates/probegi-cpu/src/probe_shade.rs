@@ -6,7 +6,8 @@
 //! - Miss: the sky radiance.
 //! - Front hit: direct light reflected toward the probe with the hit's full BSDF
 //!   (punctual lights exactly, area lights with `probe_area_light_samples` NEE
-//!   samples, shadow rays) plus diffuse albedo/π × the set's own previous
+//!   samples, shadow rays; with `shadow_field_probe_shading`, punctual lights'
+//!   visibility from the shadowing field instead) plus diffuse albedo/π × the set's own previous
 //!   irradiance at the hit — the recursion that accumulates one more bounce per
 //!   frame — plus, with `glossy_second_order`, the hit's specular reflection of the
 //!   field (`glossy`), so light bouncing off glossy objects reaches the field.
@@ -23,7 +24,7 @@
 //!   separate sky term.
 
 use glam::Vec3;
-use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance};
+use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance, field_set_shadow_visibility};
 use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_scene::{RayHit, Scene, SurfacePoint};
 use rayon::prelude::*;
@@ -101,7 +102,14 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                     (Some(_), None) => Vec3::ZERO,
                     (Some(_), Some(sp)) => {
                         let ctx = ShadingContext::new(inputs.scene, sp, -dir);
-                        let (direct, k) = inputs.direct.reflected(sp, &ctx, area, true, &mut rng);
+                        let field = inputs.field;
+                        let from_field = move |p: &SurfacePoint, wi: Vec3| {
+                            field_set_shadow_visibility(field, p.position, p.facing_normal(), -dir, wi)
+                        };
+                        let visibility = settings
+                            .shadow_field_probe_shading
+                            .then_some(&from_field as &crate::shading::PunctualVisibility<'_>);
+                        let (direct, k) = inputs.direct.reflected_with(sp, &ctx, area, true, visibility, &mut rng);
                         rays += k;
                         let mut l = direct + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * field_e[i];
                         if settings.glossy_second_order {

@@ -59,6 +59,10 @@ pub fn shade_info(needs_radiance: bool, glossy_second_order: bool, area_samples:
     (needs_radiance as u32) << 31 | (glossy_second_order as u32) << 30 | area_samples.min(0xffff)
 }
 
+/// [`shade_info`]'s flag (bit 29): punctual lights' visibility from the
+/// shadowing field (`shadow_field_probe_shading`) instead of shadow rays.
+pub const SHADE_SHADOW_FIELD: u32 = 1 << 29;
+
 /// The [`ShadeProbe`] records of a seam batch: each probe's rays, flagged as
 /// needing radiance where `batch.probe_needs_radiance` says so, with its
 /// volume's glossy and area-light settings.
@@ -76,7 +80,8 @@ pub fn batch_shade_probes(
             ShadeProbe {
                 first_ray: bp.first_ray,
                 ray_count: bp.ray_count,
-                info: shade_info(needed, s.glossy_second_order, s.probe_area_light_samples),
+                info: shade_info(needed, s.glossy_second_order, s.probe_area_light_samples)
+                    | if s.shadow_field && s.shadow_field_probe_shading { SHADE_SHADOW_FIELD } else { 0 },
                 _pad: 0,
             }
         })

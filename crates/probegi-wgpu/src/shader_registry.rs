@@ -56,6 +56,7 @@ const BVH: WgslFile = wgsl_file!("bvh.wgsl");
 const DDGI_QUERY: WgslFile = wgsl_file!("ddgi_query.wgsl");
 /// Surfaces, materials and lights (group [`SCENE_GROUP`]).
 const SCENE: WgslFile = wgsl_file!("scene.wgsl");
+const SHADOW_LIGHTING: WgslFile = wgsl_file!("shadow_lighting.wgsl");
 
 /// A pass's shader module: its label and its files in order, after the prelude.
 #[derive(Debug)]
@@ -71,8 +72,10 @@ pub(crate) const TRACE_RAYS: PassShader =
 pub(crate) const PROBE_RAY_GEN: PassShader =
     PassShader { label: "probe_ray_gen.wgsl", files: &[wgsl_file!("probe_ray_gen.wgsl")] };
 /// `probe_shade::GpuProbeShade`.
-pub(crate) const PROBE_SHADE: PassShader =
-    PassShader { label: "probe_shade.wgsl", files: &[BVH, DDGI_QUERY, SCENE, wgsl_file!("probe_shade.wgsl")] };
+pub(crate) const PROBE_SHADE: PassShader = PassShader {
+    label: "probe_shade.wgsl",
+    files: &[BVH, DDGI_QUERY, SCENE, SHADOW_LIGHTING, wgsl_file!("probe_shade.wgsl")],
+};
 /// `probe_blend::GpuProbeBlend`.
 pub(crate) const PROBE_BLEND: PassShader =
     PassShader { label: "probe_blend.wgsl", files: &[wgsl_file!("probe_blend.wgsl")] };
@@ -86,8 +89,10 @@ pub(crate) const PROBE_CLASSIFICATION: PassShader =
 pub(crate) const PROBE_USAGE: PassShader =
     PassShader { label: "probe_usage.wgsl", files: &[wgsl_file!("probe_usage.wgsl")] };
 /// `camera_frame::GpuCameraPass`.
-pub(crate) const CAMERA_FRAME: PassShader =
-    PassShader { label: "camera_frame.wgsl", files: &[BVH, DDGI_QUERY, SCENE, wgsl_file!("camera_frame.wgsl")] };
+pub(crate) const CAMERA_FRAME: PassShader = PassShader {
+    label: "camera_frame.wgsl",
+    files: &[BVH, DDGI_QUERY, SCENE, SHADOW_LIGHTING, wgsl_file!("camera_frame.wgsl")],
+};
 /// `shadow_field::GpuShadowField`.
 pub(crate) const SHADOW_FIELD: PassShader =
     PassShader { label: "shadow_field.wgsl", files: &[BVH, SCENE, wgsl_file!("shadow_field.wgsl")] };

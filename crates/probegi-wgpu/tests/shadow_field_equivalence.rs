@@ -70,10 +70,6 @@ fn gpu_traced_shadow_maps_match_the_cpus() {
     assert!(worst < 1e-3, "occlusion maps differ by {worst}");
 }
 
-fn render(scene: &Scene, seed: u64, gpu: Option<Arc<WgpuProbeTracer>>) -> Image {
-    render_with(scene, seed, gpu, settings())
-}
-
 fn render_with(scene: &Scene, seed: u64, gpu: Option<Arc<WgpuProbeTracer>>, s: DdgiVolumeSettings) -> Image {
     let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
     let camera = CameraRays::new(&scene.camera.expect("camera"), 64, 48);
@@ -93,21 +89,36 @@ fn render_with(scene: &Scene, seed: u64, gpu: Option<Arc<WgpuProbeTracer>>, s: D
 
 #[test]
 fn the_shadow_box_renders_with_the_field_on_the_gpu_as_on_the_cpu() {
+    compare_renders("camera", settings(), true);
+}
+
+#[test]
+fn probe_rays_lit_through_the_field_agree_across_backends() {
+    let s = DdgiVolumeSettings { shadow_field_probe_shading: true, ..settings() };
+    compare_renders("camera and probe rays", s, false);
+}
+
+/// The shadow box rendered with `s` on the CPU (seeds 3 and 4) and the GPU (seed
+/// 3); with `against_exact`, also against exact shadow rays.
+fn compare_renders(name: &str, s: DdgiVolumeSettings, against_exact: bool) {
     let scene = load_scene("builtin:shadow-box").expect("builtin");
     let Some(gpu) = gpu(&scene) else { return };
-    let (a, b) = (render(&scene, 3, None), render(&scene, 4, None));
-    let g = render(&scene, 3, Some(Arc::new(gpu)));
+    let (a, b) = (render_with(&scene, 3, None, s.clone()), render_with(&scene, 4, None, s.clone()));
+    let g = render_with(&scene, 3, Some(Arc::new(gpu)), s.clone());
     let flip = |x: &Image, y: &Image| probegi_image::mean_flip_hdr(x, y).expect("same size");
     let (noise, f) = (flip(&a, &b), flip(&a, &g));
-    eprintln!("shadow box: HDR-FLIP CPU vs GPU {f:.4}; CPU seed 3 vs 4 {noise:.4}; means {} {}", a.mean(), g.mean());
+    eprintln!("{name}: HDR-FLIP CPU vs GPU {f:.4}; CPU seed 3 vs 4 {noise:.4}; means {} {}", a.mean(), g.mean());
     assert!(g.first_invalid_pixel().is_none());
-    assert!(f < noise.max(0.02) + 0.005, "FLIP {f} above the seed noise {noise}");
+    assert!(f < noise.max(0.02) + 0.005, "{name}: FLIP {f} above the seed noise {noise}");
     let (ma, mg) = (a.mean(), g.mean());
-    assert!((ma - mg).abs().max_element() < 0.02 * ma.max_element(), "means {ma} vs {mg}");
+    assert!((ma - mg).abs().max_element() < 0.02 * ma.max_element(), "{name}: means {ma} vs {mg}");
+    if !against_exact {
+        return;
+    }
     // The GPU camera reads the field, not shadow rays: exact shadows are farther
     // from the CPU's field image than the GPU's field image is.
-    let exact = render_with(&scene, 3, None, DdgiVolumeSettings { shadow_field: false, ..settings() });
+    let exact = render_with(&scene, 3, None, DdgiVolumeSettings { shadow_field: false, ..s });
     let fe = flip(&a, &exact);
-    eprintln!("shadow box: HDR-FLIP field vs exact shadow rays (CPU) {fe:.4}");
-    assert!(f < 0.5 * fe, "the GPU image ({f}) is no closer to the field's than exact shadows are ({fe})");
+    eprintln!("{name}: HDR-FLIP field vs exact shadow rays (CPU) {fe:.4}");
+    assert!(f < 0.5 * fe, "{name}: the GPU image ({f}) is no closer to the field's than exact shadows are ({fe})");
 }

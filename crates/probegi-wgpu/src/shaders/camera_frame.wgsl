@@ -27,43 +27,6 @@ fn camera_finite(v: vec3<f32>) -> bool {
     return all(abs(v) <= vec3<f32>(SCENE_F32_MAX));
 }
 
-// scene_direct_punctual with each light's visibility from the shadowing field
-// (probegi_cpu::shading::punctual_direct_with under `shadow_field`), a shadow ray
-// where the field has none.
-fn camera_punctual_from_field(sp: SurfacePoint, to_viewer: vec3<f32>) -> vec3<f32> {
-    let fr = frame_from_normal(scene_facing_normal(sp));
-    var wo = frame_to_local(fr, to_viewer);
-    wo.z = max(wo.z, 1e-4);
-    wo = normalize(wo);
-    let bsdf = scene_bsdf(sp);
-    let n = scene_facing_normal(sp);
-    var l = vec3<f32>(0.0);
-    for (var k = 0u; k < bitcast<u32>(scene_lights[0].x); k++) {
-        var e = vec3<f32>(0.0);
-        let inc = scene_punctual(k, sp.position, &e);
-        if (!(max(max(e.x, e.y), e.z) > 0.0)) {
-            continue;
-        }
-        let cos = scene_lambert_cos(sp, inc.xyz);
-        if (cos <= 0.0) {
-            continue;
-        }
-        var v = ddgi_shadow_visibility(sp.position, n, to_viewer, inc.xyz);
-        if (v < 0.0) {
-            var t_max = SCENE_F32_MAX;
-            if (inc.w < SCENE_F32_MAX) {
-                t_max = inc.w * (1.0 - 1e-4);
-            }
-            let shadow = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, inc.xyz), inc.xyz, 0.0, t_max), true);
-            v = select(0.0, 1.0, shadow.leaf == BVH_NO_HIT);
-        }
-        if (v > 0.0) {
-            l += bsdf_eval(bsdf, wo, frame_to_local(fr, inc.xyz)) * e * (cos * v);
-        }
-    }
-    return l;
-}
-
 @compute @workgroup_size(8, 8)
 fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     let width = u32(camera.right.w);
@@ -95,7 +58,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     let area = camera.info.z;
     var l = vec3<f32>(0.0);
     if ((camera.info.w & 2u) != 0u) {
-        l = camera_punctual_from_field(sp, to_viewer) + scene_direct_area(sp, to_viewer, area, !glossy, &rng);
+        l = shadow_lit_punctual(sp, to_viewer) + scene_direct_area(sp, to_viewer, area, !glossy, &rng);
     } else {
         l = scene_direct(sp, to_viewer, area, !glossy, &rng);
     }

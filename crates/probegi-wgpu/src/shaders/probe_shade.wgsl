@@ -47,7 +47,8 @@ struct ShadeHit {
 @group(0) @binding(1) var<storage, read> shade_rays: array<ShadeRay>;
 @group(0) @binding(2) var<storage, read> shade_hits: array<ShadeHit>;
 // Per probe, sorted by first_ray: its rays and its `info`: bit 31 the set wants
-// their radiance, bit 30 second-order glossy, bits 0..15 area samples.
+// their radiance, bit 30 second-order glossy, bit 29 punctual lights through the
+// shadowing field (shadow_lighting.wgsl), bits 0..15 area samples.
 // Output per ray: xyz radiance, w the blend's signed distance (probe_blend.wgsl's ray_results).
 @group(0) @binding(3) var<storage, read> shade_probes: array<ShadeProbe>;
 @group(0) @binding(4) var<storage, read_write> shade_radiance: array<vec4<f32>>;
@@ -106,7 +107,12 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     var rng = rng_hash(shade_params.seed ^ rng_hash(shade_params.frame ^ rng_hash(i)));
     let to_viewer = -r.dir;
     let n = scene_facing_normal(sp);
-    var l = scene_direct(sp, to_viewer, info & 0xffffu, true, &rng);
+    var l = vec3<f32>(0.0);
+    if ((info & 0x20000000u) != 0u) {
+        l = shadow_lit_punctual(sp, to_viewer) + scene_direct_area(sp, to_viewer, info & 0xffffu, true, &rng);
+    } else {
+        l = scene_direct(sp, to_viewer, info & 0xffffu, true, &rng);
+    }
     let bsdf = scene_bsdf(sp);
     l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * ddgi_irradiance(sp.position, n, to_viewer);
     if ((info & 0x40000000u) != 0u && max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0) {
