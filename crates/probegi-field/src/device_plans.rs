@@ -46,6 +46,9 @@ pub struct DeviceShadowBlend {
     /// The frame whose update batch the rays below refer to: a device whose
     /// kept batch is another frame's blends nothing this frame.
     pub prev_frame: u32,
+    /// Front-face surfels farther than this (m) from their probe cast no
+    /// shadow ray (`shadow_field_surfel_reach_rel`; 0: every surfel).
+    pub surfel_reach_m: f32,
     /// The lights the volume serves (its brightest `shadow_field_max_lights`).
     pub lights: Vec<probegi_scene::PunctualLight>,
     /// Per probe that blends this frame and traced in the previous one: its

@@ -32,7 +32,8 @@ pub(crate) struct ShadowParams {
     pub(crate) groups_x: u32,
     pub(crate) interior: u32,
     pub(crate) occlusion_first: u32,
-    pub(crate) _pad: [u32; 2],
+    pub(crate) surfel_reach_m: f32,
+    pub(crate) _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<ShadowParams>() == 32);
 
@@ -133,7 +134,8 @@ impl GpuShadowField {
             groups_x,
             interior: target.interior,
             occlusion_first: target.first,
-            _pad: [0; 2],
+            surfel_reach_m: plan.surfel_reach_m,
+            _pad: 0,
         };
         let storage = wgpu::BufferUsages::STORAGE;
         let table = ctx.buffer_with("shadow probes", bytemuck::cast_slice(&entries), storage);

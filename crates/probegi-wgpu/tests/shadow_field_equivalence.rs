@@ -44,12 +44,21 @@ fn gpu(scene: &Scene) -> Option<WgpuProbeTracer> {
 
 #[test]
 fn gpu_traced_shadow_maps_match_the_cpus() {
+    // The seed's field (every surfel), and surfels within one cage diagonal.
+    for reach in [0.0, 1.0] {
+        maps_match(DdgiVolumeSettings { shadow_field_surfel_reach_rel: reach, ..settings() });
+    }
+}
+
+/// The occlusion maps after 5 frames with `s`, traced and blended on the CPU
+/// and on the device, read back.
+fn maps_match(s: DdgiVolumeSettings) {
     let scene = load_scene("builtin:shadow-box").expect("builtin");
     let Some(gpu) = gpu(&scene) else { return };
     let cpu = BvhTracer::for_scene(&scene, BvhSettings::default());
     let direct = DirectLighting::new(&scene, &cpu, DirectSettings::default());
     let bounds = scene.bounds().expect("geometry");
-    let new_set = || DdgiFieldSet::single(DdgiVolume::new(settings(), bounds));
+    let new_set = || DdgiFieldSet::single(DdgiVolume::new(s.clone(), bounds));
     let (mut on_cpu, mut on_gpu) = (new_set(), new_set());
     let mut ms = BTreeMap::new();
     for f in 0..5 {
@@ -65,7 +74,8 @@ fn gpu_traced_shadow_maps_match_the_cpus() {
     let worst = oc.texels.iter().zip(&og.texels).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
     let mean = oc.texels.iter().zip(&og.texels).map(|(a, b)| (a - b).abs()).sum::<f32>() / oc.texels.len() as f32;
     let shadowed = oc.texels.iter().filter(|v| **v < 0.5).count();
-    eprintln!("occlusion maps: largest texel difference {worst:.2e}, mean {mean:.2e}; {shadowed} CPU texels below 0.5");
+    let reach = s.shadow_field_surfel_reach_rel;
+    eprintln!("reach {reach}: largest texel difference {worst:.2e}, mean {mean:.2e}; {shadowed} CPU texels below 0.5");
     assert!(shadowed > 100, "the box's maps hold shadow: {shadowed} texels below 0.5");
     assert!(worst < 1e-3, "occlusion maps differ by {worst}");
 }

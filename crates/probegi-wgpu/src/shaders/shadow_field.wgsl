@@ -22,8 +22,9 @@ struct ShadowParams {
     // Occlusion interior texels per side; the volume's first occlusion texel.
     interior: u32,
     occlusion_first: u32,
+    // Front-face surfels farther than this from their probe cast no ray (0: all).
+    surfel_reach_m: f32,
     _pad0: u32,
-    _pad1: u32,
 };
 
 // One probe that blends this frame with rays from the previous frame.
@@ -120,7 +121,7 @@ fn generate_shadow_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_in
         if (to.w >= 0.0) {
             slot = vec4<f32>(to.xyz, bitcast<f32>(SHADOW_FREE));
         }
-    } else {
+    } else if (shadow_params.surfel_reach_m <= 0.0 || h.t <= shadow_params.surfel_reach_m) {
         let sp = scene_surface_point(h.triangle, h.instance, h.bary, false);
         let n = scene_facing_normal(sp);
         let pos = ray.origin + ray.dir * h.t;
