@@ -146,25 +146,24 @@ pub fn field_set_irradiance(set: &DdgiFieldSetView<'_>, position: Vec3, normal: 
     }
 }
 
-/// The shadowing field's light visibility at `position` over the set
-/// (`crate::shadow_field::shadow_visibility`): from the first member in
-/// sampling order that keeps occlusion maps and weighs the point (its probe box
-/// and one cell around it, [`volume_blend_weight`]); `None` where none does
-/// (the caller traces a shadow ray there).
-pub fn field_set_shadow_visibility(
-    set: &DdgiFieldSetView<'_>,
+/// The shadowing field's cage at `position` over the set
+/// (`crate::shadow_field::ShadowCage`): from the first member in sampling
+/// order that keeps occlusion maps, weighs the point (its probe box and one
+/// cell around it, [`volume_blend_weight`]) and has a usable probe there;
+/// `None` where none does (the caller traces shadow rays there).
+pub fn field_set_shadow_cage<'a>(
+    set: &DdgiFieldSetView<'a>,
     position: Vec3,
     normal: Vec3,
     view_dir: Vec3,
-    dir_to_light: Vec3,
-) -> Option<f32> {
+) -> Option<crate::shadow_field::ShadowCage<'a>> {
     set.members.iter().find_map(|m| {
         let occlusion = m.occlusion?;
         if volume_blend_weight(m.field.grid, position, None) <= 0.0 {
             return None;
         }
         let sharpness = m.field.settings.shadow_field_sharpness;
-        crate::shadow_field::shadow_visibility(&m.field, occlusion, position, normal, view_dir, dir_to_light, sharpness)
+        crate::shadow_field::ShadowCage::new(&m.field, occlusion, position, normal, view_dir, sharpness)
     })
 }
 

@@ -82,47 +82,83 @@ pub fn shadow_visibility(
     dir_to_light: Vec3,
     sharpness: f32,
 ) -> Option<f32> {
-    let g = field.grid;
-    let biased = position + surface_bias(field.settings, g, normal, view_dir);
-    let cage = g.cage(biased);
-    let light_uv = oct_encode(dir_to_light);
-    let mut corners = [(usize::MAX, Vec3::ZERO, 0.0f32); 8];
-    for (i, c) in corners.iter_mut().enumerate() {
-        let coords = cage.corner(i);
-        let probe = g.probe_index(coords);
-        let probe = match field.probe_usable.get(probe) {
-            Some(false) => match field.probe_fallback.get(probe) {
-                Some(&q) if q != u32::MAX => q as usize,
-                _ => continue,
-            },
-            _ => probe,
-        };
-        let offset = field.probe_offsets_m.get(probe).copied().unwrap_or(Vec3::ZERO);
-        let t = cage.trilinear(i).max(Vec3::splat(TRILINEAR_WEIGHT_FLOOR));
-        *c = (probe, g.probe_position(g.probe_coords(probe)) + offset, t.x * t.y * t.z);
-    }
-    let weigh = |cosine: bool| -> (f32, f32) {
-        let (mut sum, mut wsum) = (0.0f32, 0.0f32);
-        for &(probe, probe_pos, trilinear) in corners.iter().filter(|c| c.0 != usize::MAX) {
-            let dir = (probe_pos - position).normalize_or_zero();
-            let mut w = if cosine { dir.dot(normal).max(0.0) } else { backface_weight(dir, normal) };
+    ShadowCage::new(field, occlusion, position, normal, view_dir, sharpness).map(|c| c.visibility(dir_to_light))
+}
+
+/// A shading point's cage in the shadowing field: each corner's probe and
+/// normalised weight, which do not depend on the light, so a point lit by many
+/// lights weighs its cage once and reads each light's visibility with eight
+/// bilinear lookups ([`Self::visibility`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ShadowCage<'a> {
+    occlusion: &'a ProbeAtlas<f32>,
+    /// (probe, weight / Σ weight); `usize::MAX`: no probe at that corner.
+    corners: [(usize, f32); 8],
+    sharpness: f32,
+}
+
+impl<'a> ShadowCage<'a> {
+    /// The cage of `position` (module docs: cosine weight, the wrap weight
+    /// where no probe faces the point, Chebyshev, trilinear); `None` where no
+    /// probe of the cage nor a fallback is usable.
+    pub fn new(
+        field: &DdgiFieldView<'_>,
+        occlusion: &'a ProbeAtlas<f32>,
+        position: Vec3,
+        normal: Vec3,
+        view_dir: Vec3,
+        sharpness: f32,
+    ) -> Option<Self> {
+        let g = field.grid;
+        let biased = position + surface_bias(field.settings, g, normal, view_dir);
+        let cage = g.cage(biased);
+        // Per corner: probe, direction to it, and the weight but for the angle.
+        let mut corners = [(usize::MAX, Vec3::ZERO, 0.0f32); 8];
+        for (i, c) in corners.iter_mut().enumerate() {
+            let probe = g.probe_index(cage.corner(i));
+            let probe = match field.probe_usable.get(probe) {
+                Some(false) => match field.probe_fallback.get(probe) {
+                    Some(&q) if q != u32::MAX => q as usize,
+                    _ => continue,
+                },
+                _ => probe,
+            };
+            let offset = field.probe_offsets_m.get(probe).copied().unwrap_or(Vec3::ZERO);
+            let probe_pos = g.probe_position(g.probe_coords(probe)) + offset;
+            let t = cage.trilinear(i).max(Vec3::splat(TRILINEAR_WEIGHT_FLOOR));
             let to_probe = probe_pos - biased;
             let moments: Vec2 = field.distance.sample_bilinear(probe, oct_encode(-to_probe));
-            w *= chebyshev_weight(moments, to_probe.length()).max(CHEBYSHEV_WEIGHT_FLOOR);
-            w *= trilinear;
-            sum += w * occlusion.sample_bilinear(probe, light_uv).clamp(0.0, 1.0);
-            wsum += w;
+            let w = chebyshev_weight(moments, to_probe.length()).max(CHEBYSHEV_WEIGHT_FLOOR) * (t.x * t.y * t.z);
+            *c = (probe, (probe_pos - position).normalize_or_zero(), w);
         }
-        (sum, wsum)
-    };
-    let (mut sum, mut wsum) = weigh(true);
-    if wsum.is_nan() || wsum <= 0.0 {
-        (sum, wsum) = weigh(false);
+        let weigh = |cosine: bool| -> [(usize, f32); 8] {
+            corners.map(|(probe, dir, w)| {
+                let angle = if cosine { dir.dot(normal).max(0.0) } else { backface_weight(dir, normal) };
+                (probe, if probe == usize::MAX { 0.0 } else { angle * w })
+            })
+        };
+        let sum = |c: &[(usize, f32); 8]| c.iter().map(|c| c.1).sum::<f32>();
+        let mut weighted = weigh(true);
+        let mut wsum = sum(&weighted);
+        if wsum.is_nan() || wsum <= 0.0 {
+            weighted = weigh(false);
+            wsum = sum(&weighted);
+        }
+        if !(wsum.is_finite() && wsum > 0.0) {
+            return None;
+        }
+        Some(Self { occlusion, corners: weighted.map(|(p, w)| (p, w / wsum)), sharpness })
     }
-    if !(wsum > 0.0 && sum.is_finite()) {
-        return None;
+
+    /// The visibility in `[0, 1]` toward the light in unit direction `dir_to_light`, sharpened.
+    pub fn visibility(&self, dir_to_light: Vec3) -> f32 {
+        let uv = oct_encode(dir_to_light);
+        let mut v = 0.0f32;
+        for &(probe, w) in self.corners.iter().filter(|c| c.0 != usize::MAX && c.1 > 0.0) {
+            v += w * self.occlusion.sample_bilinear(probe, uv).clamp(0.0, 1.0);
+        }
+        if v.is_finite() { v.clamp(0.0, 1.0).powf(self.sharpness.max(0.0)) } else { 1.0 }
     }
-    Some((sum / wsum).clamp(0.0, 1.0).powf(sharpness.max(0.0)))
 }
 
 #[cfg(test)]

@@ -53,6 +53,7 @@ fn surface_visibility(
     field: Option<&DdgiFieldSet>,
 ) -> f32 {
     let (mut sum, mut wsum) = (0.0f32, 0.0f32);
+    let cage = field.and_then(|f| f.shadow_cage(sp.position, sp.facing_normal(), view_dir));
     for light in &scene.lights {
         let Some(inc) = punctual_incident(light, sp.position) else { continue };
         let Some(cos) = lambert_cos(sp, inc.wi) else { continue };
@@ -60,7 +61,7 @@ fn surface_visibility(
         if !(w > 0.0 && w.is_finite()) {
             continue;
         }
-        let v = field.and_then(|f| f.shadow_visibility(sp.position, sp.facing_normal(), view_dir, inc.wi));
+        let v = cage.map(|c| c.visibility(inc.wi));
         let v =
             v.unwrap_or_else(|| if tracer.occluded(&shadow_ray_along(sp, inc.wi, inc.distance)) { 0.0 } else { 1.0 });
         sum += w * v;

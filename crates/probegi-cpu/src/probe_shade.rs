@@ -24,7 +24,7 @@
 //!   separate sky term.
 
 use glam::Vec3;
-use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance, field_set_shadow_visibility};
+use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, field_set_irradiance, field_set_shadow_cage};
 use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_scene::{RayHit, Scene, SurfacePoint};
 use rayon::prelude::*;
@@ -102,10 +102,11 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                     (Some(_), None) => Vec3::ZERO,
                     (Some(_), Some(sp)) => {
                         let ctx = ShadingContext::new(inputs.scene, sp, -dir);
-                        let field = inputs.field;
-                        let from_field = move |p: &SurfacePoint, wi: Vec3| {
-                            field_set_shadow_visibility(field, p.position, p.facing_normal(), -dir, wi)
-                        };
+                        let cage = settings
+                            .shadow_field_probe_shading
+                            .then(|| field_set_shadow_cage(inputs.field, sp.position, sp.facing_normal(), -dir))
+                            .flatten();
+                        let from_field = move |_: &SurfacePoint, wi: Vec3| cage.map(|c| c.visibility(wi));
                         let visibility = settings
                             .shadow_field_probe_shading
                             .then_some(&from_field as &crate::shading::PunctualVisibility<'_>);

@@ -518,13 +518,17 @@ impl DdgiFieldSet {
         self.shadow_lights.extend_from_slice(lights);
     }
 
-    /// The shadowing field's light visibility in `[0, 1]` at `position` on a
-    /// surface with unit `normal`, toward unit `dir_to_light`
-    /// (`probegi_core::shadow_field::shadow_visibility`), from the densest volume
-    /// with a shadow field whose probe box, or the cell around it, holds the
-    /// point; `None` where no such volume covers it (the caller traces a shadow
-    /// ray there).
-    pub fn shadow_visibility(&self, position: Vec3, normal: Vec3, view_dir: Vec3, dir_to_light: Vec3) -> Option<f32> {
+    /// The shadowing field's cage at `position` on a surface with unit `normal`
+    /// (`probegi_core::shadow_field::ShadowCage`: weighed once, then read per
+    /// light), from the densest volume with a shadow field whose probe box, or
+    /// the cell around it, holds the point; `None` where no such volume covers
+    /// it (the caller traces shadow rays there).
+    pub fn shadow_cage(
+        &self,
+        position: Vec3,
+        normal: Vec3,
+        view_dir: Vec3,
+    ) -> Option<probegi_core::shadow_field::ShadowCage<'_>> {
         self.order.iter().map(|&i| &self.volumes[i]).find_map(|v| {
             let shadow = v.shadow.as_ref()?;
             // The probe box and one cell around it, where the volume's own
@@ -532,16 +536,22 @@ impl DdgiFieldSet {
             if probegi_core::ddgi_volume_blend::volume_blend_weight(&v.grid, position, None) <= 0.0 {
                 return None;
             }
-            probegi_core::shadow_field::shadow_visibility(
+            let sharpness = v.settings.shadow_field_sharpness;
+            probegi_core::shadow_field::ShadowCage::new(
                 &v.view(),
                 &shadow.occlusion,
                 position,
                 normal,
                 view_dir,
-                dir_to_light,
-                v.settings.shadow_field_sharpness,
+                sharpness,
             )
         })
+    }
+
+    /// The light visibility in `[0, 1]` toward unit `dir_to_light` from
+    /// [`Self::shadow_cage`]; `None` where it has none.
+    pub fn shadow_visibility(&self, position: Vec3, normal: Vec3, view_dir: Vec3, dir_to_light: Vec3) -> Option<f32> {
+        self.shadow_cage(position, normal, view_dir).map(|c| c.visibility(dir_to_light))
     }
 
     /// Seed 004 Listing 4's inputs per entry of `ray_batch().probes`, for a

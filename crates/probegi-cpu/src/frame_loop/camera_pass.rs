@@ -90,11 +90,10 @@ pub(super) fn shade_camera(
                 let ctx = ShadingContext::new(scene, sp, texel.view_dir_world);
                 let glossy_rays = ddgi.is_some() && ctx.bsdf.has_specular();
                 let view_dir = texel.view_dir_world;
-                let field_visibility = passes.shadow_field.map(|set| {
-                    move |p: &probegi_scene::SurfacePoint, wi: Vec3| {
-                        set.shadow_visibility(p.position, p.facing_normal(), view_dir, wi)
-                    }
-                });
+                // The point's shadow cage, weighed once for all its lights.
+                let cage = passes.shadow_field.map(|set| set.shadow_cage(sp.position, sp.facing_normal(), view_dir));
+                let field_visibility =
+                    cage.map(|cage| move |_: &probegi_scene::SurfacePoint, wi: Vec3| cage.map(|c| c.visibility(wi)));
                 let visibility = field_visibility.as_ref().map(|v| v as &crate::shading::PunctualVisibility<'_>);
                 let (l, k) = direct.reflected_with(sp, &ctx, direct_settings, !glossy_rays, visibility, &mut rng);
                 rays += k;

@@ -309,13 +309,23 @@ fn ddgi_irradiance(position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>) 
     return sum / wsum;
 }
 
-// probegi_core::shadow_field::shadow_visibility for member `m` (seed 003 §5.2):
-// the cage with the cosine weight (the wrap weight where no probe faces the
-// point), Chebyshev visibility and the trilinear weight, the occlusion maps read
-// toward the light, sharpened; −1 when no probe of the cage nor a fallback is usable.
-fn ddgi_volume_shadow(m: u32, position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>,
-                      dir_to_light: vec3<f32>) -> f32 {
+// probegi_core::shadow_field::ShadowCage: a point's cage in a shadowing-field
+// member, weighed once (the cosine weight, the wrap weight where no probe faces
+// the point, Chebyshev visibility, trilinear), then read per light.
+struct DdgiShadowCage {
+    // The member (ddgi_set.volumes index); DDGI_NO_PROBE: no cage.
+    member: u32,
+    probes: array<u32, 8>,
+    // Normalised weights (0 for a corner without a probe).
+    weights: array<f32, 8>,
+};
+
+// The cage of `position` in member `m`; member DDGI_NO_PROBE when no probe of
+// the cage nor a fallback is usable.
+fn ddgi_volume_shadow_cage(m: u32, position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>) -> DdgiShadowCage {
     let v = ddgi_set.volumes[m];
+    var cage: DdgiShadowCage;
+    cage.member = DDGI_NO_PROBE;
     let biased = position + ddgi_surface_bias(v, normal, view_dir);
     let counts = vec3<i32>(v.probe_counts.xyz);
     let max_c = max(counts - vec3<i32>(1), vec3<i32>(0));
@@ -323,14 +333,15 @@ fn ddgi_volume_shadow(m: u32, position: vec3<f32>, normal: vec3<f32>, view_dir: 
     let base = clamp(vec3<i32>(floor(rel)), vec3<i32>(0), max_c);
     let base_pos = v.origin_m.xyz + v.spacing_m.xyz * vec3<f32>(base);
     let alpha = clamp((biased - base_pos) / v.spacing_m.xyz, vec3<f32>(0.0), vec3<f32>(1.0));
-    let occ_side = v.shadow.y + 2u;
-    let light_texels = ddgi_footprint(v.shadow.y, ddgi_oct_encode(dir_to_light));
     let dist_side = v.texels.y + 2u;
-    var cos_sum = 0.0;
+    var cos_w: array<f32, 8>;
+    var wrap_w: array<f32, 8>;
     var cos_wsum = 0.0;
-    var wrap_sum = 0.0;
     var wrap_wsum = 0.0;
     for (var i = 0u; i < 8u; i++) {
+        cage.probes[i] = DDGI_NO_PROBE;
+        cos_w[i] = 0.0;
+        wrap_w[i] = 0.0;
         let o = vec3<i32>(i32(i & 1u), i32((i >> 1u) & 1u), i32((i >> 2u) & 1u));
         var coords = vec3<u32>(min(base + o, max_c));
         var probe = ddgi_probe_index(v, coords);
@@ -344,49 +355,77 @@ fn ddgi_volume_shadow(m: u32, position: vec3<f32>, normal: vec3<f32>, view_dir: 
             coords = ddgi_probe_coords(v, q);
         }
         let probe_pos = v.origin_m.xyz + v.spacing_m.xyz * vec3<f32>(coords) + ddgi_probes[v.extra.x + probe].xyz;
-        let dir = ddgi_normalize_or_zero(probe_pos - position);
         let to_probe = probe_pos - biased;
         let f = ddgi_footprint(v.texels.y, ddgi_oct_encode(-to_probe));
         let moments = ddgi_sample_distance(f, v.texels.w + probe * dist_side * dist_side);
-        let chebyshev = max(ddgi_chebyshev_weight(moments, length(to_probe)), CHEBYSHEV_WEIGHT_FLOOR);
         let corner_f = vec3<f32>(o);
         let t = max((vec3<f32>(1.0) - alpha) * (vec3<f32>(1.0) - corner_f) + alpha * corner_f, vec3<f32>(TRILINEAR_WEIGHT_FLOOR));
-        let trilinear = t.x * t.y * t.z;
-        let occ = clamp(ddgi_sample_distance(light_texels, v.shadow.x + probe * occ_side * occ_side).x, 0.0, 1.0);
-        let wc = max(dot(dir, normal), 0.0) * chebyshev * trilinear;
-        cos_sum += wc * occ;
-        cos_wsum += wc;
-        let ww = ddgi_backface_weight(dir, normal) * chebyshev * trilinear;
-        wrap_sum += ww * occ;
-        wrap_wsum += ww;
+        let w = max(ddgi_chebyshev_weight(moments, length(to_probe)), CHEBYSHEV_WEIGHT_FLOOR) * (t.x * t.y * t.z);
+        let dir = ddgi_normalize_or_zero(probe_pos - position);
+        cage.probes[i] = probe;
+        cos_w[i] = max(dot(dir, normal), 0.0) * w;
+        wrap_w[i] = ddgi_backface_weight(dir, normal) * w;
+        cos_wsum += cos_w[i];
+        wrap_wsum += wrap_w[i];
     }
-    var r = -1.0;
-    if (cos_wsum > 0.0) {
-        r = cos_sum / cos_wsum;
-    } else if (wrap_wsum > 0.0) {
-        r = wrap_sum / wrap_wsum;
+    var use_cos = cos_wsum > 0.0;
+    var wsum = select(wrap_wsum, cos_wsum, use_cos);
+    if (!(wsum > 0.0 && wsum <= 3.4028235e38)) {
+        return cage;
+    }
+    for (var i = 0u; i < 8u; i++) {
+        cage.weights[i] = select(wrap_w[i], cos_w[i], use_cos) / wsum;
+    }
+    cage.member = m;
+    return cage;
+}
+
+// ShadowCage::visibility: the light's visibility in [0, 1] toward `dir_to_light`, sharpened.
+fn ddgi_shadow_cage_visibility(cage: DdgiShadowCage, dir_to_light: vec3<f32>) -> f32 {
+    let v = ddgi_set.volumes[cage.member];
+    let occ_side = v.shadow.y + 2u;
+    let f = ddgi_footprint(v.shadow.y, ddgi_oct_encode(dir_to_light));
+    var r = 0.0;
+    for (var i = 0u; i < 8u; i++) {
+        if (cage.probes[i] != DDGI_NO_PROBE && cage.weights[i] > 0.0) {
+            let occ = ddgi_sample_distance(f, v.shadow.x + cage.probes[i] * occ_side * occ_side).x;
+            r += cage.weights[i] * clamp(occ, 0.0, 1.0);
+        }
     }
     if (!(r >= 0.0 && r <= 3.4028235e38)) {
-        return -1.0;
+        return 1.0;
     }
     return pow(clamp(r, 0.0, 1.0), max(bitcast<f32>(v.shadow.z), 0.0));
 }
 
-// DdgiFieldSet::shadow_visibility: the first member in sampling order with a
-// shadowing field that weighs the point (its probe box and one cell around it)
-// and has a usable probe; −1 where none does.
-fn ddgi_shadow_visibility(position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>,
-                          dir_to_light: vec3<f32>) -> f32 {
+// DdgiFieldSet::shadow_cage: the cage in the first member in sampling order
+// with a shadowing field that weighs the point (its probe box and one cell
+// around it) and has a usable probe; member DDGI_NO_PROBE where none does.
+fn ddgi_shadow_cage(position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>) -> DdgiShadowCage {
+    var none: DdgiShadowCage;
+    none.member = DDGI_NO_PROBE;
     let n = ddgi_set.header.x;
     for (var m = 0u; m < n; m++) {
         let v = ddgi_set.volumes[m];
         if (v.shadow.y == 0u || ddgi_volume_blend_weight(v, position, false) <= 0.0) {
             continue;
         }
-        let r = ddgi_volume_shadow(m, position, normal, view_dir, dir_to_light);
-        if (r >= 0.0) {
-            return r;
+        let cage = ddgi_volume_shadow_cage(m, position, normal, view_dir);
+        if (cage.member != DDGI_NO_PROBE) {
+            return cage;
         }
     }
-    return -1.0;
+    return none;
+}
+
+// A punctual light's visibility in [0, 1] from the shadowing field, −1 where no
+// member has one at the point (one light; a point lit by several weighs its
+// cage once with ddgi_shadow_cage).
+fn ddgi_shadow_visibility(position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>,
+                          dir_to_light: vec3<f32>) -> f32 {
+    let cage = ddgi_shadow_cage(position, normal, view_dir);
+    if (cage.member == DDGI_NO_PROBE) {
+        return -1.0;
+    }
+    return ddgi_shadow_cage_visibility(cage, dir_to_light);
 }

@@ -11,6 +11,8 @@ fn shadow_lit_punctual(sp: SurfacePoint, to_viewer: vec3<f32>) -> vec3<f32> {
     wo = normalize(wo);
     let bsdf = scene_bsdf(sp);
     let n = scene_facing_normal(sp);
+    // The point's shadow cage, weighed once for all its lights.
+    let cage = ddgi_shadow_cage(sp.position, n, to_viewer);
     var l = vec3<f32>(0.0);
     for (var k = 0u; k < bitcast<u32>(scene_lights[0].x); k++) {
         var e = vec3<f32>(0.0);
@@ -22,8 +24,10 @@ fn shadow_lit_punctual(sp: SurfacePoint, to_viewer: vec3<f32>) -> vec3<f32> {
         if (cos <= 0.0) {
             continue;
         }
-        var v = ddgi_shadow_visibility(sp.position, n, to_viewer, inc.xyz);
-        if (v < 0.0) {
+        var v = -1.0;
+        if (cage.member != DDGI_NO_PROBE) {
+            v = ddgi_shadow_cage_visibility(cage, inc.xyz);
+        } else {
             var t_max = SCENE_F32_MAX;
             if (inc.w < SCENE_F32_MAX) {
                 t_max = inc.w * (1.0 - 1e-4);
