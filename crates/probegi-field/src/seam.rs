@@ -222,6 +222,9 @@ impl ProbeRayBatch {
     /// Appends rays that belong to no probe entry (the shadow field's shadow
     /// rays, seed 003 §5.1) after the probes' rays; the batch keeps per-ray arrays.
     pub(crate) fn push_rays(&mut self, origins: &[Vec3], dirs: &[Vec3], max_m: &[f32]) {
+        if origins.is_empty() {
+            return;
+        }
         debug_assert!(self.ray_arrays && self.has_ray_arrays());
         self.origins_m.extend_from_slice(origins);
         self.directions.extend_from_slice(dirs);

@@ -7,13 +7,18 @@
 //!   WGSL CWBVH traversal over its own triangle soup;
 //! - the WGSL query (`probegi_wgpu::ddgi_query::query_wgsl`), included in its own
 //!   compute shader (`SHADE_WGSL` below), which lights every pixel with direct
-//!   light + albedo/π × the field's irradiance.
+//!   light + albedo/π × the field's irradiance, and reads the shadowing field's
+//!   visibility of the light (`ddgi_shadow_visibility`, seed 003 ch. 5: the
+//!   volume keeps one, fed by the shadow rays the seam puts in its batch).
 //!
 //! The world: a 4 × 3 × 4 m room with a red left wall, a green right wall, white
 //! floor, ceiling and back wall, an open front, a white box, and a point light
 //! under the ceiling. The program writes a PNG (tone-mapped) and checks what it
 //! drew: every pixel's field term from the included WGSL query equals the CPU
-//! query's at the same point within 1e-4 of the largest, no pixel is non-finite,
+//! query's at the same point within 1e-4 of the largest, and so does its light
+//! visibility from the shadowing field (`DdgiFieldSet::shadow_visibility`); the
+//! field reads the floor in the box's exact shadow as less visible than the lit
+//! floor; no pixel is non-finite,
 //! and the floor takes colour from the walls (redder near the red wall, greener
 //! near the green one). It fails otherwise.
 //!
@@ -134,6 +139,8 @@ fn update_field(
     set: &mut DdgiFieldSet,
     frame: u32,
 ) -> Result<(), Error> {
+    // The shadowing field serves the application's light.
+    set.set_shadow_lights(&[probegi_scene::PunctualLight::point(LIGHT_POSITION, Vec3::ONE, LIGHT_INTENSITY)]);
     let mut step = set.begin_update(7, frame);
     let mut rays: Vec<GpuRay> = vec![];
     let mut gpu_hits: Vec<GpuRayHit> = vec![];
@@ -205,7 +212,10 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let e = ddgi_irradiance(p.position.xyz, p.normal.xyz, p.view_dir.xyz);
     let indirect = p.albedo.xyz / 3.14159265 * e;
-    image[i] = vec4<f32>(p.direct.xyz + indirect, 1.0);
+    // w: the light's visibility from the shadowing field (−1 where it has none).
+    let to_light = normalize(vec3<f32>(2.0, 2.8, 2.0) - p.position.xyz);
+    let v = ddgi_shadow_visibility(p.position.xyz, p.normal.xyz, p.view_dir.xyz, to_light);
+    image[i] = vec4<f32>(p.direct.xyz + indirect, v);
 }
 "#;
 
@@ -234,8 +244,12 @@ pub fn main_to(out: &std::path::Path) -> Result<(), Error> {
     let trace = GpuRayTrace::new(&ctx);
 
     // A DDGI volume over the room, updated through the seam.
-    let volume =
-        DdgiVolumeSettings { probe_counts: UVec3::new(6, 5, 6), probe_rays_per_probe: 128, ..Default::default() };
+    let volume = DdgiVolumeSettings {
+        probe_counts: UVec3::new(6, 5, 6),
+        probe_rays_per_probe: 128,
+        shadow_field: true,
+        ..Default::default()
+    };
     let bounds = (Vec3::ZERO, Vec3::new(4.0, 3.0, 4.0));
     let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::single(volume), bounds, None);
     for frame in 0..40 {
@@ -253,8 +267,9 @@ pub fn main_to(out: &std::path::Path) -> Result<(), Error> {
 
     // Tone-map (exposure 1, Reinhard) and write.
     let mut img = probegi_core::image::Image::new(width, height);
-    for (k, c) in image.iter().enumerate() {
-        img.pixels[k] = *c / (Vec3::ONE + *c);
+    for (k, t) in image.iter().enumerate() {
+        let c = Vec3::from_slice(&t[..3]);
+        img.pixels[k] = c / (Vec3::ONE + c);
     }
     if let Some(dir) = out.parent() {
         std::fs::create_dir_all(dir)?;
@@ -328,11 +343,15 @@ fn camera_pixels(
 
 /// What the application's shader drew, checked against the CPU query at the
 /// same points, and the colour the walls bleed onto the floor.
-fn check_against_the_cpu(set: &DdgiFieldSet, pixels: &[Pixel], image: &[Vec3]) -> Result<(), Error> {
+fn check_against_the_cpu(set: &DdgiFieldSet, pixels: &[Pixel], image: &[[f32; 4]]) -> Result<(), Error> {
     let mut worst = 0f32;
+    let mut worst_visibility = 0f32;
+    // The field's visibility on floor points the exact shadow rays see lit and shadowed.
+    let (mut lit_floor, mut shadowed_floor) = ((0f32, 0u32), (0f32, 0u32));
     let mut largest = 0f32;
     let (mut left, mut right_side) = (Vec3::ZERO, Vec3::ZERO);
-    for (k, (p, c)) in pixels.iter().zip(image).enumerate() {
+    for (k, (p, texel)) in pixels.iter().zip(image).enumerate() {
+        let c = &Vec3::from_slice(&texel[..3]);
         if !c.is_finite() {
             return Err(format!("pixel {k} is not finite: {c}").into());
         }
@@ -346,6 +365,14 @@ fn check_against_the_cpu(set: &DdgiFieldSet, pixels: &[Pixel], image: &[Vec3]) -
             + albedo / std::f32::consts::PI * set.irradiance(pos, n, Vec3::from_slice(&p.view_dir[..3]));
         worst = worst.max((cpu - *c).abs().max_element());
         largest = largest.max(cpu.max_element());
+        let view = Vec3::from_slice(&p.view_dir[..3]);
+        let v = set.shadow_visibility(pos, n, view, (LIGHT_POSITION - pos).normalize()).unwrap_or(-1.0);
+        worst_visibility = worst_visibility.max((v - texel[3]).abs());
+        if n.y > 0.9 && pos.y < 0.01 && v >= 0.0 {
+            let exact_lit = Vec3::from_slice(&p.direct[..3]).max_element() > 0.0;
+            let m = if exact_lit { &mut lit_floor } else { &mut shadowed_floor };
+            *m = (m.0 + v, m.1 + 1);
+        }
         // Floor points near each coloured wall: their indirect light.
         if n.y > 0.9 && pos.y < 0.01 && pos.z > 2.5 {
             let e = set.irradiance(pos, n, Vec3::Y);
@@ -359,8 +386,20 @@ fn check_against_the_cpu(set: &DdgiFieldSet, pixels: &[Pixel], image: &[Vec3]) -
     let rel = worst / largest.max(1e-6);
     println!("GPU shader vs CPU query: worst {rel:.2e} of the largest pixel ({largest:.3})");
     println!("floor irradiance near the red wall {left}, near the green wall {right_side}");
+    let (lit, shadowed) = (lit_floor.0 / lit_floor.1.max(1) as f32, shadowed_floor.0 / shadowed_floor.1.max(1) as f32);
+    println!(
+        "shadowing field: GPU vs CPU visibility worst {worst_visibility:.2e}; floor visibility where exact rays see \
+         the light {lit:.3} ({} px), where they do not {shadowed:.3} ({} px)",
+        lit_floor.1, shadowed_floor.1
+    );
     if rel > 1e-4 {
         return Err(format!("the included WGSL query differs from the CPU's by {rel:e}").into());
+    }
+    if worst_visibility > 1e-4 {
+        return Err(format!("the included shadow lookup differs from the CPU's by {worst_visibility:e}").into());
+    }
+    if shadowed_floor.1 == 0 || shadowed >= lit - 0.05 {
+        return Err(format!("the shadowing field sees no shadow on the floor: {shadowed} against {lit}").into());
     }
     if !(left.x > 1.1 * left.y && right_side.y > 1.1 * right_side.x) {
         return Err(format!("no colour bleeding: {left} near red, {right_side} near green").into());
@@ -369,7 +408,7 @@ fn check_against_the_cpu(set: &DdgiFieldSet, pixels: &[Pixel], image: &[Vec3]) -
 }
 
 /// Runs `SHADE_WGSL` (with the included query at group 1) over `pixels`.
-fn shade_on_gpu(ctx: &GpuContext, field: &GpuDdgiField, pixels: &[Pixel]) -> Result<Vec<Vec3>, Error> {
+fn shade_on_gpu(ctx: &GpuContext, field: &GpuDdgiField, pixels: &[Pixel]) -> Result<Vec<[f32; 4]>, Error> {
     let device = &ctx.device;
     let (layout, pipeline) = shade_pipeline(device);
     let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -417,7 +456,7 @@ fn shade_on_gpu(ctx: &GpuContext, field: &GpuDdgiField, pixels: &[Pixel]) -> Res
     rx.recv()??;
     let bytes = slice.get_mapped_range()?.to_vec();
     let texels: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
-    Ok(texels.iter().map(|t| Vec3::new(t[0], t[1], t[2])).collect())
+    Ok(texels.to_vec())
 }
 
 /// `SHADE_WGSL` after the included query (its bindings in group 1): the
