@@ -346,6 +346,19 @@ impl GpuDdgiField {
         Some(crate::shadow_field::OcclusionTarget { buffer: &self.buffers[2], first, interior, probes })
     }
 
+    /// Resets volume `volume`'s occlusion tiles of `probes` to 1 (lit, no
+    /// history), as the host resets a probe that scrolled in; nothing without a
+    /// shadowing field.
+    pub fn reset_occlusion_tiles(&self, ctx: &GpuContext, volume: usize, probes: &[u32]) {
+        let Some(t) = self.member_occlusion(volume) else { return };
+        let tile = (t.interior as usize + 2).pow(2);
+        let lit: Vec<[f32; 2]> = vec![[1.0, 0.0]; tile];
+        for &p in probes.iter().filter(|p| **p < t.probes) {
+            let offset = (t.first as u64 + p as u64 * tile as u64) * 8;
+            ctx.write_buffer(t.buffer, offset, bytemuck::cast_slice(&lit));
+        }
+    }
+
     /// Volume `volume`'s occlusion maps read back (`None` without a shadowing field).
     pub fn download_occlusion(&self, ctx: &GpuContext, volume: usize) -> Result<Option<Vec<f32>>, GpuError> {
         let Some(t) = self.member_occlusion(volume) else { return Ok(None) };

@@ -341,6 +341,7 @@ impl WgpuProbeTracer {
                 f.member_atlases(i)
                     .ok_or_else(|| GpuError::Input("member".into()))?
                     .zero_tiles(&self.ctx, p.reset_probes);
+                f.reset_occlusion_tiles(&self.ctx, i, p.reset_probes);
             }
         }
         Ok(f)

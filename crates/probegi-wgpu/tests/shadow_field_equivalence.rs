@@ -132,3 +132,48 @@ fn compare_renders(name: &str, s: DdgiVolumeSettings, against_exact: bool) {
     eprintln!("{name}: HDR-FLIP field vs exact shadow rays (CPU) {fe:.4}");
     assert!(f < 0.5 * fe, "{name}: the GPU image ({f}) is no closer to the field's than exact shadows are ({fe})");
 }
+
+#[test]
+fn a_scrolling_window_keeps_the_same_shadow_maps_on_the_device() {
+    // A tracking window sliding from under a roof into the open, under a point
+    // light above the open part: probes that scroll in start over on both
+    // backends (a stale device tile would keep the roof's shadow).
+    let mut scene = probegi_scene::builtin::half_roofed_ground();
+    scene.lights.push(probegi_scene::PunctualLight::point(glam::Vec3::new(30.0, 8.0, 0.0), glam::Vec3::ONE, 400.0));
+    let Some(gpu) = gpu(&scene) else { return };
+    let cpu = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &cpu, DirectSettings::default());
+    let bounds = scene.bounds().expect("bounds");
+    let s = DdgiVolumeSettings {
+        probe_counts: UVec3::new(7, 3, 3),
+        probe_rays_per_probe: 64,
+        probe_spacing_m: Some(glam::Vec3::ONE),
+        probe_origin_m: Some(glam::Vec3::new(0.0, 0.5, -1.0)),
+        probe_relocation: false,
+        volume_tracks_camera: true,
+        shadow_field: true,
+        ..Default::default()
+    };
+    let start = glam::Vec3::new(14.0, 1.5, 0.0);
+    let new_set = || {
+        let settings = probegi_core::ddgi_settings::DdgiFieldSetSettings::single(s.clone());
+        DdgiFieldSet::new(&settings, bounds, Some(start))
+    };
+    let (mut on_cpu, mut on_gpu) = (new_set(), new_set());
+    let mut ms = BTreeMap::new();
+    let mut scrolled = 0;
+    for f in 0..30 {
+        let target = start + glam::Vec3::new(0.5 * f as f32, 0.0, 0.0);
+        scrolled += on_cpu.set_tracking_target(target);
+        on_gpu.set_tracking_target(target);
+        on_cpu.update_traced_by(&scene, &cpu, None, &direct, 2, f, &mut ms).expect("CPU");
+        on_gpu.update_traced_by(&scene, &cpu, Some(&gpu), &direct, 2, f, &mut ms).expect("GPU");
+    }
+    assert!(on_gpu.field_on_device() && scrolled > 0, "scrolled {scrolled} probes");
+    on_gpu.sync_host_atlases(Some(&gpu as &dyn ProbeBatchTracer)).expect("read back");
+    let (c, g) = (&on_cpu.volumes()[0], &on_gpu.volumes()[0]);
+    let (oc, og) = (&c.shadow.as_ref().expect("cpu").occlusion, &g.shadow.as_ref().expect("gpu").occlusion);
+    let worst = oc.texels.iter().zip(&og.texels).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    eprintln!("scrolling window ({scrolled} probes scrolled in): largest occlusion texel difference {worst:.2e}");
+    assert!(worst < 1e-3, "occlusion maps differ by {worst} after scrolling");
+}

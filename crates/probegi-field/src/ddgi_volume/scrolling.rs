@@ -48,6 +48,9 @@ impl DdgiVolume {
             if (p as usize) < self.grid.probe_count() {
                 self.irradiance.tile_mut(p as usize).fill(Vec3::ZERO);
                 self.distance.tile_mut(p as usize).fill(Vec2::ZERO);
+                if let Some(shadow) = self.shadow.as_mut() {
+                    shadow.occlusion.tile_mut(p as usize).fill(1.0);
+                }
             }
         }
     }
