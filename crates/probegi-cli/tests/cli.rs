@@ -544,3 +544,43 @@ fn gpu_render_keeps_the_field_on_the_device_and_draws_probes_on_the_cpu_camera()
         assert_eq!(json["camera_on"], "gpu", "{scene}");
     }
 }
+
+#[test]
+fn shadow_field_inputs_are_checked_before_rendering() {
+    // `--ao` needs a shadowing field to draw; the field's settings are validated by name.
+    fails_with(&["render", "--gi", "ddgi", "--ao", &tmp("ao.png").to_string_lossy()], "shadow_field=true");
+    fails_with(&["render", "--ao", &tmp("ao2.png").to_string_lossy()], "--gi ddgi");
+    for (set, key) in [
+        ("shadow_field_sharpness=0", "shadow_field_sharpness"),
+        ("shadow_field_texels=0", "shadow_field_texels"),
+        ("shadow_field_surfel_reach_rel=-1", "shadow_field_surfel_reach_rel"),
+        ("shadow_field_max_lights=0", "shadow_field_max_lights"),
+    ] {
+        fails_with(&["render", "--gi", "ddgi", "--set", "shadow_field=true", "--set", set], key);
+    }
+    // A reference's visibility image: exact shadow rays, values in [0, 1].
+    let (out, ao) = (tmp("ref-ao.exr"), tmp("ref-ao-vis.exr"));
+    let o = probegi(&[
+        "reference",
+        "--scene",
+        "builtin:shadow-box",
+        "--spp",
+        "1",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--out",
+        &out.to_string_lossy(),
+        "--ao",
+        &ao.to_string_lossy(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let probegi_image::LoadedImage::Hdr(img) = probegi_image::read_image(&ao).expect("read the visibility image")
+    else {
+        panic!("an .exr reads as HDR");
+    };
+    let v: Vec<f32> = img.pixels.iter().map(|p| p.x).collect();
+    assert!(v.iter().all(|x| (0.0..=1.0).contains(x)), "visibility outside [0, 1]");
+    assert!(v.contains(&1.0) && v.contains(&0.0), "the box shows both lit and shadowed pixels");
+}

@@ -157,14 +157,24 @@ pub fn field_set_shadow_cage<'a>(
     normal: Vec3,
     view_dir: Vec3,
 ) -> Option<crate::shadow_field::ShadowCage<'a>> {
-    set.members.iter().find_map(|m| {
-        let occlusion = m.occlusion?;
-        if volume_blend_weight(m.field.grid, position, None) <= 0.0 {
-            return None;
-        }
-        let sharpness = m.field.settings.shadow_field_sharpness;
-        crate::shadow_field::ShadowCage::new(&m.field, occlusion, position, normal, view_dir, sharpness)
-    })
+    set.members.iter().find_map(|m| member_shadow_cage(&m.field, m.occlusion?, position, normal, view_dir))
+}
+
+/// One member's shadow cage at `position` under [`field_set_shadow_cage`]'s
+/// rule: `None` outside its probe box and the cell around it
+/// ([`volume_blend_weight`]) or where it has no usable probe.
+pub fn member_shadow_cage<'a>(
+    field: &DdgiFieldView<'_>,
+    occlusion: &'a crate::probe_atlas::ProbeAtlas<f32>,
+    position: Vec3,
+    normal: Vec3,
+    view_dir: Vec3,
+) -> Option<crate::shadow_field::ShadowCage<'a>> {
+    if volume_blend_weight(field.grid, position, None) <= 0.0 {
+        return None;
+    }
+    let sharpness = field.settings.shadow_field_sharpness;
+    crate::shadow_field::ShadowCage::new(field, occlusion, position, normal, view_dir, sharpness)
 }
 
 #[cfg(test)]

@@ -529,22 +529,10 @@ impl DdgiFieldSet {
         normal: Vec3,
         view_dir: Vec3,
     ) -> Option<probegi_core::shadow_field::ShadowCage<'_>> {
+        // `field_set_shadow_cage`'s rule over `view()`, without building the view.
         self.order.iter().map(|&i| &self.volumes[i]).find_map(|v| {
-            let shadow = v.shadow.as_ref()?;
-            // The probe box and one cell around it, where the volume's own
-            // irradiance fades out (`volume_blend_weight`).
-            if probegi_core::ddgi_volume_blend::volume_blend_weight(&v.grid, position, None) <= 0.0 {
-                return None;
-            }
-            let sharpness = v.settings.shadow_field_sharpness;
-            probegi_core::shadow_field::ShadowCage::new(
-                &v.view(),
-                &shadow.occlusion,
-                position,
-                normal,
-                view_dir,
-                sharpness,
-            )
+            let occlusion = &v.shadow.as_ref()?.occlusion;
+            probegi_core::ddgi_volume_blend::member_shadow_cage(&v.view(), occlusion, position, normal, view_dir)
         })
     }
 

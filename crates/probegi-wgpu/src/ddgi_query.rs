@@ -150,6 +150,31 @@ fn push_probe_rows(f: &DdgiFieldView<'_>, probes: &mut Vec<[f32; 4]>) {
     }
 }
 
+/// The shadowing field's occlusion maps after every distance atlas in the
+/// distance buffer, one texel as (visibility, 0), their place written into
+/// each member's `GpuDdgiVolume::shadow`: per such member (volume, first
+/// texel, interior, probes). `distance` grows only `with_atlases`.
+fn pack_occlusion(
+    set: &DdgiFieldSetView<'_>,
+    volumes: &mut [GpuDdgiVolume],
+    distance: &mut Vec<[f32; 2]>,
+    distance_texels: &mut usize,
+    with_atlases: bool,
+) -> Vec<[u32; 4]> {
+    let mut rows = vec![];
+    for (v, m) in volumes.iter_mut().zip(&set.members) {
+        let Some(occlusion) = m.occlusion else { continue };
+        let first = *distance_texels as u32;
+        v.shadow = [first, occlusion.interior, m.field.settings.shadow_field_sharpness.to_bits(), 0];
+        rows.push([m.volume as u32, first, occlusion.interior, occlusion.probe_count as u32]);
+        *distance_texels += occlusion.texels.len();
+        if with_atlases {
+            distance.extend(occlusion.texels.iter().map(|&t| [t, 0.0]));
+        }
+    }
+    rows
+}
+
 fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedField, GpuError> {
     let header = GpuDdgiSetHeader {
         header: [
@@ -192,23 +217,7 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
     }
     // The shadowing field's occlusion maps follow every distance atlas in the
     // distance buffer, one texel as (visibility, 0).
-    let mut occlusion_rows = vec![];
-    for (v, m) in volumes.iter_mut().zip(&set.members) {
-        if let Some(occlusion) = m.occlusion {
-            let s = m.field.settings.shadow_field_sharpness;
-            v.shadow = [distance_texels as u32, occlusion.interior, s.to_bits(), 0];
-            occlusion_rows.push([
-                m.volume as u32,
-                distance_texels as u32,
-                occlusion.interior,
-                occlusion.probe_count as u32,
-            ]);
-            distance_texels += occlusion.texels.len();
-            if with_atlases {
-                distance.extend(occlusion.texels.iter().map(|&t| [t, 0.0]));
-            }
-        }
-    }
+    let occlusion_rows = pack_occlusion(set, &mut volumes, &mut distance, &mut distance_texels, with_atlases);
     let mut set_bytes = bytemuck::bytes_of(&header).to_vec();
     if volumes.is_empty() {
         set_bytes.extend_from_slice(bytemuck::bytes_of(&GpuDdgiVolume::default()));

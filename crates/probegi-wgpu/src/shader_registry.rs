@@ -10,12 +10,13 @@
 //! |-------------------------|-----------------------------------------------------------------|
 //! | [`TRACE_RAYS`]          | `bvh.wgsl`, `trace_rays.wgsl`                                   |
 //! | [`PROBE_RAY_GEN`]       | `probe_ray_gen.wgsl`                                            |
-//! | [`PROBE_SHADE`]         | `bvh.wgsl`, `ddgi_query.wgsl`, `scene.wgsl`, `probe_shade.wgsl` |
-//! | [`PROBE_BLEND`]         | `probe_blend.wgsl`                                              |
+//! | [`PROBE_SHADE`]         | `bvh.wgsl`, `ddgi_query.wgsl`, `scene.wgsl`, `shadow_lighting.wgsl`, `probe_shade.wgsl` |
+//! | [`PROBE_BLEND`]         | `probe_border.wgsl`, `probe_blend.wgsl`                         |
 //! | [`PROBE_RELOCATION`]    | `probe_relocation.wgsl`                                         |
 //! | [`PROBE_CLASSIFICATION`]| `bvh.wgsl`, `scene.wgsl`, `probe_classification.wgsl`           |
 //! | [`PROBE_USAGE`]         | `probe_usage.wgsl`                                              |
-//! | [`CAMERA_FRAME`]        | `bvh.wgsl`, `ddgi_query.wgsl`, `scene.wgsl`, `camera_frame.wgsl` |
+//! | [`CAMERA_FRAME`]        | `bvh.wgsl`, `ddgi_query.wgsl`, `scene.wgsl`, `shadow_lighting.wgsl`, `camera_frame.wgsl` |
+//! | [`SHADOW_FIELD`]        | `bvh.wgsl`, `scene.wgsl`, `probe_border.wgsl`, `shadow_field.wgsl` |
 //! | [`FIELD_QUERY`]         | `ddgi_query.wgsl`, `field_query.wgsl`                           |
 //!
 //! The one substitution: `ddgi_query.wgsl` names its group `DDGI_GROUP`, which
@@ -56,7 +57,10 @@ const BVH: WgslFile = wgsl_file!("bvh.wgsl");
 const DDGI_QUERY: WgslFile = wgsl_file!("ddgi_query.wgsl");
 /// Surfaces, materials and lights (group [`SCENE_GROUP`]).
 const SCENE: WgslFile = wgsl_file!("scene.wgsl");
+/// Punctual lights through the shadowing field (after the query and the scene).
 const SHADOW_LIGHTING: WgslFile = wgsl_file!("shadow_lighting.wgsl");
+/// Tile guard borders (no bindings).
+const PROBE_BORDER: WgslFile = wgsl_file!("probe_border.wgsl");
 
 /// A pass's shader module: its label and its files in order, after the prelude.
 #[derive(Debug)]
@@ -78,7 +82,7 @@ pub(crate) const PROBE_SHADE: PassShader = PassShader {
 };
 /// `probe_blend::GpuProbeBlend`.
 pub(crate) const PROBE_BLEND: PassShader =
-    PassShader { label: "probe_blend.wgsl", files: &[wgsl_file!("probe_blend.wgsl")] };
+    PassShader { label: "probe_blend.wgsl", files: &[PROBE_BORDER, wgsl_file!("probe_blend.wgsl")] };
 /// `probe_relocation::GpuProbeRelocation`.
 pub(crate) const PROBE_RELOCATION: PassShader =
     PassShader { label: "probe_relocation.wgsl", files: &[wgsl_file!("probe_relocation.wgsl")] };
@@ -95,7 +99,7 @@ pub(crate) const CAMERA_FRAME: PassShader = PassShader {
 };
 /// `shadow_field::GpuShadowField`.
 pub(crate) const SHADOW_FIELD: PassShader =
-    PassShader { label: "shadow_field.wgsl", files: &[BVH, SCENE, wgsl_file!("shadow_field.wgsl")] };
+    PassShader { label: "shadow_field.wgsl", files: &[BVH, SCENE, PROBE_BORDER, wgsl_file!("shadow_field.wgsl")] };
 /// `ddgi_query::GpuFieldQuery`.
 pub(crate) const FIELD_QUERY: PassShader =
     PassShader { label: "field_query.wgsl", files: &[DDGI_QUERY, wgsl_file!("field_query.wgsl")] };

@@ -104,23 +104,7 @@ impl GpuShadowField {
         if lights == 0 || plan.probes.is_empty() {
             return Ok(());
         }
-        let mut entries = Vec::with_capacity(plan.probes.len());
-        let mut slots = 0u64;
-        for &(probe, first, count, h) in &plan.probes {
-            prev.check_rays(first, count)?;
-            if probe >= target.probes {
-                return Err(GpuError::Input(format!("shadow probe {probe} of {} tiles", target.probes)));
-            }
-            entries.push(ShadowProbe {
-                prev_first_ray: first,
-                ray_count: count,
-                probe,
-                first_slot: slots as u32,
-                hysteresis: h,
-                _pad: [0; 3],
-            });
-            slots += count as u64 * lights as u64;
-        }
+        let (entries, slots) = shadow_entries(plan, prev, target)?;
         if slots > GpuRayTrace::max_batch_rays(ctx) as u64 {
             return Err(GpuError::Input(format!("{slots} shadow rays exceed one batch")));
         }
@@ -177,6 +161,36 @@ impl GpuShadowField {
         );
         Ok(())
     }
+}
+
+/// The pass's per-probe table from `plan` (each probe's slots follow the ones
+/// before it, `lights` per previous-frame ray) and the slot count; an error for
+/// a ray range outside `prev` or a probe outside `target`.
+fn shadow_entries(
+    plan: &DeviceShadowBlend,
+    prev: &GpuRayBatch,
+    target: &OcclusionTarget<'_>,
+) -> Result<(Vec<ShadowProbe>, u64), GpuError> {
+    let lights = plan.lights.len() as u64;
+    let mut entries = Vec::with_capacity(plan.probes.len());
+    let mut slots = 0u64;
+    for &(probe, first, count, h) in &plan.probes {
+        prev.check_rays(first, count)?;
+        if probe >= target.probes {
+            return Err(GpuError::Input(format!("shadow probe {probe} of {} tiles", target.probes)));
+        }
+        let first_slot = u32::try_from(slots).map_err(|_| GpuError::Input("too many shadow rays".into()))?;
+        entries.push(ShadowProbe {
+            prev_first_ray: first,
+            ray_count: count,
+            probe,
+            first_slot,
+            hysteresis: h,
+            _pad: [0; 3],
+        });
+        slots += count as u64 * lights;
+    }
+    Ok((entries, slots))
 }
 
 /// The lights buffer: per light (position, or the direction of travel, in xyz;

@@ -56,12 +56,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     let bsdf = scene_bsdf(sp);
     let glossy = max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0;
     let area = camera.info.z;
-    var l = vec3<f32>(0.0);
-    if ((camera.info.w & 2u) != 0u) {
-        l = shadow_lit_punctual(sp, to_viewer) + scene_direct_area(sp, to_viewer, area, !glossy, &rng);
-    } else {
-        l = scene_direct(sp, to_viewer, area, !glossy, &rng);
-    }
+    var l = shadow_lit_direct(sp, to_viewer, area, !glossy, (camera.info.w & 2u) != 0u, &rng);
     if (sp.front_face) {
         l += scene_emission(sp.material, sp.uv, sp.uv1);
     }

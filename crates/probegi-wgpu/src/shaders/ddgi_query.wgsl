@@ -192,17 +192,32 @@ fn ddgi_weigh(v: DdgiVolume, position: vec3<f32>, normal: vec3<f32>, biased: vec
     return vec4<f32>(ddgi_decode_half(e, v.spacing_m.w), weight);
 }
 
-// probegi_core::ddgi_query::irradiance for member `m`.
-fn ddgi_volume_irradiance(m: u32, position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>) -> vec3<f32> {
-    let v = ddgi_set.volumes[m];
-    let biased = position + ddgi_surface_bias(v, normal, view_dir);
-    // ProbeGrid::cage: base probe and the point's position in the cage.
+// ProbeGrid::cage: the base probe's grid coordinates (clamped into the grid),
+// the largest coordinates, and the point's position across the cell.
+struct DdgiCage {
+    base: vec3<i32>,
+    max_c: vec3<i32>,
+    alpha: vec3<f32>,
+};
+
+fn ddgi_cage(v: DdgiVolume, biased: vec3<f32>) -> DdgiCage {
     let counts = vec3<i32>(v.probe_counts.xyz);
     let max_c = max(counts - vec3<i32>(1), vec3<i32>(0));
     let rel = (biased - v.origin_m.xyz) / v.spacing_m.xyz;
     let base = clamp(vec3<i32>(floor(rel)), vec3<i32>(0), max_c);
     let base_pos = v.origin_m.xyz + v.spacing_m.xyz * vec3<f32>(base);
     let alpha = clamp((biased - base_pos) / v.spacing_m.xyz, vec3<f32>(0.0), vec3<f32>(1.0));
+    return DdgiCage(base, max_c, alpha);
+}
+
+// probegi_core::ddgi_query::irradiance for member `m`.
+fn ddgi_volume_irradiance(m: u32, position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>) -> vec3<f32> {
+    let v = ddgi_set.volumes[m];
+    let biased = position + ddgi_surface_bias(v, normal, view_dir);
+    let cage = ddgi_cage(v, biased);
+    let base = cage.base;
+    let max_c = cage.max_c;
+    let alpha = cage.alpha;
     let normal_texels = ddgi_footprint(v.texels.x, ddgi_oct_encode(normal));
 
     var sum = vec3<f32>(0.0);
@@ -327,12 +342,10 @@ fn ddgi_volume_shadow_cage(m: u32, position: vec3<f32>, normal: vec3<f32>, view_
     var cage: DdgiShadowCage;
     cage.member = DDGI_NO_PROBE;
     let biased = position + ddgi_surface_bias(v, normal, view_dir);
-    let counts = vec3<i32>(v.probe_counts.xyz);
-    let max_c = max(counts - vec3<i32>(1), vec3<i32>(0));
-    let rel = (biased - v.origin_m.xyz) / v.spacing_m.xyz;
-    let base = clamp(vec3<i32>(floor(rel)), vec3<i32>(0), max_c);
-    let base_pos = v.origin_m.xyz + v.spacing_m.xyz * vec3<f32>(base);
-    let alpha = clamp((biased - base_pos) / v.spacing_m.xyz, vec3<f32>(0.0), vec3<f32>(1.0));
+    let grid_cage = ddgi_cage(v, biased);
+    let base = grid_cage.base;
+    let max_c = grid_cage.max_c;
+    let alpha = grid_cage.alpha;
     let dist_side = v.texels.y + 2u;
     var cos_w: array<f32, 8>;
     var wrap_w: array<f32, 8>;

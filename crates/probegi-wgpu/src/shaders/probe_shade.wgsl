@@ -107,12 +107,7 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     var rng = rng_hash(shade_params.seed ^ rng_hash(shade_params.frame ^ rng_hash(i)));
     let to_viewer = -r.dir;
     let n = scene_facing_normal(sp);
-    var l = vec3<f32>(0.0);
-    if ((info & 0x20000000u) != 0u) {
-        l = shadow_lit_punctual(sp, to_viewer) + scene_direct_area(sp, to_viewer, info & 0xffffu, true, &rng);
-    } else {
-        l = scene_direct(sp, to_viewer, info & 0xffffu, true, &rng);
-    }
+    var l = shadow_lit_direct(sp, to_viewer, info & 0xffffu, true, (info & 0x20000000u) != 0u, &rng);
     let bsdf = scene_bsdf(sp);
     l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * ddgi_irradiance(sp.position, n, to_viewer);
     if ((info & 0x40000000u) != 0u && max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0) {

@@ -570,6 +570,21 @@ fn scene_punctual(k: u32, point: vec3<f32>, e: ptr<function, vec3<f32>>) -> vec4
     return vec4<f32>(wi, d);
 }
 
+// A surface point's shading frame, the direction to the viewer in it (lifted
+// off the horizon) and its BSDF: what every light sample at the point reads.
+struct SceneShading {
+    fr: Frame,
+    wo: vec3<f32>,
+    bsdf: Bsdf,
+};
+
+fn scene_shading(sp: SurfacePoint, to_viewer: vec3<f32>) -> SceneShading {
+    let fr = frame_from_normal(scene_facing_normal(sp));
+    var wo = frame_to_local(fr, to_viewer);
+    wo.z = max(wo.z, 1e-4);
+    return SceneShading(fr, normalize(wo), scene_bsdf(sp));
+}
+
 // Direct light reflected toward `to_viewer` (DirectLighting::reflected with the sky
 // left out): punctual lights exactly, `area_samples` stratified NEE samples of the
 // emitters (full BSDF, or the diffuse lobe alone when `specular_area` is false
@@ -577,24 +592,19 @@ fn scene_punctual(k: u32, point: vec3<f32>, e: ptr<function, vec3<f32>>) -> vec4
 // sample with a shadow ray through `bvh.wgsl`. No emission.
 fn scene_direct(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, specular_area: bool,
                 rng: ptr<function, u32>) -> vec3<f32> {
-    let fr = frame_from_normal(scene_facing_normal(sp));
-    var wo = frame_to_local(fr, to_viewer);
-    wo.z = max(wo.z, 1e-4);
-    wo = normalize(wo);
-    let bsdf = scene_bsdf(sp);
-    let punctual = bitcast<u32>(scene_lights[0].x);
-    return scene_direct_punctual(sp, fr, wo, bsdf, punctual) + scene_direct_area(sp, to_viewer, area_samples, specular_area, rng);
+    let s = scene_shading(sp, to_viewer);
+    return scene_direct_punctual(sp, s) + scene_direct_area_in(sp, s, area_samples, specular_area, rng);
 }
 
 // scene_direct's emitters alone (a caller that lights the punctual lights itself:
-// the camera pass with a shadowing field).
+// shadow_lighting.wgsl under a shadowing field).
 fn scene_direct_area(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, specular_area: bool,
                      rng: ptr<function, u32>) -> vec3<f32> {
-    let fr = frame_from_normal(scene_facing_normal(sp));
-    var wo = frame_to_local(fr, to_viewer);
-    wo.z = max(wo.z, 1e-4);
-    wo = normalize(wo);
-    let bsdf = scene_bsdf(sp);
+    return scene_direct_area_in(sp, scene_shading(sp, to_viewer), area_samples, specular_area, rng);
+}
+
+fn scene_direct_area_in(sp: SurfacePoint, s: SceneShading, area_samples: u32, specular_area: bool,
+                        rng: ptr<function, u32>) -> vec3<f32> {
     let header = scene_lights[0];
     let punctual = bitcast<u32>(header.x);
     let emitters = bitcast<u32>(header.y);
@@ -608,7 +618,7 @@ fn scene_direct_area(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, 
             let u = vec2<f32>((f32(i % k) + rng_next(rng)) / f32(k), (f32(i / k) + rng_next(rng)) / f32(k));
             let u_select = rng_next(rng);
             var c = vec3<f32>(0.0);
-            if (scene_emitter_sample(sp, fr, wo, bsdf, specular_area, u, u_select, first, emitters, &c)) {
+            if (scene_emitter_sample(sp, s.fr, s.wo, s.bsdf, specular_area, u, u_select, first, emitters, &c)) {
                 sum += c;
             }
         }
@@ -617,10 +627,21 @@ fn scene_direct_area(sp: SurfacePoint, to_viewer: vec3<f32>, area_samples: u32, 
     return l;
 }
 
+// A punctual light's visibility from `sp` by one shadow ray toward `inc`
+// (scene_punctual's direction and distance): 1 or 0.
+fn scene_punctual_shadow_ray(sp: SurfacePoint, inc: vec4<f32>) -> f32 {
+    var t_max = SCENE_F32_MAX;
+    if (inc.w < SCENE_F32_MAX) {
+        t_max = inc.w * (1.0 - 1e-4);
+    }
+    let shadow = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, inc.xyz), inc.xyz, 0.0, t_max), true);
+    return select(0.0, 1.0, shadow.leaf == BVH_NO_HIT);
+}
+
 // scene_direct's punctual lights (punctual_direct), each with a shadow ray.
-fn scene_direct_punctual(sp: SurfacePoint, fr: Frame, wo: vec3<f32>, bsdf: Bsdf, punctual: u32) -> vec3<f32> {
+fn scene_direct_punctual(sp: SurfacePoint, s: SceneShading) -> vec3<f32> {
     var l = vec3<f32>(0.0);
-    for (var k = 0u; k < punctual; k++) {
+    for (var k = 0u; k < bitcast<u32>(scene_lights[0].x); k++) {
         var e = vec3<f32>(0.0);
         let inc = scene_punctual(k, sp.position, &e);
         if (!(max(max(e.x, e.y), e.z) > 0.0)) {
@@ -630,13 +651,8 @@ fn scene_direct_punctual(sp: SurfacePoint, fr: Frame, wo: vec3<f32>, bsdf: Bsdf,
         if (cos <= 0.0) {
             continue;
         }
-        var t_max = SCENE_F32_MAX;
-        if (inc.w < SCENE_F32_MAX) {
-            t_max = inc.w * (1.0 - 1e-4);
-        }
-        let shadow = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, inc.xyz), inc.xyz, 0.0, t_max), true);
-        if (shadow.leaf == BVH_NO_HIT) {
-            l += bsdf_eval(bsdf, wo, frame_to_local(fr, inc.xyz)) * e * cos;
+        if (scene_punctual_shadow_ray(sp, inc) > 0.0) {
+            l += bsdf_eval(s.bsdf, s.wo, frame_to_local(s.fr, inc.xyz)) * e * cos;
         }
     }
     return l;

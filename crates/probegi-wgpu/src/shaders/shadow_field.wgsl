@@ -141,9 +141,15 @@ fn generate_shadow_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_in
     shadow_slots[j] = slot;
 }
 
-// The entry blended by workgroup `wid`.
+// The entry (probe) workgroup `wid` blends or borders.
 fn shadow_entry_index(wid: vec3<u32>) -> u32 {
     return wid.y * shadow_params.groups_x + wid.x;
+}
+
+// The first texel of entry `e`'s occlusion tile in `occlusion`.
+fn shadow_tile_base(e: ShadowProbe) -> u32 {
+    let side = shadow_params.interior + 2u;
+    return shadow_params.occlusion_first + e.probe * side * side;
 }
 
 @compute @workgroup_size(64)
@@ -156,7 +162,7 @@ fn blend_shadow_maps(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoc
     let n = shadow_params.interior;
     let side = n + 2u;
     let slots = e.ray_count * shadow_params.light_count;
-    let base = shadow_params.occlusion_first + e.probe * side * side;
+    let base = shadow_tile_base(e);
     for (var t = lid; t < n * n; t += 64u) {
         let omega = shadow_lights[shadow_params.light_count + t].xyz;
         var sum = 0.0;
@@ -188,18 +194,6 @@ fn blend_shadow_maps(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoc
     }
 }
 
-// probegi_core::probe_border::update_tile_border for the occlusion tiles.
-fn shadow_border_source(x: u32, y: u32, n: u32) -> vec2<u32> {
-    let last = n + 1u;
-    if ((x == 0u || x == last) && (y == 0u || y == last)) {
-        return vec2<u32>(select(1u, n, x == 0u), select(1u, n, y == 0u));
-    }
-    if (y == 0u) { return vec2<u32>(n + 1u - x, 1u); }
-    if (y == last) { return vec2<u32>(n + 1u - x, n); }
-    if (x == 0u) { return vec2<u32>(1u, n + 1u - y); }
-    return vec2<u32>(n, n + 1u - y);
-}
-
 @compute @workgroup_size(64)
 fn border_shadow_maps(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let ei = shadow_entry_index(wid);
@@ -209,12 +203,12 @@ fn border_shadow_maps(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invo
     let e = shadow_probes[ei];
     let n = shadow_params.interior;
     let side = n + 2u;
-    let base = shadow_params.occlusion_first + e.probe * side * side;
+    let base = shadow_tile_base(e);
     for (var t = lid; t < side * side; t += 64u) {
         let x = t % side;
         let y = t / side;
-        if (x == 0u || y == 0u || x == n + 1u || y == n + 1u) {
-            let src = shadow_border_source(x, y, n);
+        if (is_border(x, y, n)) {
+            let src = border_source(x, y, n);
             occlusion[base + y * side + x] = occlusion[base + src.y * side + src.x];
         }
     }
