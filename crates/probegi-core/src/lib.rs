@@ -21,6 +21,7 @@
 //! - [`irradiance_encoding`]: the perceptual (gamma) encoding of irradiance texels.
 //! - [`probe_blend`]: the blend pass, one frame folded in with hysteresis.
 //! - [`probe_border`]: the border pass, guard texels from their interior sources.
+//! - [`probe_change`]: how much a blend changed a probe (the ray budget's priority).
 //! - [`probe_relocation`]: the probe-position optimizer.
 //! - [`probe_classification`]: probe states (jcgt and usage schemes).
 //! - [`ddgi_query`]: irradiance at a point from the 8-probe cage.
@@ -48,6 +49,7 @@ pub mod octahedral;
 pub mod probe_atlas;
 pub mod probe_blend;
 pub mod probe_border;
+pub mod probe_change;
 pub mod probe_classification;
 pub mod probe_grid;
 pub mod probe_relocation;

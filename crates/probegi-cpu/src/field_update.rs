@@ -283,7 +283,7 @@ impl<'u> SeamDriver<'u> {
             .ok_or_else(|| BackendError::Unsupported("the device that traced the batch is gone".into()))?;
         let plan = set.device_blend_plan()?;
         let view = set.view();
-        let device_ms = bt.shade_and_blend(
+        let output = bt.shade_and_blend(
             set.ray_batch(),
             &view,
             !set.field_on_device(),
@@ -293,10 +293,10 @@ impl<'u> SeamDriver<'u> {
             self.frame,
         )?;
         drop((view, plan));
-        for (pass, ms) in device_ms {
+        for (pass, ms) in output.pass_ms {
             *self.own_ms.entry(pass).or_default() += ms;
         }
-        Ok(set.submit_device_blend().unwrap_or_else(seam_bug))
+        Ok(set.submit_device_blend(&output.probe_change)?)
     }
 
     /// `UpdateStep::ShadeRays` after a trace whose hits are on the host: the

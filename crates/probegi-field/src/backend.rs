@@ -163,7 +163,8 @@ pub trait DeviceField: Sync {
     /// queries read it (grids, relocation offsets, usable probes); with
     /// `upload_atlases` its atlases are current on the host and replace the
     /// device's first. Returns wall milliseconds by pass (`shade`, `blend`: blend
-    /// and border), the host having waited for each.
+    /// and border), the host having waited for each, and the probes' change
+    /// where the plan asks for it.
     #[allow(clippy::too_many_arguments)]
     fn shade_and_blend(
         &self,
@@ -174,7 +175,7 @@ pub trait DeviceField: Sync {
         volumes: &[DdgiVolume],
         seed: u64,
         frame: u32,
-    ) -> Result<Vec<(&'static str, f64)>, BackendError>;
+    ) -> Result<crate::device_plans::DeviceBlendOutput, BackendError>;
 
     /// Whether [`Self::trace_resident`] makes an update batch's rays on the
     /// device from its `generated` records, so that the set can plan update

@@ -335,6 +335,7 @@ impl DdgiFieldSet {
         // Shadow rays are made on the host: a batch with them keeps per-ray arrays.
         let per_ray = !self.update_rays_on_device || self.has_host_shadow_rays();
         self.batch.clear(ProbeRayBatchKind::Update, per_ray);
+        self.apply_ray_budget();
         for i in 0..self.volumes.len() {
             self.volumes[i].plan_update(&mut self.frames[i], self.seed, self.frame, i as u32, &mut self.batch);
         }
@@ -348,6 +349,37 @@ impl DdgiFieldSet {
         self.last_batch_rays_per_volume = self.batch.rays_per_volume(self.volumes.len());
         self.expected = UpdateStep::TraceRays;
         UpdateStep::TraceRays
+    }
+
+    /// The set's ray budget: the largest `ray_budget` of its volumes (0: none).
+    pub fn ray_budget(&self) -> u64 {
+        self.volumes.iter().map(|v| v.settings.ray_budget).max().unwrap_or(0)
+    }
+
+    /// Under a ray budget (`crate::ray_budget`), which probes of every volume
+    /// trace this frame; without one, every volume traces as its states say.
+    fn apply_ray_budget(&mut self) {
+        let budget = self.ray_budget();
+        for f in &mut self.frames {
+            f.budget_traces = None;
+            f.measure_change = budget > 0;
+        }
+        if budget == 0 {
+            return;
+        }
+        let mut candidates = Vec::new();
+        for (i, v) in self.volumes.iter().enumerate() {
+            v.budget_candidates(i as u32, &mut candidates);
+        }
+        let chosen = crate::ray_budget::select_budget_probes(&candidates, budget);
+        for (f, v) in self.frames.iter_mut().zip(&self.volumes) {
+            f.budget_traces = Some(vec![false; v.grid.probe_count()]);
+        }
+        for (c, _) in candidates.iter().zip(&chosen).filter(|(_, k)| **k) {
+            if let Some(t) = self.frames[c.volume as usize].budget_traces.as_mut() {
+                t[c.probe as usize] = true;
+            }
+        }
     }
 
     /// `probe_needs_radiance` of the update batch: the probes that blend this
@@ -699,10 +731,20 @@ impl DdgiFieldSet {
     /// The set's bookkeeping after a device ran [`Self::device_blend_plan`]
     /// (hysteresis ramps, Newly * states, usable probes). The volumes' own
     /// atlases are stale from here until [`Self::accept_host_atlases`].
-    pub fn submit_device_blend(&mut self) -> Result<UpdateStep, SeamError> {
+    /// `probe_change`: per volume, the changes the device measured
+    /// ([`crate::DeviceBlendOutput::probe_change`]; read only where the plan
+    /// asked for them).
+    pub fn submit_device_blend(&mut self, probe_change: &[Vec<f32>]) -> Result<UpdateStep, SeamError> {
         self.expect(UpdateStep::ShadeRays, "submit_device_blend")?;
+        let change = |i: usize| probe_change.get(i).map_or(&[][..], |c| c.as_slice());
+        for (i, f) in self.frames.iter().enumerate().filter(|(_, f)| f.measure_change) {
+            let wanted = f.first_ray.iter().zip(&f.active).filter(|(r, a)| **r != u32::MAX && **a).count();
+            if change(i).len() != wanted {
+                return Err(SeamError::WrongLength { what: "probe changes", expected: wanted, got: change(i).len() });
+            }
+        }
         for i in 0..self.volumes.len() {
-            self.volumes[i].accept_device_blend(&self.frames[i], &self.shadow_lights);
+            self.volumes[i].accept_device_blend(&self.frames[i], &self.shadow_lights, change(i));
             self.volumes[i].record_shadow_batch(&self.frames[i], self.frame);
         }
         self.field_on_device = true;

@@ -35,6 +35,23 @@ pub struct DeviceVolumeBlend<'a> {
     /// The shadowing field's share, for a volume that keeps one
     /// ([`DeviceShadowBlend`]; `None` otherwise).
     pub shadow: Option<DeviceShadowBlend>,
+    /// A ray budget runs: after the blend (and the shadowing field's), the
+    /// device measures each blended probe's change
+    /// (`probegi_core::probe_change::probe_change` of its irradiance and
+    /// occlusion tiles, before against after) and returns one per probe
+    /// with `probe_blend` set, in increasing probe order
+    /// ([`crate::DeviceBlendOutput::probe_change`]).
+    pub measure_change: bool,
+}
+
+/// What [`crate::DeviceField::shade_and_blend`] returns.
+#[derive(Clone, Debug, Default)]
+pub struct DeviceBlendOutput {
+    /// Wall milliseconds by pass (`shade`, `blend`, ...), the host having waited for each.
+    pub pass_ms: Vec<(&'static str, f64)>,
+    /// Per volume of the plan, the change of each probe it blended where the
+    /// plan asked for it (`DeviceVolumeBlend::measure_change`; empty otherwise).
+    pub probe_change: Vec<Vec<f32>>,
 }
 
 /// One volume's shadowing-field update on another device (seed 003 §5.1, eq.

@@ -7,13 +7,16 @@
 //!
 //! - [`ddgi_volume`]: one volume's persistent field (grid, atlases, offsets,
 //!   states, hysteresis) and its share of each update step, one file per pass:
-//!   `init_rounds`, `update_plan`, `usage_states`, `blend_inputs`, `scrolling`;
+//!   `init_rounds`, `update_plan`, `usage_states`, `blend_inputs`, `scrolling`,
+//!   `shadow_rays` (the shadowing field), `probe_budget` (its share of the
+//!   ray budget);
 //! - [`ddgi_field_set`]: any number of volumes (multiple volumes, cascades)
 //!   updated through one ray batch per frame: the seam's state machine;
 //! - [`seam`]: the seam's vocabulary (the ray batch, hits, steps, errors);
 //! - [`device_plans`]: the inputs of a device that runs the relocation,
 //!   classification and blend passes where the hits lie;
 //! - [`probe_ray_gen`]: the rotated spherical Fibonacci rays and their blend weights;
+//! - [`ray_budget`]: which probes trace under a per-frame ray budget;
 //! - [`backend`]: the traits a backend implements ([`ProbeBatchTracer`] for
 //!   trace and shade, [`DeviceField`] for the field-resident passes) and their
 //!   typed error.
@@ -28,9 +31,11 @@ pub mod ddgi_field_set;
 pub mod ddgi_volume;
 pub mod device_plans;
 pub mod probe_ray_gen;
+pub mod ray_budget;
 pub mod seam;
 
 pub use backend::{BackendError, DeviceField, ProbeBatchTracer, ProbeTracerHandle};
 pub use ddgi_field_set::DdgiFieldSet;
 pub use ddgi_volume::{DdgiVolume, SceneEvent};
+pub use device_plans::DeviceBlendOutput;
 pub use seam::{ProbeRayBatch, ProbeRayHit, SeamError, UpdateStep};

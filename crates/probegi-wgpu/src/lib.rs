@@ -17,6 +17,8 @@
 //! - [`probe_blend`]: the blend (γ encoding, seed 004 Listing 3's thresholds,
 //!   distance moments, over the CPU's own weight tables) and border passes over
 //!   device-resident atlases (a volume's own, or its range of a resident field);
+//! - [`probe_change`]: each blended probe's change, the ray budget's signal
+//!   (`probegi_core::probe_change`), read back 4 bytes a probe;
 //! - [`probe_classification`]: seed 004 Listing 5's classification round;
 //! - [`probe_ray_gen`]: rotated spherical Fibonacci rays written straight into
 //!   a trace batch;
@@ -49,6 +51,7 @@ pub mod gpu_context;
 pub mod gpu_scene;
 pub mod gpu_timer;
 pub mod probe_blend;
+pub mod probe_change;
 pub mod probe_classification;
 pub mod probe_ray_gen;
 pub mod probe_relocation;

@@ -242,6 +242,7 @@ impl GpuProbeBlend {
             distance_clamp_m: frame.distance_clamp_m,
             reset_probes: &[],
             shadow: None,
+            measure_change: false,
         };
         self.prepare_resident(ctx, atlases, &plan, &results)
     }

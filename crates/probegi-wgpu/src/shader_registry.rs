@@ -12,6 +12,7 @@
 //! | [`PROBE_RAY_GEN`]       | `probe_ray_gen.wgsl`                                            |
 //! | [`PROBE_SHADE`]         | `bvh.wgsl`, `ddgi_query.wgsl`, `scene.wgsl`, `shadow_lighting.wgsl`, `probe_shade.wgsl` |
 //! | [`PROBE_BLEND`]         | `probe_border.wgsl`, `probe_blend.wgsl`                         |
+//! | [`PROBE_CHANGE`]        | `probe_change.wgsl`                                             |
 //! | [`PROBE_RELOCATION`]    | `probe_relocation.wgsl`                                         |
 //! | [`PROBE_CLASSIFICATION`]| `bvh.wgsl`, `scene.wgsl`, `probe_classification.wgsl`           |
 //! | [`PROBE_USAGE`]         | `probe_usage.wgsl`                                              |
@@ -83,6 +84,9 @@ pub(crate) const PROBE_SHADE: PassShader = PassShader {
 /// `probe_blend::GpuProbeBlend`.
 pub(crate) const PROBE_BLEND: PassShader =
     PassShader { label: "probe_blend.wgsl", files: &[PROBE_BORDER, wgsl_file!("probe_blend.wgsl")] };
+/// `probe_change::GpuProbeChange`.
+pub(crate) const PROBE_CHANGE: PassShader =
+    PassShader { label: "probe_change.wgsl", files: &[wgsl_file!("probe_change.wgsl")] };
 /// `probe_relocation::GpuProbeRelocation`.
 pub(crate) const PROBE_RELOCATION: PassShader =
     PassShader { label: "probe_relocation.wgsl", files: &[wgsl_file!("probe_relocation.wgsl")] };
@@ -106,8 +110,9 @@ pub(crate) const FIELD_QUERY: PassShader =
 
 /// Every pass of the crate (the unit tests compile each).
 #[cfg(test)]
-pub(crate) const PASSES: [&PassShader; 10] = [
+pub(crate) const PASSES: [&PassShader; 11] = [
     &SHADOW_FIELD,
+    &PROBE_CHANGE,
     &TRACE_RAYS,
     &PROBE_RAY_GEN,
     &PROBE_SHADE,

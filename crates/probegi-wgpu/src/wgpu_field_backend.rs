@@ -34,7 +34,7 @@ use probegi_core::probe_classification::ProbeUsageCounts;
 use probegi_field::backend::{BackendError, DeviceField, ProbeBatchTracer};
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::device_plans::{
-    DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
+    DeviceBlendOutput, DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
 };
 use probegi_field::seam::ProbeRayBatch;
 use probegi_scene::{BvhTracer, RayHit, Scene, TlasLayout};
@@ -92,6 +92,38 @@ impl WgpuProbeTracer {
             pass.update(&self.ctx, &self.trace, &self.bvh, scene, batch, shadow, &target)?;
         }
         Ok(())
+    }
+}
+
+impl WgpuProbeTracer {
+    /// Before the blend: the tiles of the probes whose change `plan` asks for
+    /// (the ray budget's), per volume (`None`: not measured).
+    fn snapshot_changes(
+        &self,
+        field: &GpuDdgiField,
+        plan: &[DeviceVolumeBlend<'_>],
+    ) -> Result<Vec<Option<crate::probe_change::ChangeMeasure>>, GpuError> {
+        let mut out = Vec::with_capacity(plan.len());
+        for (i, p) in plan.iter().enumerate() {
+            let Some(pass) = self.change.as_ref().filter(|_| p.measure_change) else {
+                out.push(None);
+                continue;
+            };
+            let atlases = field.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
+            let probes: Vec<u32> =
+                p.probe_blend.iter().enumerate().filter(|(_, b)| b.is_some()).map(|(k, _)| k as u32).collect();
+            out.push(pass.snapshot(&self.ctx, &atlases, field.member_occlusion(i).as_ref(), &probes)?);
+        }
+        Ok(out)
+    }
+
+    /// After the blends: each snapshot probe's change, per volume (empty where not measured).
+    fn measure_changes(
+        &self,
+        measures: &[Option<crate::probe_change::ChangeMeasure>],
+    ) -> Result<Vec<Vec<f32>>, GpuError> {
+        let Some(pass) = self.change.as_ref() else { return Ok(vec![Vec::new(); measures.len()]) };
+        measures.iter().map(|m| m.as_ref().map_or(Ok(Vec::new()), |m| pass.measure(&self.ctx, m))).collect()
     }
 }
 
@@ -153,6 +185,8 @@ pub struct WgpuProbeTracer {
     field: Mutex<Option<GpuDdgiField>>,
     /// The shadowing field's passes (with `keeping_field`, where the adapter binds enough buffers).
     shadow: Option<GpuShadowField>,
+    /// The ray budget's change measure (with `keeping_field`).
+    change: Option<crate::probe_change::GpuProbeChange>,
     /// The last update batch blended on the device, kept with its frame: the
     /// shadowing field casts the next frame's shadow rays from its hits.
     prev_update: Mutex<Option<(u32, GpuRayBatch)>>,
@@ -211,6 +245,7 @@ impl WgpuProbeTracer {
             rounds_on_device: Default::default(),
             field: Mutex::new(None),
             shadow: None,
+            change: None,
             prev_update: Mutex::new(None),
         })
     }
@@ -234,6 +269,7 @@ impl WgpuProbeTracer {
         self.ray_gen = self.keep_field.then(|| GpuProbeRayGen::new(&self.ctx));
         // Without it the shadowing field's rays and blend run on the host.
         self.shadow = if self.keep_field { GpuShadowField::new(&self.ctx).ok() } else { None };
+        self.change = self.keep_field.then(|| crate::probe_change::GpuProbeChange::new(&self.ctx));
         self
     }
 
@@ -565,7 +601,7 @@ impl DeviceField for WgpuProbeTracer {
         volumes: &[DdgiVolume],
         seed: u64,
         frame: u32,
-    ) -> Result<Vec<(&'static str, f64)>, BackendError> {
+    ) -> Result<DeviceBlendOutput, BackendError> {
         let ((shade, scene), Some((blend, _, _))) = (
             self.shading
                 .as_ref()
@@ -580,7 +616,7 @@ impl DeviceField for WgpuProbeTracer {
             .filter(|b| b.ray_count as usize == batch.len())
             .ok_or_else(|| BackendError::Device("the batch to shade is not the one traced on the device".into()))?;
         let mut gpu_field = self.field.lock().map_err(poisoned)?;
-        let run = |gpu_field: &mut Option<GpuDdgiField>| -> Result<Vec<(&'static str, f64)>, GpuError> {
+        let run = |gpu_field: &mut Option<GpuDdgiField>| -> Result<DeviceBlendOutput, GpuError> {
             let t = std::time::Instant::now();
             let f = self.resident_field(gpu_field, field, upload_atlases, plan)?;
             let probes = batch_shade_probes(batch, volumes);
@@ -592,6 +628,7 @@ impl DeviceField for WgpuProbeTracer {
             self.ctx.wait()?;
             let shade_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = std::time::Instant::now();
+            let measures = self.snapshot_changes(f, plan)?;
             let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
             for (i, p) in plan.iter().enumerate() {
                 if p.probe_blend.iter().all(|b| b.is_none()) {
@@ -607,7 +644,14 @@ impl DeviceField for WgpuProbeTracer {
             let t = std::time::Instant::now();
             self.shadow_update(f, scene, plan)?;
             self.ctx.wait()?;
-            Ok(vec![("shade", shade_ms), ("blend", blend_ms), ("shadow_blend", t.elapsed().as_secs_f64() * 1e3)])
+            let mut pass_ms =
+                vec![("shade", shade_ms), ("blend", blend_ms), ("shadow_blend", t.elapsed().as_secs_f64() * 1e3)];
+            let t = std::time::Instant::now();
+            let probe_change = self.measure_changes(&measures)?;
+            if measures.iter().any(|m| m.is_some()) {
+                pass_ms.push(("probe_change", t.elapsed().as_secs_f64() * 1e3));
+            }
+            Ok(DeviceBlendOutput { pass_ms, probe_change })
         };
         let result = run(&mut gpu_field).map_err(BackendError::from);
         drop(last);

@@ -58,6 +58,7 @@ impl DdgiVolume {
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) {
         let t = std::time::Instant::now();
+        let before = self.tiles_before(frame);
         let n = frame.ray_count;
         let (base, irr_scale, vis_scale) = self.blend_plan(frame);
         let thresholds = self.settings.probe_fast_convergence.then_some(TexelThresholds {
@@ -117,6 +118,11 @@ impl DdgiVolume {
             self.blend_shadow_maps(frame, &hysteresis);
             *pass_ms.entry("shadow_blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
         }
+        if let Some(before) = before {
+            let t = std::time::Instant::now();
+            self.record_change(&updated, &before);
+            *pass_ms.entry("probe_change").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        }
         self.after_update(&updated);
         #[cfg(debug_assertions)]
         self.validate();
@@ -166,16 +172,26 @@ impl DdgiVolume {
             visibility_scale,
             distance_clamp_m: self.distance_clamp_m(),
             reset_probes: &self.probes_reset_since_blend,
+            measure_change: frame.measure_change,
         }
     }
 
-    /// The bookkeeping of a blend another device ran by [`Self::device_blend`].
-    pub(crate) fn accept_device_blend(&mut self, frame: &VolumeFrame, lights: &[probegi_scene::PunctualLight]) {
+    /// The bookkeeping of a blend another device ran by [`Self::device_blend`];
+    /// `change`: the probe changes it measured (`DeviceVolumeBlend::measure_change`).
+    pub(crate) fn accept_device_blend(
+        &mut self,
+        frame: &VolumeFrame,
+        lights: &[probegi_scene::PunctualLight],
+        change: &[f32],
+    ) {
         let (base, irr_scale, _) = self.blend_plan(frame);
         if let Some(plan) = self.device_shadow_blend(&base, irr_scale, lights) {
             self.accept_device_shadow_blend(&plan);
         }
         let updated: Vec<bool> = base.iter().map(|b| b.is_some()).collect();
+        if frame.measure_change {
+            self.accept_device_change(&updated, change);
+        }
         self.after_update(&updated);
     }
 

@@ -29,6 +29,7 @@ use crate::probe_ray_gen::ProbeRayDirections;
 
 mod blend_inputs;
 mod init_rounds;
+mod probe_budget;
 mod scrolling;
 mod shadow_rays;
 mod update_plan;
@@ -102,6 +103,10 @@ pub struct DdgiVolume {
     probes_reset_since_blend: Vec<u32>,
     /// Seed 003 ch. 5's occlusion maps, with `settings.shadow_field`.
     pub shadow: Option<ShadowField>,
+    /// The ray budget's signal (`probe_budget`): each probe's change in its
+    /// last blend (1 before any), and the frames since it last traced.
+    probe_change: Vec<f32>,
+    probe_untraced_frames: Vec<u32>,
 }
 
 /// One volume's per-frame scratch.
@@ -125,6 +130,10 @@ pub struct VolumeFrame {
     pub(crate) shadow_slots: Vec<shadow_rays::ShadowSlot>,
     /// The samples' probe and (direction, visibility) once the batch is traced.
     pub(crate) shadow_samples: Vec<(u32, probegi_core::shadow_field::ShadowSample)>,
+    /// Under a ray budget, the probes it lets trace this frame (`None`: no budget).
+    pub budget_traces: Option<Vec<bool>>,
+    /// The blend records each probe's change (a ray budget reads it).
+    pub measure_change: bool,
 }
 
 impl DdgiVolume {
@@ -170,6 +179,8 @@ impl DdgiVolume {
             active_probes_last: 0,
             probes_reset_since_blend: Vec::new(),
             shadow: settings.shadow_field.then(|| ShadowField::new(probes, settings.shadow_field_texels)),
+            probe_change: vec![1.0; probes],
+            probe_untraced_frames: vec![0; probes],
             settings,
         }
     }
@@ -200,6 +211,12 @@ impl DdgiVolume {
     /// Whether queries may read probe `p` now.
     pub fn probe_usable(&self, p: usize) -> bool {
         self.probe_usable[p]
+    }
+
+    /// Probe `p`'s change in its last blend (`probegi_core::probe_change`; 1
+    /// before its first), measured while a ray budget runs.
+    pub fn probe_change(&self, p: usize) -> f32 {
+        self.probe_change[p]
     }
 
     /// Whether probe `p` has been blended since it was created or last reset.

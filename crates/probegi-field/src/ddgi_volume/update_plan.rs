@@ -14,7 +14,8 @@ use super::{DdgiVolume, VolumeFrame};
 
 impl DdgiVolume {
     /// Adds the frame's update rays (seed 003 §4.2) of the probes whose state
-    /// traces, and decides which probes update this frame.
+    /// traces (and, under a ray budget, that it chose), and decides which
+    /// probes update this frame.
     pub(crate) fn plan_update(
         &mut self,
         frame: &mut VolumeFrame,
@@ -25,7 +26,11 @@ impl DdgiVolume {
     ) {
         let probes = self.grid.probe_count();
         let interval = self.settings.probe_sleeping_update_interval;
-        frame.tracing = self.probe_states.iter().map(|s| s.traces()).collect();
+        frame.tracing = match &frame.budget_traces {
+            Some(chosen) => self.probe_states.iter().zip(chosen).map(|(s, c)| s.traces() && *c).collect(),
+            None => self.probe_states.iter().map(|s| s.traces()).collect(),
+        };
+        self.count_untraced_frames(frame);
         frame.active = self.probe_states.iter().map(|s| s.updates_in_frame(frame_index, interval)).collect();
         frame.rays = generate_probe_rays(&self.settings, self.stream_seed(seed), frame_index);
         frame.ray_count = frame.rays.dirs.len();
