@@ -105,7 +105,9 @@ pub fn adjusted_hysteresis(hysteresis: f32, change: f32, thresholds: &TexelThres
 
 /// Blends one probe's ray radiances into its irradiance tile (encoded with `gamma`).
 /// `hysteresis` is the weight of the old value (0 replaces it); with `thresholds`
-/// each texel lowers it by Listing 3.
+/// each texel lowers it by Listing 3. Returns the probe's change: the mean over
+/// the interior of [`crate::probe_change::texel_change`] between each texel's
+/// history and this frame's estimate (0 for a texel no ray weighs).
 pub fn blend_irradiance_tile(
     tile: &mut [Vec3],
     interior: u32,
@@ -114,7 +116,8 @@ pub fn blend_irradiance_tile(
     hysteresis: f32,
     gamma: f32,
     thresholds: Option<&TexelThresholds>,
-) {
+) -> f32 {
+    let mut change = 0.0f32;
     for t in 0..(interior * interior) as usize {
         let mut sum = Vec3::ZERO;
         let mut wsum = 0.0f32;
@@ -130,6 +133,7 @@ pub fn blend_irradiance_tile(
         }
         let encoded = encode_irradiance(sum / wsum, gamma);
         let dst = &mut tile[interior_index(t, interior)];
+        change += crate::probe_change::texel_change(*dst, encoded);
         let h = match thresholds {
             Some(th) => adjusted_hysteresis(hysteresis, (encoded - *dst).max_element(), th),
             None => hysteresis,
@@ -139,6 +143,7 @@ pub fn blend_irradiance_tile(
             *dst = blended;
         }
     }
+    change / (interior * interior).max(1) as f32
 }
 
 /// Blends one probe's ray lengths into its distance tile as (mean, mean²).

@@ -42,11 +42,14 @@ pub struct ShadowSample {
 
 /// Eq. 5.2–5.3 for one probe's tile (border included, `interior²` texels
 /// inside): `hysteresis` is the weight of the old value (0 replaces it). The
-/// border is refreshed afterwards.
-pub fn blend_shadow_tile(tile: &mut [f32], interior: u32, samples: &[ShadowSample], hysteresis: f32) {
+/// border is refreshed afterwards. Returns the tile's change: the mean over the
+/// interior of |this frame's visibility − the history| (0 for a texel no
+/// sample weighs; `crate::probe_change`).
+pub fn blend_shadow_tile(tile: &mut [f32], interior: u32, samples: &[ShadowSample], hysteresis: f32) -> f32 {
     if samples.is_empty() {
-        return;
+        return 0.0;
     }
+    let mut change = 0.0f32;
     for j in 0..interior {
         for i in 0..interior {
             let omega = oct_decode(texel_center_uv(i, j, interior));
@@ -60,6 +63,7 @@ pub fn blend_shadow_tile(tile: &mut [f32], interior: u32, samples: &[ShadowSampl
                 continue;
             }
             let dst = &mut tile[interior_texel_index(interior, i, j)];
+            change += (sum / wsum - *dst).abs();
             let blended = (sum / wsum) * (1.0 - hysteresis) + *dst * hysteresis;
             if blended.is_finite() {
                 *dst = blended.clamp(0.0, 1.0);
@@ -67,6 +71,7 @@ pub fn blend_shadow_tile(tile: &mut [f32], interior: u32, samples: &[ShadowSampl
         }
     }
     update_tile_border(tile, interior);
+    change / (interior * interior).max(1) as f32
 }
 
 /// Mean light visibility in `[0, 1]` at `position` on a surface with unit

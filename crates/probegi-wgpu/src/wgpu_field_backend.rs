@@ -96,34 +96,21 @@ impl WgpuProbeTracer {
 }
 
 impl WgpuProbeTracer {
-    /// Before the blend: the tiles of the probes whose change `plan` asks for
-    /// (the ray budget's), per volume (`None`: not measured).
-    fn snapshot_changes(
-        &self,
-        field: &GpuDdgiField,
-        plan: &[DeviceVolumeBlend<'_>],
-    ) -> Result<Vec<Option<crate::probe_change::ChangeMeasure>>, GpuError> {
+    /// After the blends: per volume, the change of each probe it blended where
+    /// `plan` asks for it (the ray budget's; empty elsewhere).
+    fn measure_changes(&self, field: &GpuDdgiField, plan: &[DeviceVolumeBlend<'_>]) -> Result<Vec<Vec<f32>>, GpuError> {
         let mut out = Vec::with_capacity(plan.len());
         for (i, p) in plan.iter().enumerate() {
             let Some(pass) = self.change.as_ref().filter(|_| p.measure_change) else {
-                out.push(None);
+                out.push(Vec::new());
                 continue;
             };
             let atlases = field.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
             let probes: Vec<u32> =
                 p.probe_blend.iter().enumerate().filter(|(_, b)| b.is_some()).map(|(k, _)| k as u32).collect();
-            out.push(pass.snapshot(&self.ctx, &atlases, field.member_occlusion(i).as_ref(), &probes)?);
+            out.push(pass.measure(&self.ctx, &atlases, field.member_occlusion(i).as_ref(), &probes)?);
         }
         Ok(out)
-    }
-
-    /// After the blends: each snapshot probe's change, per volume (empty where not measured).
-    fn measure_changes(
-        &self,
-        measures: &[Option<crate::probe_change::ChangeMeasure>],
-    ) -> Result<Vec<Vec<f32>>, GpuError> {
-        let Some(pass) = self.change.as_ref() else { return Ok(vec![Vec::new(); measures.len()]) };
-        measures.iter().map(|m| m.as_ref().map_or(Ok(Vec::new()), |m| pass.measure(&self.ctx, m))).collect()
     }
 }
 
@@ -628,7 +615,6 @@ impl DeviceField for WgpuProbeTracer {
             self.ctx.wait()?;
             let shade_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = std::time::Instant::now();
-            let measures = self.snapshot_changes(f, plan)?;
             let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
             for (i, p) in plan.iter().enumerate() {
                 if p.probe_blend.iter().all(|b| b.is_none()) {
@@ -647,8 +633,8 @@ impl DeviceField for WgpuProbeTracer {
             let mut pass_ms =
                 vec![("shade", shade_ms), ("blend", blend_ms), ("shadow_blend", t.elapsed().as_secs_f64() * 1e3)];
             let t = std::time::Instant::now();
-            let probe_change = self.measure_changes(&measures)?;
-            if measures.iter().any(|m| m.is_some()) {
+            let probe_change = self.measure_changes(f, plan)?;
+            if plan.iter().any(|p| p.measure_change) {
                 pass_ms.push(("probe_change", t.elapsed().as_secs_f64() * 1e3));
             }
             Ok(DeviceBlendOutput { pass_ms, probe_change })

@@ -58,7 +58,6 @@ impl DdgiVolume {
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) {
         let t = std::time::Instant::now();
-        let before = self.tiles_before(frame);
         let n = frame.ray_count;
         let (base, irr_scale, vis_scale) = self.blend_plan(frame);
         let thresholds = self.settings.probe_fast_convergence.then_some(TexelThresholds {
@@ -71,19 +70,25 @@ impl DdgiVolume {
         let irr_len = self.irradiance.tile_len();
         let dist_len = self.distance.tile_len();
         let weights = &frame.rays;
-        self.irradiance.texels.par_chunks_mut(irr_len).zip(base.par_iter()).for_each(|(tile, b)| {
-            if let Some((first, h)) = *b {
-                blend_irradiance_tile(
-                    tile,
-                    irr_n,
-                    &weights.irradiance_weights,
-                    &ray_radiance[first..first + n],
-                    h * irr_scale,
-                    gamma,
-                    thresholds.as_ref(),
-                );
-            }
-        });
+        let irradiance_change: Vec<Option<f32>> = self
+            .irradiance
+            .texels
+            .par_chunks_mut(irr_len)
+            .zip(base.par_iter())
+            .map(|(tile, b)| {
+                b.map(|(first, h)| {
+                    blend_irradiance_tile(
+                        tile,
+                        irr_n,
+                        &weights.irradiance_weights,
+                        &ray_radiance[first..first + n],
+                        h * irr_scale,
+                        gamma,
+                        thresholds.as_ref(),
+                    )
+                })
+            })
+            .collect();
         self.distance.texels.par_chunks_mut(dist_len).zip(base.par_iter()).for_each(|(tile, b)| {
             if let Some((first, h)) = *b {
                 blend_distance_tile(
@@ -111,18 +116,15 @@ impl DdgiVolume {
             }
         });
         *pass_ms.entry("border").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        let mut occlusion_change = Vec::new();
         if self.shadow.is_some() {
             // A light that changes changes the shadows: the irradiance scale applies.
             let t = std::time::Instant::now();
             let hysteresis: Vec<Option<f32>> = base.iter().map(|b| b.map(|(_, h)| h * irr_scale)).collect();
-            self.blend_shadow_maps(frame, &hysteresis);
+            occlusion_change = self.blend_shadow_maps(frame, &hysteresis);
             *pass_ms.entry("shadow_blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
         }
-        if let Some(before) = before {
-            let t = std::time::Instant::now();
-            self.record_change(&updated, &before);
-            *pass_ms.entry("probe_change").or_default() += t.elapsed().as_secs_f64() * 1e3;
-        }
+        self.record_change(&irradiance_change, &occlusion_change);
         self.after_update(&updated);
         #[cfg(debug_assertions)]
         self.validate();

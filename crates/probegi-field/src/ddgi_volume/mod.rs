@@ -107,6 +107,8 @@ pub struct DdgiVolume {
     /// last blend (1 before any), and the frames since it last traced.
     probe_change: Vec<f32>,
     probe_untraced_frames: Vec<u32>,
+    /// The occlusion change of each probe's last occlusion blend.
+    probe_occlusion_change: Vec<f32>,
 }
 
 /// One volume's per-frame scratch.
@@ -132,7 +134,8 @@ pub struct VolumeFrame {
     pub(crate) shadow_samples: Vec<(u32, probegi_core::shadow_field::ShadowSample)>,
     /// Under a ray budget, the probes it lets trace this frame (`None`: no budget).
     pub budget_traces: Option<Vec<bool>>,
-    /// The blend records each probe's change (a ray budget reads it).
+    /// A device blend measures each probe's change (a ray budget reads it;
+    /// a host blend always reports it).
     pub measure_change: bool,
 }
 
@@ -181,6 +184,7 @@ impl DdgiVolume {
             shadow: settings.shadow_field.then(|| ShadowField::new(probes, settings.shadow_field_texels)),
             probe_change: vec![1.0; probes],
             probe_untraced_frames: vec![0; probes],
+            probe_occlusion_change: vec![0.0; probes],
             settings,
         }
     }
@@ -217,6 +221,11 @@ impl DdgiVolume {
     /// before its first), measured while a ray budget runs.
     pub fn probe_change(&self, p: usize) -> f32 {
         self.probe_change[p]
+    }
+
+    /// Frames since probe `p` last traced (0: it traced in the last update).
+    pub fn probe_frames_since_traced(&self, p: usize) -> u32 {
+        self.probe_untraced_frames[p]
     }
 
     /// Whether probe `p` has been blended since it was created or last reset.

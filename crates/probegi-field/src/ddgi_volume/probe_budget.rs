@@ -1,27 +1,20 @@
 //! The volume's share of the ray budget (`crate::ray_budget`): its candidates
-//! with their priorities and floor, and the change each blend leaves
-//! (`probegi_core::probe_change`), measured here for a host blend and taken
-//! from the device for a device blend.
+//! with their priorities and floor, and each probe's change
+//! (`probegi_core::probe_change`), as the host blend reports it or as the
+//! device measured it.
 
-use glam::Vec3;
-use probegi_core::probe_change::{irradiance_tile_change, occlusion_tile_change, probe_change};
-use rayon::prelude::*;
+use probegi_core::probe_change::probe_change;
 
-use crate::ray_budget::{BudgetCandidate, budget_priority};
+use crate::ray_budget::BudgetCandidate;
 
 use super::{DdgiVolume, VolumeFrame};
-
-/// The tiles a host blend is about to change, kept to measure the change.
-pub(crate) struct TilesBefore {
-    irradiance: Vec<Vec3>,
-    occlusion: Option<Vec<f32>>,
-}
 
 impl DdgiVolume {
     /// Appends this volume's probes whose state traces, with their priority
     /// and whether the floor makes them trace.
     pub(crate) fn budget_candidates(&self, volume: u32, out: &mut Vec<BudgetCandidate>) {
         let interval = self.settings.ray_budget_max_interval_frames;
+        let change = self.neighbourhood_change();
         for (p, state) in self.probe_states.iter().enumerate() {
             if !state.traces() {
                 continue;
@@ -31,10 +24,35 @@ impl DdgiVolume {
                 volume,
                 probe: p as u32,
                 rays: self.settings.probe_rays_per_probe,
-                priority: budget_priority(self.probe_change[p], age),
+                change: change[p],
+                age_frames: age,
                 mandatory: !self.probe_has_history[p] || state.is_new() || age >= interval,
             });
         }
+    }
+
+    /// Per probe, the largest last change of it and its six grid neighbours:
+    /// light that changed at one probe has likely changed at the next, which
+    /// then traces before its own age would let it (`crate::ray_budget`).
+    fn neighbourhood_change(&self) -> Vec<f32> {
+        let grid = &self.grid;
+        let counts = grid.probe_counts.as_ivec3();
+        (0..grid.probe_count())
+            .map(|p| {
+                let c = grid.probe_coords(p).as_ivec3();
+                let mut m = self.probe_change[p];
+                for axis in 0..3 {
+                    for step in [-1, 1] {
+                        let mut n = c;
+                        n[axis] += step;
+                        if n[axis] >= 0 && n[axis] < counts[axis] {
+                            m = m.max(self.probe_change[grid.probe_index(n.as_uvec3())]);
+                        }
+                    }
+                }
+                m
+            })
+            .collect()
     }
 
     /// Counts the frames since each probe last traced, after `frame` was planned.
@@ -44,44 +62,26 @@ impl DdgiVolume {
         }
     }
 
-    /// The tiles before a host blend, when the frame measures change.
-    pub(super) fn tiles_before(&self, frame: &VolumeFrame) -> Option<TilesBefore> {
-        frame.measure_change.then(|| TilesBefore {
-            irradiance: self.irradiance.texels.clone(),
-            occlusion: self.shadow.as_ref().map(|s| s.occlusion.texels.clone()),
-        })
-    }
-
-    /// Each blended probe's change from `before` to the atlases now.
-    pub(super) fn record_change(&mut self, updated: &[bool], before: &TilesBefore) {
-        let (irr_len, n) = (self.irradiance.tile_len(), self.irradiance.interior);
-        let occ = self.shadow.as_ref().map(|s| (&s.occlusion, &before.occlusion));
-        let irradiance = &self.irradiance;
-        let changes: Vec<Option<f32>> = (0..updated.len())
-            .into_par_iter()
-            .map(|p| {
-                updated[p].then(|| {
-                    let tile = p * irr_len..(p + 1) * irr_len;
-                    let e = irradiance_tile_change(&before.irradiance[tile.clone()], &irradiance.texels[tile], n);
-                    let v = occ.and_then(|(atlas, old)| {
-                        let old = old.as_ref()?;
-                        let len = atlas.tile_len();
-                        let tile = p * len..(p + 1) * len;
-                        Some(occlusion_tile_change(&old[tile.clone()], &atlas.texels[tile], atlas.interior))
-                    });
-                    probe_change(e, v)
-                })
-            })
-            .collect();
-        for (p, c) in changes.into_iter().enumerate() {
-            if let Some(c) = c {
-                self.probe_change[p] = c;
+    /// The changes a host blend reported (`probegi_core::probe_change`):
+    /// per probe, its irradiance change if it blended and its occlusion
+    /// change if its occlusion tile blended.
+    pub(super) fn record_change(&mut self, irradiance: &[Option<f32>], occlusion: &[Option<f32>]) {
+        for (p, o) in occlusion.iter().enumerate() {
+            if let Some(o) = o {
+                self.probe_occlusion_change[p] = *o;
+            }
+        }
+        for (p, e) in irradiance.iter().enumerate() {
+            if let Some(e) = e {
+                let occ = self.shadow.is_some().then(|| self.probe_occlusion_change[p]);
+                self.probe_change[p] = probe_change(*e, occ);
             }
         }
     }
 
     /// The change a device measured for each probe it blended, in increasing
-    /// probe order (`DeviceVolumeBlend::measure_change`).
+    /// probe order (`DeviceVolumeBlend::measure_change`; the larger of the
+    /// irradiance and last occlusion change, as [`Self::record_change`] keeps it).
     pub(super) fn accept_device_change(&mut self, updated: &[bool], change: &[f32]) {
         let blended = updated.iter().enumerate().filter(|(_, u)| **u).map(|(p, _)| p);
         for (p, &c) in blended.zip(change) {

@@ -273,9 +273,10 @@ impl DdgiVolume {
     }
 
     /// Eq. 5.2–5.3 into the occlusion maps of the probes that blend this frame
-    /// (`hysteresis[p]`: `Some(α)`), from the frame's samples.
-    pub(crate) fn blend_shadow_maps(&mut self, frame: &VolumeFrame, hysteresis: &[Option<f32>]) {
-        let Some(shadow) = self.shadow.as_mut() else { return };
+    /// (`hysteresis[p]`: `Some(α)`), from the frame's samples. Returns per
+    /// probe the change of the tiles it blended (`probegi_core::probe_change`).
+    pub(crate) fn blend_shadow_maps(&mut self, frame: &VolumeFrame, hysteresis: &[Option<f32>]) -> Vec<Option<f32>> {
+        let Some(shadow) = self.shadow.as_mut() else { return Vec::new() };
         let interior = shadow.occlusion.interior;
         let len = shadow.occlusion.tile_len();
         // Samples are in probe order: each probe's run, found once.
@@ -291,15 +292,23 @@ impl DdgiVolume {
         }
         let samples: Vec<ShadowSample> = frame.shadow_samples.iter().map(|s| s.1).collect();
         let history = &shadow.has_history;
-        shadow.occlusion.texels.par_chunks_mut(len).enumerate().for_each(|(p, tile)| {
-            if let (Some(h), (a, b)) = (hysteresis.get(p).copied().flatten(), runs[p]) {
-                blend_shadow_tile(tile, interior, &samples[a..b], if history[p] { h } else { 0.0 });
-            }
-        });
-        for (p, (a, b)) in runs.iter().enumerate() {
-            if hysteresis.get(p).copied().flatten().is_some() && b > a {
+        let change: Vec<Option<f32>> = shadow
+            .occlusion
+            .texels
+            .par_chunks_mut(len)
+            .enumerate()
+            .map(|(p, tile)| match (hysteresis.get(p).copied().flatten(), runs[p]) {
+                (Some(h), (a, b)) if b > a => {
+                    Some(blend_shadow_tile(tile, interior, &samples[a..b], if history[p] { h } else { 0.0 }))
+                }
+                _ => None,
+            })
+            .collect();
+        for (p, c) in change.iter().enumerate() {
+            if c.is_some() {
                 shadow.has_history[p] = true;
             }
         }
+        change
     }
 }

@@ -2,6 +2,9 @@
 // Must match `probegi_wgpu::probe_blend::BlendParams` (#[repr(C)], 64 bytes) and the
 // tile-major atlas layout of `probegi_core::probe_atlas` (tile side = interior + 2,
 // row-major inside a tile, interior texel (i, j) at tile texel (i + 1, j + 1)).
+// An irradiance texel's w holds its change in its last blend (the ray budget's
+// signal, probegi_core::probe_change::texel_change; 0 where no ray weighs it),
+// which probe_change.wgsl averages; queries read xyz only.
 
 struct BlendParams {
     probe_count: u32,
@@ -107,9 +110,12 @@ fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(work
             wsum += w;
         }
     }
-    if (wsum <= 0.0) { return; }
-    let encoded = encode_irradiance(sum / wsum, params.gamma);
     let idx = params.irradiance_first + probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
+    if (wsum <= 0.0) {
+        irradiance[idx].w = 0.0;
+        return;
+    }
+    let encoded = encode_irradiance(sum / wsum, params.gamma);
     let old = irradiance[idx].xyz;
     var h = h0 * params.irradiance_scale;
     if (params.use_thresholds != 0u) {
@@ -123,9 +129,28 @@ fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(work
         }
     }
     let blended = encoded * (1.0 - h) + old * h;
+    let change = texel_change(old, encoded);
     if (is_finite3(blended)) {
-        irradiance[idx] = vec4<f32>(blended, 0.0);
+        irradiance[idx] = vec4<f32>(blended, change);
+    } else {
+        irradiance[idx].w = change;
     }
+}
+
+// probegi_core::probe_change::ycocg
+fn ycocg(c: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(0.25 * c.x + 0.5 * c.y + 0.25 * c.z, 0.5 * c.x - 0.5 * c.z, -0.25 * c.x + 0.5 * c.y - 0.25 * c.z);
+}
+
+// probegi_core::probe_change::texel_change: SMAPE of the YCoCg vectors, in [0, 1].
+fn texel_change(history: vec3<f32>, estimate: vec3<f32>) -> f32 {
+    let a = ycocg(history);
+    let b = ycocg(estimate);
+    let s = abs(a) + abs(b);
+    let den = s.x + s.y + s.z;
+    if (!(den > 0.0)) { return 0.0; }
+    let d = abs(a - b);
+    return min((d.x + d.y + d.z) / den, 1.0);
 }
 
 // probegi_core::probe_blend::blend_distance_tile, one thread per interior texel.

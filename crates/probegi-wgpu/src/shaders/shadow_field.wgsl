@@ -9,8 +9,9 @@
 //     Σ max(0, ω·l)·V / Σ max(0, ω·l) over the probe's slots with its hysteresis
 //     (eq. 5.2–5.3), V = 1 when the (any-hit) shadow ray found nothing;
 //   border_shadow_maps: the tiles' guard borders (probegi_core::probe_border).
-// The occlusion maps live in the field's distance buffer (x of each vec2), after
-// the distance atlases (probegi_wgpu::ddgi_query::GpuDdgiVolume::shadow).
+// The occlusion maps live in the field's distance buffer (x of each vec2; y the
+// texel's change in its last blend, for the ray budget), after the distance
+// atlases (probegi_wgpu::ddgi_query::GpuDdgiVolume::shadow).
 // Must match `probegi_wgpu::shadow_field::{ShadowParams, ShadowProbe}` (#[repr(C)],
 // 32 bytes each) and the trace pass's `GpuRay` / `GpuRayHit`.
 
@@ -181,15 +182,21 @@ fn blend_shadow_maps(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoc
             sum += w * visible;
             wsum += w;
         }
-        if (!(wsum > 0.0)) {
-            continue;
-        }
         let i = t % n;
         let jj = t / n;
         let dst = base + (jj + 1u) * side + (i + 1u);
-        let blended = (sum / wsum) * (1.0 - e.hysteresis) + occlusion[dst].x * e.hysteresis;
+        if (!(wsum > 0.0)) {
+            occlusion[dst].y = 0.0;
+            continue;
+        }
+        let old = occlusion[dst].x;
+        // y: the texel's change (probegi_core::shadow_field::blend_shadow_tile's).
+        let change = abs(sum / wsum - old);
+        let blended = (sum / wsum) * (1.0 - e.hysteresis) + old * e.hysteresis;
         if (blended >= -SCENE_F32_MAX && blended <= SCENE_F32_MAX) {
-            occlusion[dst] = vec2<f32>(clamp(blended, 0.0, 1.0), 0.0);
+            occlusion[dst] = vec2<f32>(clamp(blended, 0.0, 1.0), change);
+        } else {
+            occlusion[dst].y = change;
         }
     }
 }
