@@ -43,7 +43,7 @@ pub enum Command {
 #[derive(Args, Debug)]
 pub struct LagArgs {
     /// The plot of frames-to-converge against hysteresis; the per-frame FLIP curves
-    /// go beside it as NAME-curves.png and the numbers as NAME.csv.
+    /// go beside it as NAME-curves.png (light on) and NAME-occluder-curves.png, and the numbers as NAME.csv.
     #[arg(long, default_value = "out/convergence-lag.png")]
     pub out: std::path::PathBuf,
     /// Image size (square) of the compared frames.
@@ -69,6 +69,10 @@ pub struct LagArgs {
     /// Frames the after-step state is held to make the converged target image.
     #[arg(long, default_value_t = 400)]
     pub target_frames: u32,
+    /// Volume settings for the stepped runs (not the target), KEY=VALUE as
+    /// `render --set` takes them, e.g. `ray_budget=3456`.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
 }

@@ -109,6 +109,18 @@ fn render_sequence(
     out
 }
 
+/// The volume of a stepped run: `base` with hysteresis `h`, the heuristics on
+/// or off, then each of `set` (`--set`, e.g. a ray budget).
+fn stepped_volume(base: &DdgiVolumeSettings, h: f32, heuristics: bool, set: &[String]) -> Result<DdgiVolumeSettings> {
+    let mut v = DdgiVolumeSettings { probe_hysteresis: h, probe_fast_convergence: heuristics, ..base.clone() };
+    for a in set {
+        v = probegi_scene::scene_file::apply_volume_override(&v, a)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("--set {a}"))?;
+    }
+    Ok(v)
+}
+
 /// First index from which every value is at most `threshold`.
 fn settled_from(flip: &[f32], threshold: f32) -> Option<usize> {
     let last_above = flip.iter().rposition(|&v| v > threshold);
@@ -142,8 +154,7 @@ pub fn run(args: &LagArgs) -> Result<()> {
         let scene = step_scene(step, at as f32, false)?;
         for &h in &args.hysteresis {
             for heuristics in [true, false] {
-                let v =
-                    DdgiVolumeSettings { probe_hysteresis: h, probe_fast_convergence: heuristics, ..volume.clone() };
+                let v = stepped_volume(&volume, h, heuristics, &args.set)?;
                 let frames = render_sequence(&scene, at + args.frames_after, args.size, args.seed, &v, at);
                 let flip: Vec<f32> = frames
                     .iter()
@@ -214,14 +225,31 @@ fn write_outputs(args: &LagArgs, runs: &[Run]) -> Result<()> {
     }
     lag_plot.write_png(&args.out)?;
 
+    let name = stem.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let curves_path = stem.with_file_name(format!("{name}-curves.png"));
+    write_curves(args, runs, Step::LightOn, &curves_path)?;
+    let occluder_path = stem.with_file_name(format!("{name}-occluder-curves.png"));
+    write_curves(args, runs, Step::Occluder, &occluder_path)?;
+    eprintln!(
+        "wrote {}, {}, {} and {}",
+        args.out.display(),
+        curves_path.display(),
+        occluder_path.display(),
+        csv_path.display()
+    );
+    Ok(())
+}
+
+/// The per-frame FLIP curves of `step`'s runs into `path`.
+fn write_curves(args: &LagArgs, runs: &[Run], step: Step, path: &std::path::Path) -> Result<()> {
     let mut curves = LinePlot {
-        title: "LIGHT ON: FLIP AGAINST THE CONVERGED IMAGE".into(),
+        title: format!("{}: FLIP AGAINST THE CONVERGED IMAGE", step.name().to_uppercase()),
         x_label: "FRAMES AFTER THE STEP".into(),
         y_label: "FLIP".into(),
         guides: vec![(args.flip_threshold as f64, "THRESHOLD".into())],
         ..Default::default()
     };
-    for (k, r) in runs.iter().filter(|r| r.step == Step::LightOn).enumerate() {
+    for (k, r) in runs.iter().filter(|r| r.step == step).enumerate() {
         curves.series.push(Series {
             label: format!("H {} {}", r.hysteresis, if r.heuristics { "ON" } else { "OFF" }),
             rgb: PALETTE[(k / 2) % PALETTE.len()],
@@ -229,13 +257,7 @@ fn write_outputs(args: &LagArgs, runs: &[Run]) -> Result<()> {
             dashed: !r.heuristics,
         });
     }
-    let curves_path = stem.with_file_name(format!(
-        "{}-curves.png",
-        stem.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default()
-    ));
-    curves.write_png(&curves_path)?;
-    eprintln!("wrote {}, {} and {}", args.out.display(), curves_path.display(), csv_path.display());
-    Ok(())
+    Ok(curves.write_png(path)?)
 }
 
 #[cfg(test)]

@@ -143,6 +143,13 @@ pub struct DdgiVolumeSettings {
     /// budget). Seed 000 §5.2 asks for "a set minimum" without a number; 8
     /// measured on the moving box and Sponza (docs/RESULTS.md).
     pub ray_budget_max_interval_frames: u32,
+    /// Under a budget, a probe that last blended k frames ago blends with
+    /// hysteresis α^k (capped at the floor's interval), as if it had blended
+    /// this frame's estimate on each frame it skipped: the field then responds
+    /// in as many frames as without a budget, at the cost of noise where
+    /// probes wait. Measured in docs/RESULTS.md: off, a budget of half the rays
+    /// doubles the lag of a change that reaches every probe.
+    pub ray_budget_hysteresis_per_frame: bool,
 }
 
 impl Default for DdgiVolumeSettings {
@@ -190,6 +197,7 @@ impl Default for DdgiVolumeSettings {
             shadow_field_surfel_reach_rel: 0.0,
             ray_budget: 0,
             ray_budget_max_interval_frames: 8,
+            ray_budget_hysteresis_per_frame: true,
         }
     }
 }

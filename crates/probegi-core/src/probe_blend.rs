@@ -103,9 +103,21 @@ pub fn adjusted_hysteresis(hysteresis: f32, change: f32, thresholds: &TexelThres
     }
 }
 
+/// `h` to the power `frames` by repeated multiplication (the WGSL twin's
+/// order): the hysteresis of a blend that stands for `frames` per-frame blends
+/// of the same estimate (a ray budget's probe that waited; `frames` ≤ 1: `h`).
+pub fn hysteresis_over_frames(h: f32, frames: u32) -> f32 {
+    let mut hk = h;
+    for _ in 1..frames {
+        hk *= h;
+    }
+    hk
+}
+
 /// Blends one probe's ray radiances into its irradiance tile (encoded with `gamma`).
-/// `hysteresis` is the weight of the old value (0 replaces it); with `thresholds`
-/// each texel lowers it by Listing 3. Returns the probe's change: the mean over
+/// `hysteresis` is the per-frame weight of the old value (0 replaces it); with
+/// `thresholds` each texel lowers it by Listing 3; then it is raised to
+/// `frames` ([`hysteresis_over_frames`]; 1 without a ray budget). Returns the probe's change: the mean over
 /// the interior of [`crate::probe_change::texel_change`] between each texel's
 /// history and this frame's estimate (0 for a texel no ray weighs).
 pub fn blend_irradiance_tile(
@@ -113,7 +125,7 @@ pub fn blend_irradiance_tile(
     interior: u32,
     weights: &BlendWeights,
     ray_radiance: &[Vec3],
-    hysteresis: f32,
+    (hysteresis, frames): (f32, u32),
     gamma: f32,
     thresholds: Option<&TexelThresholds>,
 ) -> f32 {
@@ -138,6 +150,7 @@ pub fn blend_irradiance_tile(
             Some(th) => adjusted_hysteresis(hysteresis, (encoded - *dst).max_element(), th),
             None => hysteresis,
         };
+        let h = hysteresis_over_frames(h, frames);
         let blended = encoded * (1.0 - h) + *dst * h;
         if blended.is_finite() {
             *dst = blended;
@@ -194,7 +207,7 @@ mod tests {
         let d = dirs(256);
         let w = BlendWeights::new(&d, 6, 1.0);
         let mut tile = vec![Vec3::ZERO; 64];
-        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::splat(2.0); 256], 0.0, 5.0, None);
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::splat(2.0); 256], (0.0, 1), 5.0, None);
         let want = 2.0f32.powf(0.2);
         for j in 1..7 {
             for i in 1..7 {
@@ -202,8 +215,14 @@ mod tests {
             }
         }
         // Hysteresis 0.75 keeps three quarters of the old value.
-        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ZERO; 256], 0.75, 5.0, None);
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ZERO; 256], (0.75, 1), 5.0, None);
         assert!((tile[9].x - 0.75 * want).abs() < 1e-5);
+        // Two frames' worth: 0.75² of the old value.
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ZERO; 256], (0.75, 2), 5.0, None);
+        assert!((tile[9].x - 0.75 * 0.5625 * want).abs() < 1e-5);
+        assert_eq!(hysteresis_over_frames(0.5, 3), 0.125);
+        assert_eq!(hysteresis_over_frames(0.97, 1), 0.97);
+        assert_eq!(hysteresis_over_frames(0.97, 0), 0.97);
     }
 
     #[test]
@@ -215,7 +234,7 @@ mod tests {
         let n = 14;
         let w = BlendWeights::new(&d, n, 1.0);
         let mut tile = vec![Vec3::ZERO; 16 * 16];
-        blend_irradiance_tile(&mut tile, n, &w, &l, 0.0, 1.0, None);
+        blend_irradiance_tile(&mut tile, n, &w, &l, (0.0, 1), 1.0, None);
         let value_at = |dir: Vec3| {
             let uv = crate::octahedral::oct_encode(dir);
             crate::probe_atlas::sample_tile_bilinear(&tile, n, uv * (1.0 - 1.0 / n as f32)).x
@@ -235,7 +254,7 @@ mod tests {
         let d = dirs(256);
         let w = BlendWeights::new(&d, 6, 1.0);
         let mut tile = vec![Vec3::ZERO; 64];
-        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ONE; 256], 0.97, 5.0, Some(&th));
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ONE; 256], (0.97, 1), 5.0, Some(&th));
         assert!((tile[9].x - 1.0).abs() < 1e-5);
     }
 
@@ -255,7 +274,7 @@ mod tests {
         }
         let mut irr = vec![Vec3::ONE; 36];
         let w1 = BlendWeights::new(&d, 4, 1.0);
-        blend_irradiance_tile(&mut irr, 4, &w1, &vec![Vec3::splat(f32::NAN); 256], 0.0, 5.0, None);
+        blend_irradiance_tile(&mut irr, 4, &w1, &vec![Vec3::splat(f32::NAN); 256], (0.0, 1), 5.0, None);
         assert!(irr.iter().all(|v| *v == Vec3::ONE), "all-NaN rays leave the old values");
     }
 }

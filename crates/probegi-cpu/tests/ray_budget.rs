@@ -6,7 +6,7 @@
 
 use std::collections::BTreeMap;
 
-use glam::{UVec3, Vec3};
+use glam::UVec3;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_cpu::field_update::FieldSetUpdate;
 use probegi_cpu::{DirectLighting, DirectSettings};

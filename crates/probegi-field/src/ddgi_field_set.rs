@@ -248,8 +248,15 @@ impl DdgiFieldSet {
         self.volumes.iter_mut().for_each(|v| v.notify_scene_event(event));
     }
 
-    /// Wakes Sleeping probes around moving objects in every volume; returns the count.
+    /// Wakes Sleeping probes around moving objects in every volume; returns the
+    /// count. Under a ray budget the probes around them also count as changed
+    /// (`DdgiVolume::mark_changed_near`).
     pub fn wake_probes_near(&mut self, dynamic_aabbs: &[(Vec3, Vec3)]) -> usize {
+        if self.ray_budget() > 0 {
+            self.volumes.iter_mut().for_each(|v| {
+                v.mark_changed_near(dynamic_aabbs);
+            });
+        }
         self.volumes.iter_mut().map(|v| v.wake_probes_near(dynamic_aabbs)).sum()
     }
 

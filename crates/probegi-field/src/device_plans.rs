@@ -42,6 +42,11 @@ pub struct DeviceVolumeBlend<'a> {
     /// with `probe_blend` set, in increasing probe order
     /// ([`crate::DeviceBlendOutput::probe_change`]).
     pub measure_change: bool,
+    /// Per probe, the frames its blend stands for (a ray budget's probe that
+    /// waited, `ray_budget_hysteresis_per_frame`): each texel's hysteresis,
+    /// after the scene-event scale and Listing 3, is raised to it
+    /// (`probegi_core::probe_blend::hysteresis_over_frames`). Empty: 1 for all.
+    pub probe_blend_frames: Vec<u32>,
 }
 
 /// What [`crate::DeviceField::shade_and_blend`] returns.

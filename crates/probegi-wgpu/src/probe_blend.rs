@@ -17,7 +17,8 @@
 //! signed blend distance in w (backface −0.2·t, miss the ray's max distance:
 //! `probegi_field::ddgi_volume::blend_inputs`), as the shade pass writes them, so a batch
 //! shaded on the device is blended without leaving it ([`GpuProbeBlend::prepare_resident`]).
-//! Per probe the passes read its first ray in the batch and its hysteresis.
+//! Per probe the passes read its first ray in the batch, its hysteresis and the
+//! frames its blend stands for (a ray budget's, `probegi_field::device_plans::DeviceVolumeBlend::probe_blend_frames`).
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
@@ -243,6 +244,7 @@ impl GpuProbeBlend {
             reset_probes: &[],
             shadow: None,
             measure_change: false,
+            probe_blend_frames: Vec::new(),
         };
         self.prepare_resident(ctx, atlases, &plan, &results)
     }
@@ -268,12 +270,14 @@ impl GpuProbeBlend {
         let per_row = (probes as u32).min(MAX_GROUPS);
         let params = blend_params(atlases, plan, per_row);
         let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| ctx.buffer_with(label, contents, usage);
-        let per_probe: Vec<[u32; 2]> = plan
+        let frames = |p: usize| plan.probe_blend_frames.get(p).copied().unwrap_or(1).max(1);
+        let per_probe: Vec<[u32; 4]> = plan
             .probe_blend
             .iter()
-            .map(|b| match b {
-                Some((first, h)) => [*first, h.max(0.0).to_bits()],
-                None => [0, (-1.0f32).to_bits()],
+            .enumerate()
+            .map(|(p, b)| match b {
+                Some((first, h)) => [*first, h.max(0.0).to_bits(), frames(p), 0],
+                None => [0, (-1.0f32).to_bits(), 1, 0],
             })
             .collect();
         let storage = wgpu::BufferUsages::STORAGE;

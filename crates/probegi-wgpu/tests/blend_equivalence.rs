@@ -64,7 +64,7 @@ fn cpu_blend(s: &DdgiVolumeSettings, fr: &Frame, irr: &mut ProbeAtlas<Vec3>, dis
     for (p, h) in fr.hysteresis.iter().enumerate() {
         let Some(h) = *h else { continue };
         let r = p * rays..(p + 1) * rays;
-        blend_irradiance_tile(irr.tile_mut(p), ni, &wi, &fr.radiance[r.clone()], h * 0.85, 5.0, Some(&th));
+        blend_irradiance_tile(irr.tile_mut(p), ni, &wi, &fr.radiance[r.clone()], (h * 0.85, 1), 5.0, Some(&th));
         blend_distance_tile(dist.tile_mut(p), nd, &wd, &fr.distance[r], h * 0.5, clamp);
         update_tile_border(irr.tile_mut(p), ni);
         update_tile_border(dist.tile_mut(p), nd);

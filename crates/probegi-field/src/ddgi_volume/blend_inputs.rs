@@ -9,7 +9,9 @@
 use std::collections::BTreeMap;
 
 use glam::Vec3;
-use probegi_core::probe_blend::{BACKFACE_DISTANCE_SCALE, TexelThresholds, blend_distance_tile, blend_irradiance_tile};
+use probegi_core::probe_blend::{
+    BACKFACE_DISTANCE_SCALE, TexelThresholds, blend_distance_tile, blend_irradiance_tile, hysteresis_over_frames,
+};
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::probe_classification::ProbeState;
 use rayon::prelude::*;
@@ -21,9 +23,12 @@ use super::{DdgiVolume, HysteresisReduction, SceneEvent, VolumeFrame};
 
 impl DdgiVolume {
     /// Reports a scene change (seed 004 §4.3 per-probe heuristics; they apply to all
-    /// probes). No effect unless `probe_fast_convergence` is on. Repeating an event
-    /// while its reduction lasts restarts the reduction's window.
+    /// probes). The hysteresis reductions need `probe_fast_convergence`; repeating
+    /// an event while its reduction lasts restarts the reduction's window. Under
+    /// a ray budget every probe also counts as changed until it traces again
+    /// (`probe_budget`), so the budget visits them all, longest-waiting first.
     pub fn notify_scene_event(&mut self, event: SceneEvent) {
+        self.mark_all_changed();
         let (irr, vis) = match event {
             SceneEvent::SmallLightChange => (Some((0.85, 4)), None),
             SceneEvent::LargeLightChange => (Some((0.5, 10)), None),
@@ -60,6 +65,7 @@ impl DdgiVolume {
         let t = std::time::Instant::now();
         let n = frame.ray_count;
         let (base, irr_scale, vis_scale) = self.blend_plan(frame);
+        let frames = self.blend_frames(frame);
         let thresholds = self.settings.probe_fast_convergence.then_some(TexelThresholds {
             significant: self.settings.probe_significant_change_threshold,
             new_distribution: self.settings.probe_new_distribution_threshold,
@@ -74,29 +80,29 @@ impl DdgiVolume {
             .irradiance
             .texels
             .par_chunks_mut(irr_len)
-            .zip(base.par_iter())
-            .map(|(tile, b)| {
+            .zip(base.par_iter().zip(&frames))
+            .map(|(tile, (b, k))| {
                 b.map(|(first, h)| {
                     blend_irradiance_tile(
                         tile,
                         irr_n,
                         &weights.irradiance_weights,
                         &ray_radiance[first..first + n],
-                        h * irr_scale,
+                        (h * irr_scale, *k),
                         gamma,
                         thresholds.as_ref(),
                     )
                 })
             })
             .collect();
-        self.distance.texels.par_chunks_mut(dist_len).zip(base.par_iter()).for_each(|(tile, b)| {
+        self.distance.texels.par_chunks_mut(dist_len).zip(base.par_iter().zip(&frames)).for_each(|(tile, (b, k))| {
             if let Some((first, h)) = *b {
                 blend_distance_tile(
                     tile,
                     dist_n,
                     &weights.distance_weights,
                     &ray_distance[first..first + n],
-                    h * vis_scale,
+                    hysteresis_over_frames(h * vis_scale, *k),
                     clamp,
                 );
             }
@@ -120,7 +126,7 @@ impl DdgiVolume {
         if self.shadow.is_some() {
             // A light that changes changes the shadows: the irradiance scale applies.
             let t = std::time::Instant::now();
-            let hysteresis: Vec<Option<f32>> = base.iter().map(|b| b.map(|(_, h)| h * irr_scale)).collect();
+            let hysteresis: Vec<Option<f32>> = shadow_base(&base, irr_scale, &frames).iter().map(|b| b.map(|(_, h)| h)).collect();
             occlusion_change = self.blend_shadow_maps(frame, &hysteresis);
             *pass_ms.entry("shadow_blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
         }
@@ -162,7 +168,8 @@ impl DdgiVolume {
         lights: &[probegi_scene::PunctualLight],
     ) -> DeviceVolumeBlend<'a> {
         let (base, irradiance_scale, visibility_scale) = self.blend_plan(frame);
-        let shadow = self.device_shadow_blend(&base, irradiance_scale, lights);
+        let frames = self.blend_frames(frame);
+        let shadow = self.device_shadow_blend(&shadow_base(&base, irradiance_scale, &frames), lights);
         DeviceVolumeBlend {
             shadow,
             settings: &self.settings,
@@ -175,6 +182,7 @@ impl DdgiVolume {
             distance_clamp_m: self.distance_clamp_m(),
             reset_probes: &self.probes_reset_since_blend,
             measure_change: frame.measure_change,
+            probe_blend_frames: frames,
         }
     }
 
@@ -187,7 +195,8 @@ impl DdgiVolume {
         change: &[f32],
     ) {
         let (base, irr_scale, _) = self.blend_plan(frame);
-        if let Some(plan) = self.device_shadow_blend(&base, irr_scale, lights) {
+        let frames = self.blend_frames(frame);
+        if let Some(plan) = self.device_shadow_blend(&shadow_base(&base, irr_scale, &frames), lights) {
             self.accept_device_shadow_blend(&plan);
         }
         let updated: Vec<bool> = base.iter().map(|b| b.is_some()).collect();
@@ -203,6 +212,9 @@ impl DdgiVolume {
         self.probes_reset_since_blend.clear();
         let max_h = self.settings.probe_hysteresis;
         self.active_probes_last = updated.iter().filter(|a| **a).count();
+        for (n, u) in self.probe_unblended_frames.iter_mut().zip(updated) {
+            *n = if *u { 0 } else { n.saturating_add(1) };
+        }
         for (p, _) in updated.iter().enumerate().filter(|(_, u)| **u) {
             self.probe_has_history[p] = true;
             let state = self.probe_states[p].after_update();
@@ -220,6 +232,13 @@ impl DdgiVolume {
             events.retain(|e| e.frames_left > 0);
         }
     }
+}
+
+/// The shadowing field's blend plan from the irradiance one: per probe its
+/// first ray and its occlusion hysteresis, (α · the scene-event scale)^k (a
+/// light that changes changes the shadows, so the irradiance scale applies).
+fn shadow_base(base: &[Option<(usize, f32)>], irr_scale: f32, frames: &[u32]) -> Vec<Option<(usize, f32)>> {
+    base.iter().zip(frames).map(|(b, k)| b.map(|(first, h)| (first, hysteresis_over_frames(h * irr_scale, *k)))).collect()
 }
 
 /// The blend's per-ray inputs from a batch's hits and the caller's radiance, the

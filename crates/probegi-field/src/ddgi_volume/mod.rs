@@ -109,6 +109,8 @@ pub struct DdgiVolume {
     probe_untraced_frames: Vec<u32>,
     /// The occlusion change of each probe's last occlusion blend.
     probe_occlusion_change: Vec<f32>,
+    /// Frames since each probe last blended (`ray_budget_hysteresis_per_frame`).
+    probe_unblended_frames: Vec<u32>,
 }
 
 /// One volume's per-frame scratch.
@@ -185,6 +187,7 @@ impl DdgiVolume {
             probe_change: vec![1.0; probes],
             probe_untraced_frames: vec![0; probes],
             probe_occlusion_change: vec![0.0; probes],
+            probe_unblended_frames: vec![0; probes],
             settings,
         }
     }

@@ -55,6 +55,38 @@ impl DdgiVolume {
             .collect()
     }
 
+    /// Per probe, the frames its blend this frame stands for: under a budget
+    /// with `ray_budget_hysteresis_per_frame`, the frames since it last blended
+    /// (capped at the floor's interval), so that each texel's hysteresis, after
+    /// Listing 3, is raised to that power; else 1.
+    pub(super) fn blend_frames(&self, frame: &VolumeFrame) -> Vec<u32> {
+        if frame.budget_traces.is_none() || !self.settings.ray_budget_hysteresis_per_frame {
+            return vec![1; self.grid.probe_count()];
+        }
+        let cap = self.settings.ray_budget_max_interval_frames;
+        self.probe_unblended_frames.iter().map(|n| n.saturating_add(1).min(cap)).collect()
+    }
+
+    /// Every probe counts as fully changed until it traces again (a scene event).
+    pub(super) fn mark_all_changed(&mut self) {
+        self.probe_change.fill(1.0);
+    }
+
+    /// Probes inside `aabbs` grown by a cell (moving objects' boxes) count as
+    /// fully changed until they trace again: under a ray budget they trace
+    /// before the still ones. Returns how many.
+    pub fn mark_changed_near(&mut self, aabbs: &[(glam::Vec3, glam::Vec3)]) -> usize {
+        let grow = self.grid.spacing_m;
+        let mut marked = 0;
+        for (p, pos) in self.probe_positions.iter().enumerate() {
+            if aabbs.iter().any(|&(lo, hi)| probegi_core::probe_classification::inside_grown_aabb(*pos, lo, hi, grow)) {
+                self.probe_change[p] = 1.0;
+                marked += 1;
+            }
+        }
+        marked
+    }
+
     /// Counts the frames since each probe last traced, after `frame` was planned.
     pub(super) fn count_untraced_frames(&mut self, frame: &VolumeFrame) {
         for (n, &traced) in self.probe_untraced_frames.iter_mut().zip(&frame.tracing) {

@@ -229,12 +229,12 @@ impl DdgiVolume {
     }
 
     /// The shadowing field's update as data for a device that kept the last
-    /// update batch (`base`: this frame's blend plan, `irr_scale` its
-    /// scene-event scale): `None` without a field or a previous batch.
+    /// update batch (`base`: per probe its first ray and occlusion hysteresis
+    /// this frame, `None` where it does not blend): `None` without a field or
+    /// a previous batch.
     pub(crate) fn device_shadow_blend(
         &self,
         base: &[Option<(usize, f32)>],
-        irr_scale: f32,
         lights: &[PunctualLight],
     ) -> Option<DeviceShadowBlend> {
         let shadow = self.shadow.as_ref()?;
@@ -247,7 +247,7 @@ impl DdgiVolume {
                 let (_, h) = (*b)?;
                 let first = *shadow.prev_first_ray.get(p)?;
                 (first != u32::MAX).then(|| {
-                    let h = if shadow.has_history[p] { h * irr_scale } else { 0.0 };
+                    let h = if shadow.has_history[p] { h } else { 0.0 };
                     (p as u32, first, shadow.prev_ray_count, h)
                 })
             })

@@ -34,8 +34,9 @@ struct BlendParams {
 // Per batch ray: xyz radiance, w the signed blend distance (backfaces −0.2·t,
 // misses the ray's max distance), as probe_shade.wgsl writes them.
 @group(0) @binding(2) var<storage, read> ray_results: array<vec4<f32>>;
-// Per probe: x its first ray in the batch, y the bits of its blend hysteresis (< 0: not updated).
-@group(0) @binding(3) var<storage, read> probe_blend: array<vec2<u32>>;
+// Per probe: x its first ray in the batch, y the bits of its blend hysteresis (< 0: not
+// updated), z the frames the blend stands for (a ray budget's; 1 otherwise), w 0.
+@group(0) @binding(3) var<storage, read> probe_blend: array<vec4<u32>>;
 @group(0) @binding(4) var<storage, read_write> irradiance: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> distance: array<vec2<f32>>;
 
@@ -68,6 +69,7 @@ struct TexelJob {
     i: u32,
     j: u32,
     hysteresis: f32,
+    frames: u32,
     first_ray: u32,
     texel: u32,     // row-major interior texel, the weight tables' index
 };
@@ -81,6 +83,7 @@ fn interior_job(gid: vec3<u32>, wid: vec3<u32>, n: u32) -> TexelJob {
     let pb = probe_blend[job.probe];
     job.first_ray = pb.x;
     job.hysteresis = bitcast<f32>(pb.y);
+    job.frames = pb.z;
     job.valid = job.hysteresis >= 0.0;
     job.i = gid.x % n;
     job.j = gid.x / n;
@@ -128,6 +131,7 @@ fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(work
             h = max(h - 0.15, 0.0);
         }
     }
+    h = hysteresis_over_frames(h, job.frames);
     let blended = encoded * (1.0 - h) + old * h;
     let change = texel_change(old, encoded);
     if (is_finite3(blended)) {
@@ -135,6 +139,15 @@ fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(work
     } else {
         irradiance[idx].w = change;
     }
+}
+
+// probegi_core::probe_blend::hysteresis_over_frames: h^frames by repeated multiplication.
+fn hysteresis_over_frames(h: f32, frames: u32) -> f32 {
+    var hk = h;
+    for (var i = 1u; i < frames; i++) {
+        hk *= h;
+    }
+    return hk;
 }
 
 // probegi_core::probe_change::ycocg
@@ -178,7 +191,7 @@ fn blend_distance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgr
     }
     if (wsum <= 0.0) { return; }
     let idx = params.distance_first + probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
-    let h = h0 * params.visibility_scale;
+    let h = hysteresis_over_frames(h0 * params.visibility_scale, job.frames);
     let blended = (sum / wsum) * (1.0 - h) + distance[idx] * h;
     if (all(abs(blended) <= vec2<f32>(3.4028235e38))) {
         distance[idx] = blended;
