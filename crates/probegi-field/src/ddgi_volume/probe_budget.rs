@@ -14,7 +14,15 @@ impl DdgiVolume {
     /// and whether the floor makes them trace.
     pub(crate) fn budget_candidates(&self, volume: u32, out: &mut Vec<BudgetCandidate>) {
         let interval = self.settings.ray_budget_max_interval_frames;
-        let change = self.neighbourhood_change();
+        // While a scene event's window lasts (seed 004 §4.3: 4–10 frames), every
+        // probe counts as fully changed: the budget visits them in turn,
+        // longest-waiting first, so light that fades through the bounces is
+        // followed everywhere, not only where the first blend saw it change.
+        let change = if self.irradiance_events.is_empty() && self.visibility_events.is_empty() {
+            self.neighbourhood_change()
+        } else {
+            vec![1.0; self.grid.probe_count()]
+        };
         for (p, state) in self.probe_states.iter().enumerate() {
             if !state.traces() {
                 continue;
