@@ -6,7 +6,8 @@
 # frames with exact shadow rays (shadow_field=false): HDR-FLIP per frame. A field
 # that follows within its hysteresis lag stays near its error while the block is
 # still (frames 130–149). Writes OUT/lag.csv; prints a Markdown summary.
-# Usage: scripts/shadow-field-lag.sh [OUT_DIR] (default out/shadow-field-lag); needs a release build.
+# Usage: [FIELD_SET="shadow_field_surfel_reach_rel=1 …"] scripts/shadow-field-lag.sh [OUT_DIR]
+# (default out/shadow-field-lag); FIELD_SET adds --set keys to the field's run. Needs a release build.
 set -euo pipefail
 out=${1:-out/shadow-field-lag}
 bin=${PROBEGI_BIN:-target/release/probegi}
@@ -14,9 +15,13 @@ scene=${SCENE:-scenes/sponza-moving-occluder.toml}
 frames=${FRAMES:-150}
 size=(--width "${WIDTH:-320}" --height "${HEIGHT:-180}")
 mkdir -p "$out"
+extra=()
+for kv in ${FIELD_SET:-}; do extra+=(--set "$kv"); done
 for f in true false; do
     rm -rf "${out:?}/field-$f"
-    "$bin" render --scene "$scene" --gi ddgi "${size[@]}" --frames "$frames" --set shadow_field=$f \
+    args=(--set shadow_field=$f)
+    [[ $f == true ]] && args+=("${extra[@]}")
+    "$bin" render --scene "$scene" --gi ddgi "${size[@]}" --frames "$frames" "${args[@]}" \
         --sequence "$out/field-$f" --sequence-exr --out "$out/field-$f.exr" 2>/dev/null
 done
 echo "frame,hdr_flip_field_vs_exact" > "$out/lag.csv"
@@ -31,3 +36,25 @@ echo "|---|---|---|"
 echo "| 10–55 | sliding out | $(mean 10 55) |"
 echo "| 65–115 | sliding back | $(mean 65 115) |"
 echo "| 130–$((frames - 1)) | still | $(mean 130 $((frames - 1))) |"
+# The curve, where matplotlib is installed (pip install matplotlib).
+python3 - "$out" <<'PY' 2>/dev/null || echo "(no matplotlib: $out/lag.csv holds the curve)"
+import csv, sys
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+out = sys.argv[1]
+rows = list(csv.DictReader(open(f"{out}/lag.csv")))
+x = [int(r["frame"]) for r in rows]
+y = [float(r["hdr_flip_field_vs_exact"]) for r in rows]
+plt.figure(figsize=(7, 3))
+plt.plot(x, y)
+for f, label in [(60, "block turns"), (120, "block stops")]:
+    plt.axvline(f, color="grey", ls="--")
+    plt.text(f + 1, max(y), label, va="top", fontsize=8)
+plt.xlabel("frame")
+plt.ylabel("HDR-FLIP, field vs exact shadows")
+plt.title("The shadowing field under a moving occluder (Sponza, 16³ probes, 64 rays)")
+plt.tight_layout()
+plt.savefig(f"{out}/lag.png", dpi=100)
+print(f"wrote {out}/lag.png")
+PY

@@ -145,6 +145,7 @@ pub fn run(args: &LagArgs) -> Result<()> {
     let mut volume = load_scene("builtin:door-room")?.volume.context("door room volume")?;
     volume.probe_rays_per_probe = args.rays_per_probe;
     volume.validate().map_err(|(f, why)| anyhow::anyhow!("{f}: {why}"))?;
+    stepped_volume(&volume, volume.probe_hysteresis, true, &args.set)?; // bad --set fails before any frame
     let at = args.frames_before;
     let mut runs = vec![];
     for step in [Step::LightOn, Step::Occluder] {

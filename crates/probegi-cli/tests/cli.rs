@@ -546,6 +546,18 @@ fn gpu_render_keeps_the_field_on_the_device_and_draws_probes_on_the_cpu_camera()
 }
 
 #[test]
+fn ray_budget_inputs_are_checked_before_rendering() {
+    for (set, key) in [
+        ("ray_budget=-5", "ray_budget"),
+        ("ray_budget_max_interval_frames=0", "ray_budget_max_interval_frames"),
+        ("ray_budget_hysteresis_per_frame=maybe", "ray_budget_hysteresis_per_frame"),
+    ] {
+        fails_with(&["render", "--gi", "ddgi", "--set", set], key);
+    }
+    fails_with(&["lag", "--set", "ray_budget_max_interval_frames=0"], "ray_budget_max_interval_frames");
+}
+
+#[test]
 fn shadow_field_inputs_are_checked_before_rendering() {
     // `--ao` needs a shadowing field to draw; the field's settings are validated by name.
     fails_with(&["render", "--gi", "ddgi", "--ao", &tmp("ao.png").to_string_lossy()], "shadow_field=true");

@@ -125,3 +125,18 @@ fn after_a_light_switches_off_the_probes_it_lit_trace_more_often() {
     assert!(top > 0.8, "the changed probes trace most frames: {top}");
     assert!(rest < 0.3, "the still probes wait for the floor: {rest}");
 }
+
+#[test]
+fn after_a_scene_event_the_budget_visits_every_probe_in_turn() {
+    let scene = load_scene("builtin:shadow-box").expect("builtin");
+    let probes = 8 * 3 * 8;
+    let budget = probes as u64 * RAYS as u64 / 4;
+    let mut set = new_set(&scene, settings(budget));
+    run(&scene, &mut set, 0..12, |_, _| {});
+    set.notify_scene_event(probegi_field::SceneEvent::LargeLightChange);
+    run(&scene, &mut set, 12..16, |_, _| {});
+    // A quarter of the probes a frame, round robin: each traced within the 4 frames.
+    let v = &set.volumes()[0];
+    let waited = (0..probes).map(|p| v.probe_frames_since_traced(p)).max().expect("probes");
+    assert!(waited < 4, "a probe waited {waited} frames through the event's window");
+}

@@ -75,9 +75,17 @@ fn changes_match(s: DdgiVolumeSettings) {
         }
         assert_eq!(c.probe_states, g.probe_states, "frame {f}: probe states");
     }
+    // Probes that waited blend with α^k on both sides (ray_budget_hysteresis_per_frame).
+    on_gpu.sync_host_atlases(Some(&gpu as &dyn ProbeBatchTracer)).expect("read back");
+    let (ic, ig) = (&on_cpu.volumes()[0].irradiance.texels, &on_gpu.volumes()[0].irradiance.texels);
+    let atlas = ic.iter().zip(ig).map(|(a, b)| (*a - *b).abs().max_element()).fold(0.0f32, f32::max);
+    assert!(atlas < 1e-3, "irradiance atlases differ by {atlas}");
     let budget = s.ray_budget;
     let rays = on_gpu.volumes()[0].rays_per_frame();
-    eprintln!("{:?}: largest change difference {worst:.2e}; last frame {rays} rays (budget {budget})", s.probe_states);
+    eprintln!(
+        "{:?}: largest change difference {worst:.2e}, atlas difference {atlas:.2e}; last frame {rays} rays (budget {budget})",
+        s.probe_states
+    );
     assert!(rays <= budget, "the budget holds on the device path: {rays}");
     assert!(worst < 1e-3, "probe changes differ by {worst}");
     assert!(ms.contains_key("probe_change"), "the device measured the changes: {ms:?}");

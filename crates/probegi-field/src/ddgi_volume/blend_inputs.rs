@@ -126,7 +126,8 @@ impl DdgiVolume {
         if self.shadow.is_some() {
             // A light that changes changes the shadows: the irradiance scale applies.
             let t = std::time::Instant::now();
-            let hysteresis: Vec<Option<f32>> = shadow_base(&base, irr_scale, &frames).iter().map(|b| b.map(|(_, h)| h)).collect();
+            let hysteresis: Vec<Option<f32>> =
+                shadow_base(&base, irr_scale, &frames).iter().map(|b| b.map(|(_, h)| h)).collect();
             occlusion_change = self.blend_shadow_maps(frame, &hysteresis);
             *pass_ms.entry("shadow_blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
         }
@@ -238,7 +239,10 @@ impl DdgiVolume {
 /// first ray and its occlusion hysteresis, (α · the scene-event scale)^k (a
 /// light that changes changes the shadows, so the irradiance scale applies).
 fn shadow_base(base: &[Option<(usize, f32)>], irr_scale: f32, frames: &[u32]) -> Vec<Option<(usize, f32)>> {
-    base.iter().zip(frames).map(|(b, k)| b.map(|(first, h)| (first, hysteresis_over_frames(h * irr_scale, *k)))).collect()
+    base.iter()
+        .zip(frames)
+        .map(|(b, k)| b.map(|(first, h)| (first, hysteresis_over_frames(h * irr_scale, *k))))
+        .collect()
 }
 
 /// The blend's per-ray inputs from a batch's hits and the caller's radiance, the
