@@ -109,19 +109,8 @@ impl DdgiVolume {
         });
         *pass_ms.entry("blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
 
-        let t = std::time::Instant::now();
         let updated: Vec<bool> = base.iter().map(|b| b.is_some()).collect();
-        self.irradiance.texels.par_chunks_mut(irr_len).zip(updated.par_iter()).for_each(|(tile, a)| {
-            if *a {
-                update_tile_border(tile, irr_n)
-            }
-        });
-        self.distance.texels.par_chunks_mut(dist_len).zip(updated.par_iter()).for_each(|(tile, a)| {
-            if *a {
-                update_tile_border(tile, dist_n)
-            }
-        });
-        *pass_ms.entry("border").or_default() += t.elapsed().as_secs_f64() * 1e3;
+        self.border_tiles(&updated, pass_ms);
         let mut occlusion_change = Vec::new();
         if self.shadow.is_some() {
             // A light that changes changes the shadows: the irradiance scale applies.
@@ -135,6 +124,24 @@ impl DdgiVolume {
         self.after_update(&updated);
         #[cfg(debug_assertions)]
         self.validate();
+    }
+
+    /// The border pass over the tiles that blended (seed 004 §2.3), timed under `border`.
+    fn border_tiles(&mut self, updated: &[bool], pass_ms: &mut BTreeMap<&'static str, f64>) {
+        let t = std::time::Instant::now();
+        let (irr_n, dist_n) = (self.irradiance.interior, self.distance.interior);
+        let (irr_len, dist_len) = (self.irradiance.tile_len(), self.distance.tile_len());
+        self.irradiance.texels.par_chunks_mut(irr_len).zip(updated.par_iter()).for_each(|(tile, a)| {
+            if *a {
+                update_tile_border(tile, irr_n)
+            }
+        });
+        self.distance.texels.par_chunks_mut(dist_len).zip(updated.par_iter()).for_each(|(tile, a)| {
+            if *a {
+                update_tile_border(tile, dist_n)
+            }
+        });
+        *pass_ms.entry("border").or_default() += t.elapsed().as_secs_f64() * 1e3;
     }
 
     /// Per probe, its first ray and the hysteresis of its blend this frame (`None`:
