@@ -3,7 +3,8 @@
 # on a moving scene: HDR-FLIP against the path-traced reference at several frames of
 #  - every tracing probe at R rays each (the full cost);
 #  - a budget of half of that, at R rays per probe (`--set ray_budget=N`);
-#  - every tracing probe at R/2 rays (fixed rays at the same budget).
+#  - every tracing probe at R/2 rays (fixed rays at the same budget);
+#  - the full run again with another seed (how far apart noise alone puts two runs).
 # Usage: [SCENE=…] [FRAMES="20 45 75"] [R=128] [SPP=256] scripts/ray-budget-compare.sh [OUT_DIR]
 # (default out/ray-budget); needs a release build. Prints a Markdown table.
 set -euo pipefail
@@ -37,13 +38,15 @@ full_rays=$(json "$out/full.json" rays_per_frame)
 budget=$((${full_rays%.*} / 2))
 run budget --rays-per-probe "$r" --set ray_budget="$budget"
 run fixed-half --rays-per-probe $((r / 2))
+# The noise scale: the full run with another seed.
+run full-seed-1 --rays-per-probe "$r" --seed 1
 flip() { "$bin" compare "$1" "$2" 2>/dev/null | sed -n 's/^mean_flip: //p'; }
 header="| $scene ($probes probes) | field rays, last frame |"
 rule="|---|---|"
 for f in "${frames[@]}"; do header+=" HDR-FLIP frame $f |"; rule+="---|"; done
 echo "$header"
 echo "$rule"
-for name in full budget fixed-half; do
+for name in full full-seed-1 budget fixed-half; do
     row="| $name | $(json "$out/$name.json" rays_per_frame) |"
     for f in "${frames[@]}"; do
         row+=" $(flip "$out/ref-$f.exr" "$(printf '%s/%s/frame-%04d.exr' "$out" "$name" "$f")") |"
