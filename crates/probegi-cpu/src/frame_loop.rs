@@ -9,11 +9,14 @@
 //! frames; the indirect term is the last frame's, so the image shows the field as
 //! it stands after N updates.
 //!
-//! [`render_frames`] drives a private frame-loop type with one method per step
-//! of ARCHITECTURE.md's per-frame data flow (pose, field update, camera image),
+//! [`render_frames`] steps a [`FrameStepper`] (one frame at a time, each with
+//! the camera its caller chooses: the viewer's fly camera) over the frames; the
+//! stepper drives a private frame-loop type with one method per step of
+//! ARCHITECTURE.md's per-frame data flow (pose, field update, camera image),
 //! then composes the output; the `camera` pass itself is in `camera_pass`.
 
 mod camera_pass;
+mod frame_stepper;
 
 use std::collections::BTreeMap;
 use std::ops::ControlFlow::{self, Break, Continue};
@@ -31,6 +34,7 @@ use crate::gbuffer::{GBuffer, trace_gbuffer};
 use crate::scene_events::SceneChangeDetector;
 use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
 use camera_pass::{CameraPasses, IndirectField, shade_camera};
+pub use frame_stepper::FrameStepper;
 use probegi_core::sh_settings::ShProbeSettings;
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 
@@ -266,23 +270,13 @@ pub fn render_frames(
     settings: &RenderSettings,
     mut on_frame_done: impl FnMut(u32, &dyn Fn() -> Image),
 ) -> RenderOutput {
-    let mut frame_scene = base_scene.is_animated().then(|| base_scene.clone());
-    let static_direct = DirectLighting::new(base_scene, tracer, settings.direct);
-    let mut frame_loop = FrameLoop::new(base_scene, camera, settings);
+    let mut stepper = FrameStepper::new(base_scene, tracer, camera, settings);
     for f in 0..settings.frames.max(1) {
-        let Continue((scene, frame_tracer)) = frame_loop.pose(tracer, &mut frame_scene, f) else { break };
-        let tracer: &dyn RayTracer = frame_tracer.as_deref().unwrap_or(tracer);
-        let frame_direct_lighting = frame_loop.animated.then(|| static_direct.for_frame(scene, tracer));
-        let direct = frame_direct_lighting.as_ref().unwrap_or(&static_direct);
-        let frame = Frame { index: f, scene, tracer, direct, camera: frame_loop.camera_at(f) };
-        if frame_loop.update_field(&frame).is_break() {
-            break;
-        }
-        if frame_loop.camera_image(&frame, &mut on_frame_done).is_break() {
+        if stepper.step_with(frame_camera(settings, camera, f), &mut on_frame_done).is_break() {
             break;
         }
     }
-    frame_loop.finish()
+    stepper.finish()
 }
 
 /// What one frame's passes read: the frame, the scene posed at it, the tracer
@@ -304,7 +298,6 @@ struct FrameLoop<'a> {
     camera: &'a CameraRays,
     settings: &'a RenderSettings,
     animated: bool,
-    moving_camera: bool,
     field: Option<DdgiFieldSet>,
     sh: Option<ShProbes>,
     /// The camera pass's direct-light settings (see [`FrameLoop::new`]).
@@ -314,13 +307,14 @@ struct FrameLoop<'a> {
     pass_totals: BTreeMap<&'static str, f64>,
     last_gbuffer: Option<GBuffer>,
     detector: SceneChangeDetector,
+    /// The camera of the last frame rendered (a different one restarts the direct term).
+    prev_camera: Option<CameraRays>,
 }
 
 impl<'a> FrameLoop<'a> {
     /// The field the settings ask for, placed around the first frame's camera.
     fn new(base_scene: &'a Scene, camera: &'a CameraRays, settings: &'a RenderSettings) -> Self {
         let animated = base_scene.is_animated();
-        let moving_camera = settings.camera_path.len() > 1;
         let field = make_field_set(&settings.gi, base_scene, frame_camera(settings, camera, 0).origin_world);
         let sh = match &settings.gi {
             GiMethod::Sh(s) => {
@@ -340,7 +334,6 @@ impl<'a> FrameLoop<'a> {
             camera,
             settings,
             animated,
-            moving_camera,
             field,
             sh,
             camera_direct,
@@ -349,6 +342,7 @@ impl<'a> FrameLoop<'a> {
             pass_totals: BTreeMap::new(),
             last_gbuffer: None,
             detector: SceneChangeDetector::new(),
+            prev_camera: None,
         }
     }
 
@@ -545,8 +539,7 @@ impl<'a> FrameLoop<'a> {
     /// changed since the last frame (a camera that holds at its last key
     /// accumulates again).
     fn restarts_direct(&self, frame: &Frame<'_>) -> bool {
-        let f = frame.index;
-        let camera_moved = self.moving_camera && f > 0 && self.camera_at(f - 1) != frame.camera;
+        let camera_moved = self.prev_camera.as_ref().is_some_and(|c| c != frame.camera);
         self.animated || camera_moved
     }
 
@@ -562,7 +555,7 @@ impl<'a> FrameLoop<'a> {
         }
         // Frames that completed (all of them unless a backend failed).
         let frames = self.stats.frame_means.len().max(1) as u32;
-        let last_camera = self.camera_at(frames - 1);
+        let last_camera = self.prev_camera.unwrap_or(*self.camera_at(0));
         let FrameLoop { field, sh, acc, mut stats, pass_totals, last_gbuffer, .. } = self;
         stats.frames = stats.frame_means.len() as u32;
         stats.pass_ms = pass_totals.into_iter().map(|(k, v)| (k, v / frames as f64)).collect();
@@ -576,7 +569,7 @@ impl<'a> FrameLoop<'a> {
         let mut pixels = acc.pixels();
         if let (true, Some(set), Some(g)) = (settings.show_probes, &field, &last_gbuffer) {
             for v in set.volumes() {
-                crate::probe_vis::draw_probes(v, last_camera, g, &mut pixels);
+                crate::probe_vis::draw_probes(v, &last_camera, g, &mut pixels);
             }
         }
         let image = Image { width: settings.width, height: settings.height, pixels };

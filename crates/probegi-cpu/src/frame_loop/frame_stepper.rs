@@ -1,0 +1,116 @@
+//! One frame at a time: [`FrameStepper`] runs the frame loop's steps (pose,
+//! field update, camera image) for the frame after the last, seen through the
+//! camera its caller gives, so an interactive viewer can move the camera
+//! between frames while the field keeps updating. [`super::render_frames`] is
+//! a stepper driven over the settings' camera path.
+
+use std::ops::ControlFlow::{self, Break};
+
+use probegi_core::camera::CameraRays;
+use probegi_core::image::Image;
+use probegi_field::ddgi_field_set::DdgiFieldSet;
+use probegi_scene::{RayTracer, Scene};
+
+use super::{Frame, FrameLoop, RenderOutput, RenderSettings};
+use crate::direct::DirectLighting;
+
+/// A render stepped one frame at a time (see the module docs). The scene
+/// clock is the frame index: an animated scene is posed at each frame's.
+pub struct FrameStepper<'a> {
+    tracer: &'a dyn RayTracer,
+    static_direct: DirectLighting<'a>,
+    /// The scene as it stands at the current frame (animated scenes only).
+    frame_scene: Option<Scene>,
+    frame_loop: FrameLoop<'a>,
+    next_frame: u32,
+    failed: bool,
+}
+
+impl<'a> FrameStepper<'a> {
+    /// A render of `base_scene` by `settings` (its `frames` and `camera_path`
+    /// are not read: the caller steps), the field placed around `camera`.
+    pub fn new(
+        base_scene: &'a Scene,
+        tracer: &'a dyn RayTracer,
+        camera: &'a CameraRays,
+        settings: &'a RenderSettings,
+    ) -> Self {
+        Self {
+            tracer,
+            static_direct: DirectLighting::new(base_scene, tracer, settings.direct),
+            frame_scene: base_scene.is_animated().then(|| base_scene.clone()),
+            frame_loop: FrameLoop::new(base_scene, camera, settings),
+            next_frame: 0,
+            failed: false,
+        }
+    }
+
+    /// Renders the next frame through `camera` (of the settings' size) and
+    /// returns its image; an error names the frame and the pass that failed,
+    /// and every later step fails too.
+    pub fn step(&mut self, camera: &CameraRays) -> Result<Image, String> {
+        let mut image = None;
+        match self.step_with(camera, &mut |_, compose| image = Some(compose())) {
+            ControlFlow::Continue(()) => image.ok_or_else(|| "the frame produced no image".into()),
+            Break(()) => Err(self.error()),
+        }
+    }
+
+    /// [`Self::step`] handing the frame to `on_frame_done` (its image composed
+    /// only when called).
+    pub(crate) fn step_with(
+        &mut self,
+        camera: &CameraRays,
+        on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
+    ) -> ControlFlow<()> {
+        if self.failed {
+            return Break(());
+        }
+        let f = self.next_frame;
+        let Self { tracer, static_direct, frame_scene, frame_loop, .. } = self;
+        let ControlFlow::Continue((scene, frame_tracer)) = frame_loop.pose(*tracer, frame_scene, f) else {
+            self.failed = true;
+            return Break(());
+        };
+        let tracer: &dyn RayTracer = frame_tracer.as_deref().unwrap_or(*tracer);
+        let frame_direct_lighting = frame_loop.animated.then(|| static_direct.for_frame(scene, tracer));
+        let direct = frame_direct_lighting.as_ref().unwrap_or(static_direct);
+        let frame = Frame { index: f, scene, tracer, direct, camera };
+        let flow = match frame_loop.update_field(&frame) {
+            ControlFlow::Continue(()) => frame_loop.camera_image(&frame, on_frame_done),
+            Break(()) => Break(()),
+        };
+        frame_loop.prev_camera = Some(*camera);
+        self.failed = flow.is_break();
+        self.next_frame += 1;
+        flow
+    }
+
+    /// The index of the frame the next step renders (frames rendered so far).
+    pub fn frame_index(&self) -> u32 {
+        self.next_frame
+    }
+
+    /// Why the last step failed, if it did.
+    fn error(&self) -> String {
+        self.frame_loop.stats.error.clone().unwrap_or_else(|| "a pass failed".into())
+    }
+
+    /// The DDGI field as it stands (`None` without `--gi ddgi`); its atlases
+    /// may be stale on the host while a device holds them
+    /// (`DdgiFieldSet::field_on_device`).
+    pub fn field(&self) -> Option<&DdgiFieldSet> {
+        self.frame_loop.field.as_ref()
+    }
+
+    /// The DDGI field, to change its settings or report scene events between frames.
+    pub fn field_mut(&mut self) -> Option<&mut DdgiFieldSet> {
+        self.frame_loop.field.as_mut()
+    }
+
+    /// After the last step: the field back on the host, the statistics, the
+    /// last frame's image (with `show_probes`, the probes drawn on it).
+    pub fn finish(self) -> RenderOutput {
+        self.frame_loop.finish()
+    }
+}
