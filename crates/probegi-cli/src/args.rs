@@ -38,6 +38,44 @@ pub enum Command {
     /// into the doorway) in the door room, against hysteresis with the fast-
     /// convergence heuristics on and off: a PNG plot, a curves PNG and a CSV.
     Lag(LagArgs),
+    /// The field live through a fly camera (W/S A/D Q/E, mouse look, scroll
+    /// for speed, R to reset). Built so far: the scripted, headless run
+    /// (`--headless --input-script FILE --exit-after-frames N --screenshot
+    /// FILE`); the window and its panels are not built yet.
+    View(ViewArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Global illumination method.
+    #[arg(long, value_enum, default_value_t = GiArg::Ddgi)]
+    pub gi: GiArg,
+    #[command(flatten)]
+    pub volume: VolumeArgs,
+    /// Area-light shadow samples per pixel per frame (stratified).
+    #[arg(long, default_value_t = 16)]
+    pub area_samples: u32,
+    /// `wgpu` (the default here: the field and the camera frame on the GPU) or `cpu`.
+    #[arg(long, value_enum, default_value_t = crate::gpu_backend::Backend::Wgpu)]
+    pub backend: crate::gpu_backend::Backend,
+    /// Run without a window: the input script drives the camera.
+    #[arg(long)]
+    pub headless: bool,
+    /// Timed key and mouse events (format: `probegi_view::input_script`, docs/CLI.md).
+    #[arg(long)]
+    pub input_script: Option<PathBuf>,
+    /// Frames to run before exiting.
+    #[arg(long)]
+    pub exit_after_frames: Option<u32>,
+    /// Write the last frame here: .png (tone-mapped) or .exr (linear radiance).
+    #[arg(long)]
+    pub screenshot: Option<PathBuf>,
+    /// The fly camera's starting speed in metres per second (default: a tenth
+    /// of the scene's bounding-box diagonal).
+    #[arg(long)]
+    pub fly_speed: Option<f32>,
 }
 
 #[derive(Args, Debug)]

@@ -14,6 +14,7 @@ mod memory;
 mod render_outputs;
 mod render_settings;
 mod scene_setup;
+mod view;
 
 use std::process::ExitCode;
 use std::time::Instant;
@@ -59,6 +60,7 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Some(Command::Lag(a)) => lag::run(&a),
+        Some(Command::View(a)) => view::run(&a),
         Some(Command::Bench(a)) => {
             let report = bench::run(&a)?;
             println!("{}", serde_json::to_string_pretty(&report)?);

@@ -596,3 +596,49 @@ fn shadow_field_inputs_are_checked_before_rendering() {
     assert!(v.iter().all(|x| (0.0..=1.0).contains(x)), "visibility outside [0, 1]");
     assert!(v.contains(&1.0) && v.contains(&0.0), "the box shows both lit and shadowed pixels");
 }
+
+#[test]
+fn view_runs_scripted_without_a_window_and_names_bad_input() {
+    // No window yet: the message names the scripted way.
+    fails_with(&["view", "--scene", "builtin:cornell-box"], "--headless");
+    fails_with(&["view", "--headless"], "--exit-after-frames");
+    let script = tmp("bad-script.txt");
+    std::fs::write(&script, "0 key w down\n3 key z down\n").expect("write");
+    let s = script.to_string_lossy().into_owned();
+    fails_with(
+        &["view", "--headless", "--exit-after-frames", "2", "--input-script", &s],
+        "bad-script.txt:2: unknown key",
+    );
+    fails_with(&["view", "--headless", "--exit-after-frames", "2", "--fly-speed=-1"], "--fly-speed");
+    // A scripted CPU run: the camera flies, the screenshot is a lit frame.
+    let good = tmp("fly.txt");
+    std::fs::write(&good, "# forward for 10 frames\n0 key w down\n10 key w up\n").expect("write");
+    let shot = tmp("view.exr");
+    let o = probegi(&[
+        "view",
+        "--headless",
+        "--backend",
+        "cpu",
+        "--input-script",
+        &good.to_string_lossy(),
+        "--exit-after-frames",
+        "12",
+        "--fly-speed",
+        "0.6",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--rays-per-probe",
+        "32",
+        "--screenshot",
+        &shot.to_string_lossy(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // 10 frames of 1/60 s at 0.6 m/s: 0.1 m along the view from the Cornell camera's z.
+    assert!(stderr(&o).contains("view: 12 frames of builtin:cornell-box"), "{}", stderr(&o));
+    let probegi_image::LoadedImage::Hdr(image) = probegi_image::read_image(&shot).expect("screenshot") else {
+        panic!("an EXR screenshot reads back as HDR");
+    };
+    assert!(image.mean().max_element() > 0.01 && image.first_invalid_pixel().is_none());
+}
