@@ -76,6 +76,10 @@ pub struct ViewArgs {
     /// of the scene's bounding-box diagonal).
     #[arg(long)]
     pub fly_speed: Option<f32>,
+    /// With --headless: print frame-time percentiles and the field update's
+    /// share of a frame as JSON on stdout.
+    #[arg(long, requires = "headless")]
+    pub bench: bool,
 }
 
 #[derive(Args, Debug)]

@@ -5,7 +5,7 @@
 use anyhow::{Context, Result, bail};
 use probegi_scene::{BvhSettings, BvhTracer};
 use probegi_view::input_script::InputScript;
-use probegi_view::scripted_run::{ScriptedRun, run_scripted};
+use probegi_view::scripted_run::{ScriptedOutput, ScriptedRun, frame_time_percentiles, run_scripted};
 
 use crate::args::{RenderArgs, ViewArgs};
 use crate::render_outputs::write_radiance;
@@ -61,6 +61,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     let gi = crate::render_settings::gi_method(&scene, &render)?;
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let gpu = crate::gpu_backend::render_probe_tracer(args.backend, &gi, &scene, &bvh)?;
+    let adapter = gpu.as_ref().map(|g| g.adapter_name().to_string());
     let settings = crate::render_settings::render_settings(&render, &scene, gi, gpu);
     let diagonal = scene.bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
     let run = ScriptedRun {
@@ -73,6 +74,9 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     if let Some(p) = &args.screenshot {
         write_radiance(p, &out.image)?;
     }
+    if args.bench {
+        println!("{}", serde_json::to_string_pretty(&bench_report(&scene.name, adapter, &out))?);
+    }
     let at = out.camera.position_m;
     eprintln!(
         "view: {frames} frames of {}, camera at ({:.2}, {:.2}, {:.2}){}",
@@ -83,4 +87,20 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         args.screenshot.as_ref().map_or(String::new(), |p| format!(", wrote {}", p.display()))
     );
     Ok(())
+}
+
+/// `view --headless --bench`: frame-time percentiles over the run and how long
+/// the field update and the camera frame take on average.
+fn bench_report(scene: &str, adapter: Option<String>, out: &ScriptedOutput) -> serde_json::Value {
+    let [median, p95, max] = frame_time_percentiles(&out.frame_ms);
+    let stats = &out.render.stats;
+    serde_json::json!({
+        "scene": scene,
+        "adapter": adapter,
+        "frames": out.frame_ms.len(),
+        "frame_ms": { "median": median, "p95": p95, "max": max },
+        "field_update_ms": stats.field_update_ms,
+        "camera_ms": stats.pass_ms.get("camera"),
+        "rays_per_frame": stats.rays_per_frame,
+    })
 }

@@ -633,8 +633,15 @@ fn view_runs_scripted_without_a_window_and_names_bad_input() {
         "32",
         "--screenshot",
         &shot.to_string_lossy(),
+        "--bench",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).expect("--bench prints JSON");
+    assert_eq!(report["frames"], 12);
+    let (median, p95, max) = (&report["frame_ms"]["median"], &report["frame_ms"]["p95"], &report["frame_ms"]["max"]);
+    let ms = |v: &serde_json::Value| v.as_f64().expect("a number");
+    assert!(0.0 < ms(median) && ms(median) <= ms(p95) && ms(p95) <= ms(max), "{report}");
+    assert!(report["field_update_ms"].as_f64().is_some_and(|v| v > 0.0), "{report}");
     // 10 frames of 1/60 s at 0.6 m/s: 0.1 m along the view from the Cornell camera's z.
     assert!(stderr(&o).contains("view: 12 frames of builtin:cornell-box"), "{}", stderr(&o));
     let probegi_image::LoadedImage::Hdr(image) = probegi_image::read_image(&shot).expect("screenshot") else {

@@ -34,6 +34,19 @@ pub struct ScriptedOutput {
     pub camera: FlyCamera,
     /// The render's statistics and field, as `probegi render` leaves them.
     pub render: RenderOutput,
+    /// Wall milliseconds of each frame (input, field update, camera frame).
+    pub frame_ms: Vec<f64>,
+}
+
+/// Median, 95th percentile and largest of `ms` (nearest rank; zeros when empty).
+pub fn frame_time_percentiles(ms: &[f64]) -> [f64; 3] {
+    if ms.is_empty() {
+        return [0.0; 3];
+    }
+    let mut v = ms.to_vec();
+    v.sort_by(f64::total_cmp);
+    let rank = |p: f64| v[((p * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1];
+    [rank(0.5), rank(0.95), v[v.len() - 1]]
 }
 
 /// Runs `run` over `scene` with `settings` (size, seed, GI, probe tracer; its
@@ -55,7 +68,9 @@ pub fn run_scripted(
     let mut input = InputState::default();
     let mut events = run.script.events.iter().peekable();
     let mut last = None;
+    let mut frame_ms = Vec::with_capacity(run.frames as usize);
     for f in 0..run.frames.max(1) {
+        let t = std::time::Instant::now();
         while let Some((_, e)) = events.next_if(|(at, _)| *at <= f) {
             input.apply(*e);
         }
@@ -65,9 +80,23 @@ pub fn run_scripted(
         fly.advance(&input.fly, run.frame_dt_s);
         input.end_frame();
         let image = stepper.step(&CameraRays::new(&fly.camera(), w, h))?;
+        frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
         on_frame(f, &image);
         last = Some(image);
     }
     let image = last.ok_or("no frame ran")?;
-    Ok(ScriptedOutput { image, camera: fly, render: stepper.finish() })
+    Ok(ScriptedOutput { image, camera: fly, render: stepper.finish(), frame_ms })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::frame_time_percentiles;
+
+    #[test]
+    fn percentiles_are_nearest_rank() {
+        let ms: Vec<f64> = (1..=100).map(f64::from).collect();
+        assert_eq!(frame_time_percentiles(&ms), [50.0, 95.0, 100.0]);
+        assert_eq!(frame_time_percentiles(&[3.0]), [3.0, 3.0, 3.0]);
+        assert_eq!(frame_time_percentiles(&[]), [0.0; 3]);
+    }
 }
