@@ -80,6 +80,9 @@ pub struct ViewArgs {
     /// share of a frame as JSON on stdout.
     #[arg(long, requires = "headless")]
     pub bench: bool,
+    /// Write every frame into this folder as frame-NNNN.png (tone-mapped).
+    #[arg(long)]
+    pub sequence: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]

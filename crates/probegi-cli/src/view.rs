@@ -70,7 +70,17 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         frame_dt_s: 1.0 / 60.0,
         fly_speed_m_per_s: args.fly_speed.unwrap_or(0.1 * diagonal),
     };
-    let out = run_scripted(&scene, &bvh, &camera, &settings, &run, |_, _| {}).map_err(anyhow::Error::msg)?;
+    if let Some(dir) = &args.sequence {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let mut written: Result<()> = Ok(());
+    let out = run_scripted(&scene, &bvh, &camera, &settings, &run, |f, image| {
+        if let (Some(dir), Ok(())) = (&args.sequence, &written) {
+            written = write_radiance(&dir.join(format!("frame-{f:04}.png")), image);
+        }
+    })
+    .map_err(anyhow::Error::msg)?;
+    written?;
     if let Some(p) = &args.screenshot {
         write_radiance(p, &out.image)?;
     }
