@@ -7,7 +7,7 @@
 use std::collections::BTreeMap;
 
 use glam::UVec3;
-use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_cpu::field_update::FieldSetUpdate;
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::DdgiFieldSet;
@@ -21,7 +21,7 @@ fn settings(budget: u64) -> DdgiVolumeSettings {
         probe_counts: UVec3::new(8, 3, 8),
         probe_rays_per_probe: RAYS,
         shadow_field: true,
-        probe_states: probegi_core::ddgi_settings::ProbeStatesMode::AllActive,
+        probe_states: ProbeStatesMode::AllActive,
         ray_budget: budget,
         ..Default::default()
     }
@@ -44,19 +44,27 @@ fn run(scene: &Scene, set: &mut DdgiFieldSet, frames: std::ops::Range<u32>, mut 
 
 #[test]
 fn a_budget_that_covers_every_probe_changes_nothing() {
+    for states in [ProbeStatesMode::AllActive, ProbeStatesMode::Jcgt, ProbeStatesMode::Usage] {
+        covers_everything(states);
+    }
+}
+
+fn covers_everything(states: ProbeStatesMode) {
     let scene = load_scene("builtin:shadow-box").expect("builtin");
-    let (mut a, mut b) = (new_set(&scene, settings(0)), new_set(&scene, settings(u64::MAX)));
-    run(&scene, &mut a, 0..6, |_, _| {});
-    run(&scene, &mut b, 0..6, |_, _| {});
+    let with = |budget| DdgiVolumeSettings { probe_states: states, ..settings(budget) };
+    let (mut a, mut b) = (new_set(&scene, with(0)), new_set(&scene, with(u64::MAX)));
+    // Past the usage scheme's sleeping interval (10), so its own schedule runs.
+    run(&scene, &mut a, 0..24, |_, _| {});
+    run(&scene, &mut b, 0..24, |_, _| {});
     let (va, vb) = (&a.volumes()[0], &b.volumes()[0]);
-    assert!(va.irradiance.texels == vb.irradiance.texels, "irradiance atlases differ");
-    assert!(va.distance.texels == vb.distance.texels, "distance atlases differ");
+    assert!(va.irradiance.texels == vb.irradiance.texels, "{states:?}: irradiance atlases differ");
+    assert!(va.distance.texels == vb.distance.texels, "{states:?}: distance atlases differ");
     let occ = |v: &DdgiVolume| v.shadow.as_ref().expect("shadow field").occlusion.texels.clone();
     assert!(occ(va) == occ(vb), "occlusion maps differ");
     // And the budget measured every probe's change (a still field: small, not the initial 1).
     let changes: Vec<f32> = (0..vb.grid.probe_count()).map(|p| vb.probe_change(p)).collect();
     let mean = changes.iter().sum::<f32>() / changes.len() as f32;
-    eprintln!("mean probe change after 6 frames: {mean:.4}");
+    eprintln!("{states:?}: mean probe change after 24 frames: {mean:.4}");
     assert!(changes.iter().all(|c| (0.0..=1.0).contains(c)));
     assert!(mean > 0.0 && mean < 0.5, "mean change {mean}");
 }
@@ -96,8 +104,10 @@ fn after_a_light_switches_off_the_probes_it_lit_trace_more_often() {
     dark.lights.truncate(1);
     let probes = 8 * 3 * 8;
     let budget = probes as u64 * RAYS as u64 / 4;
-    // Converged first (every probe every frame), then under the budget.
-    let mut set = new_set(&scene, settings(0));
+    // Converged first (every probe every frame), then under the budget. No
+    // shadowing field: its floor updates come in pairs (the occlusion maps
+    // blend from the frame before), which takes the rest of a quarter budget.
+    let mut set = new_set(&scene, DdgiVolumeSettings { shadow_field: false, ..settings(0) });
     run(&scene, &mut set, 0..60, |_, _| {});
     set.volumes_mut()[0].settings.ray_budget = budget;
     run(&scene, &mut set, 60..68, |_, _| {});
@@ -122,8 +132,8 @@ fn after_a_light_switches_off_the_probes_it_lit_trace_more_often() {
     let rate = |ps: &[usize]| ps.iter().map(|&p| traces[p] as f32).sum::<f32>() / (ps.len() as f32 * 6.0);
     let (top, rest) = (rate(&order[..probes / 8]), rate(&order[probes / 2..]));
     eprintln!("after the switch: trace rate of the eighth that changed most {top:.2}, of the still half {rest:.2}");
-    assert!(top > 0.8, "the changed probes trace most frames: {top}");
-    assert!(rest < 0.3, "the still probes wait for the floor: {rest}");
+    assert!(top > 0.7, "the changed probes trace most frames: {top}");
+    assert!(rest < 0.1 * top, "the still probes wait for the floor: {rest}");
 }
 
 #[test]
@@ -139,4 +149,21 @@ fn after_a_scene_event_the_budget_visits_every_probe_in_turn() {
     let v = &set.volumes()[0];
     let waited = (0..probes).map(|p| v.probe_frames_since_traced(p)).max().expect("probes");
     assert!(waited < 4, "a probe waited {waited} frames through the event's window");
+}
+
+#[test]
+fn under_a_budget_every_probes_occlusion_map_keeps_blending() {
+    // The occlusion maps blend from the surfels of the frame before, so the
+    // budget traces a probe two frames in a row at least: after two floor
+    // intervals every probe's map has blended since the start.
+    let scene = load_scene("builtin:shadow-box").expect("builtin");
+    let probes = 8 * 3 * 8;
+    let mut set = new_set(&scene, settings(probes as u64 * RAYS as u64 / 4));
+    let first = |set: &DdgiFieldSet| set.volumes()[0].shadow.as_ref().expect("shadow field").occlusion.clone();
+    run(&scene, &mut set, 0..2, |_, _| {});
+    let early = first(&set);
+    run(&scene, &mut set, 2..20, |_, _| {});
+    let late = first(&set);
+    let unchanged = (0..probes).filter(|&p| early.tile(p) == late.tile(p)).count();
+    assert_eq!(unchanged, 0, "{unchanged} probes' occlusion maps never blended again under the budget");
 }

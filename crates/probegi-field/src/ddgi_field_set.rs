@@ -376,7 +376,7 @@ impl DdgiFieldSet {
         }
         let mut candidates = Vec::new();
         for (i, v) in self.volumes.iter().enumerate() {
-            v.budget_candidates(i as u32, &mut candidates);
+            v.budget_candidates(i as u32, self.frame, &mut candidates);
         }
         let chosen = crate::ray_budget::select_budget_probes(&candidates, budget);
         for (f, v) in self.frames.iter_mut().zip(&self.volumes) {

@@ -86,6 +86,10 @@ impl FlyCamera {
 
     /// One frame of `dt_s` seconds under `input`: turn, rescale the speed, then move.
     pub fn advance(&mut self, input: &FlyInput, dt_s: f32) {
+        // Motion that sums past f32 (a script's huge numbers) turns nothing.
+        let look = if input.look_px.is_finite() { input.look_px } else { glam::Vec2::ZERO };
+        let scroll = if input.scroll_steps.is_finite() { input.scroll_steps } else { 0.0 };
+        let input = &FlyInput { look_px: look, scroll_steps: scroll, ..*input };
         self.yaw_rad -= input.look_px.x * FLY_LOOK_RAD_PER_PIXEL;
         self.pitch_rad = (self.pitch_rad - input.look_px.y * FLY_LOOK_RAD_PER_PIXEL)
             .clamp(-FLY_PITCH_LIMIT_RAD, FLY_PITCH_LIMIT_RAD);
@@ -150,5 +154,10 @@ mod tests {
         fly.reset();
         assert!((fly.forward() - Vec3::NEG_Z).length() < 1e-6);
         assert_eq!(fly.position_m, scene_camera().position);
+        // Motion summed past f32 turns nothing instead of making the camera NaN.
+        let huge =
+            FlyInput { look_px: glam::Vec2::new(f32::INFINITY, 0.0), scroll_steps: f32::NAN, ..Default::default() };
+        fly.advance(&huge, 0.1);
+        assert!(fly.camera().target.is_finite() && fly.speed_m_per_s.is_finite());
     }
 }

@@ -80,7 +80,9 @@ impl<'a> FrameStepper<'a> {
             ControlFlow::Continue(()) => frame_loop.camera_image(&frame, on_frame_done),
             Break(()) => Break(()),
         };
-        frame_loop.prev_camera = Some(*camera);
+        if flow.is_continue() {
+            frame_loop.prev_camera = Some(*camera);
+        }
         self.failed = flow.is_break();
         self.next_frame += 1;
         flow

@@ -121,6 +121,7 @@ impl DdgiVolume {
             *pass_ms.entry("shadow_blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
         }
         self.record_change(&irradiance_change, &occlusion_change);
+        self.count_unblended_frames(frame, &updated);
         self.after_update(&updated);
         #[cfg(debug_assertions)]
         self.validate();
@@ -211,6 +212,7 @@ impl DdgiVolume {
         if frame.measure_change {
             self.accept_device_change(&updated, change);
         }
+        self.count_unblended_frames(frame, &updated);
         self.after_update(&updated);
     }
 
@@ -220,9 +222,6 @@ impl DdgiVolume {
         self.probes_reset_since_blend.clear();
         let max_h = self.settings.probe_hysteresis;
         self.active_probes_last = updated.iter().filter(|a| **a).count();
-        for (n, u) in self.probe_unblended_frames.iter_mut().zip(updated) {
-            *n = if *u { 0 } else { n.saturating_add(1) };
-        }
         for (p, _) in updated.iter().enumerate().filter(|(_, u)| **u) {
             self.probe_has_history[p] = true;
             let state = self.probe_states[p].after_update();

@@ -109,8 +109,11 @@ pub struct DdgiVolume {
     probe_untraced_frames: Vec<u32>,
     /// The occlusion change of each probe's last occlusion blend.
     probe_occlusion_change: Vec<f32>,
-    /// Frames since each probe last blended (`ray_budget_hysteresis_per_frame`).
+    /// Frames its state wanted each probe to blend but the budget held it
+    /// back, since its last blend (`ray_budget_hysteresis_per_frame`).
     probe_unblended_frames: Vec<u32>,
+    /// Frames in a row each probe has traced (the shadowing field's pairs).
+    probe_trace_run: Vec<u32>,
 }
 
 /// One volume's per-frame scratch.
@@ -188,6 +191,7 @@ impl DdgiVolume {
             probe_untraced_frames: vec![0; probes],
             probe_occlusion_change: vec![0.0; probes],
             probe_unblended_frames: vec![0; probes],
+            probe_trace_run: vec![0; probes],
             settings,
         }
     }

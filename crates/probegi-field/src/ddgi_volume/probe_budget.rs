@@ -4,6 +4,7 @@
 //! device measured it.
 
 use probegi_core::probe_change::probe_change;
+use probegi_core::probe_classification::ProbeState;
 
 use crate::ray_budget::BudgetCandidate;
 
@@ -11,9 +12,19 @@ use super::{DdgiVolume, VolumeFrame};
 
 impl DdgiVolume {
     /// Appends this volume's probes whose state traces, with their priority
-    /// and whether the floor makes them trace.
-    pub(crate) fn budget_candidates(&self, volume: u32, out: &mut Vec<BudgetCandidate>) {
+    /// and whether the floor makes them trace in frame `frame_index`.
+    /// - A probe whose state does not blend this frame (usage scheme: DEAD, or
+    ///   SLEEPING off its interval) traces only for its classification: change
+    ///   0, at the floor. A SLEEPING probe on its interval frame is its own
+    ///   schedule's amortisation and traces whatever the budget.
+    /// - With a shadowing field a probe that traced last frame alone counts as
+    ///   fully changed: its occlusion maps blend from the surfels of the frame
+    ///   before, so a probe needs two frames in a row to update them, and a
+    ///   floor update comes in pairs where the budget leaves room (ties go to
+    ///   the longer wait, so a scene event's round still comes first).
+    pub(crate) fn budget_candidates(&self, volume: u32, frame_index: u32, out: &mut Vec<BudgetCandidate>) {
         let interval = self.settings.ray_budget_max_interval_frames;
+        let sleep = self.settings.probe_sleeping_update_interval;
         // While a scene event's window lasts (seed 004 §4.3: 4–10 frames), every
         // probe counts as fully changed: the budget visits them in turn,
         // longest-waiting first, so light that fades through the bounces is
@@ -28,13 +39,21 @@ impl DdgiVolume {
                 continue;
             }
             let age = self.probe_untraced_frames[p].saturating_add(1);
+            let blends = state.updates_in_frame(frame_index, sleep);
+            let own_schedule = *state == ProbeState::UsageSleeping && blends;
+            let shadow_pair = self.shadow.is_some() && self.probe_trace_run[p] == 1;
+            let floor = !self.probe_has_history[p] || state.is_new() || age >= interval;
             out.push(BudgetCandidate {
                 volume,
                 probe: p as u32,
                 rays: self.settings.probe_rays_per_probe,
-                change: change[p],
+                change: match (blends, shadow_pair) {
+                    (false, _) => 0.0,
+                    (true, true) => 1.0,
+                    (true, false) => change[p],
+                },
                 age_frames: age,
-                mandatory: !self.probe_has_history[p] || state.is_new() || age >= interval,
+                mandatory: floor || own_schedule,
             });
         }
     }
@@ -54,7 +73,12 @@ impl DdgiVolume {
                         let mut n = c;
                         n[axis] += step;
                         if n[axis] >= 0 && n[axis] < counts[axis] {
-                            m = m.max(self.probe_change[grid.probe_index(n.as_uvec3())]);
+                            let q = grid.probe_index(n.as_uvec3());
+                            // Only neighbours that measure: one that never blends keeps its
+                            // initial 1 and would pin its neighbours at the top.
+                            if self.probe_states[q].traces() && self.probe_has_history[q] {
+                                m = m.max(self.probe_change[q]);
+                            }
                         }
                     }
                 }
@@ -95,10 +119,28 @@ impl DdgiVolume {
         marked
     }
 
-    /// Counts the frames since each probe last traced, after `frame` was planned.
+    /// Counts the frames since each probe last traced, and how many frames in
+    /// a row it has traced, after `frame` was planned.
     pub(super) fn count_untraced_frames(&mut self, frame: &VolumeFrame) {
         for (n, &traced) in self.probe_untraced_frames.iter_mut().zip(&frame.tracing) {
             *n = if traced { 0 } else { n.saturating_add(1) };
+        }
+        for (run, &traced) in self.probe_trace_run.iter_mut().zip(&frame.tracing) {
+            *run = if traced { run.saturating_add(1) } else { 0 };
+        }
+    }
+
+    /// After a blend: a probe that blended starts counting again; one its
+    /// state wanted to blend (`frame.active`) but the budget held back counts
+    /// the frame (so the frames its next blend stands for are the budget's
+    /// alone, not its state's own schedule).
+    pub(super) fn count_unblended_frames(&mut self, frame: &VolumeFrame, updated: &[bool]) {
+        for (p, n) in self.probe_unblended_frames.iter_mut().enumerate() {
+            if updated.get(p).copied().unwrap_or(false) {
+                *n = 0;
+            } else if frame.active.get(p).copied().unwrap_or(false) {
+                *n = n.saturating_add(1);
+            }
         }
     }
 
