@@ -64,11 +64,16 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     let adapter = gpu.as_ref().map(|g| g.adapter_name().to_string());
     let settings = crate::render_settings::render_settings(&render, &scene, gi, gpu);
     let diagonal = scene.bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
+    // A keyframed camera plays (as in `render`) unless a --camera-* flag fixes it.
+    let s = &args.scene;
+    let fixed = s.camera_pos.is_some() || s.camera_target.is_some() || s.fov_y.is_some();
+    let camera_path = if fixed { Vec::new() } else { scene.camera_path(frames) };
     let run = ScriptedRun {
         script: &script,
         frames,
         frame_dt_s: 1.0 / 60.0,
         fly_speed_m_per_s: args.fly_speed.unwrap_or(0.1 * diagonal),
+        camera_path,
     };
     if let Some(dir) = &args.sequence {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;

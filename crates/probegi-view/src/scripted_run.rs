@@ -1,5 +1,6 @@
 //! The headless run (`probegi view --headless`): frame by frame the script's
-//! events reach the fly camera, the camera moves, and the field updates and
+//! events reach the fly camera (a keyframed camera plays until the input
+//! first moves it), the camera moves, and the field updates and
 //! the frame renders through `probegi_cpu::frame_loop::FrameStepper`, the same
 //! stepper `probegi render` drives, on the CPU or (with the settings' probe
 //! tracer) on the GPU. The scene clock is the frame index; each frame is
@@ -10,7 +11,7 @@ use probegi_core::image::Image;
 use probegi_cpu::frame_loop::{FrameStepper, RenderOutput, RenderSettings};
 use probegi_scene::{RayTracer, Scene};
 
-use crate::fly_camera::FlyCamera;
+use crate::fly_camera::{FlyCamera, FlyInput};
 use crate::input_script::{InputScript, InputState};
 
 /// What a scripted run does.
@@ -24,6 +25,10 @@ pub struct ScriptedRun<'s> {
     pub frame_dt_s: f32,
     /// The fly camera's starting speed, metres per second.
     pub fly_speed_m_per_s: f32,
+    /// A keyframed camera's path, one camera per frame (empty: none). The run
+    /// plays it until the input first moves the camera, which then flies on
+    /// from where the path was; R returns to the path.
+    pub camera_path: Vec<Camera>,
 }
 
 /// What a scripted run leaves.
@@ -69,17 +74,33 @@ pub fn run_scripted(
     let mut events = run.script.events.iter().peekable();
     let mut last = None;
     let mut frame_ms = Vec::with_capacity(run.frames as usize);
+    let mut on_path = !run.camera_path.is_empty();
     for f in 0..run.frames.max(1) {
         let t = std::time::Instant::now();
         while let Some((_, e)) = events.next_if(|(at, _)| *at <= f) {
             input.apply(*e);
         }
+        let keyed = run.camera_path.get(f as usize).or(run.camera_path.last());
         if input.reset {
             fly.reset();
+            on_path = keyed.is_some();
         }
-        fly.advance(&input.fly, run.frame_dt_s);
+        if on_path && input.fly != FlyInput::default() {
+            // The user takes over where the path is.
+            on_path = false;
+            if let Some(k) = keyed {
+                fly = FlyCamera::from_camera(k, fly.speed_m_per_s);
+            }
+        }
+        let camera = match (on_path, keyed) {
+            (true, Some(k)) => *k,
+            _ => {
+                fly.advance(&input.fly, run.frame_dt_s);
+                fly.camera()
+            }
+        };
         input.end_frame();
-        let image = stepper.step(&CameraRays::new(&fly.camera(), w, h))?;
+        let image = stepper.step(&CameraRays::new(&camera, w, h))?;
         frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
         on_frame(f, &image);
         last = Some(image);

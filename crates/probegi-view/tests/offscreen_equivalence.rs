@@ -43,7 +43,13 @@ fn gpu(scene: &Scene, bvh: &BvhTracer) -> Option<Arc<WgpuProbeTracer>> {
 
 fn view(scene: &Scene, bvh: &BvhTracer, s: &RenderSettings, script: &InputScript) -> (Image, glam::Vec3) {
     let camera = scene.default_camera();
-    let run = ScriptedRun { script, frames: FRAMES, frame_dt_s: 1.0 / 60.0, fly_speed_m_per_s: 1.0 };
+    let run = ScriptedRun {
+        script,
+        frames: FRAMES,
+        frame_dt_s: 1.0 / 60.0,
+        fly_speed_m_per_s: 1.0,
+        camera_path: scene.camera_path(FRAMES),
+    };
     let out = run_scripted(scene, bvh, &camera, s, &run, |_, _| {}).expect("scripted run");
     assert!(out.render.stats.error.is_none(), "{:?}", out.render.stats.error);
     (out.image, out.camera.position_m)
@@ -95,4 +101,28 @@ fn a_script_flies_the_camera_and_changes_the_frame() {
     let f = flip(&still, &moved);
     eprintln!("HDR-FLIP after flying 0.1 m: {f:.4}");
     assert!(f > 0.02, "the frame changed: {f}");
+}
+
+#[test]
+fn a_keyframed_camera_plays_until_the_input_takes_over() {
+    // The Cornell box with a camera that dollies in over the frames.
+    let mut scene = load_scene("builtin:cornell-box").expect("scene");
+    let c = scene.default_camera();
+    let key = |frame: f32, z: f32| probegi_scene::CameraKeyframe {
+        frame,
+        camera: probegi_core::camera::Camera { position: glam::Vec3::new(c.position.x, c.position.y, z), ..c },
+    };
+    scene.camera_keyframes = vec![key(0.0, c.position.z), key(FRAMES as f32 - 1.0, c.position.z - 1.0)];
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let mut s = settings(&scene, 3, None);
+    // `render` with the path: the viewer with no input is the same frame, bit for bit.
+    s.camera_path = scene.camera_path(FRAMES).iter().map(|c| CameraRays::new(c, W, H)).collect();
+    let rendered = render(&scene, &bvh, &s);
+    let (played, at) = view(&scene, &bvh, &s, &InputScript::default());
+    assert_eq!(played.pixels, rendered.pixels, "the path played as render plays it");
+    let _ = at; // with no input the fly camera never moved; the path did
+    // A key press from frame 4 on: the camera leaves the path where it was.
+    let script = InputScript::parse("4 key e down\n", "up.txt").expect("script");
+    let (_, flown) = view(&scene, &bvh, &s, &script);
+    assert!(flown.y > c.position.y + 0.05, "flew up from the path: {flown}");
 }
