@@ -10,18 +10,15 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use glam::UVec3;
-use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::image::Image;
 use probegi_cpu::field_update::FieldSetUpdate;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_field::ProbeBatchTracer;
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
-use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
-use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
-use probegi_wgpu::GpuContext;
-use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
+use probegi_scene::{BvhSettings, BvhTracer, load_scene};
+mod common;
 
 const PROBES: u64 = 8 * 3 * 8;
 const RAYS: u32 = 64;
@@ -37,14 +34,6 @@ fn settings(states: ProbeStatesMode) -> DdgiVolumeSettings {
     }
 }
 
-fn gpu(scene: &Scene) -> Option<WgpuProbeTracer> {
-    let ctx = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set")?;
-    let bvh = BvhTracer::for_scene(scene, BvhSettings::default());
-    let t = WgpuProbeTracer::new(ctx, scene, &bvh, true).expect("upload").keeping_field(true);
-    assert!(t.renders_camera(), "{:?}", t.shading_note);
-    Some(t)
-}
-
 #[test]
 fn the_device_measures_the_cpus_changes_and_the_same_probes_trace() {
     for states in [ProbeStatesMode::AllActive, ProbeStatesMode::Usage] {
@@ -54,7 +43,7 @@ fn the_device_measures_the_cpus_changes_and_the_same_probes_trace() {
 
 fn changes_match(s: DdgiVolumeSettings) {
     let scene = load_scene("builtin:shadow-box").expect("builtin");
-    let Some(gpu) = gpu(&scene) else { return };
+    let Some(gpu) = common::resident_tracer(&scene) else { return };
     let cpu = BvhTracer::for_scene(&scene, BvhSettings::default());
     let direct = DirectLighting::new(&scene, &cpu, DirectSettings::default());
     let bounds = scene.bounds().expect("geometry");
@@ -91,29 +80,14 @@ fn changes_match(s: DdgiVolumeSettings) {
     assert!(ms.contains_key("probe_change"), "the device measured the changes: {ms:?}");
 }
 
-fn render_with(scene: &Scene, seed: u64, gpu: Option<Arc<WgpuProbeTracer>>) -> Image {
-    let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
-    let camera = CameraRays::new(&scene.camera.expect("camera"), 64, 48);
-    let rs = RenderSettings {
-        width: 64,
-        height: 48,
-        frames: 16,
-        seed,
-        gi: GiMethod::Ddgi(Box::new(settings(ProbeStatesMode::Jcgt))),
-        probe_tracer: gpu.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
-        ..Default::default()
-    };
-    let out = render_frames(scene, &cpu, &camera, &rs, |_, _| {});
-    assert!(out.stats.error.is_none(), "{:?}", out.stats.error);
-    out.image
-}
-
 #[test]
 fn a_budgeted_field_renders_on_the_gpu_as_on_the_cpu() {
     let scene = load_scene("builtin:shadow-box").expect("builtin");
-    let Some(gpu) = gpu(&scene) else { return };
-    let (a, b) = (render_with(&scene, 3, None), render_with(&scene, 4, None));
-    let g = render_with(&scene, 3, Some(Arc::new(gpu)));
+    let Some(gpu) = common::resident_tracer(&scene) else { return };
+    let s = settings(ProbeStatesMode::Jcgt);
+    let (a, b) =
+        (common::render_ddgi(&scene, 16, 3, s.clone(), None), common::render_ddgi(&scene, 16, 4, s.clone(), None));
+    let g = common::render_ddgi(&scene, 16, 3, s, Some(Arc::new(gpu)));
     let flip = |x: &Image, y: &Image| probegi_image::mean_flip_hdr(x, y).expect("same size");
     let (noise, f) = (flip(&a, &b), flip(&a, &g));
     eprintln!("ray budget: HDR-FLIP CPU vs GPU {f:.4}; CPU seed 3 vs 4 {noise:.4}; means {} {}", a.mean(), g.mean());

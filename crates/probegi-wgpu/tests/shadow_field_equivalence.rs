@@ -11,18 +11,15 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use glam::UVec3;
-use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
 use probegi_cpu::field_update::FieldSetUpdate;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::{DirectLighting, DirectSettings};
+use probegi_field::ProbeBatchTracer;
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
-use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
-use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
-use probegi_wgpu::GpuContext;
-use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
+use probegi_scene::{BvhSettings, BvhTracer, load_scene};
+mod common;
 
 fn settings() -> DdgiVolumeSettings {
     DdgiVolumeSettings {
@@ -32,14 +29,6 @@ fn settings() -> DdgiVolumeSettings {
         shadow_field_sharpness: 2.0,
         ..Default::default()
     }
-}
-
-fn gpu(scene: &Scene) -> Option<WgpuProbeTracer> {
-    let ctx = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set")?;
-    let bvh = BvhTracer::for_scene(scene, BvhSettings::default());
-    let t = WgpuProbeTracer::new(ctx, scene, &bvh, true).expect("upload").keeping_field(true);
-    assert!(t.renders_camera(), "{:?}", t.shading_note);
-    Some(t)
 }
 
 #[test]
@@ -54,7 +43,7 @@ fn gpu_traced_shadow_maps_match_the_cpus() {
 /// and on the device, read back.
 fn maps_match(s: DdgiVolumeSettings) {
     let scene = load_scene("builtin:shadow-box").expect("builtin");
-    let Some(gpu) = gpu(&scene) else { return };
+    let Some(gpu) = common::resident_tracer(&scene) else { return };
     let cpu = BvhTracer::for_scene(&scene, BvhSettings::default());
     let direct = DirectLighting::new(&scene, &cpu, DirectSettings::default());
     let bounds = scene.bounds().expect("geometry");
@@ -80,23 +69,6 @@ fn maps_match(s: DdgiVolumeSettings) {
     assert!(worst < 1e-3, "occlusion maps differ by {worst}");
 }
 
-fn render_with(scene: &Scene, seed: u64, gpu: Option<Arc<WgpuProbeTracer>>, s: DdgiVolumeSettings) -> Image {
-    let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
-    let camera = CameraRays::new(&scene.camera.expect("camera"), 64, 48);
-    let rs = RenderSettings {
-        width: 64,
-        height: 48,
-        frames: 8,
-        seed,
-        gi: GiMethod::Ddgi(Box::new(s)),
-        probe_tracer: gpu.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
-        ..Default::default()
-    };
-    let out = render_frames(scene, &cpu, &camera, &rs, |_, _| {});
-    assert!(out.stats.error.is_none(), "{:?}", out.stats.error);
-    out.image
-}
-
 #[test]
 fn the_shadow_box_renders_with_the_field_on_the_gpu_as_on_the_cpu() {
     compare_renders("camera", settings(), true);
@@ -112,9 +84,10 @@ fn probe_rays_lit_through_the_field_agree_across_backends() {
 /// 3); with `against_exact`, also against exact shadow rays.
 fn compare_renders(name: &str, s: DdgiVolumeSettings, against_exact: bool) {
     let scene = load_scene("builtin:shadow-box").expect("builtin");
-    let Some(gpu) = gpu(&scene) else { return };
-    let (a, b) = (render_with(&scene, 3, None, s.clone()), render_with(&scene, 4, None, s.clone()));
-    let g = render_with(&scene, 3, Some(Arc::new(gpu)), s.clone());
+    let Some(gpu) = common::resident_tracer(&scene) else { return };
+    let (a, b) =
+        (common::render_ddgi(&scene, 8, 3, s.clone(), None), common::render_ddgi(&scene, 8, 4, s.clone(), None));
+    let g = common::render_ddgi(&scene, 8, 3, s.clone(), Some(Arc::new(gpu)));
     let flip = |x: &Image, y: &Image| probegi_image::mean_flip_hdr(x, y).expect("same size");
     let (noise, f) = (flip(&a, &b), flip(&a, &g));
     eprintln!("{name}: HDR-FLIP CPU vs GPU {f:.4}; CPU seed 3 vs 4 {noise:.4}; means {} {}", a.mean(), g.mean());
@@ -127,7 +100,7 @@ fn compare_renders(name: &str, s: DdgiVolumeSettings, against_exact: bool) {
     }
     // The GPU camera reads the field, not shadow rays: exact shadows are farther
     // from the CPU's field image than the GPU's field image is.
-    let exact = render_with(&scene, 3, None, DdgiVolumeSettings { shadow_field: false, ..s });
+    let exact = common::render_ddgi(&scene, 8, 3, DdgiVolumeSettings { shadow_field: false, ..s }, None);
     let fe = flip(&a, &exact);
     eprintln!("{name}: HDR-FLIP field vs exact shadow rays (CPU) {fe:.4}");
     assert!(f < 0.5 * fe, "{name}: the GPU image ({f}) is no closer to the field's than exact shadows are ({fe})");
@@ -140,7 +113,7 @@ fn a_scrolling_window_keeps_the_same_shadow_maps_on_the_device() {
     // backends (a stale device tile would keep the roof's shadow).
     let mut scene = probegi_scene::builtin::half_roofed_ground();
     scene.lights.push(probegi_scene::PunctualLight::point(glam::Vec3::new(30.0, 8.0, 0.0), glam::Vec3::ONE, 400.0));
-    let Some(gpu) = gpu(&scene) else { return };
+    let Some(gpu) = common::resident_tracer(&scene) else { return };
     let cpu = BvhTracer::for_scene(&scene, BvhSettings::default());
     let direct = DirectLighting::new(&scene, &cpu, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");

@@ -1,8 +1,19 @@
-//! What the GPU tests share: the device (or a clear skip) and the shared scenes.
+//! What the GPU tests share: the device (or a clear skip), the field-keeping
+//! tracer `--backend wgpu` uses, a small DDGI render on either backend, and
+//! the shared scenes.
 
 #![allow(dead_code)]
 
+use std::sync::Arc;
+
+use probegi_core::camera::CameraRays;
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::image::Image;
+use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
+use probegi_scene::{BvhSettings, BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
+use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 
 /// A headless device, or `None` when there is none and `PROBEGI_REQUIRE_GPU` is
 /// not set (see `GpuContext::headless_unless_absent`).
@@ -17,4 +28,38 @@ pub fn shared(path: &str) -> String {
         .join(path)
         .to_string_lossy()
         .into_owned()
+}
+
+/// `scene` on the device as `--backend wgpu` has it: the field kept there and
+/// the camera frame rendered there; `None` without a device (see [`context`]).
+pub fn resident_tracer(scene: &Scene) -> Option<WgpuProbeTracer> {
+    let bvh = BvhTracer::for_scene(scene, BvhSettings::default());
+    let t = WgpuProbeTracer::new(context()?, scene, &bvh, true).expect("upload").keeping_field(true);
+    assert!(t.renders_camera(), "{:?}", t.shading_note);
+    Some(t)
+}
+
+/// `frames` frames of DDGI with `s` at 64×48 from the scene's camera at
+/// `seed`, on the CPU or (with `gpu`) the device; the last frame.
+pub fn render_ddgi(
+    scene: &Scene,
+    frames: u32,
+    seed: u64,
+    s: DdgiVolumeSettings,
+    gpu: Option<Arc<WgpuProbeTracer>>,
+) -> Image {
+    let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
+    let camera = CameraRays::new(&scene.camera.expect("camera"), 64, 48);
+    let rs = RenderSettings {
+        width: 64,
+        height: 48,
+        frames,
+        seed,
+        gi: GiMethod::Ddgi(Box::new(s)),
+        probe_tracer: gpu.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
+        ..Default::default()
+    };
+    let out = render_frames(scene, &cpu, &camera, &rs, |_, _| {});
+    assert!(out.stats.error.is_none(), "{:?}", out.stats.error);
+    out.image
 }
