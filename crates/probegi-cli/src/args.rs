@@ -45,7 +45,7 @@ pub enum Command {
     View(ViewArgs),
 }
 
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Clone)]
 pub struct ViewArgs {
     #[command(flatten)]
     pub scene: SceneArgs,

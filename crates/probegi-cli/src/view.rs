@@ -1,13 +1,19 @@
-//! `probegi view`: the field through a fly camera (`probegi_view`). Built so
-//! far: the headless, scripted run; without `--headless` it says the window is
-//! not built yet.
+//! `probegi view`: the field through a fly camera (`probegi_view`): in a
+//! window with panels, or `--headless`, the scripted run without one. Both
+//! build their sessions here, from the same arguments as `probegi render`.
 
 use anyhow::{Context, Result, bail};
 use probegi_scene::{BvhSettings, BvhTracer};
 use probegi_view::input_script::InputScript;
 use probegi_view::scripted_run::{ScriptedOutput, ScriptedRun, frame_time_percentiles, run_scripted};
 
-use crate::args::{RenderArgs, ViewArgs};
+use probegi_cpu::frame_loop::RenderSettings;
+use probegi_view::viewer_controls::{GiChoice, ViewerControls};
+use probegi_view::viewer_prefs::ViewerPrefs;
+use probegi_view::viewer_window::WindowOptions;
+use probegi_view::viewer_worker::{SessionParts, ViewSource, WorkerOptions};
+
+use crate::args::{GiArg, RenderArgs, ViewArgs};
 use crate::render_outputs::write_radiance;
 use crate::scene_setup::{check_posed_bounds, prepare};
 
@@ -36,15 +42,10 @@ fn render_args(args: &ViewArgs, frames: u32) -> RenderArgs {
 
 pub fn run(args: &ViewArgs) -> Result<()> {
     if !args.headless {
-        bail!(
-            "probegi view: the window is not built yet; run it scripted without one: \
-             --headless --exit-after-frames N [--input-script FILE] [--screenshot FILE]"
-        );
+        return run_windowed(args);
     }
     let frames = args.exit_after_frames.context("--headless needs --exit-after-frames N")?;
-    if frames == 0 || frames > 100_000 {
-        bail!("--exit-after-frames {frames}: must be in 1..=100000");
-    }
+    check_frames(frames)?;
     let script = match &args.input_script {
         Some(p) => InputScript::load(p)?,
         None => InputScript::default(),
@@ -118,4 +119,127 @@ fn bench_report(scene: &str, adapter: Option<String>, out: &ScriptedOutput) -> s
         "camera_ms": stats.pass_ms.get("camera"),
         "rays_per_frame": stats.rays_per_frame,
     })
+}
+
+fn check_frames(frames: u32) -> Result<()> {
+    if frames == 0 || frames > 100_000 {
+        bail!("--exit-after-frames {frames}: must be in 1..=100000");
+    }
+    Ok(())
+}
+
+/// The window (`probegi_view::viewer_window`): checks the arguments, then
+/// the frame worker builds its sessions through [`CliViewSource`].
+fn run_windowed(args: &ViewArgs) -> Result<()> {
+    if let Some(n) = args.exit_after_frames {
+        check_frames(n)?;
+    }
+    let script = match &args.input_script {
+        Some(p) => Some(InputScript::load(p)?),
+        None => None,
+    };
+    if let Some(p) = &args.screenshot {
+        probegi_image::check_output_path(p, true)?;
+    }
+    if args.fly_speed.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
+        bail!("--fly-speed must be a positive number of metres per second");
+    }
+    let scripted = args.exit_after_frames.is_some();
+    let prefs_path = (!scripted).then(ViewerPrefs::default_path).flatten();
+    let prefs = prefs_path.as_deref().map(ViewerPrefs::load).unwrap_or_default();
+    let worker = WorkerOptions {
+        script,
+        exit_after_frames: args.exit_after_frames,
+        screenshot: args.screenshot.clone(),
+        // A scripted run steps the fly camera as --headless does; a person's
+        // run by the wall clock.
+        fixed_dt_s: (scripted || args.input_script.is_some()).then_some(1.0 / 60.0),
+        adaptive_target_ms: (!scripted).then_some(prefs.cpu_target_frame_ms),
+        screenshot_dir: std::env::current_dir().unwrap_or_default(),
+    };
+    let scene_name = args.scene.scene.clone();
+    let window = WindowOptions {
+        title: format!("probegi view: {scene_name}"),
+        scene_name,
+        cpu_backend: args.backend == crate::gpu_backend::Backend::Cpu,
+        capture_path: scripted.then(|| args.screenshot.clone()).flatten(),
+        prefs_path,
+    };
+    let source = CliViewSource { args: args.clone() };
+    probegi_view::viewer_window::run_window(Box::new(source), worker, window).map_err(anyhow::Error::msg)
+}
+
+/// Builds the viewer's sessions from the command line and the panels' controls.
+struct CliViewSource {
+    args: ViewArgs,
+}
+
+impl CliViewSource {
+    /// The arguments with the panels' rebuild settings applied.
+    fn args_for(&self, controls: Option<&ViewerControls>) -> ViewArgs {
+        let mut args = self.args.clone();
+        if let Some(c) = controls {
+            args.gi = match c.gi {
+                GiChoice::None => GiArg::None,
+                GiChoice::Ddgi => GiArg::Ddgi,
+                GiChoice::Sh => GiArg::Sh,
+            };
+            args.volume.cascades = (c.gi == GiChoice::Ddgi && c.cascades > 0).then_some(c.cascades);
+            match (c.gi, c.field) {
+                (GiChoice::Ddgi, Some(f)) => {
+                    args.volume.rays_per_probe = None;
+                    args.volume.set.extend(f.set_overrides());
+                }
+                (GiChoice::Ddgi, None) => {}
+                _ => {
+                    args.volume = crate::args::VolumeArgs::default();
+                }
+            }
+        }
+        args
+    }
+
+    fn build(&self, controls: Option<&ViewerControls>) -> Result<SessionParts> {
+        let args = self.args_for(controls);
+        let frames = args.exit_after_frames.unwrap_or(100_000);
+        let render = render_args(&args, frames);
+        let (scene, camera) = prepare(&args.scene, &args.volume.set, 160)?;
+        let gi = crate::render_settings::gi_method(&scene, &render)?;
+        let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+        let gpu = crate::gpu_backend::render_probe_tracer(args.backend, &gi, &scene, &bvh)?;
+        let adapter = gpu.as_ref().map(|g| g.adapter_name().to_string());
+        let settings = crate::render_settings::render_settings(&render, &scene, gi, gpu);
+        let diagonal = scene.bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
+        let s = &args.scene;
+        let fixed = s.camera_pos.is_some() || s.camera_target.is_some() || s.fov_y.is_some();
+        let path_frames =
+            args.exit_after_frames.unwrap_or_else(|| scene.camera_keyframes.last().map_or(1, |k| k.frame as u32 + 1));
+        let camera_path = if fixed { Vec::new() } else { scene.camera_path(path_frames) };
+        Ok(SessionParts {
+            camera,
+            camera_path,
+            settings: RenderSettings { camera_path: Vec::new(), ..settings },
+            fly_speed_m_per_s: args.fly_speed.unwrap_or(0.1 * diagonal),
+            adapter,
+            gi: match args.gi {
+                GiArg::None => GiChoice::None,
+                GiArg::Ddgi => GiChoice::Ddgi,
+                GiArg::Sh => GiChoice::Sh,
+            },
+            cascades: args.volume.cascades.unwrap_or(0),
+            tracer: Box::new(bvh),
+            scene,
+        })
+    }
+}
+
+impl ViewSource for CliViewSource {
+    fn load(&self, controls: Option<&ViewerControls>) -> Result<SessionParts, String> {
+        self.build(controls).map_err(|e| format!("{e:#}"))
+    }
+
+    fn watched_file(&self) -> Option<std::path::PathBuf> {
+        let p = std::path::Path::new(&self.args.scene.scene);
+        p.is_file().then(|| p.to_path_buf())
+    }
 }

@@ -34,7 +34,8 @@ use crate::gbuffer::{GBuffer, trace_gbuffer};
 use crate::scene_events::SceneChangeDetector;
 use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
 use camera_pass::{CameraPasses, IndirectField, shade_camera};
-pub use frame_stepper::FrameStepper;
+pub use frame_stepper::{FrameLayers, FrameStepper};
+
 use probegi_core::sh_settings::ShProbeSettings;
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 
@@ -170,6 +171,10 @@ pub struct RenderOutput {
 /// shadowing field's occlusion blend, where a volume keeps one).
 pub const FIELD_UPDATE_PASSES: [&str; 6] = ["ray_gen", "trace", "shade", "blend", "border", "shadow_blend"];
 
+/// A caller's edit of the posed scene, each frame: `(base, posed)` (see
+/// [`FrameStepper::set_scene_edit`]).
+pub type SceneEdit<'a> = Box<dyn Fn(&Scene, &mut Scene) + 'a>;
+
 /// The render's running sums between frames.
 struct Accumulation {
     direct_sum: Vec<DVec3>,
@@ -295,9 +300,24 @@ struct Frame<'f> {
 /// [`Self::update_field`], [`Self::camera_image`]; then [`Self::finish`].
 struct FrameLoop<'a> {
     base_scene: &'a Scene,
-    camera: &'a CameraRays,
-    settings: &'a RenderSettings,
+    /// The fixed camera (frames without a path entry), owned so a viewer can
+    /// keep the stepper while it rebuilds its own.
+    camera: CameraRays,
+    /// The render's settings, owned so a viewer can resize the frame
+    /// ([`FrameStepper::set_size`]).
+    settings: RenderSettings,
+    /// The scene is posed every frame: it is animated, or a caller edits it
+    /// ([`FrameStepper::set_scene_edit`]).
     animated: bool,
+    /// The scene moves on its own (`Scene::is_animated`): the direct term
+    /// restarts every frame.
+    self_animated: bool,
+    /// A caller's edit of each posed frame (a viewer's light switches), and
+    /// whether it changed since the last frame (the direct term restarts once).
+    scene_edit: Option<SceneEdit<'a>>,
+    scene_edit_changed: bool,
+    /// The scene clock a caller holds (a paused viewer); `None`: the frame index.
+    scene_frame: Option<u32>,
     field: Option<DdgiFieldSet>,
     sh: Option<ShProbes>,
     /// The camera pass's direct-light settings (see [`FrameLoop::new`]).
@@ -313,7 +333,7 @@ struct FrameLoop<'a> {
 
 impl<'a> FrameLoop<'a> {
     /// The field the settings ask for, placed around the first frame's camera.
-    fn new(base_scene: &'a Scene, camera: &'a CameraRays, settings: &'a RenderSettings) -> Self {
+    fn new(base_scene: &'a Scene, camera: &CameraRays, settings: &RenderSettings) -> Self {
         let animated = base_scene.is_animated();
         let field = make_field_set(&settings.gi, base_scene, frame_camera(settings, camera, 0).origin_world);
         let sh = match &settings.gi {
@@ -331,9 +351,13 @@ impl<'a> FrameLoop<'a> {
         };
         Self {
             base_scene,
-            camera,
-            settings,
+            camera: *camera,
+            settings: settings.clone(),
             animated,
+            self_animated: animated,
+            scene_edit: None,
+            scene_edit_changed: false,
+            scene_frame: None,
             field,
             sh,
             camera_direct,
@@ -347,8 +371,8 @@ impl<'a> FrameLoop<'a> {
     }
 
     /// The camera of frame `f` (see [`frame_camera`]).
-    fn camera_at(&self, f: u32) -> &'a CameraRays {
-        frame_camera(self.settings, self.camera, f)
+    fn camera_at(&self, f: u32) -> &CameraRays {
+        frame_camera(&self.settings, &self.camera, f)
     }
 
     /// Poses an animated scene at frame `f` (`frame_scene`, and on the device)
@@ -366,8 +390,12 @@ impl<'a> FrameLoop<'a> {
         'a: 's,
     {
         let animated = self.animated;
+        let f = self.scene_frame.unwrap_or(f);
         if let Some(fs) = frame_scene.as_mut() {
             fs.set_frame_from(self.base_scene, f as f32);
+            if let Some(edit) = &self.scene_edit {
+                edit(self.base_scene, fs);
+            }
         }
         let scene: &Scene = frame_scene.as_ref().unwrap_or(self.base_scene);
         if let (true, Some(h)) = (animated, &self.settings.probe_tracer)
@@ -389,7 +417,7 @@ impl<'a> FrameLoop<'a> {
     /// the camera, scene changes reach the set, then one update through the seam.
     /// `Break` when the probe trace failed.
     fn update_field(&mut self, frame: &Frame<'_>) -> ControlFlow<()> {
-        let (f, settings) = (frame.index, self.settings);
+        let (f, settings) = (frame.index, &self.settings);
         if let Some(set) = self.field.as_mut() {
             self.stats.probes_scrolled_in += set.set_tracking_target(frame.camera.origin_world) as u64;
             if self.animated {
@@ -430,7 +458,7 @@ impl<'a> FrameLoop<'a> {
         frame: &Frame<'_>,
         on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
     ) -> Option<ControlFlow<()>> {
-        let (f, camera, settings) = (frame.index, frame.camera, self.settings);
+        let (f, camera, settings) = (frame.index, frame.camera, &self.settings);
         let (Some(h), Some(set), false) = (&settings.probe_tracer, self.field.as_ref(), settings.show_probes) else {
             return None;
         };
@@ -477,7 +505,7 @@ impl<'a> FrameLoop<'a> {
         on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
     ) -> ControlFlow<()> {
         let Frame { index: f, scene, tracer, direct, camera } = *frame;
-        let settings = self.settings;
+        let settings = &self.settings;
         let t = Instant::now();
         let (gbuffer, rays) = trace_gbuffer(scene, tracer, camera, settings.width, settings.height, f, settings.seed);
         *self.pass_totals.entry("gbuffer").or_default() += t.elapsed().as_secs_f64() * 1e3;
@@ -540,13 +568,13 @@ impl<'a> FrameLoop<'a> {
     /// accumulates again).
     fn restarts_direct(&self, frame: &Frame<'_>) -> bool {
         let camera_moved = self.prev_camera.as_ref().is_some_and(|c| c != frame.camera);
-        self.animated || camera_moved
+        self.self_animated || self.scene_edit_changed || camera_moved
     }
 
     /// After the last frame: the field back on the host, the statistics, the
     /// composed image (with `show_probes`, the probes drawn on it).
     fn finish(mut self) -> RenderOutput {
-        let settings = self.settings;
+        let settings = &self.settings;
         // The field as the render leaves it, on the host (a device may hold it).
         if let Some(set) = self.field.as_mut()
             && let Err(e) = set.sync_host_atlases(settings.probe_tracer.as_ref().map(|h| &*h.0))

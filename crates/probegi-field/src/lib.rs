@@ -26,6 +26,7 @@
 
 #![warn(missing_docs)]
 
+pub mod atlas_view;
 pub mod backend;
 pub mod ddgi_field_set;
 pub mod ddgi_volume;

@@ -17,3 +17,10 @@
 pub mod fly_camera;
 pub mod input_script;
 pub mod scripted_run;
+pub mod view_layers;
+pub mod view_session;
+pub mod viewer_controls;
+pub mod viewer_panels;
+pub mod viewer_prefs;
+pub mod viewer_window;
+pub mod viewer_worker;

@@ -6,13 +6,14 @@
 //! tracer) on the GPU. The scene clock is the frame index; each frame is
 //! `frame_dt_s` of fly time, fixed so a run is the same on every machine.
 
-use probegi_core::camera::{Camera, CameraRays};
+use probegi_core::camera::Camera;
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{FrameStepper, RenderOutput, RenderSettings};
+use probegi_cpu::frame_loop::{RenderOutput, RenderSettings};
 use probegi_scene::{RayTracer, Scene};
 
-use crate::fly_camera::{FlyCamera, FlyInput};
-use crate::input_script::{InputScript, InputState};
+use crate::fly_camera::FlyCamera;
+use crate::input_script::InputScript;
+use crate::view_session::ViewSession;
 
 /// What a scripted run does.
 #[derive(Clone, Debug)]
@@ -66,47 +67,23 @@ pub fn run_scripted(
     run: &ScriptedRun<'_>,
     mut on_frame: impl FnMut(u32, &Image),
 ) -> Result<ScriptedOutput, String> {
-    let (w, h) = (settings.width, settings.height);
-    let start = CameraRays::new(camera, w, h);
-    let mut stepper = FrameStepper::new(scene, tracer, &start, settings);
-    let mut fly = FlyCamera::from_camera(camera, run.fly_speed_m_per_s);
-    let mut input = InputState::default();
+    let mut session = ViewSession::new(scene, tracer, camera, settings, run.fly_speed_m_per_s, run.camera_path.clone());
     let mut events = run.script.events.iter().peekable();
     let mut last = None;
     let mut frame_ms = Vec::with_capacity(run.frames as usize);
-    let mut on_path = !run.camera_path.is_empty();
     for f in 0..run.frames.max(1) {
         let t = std::time::Instant::now();
         while let Some((_, e)) = events.next_if(|(at, _)| *at <= f) {
-            input.apply(*e);
+            session.apply(*e);
         }
-        let keyed = run.camera_path.get(f as usize).or(run.camera_path.last());
-        if input.reset {
-            fly.reset();
-            on_path = keyed.is_some();
-        }
-        if on_path && input.fly != FlyInput::default() {
-            // The user takes over where the path is.
-            on_path = false;
-            if let Some(k) = keyed {
-                fly = FlyCamera::from_camera(k, fly.speed_m_per_s);
-            }
-        }
-        let camera = match (on_path, keyed) {
-            (true, Some(k)) => *k,
-            _ => {
-                fly.advance(&input.fly, run.frame_dt_s);
-                fly.camera()
-            }
-        };
-        input.end_frame();
-        let image = stepper.step(&CameraRays::new(&camera, w, h))?;
+        let image = session.frame(run.frame_dt_s)?;
         frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
         on_frame(f, &image);
         last = Some(image);
     }
     let image = last.ok_or("no frame ran")?;
-    Ok(ScriptedOutput { image, camera: fly, render: stepper.finish(), frame_ms })
+    let (render, camera) = session.finish();
+    Ok(ScriptedOutput { image, camera, render, frame_ms })
 }
 
 #[cfg(test)]

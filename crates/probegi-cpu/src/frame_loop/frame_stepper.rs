@@ -14,6 +14,14 @@ use probegi_scene::{RayTracer, Scene};
 use super::{Frame, FrameLoop, RenderOutput, RenderSettings};
 use crate::direct::DirectLighting;
 
+/// A frame's two terms, as [`FrameStepper::layers`] returns them.
+pub struct FrameLayers {
+    /// The direct term (averaged over the frames it has accumulated).
+    pub direct: Image,
+    /// The indirect term of the last frame.
+    pub indirect: Image,
+}
+
 /// A render stepped one frame at a time (see the module docs). The scene
 /// clock is the frame index: an animated scene is posed at each frame's.
 pub struct FrameStepper<'a> {
@@ -28,12 +36,13 @@ pub struct FrameStepper<'a> {
 
 impl<'a> FrameStepper<'a> {
     /// A render of `base_scene` by `settings` (its `frames` and `camera_path`
-    /// are not read: the caller steps), the field placed around `camera`.
+    /// are not read: the caller steps), the field placed around `camera`. The
+    /// stepper keeps its own copy of both.
     pub fn new(
         base_scene: &'a Scene,
         tracer: &'a dyn RayTracer,
-        camera: &'a CameraRays,
-        settings: &'a RenderSettings,
+        camera: &CameraRays,
+        settings: &RenderSettings,
     ) -> Self {
         Self {
             tracer,
@@ -82,10 +91,72 @@ impl<'a> FrameStepper<'a> {
         };
         if flow.is_continue() {
             frame_loop.prev_camera = Some(*camera);
+            frame_loop.scene_edit_changed = false;
         }
         self.failed = flow.is_break();
         self.next_frame += 1;
         flow
+    }
+
+    /// Edits the scene of every later frame after it is posed (`edit(base,
+    /// posed)`; a viewer's light switches and sky): from now on the scene is
+    /// posed each frame, on the device too, so the field sees the change as
+    /// it sees a keyframed light's, through its scene-change detector. `None`
+    /// takes the edit away (the scene is still posed each frame). What the
+    /// edit may change is what posing a frame carries to a device: punctual
+    /// lights and the sky (emitters stay as uploaded).
+    pub fn set_scene_edit(&mut self, edit: Option<super::SceneEdit<'a>>) {
+        if self.frame_scene.is_none() {
+            self.frame_scene = Some(self.frame_loop.base_scene.clone());
+        }
+        self.frame_loop.animated = true;
+        self.frame_loop.scene_edit = edit;
+        self.frame_loop.scene_edit_changed = true;
+    }
+
+    /// Holds the scene clock at `frame` (a paused viewer; the field and the
+    /// camera keep running), or lets it follow the frame index again (`None`).
+    pub fn set_scene_frame(&mut self, frame: Option<u32>) {
+        self.frame_loop.scene_frame = frame;
+    }
+
+    /// Renders later frames at `width` × `height` (a viewer's adaptive
+    /// resolution): the camera image's sums restart, the field is kept. The
+    /// cameras passed to [`Self::step`] must then have this size.
+    pub fn set_size(&mut self, width: u32, height: u32) {
+        let fl = &mut self.frame_loop;
+        if (fl.settings.width, fl.settings.height) == (width, height) {
+            return;
+        }
+        fl.settings.width = width;
+        fl.settings.height = height;
+        fl.acc = super::Accumulation::new(width as usize * height as usize);
+        fl.prev_camera = None;
+        fl.last_gbuffer = None;
+    }
+
+    /// The last frame's layers: the direct term (its mean over the frames it
+    /// has accumulated) and the indirect term, each of the frame's size.
+    pub fn layers(&self) -> FrameLayers {
+        let fl = &self.frame_loop;
+        let (width, height) = (fl.settings.width, fl.settings.height);
+        let k = fl.acc.accumulated.max(1) as f64;
+        let direct = fl.acc.direct_sum.iter().map(|d| (*d / k).as_vec3()).collect();
+        FrameLayers {
+            direct: Image { width, height, pixels: direct },
+            indirect: Image { width, height, pixels: fl.acc.indirect.clone() },
+        }
+    }
+
+    /// The statistics so far (pass times are totals until [`Self::finish`]
+    /// divides them; see [`Self::pass_totals_ms`]).
+    pub fn stats(&self) -> &super::RenderStats {
+        &self.frame_loop.stats
+    }
+
+    /// Total wall milliseconds of each pass over the frames so far.
+    pub fn pass_totals_ms(&self) -> &std::collections::BTreeMap<&'static str, f64> {
+        &self.frame_loop.pass_totals
     }
 
     /// The index of the frame the next step renders (frames rendered so far).
@@ -103,6 +174,22 @@ impl<'a> FrameStepper<'a> {
     /// (`DdgiFieldSet::field_on_device`).
     pub fn field(&self) -> Option<&DdgiFieldSet> {
         self.frame_loop.field.as_ref()
+    }
+
+    /// The DDGI field with its atlases current on the host (read back from a
+    /// device that holds them), for views that read it; `None` without
+    /// `--gi ddgi`.
+    pub fn sync_field_to_host(&mut self) -> Result<Option<&DdgiFieldSet>, String> {
+        let fl = &mut self.frame_loop;
+        let Some(set) = fl.field.as_mut() else { return Ok(None) };
+        set.sync_host_atlases(fl.settings.probe_tracer.as_ref().map(|h| &*h.0))
+            .map_err(|e| format!("reading the field back: {e}"))?;
+        Ok(Some(set))
+    }
+
+    /// The render's settings as the stepper keeps them.
+    pub fn settings(&self) -> &RenderSettings {
+        &self.frame_loop.settings
     }
 
     /// The DDGI field, to change its settings or report scene events between frames.

@@ -1,0 +1,145 @@
+//! The viewer's debug views of a frame (RTXGI's test harness shows the same
+//! set): the full frame, its direct and indirect terms, the surfaces' diffuse
+//! albedo and shading normals, the probes drawn as spheres shaded by their
+//! irradiance, and a volume's irradiance and distance atlases.
+//!
+//! Full, direct and indirect are the stepper's own terms, from whichever
+//! backend rendered them. Albedo, normals and the probe spheres are drawn on a
+//! G-buffer traced on the CPU at the frame's size (primary rays only), and the
+//! atlases are read on the host (a device-resident field is read back first).
+
+use probegi_core::camera::CameraRays;
+use probegi_core::image::Image;
+use probegi_cpu::gbuffer::trace_gbuffer;
+use probegi_cpu::shading::ShadingContext;
+use probegi_field::atlas_view::{distance_grey_image, irradiance_image};
+use probegi_scene::{RayTracer, Scene};
+
+use crate::view_session::ViewSession;
+
+/// What the viewer shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ViewMode {
+    /// The frame as `probegi render` composes it.
+    #[default]
+    Full,
+    /// The direct term.
+    Direct,
+    /// The indirect term (the field's, or the SH probes').
+    Indirect,
+    /// Diffuse albedo of the surface each pixel sees.
+    Albedo,
+    /// Shading normals, mapped from [−1, 1] to [0, 1].
+    Normals,
+    /// The full frame with the probes drawn as spheres shaded by their irradiance.
+    Probes,
+    /// A volume's irradiance atlas (decoded radiance).
+    IrradianceAtlas,
+    /// A volume's distance atlas (mean distance over the clamp, grey).
+    DistanceAtlas,
+}
+
+impl ViewMode {
+    /// Every view, in the panel's order.
+    pub const ALL: [ViewMode; 8] = [
+        ViewMode::Full,
+        ViewMode::Direct,
+        ViewMode::Indirect,
+        ViewMode::Albedo,
+        ViewMode::Normals,
+        ViewMode::Probes,
+        ViewMode::IrradianceAtlas,
+        ViewMode::DistanceAtlas,
+    ];
+
+    /// The view's name in the panel.
+    pub fn label(self) -> &'static str {
+        match self {
+            ViewMode::Full => "full",
+            ViewMode::Direct => "direct",
+            ViewMode::Indirect => "indirect",
+            ViewMode::Albedo => "albedo",
+            ViewMode::Normals => "normals",
+            ViewMode::Probes => "probes",
+            ViewMode::IrradianceAtlas => "irradiance atlas",
+            ViewMode::DistanceAtlas => "distance atlas",
+        }
+    }
+
+    /// Whether the view reads the DDGI field (absent without `--gi ddgi`).
+    pub fn needs_field(self) -> bool {
+        matches!(self, ViewMode::Probes | ViewMode::IrradianceAtlas | ViewMode::DistanceAtlas)
+    }
+}
+
+/// The HDR image of `mode` for the frame `full` that `session` just rendered
+/// over `scene` (posed as the frame saw it) and `tracer`; `volume` picks the
+/// atlas. Views that need a field fall back to the full frame without one.
+pub fn view_image(
+    mode: ViewMode,
+    full: &Image,
+    session: &mut ViewSession<'_>,
+    scene: &Scene,
+    tracer: &dyn RayTracer,
+    volume: usize,
+) -> Result<Image, String> {
+    let (w, h) = (full.width, full.height);
+    let camera = CameraRays::new(&session.last_camera(), w, h);
+    let gbuffer_image = |pixel: &dyn Fn(&probegi_scene::SurfacePoint, glam::Vec3) -> glam::Vec3| {
+        let (g, _) = trace_gbuffer(scene, tracer, &camera, w, h, 0, 0);
+        let pixels =
+            g.texels.iter().map(|t| t.surface.as_ref().map_or(glam::Vec3::ZERO, |sp| pixel(sp, t.view_dir_world)));
+        Image { width: w, height: h, pixels: pixels.collect() }
+    };
+    match mode {
+        ViewMode::Full => Ok(full.clone()),
+        ViewMode::Direct => Ok(session.stepper().layers().direct),
+        ViewMode::Indirect => Ok(session.stepper().layers().indirect),
+        ViewMode::Albedo => Ok(gbuffer_image(&|sp, v| ShadingContext::new(scene, sp, -v).bsdf.diffuse_albedo())),
+        ViewMode::Normals => Ok(gbuffer_image(&|sp, _| sp.shading_normal * 0.5 + 0.5)),
+        ViewMode::Probes | ViewMode::IrradianceAtlas | ViewMode::DistanceAtlas => {
+            field_view(mode, full, session, scene, tracer, &camera, volume)
+        }
+    }
+}
+
+/// The views that read the field on the host.
+fn field_view(
+    mode: ViewMode,
+    full: &Image,
+    session: &mut ViewSession<'_>,
+    scene: &Scene,
+    tracer: &dyn RayTracer,
+    camera: &CameraRays,
+    volume: usize,
+) -> Result<Image, String> {
+    let Some(set) = session.stepper_mut().sync_field_to_host()? else {
+        return Ok(full.clone());
+    };
+    let v = &set.volumes()[volume.min(set.volumes().len() - 1)];
+    match mode {
+        ViewMode::IrradianceAtlas => Ok(irradiance_image(v)),
+        ViewMode::DistanceAtlas => Ok(distance_grey_image(v)),
+        _ => {
+            let (g, _) = trace_gbuffer(scene, tracer, camera, full.width, full.height, 0, 0);
+            let mut pixels = full.pixels.clone();
+            for v in set.volumes() {
+                probegi_cpu::probe_vis::draw_probes(v, camera, &g, &mut pixels);
+            }
+            Ok(Image { width: full.width, height: full.height, pixels })
+        }
+    }
+}
+
+/// `image` tone-mapped (the CLI's fixed operator) as RGBA8.
+pub fn to_rgba8(image: &Image) -> Vec<u8> {
+    image
+        .pixels
+        .iter()
+        .flat_map(|p| {
+            let [r, g, b] = probegi_core::color::tonemap_rgb8(*p);
+            [r, g, b, 255]
+        })
+        .collect()
+}

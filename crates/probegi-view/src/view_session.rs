@@ -1,0 +1,164 @@
+//! One viewer frame at a time, the same for the headless run and the window:
+//! input events reach the fly camera (a keyframed camera plays until the
+//! input first moves it; R returns to it), the camera moves by the frame's
+//! time step, and the field updates and the frame renders through
+//! `probegi_cpu::frame_loop::FrameStepper`, the stepper `probegi render`
+//! drives, on the CPU or (with the settings' probe tracer) on the GPU.
+//!
+//! The scene clock is a frame count of its own: it advances one per frame
+//! unless paused, and steps one at a time while paused; the field and the
+//! camera keep running either way.
+
+use probegi_core::camera::{Camera, CameraRays};
+use probegi_core::image::Image;
+use probegi_cpu::frame_loop::{FrameStepper, RenderSettings};
+use probegi_scene::{RayTracer, Scene};
+
+use crate::fly_camera::{FlyCamera, FlyInput};
+use crate::input_script::{InputState, ScriptEvent};
+
+/// The viewer's per-frame state over a [`FrameStepper`].
+pub struct ViewSession<'a> {
+    stepper: FrameStepper<'a>,
+    fly: FlyCamera,
+    input: InputState,
+    camera_path: Vec<Camera>,
+    on_path: bool,
+    size: (u32, u32),
+    scene_frame: u32,
+    paused: bool,
+    step_once: bool,
+    last_camera: Camera,
+}
+
+impl<'a> ViewSession<'a> {
+    /// A session over `scene` rendered by `settings` (its size; its `frames`
+    /// and `camera_path` are not read), the fly camera starting at `camera`
+    /// with `fly_speed_m_per_s`; `camera_path` (one camera per frame, may be
+    /// empty) plays until the input takes over.
+    pub fn new(
+        scene: &'a Scene,
+        tracer: &'a dyn RayTracer,
+        camera: &Camera,
+        settings: &RenderSettings,
+        fly_speed_m_per_s: f32,
+        camera_path: Vec<Camera>,
+    ) -> Self {
+        let size = (settings.width, settings.height);
+        let start = camera_path.first().copied().unwrap_or(*camera);
+        let stepper = FrameStepper::new(scene, tracer, &CameraRays::new(&start, size.0, size.1), settings);
+        Self {
+            stepper,
+            fly: FlyCamera::from_camera(camera, fly_speed_m_per_s),
+            input: InputState::default(),
+            on_path: !camera_path.is_empty(),
+            camera_path,
+            size,
+            scene_frame: 0,
+            paused: false,
+            step_once: false,
+            last_camera: start,
+        }
+    }
+
+    /// Applies one input event (it takes effect at the next frame).
+    pub fn apply(&mut self, event: ScriptEvent) {
+        self.input.apply(event);
+    }
+
+    /// Renders the next frame, the camera moved by `dt_s` seconds of input.
+    /// An error names the frame and the pass that failed.
+    pub fn frame(&mut self, dt_s: f32) -> Result<Image, String> {
+        let camera = self.next_camera(dt_s);
+        self.stepper.set_scene_frame(Some(self.scene_frame));
+        let image = self.stepper.step(&CameraRays::new(&camera, self.size.0, self.size.1))?;
+        if !self.paused || std::mem::take(&mut self.step_once) {
+            self.scene_frame += 1;
+        }
+        self.last_camera = camera;
+        Ok(image)
+    }
+
+    /// The camera of the next frame (see the module docs).
+    fn next_camera(&mut self, dt_s: f32) -> Camera {
+        let keyed = self.camera_path.get(self.scene_frame as usize).or(self.camera_path.last());
+        let input = &mut self.input;
+        if input.reset {
+            self.fly.reset();
+            self.on_path = keyed.is_some();
+        }
+        if self.on_path && input.fly != FlyInput::default() {
+            // The user takes over where the path is.
+            self.on_path = false;
+            if let Some(k) = keyed {
+                self.fly = FlyCamera::from_camera(k, self.fly.speed_m_per_s);
+            }
+        }
+        let camera = match (self.on_path, keyed) {
+            (true, Some(k)) => *k,
+            _ => {
+                self.fly.advance(&input.fly, dt_s);
+                self.fly.camera()
+            }
+        };
+        input.end_frame();
+        camera
+    }
+
+    /// Renders later frames at `width` × `height` (the CPU backend's adaptive
+    /// resolution); the field is kept.
+    pub fn set_size(&mut self, width: u32, height: u32) {
+        self.size = (width.max(1), height.max(1));
+        self.stepper.set_size(self.size.0, self.size.1);
+    }
+
+    /// The frame size, pixels.
+    pub fn size(&self) -> (u32, u32) {
+        self.size
+    }
+
+    /// Pauses or resumes the scene clock.
+    pub fn set_paused(&mut self, paused: bool) {
+        self.paused = paused;
+    }
+
+    /// Whether the scene clock is paused.
+    pub fn paused(&self) -> bool {
+        self.paused
+    }
+
+    /// While paused: the next frame advances the scene clock by one.
+    pub fn step_scene_clock(&mut self) {
+        self.step_once = true;
+    }
+
+    /// The scene clock, frames.
+    pub fn scene_frame(&self) -> u32 {
+        self.scene_frame
+    }
+
+    /// The fly camera.
+    pub fn fly_camera(&self) -> &FlyCamera {
+        &self.fly
+    }
+
+    /// The camera of the last frame rendered.
+    pub fn last_camera(&self) -> Camera {
+        self.last_camera
+    }
+
+    /// The stepper (the field, its statistics, the frame's layers).
+    pub fn stepper(&self) -> &FrameStepper<'a> {
+        &self.stepper
+    }
+
+    /// The stepper, to change the field's settings or edit the scene.
+    pub fn stepper_mut(&mut self) -> &mut FrameStepper<'a> {
+        &mut self.stepper
+    }
+
+    /// Ends the session: the stepper's output (field, statistics, image).
+    pub fn finish(self) -> (probegi_cpu::frame_loop::RenderOutput, FlyCamera) {
+        (self.stepper.finish(), self.fly)
+    }
+}

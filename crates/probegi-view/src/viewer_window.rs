@@ -1,0 +1,474 @@
+//! The window of `probegi view`: winit 0.30, a wgpu 30 surface through
+//! `egui-wgpu`, and the egui panels (`viewer_panels`). The frame worker
+//! (`viewer_worker`) renders on its own thread with its own device; the
+//! window shows its newest frame as a texture, so the UI keeps its own rate
+//! whatever a field update costs. Input that egui does not take goes to the
+//! worker as the same events an input script holds.
+//!
+//! A scripted run in the window (`--input-script`, `--exit-after-frames`)
+//! takes the script's events frame by frame in the worker with a fixed time
+//! step, exactly as `--headless` does, so its screenshot matches the headless
+//! run's; the window itself is then captured beside it
+//! (`NAME-window.png`) so a test can see what was on screen.
+
+use std::path::PathBuf;
+use std::sync::mpsc::{self, Receiver, Sender};
+use std::sync::{Arc, Mutex};
+
+use egui::{ColorImage, TextureHandle, TextureOptions, ViewportId};
+use winit::application::ApplicationHandler;
+use winit::event::{DeviceEvent, ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
+use winit::keyboard::{KeyCode, PhysicalKey};
+use winit::window::{Window, WindowId};
+
+use crate::input_script::{FlyKey, ScriptEvent};
+use crate::view_layers::ViewMode;
+use crate::viewer_panels::{PanelAction, PanelState, panels_ui};
+use crate::viewer_prefs::ViewerPrefs;
+use crate::viewer_worker::{
+    LatestFrame, ViewSource, WorkerCommand, WorkerLink, WorkerOptions, WorkerReport, run_worker,
+};
+
+/// How the window runs.
+#[derive(Clone, Debug, Default)]
+pub struct WindowOptions {
+    /// The window's title.
+    pub title: String,
+    /// The scene's name (panels, screenshots).
+    pub scene_name: String,
+    /// The CPU backend renders (the GI panel offers SH).
+    pub cpu_backend: bool,
+    /// A scripted run: exit when the worker is done, capture the window
+    /// beside `capture_path`.
+    pub capture_path: Option<PathBuf>,
+    /// Settings that persist between runs (`None`: a scripted run reads none).
+    pub prefs_path: Option<PathBuf>,
+}
+
+/// Why the window could not open: no window system.
+pub fn no_display_message(detail: &str) -> String {
+    format!(
+        "probegi view: no window system ({detail}); run it without a window: \
+         probegi view --headless --exit-after-frames N [--input-script FILE] [--screenshot FILE]"
+    )
+}
+
+/// Opens the window over a worker built from `source`; returns when the
+/// window closes or a scripted run ends. An error names what failed.
+pub fn run_window(source: Box<dyn ViewSource>, worker: WorkerOptions, opts: WindowOptions) -> Result<(), String> {
+    let has_display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
+    if cfg!(target_os = "linux") && !has_display {
+        return Err(no_display_message("neither DISPLAY nor WAYLAND_DISPLAY is set"));
+    }
+    let event_loop = EventLoop::new().map_err(|e| no_display_message(&e.to_string()))?;
+    event_loop.set_control_flow(ControlFlow::Poll);
+    let (cmd_tx, cmd_rx) = mpsc::channel();
+    let (rep_tx, rep_rx) = mpsc::channel();
+    let latest: LatestFrame = Arc::new(Mutex::new(None));
+    let link = WorkerLink { commands: cmd_rx, reports: rep_tx, latest: Arc::clone(&latest) };
+    let worker_thread = std::thread::Builder::new()
+        .name("probegi-view-frames".into())
+        .spawn(move || run_worker(&*source, &worker, &link))
+        .map_err(|e| format!("starting the frame worker: {e}"))?;
+    let mut app = ViewerApp::new(opts, cmd_tx.clone(), rep_rx, latest);
+    let run = event_loop.run_app(&mut app).map_err(|e| format!("the window's event loop: {e}"));
+    let _ = cmd_tx.send(WorkerCommand::Quit);
+    drop(cmd_tx);
+    app.save_prefs();
+    let worker_result = worker_thread.join().map_err(|_| "the frame worker panicked".to_string())?;
+    run?;
+    app.outcome.take().unwrap_or(Ok(())).and(worker_result)
+}
+
+/// The GPU side of the window.
+struct Gfx {
+    window: Arc<Window>,
+    painter: egui_wgpu::winit::Painter,
+    egui_state: egui_winit::State,
+}
+
+/// Textures of the central panel.
+#[derive(Default)]
+struct Textures {
+    live: Option<TextureHandle>,
+    reference: Option<TextureHandle>,
+    heat: Option<TextureHandle>,
+}
+
+struct ViewerApp {
+    opts: WindowOptions,
+    prefs: ViewerPrefs,
+    ctx: egui::Context,
+    gfx: Option<Gfx>,
+    commands: Sender<WorkerCommand>,
+    reports: Receiver<WorkerReport>,
+    latest: LatestFrame,
+    panels: Option<PanelState>,
+    textures: Textures,
+    ui_visible: bool,
+    looking: bool,
+    /// The result the window closes with (set by a scripted run's end or an error).
+    outcome: Option<Result<(), String>>,
+    /// A scripted run ended: capture the window, then close.
+    capture: Option<(Receiver<Arc<ColorImage>>, u32)>,
+    done: bool,
+}
+
+impl ViewerApp {
+    fn new(
+        opts: WindowOptions,
+        commands: Sender<WorkerCommand>,
+        reports: Receiver<WorkerReport>,
+        latest: LatestFrame,
+    ) -> Self {
+        let prefs = opts.prefs_path.as_deref().map(ViewerPrefs::load).unwrap_or_default();
+        Self {
+            ui_visible: prefs.panels_visible,
+            prefs,
+            opts,
+            ctx: egui::Context::default(),
+            gfx: None,
+            commands,
+            reports,
+            latest,
+            panels: None,
+            textures: Textures::default(),
+            looking: false,
+            outcome: None,
+            capture: None,
+            done: false,
+        }
+    }
+
+    fn save_prefs(&mut self) {
+        let Some(path) = &self.opts.prefs_path else { return };
+        if let Some(p) = &self.panels {
+            self.prefs.view = p.controls.view;
+            self.prefs.reference_spp = p.reference_spp;
+        }
+        self.prefs.panels_visible = self.ui_visible;
+        if let Err(e) = self.prefs.save(path) {
+            eprintln!("probegi view: {e}");
+        }
+    }
+
+    fn send(&self, cmd: WorkerCommand) {
+        let _ = self.commands.send(cmd);
+    }
+
+    /// Takes the worker's reports and its newest frame in.
+    fn take_reports(&mut self, event_loop: &ActiveEventLoop) {
+        while let Ok(report) = self.reports.try_recv() {
+            match report {
+                WorkerReport::Ready(mut c) => {
+                    let first = self.panels.is_none();
+                    if first && self.opts.prefs_path.is_some() {
+                        c.view = self.prefs.view;
+                        self.send(WorkerCommand::Controls(c.clone()));
+                    }
+                    let panels = self.panels.get_or_insert_with(|| {
+                        let mut p = PanelState::new(c.clone(), &self.opts.scene_name, self.opts.cpu_backend);
+                        p.reference_spp = self.prefs.reference_spp;
+                        p
+                    });
+                    panels.controls = c;
+                }
+                WorkerReport::Reference(r) => {
+                    let size = [r.width as usize, r.height as usize];
+                    if let Some(rgba) = &r.rgba {
+                        let image = ColorImage::from_rgba_unmultiplied(size, rgba);
+                        set_texture(&self.ctx, &mut self.textures.reference, "reference", image);
+                    }
+                    match &r.heat_rgba {
+                        Some(rgba) => {
+                            let image = ColorImage::from_rgba_unmultiplied(size, rgba);
+                            set_texture(&self.ctx, &mut self.textures.heat, "flip", image);
+                        }
+                        None if r.rgba.is_some() => self.textures.heat = None,
+                        None => {}
+                    }
+                    if let Some(p) = self.panels.as_mut() {
+                        p.reference = Some(r);
+                    }
+                }
+                WorkerReport::Message(m) => self.status(m),
+                WorkerReport::Error(e) => {
+                    eprintln!("probegi view: {e}");
+                    self.status(format!("error: {e}"));
+                    if self.opts.capture_path.is_some() {
+                        self.outcome = Some(Err(e));
+                        event_loop.exit();
+                    }
+                }
+                WorkerReport::Done => self.done = true,
+            }
+        }
+        let frame = self.latest.lock().ok().and_then(|mut s| s.take());
+        if let Some(f) = frame {
+            let image = ColorImage::from_rgba_unmultiplied([f.width as usize, f.height as usize], &f.rgba);
+            set_texture(&self.ctx, &mut self.textures.live, "live", image);
+            if let Some(p) = self.panels.as_mut() {
+                p.push_frame(f);
+            }
+        }
+    }
+
+    fn status(&mut self, message: String) {
+        if let Some(p) = self.panels.as_mut() {
+            p.status = message;
+        }
+    }
+
+    /// A key egui did not take.
+    fn key(&mut self, event_loop: &ActiveEventLoop, code: KeyCode, pressed: bool, ctrl: bool) {
+        let fly = match code {
+            KeyCode::KeyW => Some(FlyKey::W),
+            KeyCode::KeyA => Some(FlyKey::A),
+            KeyCode::KeyS => Some(FlyKey::S),
+            KeyCode::KeyD => Some(FlyKey::D),
+            KeyCode::KeyQ => Some(FlyKey::Q),
+            KeyCode::KeyE => Some(FlyKey::E),
+            KeyCode::KeyR if !ctrl => Some(FlyKey::R),
+            _ => None,
+        };
+        if let Some(k) = fly {
+            self.send(WorkerCommand::Input(ScriptEvent::Key(k, pressed)));
+            return;
+        }
+        if !pressed {
+            return;
+        }
+        match code {
+            KeyCode::Escape => event_loop.exit(),
+            KeyCode::Tab => self.ui_visible = !self.ui_visible,
+            KeyCode::F12 => self.send(WorkerCommand::Screenshot),
+            KeyCode::KeyR if ctrl => self.send(WorkerCommand::Reload),
+            KeyCode::F5 => {
+                let spp = self.panels.as_ref().map_or(64, |p| p.reference_spp);
+                self.send(WorkerCommand::Reference(spp));
+            }
+            KeyCode::KeyN => self.send(WorkerCommand::StepClock),
+            KeyCode::Space | KeyCode::KeyV => {
+                let Some(p) = self.panels.as_mut() else { return };
+                if code == KeyCode::Space {
+                    p.controls.paused = !p.controls.paused;
+                } else {
+                    let i = ViewMode::ALL.iter().position(|m| *m == p.controls.view).unwrap_or(0);
+                    let has_field = p.controls.field.is_some();
+                    let next = (1..=ViewMode::ALL.len())
+                        .map(|k| ViewMode::ALL[(i + k) % ViewMode::ALL.len()])
+                        .find(|m| has_field || !m.needs_field());
+                    p.controls.view = next.unwrap_or(ViewMode::Full);
+                }
+                let c = p.controls.clone();
+                self.send(WorkerCommand::Controls(c));
+            }
+            _ => {}
+        }
+    }
+
+    /// One UI frame: reports in, panels, paint.
+    fn redraw(&mut self, event_loop: &ActiveEventLoop) {
+        self.take_reports(event_loop);
+        let Some(gfx) = self.gfx.as_mut() else { return };
+        let raw_input = gfx.egui_state.take_egui_input(&gfx.window);
+        let mut actions = vec![];
+        let (ui_visible, textures) = (self.ui_visible, &self.textures);
+        let panels = &mut self.panels;
+        let full_output = self.ctx.run_ui(raw_input, |ui| {
+            if ui_visible && let Some(p) = panels.as_mut() {
+                egui::Panel::right("panels").default_size(340.0).show(ui, |ui| actions = panels_ui(ui, p));
+            }
+            egui::CentralPanel::default().show(ui, |ui| central_ui(ui, textures, panels.as_ref()));
+        });
+        gfx.egui_state.handle_platform_output(&gfx.window, full_output.platform_output);
+        let clipped = self.ctx.tessellate(full_output.shapes, full_output.pixels_per_point);
+        let mut deltas = full_output.textures_delta;
+        let capture = self.capture_request();
+        let gfx = self.gfx.as_mut().expect("checked above");
+        gfx.painter.paint_and_update_textures(
+            ViewportId::ROOT,
+            full_output.pixels_per_point,
+            [0.05, 0.05, 0.08, 1.0],
+            &clipped,
+            &mut deltas,
+            capture,
+            &gfx.window,
+        );
+        for a in actions {
+            self.panel_action(a);
+        }
+        self.finish_capture(event_loop);
+    }
+
+    fn panel_action(&mut self, a: PanelAction) {
+        match a {
+            PanelAction::Controls => {
+                if let Some(p) = &self.panels {
+                    self.send(WorkerCommand::Controls(p.controls.clone()));
+                }
+            }
+            PanelAction::Reference(spp) => self.send(WorkerCommand::Reference(spp)),
+            PanelAction::Screenshot => self.send(WorkerCommand::Screenshot),
+            PanelAction::StepClock => self.send(WorkerCommand::StepClock),
+            PanelAction::Reload => self.send(WorkerCommand::Reload),
+        }
+    }
+
+    /// After a scripted run's last frame has been shown: ask for the window's pixels.
+    fn capture_request(&mut self) -> Vec<egui::ScreenshotCallback> {
+        if !self.done || self.capture.is_some() || self.opts.capture_path.is_none() {
+            return vec![];
+        }
+        let (tx, rx) = mpsc::channel();
+        self.capture = Some((rx, 0));
+        vec![egui::ScreenshotCallback::new(move |img| {
+            let _ = tx.send(img);
+        })]
+    }
+
+    /// Writes the window's pixels beside the screenshot and closes (or gives
+    /// up after 120 UI frames, saying so).
+    fn finish_capture(&mut self, event_loop: &ActiveEventLoop) {
+        let Some((rx, waited)) = self.capture.as_mut() else {
+            if self.done && self.opts.capture_path.is_none() {
+                self.outcome.get_or_insert(Ok(()));
+                event_loop.exit();
+            }
+            return;
+        };
+        *waited += 1;
+        let result = match rx.try_recv() {
+            Ok(img) => write_capture(self.opts.capture_path.as_deref(), &img),
+            Err(_) if *waited < 120 => return,
+            Err(_) => Err("the window's pixels never came back from the surface".into()),
+        };
+        self.outcome.get_or_insert(result);
+        event_loop.exit();
+    }
+}
+
+/// Sets (or creates) a texture from `image`.
+fn set_texture(ctx: &egui::Context, slot: &mut Option<TextureHandle>, name: &str, image: ColorImage) {
+    match slot {
+        Some(t) => t.set(image, TextureOptions::NEAREST),
+        None => *slot = Some(ctx.load_texture(name, image, TextureOptions::NEAREST)),
+    }
+}
+
+/// The live frame, and beside it the reference and the FLIP heat map.
+fn central_ui(ui: &mut egui::Ui, textures: &Textures, panels: Option<&PanelState>) {
+    let Some(live) = &textures.live else {
+        ui.centered_and_justified(|ui| ui.label("rendering the first frame…"));
+        return;
+    };
+    let reference = panels.and_then(|p| p.reference.as_ref()).filter(|r| r.rgba.is_some());
+    let columns = if reference.is_some() { 3.0 } else { 1.0 };
+    let avail = ui.available_size();
+    let [w, h] = live.size().map(|s| s as f32);
+    let scale = ((avail.x / columns - 8.0) / w).min(avail.y / h).max(0.01);
+    ui.horizontal(|ui| {
+        ui.image((live.id(), egui::vec2(w * scale, h * scale)));
+        for t in [&textures.reference, &textures.heat].into_iter().flatten().filter(|_| reference.is_some()) {
+            let [tw, th] = t.size().map(|s| s as f32);
+            let s = (w * scale / tw).min(h * scale / th);
+            ui.image((t.id(), egui::vec2(tw * s, th * s)));
+        }
+    });
+}
+
+/// The window's pixels as PNG beside `screenshot` (`NAME-window.png`).
+fn write_capture(screenshot: Option<&std::path::Path>, img: &ColorImage) -> Result<(), String> {
+    let Some(path) = screenshot else { return Ok(()) };
+    let stem = path.file_stem().map_or("screenshot".into(), |s| s.to_string_lossy().into_owned());
+    let out = path.with_file_name(format!("{stem}-window.png"));
+    let rgb: Vec<u8> = img.pixels.iter().flat_map(|c| [c.r(), c.g(), c.b()]).collect();
+    probegi_image::io::write_png(&out, img.size[0] as u32, img.size[1] as u32, rgb).map_err(|e| e.to_string())
+}
+
+impl ApplicationHandler for ViewerApp {
+    fn resumed(&mut self, event_loop: &ActiveEventLoop) {
+        if self.gfx.is_some() {
+            return;
+        }
+        match open_window(event_loop, &self.ctx, &self.opts.title) {
+            Ok(g) => self.gfx = Some(g),
+            Err(e) => {
+                self.outcome = Some(Err(e));
+                event_loop.exit();
+            }
+        }
+    }
+
+    fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        let Some(gfx) = self.gfx.as_mut() else { return };
+        let consumed = gfx.egui_state.on_window_event(&gfx.window, &event).consumed;
+        match event {
+            WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::Resized(size) => {
+                if let (Some(w), Some(h)) =
+                    (std::num::NonZeroU32::new(size.width), std::num::NonZeroU32::new(size.height))
+                {
+                    gfx.painter.on_window_resized(ViewportId::ROOT, w, h);
+                }
+            }
+            WindowEvent::RedrawRequested => self.redraw(event_loop),
+            WindowEvent::KeyboardInput { event, .. } if !consumed && !event.repeat => {
+                if let PhysicalKey::Code(code) = event.physical_key {
+                    let ctrl = self.ctx.input(|i| i.modifiers.ctrl);
+                    self.key(event_loop, code, event.state == ElementState::Pressed, ctrl);
+                }
+            }
+            WindowEvent::MouseInput { button: MouseButton::Right, state, .. } => {
+                self.looking = state == ElementState::Pressed && !self.ctx.egui_wants_pointer_input();
+            }
+            WindowEvent::MouseWheel { delta, .. } if !consumed && !self.ctx.egui_wants_pointer_input() => {
+                let steps = match delta {
+                    MouseScrollDelta::LineDelta(_, y) => y,
+                    MouseScrollDelta::PixelDelta(p) => (p.y / 40.0) as f32,
+                };
+                self.send(WorkerCommand::Input(ScriptEvent::Scroll(steps)));
+            }
+            _ => {}
+        }
+    }
+
+    fn device_event(&mut self, _event_loop: &ActiveEventLoop, _id: winit::event::DeviceId, event: DeviceEvent) {
+        if let (true, DeviceEvent::MouseMotion { delta }) = (self.looking, event) {
+            self.send(WorkerCommand::Input(ScriptEvent::Mouse(delta.0 as f32, delta.1 as f32)));
+        }
+    }
+
+    fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
+        if let Some(g) = &self.gfx {
+            g.window.request_redraw();
+        }
+        // The UI's own rate: about 60 frames a second, whatever the worker does.
+        std::thread::sleep(std::time::Duration::from_millis(8));
+    }
+}
+
+/// The window, its wgpu surface and egui's winit state.
+fn open_window(event_loop: &ActiveEventLoop, ctx: &egui::Context, title: &str) -> Result<Gfx, String> {
+    let attributes =
+        Window::default_attributes().with_title(title).with_inner_size(winit::dpi::LogicalSize::new(1280.0, 760.0));
+    let window = Arc::new(event_loop.create_window(attributes).map_err(|e| no_display_message(&e.to_string()))?);
+    let mut painter = pollster::block_on(egui_wgpu::winit::Painter::new(
+        ctx.clone(),
+        egui_wgpu::WgpuConfiguration::default(),
+        false,
+        egui_wgpu::RendererOptions::default(),
+    ));
+    pollster::block_on(painter.set_window(ViewportId::ROOT, Some(Arc::clone(&window))))
+        .map_err(|e| format!("the window's GPU surface: {e}"))?;
+    let egui_state = egui_winit::State::new(
+        ctx.clone(),
+        ViewportId::ROOT,
+        &window,
+        Some(window.scale_factor() as f32),
+        None,
+        painter.max_texture_side(),
+    );
+    Ok(Gfx { window, painter, egui_state })
+}

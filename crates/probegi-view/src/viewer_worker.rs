@@ -1,0 +1,612 @@
+//! The frame worker of `probegi view`: a thread that owns the scene, the
+//! tracer and the [`ViewSession`], renders frame after frame, and hands each
+//! one to the window. The window keeps its own rate whatever a frame costs
+//! (a field update slower than a UI frame never stalls the UI); the worker
+//! takes the input and the panels' controls between two frames.
+//!
+//! It also runs what the panels ask of it: the path-traced reference of the
+//! current view on a thread beside the frames (progress, then the reference
+//! beside the live frame with its FLIP heat map), screenshots (PNG and linear
+//! EXR named after the scene and frame), scene reload when the scene file
+//! changes, and on the CPU backend an adaptive frame size.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::mpsc::{Receiver, Sender};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+
+use probegi_core::camera::{Camera, CameraRays};
+use probegi_core::image::Image;
+use probegi_cpu::frame_loop::RenderSettings;
+use probegi_cpu::{PathTracer, PathTracerSettings};
+use probegi_scene::{RayTracer, Scene};
+
+use crate::input_script::{InputScript, ScriptEvent};
+use crate::view_layers::{ViewMode, to_rgba8, view_image};
+use crate::view_session::ViewSession;
+use crate::viewer_controls::{GiChoice, ViewerControls};
+
+/// What a session is built from: what the CLI's scene setup makes of its
+/// arguments and the panels' controls.
+pub struct SessionParts {
+    /// The scene as loaded (unposed).
+    pub scene: Scene,
+    /// Its ray tracer.
+    pub tracer: Box<dyn RayTracer>,
+    /// The fly camera's start.
+    pub camera: Camera,
+    /// The render settings (size, seed, GI, probe tracer).
+    pub settings: RenderSettings,
+    /// A keyframed camera's path, one per frame (may be empty).
+    pub camera_path: Vec<Camera>,
+    /// The fly camera's speed, metres per second.
+    pub fly_speed_m_per_s: f32,
+    /// The GPU adapter's name (`None`: the CPU backend).
+    pub adapter: Option<String>,
+    /// The GI method and cascade count the settings were built with.
+    pub gi: GiChoice,
+    /// Camera-centred cascades (0: the scene's volumes).
+    pub cascades: u32,
+}
+
+/// Builds sessions: the CLI's scene setup.
+pub trait ViewSource: Send {
+    /// A session for `controls` (`None`: as the command line says). An error
+    /// names the file and the place.
+    fn load(&self, controls: Option<&ViewerControls>) -> Result<SessionParts, String>;
+    /// The scene file to watch for changes (`None`: a built-in scene).
+    fn watched_file(&self) -> Option<PathBuf>;
+}
+
+/// What the window asks of the worker.
+#[derive(Clone, Debug)]
+pub enum WorkerCommand {
+    /// A key, mouse or scroll event for the fly camera.
+    Input(ScriptEvent),
+    /// The panels' controls changed.
+    Controls(ViewerControls),
+    /// While paused: advance the scene clock by one frame.
+    StepClock,
+    /// Path-trace the current view at this many samples per pixel.
+    Reference(u32),
+    /// Write the current frame as PNG and EXR.
+    Screenshot,
+    /// Load the scene anew.
+    Reload,
+    /// Stop.
+    Quit,
+}
+
+/// How the worker runs.
+#[derive(Clone, Debug, Default)]
+pub struct WorkerOptions {
+    /// Timed input, applied at its frames (a scripted run).
+    pub script: Option<InputScript>,
+    /// Stop after this many frames, writing `screenshot` (a scripted run).
+    pub exit_after_frames: Option<u32>,
+    /// The last frame's file (`--screenshot`).
+    pub screenshot: Option<PathBuf>,
+    /// Fly time per frame; `None`: the wall time since the last frame.
+    pub fixed_dt_s: Option<f32>,
+    /// The CPU backend's frame-time target, milliseconds: the frame size
+    /// shrinks above it and grows back below; `None` keeps the size.
+    pub adaptive_target_ms: Option<f64>,
+    /// Where the screenshot key writes.
+    pub screenshot_dir: PathBuf,
+}
+
+/// One rendered frame and the figures of the stats panel.
+#[derive(Clone, Debug, Default)]
+pub struct FrameReport {
+    /// Frames rendered since the viewer started.
+    pub frame: u32,
+    /// The scene clock.
+    pub scene_frame: u32,
+    /// The view's image, tone-mapped RGBA8.
+    pub rgba: Vec<u8>,
+    /// Its size, pixels.
+    pub width: u32,
+    /// Its size, pixels.
+    pub height: u32,
+    /// Wall milliseconds of the frame (input, field update, camera frame, view).
+    pub frame_ms: f64,
+    /// This frame's milliseconds by pass.
+    pub pass_ms: Vec<(&'static str, f64)>,
+    /// Probe rays traced this frame.
+    pub rays: u64,
+    /// Probes per state, over every volume.
+    pub probe_states: BTreeMap<&'static str, usize>,
+    /// The field's volumes.
+    pub volumes: usize,
+    /// The adapter (`None`: CPU).
+    pub adapter: Option<String>,
+    /// Where the camera is, metres.
+    pub camera_m: glam::Vec3,
+    /// The fly camera's speed, metres per second.
+    pub fly_speed_m_per_s: f32,
+}
+
+/// The reference's progress and, once done, its images.
+#[derive(Clone, Debug, Default)]
+pub struct ReferenceReport {
+    /// Rows done over rows.
+    pub progress: f32,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// The reference, tone-mapped RGBA8 (when done).
+    pub rgba: Option<Vec<u8>>,
+    /// FLIP between it and the live frame, magma RGBA8 (when the camera is
+    /// still where the reference was taken).
+    pub heat_rgba: Option<Vec<u8>>,
+    /// Mean FLIP of the live frame against the reference.
+    pub mean_flip: Option<f32>,
+    /// Size of the images.
+    pub width: u32,
+    /// Size of the images.
+    pub height: u32,
+    /// The camera or the frame size changed since the reference was taken.
+    pub stale: bool,
+}
+
+/// What the worker tells the window.
+#[derive(Clone, Debug)]
+pub enum WorkerReport {
+    /// A session started with these controls (after a rebuild or reload too).
+    Ready(ViewerControls),
+    /// The reference's state.
+    Reference(ReferenceReport),
+    /// Something to show in the status line (a screenshot written).
+    Message(String),
+    /// A failure; the worker waits for a reload or quit.
+    Error(String),
+    /// A scripted run finished.
+    Done,
+}
+
+/// The newest frame, overwritten by the worker and taken by the window.
+pub type LatestFrame = Arc<Mutex<Option<FrameReport>>>;
+
+enum SessionEnd {
+    Rebuild,
+    Quit,
+}
+
+/// The worker's channels.
+pub struct WorkerLink {
+    /// Commands from the window.
+    pub commands: Receiver<WorkerCommand>,
+    /// Reports to the window.
+    pub reports: Sender<WorkerReport>,
+    /// The newest frame.
+    pub latest: LatestFrame,
+}
+
+/// Runs the worker until `Quit`, a scripted run's last frame, or a channel
+/// closes. Returns the first error of a scripted run.
+pub fn run_worker(source: &dyn ViewSource, opts: &WorkerOptions, link: &WorkerLink) -> Result<(), String> {
+    let mut controls: Option<ViewerControls> = None;
+    let mut frames_total = 0u32;
+    loop {
+        let parts = match source.load(controls.as_ref()) {
+            Ok(p) => p,
+            Err(e) => {
+                let _ = link.reports.send(WorkerReport::Error(e.clone()));
+                if controls.is_none() || opts.exit_after_frames.is_some() {
+                    return Err(e);
+                }
+                match wait_for_reload(link) {
+                    SessionEnd::Rebuild => continue,
+                    SessionEnd::Quit => return Ok(()),
+                }
+            }
+        };
+        let mut state = SessionState::new(&parts, controls.take(), opts, frames_total, source.watched_file());
+        let end = state.run(link);
+        frames_total = state.frames_total;
+        controls = Some(state.controls);
+        match end {
+            Ok(SessionEnd::Rebuild) => continue,
+            Ok(SessionEnd::Quit) => return Ok(()),
+            Err(e) => {
+                let _ = link.reports.send(WorkerReport::Error(e.clone()));
+                if opts.exit_after_frames.is_some() {
+                    return Err(e);
+                }
+                match wait_for_reload(link) {
+                    SessionEnd::Rebuild => continue,
+                    SessionEnd::Quit => return Ok(()),
+                }
+            }
+        }
+    }
+}
+
+/// After a failure: waits for a reload, new controls, or quit.
+fn wait_for_reload(link: &WorkerLink) -> SessionEnd {
+    loop {
+        match link.commands.recv() {
+            Ok(WorkerCommand::Reload | WorkerCommand::Controls(_)) => return SessionEnd::Rebuild,
+            Ok(WorkerCommand::Quit) | Err(_) => return SessionEnd::Quit,
+            Ok(_) => {}
+        }
+    }
+}
+
+/// A finished reference: its image and where it was taken.
+struct Reference {
+    image: Image,
+    camera: Camera,
+    spp: u32,
+}
+
+/// A reference being path-traced.
+struct ReferenceJob<'s> {
+    handle: std::thread::ScopedJoinHandle<'s, Image>,
+    rows_done: Arc<AtomicU32>,
+    rows: u32,
+    camera: Camera,
+    spp: u32,
+}
+
+/// One session's loop state.
+struct SessionState<'p> {
+    parts: &'p SessionParts,
+    controls: ViewerControls,
+    opts: &'p WorkerOptions,
+    frames_total: u32,
+    last_full: Option<Image>,
+    prev_pass_totals: BTreeMap<&'static str, f64>,
+    reference: Option<Reference>,
+    watch_file: Option<PathBuf>,
+    watched: Option<(PathBuf, Option<SystemTime>)>,
+    last_frame_at: Instant,
+}
+
+impl<'p> SessionState<'p> {
+    fn new(
+        parts: &'p SessionParts,
+        user: Option<ViewerControls>,
+        opts: &'p WorkerOptions,
+        frames_total: u32,
+        watch_file: Option<PathBuf>,
+    ) -> Self {
+        Self {
+            parts,
+            controls: user.unwrap_or_else(|| ViewerControls::new(parts.gi, parts.cascades, &parts.scene, None)),
+            opts,
+            frames_total,
+            last_full: None,
+            prev_pass_totals: BTreeMap::new(),
+            reference: None,
+            watch_file,
+            watched: None,
+            last_frame_at: Instant::now(),
+        }
+    }
+
+    /// Frames until quit, rebuild or (scripted) the last frame.
+    fn run(&mut self, link: &WorkerLink) -> Result<SessionEnd, String> {
+        let parts = self.parts;
+        let mut session = ViewSession::new(
+            &parts.scene,
+            &*parts.tracer,
+            &parts.camera,
+            &parts.settings,
+            parts.fly_speed_m_per_s,
+            parts.camera_path.clone(),
+        );
+        self.start_controls(&mut session);
+        let _ = link.reports.send(WorkerReport::Ready(self.controls.clone()));
+        self.watched = self.watch_file.as_deref().filter(|_| self.opts.exit_after_frames.is_none()).map(watch_state);
+        std::thread::scope(|scope| {
+            let mut job: Option<ReferenceJob<'_>> = None;
+            let mut frame_in_session = 0u32;
+            loop {
+                for cmd in link.commands.try_iter() {
+                    match cmd {
+                        WorkerCommand::Input(e) => session.apply(e),
+                        WorkerCommand::Controls(c) => {
+                            if self.controls.needs_rebuild(&c) {
+                                self.controls = c;
+                                return Ok(SessionEnd::Rebuild);
+                            }
+                            self.apply_controls(&mut session, c);
+                        }
+                        WorkerCommand::StepClock => session.step_scene_clock(),
+                        WorkerCommand::Reference(spp) => job = Some(self.start_reference(scope, &session, spp)),
+                        WorkerCommand::Screenshot => self.screenshot(link),
+                        WorkerCommand::Reload => return Ok(SessionEnd::Rebuild),
+                        WorkerCommand::Quit => return Ok(SessionEnd::Quit),
+                    }
+                }
+                self.apply_script(&mut session);
+                self.frame(&mut session, link)?;
+                frame_in_session += 1;
+                job = self.poll_reference(job, &session, link, frame_in_session);
+                if self.opts.exit_after_frames.is_some_and(|n| self.frames_total >= n) {
+                    return self.finish_scripted(link);
+                }
+                if frame_in_session.is_multiple_of(30) && self.scene_file_changed() {
+                    let _ = link.reports.send(WorkerReport::Message("scene file changed: reloading".into()));
+                    return Ok(SessionEnd::Rebuild);
+                }
+            }
+        })
+    }
+
+    /// A new session takes the user's view, clock, lights, sky and live
+    /// field settings; the rest is what it was built with.
+    fn start_controls(&mut self, session: &mut ViewSession<'_>) {
+        let built =
+            ViewerControls::new(self.parts.gi, self.parts.cascades, &self.parts.scene, session.stepper().field());
+        let user = std::mem::replace(&mut self.controls, built.clone());
+        let mut c = ViewerControls {
+            view: user.view,
+            atlas_volume: user.atlas_volume,
+            paused: user.paused,
+            sky_scale: user.sky_scale,
+            ..built
+        };
+        if user.lights.len() == c.lights.len() {
+            c.lights = user.lights;
+        }
+        if let (Some(u), Some(b)) = (user.field, c.field.as_mut()) {
+            b.hysteresis = u.hysteresis;
+            b.fast_convergence = u.fast_convergence;
+            b.glossy_second_order = u.glossy_second_order;
+            b.ray_budget = u.ray_budget;
+        }
+        self.apply_controls(session, c);
+    }
+
+    /// Applies live controls (see `viewer_controls`).
+    fn apply_controls(&mut self, session: &mut ViewSession<'_>, c: ViewerControls) {
+        if let (Some(f), Some(set)) = (c.field, session.stepper_mut().field_mut()) {
+            f.apply_live(set);
+        }
+        let lights_changed = c.lights != self.controls.lights || c.sky_scale != self.controls.sky_scale;
+        if lights_changed && (c.edits_scene() || self.controls.edits_scene()) {
+            session.stepper_mut().set_scene_edit(Some(c.scene_edit()));
+        }
+        session.set_paused(c.paused);
+        self.controls = c;
+    }
+
+    /// The script's events for the next frame.
+    fn apply_script(&self, session: &mut ViewSession<'_>) {
+        if let Some(s) = &self.opts.script {
+            for (_, e) in s.events.iter().filter(|(at, _)| *at == self.frames_total) {
+                session.apply(*e);
+            }
+        }
+    }
+
+    /// Renders one frame and hands it to the window.
+    fn frame(&mut self, session: &mut ViewSession<'_>, link: &WorkerLink) -> Result<(), String> {
+        let t = Instant::now();
+        let dt_s = self.opts.fixed_dt_s.unwrap_or_else(|| self.last_frame_at.elapsed().as_secs_f32().min(0.1));
+        self.last_frame_at = Instant::now();
+        let full = session.frame(dt_s).map_err(|e| format!("frame {}: {e}", self.frames_total))?;
+        // Views drawn on a CPU G-buffer see the scene as the frame did.
+        let gbuffer_view = matches!(self.controls.view, ViewMode::Albedo | ViewMode::Normals | ViewMode::Probes);
+        let posed = gbuffer_view.then(|| posed_scene(self.parts, &self.controls, session.scene_frame())).flatten();
+        let scene = posed.as_ref().unwrap_or(&self.parts.scene);
+        let view =
+            view_image(self.controls.view, &full, session, scene, &*self.parts.tracer, self.controls.atlas_volume)?;
+        let report = self.report(session, &view, t.elapsed().as_secs_f64() * 1e3);
+        self.adapt_size(session, report.frame_ms);
+        self.last_full = Some(full);
+        self.frames_total += 1;
+        if let Ok(mut slot) = link.latest.lock() {
+            *slot = Some(report);
+        }
+        Ok(())
+    }
+
+    /// The stats panel's figures for the frame just rendered.
+    fn report(&mut self, session: &ViewSession<'_>, view: &Image, frame_ms: f64) -> FrameReport {
+        let totals = session.stepper().pass_totals_ms();
+        let pass_ms =
+            totals.iter().map(|(k, v)| (*k, v - self.prev_pass_totals.get(k).copied().unwrap_or(0.0))).collect();
+        self.prev_pass_totals = totals.clone();
+        let mut probe_states = BTreeMap::new();
+        let (mut rays, mut volumes) = (0, 0);
+        if let Some(set) = session.stepper().field() {
+            for v in set.volumes() {
+                for (k, n) in v.state_counts() {
+                    *probe_states.entry(k).or_default() += n;
+                }
+            }
+            rays = set.last_batch_rays;
+            volumes = set.volumes().len();
+        }
+        FrameReport {
+            frame: self.frames_total,
+            scene_frame: session.scene_frame(),
+            rgba: to_rgba8(view),
+            width: view.width,
+            height: view.height,
+            frame_ms,
+            pass_ms,
+            rays,
+            probe_states,
+            volumes,
+            adapter: self.parts.adapter.clone(),
+            camera_m: session.last_camera().position,
+            fly_speed_m_per_s: session.fly_camera().speed_m_per_s,
+        }
+    }
+
+    /// The CPU backend's adaptive frame size: ×0.8 above the target frame
+    /// time, ×1.15 below 60 % of it, never above the size asked for.
+    fn adapt_size(&self, session: &mut ViewSession<'_>, frame_ms: f64) {
+        let (Some(target), None) = (self.opts.adaptive_target_ms, &self.parts.settings.probe_tracer) else { return };
+        let (max_w, max_h) = (self.parts.settings.width, self.parts.settings.height);
+        let (w, _) = session.size();
+        let scale = if frame_ms > target * 1.25 && w > 64 {
+            0.8
+        } else if frame_ms < target * 0.6 && w < max_w {
+            1.15
+        } else {
+            return;
+        };
+        let nw = ((w as f64 * scale).round() as u32).clamp(32.min(max_w), max_w);
+        let nh = ((nw as f64 * max_h as f64 / max_w as f64).round() as u32).max(1);
+        session.set_size(nw, nh);
+    }
+
+    /// Starts the path-traced reference of the current view on a thread of `scope`.
+    fn start_reference<'s>(
+        &self,
+        scope: &'s std::thread::Scope<'s, '_>,
+        session: &ViewSession<'_>,
+        spp: u32,
+    ) -> ReferenceJob<'s>
+    where
+        'p: 's,
+    {
+        let parts: &'p SessionParts = self.parts;
+        let camera = session.last_camera();
+        let (w, h) = session.size();
+        let posed = posed_scene(parts, &self.controls, session.scene_frame()).unwrap_or_else(|| parts.scene.clone());
+        let clock = session.scene_frame() as f32;
+        let rows_done = Arc::new(AtomicU32::new(0));
+        let rows = Arc::clone(&rows_done);
+        let seed = parts.settings.seed;
+        let base_tracer: &'p dyn RayTracer = &*parts.tracer;
+        let handle = scope.spawn(move || {
+            let at_frame = base_tracer.at_frame(&posed, clock);
+            let tracer: &dyn RayTracer = at_frame.as_deref().unwrap_or(base_tracer);
+            let settings = PathTracerSettings { pt_spp: spp.max(1), seed, ..Default::default() };
+            let pt = PathTracer::new(&posed, tracer, settings);
+            let rays = CameraRays::new(&camera, w, h);
+            pt.render(&rays, w, h, &|| {
+                rows.fetch_add(1, Ordering::Relaxed);
+            })
+            .0
+        });
+        ReferenceJob { handle, rows_done, rows: h, camera, spp }
+    }
+
+    /// Reports a running reference's progress; takes a finished one in; every
+    /// 10 frames compares the live frame against it.
+    fn poll_reference<'s>(
+        &mut self,
+        job: Option<ReferenceJob<'s>>,
+        session: &ViewSession<'_>,
+        link: &WorkerLink,
+        frame: u32,
+    ) -> Option<ReferenceJob<'s>> {
+        if let Some(j) = job {
+            if !j.handle.is_finished() {
+                let progress = j.rows_done.load(Ordering::Relaxed) as f32 / j.rows.max(1) as f32;
+                let report = ReferenceReport { progress, spp: j.spp, ..Default::default() };
+                let _ = link.reports.send(WorkerReport::Reference(report));
+                return Some(j);
+            }
+            match j.handle.join() {
+                Ok(image) => self.reference = Some(Reference { image, camera: j.camera, spp: j.spp }),
+                Err(_) => {
+                    let _ = link.reports.send(WorkerReport::Error("the reference render panicked".into()));
+                }
+            }
+            self.send_reference(session, link);
+        } else if frame.is_multiple_of(10) && self.reference.is_some() {
+            self.send_reference(session, link);
+        }
+        None
+    }
+
+    /// The finished reference beside the live frame: FLIP while the camera
+    /// and size are where it was taken.
+    fn send_reference(&self, session: &ViewSession<'_>, link: &WorkerLink) {
+        let (Some(r), Some(live)) = (&self.reference, &self.last_full) else { return };
+        let same_view =
+            r.camera == session.last_camera() && (r.image.width, r.image.height) == (live.width, live.height);
+        let mut report = ReferenceReport {
+            progress: 1.0,
+            spp: r.spp,
+            rgba: Some(to_rgba8(&r.image)),
+            width: r.image.width,
+            height: r.image.height,
+            stale: !same_view,
+            ..Default::default()
+        };
+        if same_view {
+            let reference = probegi_image::LoadedImage::Hdr(r.image.clone()).to_srgb8();
+            let test = probegi_image::LoadedImage::Hdr(live.clone()).to_srgb8();
+            let flip = probegi_image::flip_srgb8(live.width, live.height, &reference, &test);
+            let magma = probegi_image::compare::error_map_magma(&flip);
+            report.heat_rgba = Some(magma.chunks(3).flat_map(|c| [c[0], c[1], c[2], 255]).collect());
+            report.mean_flip = Some(flip.mean_flip);
+        }
+        let _ = link.reports.send(WorkerReport::Reference(report));
+    }
+
+    /// The screenshot key: the last full frame as PNG and linear EXR.
+    fn screenshot(&self, link: &WorkerLink) {
+        let Some(img) = &self.last_full else { return };
+        let stem = format!("{}-frame{:04}", file_safe(&self.parts.scene.name), self.frames_total);
+        let mut written = vec![];
+        for ext in ["png", "exr"] {
+            let path = self.opts.screenshot_dir.join(format!("{stem}.{ext}"));
+            match probegi_image::write_image(&path, img) {
+                Ok(()) => written.push(path.display().to_string()),
+                Err(e) => {
+                    let _ = link.reports.send(WorkerReport::Error(format!("screenshot: {e}")));
+                    return;
+                }
+            }
+        }
+        let _ = link.reports.send(WorkerReport::Message(format!("wrote {}", written.join(" and "))));
+    }
+
+    /// The scripted run's end: the screenshot, then `Done`.
+    fn finish_scripted(&self, link: &WorkerLink) -> Result<SessionEnd, String> {
+        if let (Some(path), Some(img)) = (&self.opts.screenshot, &self.last_full) {
+            probegi_image::write_image(path, img).map_err(|e| e.to_string())?;
+        }
+        let _ = link.reports.send(WorkerReport::Done);
+        Ok(SessionEnd::Quit)
+    }
+
+    /// Whether the watched scene file's modification time moved.
+    fn scene_file_changed(&mut self) -> bool {
+        let Some((path, seen)) = &mut self.watched else { return false };
+        let now = std::fs::metadata(&*path).and_then(|m| m.modified()).ok();
+        if now.is_some() && now != *seen {
+            *seen = now;
+            return true;
+        }
+        false
+    }
+}
+
+/// The scene file and its modification time now.
+fn watch_state(path: &std::path::Path) -> (PathBuf, Option<SystemTime>) {
+    (path.to_path_buf(), std::fs::metadata(path).and_then(|m| m.modified()).ok())
+}
+
+/// The scene posed at `scene_frame` with the controls' lights and sky, when
+/// it differs from the loaded one (animated, or edited).
+fn posed_scene(parts: &SessionParts, controls: &ViewerControls, scene_frame: u32) -> Option<Scene> {
+    if !parts.scene.is_animated() && !controls.edits_scene() {
+        return None;
+    }
+    let mut posed = parts.scene.clone();
+    posed.set_frame_from(&parts.scene, scene_frame as f32);
+    if controls.edits_scene() {
+        controls.scene_edit()(&parts.scene, &mut posed);
+    }
+    Some(posed)
+}
+
+/// `name` with anything but letters, digits, `-` and `_` replaced by `_`.
+fn file_safe(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
+}
+
+/// How long the window waits for the worker's first frame before it says so.
+pub const FIRST_FRAME_PATIENCE: Duration = Duration::from_secs(600);
