@@ -53,6 +53,23 @@ fi
 if [ ! -d "$ASSIMP_GLTF2" ]; then
   echo "warning: assimp-testmodels is not installed: the glTF corpus test will SKIP" >&2
 fi
+# The viewer's real-window test (crates/probegi-cli/tests/view_window.rs) runs
+# `probegi view` under Xvfb: install it (and the X libraries winit opens at run
+# time) like mesa-vulkan-drivers, then require the test; without it, it skips.
+if ! command -v xvfb-run >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1; then
+  echo "installing xvfb for the viewer's window test" >&2
+  SUDO=""; [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1 && SUDO="sudo -n"
+  X_PACKAGES="xvfb xauth libxkbcommon-x11-0 libxcursor1 libxrandr2 libxi6"
+  # shellcheck disable=SC2086
+  { $SUDO apt-get install -y $X_PACKAGES >/dev/null 2>&1 ||
+    { $SUDO apt-get update >/dev/null 2>&1 && $SUDO apt-get install -y $X_PACKAGES >/dev/null 2>&1; }; } ||
+    echo "could not install xvfb" >&2
+fi
+if command -v xvfb-run >/dev/null 2>&1 && have_vulkan; then
+  export PROBEGI_REQUIRE_DISPLAY=1
+else
+  echo "warning: no xvfb-run (or no Vulkan driver): the viewer's window test will SKIP (install xvfb)" >&2
+fi
 # Khronos glTF samples (WaterBottle, TextureSettingsTest, TextureTransformTest,
 # AlphaBlendModeTest) as the scena crate 1.5.0 ships them in its tests, fetched
 # once into a cache outside the repository for

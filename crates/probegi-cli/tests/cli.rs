@@ -599,8 +599,15 @@ fn shadow_field_inputs_are_checked_before_rendering() {
 
 #[test]
 fn view_runs_scripted_without_a_window_and_names_bad_input() {
-    // No window yet: the message names the scripted way.
-    fails_with(&["view", "--scene", "builtin:cornell-box"], "--headless");
+    // No window system: the message says so and names the scripted way.
+    let o = Command::new(env!("CARGO_BIN_EXE_probegi"))
+        .args(["view", "--scene", "builtin:cornell-box"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("runs");
+    assert!(!o.status.success() && stderr(&o).contains("no window system"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--headless"), "{}", stderr(&o));
     fails_with(&["view", "--headless"], "--exit-after-frames");
     let script = tmp("bad-script.txt");
     std::fs::write(&script, "0 key w down\n3 key z down\n").expect("write");
