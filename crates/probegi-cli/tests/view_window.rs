@@ -89,7 +89,8 @@ fn a_window_flies_the_script_and_matches_the_headless_run() {
     assert!(flip < 1e-3, "the window's frame is the headless run's: FLIP {flip}");
     // The window itself: a capture of what was on screen.
     let capture = window_shot.with_file_name("window-window.png");
-    let probegi_image::LoadedImage::Srgb8 { width, height, rgb } = probegi_image::read_image(&capture).expect("capture")
+    let probegi_image::LoadedImage::Srgb8 { width, height, rgb } =
+        probegi_image::read_image(&capture).expect("capture")
     else {
         panic!("the capture is a PNG");
     };

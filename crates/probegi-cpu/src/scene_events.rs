@@ -40,6 +40,15 @@ impl SceneChangeDetector {
         Self::default()
     }
 
+    /// Takes `scene`'s lights as the last observed frame's without reporting
+    /// anything (a scene that starts to be observed mid-render: a viewer's
+    /// first light switch is then a change).
+    pub fn remember_lights(&mut self, scene: &Scene) {
+        if self.lights_on.is_none() {
+            self.lights_on = Some(scene.lights.iter().map(|l| l.intensity > 0.0).collect());
+        }
+    }
+
     /// Compares `scene` (this frame) with the last observed frame and reports the
     /// changes to `set`.
     pub fn observe(&mut self, scene: &Scene, set: &mut DdgiFieldSet) -> SceneChanges {

@@ -139,8 +139,8 @@ fn gi_panel(ui: &mut Ui, state: &mut PanelState) {
     });
     if c.gi == GiChoice::Ddgi {
         ui.horizontal(|ui| {
-            ui.label("cascades (0: the scene's volumes)");
-            ui.add(egui::DragValue::new(&mut c.cascades).range(0..=6));
+            let l = ui.label("cascades (0: the scene's volumes)");
+            ui.add(egui::DragValue::new(&mut c.cascades).range(0..=6)).labelled_by(l.id);
         });
     }
 }
@@ -154,14 +154,14 @@ fn field_panel(ui: &mut Ui, state: &mut PanelState) {
     ui.checkbox(&mut f.fast_convergence, "fast convergence");
     ui.checkbox(&mut f.glossy_second_order, "second-order glossy");
     ui.horizontal(|ui| {
-        ui.label("ray budget (0: off)");
-        ui.add(egui::DragValue::new(&mut f.ray_budget).speed(256.0));
+        let l = ui.label("ray budget (0: off)");
+        ui.add(egui::DragValue::new(&mut f.ray_budget).speed(256.0)).labelled_by(l.id);
     });
     ui.separator();
     ui.label("These rebuild the field:");
     ui.horizontal(|ui| {
-        ui.label("rays per probe");
-        ui.add(egui::DragValue::new(&mut f.rays_per_probe).range(16..=1024));
+        let l = ui.label("rays per probe");
+        ui.add(egui::DragValue::new(&mut f.rays_per_probe).range(16..=1024)).labelled_by(l.id);
     });
     ui.horizontal(|ui| {
         ui.label("probe states");
@@ -220,8 +220,8 @@ fn clock_panel(ui: &mut Ui, state: &mut PanelState, actions: &mut Vec<PanelActio
 
 fn reference_panel(ui: &mut Ui, state: &mut PanelState, actions: &mut Vec<PanelAction>) {
     ui.horizontal(|ui| {
-        ui.label("spp");
-        ui.add(egui::DragValue::new(&mut state.reference_spp).range(1..=65536));
+        let l = ui.label("reference spp");
+        ui.add(egui::DragValue::new(&mut state.reference_spp).range(1..=65536)).labelled_by(l.id);
         if ui.button("path-trace this view").clicked() {
             actions.push(PanelAction::Reference(state.reference_spp));
         }
@@ -263,6 +263,12 @@ fn stats_panel(ui: &mut Ui, state: &mut PanelState) {
     let states: Vec<String> = f.probe_states.iter().map(|(k, n)| format!("{k} {n}")).collect();
     if !states.is_empty() {
         ui.label(format!("probes: {}", states.join(", ")));
+    }
+    if f.hysteresis_scale < 1.0 {
+        ui.colored_label(
+            Color32::from_rgb(240, 228, 66),
+            format!("fast convergence: hysteresis ×{:.2} after a scene change", f.hysteresis_scale),
+        );
     }
     let c = f.camera_m;
     ui.label(format!("camera ({:.2}, {:.2}, {:.2}), {:.2} m/s", c.x, c.y, c.z, f.fly_speed_m_per_s));

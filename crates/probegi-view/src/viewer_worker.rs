@@ -120,6 +120,9 @@ pub struct FrameReport {
     pub probe_states: BTreeMap<&'static str, usize>,
     /// The field's volumes.
     pub volumes: usize,
+    /// The fast-convergence heuristics' factor on the irradiance hysteresis
+    /// (the smallest over the volumes; 1: none running).
+    pub hysteresis_scale: f32,
     /// The adapter (`None`: CPU).
     pub adapter: Option<String>,
     /// Where the camera is, metres.
@@ -412,7 +415,7 @@ impl<'p> SessionState<'p> {
             totals.iter().map(|(k, v)| (*k, v - self.prev_pass_totals.get(k).copied().unwrap_or(0.0))).collect();
         self.prev_pass_totals = totals.clone();
         let mut probe_states = BTreeMap::new();
-        let (mut rays, mut volumes) = (0, 0);
+        let (mut rays, mut volumes, mut hysteresis_scale) = (0, 0, 1.0f32);
         if let Some(set) = session.stepper().field() {
             for v in set.volumes() {
                 for (k, n) in v.state_counts() {
@@ -421,6 +424,7 @@ impl<'p> SessionState<'p> {
             }
             rays = set.last_batch_rays;
             volumes = set.volumes().len();
+            hysteresis_scale = set.volumes().iter().map(|v| v.irradiance_hysteresis_scale()).fold(1.0, f32::min);
         }
         FrameReport {
             frame: self.frames_total,
@@ -433,6 +437,7 @@ impl<'p> SessionState<'p> {
             rays,
             probe_states,
             volumes,
+            hysteresis_scale,
             adapter: self.parts.adapter.clone(),
             camera_m: session.last_camera().position,
             fly_speed_m_per_s: session.fly_camera().speed_m_per_s,

@@ -109,6 +109,9 @@ impl<'a> FrameStepper<'a> {
         if self.frame_scene.is_none() {
             self.frame_scene = Some(self.frame_loop.base_scene.clone());
         }
+        // The scene as rendered so far is what the edit changes.
+        let last = self.frame_scene.as_ref().unwrap_or(self.frame_loop.base_scene);
+        self.frame_loop.detector.remember_lights(last);
         self.frame_loop.animated = true;
         self.frame_loop.scene_edit = edit;
         self.frame_loop.scene_edit_changed = true;

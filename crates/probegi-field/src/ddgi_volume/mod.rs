@@ -219,6 +219,16 @@ impl DdgiVolume {
         self.active_probes_last
     }
 
+    /// The factor the fast-convergence heuristics (seed 004 §4.3) put on the
+    /// irradiance hysteresis now: the product of the scene events' reductions
+    /// still running, 1 when none runs or `probe_fast_convergence` is off.
+    pub fn irradiance_hysteresis_scale(&self) -> f32 {
+        if !self.settings.probe_fast_convergence {
+            return 1.0;
+        }
+        self.irradiance_events.iter().map(|e| e.scale).product()
+    }
+
     /// Whether queries may read probe `p` now.
     pub fn probe_usable(&self, p: usize) -> bool {
         self.probe_usable[p]
