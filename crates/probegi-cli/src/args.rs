@@ -38,10 +38,11 @@ pub enum Command {
     /// into the doorway) in the door room, against hysteresis with the fast-
     /// convergence heuristics on and off: a PNG plot, a curves PNG and a CSV.
     Lag(LagArgs),
-    /// The field live through a fly camera (W/S A/D Q/E, mouse look, scroll
-    /// for speed, R to reset). Built so far: the scripted, headless run
-    /// (`--headless --input-script FILE --exit-after-frames N --screenshot
-    /// FILE`); the window and its panels are not built yet.
+    /// The field live in a window with a fly camera, panels (GI, field
+    /// settings, views, lights, scene clock, reference, stats) and the
+    /// path-traced reference one key away; `--headless` runs a script
+    /// without a window.
+    #[command(after_help = probegi_view::viewer_panels::keys_help())]
     View(ViewArgs),
 }
 
@@ -83,6 +84,14 @@ pub struct ViewArgs {
     /// Write every frame into this folder as frame-NNNN.png (tone-mapped).
     #[arg(long)]
     pub sequence: Option<PathBuf>,
+    /// The view the window starts with: full, direct, indirect, albedo,
+    /// normals, probes, irradiance-atlas, distance-atlas.
+    #[arg(long)]
+    pub view: Option<String>,
+    /// Samples per pixel of the reference an input script's `f5` asks for
+    /// (the window's panel sets its own).
+    #[arg(long, default_value_t = 64)]
+    pub reference_spp: u32,
 }
 
 #[derive(Args, Debug)]

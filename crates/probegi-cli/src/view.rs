@@ -8,6 +8,7 @@ use probegi_view::input_script::InputScript;
 use probegi_view::scripted_run::{ScriptedOutput, ScriptedRun, frame_time_percentiles, run_scripted};
 
 use probegi_cpu::frame_loop::RenderSettings;
+use probegi_view::view_layers::ViewMode;
 use probegi_view::viewer_controls::{GiChoice, ViewerControls};
 use probegi_view::viewer_prefs::ViewerPrefs;
 use probegi_view::viewer_window::WindowOptions;
@@ -46,10 +47,19 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     }
     let frames = args.exit_after_frames.context("--headless needs --exit-after-frames N")?;
     check_frames(frames)?;
+    if args.view.is_some() {
+        bail!("--view picks the window's view; --headless renders the full frame");
+    }
     let script = match &args.input_script {
         Some(p) => InputScript::load(p)?,
         None => InputScript::default(),
     };
+    if let Some((f, k)) = script.first_viewer_key() {
+        bail!(
+            "{}: the viewer key {k:?} at frame {f} acts in the window only; --headless takes fly keys, mouse and scroll",
+            args.input_script.as_deref().unwrap_or(std::path::Path::new("script")).display()
+        );
+    }
     if let Some(p) = &args.screenshot {
         probegi_image::check_output_path(p, true)?;
     }
@@ -144,6 +154,16 @@ fn run_windowed(args: &ViewArgs) -> Result<()> {
     if args.fly_speed.is_some_and(|s| !(s.is_finite() && s > 0.0)) {
         bail!("--fly-speed must be a positive number of metres per second");
     }
+    let start_view = match &args.view {
+        Some(v) => Some(ViewMode::from_name(v).with_context(|| {
+            let names: Vec<String> = ViewMode::ALL.iter().map(|m| m.label().replace(' ', "-")).collect();
+            format!("--view {v}: not a view ({})", names.join(", "))
+        })?),
+        None => None,
+    };
+    if args.reference_spp == 0 {
+        bail!("--reference-spp must be at least 1");
+    }
     let scripted = args.exit_after_frames.is_some();
     let prefs_path = (!scripted).then(ViewerPrefs::default_path).flatten();
     let prefs = prefs_path.as_deref().map(ViewerPrefs::load).unwrap_or_default();
@@ -156,6 +176,8 @@ fn run_windowed(args: &ViewArgs) -> Result<()> {
         fixed_dt_s: (scripted || args.input_script.is_some()).then_some(1.0 / 60.0),
         adaptive_target_ms: (!scripted).then_some(prefs.cpu_target_frame_ms),
         screenshot_dir: std::env::current_dir().unwrap_or_default(),
+        reference_spp: args.reference_spp,
+        start_view,
     };
     let scene_name = args.scene.scene.clone();
     let window = WindowOptions {
@@ -164,6 +186,7 @@ fn run_windowed(args: &ViewArgs) -> Result<()> {
         cpu_backend: args.backend == crate::gpu_backend::Backend::Cpu,
         capture_path: scripted.then(|| args.screenshot.clone()).flatten(),
         prefs_path,
+        start_view,
     };
     let source = CliViewSource { args: args.clone() };
     probegi_view::viewer_window::run_window(Box::new(source), worker, window).map_err(anyhow::Error::msg)

@@ -617,6 +617,18 @@ fn view_runs_scripted_without_a_window_and_names_bad_input() {
         "bad-script.txt:2: unknown key",
     );
     fails_with(&["view", "--headless", "--exit-after-frames", "2", "--fly-speed=-1"], "--fly-speed");
+    fails_with(&["view", "--headless", "--exit-after-frames", "2", "--view", "indirect"], "--view");
+    let keys = tmp("viewer-keys.txt");
+    std::fs::write(&keys, "0 key w down\n5 key f5 down\n").expect("write");
+    fails_with(
+        &["view", "--headless", "--exit-after-frames", "2", "--input-script", &keys.to_string_lossy()],
+        "viewer-keys.txt: the viewer key Reference at frame 5 acts in the window only",
+    );
+    let help = probegi(&["view", "--help"]);
+    let help = String::from_utf8_lossy(&help.stdout);
+    for key in ["W A S D", "F5", "F12", "Space", "Ctrl+R"] {
+        assert!(help.contains(key), "`view --help` lists {key}: {help}");
+    }
     // A scripted CPU run: the camera flies, the screenshot is a lit frame.
     let good = tmp("fly.txt");
     std::fs::write(&good, "# forward for 10 frames\n0 key w down\n10 key w up\n").expect("write");

@@ -5,6 +5,7 @@
 //! | line | meaning |
 //! |---|---|
 //! | `12 key w down`, `40 key w up` | a key pressed or released from that frame on (w a s d q e: fly; r: reset the camera) |
+//! | `50 key f5 down` | a viewer key pressed (in the window only): `space` pause, `n` step the clock, `v` next view, `f5` reference, `f12` screenshot |
 //! | `12 mouse 30 -5` | the mouse moved 30 px right and 5 px up during frame 12 |
 //! | `12 scroll 2` | two scroll-wheel steps up (faster) during frame 12 |
 //!
@@ -33,11 +34,28 @@ pub enum FlyKey {
     R,
 }
 
+/// A key of the viewer's own (not the fly camera's), acted on when pressed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ViewerKey {
+    /// Space: pause or resume the scene clock.
+    Pause,
+    /// N: step the paused scene clock.
+    Step,
+    /// V: the next view.
+    NextView,
+    /// F5: path-trace the reference of the view.
+    Reference,
+    /// F12: screenshot (PNG and EXR).
+    Screenshot,
+}
+
 /// One timed event.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ScriptEvent {
     /// A key pressed (`true`) or released.
     Key(FlyKey, bool),
+    /// A viewer key pressed (the window's worker acts on it; the fly camera ignores it).
+    Viewer(ViewerKey),
     /// Mouse motion, pixels (x right, y down).
     Mouse(f32, f32),
     /// Scroll-wheel steps (up positive).
@@ -94,6 +112,14 @@ impl InputScript {
         Ok(Self { events })
     }
 
+    /// The first viewer key (frame and key), which only the window acts on.
+    pub fn first_viewer_key(&self) -> Option<(u32, ViewerKey)> {
+        self.events.iter().find_map(|(f, e)| match e {
+            ScriptEvent::Viewer(k) => Some((*f, *k)),
+            _ => None,
+        })
+    }
+
     /// The last frame with an event (0 for an empty script).
     pub fn last_frame(&self) -> u32 {
         self.events.last().map_or(0, |(f, _)| *f)
@@ -113,6 +139,21 @@ fn parse_line(line: &str) -> Result<(u32, ScriptEvent), String> {
     let event = match words.get(1).copied() {
         Some("key") => {
             arity(4)?;
+            let viewer = match words[2].to_ascii_lowercase().as_str() {
+                "space" => Some(ViewerKey::Pause),
+                "n" => Some(ViewerKey::Step),
+                "v" => Some(ViewerKey::NextView),
+                "f5" => Some(ViewerKey::Reference),
+                "f12" => Some(ViewerKey::Screenshot),
+                _ => None,
+            };
+            if let Some(k) = viewer {
+                return match words[3] {
+                    "down" => Ok((frame, ScriptEvent::Viewer(k))),
+                    "up" => Err(format!("`{line}`: viewer keys act when pressed; script them `down` only")),
+                    s => Err(format!("`{s}`: a key goes `down` or `up`")),
+                };
+            }
             let key = match words[2].to_ascii_lowercase().as_str() {
                 "w" => FlyKey::W,
                 "s" => FlyKey::S,
@@ -121,7 +162,7 @@ fn parse_line(line: &str) -> Result<(u32, ScriptEvent), String> {
                 "q" => FlyKey::Q,
                 "e" => FlyKey::E,
                 "r" => FlyKey::R,
-                k => return Err(format!("unknown key `{k}` (w a s d q e r)")),
+                k => return Err(format!("unknown key `{k}` (w a s d q e r; in the window also space n v f5 f12)")),
             };
             let down = match words[3] {
                 "down" => true,
@@ -168,6 +209,7 @@ impl InputState {
             },
             ScriptEvent::Mouse(dx, dy) => self.fly.look_px += glam::Vec2::new(dx, dy),
             ScriptEvent::Scroll(s) => self.fly.scroll_steps += s,
+            ScriptEvent::Viewer(_) => {}
         }
     }
 

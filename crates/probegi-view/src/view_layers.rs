@@ -67,6 +67,22 @@ impl ViewMode {
         }
     }
 
+    /// The view after this one (`V`), skipping those that need a field when
+    /// there is none.
+    pub fn next(self, has_field: bool) -> ViewMode {
+        let i = ViewMode::ALL.iter().position(|m| *m == self).unwrap_or(0);
+        (1..=ViewMode::ALL.len())
+            .map(|k| ViewMode::ALL[(i + k) % ViewMode::ALL.len()])
+            .find(|m| has_field || !m.needs_field())
+            .unwrap_or(ViewMode::Full)
+    }
+
+    /// The view named `name` (its label, spaces or dashes).
+    pub fn from_name(name: &str) -> Option<ViewMode> {
+        let n = name.replace('-', " ");
+        ViewMode::ALL.into_iter().find(|m| m.label() == n)
+    }
+
     /// Whether the view reads the DDGI field (absent without `--gi ddgi`).
     pub fn needs_field(self) -> bool {
         matches!(self, ViewMode::Probes | ViewMode::IrradianceAtlas | ViewMode::DistanceAtlas)

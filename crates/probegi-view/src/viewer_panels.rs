@@ -33,6 +33,15 @@ pub const KEY_BINDINGS: &[(&str, &str)] = &[
     ("Esc", "quit"),
 ];
 
+/// [`KEY_BINDINGS`] as the text `probegi view --help` ends with.
+pub fn keys_help() -> String {
+    let mut text = String::from("Keys in the window:\n");
+    for (key, what) in KEY_BINDINGS {
+        text.push_str(&format!("  {key:<18} {what}\n"));
+    }
+    text
+}
+
 /// What the panels show and set.
 #[derive(Clone, Debug)]
 pub struct PanelState {
@@ -230,7 +239,7 @@ fn reference_panel(ui: &mut Ui, state: &mut PanelState, actions: &mut Vec<PanelA
         if r.progress < 1.0 {
             ui.add(egui::ProgressBar::new(r.progress).show_percentage());
         } else if r.stale {
-            ui.label("the view moved since the reference: FLIP paused");
+            ui.label("the view or the scene moved since the reference: FLIP paused (pause the clock with Space)");
         } else if let Some(flip) = r.mean_flip {
             ui.label(format!("mean FLIP against the reference ({} spp): {flip:.3}", r.spp));
         }

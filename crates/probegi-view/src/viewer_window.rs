@@ -23,7 +23,6 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::input_script::{FlyKey, ScriptEvent};
-use crate::view_layers::ViewMode;
 use crate::viewer_panels::{PanelAction, PanelState, panels_ui};
 use crate::viewer_prefs::ViewerPrefs;
 use crate::viewer_worker::{
@@ -44,6 +43,8 @@ pub struct WindowOptions {
     pub capture_path: Option<PathBuf>,
     /// Settings that persist between runs (`None`: a scripted run reads none).
     pub prefs_path: Option<PathBuf>,
+    /// The view asked for on the command line (`--view`; the worker starts with it).
+    pub start_view: Option<crate::view_layers::ViewMode>,
 }
 
 /// Why the window could not open: no window system.
@@ -163,7 +164,7 @@ impl ViewerApp {
             match report {
                 WorkerReport::Ready(mut c) => {
                     let first = self.panels.is_none();
-                    if first && self.opts.prefs_path.is_some() {
+                    if first && self.opts.prefs_path.is_some() && self.opts.start_view.is_none() {
                         c.view = self.prefs.view;
                         self.send(WorkerCommand::Controls(c.clone()));
                     }
@@ -173,6 +174,11 @@ impl ViewerApp {
                         p
                     });
                     panels.controls = c;
+                }
+                WorkerReport::Controls(c) => {
+                    if let Some(p) = self.panels.as_mut() {
+                        p.controls = c;
+                    }
                 }
                 WorkerReport::Reference(r) => {
                     let size = [r.width as usize, r.height as usize];
@@ -254,12 +260,7 @@ impl ViewerApp {
                 if code == KeyCode::Space {
                     p.controls.paused = !p.controls.paused;
                 } else {
-                    let i = ViewMode::ALL.iter().position(|m| *m == p.controls.view).unwrap_or(0);
-                    let has_field = p.controls.field.is_some();
-                    let next = (1..=ViewMode::ALL.len())
-                        .map(|k| ViewMode::ALL[(i + k) % ViewMode::ALL.len()])
-                        .find(|m| has_field || !m.needs_field());
-                    p.controls.view = next.unwrap_or(ViewMode::Full);
+                    p.controls.view = p.controls.view.next(p.controls.field.is_some());
                 }
                 let c = p.controls.clone();
                 self.send(WorkerCommand::Controls(c));
@@ -357,25 +358,33 @@ fn set_texture(ctx: &egui::Context, slot: &mut Option<TextureHandle>, name: &str
     }
 }
 
-/// The live frame, and beside it the reference and the FLIP heat map.
+/// The live frame; with a reference, a 2 × 2 grid: live and reference on
+/// top, the FLIP heat map below the live frame.
 fn central_ui(ui: &mut egui::Ui, textures: &Textures, panels: Option<&PanelState>) {
     let Some(live) = &textures.live else {
         ui.centered_and_justified(|ui| ui.label("rendering the first frame…"));
         return;
     };
     let reference = panels.and_then(|p| p.reference.as_ref()).filter(|r| r.rgba.is_some());
-    let columns = if reference.is_some() { 3.0 } else { 1.0 };
+    let cells = if reference.is_some() { 2.0 } else { 1.0 };
     let avail = ui.available_size();
     let [w, h] = live.size().map(|s| s as f32);
-    let scale = ((avail.x / columns - 8.0) / w).min(avail.y / h).max(0.01);
+    let scale = ((avail.x / cells - 8.0) / w).min((avail.y / cells - 8.0) / h).max(0.01);
+    let size = egui::vec2(w * scale, h * scale);
     ui.horizontal(|ui| {
-        ui.image((live.id(), egui::vec2(w * scale, h * scale)));
-        for t in [&textures.reference, &textures.heat].into_iter().flatten().filter(|_| reference.is_some()) {
-            let [tw, th] = t.size().map(|s| s as f32);
-            let s = (w * scale / tw).min(h * scale / th);
-            ui.image((t.id(), egui::vec2(tw * s, th * s)));
+        ui.image((live.id(), size));
+        if let (Some(_), Some(t)) = (reference, &textures.reference) {
+            ui.image((t.id(), size));
         }
     });
+    if let (Some(_), Some(t)) = (reference, &textures.heat) {
+        ui.horizontal(|ui| {
+            ui.image((t.id(), size));
+            if let Some(f) = reference.and_then(|r| r.mean_flip) {
+                ui.label(format!("FLIP of the live frame\nagainst the reference: {f:.3}"));
+            }
+        });
+    }
 }
 
 /// The window's pixels as PNG beside `screenshot` (`NAME-window.png`).

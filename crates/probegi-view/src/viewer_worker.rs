@@ -23,7 +23,7 @@ use probegi_cpu::frame_loop::RenderSettings;
 use probegi_cpu::{PathTracer, PathTracerSettings};
 use probegi_scene::{RayTracer, Scene};
 
-use crate::input_script::{InputScript, ScriptEvent};
+use crate::input_script::{InputScript, ScriptEvent, ViewerKey};
 use crate::view_layers::{ViewMode, to_rgba8, view_image};
 use crate::view_session::ViewSession;
 use crate::viewer_controls::{GiChoice, ViewerControls};
@@ -95,6 +95,10 @@ pub struct WorkerOptions {
     pub adaptive_target_ms: Option<f64>,
     /// Where the screenshot key writes.
     pub screenshot_dir: PathBuf,
+    /// Samples per pixel of a scripted reference key (`f5`).
+    pub reference_spp: u32,
+    /// The first session's view (`--view`).
+    pub start_view: Option<ViewMode>,
 }
 
 /// One rendered frame and the figures of the stats panel.
@@ -158,6 +162,8 @@ pub struct ReferenceReport {
 pub enum WorkerReport {
     /// A session started with these controls (after a rebuild or reload too).
     Ready(ViewerControls),
+    /// The worker changed the controls itself (a scripted viewer key).
+    Controls(ViewerControls),
     /// The reference's state.
     Reference(ReferenceReport),
     /// Something to show in the status line (a screenshot written).
@@ -205,7 +211,11 @@ pub fn run_worker(source: &dyn ViewSource, opts: &WorkerOptions, link: &WorkerLi
                 }
             }
         };
+        let first = controls.is_none();
         let mut state = SessionState::new(&parts, controls.take(), opts, frames_total, source.watched_file());
+        if let (true, Some(v)) = (first, opts.start_view) {
+            state.controls.view = v;
+        }
         let end = state.run(link);
         frames_total = state.frames_total;
         controls = Some(state.controls);
@@ -237,10 +247,20 @@ fn wait_for_reload(link: &WorkerLink) -> SessionEnd {
     }
 }
 
+/// The scene a reference saw: the scene clock (for a scene that moves) and
+/// the light switches.
+#[derive(Clone, Debug, PartialEq)]
+struct ReferenceScene {
+    scene_frame: Option<u32>,
+    lights: Vec<crate::viewer_controls::LightControl>,
+    sky_scale: f32,
+}
+
 /// A finished reference: its image and where it was taken.
 struct Reference {
     image: Image,
     camera: Camera,
+    scene: ReferenceScene,
     spp: u32,
 }
 
@@ -250,6 +270,7 @@ struct ReferenceJob<'s> {
     rows_done: Arc<AtomicU32>,
     rows: u32,
     camera: Camera,
+    scene: ReferenceScene,
     spp: u32,
 }
 
@@ -307,7 +328,9 @@ impl<'p> SessionState<'p> {
             let mut job: Option<ReferenceJob<'_>> = None;
             let mut frame_in_session = 0u32;
             loop {
-                for cmd in link.commands.try_iter() {
+                let mut commands: Vec<WorkerCommand> = link.commands.try_iter().collect();
+                commands.extend(self.script_commands(&mut session, link));
+                for cmd in commands {
                     match cmd {
                         WorkerCommand::Input(e) => session.apply(e),
                         WorkerCommand::Controls(c) => {
@@ -324,7 +347,6 @@ impl<'p> SessionState<'p> {
                         WorkerCommand::Quit => return Ok(SessionEnd::Quit),
                     }
                 }
-                self.apply_script(&mut session);
                 self.frame(&mut session, link)?;
                 frame_in_session += 1;
                 job = self.poll_reference(job, &session, link, frame_in_session);
@@ -377,13 +399,31 @@ impl<'p> SessionState<'p> {
         self.controls = c;
     }
 
-    /// The script's events for the next frame.
-    fn apply_script(&self, session: &mut ViewSession<'_>) {
-        if let Some(s) = &self.opts.script {
-            for (_, e) in s.events.iter().filter(|(at, _)| *at == self.frames_total) {
+    /// The script's events for the next frame: fly input goes to the
+    /// session; viewer keys become the commands the window's keys send
+    /// (their new controls reported to the window).
+    fn script_commands(&self, session: &mut ViewSession<'_>, link: &WorkerLink) -> Vec<WorkerCommand> {
+        let Some(s) = &self.opts.script else { return vec![] };
+        let mut commands = vec![];
+        let mut controls = self.controls.clone();
+        for (_, e) in s.events.iter().filter(|(at, _)| *at == self.frames_total) {
+            let ScriptEvent::Viewer(key) = e else {
                 session.apply(*e);
+                continue;
+            };
+            match key {
+                ViewerKey::Pause => controls.paused = !controls.paused,
+                ViewerKey::NextView => controls.view = controls.view.next(controls.field.is_some()),
+                ViewerKey::Step => commands.push(WorkerCommand::StepClock),
+                ViewerKey::Reference => commands.push(WorkerCommand::Reference(self.opts.reference_spp.max(1))),
+                ViewerKey::Screenshot => commands.push(WorkerCommand::Screenshot),
             }
         }
+        if controls != self.controls {
+            let _ = link.reports.send(WorkerReport::Controls(controls.clone()));
+            commands.insert(0, WorkerCommand::Controls(controls));
+        }
+        commands
     }
 
     /// Renders one frame and hands it to the window.
@@ -462,6 +502,15 @@ impl<'p> SessionState<'p> {
         session.set_size(nw, nh);
     }
 
+    /// What the reference of the current view sees of the scene.
+    fn reference_scene(&self, session: &ViewSession<'_>) -> ReferenceScene {
+        ReferenceScene {
+            scene_frame: self.parts.scene.is_animated().then(|| session.scene_frame()),
+            lights: self.controls.lights.clone(),
+            sky_scale: self.controls.sky_scale,
+        }
+    }
+
     /// Starts the path-traced reference of the current view on a thread of `scope`.
     fn start_reference<'s>(
         &self,
@@ -492,7 +541,7 @@ impl<'p> SessionState<'p> {
             })
             .0
         });
-        ReferenceJob { handle, rows_done, rows: h, camera, spp }
+        ReferenceJob { handle, rows_done, rows: h, camera, scene: self.reference_scene(session), spp }
     }
 
     /// Reports a running reference's progress; takes a finished one in; every
@@ -512,7 +561,7 @@ impl<'p> SessionState<'p> {
                 return Some(j);
             }
             match j.handle.join() {
-                Ok(image) => self.reference = Some(Reference { image, camera: j.camera, spp: j.spp }),
+                Ok(image) => self.reference = Some(Reference { image, camera: j.camera, scene: j.scene, spp: j.spp }),
                 Err(_) => {
                     let _ = link.reports.send(WorkerReport::Error("the reference render panicked".into()));
                 }
@@ -528,8 +577,9 @@ impl<'p> SessionState<'p> {
     /// and size are where it was taken.
     fn send_reference(&self, session: &ViewSession<'_>, link: &WorkerLink) {
         let (Some(r), Some(live)) = (&self.reference, &self.last_full) else { return };
-        let same_view =
-            r.camera == session.last_camera() && (r.image.width, r.image.height) == (live.width, live.height);
+        let same_view = r.camera == session.last_camera()
+            && (r.image.width, r.image.height) == (live.width, live.height)
+            && r.scene == self.reference_scene(session);
         let mut report = ReferenceReport {
             progress: 1.0,
             spp: r.spp,
