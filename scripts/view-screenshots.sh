@@ -20,8 +20,8 @@ shot() { # name, frames, then view arguments
   cp "$out/$name-window.png" "docs/images/view-window-$name.png"
 }
 flight=(--scene builtin:sponza-sun --input-script scenes/sponza-flight.script)
-shot full 100 "${flight[@]}"
-shot indirect 100 "${flight[@]}" --view indirect
-shot probes 100 "${flight[@]}" --view probes
+shot full 60 "${flight[@]}"
+shot indirect 60 "${flight[@]}" --view indirect
+shot probes 60 "${flight[@]}" --view probes
 shot atlas 40 --scene builtin:sponza-sun --view irradiance-atlas
 shot reference 60 --scene builtin:sponza-sun --input-script "$out/reference.script" --reference-spp 64

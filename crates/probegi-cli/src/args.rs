@@ -77,9 +77,10 @@ pub struct ViewArgs {
     /// of the scene's bounding-box diagonal).
     #[arg(long)]
     pub fly_speed: Option<f32>,
-    /// With --headless: print frame-time percentiles and the field update's
-    /// share of a frame as JSON on stdout.
-    #[arg(long, requires = "headless")]
+    /// Print frame-time percentiles as JSON on stdout: with --headless the
+    /// frames' and the field update's share of them; in a scripted window
+    /// run the UI's frame interval beside the frame worker's frame time.
+    #[arg(long)]
     pub bench: bool,
     /// Write every frame into this folder as frame-NNNN.png (tone-mapped).
     #[arg(long)]

@@ -187,7 +187,11 @@ fn run_windowed(args: &ViewArgs) -> Result<()> {
         capture_path: scripted.then(|| args.screenshot.clone()).flatten(),
         prefs_path,
         start_view,
+        bench: args.bench,
     };
+    if args.bench && !scripted {
+        bail!("--bench in the window needs --exit-after-frames N (a scripted run)");
+    }
     let source = CliViewSource { args: args.clone() };
     probegi_view::viewer_window::run_window(Box::new(source), worker, window).map_err(anyhow::Error::msg)
 }

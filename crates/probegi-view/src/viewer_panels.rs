@@ -267,7 +267,7 @@ fn stats_panel(ui: &mut Ui, state: &mut PanelState) {
         return;
     };
     ui.label(format!("adapter: {}", f.adapter.as_deref().unwrap_or("CPU")));
-    ui.label(format!("frame {} at {}×{}: {:.1} ms", f.frame, f.width, f.height, f.frame_ms));
+    ui.label(format!("frame {} at {}×{}: {:.1} ms", f.frame, f.frame_size.0, f.frame_size.1, f.frame_ms));
     ui.label(format!("probe rays this frame: {}", f.rays));
     let states: Vec<String> = f.probe_states.iter().map(|(k, n)| format!("{k} {n}")).collect();
     if !states.is_empty() {

@@ -41,6 +41,8 @@ pub struct WindowOptions {
     /// A scripted run: exit when the worker is done, capture the window
     /// beside `capture_path`.
     pub capture_path: Option<PathBuf>,
+    /// Print the UI's and the worker's frame-time percentiles as JSON at the end.
+    pub bench: bool,
     /// Settings that persist between runs (`None`: a scripted run reads none).
     pub prefs_path: Option<PathBuf>,
     /// The view asked for on the command line (`--view`; the worker starts with it).
@@ -77,6 +79,9 @@ pub fn run_window(source: Box<dyn ViewSource>, worker: WorkerOptions, opts: Wind
     let _ = cmd_tx.send(WorkerCommand::Quit);
     drop(cmd_tx);
     app.save_prefs();
+    if app.opts.bench {
+        println!("{}", app.bench_json());
+    }
     let worker_result = worker_thread.join().map_err(|_| "the frame worker panicked".to_string())?;
     run?;
     app.outcome.take().unwrap_or(Ok(())).and(worker_result)
@@ -114,6 +119,11 @@ struct ViewerApp {
     /// A scripted run ended: capture the window, then close.
     capture: Option<(Receiver<Arc<ColorImage>>, u32)>,
     done: bool,
+    /// When the last UI frame began, and the intervals between UI frames (ms).
+    last_ui_frame: Option<std::time::Instant>,
+    ui_frame_ms: Vec<f64>,
+    /// The worker's frame times (a scripted run's, at its end).
+    worker_frame_ms: Vec<f64>,
 }
 
 impl ViewerApp {
@@ -139,6 +149,9 @@ impl ViewerApp {
             outcome: None,
             capture: None,
             done: false,
+            last_ui_frame: None,
+            ui_frame_ms: Vec::new(),
+            worker_frame_ms: Vec::new(),
         }
     }
 
@@ -152,6 +165,21 @@ impl ViewerApp {
         if let Err(e) = self.prefs.save(path) {
             eprintln!("probegi view: {e}");
         }
+    }
+
+    /// `--bench` in the window: the UI's frame interval and the worker's frame
+    /// time, percentiles (median, p95, max) in milliseconds.
+    fn bench_json(&self) -> String {
+        let p = |ms: &[f64]| {
+            let [m, p95, max] = crate::scripted_run::frame_time_percentiles(ms);
+            format!("{{\"median\": {m:.2}, \"p95\": {p95:.2}, \"max\": {max:.2}, \"frames\": {}}}", ms.len())
+        };
+        format!(
+            "{{\"scene\": {:?}, \"ui_frame_ms\": {}, \"worker_frame_ms\": {}}}",
+            self.opts.scene_name,
+            p(&self.ui_frame_ms),
+            p(&self.worker_frame_ms)
+        )
     }
 
     fn send(&self, cmd: WorkerCommand) {
@@ -207,7 +235,10 @@ impl ViewerApp {
                         event_loop.exit();
                     }
                 }
-                WorkerReport::Done => self.done = true,
+                WorkerReport::Done(ms) => {
+                    self.done = true;
+                    self.worker_frame_ms = ms;
+                }
             }
         }
         let frame = self.latest.lock().ok().and_then(|mut s| s.take());
@@ -271,6 +302,10 @@ impl ViewerApp {
 
     /// One UI frame: reports in, panels, paint.
     fn redraw(&mut self, event_loop: &ActiveEventLoop) {
+        let now = std::time::Instant::now();
+        if let Some(last) = self.last_ui_frame.replace(now) {
+            self.ui_frame_ms.push((now - last).as_secs_f64() * 1e3);
+        }
         self.take_reports(event_loop);
         let Some(gfx) = self.gfx.as_mut() else { return };
         let raw_input = gfx.egui_state.take_egui_input(&gfx.window);

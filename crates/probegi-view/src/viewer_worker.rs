@@ -114,6 +114,8 @@ pub struct FrameReport {
     pub width: u32,
     /// Its size, pixels.
     pub height: u32,
+    /// The rendered frame's size, pixels (the view's differs for the atlases).
+    pub frame_size: (u32, u32),
     /// Wall milliseconds of the frame (input, field update, camera frame, view).
     pub frame_ms: f64,
     /// This frame's milliseconds by pass.
@@ -170,8 +172,8 @@ pub enum WorkerReport {
     Message(String),
     /// A failure; the worker waits for a reload or quit.
     Error(String),
-    /// A scripted run finished.
-    Done,
+    /// A scripted run finished: the wall milliseconds of each of its frames.
+    Done(Vec<f64>),
 }
 
 /// The newest frame, overwritten by the worker and taken by the window.
@@ -197,6 +199,7 @@ pub struct WorkerLink {
 pub fn run_worker(source: &dyn ViewSource, opts: &WorkerOptions, link: &WorkerLink) -> Result<(), String> {
     let mut controls: Option<ViewerControls> = None;
     let mut frames_total = 0u32;
+    let mut frame_ms = Vec::new();
     loop {
         let parts = match source.load(controls.as_ref()) {
             Ok(p) => p,
@@ -213,11 +216,13 @@ pub fn run_worker(source: &dyn ViewSource, opts: &WorkerOptions, link: &WorkerLi
         };
         let first = controls.is_none();
         let mut state = SessionState::new(&parts, controls.take(), opts, frames_total, source.watched_file());
+        state.frame_ms = std::mem::take(&mut frame_ms);
         if let (true, Some(v)) = (first, opts.start_view) {
             state.controls.view = v;
         }
         let end = state.run(link);
         frames_total = state.frames_total;
+        frame_ms = std::mem::take(&mut state.frame_ms);
         controls = Some(state.controls);
         match end {
             Ok(SessionEnd::Rebuild) => continue,
@@ -280,6 +285,8 @@ struct SessionState<'p> {
     controls: ViewerControls,
     opts: &'p WorkerOptions,
     frames_total: u32,
+    /// Wall milliseconds of every frame so far (all sessions).
+    frame_ms: Vec<f64>,
     last_full: Option<Image>,
     prev_pass_totals: BTreeMap<&'static str, f64>,
     reference: Option<Reference>,
@@ -301,6 +308,7 @@ impl<'p> SessionState<'p> {
             controls: user.unwrap_or_else(|| ViewerControls::new(parts.gi, parts.cascades, &parts.scene, None)),
             opts,
             frames_total,
+            frame_ms: Vec::new(),
             last_full: None,
             prev_pass_totals: BTreeMap::new(),
             reference: None,
@@ -440,6 +448,7 @@ impl<'p> SessionState<'p> {
             view_image(self.controls.view, &full, session, scene, &*self.parts.tracer, self.controls.atlas_volume)?;
         let report = self.report(session, &view, t.elapsed().as_secs_f64() * 1e3);
         self.adapt_size(session, report.frame_ms);
+        self.frame_ms.push(report.frame_ms);
         self.last_full = Some(full);
         self.frames_total += 1;
         if let Ok(mut slot) = link.latest.lock() {
@@ -472,6 +481,7 @@ impl<'p> SessionState<'p> {
             rgba: to_rgba8(view),
             width: view.width,
             height: view.height,
+            frame_size: session.size(),
             frame_ms,
             pass_ms,
             rays,
@@ -623,7 +633,7 @@ impl<'p> SessionState<'p> {
         if let (Some(path), Some(img)) = (&self.opts.screenshot, &self.last_full) {
             probegi_image::write_image(path, img).map_err(|e| e.to_string())?;
         }
-        let _ = link.reports.send(WorkerReport::Done);
+        let _ = link.reports.send(WorkerReport::Done(self.frame_ms.clone()));
         Ok(SessionEnd::Quit)
     }
 

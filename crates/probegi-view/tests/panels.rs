@@ -29,6 +29,7 @@ fn frame_report() -> FrameReport {
         scene_frame: 12,
         width: 32,
         height: 24,
+        frame_size: (32, 24),
         frame_ms: 41.5,
         pass_ms: vec![("trace", 10.0), ("shade", 20.0), ("blend", 3.0), ("camera", 8.0)],
         rays: 3456,

@@ -20,7 +20,10 @@ use probegi_view::viewer_worker::{
 };
 
 /// The Cornell box at 24×24 with a small field; `controls` pick the rays.
-struct CornellSource;
+/// `watched` stands for its scene file.
+struct CornellSource {
+    watched: PathBuf,
+}
 
 impl ViewSource for CornellSource {
     fn load(&self, controls: Option<&ViewerControls>) -> Result<SessionParts, String> {
@@ -50,7 +53,7 @@ impl ViewSource for CornellSource {
     }
 
     fn watched_file(&self) -> Option<PathBuf> {
-        None
+        Some(self.watched.clone())
     }
 }
 
@@ -85,7 +88,10 @@ fn the_worker_renders_rebuilds_references_and_screenshots() {
     let latest = Arc::new(Mutex::new(None));
     let link = WorkerLink { commands: cmd_rx, reports: rep_tx, latest: Arc::clone(&latest) };
     let opts = WorkerOptions { fixed_dt_s: Some(1.0 / 60.0), screenshot_dir: dir.clone(), ..Default::default() };
-    let worker = std::thread::spawn(move || run_worker(&CornellSource, &opts, &link));
+    let watched = dir.join("scene.toml");
+    std::fs::write(&watched, "# v1\n").expect("write");
+    let source = CornellSource { watched: watched.clone() };
+    let worker = std::thread::spawn(move || run_worker(&source, &opts, &link));
 
     let ready = wait_for(&rep_rx, "the first session", |r| match r {
         WorkerReport::Ready(c) => Some(c),
@@ -143,6 +149,14 @@ fn the_worker_renders_rebuilds_references_and_screenshots() {
         .filter(|e| e.as_ref().is_ok_and(|e| e.path().extension().is_some_and(|x| x == "exr")))
         .count();
     assert_eq!(pngs, 1);
+    // The scene file changes: the worker loads it anew, the panels' settings kept.
+    std::thread::sleep(Duration::from_millis(50));
+    std::fs::write(&watched, "# v2, a longer file\n").expect("write");
+    let reloaded = wait_for(&rep_rx, "the reload", |r| match r {
+        WorkerReport::Ready(c) => Some(c),
+        _ => None,
+    });
+    assert_eq!(reloaded.field.map(|f| f.rays_per_probe), Some(48));
     cmd_tx.send(WorkerCommand::Quit).expect("send");
     worker.join().expect("no panic").expect("the worker ends cleanly");
     let _ = std::fs::remove_dir_all(dir);
