@@ -25,3 +25,4 @@ shot indirect 60 "${flight[@]}" --view indirect
 shot probes 60 "${flight[@]}" --view probes
 shot atlas 40 --scene builtin:sponza-sun --view irradiance-atlas
 shot reference 60 --scene builtin:sponza-sun --input-script "$out/reference.script" --reference-spp 64
+shot forest 30 --scene builtin:forest

@@ -1,16 +1,23 @@
-//! probegi-view: the field live, one frame at a time through a fly camera
-//! (issue "`probegi view`…"). Built so far, without a window:
+//! probegi-view: the field live through a fly camera (issue "`probegi
+//! view`…"), in a window or without one.
 //! - [`fly_camera`]: WASD/QE and mouse look, a speed on the scroll wheel,
 //!   reset to the scene's camera;
 //! - [`input_script`]: timed key and mouse events from a small text format,
 //!   so a run is reproducible without a person;
-//! - [`scripted_run`]: the headless run (`probegi view --headless`): the
-//!   script drives the fly camera frame by frame while the field keeps
-//!   updating (`probegi_cpu::frame_loop::FrameStepper`, on either backend).
+//! - [`view_session`]: one viewer frame (input, fly camera, then
+//!   `probegi_cpu::frame_loop::FrameStepper`, on either backend), with a scene
+//!   clock that pauses and steps;
+//! - [`scripted_run`]: the headless run (`probegi view --headless`);
+//! - [`view_layers`]: the debug views (direct, indirect, albedo, normals,
+//!   probes, atlases);
+//! - [`viewer_controls`]: what the panels set, live or by rebuilding the field;
+//! - [`viewer_worker`]: the frame worker thread (sessions, the path-traced
+//!   reference with FLIP, screenshots, reload, adaptive CPU frame size);
+//! - [`viewer_panels`]: the egui panels; [`viewer_prefs`]: settings that
+//!   persist; [`viewer_window`]: winit + egui-wgpu.
 //!
-//! Not built yet: the window (winit), the panels (egui), the reference one key
-//! away. The UI crates will come into this crate only, so the library crates
-//! never compile them.
+//! The UI crates (winit, egui, egui-winit, egui-wgpu) come into this crate
+//! only, so the library crates never compile them.
 
 #![warn(missing_docs)]
 

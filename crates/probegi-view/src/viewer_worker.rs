@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::mpsc::{Receiver, Sender};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Instant, SystemTime};
 
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::image::Image;
@@ -672,6 +672,3 @@ fn posed_scene(parts: &SessionParts, controls: &ViewerControls, scene_frame: u32
 fn file_safe(name: &str) -> String {
     name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
 }
-
-/// How long the window waits for the worker's first frame before it says so.
-pub const FIRST_FRAME_PATIENCE: Duration = Duration::from_secs(600);
