@@ -184,6 +184,7 @@ fn run_windowed(args: &ViewArgs) -> Result<()> {
         title: format!("probegi view: {scene_name}"),
         scene_name,
         cpu_backend: args.backend == crate::gpu_backend::Backend::Cpu,
+        scripted,
         capture_path: scripted.then(|| args.screenshot.clone()).flatten(),
         prefs_path,
         start_view,
@@ -202,25 +203,33 @@ struct CliViewSource {
 }
 
 impl CliViewSource {
-    /// The arguments with the panels' rebuild settings applied.
+    /// The arguments with the panels' rebuild settings applied: the GI
+    /// method and cascades, and the field settings the panels changed from
+    /// what the command line built. A method other than the command line's
+    /// keeps the scene-level `--set` keys only (the probe keys were for the
+    /// other method).
     fn args_for(&self, controls: Option<&ViewerControls>) -> ViewArgs {
         let mut args = self.args.clone();
-        if let Some(c) = controls {
-            args.gi = match c.gi {
-                GiChoice::None => GiArg::None,
-                GiChoice::Ddgi => GiArg::Ddgi,
-                GiChoice::Sh => GiArg::Sh,
-            };
-            args.volume.cascades = (c.gi == GiChoice::Ddgi && c.cascades > 0).then_some(c.cascades);
-            match (c.gi, c.field) {
-                (GiChoice::Ddgi, Some(f)) => {
+        let Some(c) = controls else { return args };
+        let gi = match c.gi {
+            GiChoice::None => GiArg::None,
+            GiChoice::Ddgi => GiArg::Ddgi,
+            GiChoice::Sh => GiArg::Sh,
+        };
+        if gi != self.args.gi {
+            let set = args.volume.set.iter().filter(|a| probegi_scene::scene_file::is_scene_setting(a)).cloned();
+            let cascade_ratio = args.volume.cascade_ratio;
+            args.volume = crate::args::VolumeArgs { set: set.collect(), cascade_ratio, ..Default::default() };
+        }
+        args.gi = gi;
+        if gi == GiArg::Ddgi {
+            args.volume.cascades = (c.cascades > 0).then_some(c.cascades);
+            if let Some(f) = c.field {
+                let overrides = f.set_overrides_from(c.field_at_start.as_ref());
+                if overrides.iter().any(|o| o.starts_with("probe_rays_per_probe=")) {
                     args.volume.rays_per_probe = None;
-                    args.volume.set.extend(f.set_overrides());
                 }
-                (GiChoice::Ddgi, None) => {}
-                _ => {
-                    args.volume = crate::args::VolumeArgs::default();
-                }
+                args.volume.set.extend(overrides);
             }
         }
         args

@@ -104,7 +104,7 @@ fn a_window_flies_the_script_and_matches_the_headless_run() {
     // the panels give hundreds.
     assert!(dark < 0.5, "the window is mostly black ({:.0} %)", dark * 100.0);
     assert!(colours.len() > 200, "the window shows {} colours: nothing drawn", colours.len());
-    let lit = px.iter().filter(|p| p[0] > 60 && p[0] > p[2] + 20).count();
+    let lit = px.iter().filter(|p| p[0] > 60 && u16::from(p[0]) > u16::from(p[2]) + 20).count();
     assert!(lit > 1000, "the Cornell box's red wall is on screen ({lit} red pixels)");
     let _ = std::fs::remove_dir_all(headless_shot.parent().expect("dir"));
 }

@@ -394,6 +394,8 @@ impl<'a> FrameLoop<'a> {
         if let Some(fs) = frame_scene.as_mut() {
             fs.set_frame_from(self.base_scene, f as f32);
             if let Some(edit) = &self.scene_edit {
+                // Posing does not carry the sky; an edit starts from the base's.
+                fs.sky_radiance = self.base_scene.sky_radiance;
                 edit(self.base_scene, fs);
             }
         }

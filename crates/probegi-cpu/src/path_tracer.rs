@@ -81,6 +81,23 @@ impl<'a> PathTracer<'a> {
         height: u32,
         on_row_done: &(dyn Fn() + Sync),
     ) -> (Image, RenderCounters) {
+        let never = std::sync::atomic::AtomicBool::new(false);
+        self.render_cancellable(camera, width, height, on_row_done, &never)
+            .unwrap_or_else(|| (Image::new(width, height), RenderCounters::default()))
+    }
+
+    /// [`Self::render`] that stops early when `cancel` is set (rows not yet
+    /// started are skipped): `None` when it was cancelled. Uncancelled, the
+    /// image is `render`'s, bit for bit.
+    pub fn render_cancellable(
+        &self,
+        camera: &CameraRays,
+        width: u32,
+        height: u32,
+        on_row_done: &(dyn Fn() + Sync),
+        cancel: &std::sync::atomic::AtomicBool,
+    ) -> Option<(Image, RenderCounters)> {
+        use std::sync::atomic::Ordering::Relaxed;
         let mut img = Image::new(width, height);
         let w = width as usize;
         let spp = self.settings.pt_spp.max(1);
@@ -88,6 +105,9 @@ impl<'a> PathTracer<'a> {
             &mut img.pixels,
             w,
             |y, row| {
+                if cancel.load(Relaxed) {
+                    return 0;
+                }
                 let mut rays = 0u64;
                 for (x, px) in row.iter_mut().enumerate() {
                     let pixel = (y * w + x) as u64;
@@ -109,7 +129,7 @@ impl<'a> PathTracer<'a> {
             },
             on_row_done,
         );
-        (img, RenderCounters { rays_traced: rays })
+        (!cancel.load(Relaxed)).then_some((img, RenderCounters { rays_traced: rays }))
     }
 
     /// One next-event sample of the area lights at `sp`, MIS-weighted against

@@ -13,7 +13,7 @@ use probegi_core::image::Image;
 use probegi_cpu::gbuffer::trace_gbuffer;
 use probegi_cpu::shading::ShadingContext;
 use probegi_field::atlas_view::{distance_grey_image, irradiance_image};
-use probegi_scene::{RayTracer, Scene};
+use probegi_scene::RayTracer;
 
 use crate::view_session::ViewSession;
 
@@ -89,59 +89,51 @@ impl ViewMode {
     }
 }
 
-/// The HDR image of `mode` for the frame `full` that `session` just rendered
-/// over `scene` (posed as the frame saw it) and `tracer`; `volume` picks the
-/// atlas. Views that need a field fall back to the full frame without one.
+/// The HDR image of `mode` for the frame `full` that `session` just
+/// rendered; `tracer` traces the loaded scene (moving objects are placed at
+/// the frame's clock). Views that need a field show the full frame without one.
 pub fn view_image(
     mode: ViewMode,
     full: &Image,
     session: &mut ViewSession<'_>,
-    scene: &Scene,
     tracer: &dyn RayTracer,
     volume: usize,
 ) -> Result<Image, String> {
-    let (w, h) = (full.width, full.height);
-    let camera = CameraRays::new(&session.last_camera(), w, h);
+    match mode {
+        ViewMode::Full => return Ok(full.clone()),
+        ViewMode::Direct => return Ok(session.stepper().layers().direct),
+        ViewMode::Indirect => return Ok(session.stepper().layers().indirect),
+        _ => {}
+    }
+    let has_field = session.stepper_mut().sync_field_to_host()?.is_some();
+    let st = session.stepper();
+    // The scene as the frame saw it: posed at its clock, lights switched.
+    let scene = st.frame_scene();
+    let at_frame = tracer.at_frame(scene, session.last_scene_frame() as f32);
+    let tracer: &dyn RayTracer = at_frame.as_deref().unwrap_or(tracer);
+    let camera = CameraRays::new(&session.last_camera(), full.width, full.height);
     let gbuffer_image = |pixel: &dyn Fn(&probegi_scene::SurfacePoint, glam::Vec3) -> glam::Vec3| {
-        let (g, _) = trace_gbuffer(scene, tracer, &camera, w, h, 0, 0);
+        let (g, _) = trace_gbuffer(scene, tracer, &camera, full.width, full.height, 0, 0);
         let pixels =
             g.texels.iter().map(|t| t.surface.as_ref().map_or(glam::Vec3::ZERO, |sp| pixel(sp, t.view_dir_world)));
-        Image { width: w, height: h, pixels: pixels.collect() }
+        Image { width: full.width, height: full.height, pixels: pixels.collect() }
     };
-    match mode {
-        ViewMode::Full => Ok(full.clone()),
-        ViewMode::Direct => Ok(session.stepper().layers().direct),
-        ViewMode::Indirect => Ok(session.stepper().layers().indirect),
-        ViewMode::Albedo => Ok(gbuffer_image(&|sp, v| ShadingContext::new(scene, sp, -v).bsdf.diffuse_albedo())),
-        ViewMode::Normals => Ok(gbuffer_image(&|sp, _| sp.shading_normal * 0.5 + 0.5)),
-        ViewMode::Probes | ViewMode::IrradianceAtlas | ViewMode::DistanceAtlas => {
-            field_view(mode, full, session, scene, tracer, &camera, volume)
+    let set = st.field().filter(|_| has_field);
+    match (mode, set) {
+        (ViewMode::Albedo, _) => Ok(gbuffer_image(&|sp, v| ShadingContext::new(scene, sp, -v).bsdf.diffuse_albedo())),
+        (ViewMode::Normals, _) => Ok(gbuffer_image(&|sp, _| sp.shading_normal * 0.5 + 0.5)),
+        (_, None) => Ok(full.clone()),
+        (ViewMode::IrradianceAtlas, Some(set)) => {
+            Ok(irradiance_image(&set.volumes()[volume.min(set.volumes().len() - 1)]))
         }
-    }
-}
-
-/// The views that read the field on the host.
-fn field_view(
-    mode: ViewMode,
-    full: &Image,
-    session: &mut ViewSession<'_>,
-    scene: &Scene,
-    tracer: &dyn RayTracer,
-    camera: &CameraRays,
-    volume: usize,
-) -> Result<Image, String> {
-    let Some(set) = session.stepper_mut().sync_field_to_host()? else {
-        return Ok(full.clone());
-    };
-    let v = &set.volumes()[volume.min(set.volumes().len() - 1)];
-    match mode {
-        ViewMode::IrradianceAtlas => Ok(irradiance_image(v)),
-        ViewMode::DistanceAtlas => Ok(distance_grey_image(v)),
-        _ => {
-            let (g, _) = trace_gbuffer(scene, tracer, camera, full.width, full.height, 0, 0);
+        (ViewMode::DistanceAtlas, Some(set)) => {
+            Ok(distance_grey_image(&set.volumes()[volume.min(set.volumes().len() - 1)]))
+        }
+        (_, Some(set)) => {
+            let (g, _) = trace_gbuffer(scene, tracer, &camera, full.width, full.height, 0, 0);
             let mut pixels = full.pixels.clone();
             for v in set.volumes() {
-                probegi_cpu::probe_vis::draw_probes(v, camera, &g, &mut pixels);
+                probegi_cpu::probe_vis::draw_probes(v, &camera, &g, &mut pixels);
             }
             Ok(Image { width: full.width, height: full.height, pixels })
         }

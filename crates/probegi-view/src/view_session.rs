@@ -29,6 +29,22 @@ pub struct ViewSession<'a> {
     paused: bool,
     step_once: bool,
     last_camera: Camera,
+    last_scene_frame: u32,
+}
+
+/// What a viewer keeps when its session is built anew (a rebuild or a
+/// reload): the fly camera, whether the keyframed path still plays, and the
+/// scene clock.
+#[derive(Clone, Copy, Debug)]
+pub struct ViewCarry {
+    /// The fly camera.
+    pub fly: FlyCamera,
+    /// The keyframed path still plays.
+    pub on_path: bool,
+    /// The scene clock.
+    pub scene_frame: u32,
+    /// The clock is paused.
+    pub paused: bool,
 }
 
 impl<'a> ViewSession<'a> {
@@ -58,7 +74,21 @@ impl<'a> ViewSession<'a> {
             paused: false,
             step_once: false,
             last_camera: start,
+            last_scene_frame: 0,
         }
+    }
+
+    /// What a new session over the same scene should take over.
+    pub fn carry(&self) -> ViewCarry {
+        ViewCarry { fly: self.fly, on_path: self.on_path, scene_frame: self.scene_frame, paused: self.paused }
+    }
+
+    /// Takes over a previous session's camera and clock.
+    pub fn restore(&mut self, carry: ViewCarry) {
+        self.fly = carry.fly;
+        self.on_path = carry.on_path && !self.camera_path.is_empty();
+        self.scene_frame = carry.scene_frame;
+        self.paused = carry.paused;
     }
 
     /// Applies one input event (it takes effect at the next frame).
@@ -72,7 +102,9 @@ impl<'a> ViewSession<'a> {
         let camera = self.next_camera(dt_s);
         self.stepper.set_scene_frame(Some(self.scene_frame));
         let image = self.stepper.step(&CameraRays::new(&camera, self.size.0, self.size.1))?;
-        if !self.paused || std::mem::take(&mut self.step_once) {
+        self.last_scene_frame = self.scene_frame;
+        let step = std::mem::take(&mut self.step_once);
+        if !self.paused || step {
             self.scene_frame += 1;
         }
         self.last_camera = camera;
@@ -127,9 +159,15 @@ impl<'a> ViewSession<'a> {
         self.paused
     }
 
-    /// While paused: the next frame advances the scene clock by one.
+    /// While paused: the next frame advances the scene clock by one (a
+    /// running clock ignores it).
     pub fn step_scene_clock(&mut self) {
-        self.step_once = true;
+        self.step_once = self.paused;
+    }
+
+    /// The scene clock of the last frame rendered.
+    pub fn last_scene_frame(&self) -> u32 {
+        self.last_scene_frame
     }
 
     /// The scene clock, frames.

@@ -83,7 +83,19 @@ impl FieldControls {
         }
     }
 
-    /// The rebuild settings as `--set KEY=VALUE` overrides, for the field built anew.
+    /// The settings that differ from `base` (what the command line built) as
+    /// `--set KEY=VALUE` overrides, for the field built anew; every setting
+    /// without a base. A scene's `[[volumes]]` keep their own values for the
+    /// settings the panel did not touch.
+    pub fn set_overrides_from(&self, base: Option<&FieldControls>) -> Vec<String> {
+        let all = self.set_overrides();
+        match base {
+            Some(b) => all.into_iter().zip(b.set_overrides()).filter(|(a, b)| a != b).map(|(a, _)| a).collect(),
+            None => all,
+        }
+    }
+
+    /// Every panel setting as a `--set KEY=VALUE` override.
     pub fn set_overrides(&self) -> Vec<String> {
         let states = match self.probe_states {
             ProbeStatesMode::AllActive => "all-active",
@@ -133,6 +145,9 @@ pub struct ViewerControls {
     pub atlas_volume: usize,
     /// The scene clock is paused.
     pub paused: bool,
+    /// The field's settings as the command line built them (the first
+    /// session's), against which a rebuild's overrides are taken.
+    pub field_at_start: Option<FieldControls>,
 }
 
 impl ViewerControls {
@@ -161,6 +176,7 @@ impl ViewerControls {
             view: ViewMode::Full,
             atlas_volume: 0,
             paused: false,
+            field_at_start: None,
         }
     }
 
@@ -188,5 +204,24 @@ impl ViewerControls {
             }
             posed.sky_radiance = base.sky_radiance * sky;
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overrides_are_only_what_the_panel_changed() {
+        let base = FieldControls::from_settings(&DdgiVolumeSettings::default());
+        let mut f = base;
+        assert!(f.set_overrides_from(Some(&base)).is_empty());
+        f.rays_per_probe = 64;
+        f.probe_states = ProbeStatesMode::AllActive;
+        assert_eq!(
+            f.set_overrides_from(Some(&base)),
+            vec!["probe_rays_per_probe=64".to_string(), "probe_states=all-active".to_string()]
+        );
+        assert_eq!(f.set_overrides_from(None).len(), 8);
     }
 }

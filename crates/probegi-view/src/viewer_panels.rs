@@ -149,7 +149,7 @@ fn gi_panel(ui: &mut Ui, state: &mut PanelState) {
     if c.gi == GiChoice::Ddgi {
         ui.horizontal(|ui| {
             let l = ui.label("cascades (0: the scene's volumes)");
-            ui.add(egui::DragValue::new(&mut c.cascades).range(0..=6)).labelled_by(l.id);
+            ui.add(egui::DragValue::new(&mut c.cascades).range(0..=6).clamp_existing_to_range(false)).labelled_by(l.id);
         });
     }
 }
@@ -159,7 +159,7 @@ fn field_panel(ui: &mut Ui, state: &mut PanelState) {
         ui.label("no DDGI field");
         return;
     };
-    ui.add(egui::Slider::new(&mut f.hysteresis, 0.0..=0.999).text("hysteresis"));
+    ui.add(egui::Slider::new(&mut f.hysteresis, 0.0..=1.0).clamping(egui::SliderClamping::Edits).text("hysteresis"));
     ui.checkbox(&mut f.fast_convergence, "fast convergence");
     ui.checkbox(&mut f.glossy_second_order, "second-order glossy");
     ui.horizontal(|ui| {
@@ -170,7 +170,8 @@ fn field_panel(ui: &mut Ui, state: &mut PanelState) {
     ui.label("These rebuild the field:");
     ui.horizontal(|ui| {
         let l = ui.label("rays per probe");
-        ui.add(egui::DragValue::new(&mut f.rays_per_probe).range(16..=1024)).labelled_by(l.id);
+        ui.add(egui::DragValue::new(&mut f.rays_per_probe).range(16..=1024).clamp_existing_to_range(false))
+            .labelled_by(l.id);
     });
     ui.horizontal(|ui| {
         ui.label("probe states");
@@ -204,10 +205,14 @@ fn lights_panel(ui: &mut Ui, state: &mut PanelState) {
     for l in &mut c.lights {
         ui.horizontal(|ui| {
             ui.checkbox(&mut l.enabled, &l.name);
-            ui.add(egui::Slider::new(&mut l.intensity_scale, 0.0..=4.0).text("× intensity"));
+            ui.add(
+                egui::Slider::new(&mut l.intensity_scale, 0.0..=4.0)
+                    .clamping(egui::SliderClamping::Edits)
+                    .text("× intensity"),
+            );
         });
     }
-    ui.add(egui::Slider::new(&mut c.sky_scale, 0.0..=4.0).text("× sky radiance"));
+    ui.add(egui::Slider::new(&mut c.sky_scale, 0.0..=4.0).clamping(egui::SliderClamping::Edits).text("× sky radiance"));
 }
 
 fn clock_panel(ui: &mut Ui, state: &mut PanelState, actions: &mut Vec<PanelAction>) {
@@ -230,7 +235,8 @@ fn clock_panel(ui: &mut Ui, state: &mut PanelState, actions: &mut Vec<PanelActio
 fn reference_panel(ui: &mut Ui, state: &mut PanelState, actions: &mut Vec<PanelAction>) {
     ui.horizontal(|ui| {
         let l = ui.label("reference spp");
-        ui.add(egui::DragValue::new(&mut state.reference_spp).range(1..=65536)).labelled_by(l.id);
+        ui.add(egui::DragValue::new(&mut state.reference_spp).range(1..=65536).clamp_existing_to_range(false))
+            .labelled_by(l.id);
         if ui.button("path-trace this view").clicked() {
             actions.push(PanelAction::Reference(state.reference_spp));
         }

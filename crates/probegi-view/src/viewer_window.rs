@@ -38,8 +38,9 @@ pub struct WindowOptions {
     pub scene_name: String,
     /// The CPU backend renders (the GI panel offers SH).
     pub cpu_backend: bool,
-    /// A scripted run: exit when the worker is done, capture the window
-    /// beside `capture_path`.
+    /// A scripted run: the window closes when the worker is done (or fails).
+    pub scripted: bool,
+    /// Capture the window beside this screenshot at a scripted run's end.
     pub capture_path: Option<PathBuf>,
     /// Print the UI's and the worker's frame-time percentiles as JSON at the end.
     pub bench: bool,
@@ -119,6 +120,8 @@ struct ViewerApp {
     /// A scripted run ended: capture the window, then close.
     capture: Option<(Receiver<Arc<ColorImage>>, u32)>,
     done: bool,
+    /// The worker's last error, shown in the central panel.
+    error: Option<String>,
     /// When the last UI frame began, and the intervals between UI frames (ms).
     last_ui_frame: Option<std::time::Instant>,
     ui_frame_ms: Vec<f64>,
@@ -149,6 +152,7 @@ impl ViewerApp {
             outcome: None,
             capture: None,
             done: false,
+            error: None,
             last_ui_frame: None,
             ui_frame_ms: Vec::new(),
             worker_frame_ms: Vec::new(),
@@ -183,12 +187,29 @@ impl ViewerApp {
     }
 
     fn send(&self, cmd: WorkerCommand) {
+        // A scripted run is the script's alone: live fly input would make it
+        // differ from the same script's headless run.
+        if self.opts.scripted && matches!(cmd, WorkerCommand::Input(_)) {
+            return;
+        }
         let _ = self.commands.send(cmd);
     }
 
     /// Takes the worker's reports and its newest frame in.
     fn take_reports(&mut self, event_loop: &ActiveEventLoop) {
-        while let Ok(report) = self.reports.try_recv() {
+        loop {
+            let report = match self.reports.try_recv() {
+                Ok(r) => r,
+                Err(mpsc::TryRecvError::Empty) => break,
+                Err(mpsc::TryRecvError::Disconnected) => {
+                    // The worker ended without `Done`: its error (if any) is its result.
+                    if !self.done {
+                        self.outcome.get_or_insert(Ok(()));
+                        event_loop.exit();
+                    }
+                    break;
+                }
+            };
             match report {
                 WorkerReport::Ready(mut c) => {
                     let first = self.panels.is_none();
@@ -202,6 +223,12 @@ impl ViewerApp {
                         p
                     });
                     panels.controls = c;
+                    if !first {
+                        // A new session: an old reference no longer describes it.
+                        panels.reference = None;
+                        self.textures.reference = None;
+                        self.textures.heat = None;
+                    }
                 }
                 WorkerReport::Controls(c) => {
                     if let Some(p) = self.panels.as_mut() {
@@ -230,7 +257,8 @@ impl ViewerApp {
                 WorkerReport::Error(e) => {
                     eprintln!("probegi view: {e}");
                     self.status(format!("error: {e}"));
-                    if self.opts.capture_path.is_some() {
+                    self.error = Some(e.clone());
+                    if self.opts.scripted {
                         self.outcome = Some(Err(e));
                         event_loop.exit();
                     }
@@ -248,6 +276,14 @@ impl ViewerApp {
             if let Some(p) = self.panels.as_mut() {
                 p.push_frame(f);
             }
+        }
+    }
+
+    /// Releases every fly key and stops looking (focus lost, a release missed).
+    fn release_all(&mut self) {
+        self.looking = false;
+        for k in [FlyKey::W, FlyKey::A, FlyKey::S, FlyKey::D, FlyKey::Q, FlyKey::E] {
+            self.send(WorkerCommand::Input(ScriptEvent::Key(k, false)));
         }
     }
 
@@ -310,13 +346,18 @@ impl ViewerApp {
         let Some(gfx) = self.gfx.as_mut() else { return };
         let raw_input = gfx.egui_state.take_egui_input(&gfx.window);
         let mut actions = vec![];
-        let (ui_visible, textures) = (self.ui_visible, &self.textures);
+        let (ui_visible, textures, error) = (self.ui_visible, &self.textures, self.error.as_deref());
         let panels = &mut self.panels;
         let full_output = self.ctx.run_ui(raw_input, |ui| {
             if ui_visible && let Some(p) = panels.as_mut() {
                 egui::Panel::right("panels").default_size(340.0).show(ui, |ui| actions = panels_ui(ui, p));
             }
-            egui::CentralPanel::default().show(ui, |ui| central_ui(ui, textures, panels.as_ref()));
+            egui::CentralPanel::default().show(ui, |ui| {
+                if let Some(e) = error.filter(|_| textures.live.is_none()) {
+                    ui.colored_label(egui::Color32::from_rgb(255, 120, 100), format!("error: {e}"));
+                }
+                central_ui(ui, textures, panels.as_ref())
+            });
         });
         gfx.egui_state.handle_platform_output(&gfx.window, full_output.platform_output);
         let clipped = self.ctx.tessellate(full_output.shapes, full_output.pixels_per_point);
@@ -368,7 +409,7 @@ impl ViewerApp {
     /// up after 120 UI frames, saying so).
     fn finish_capture(&mut self, event_loop: &ActiveEventLoop) {
         let Some((rx, waited)) = self.capture.as_mut() else {
-            if self.done && self.opts.capture_path.is_none() {
+            if self.done && self.opts.capture_path.is_none() && self.opts.scripted {
                 self.outcome.get_or_insert(Ok(()));
                 event_loop.exit();
             }
@@ -458,12 +499,17 @@ impl ApplicationHandler for ViewerApp {
                 }
             }
             WindowEvent::RedrawRequested => self.redraw(event_loop),
-            WindowEvent::KeyboardInput { event, .. } if !consumed && !event.repeat => {
+            // Releases always reach the fly camera (a key held into a text field
+            // must not stick); presses only when egui does not take them.
+            WindowEvent::KeyboardInput { event, .. }
+                if !event.repeat && (!consumed || event.state == ElementState::Released) =>
+            {
                 if let PhysicalKey::Code(code) = event.physical_key {
                     let ctrl = self.ctx.input(|i| i.modifiers.ctrl);
                     self.key(event_loop, code, event.state == ElementState::Pressed, ctrl);
                 }
             }
+            WindowEvent::Focused(false) => self.release_all(),
             WindowEvent::MouseInput { button: MouseButton::Right, state, .. } => {
                 self.looking = state == ElementState::Pressed && !self.ctx.egui_wants_pointer_input();
             }

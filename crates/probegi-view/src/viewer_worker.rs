@@ -12,8 +12,8 @@
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::mpsc::{Receiver, Sender};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
 use std::sync::{Arc, Mutex};
 use std::time::{Instant, SystemTime};
 
@@ -25,7 +25,7 @@ use probegi_scene::{RayTracer, Scene};
 
 use crate::input_script::{InputScript, ScriptEvent, ViewerKey};
 use crate::view_layers::{ViewMode, to_rgba8, view_image};
-use crate::view_session::ViewSession;
+use crate::view_session::{ViewCarry, ViewSession};
 use crate::viewer_controls::{GiChoice, ViewerControls};
 
 /// What a session is built from: what the CLI's scene setup makes of its
@@ -194,60 +194,82 @@ pub struct WorkerLink {
     pub latest: LatestFrame,
 }
 
-/// Runs the worker until `Quit`, a scripted run's last frame, or a channel
-/// closes. Returns the first error of a scripted run.
+/// Runs the worker until `Quit`, a scripted run's last frame, or the window
+/// goes away. Returns the first error of a scripted run.
 pub fn run_worker(source: &dyn ViewSource, opts: &WorkerOptions, link: &WorkerLink) -> Result<(), String> {
     let mut controls: Option<ViewerControls> = None;
+    let mut carry: Option<ViewCarry> = None;
     let mut frames_total = 0u32;
     let mut frame_ms = Vec::new();
     loop {
-        let parts = match source.load(controls.as_ref()) {
-            Ok(p) => p,
-            Err(e) => {
-                let _ = link.reports.send(WorkerReport::Error(e.clone()));
-                if controls.is_none() || opts.exit_after_frames.is_some() {
-                    return Err(e);
+        let failure = match source.load(controls.as_ref()) {
+            Err(e) => e,
+            Ok(parts) => {
+                let first = controls.is_none();
+                let mut state = SessionState::new(&parts, controls.take(), opts, frames_total, source.watched_file());
+                state.frame_ms = std::mem::take(&mut frame_ms);
+                state.carry = carry.take();
+                if let (true, Some(v)) = (first, opts.start_view) {
+                    state.controls.view = v;
                 }
-                match wait_for_reload(link) {
-                    SessionEnd::Rebuild => continue,
-                    SessionEnd::Quit => return Ok(()),
+                let end = state.run(link);
+                frames_total = state.frames_total;
+                frame_ms = std::mem::take(&mut state.frame_ms);
+                carry = state.carry.take();
+                controls = Some(state.controls);
+                match end {
+                    Ok(SessionEnd::Rebuild) => continue,
+                    Ok(SessionEnd::Quit) => return Ok(()),
+                    Err(e) => e,
                 }
             }
         };
-        let first = controls.is_none();
-        let mut state = SessionState::new(&parts, controls.take(), opts, frames_total, source.watched_file());
-        state.frame_ms = std::mem::take(&mut frame_ms);
-        if let (true, Some(v)) = (first, opts.start_view) {
-            state.controls.view = v;
+        let _ = link.reports.send(WorkerReport::Error(failure.clone()));
+        if controls.is_none() || opts.exit_after_frames.is_some() {
+            return Err(failure);
         }
-        let end = state.run(link);
-        frames_total = state.frames_total;
-        frame_ms = std::mem::take(&mut state.frame_ms);
-        controls = Some(state.controls);
-        match end {
-            Ok(SessionEnd::Rebuild) => continue,
-            Ok(SessionEnd::Quit) => return Ok(()),
-            Err(e) => {
-                let _ = link.reports.send(WorkerReport::Error(e.clone()));
-                if opts.exit_after_frames.is_some() {
-                    return Err(e);
-                }
-                match wait_for_reload(link) {
-                    SessionEnd::Rebuild => continue,
-                    SessionEnd::Quit => return Ok(()),
+        match wait_for_reload(link, source.watched_file().as_deref()) {
+            Some(Some(c)) => controls = Some(c),
+            Some(None) => {}
+            None => return Ok(()),
+        }
+    }
+}
+
+/// After a failure: waits for a reload, new controls (`Some(Some)`), a
+/// change of the scene file (`Some(None)`), or quit (`None`).
+fn wait_for_reload(link: &WorkerLink, watched: Option<&std::path::Path>) -> Option<Option<ViewerControls>> {
+    let mut seen = watched.map(watch_state);
+    loop {
+        match link.commands.recv_timeout(std::time::Duration::from_millis(500)) {
+            Ok(WorkerCommand::Reload) => return Some(None),
+            Ok(WorkerCommand::Controls(c)) => return Some(Some(c)),
+            Ok(WorkerCommand::Quit) | Err(RecvTimeoutError::Disconnected) => return None,
+            Ok(_) => {}
+            Err(RecvTimeoutError::Timeout) => {
+                if let Some((path, time)) = &mut seen {
+                    let now = std::fs::metadata(&*path).and_then(|m| m.modified()).ok();
+                    if now.is_some() && now != *time {
+                        return Some(None);
+                    }
+                    *time = now;
                 }
             }
         }
     }
 }
 
-/// After a failure: waits for a reload, new controls, or quit.
-fn wait_for_reload(link: &WorkerLink) -> SessionEnd {
+/// The commands waiting; a window gone away reads as `Quit`.
+fn take_commands(link: &WorkerLink) -> Vec<WorkerCommand> {
+    let mut commands = vec![];
     loop {
-        match link.commands.recv() {
-            Ok(WorkerCommand::Reload | WorkerCommand::Controls(_)) => return SessionEnd::Rebuild,
-            Ok(WorkerCommand::Quit) | Err(_) => return SessionEnd::Quit,
-            Ok(_) => {}
+        match link.commands.try_recv() {
+            Ok(c) => commands.push(c),
+            Err(TryRecvError::Empty) => return commands,
+            Err(TryRecvError::Disconnected) => {
+                commands.push(WorkerCommand::Quit);
+                return commands;
+            }
         }
     }
 }
@@ -271,7 +293,8 @@ struct Reference {
 
 /// A reference being path-traced.
 struct ReferenceJob<'s> {
-    handle: std::thread::ScopedJoinHandle<'s, Image>,
+    handle: std::thread::ScopedJoinHandle<'s, Option<Image>>,
+    cancel: Arc<AtomicBool>,
     rows_done: Arc<AtomicU32>,
     rows: u32,
     camera: Camera,
@@ -293,6 +316,8 @@ struct SessionState<'p> {
     watch_file: Option<PathBuf>,
     watched: Option<(PathBuf, Option<SystemTime>)>,
     last_frame_at: Instant,
+    /// The last session's camera and clock, for the next one.
+    carry: Option<ViewCarry>,
 }
 
 impl<'p> SessionState<'p> {
@@ -315,10 +340,12 @@ impl<'p> SessionState<'p> {
             watch_file,
             watched: None,
             last_frame_at: Instant::now(),
+            carry: None,
         }
     }
 
-    /// Frames until quit, rebuild or (scripted) the last frame.
+    /// Builds the session (taking the last one's camera and clock over) and
+    /// runs its frames.
     fn run(&mut self, link: &WorkerLink) -> Result<SessionEnd, String> {
         let parts = self.parts;
         let mut session = ViewSession::new(
@@ -329,44 +356,81 @@ impl<'p> SessionState<'p> {
             parts.fly_speed_m_per_s,
             parts.camera_path.clone(),
         );
+        if let Some(c) = self.carry {
+            session.restore(c);
+        }
         self.start_controls(&mut session);
         let _ = link.reports.send(WorkerReport::Ready(self.controls.clone()));
         self.watched = self.watch_file.as_deref().filter(|_| self.opts.exit_after_frames.is_none()).map(watch_state);
-        std::thread::scope(|scope| {
+        let pool = reference_pool();
+        let end = std::thread::scope(|scope| {
             let mut job: Option<ReferenceJob<'_>> = None;
-            let mut frame_in_session = 0u32;
-            loop {
-                let mut commands: Vec<WorkerCommand> = link.commands.try_iter().collect();
-                commands.extend(self.script_commands(&mut session, link));
-                for cmd in commands {
-                    match cmd {
-                        WorkerCommand::Input(e) => session.apply(e),
-                        WorkerCommand::Controls(c) => {
-                            if self.controls.needs_rebuild(&c) {
-                                self.controls = c;
-                                return Ok(SessionEnd::Rebuild);
-                            }
-                            self.apply_controls(&mut session, c);
-                        }
-                        WorkerCommand::StepClock => session.step_scene_clock(),
-                        WorkerCommand::Reference(spp) => job = Some(self.start_reference(scope, &session, spp)),
-                        WorkerCommand::Screenshot => self.screenshot(link),
-                        WorkerCommand::Reload => return Ok(SessionEnd::Rebuild),
-                        WorkerCommand::Quit => return Ok(SessionEnd::Quit),
+            let end = self.session_loop(&mut session, link, scope, &pool, &mut job);
+            // A running reference stops at its next row rather than hold the exit up.
+            if let Some(j) = job {
+                j.cancel.store(true, Ordering::Relaxed);
+            }
+            end
+        });
+        self.carry = Some(session.carry());
+        end
+    }
+
+    /// Frames until quit, rebuild or (scripted) the last frame.
+    fn session_loop<'s>(
+        &mut self,
+        session: &mut ViewSession<'_>,
+        link: &WorkerLink,
+        scope: &'s std::thread::Scope<'s, '_>,
+        pool: &'s Option<rayon::ThreadPool>,
+        job: &mut Option<ReferenceJob<'s>>,
+    ) -> Result<SessionEnd, String>
+    where
+        'p: 's,
+    {
+        let mut frame_in_session = 0u32;
+        loop {
+            let mut commands = take_commands(link);
+            if commands.iter().any(|c| matches!(c, WorkerCommand::Quit)) {
+                return Ok(SessionEnd::Quit);
+            }
+            commands.extend(self.script_commands(session, link));
+            let mut rebuild = false;
+            for cmd in commands {
+                match cmd {
+                    WorkerCommand::Input(e) => session.apply(e),
+                    WorkerCommand::Controls(c) if self.controls.needs_rebuild(&c) || rebuild => {
+                        self.controls = c;
+                        rebuild = true;
                     }
-                }
-                self.frame(&mut session, link)?;
-                frame_in_session += 1;
-                job = self.poll_reference(job, &session, link, frame_in_session);
-                if self.opts.exit_after_frames.is_some_and(|n| self.frames_total >= n) {
-                    return self.finish_scripted(link);
-                }
-                if frame_in_session.is_multiple_of(30) && self.scene_file_changed() {
-                    let _ = link.reports.send(WorkerReport::Message("scene file changed: reloading".into()));
-                    return Ok(SessionEnd::Rebuild);
+                    WorkerCommand::Controls(c) => self.apply_controls(session, c),
+                    WorkerCommand::StepClock => session.step_scene_clock(),
+                    WorkerCommand::Reference(spp) => {
+                        if let Some(old) = job.take() {
+                            old.cancel.store(true, Ordering::Relaxed);
+                            let _ = old.handle.join();
+                        }
+                        *job = Some(self.start_reference(scope, pool, session, spp));
+                    }
+                    WorkerCommand::Screenshot => self.screenshot(link),
+                    WorkerCommand::Reload => rebuild = true,
+                    WorkerCommand::Quit => return Ok(SessionEnd::Quit),
                 }
             }
-        })
+            if rebuild {
+                return Ok(SessionEnd::Rebuild);
+            }
+            self.frame(session, link, job.is_some())?;
+            frame_in_session += 1;
+            *job = self.poll_reference(job.take(), session, link, frame_in_session);
+            if self.opts.exit_after_frames.is_some_and(|n| self.frames_total >= n) {
+                return self.finish_scripted(link);
+            }
+            if frame_in_session.is_multiple_of(30) && self.scene_file_changed() {
+                let _ = link.reports.send(WorkerReport::Message("scene file changed: reloading".into()));
+                return Ok(SessionEnd::Rebuild);
+            }
+        }
     }
 
     /// A new session takes the user's view, clock, lights, sky and live
@@ -380,6 +444,7 @@ impl<'p> SessionState<'p> {
             atlas_volume: user.atlas_volume,
             paused: user.paused,
             sky_scale: user.sky_scale,
+            field_at_start: user.field_at_start.or(built.field),
             ..built
         };
         if user.lights.len() == c.lights.len() {
@@ -396,7 +461,9 @@ impl<'p> SessionState<'p> {
 
     /// Applies live controls (see `viewer_controls`).
     fn apply_controls(&mut self, session: &mut ViewSession<'_>, c: ViewerControls) {
-        if let (Some(f), Some(set)) = (c.field, session.stepper_mut().field_mut()) {
+        // Only a change is written: the volumes of a set keep their own settings otherwise.
+        if let (true, Some(f), Some(set)) = (c.field != self.controls.field, c.field, session.stepper_mut().field_mut())
+        {
             f.apply_live(set);
         }
         let lights_changed = c.lights != self.controls.lights || c.sky_scale != self.controls.sky_scale;
@@ -435,19 +502,17 @@ impl<'p> SessionState<'p> {
     }
 
     /// Renders one frame and hands it to the window.
-    fn frame(&mut self, session: &mut ViewSession<'_>, link: &WorkerLink) -> Result<(), String> {
+    fn frame(&mut self, session: &mut ViewSession<'_>, link: &WorkerLink, referencing: bool) -> Result<(), String> {
         let t = Instant::now();
         let dt_s = self.opts.fixed_dt_s.unwrap_or_else(|| self.last_frame_at.elapsed().as_secs_f32().min(0.1));
         self.last_frame_at = Instant::now();
         let full = session.frame(dt_s).map_err(|e| format!("frame {}: {e}", self.frames_total))?;
-        // Views drawn on a CPU G-buffer see the scene as the frame did.
-        let gbuffer_view = matches!(self.controls.view, ViewMode::Albedo | ViewMode::Normals | ViewMode::Probes);
-        let posed = gbuffer_view.then(|| posed_scene(self.parts, &self.controls, session.scene_frame())).flatten();
-        let scene = posed.as_ref().unwrap_or(&self.parts.scene);
-        let view =
-            view_image(self.controls.view, &full, session, scene, &*self.parts.tracer, self.controls.atlas_volume)?;
+        let view = view_image(self.controls.view, &full, session, &*self.parts.tracer, self.controls.atlas_volume)?;
         let report = self.report(session, &view, t.elapsed().as_secs_f64() * 1e3);
-        self.adapt_size(session, report.frame_ms);
+        // A reference compares frames of its own size: the size holds while one exists.
+        if !referencing && self.reference.is_none() {
+            self.adapt_size(session, report.frame_ms);
+        }
         self.frame_ms.push(report.frame_ms);
         self.last_full = Some(full);
         self.frames_total += 1;
@@ -477,7 +542,7 @@ impl<'p> SessionState<'p> {
         }
         FrameReport {
             frame: self.frames_total,
-            scene_frame: session.scene_frame(),
+            scene_frame: session.last_scene_frame(),
             rgba: to_rgba8(view),
             width: view.width,
             height: view.height,
@@ -515,43 +580,50 @@ impl<'p> SessionState<'p> {
     /// What the reference of the current view sees of the scene.
     fn reference_scene(&self, session: &ViewSession<'_>) -> ReferenceScene {
         ReferenceScene {
-            scene_frame: self.parts.scene.is_animated().then(|| session.scene_frame()),
+            scene_frame: self.parts.scene.is_animated().then(|| session.last_scene_frame()),
             lights: self.controls.lights.clone(),
             sky_scale: self.controls.sky_scale,
         }
     }
 
-    /// Starts the path-traced reference of the current view on a thread of `scope`.
+    /// Starts the path-traced reference of the current view on a thread of
+    /// `scope`, its rows on `pool` (so the frames keep the global pool).
     fn start_reference<'s>(
         &self,
         scope: &'s std::thread::Scope<'s, '_>,
+        pool: &'s Option<rayon::ThreadPool>,
         session: &ViewSession<'_>,
         spp: u32,
     ) -> ReferenceJob<'s>
     where
         'p: 's,
     {
-        let parts: &'p SessionParts = self.parts;
         let camera = session.last_camera();
         let (w, h) = session.size();
-        let posed = posed_scene(parts, &self.controls, session.scene_frame()).unwrap_or_else(|| parts.scene.clone());
-        let clock = session.scene_frame() as f32;
+        // The scene as the last frame saw it: posed at its clock, lights switched.
+        let posed = session.stepper().frame_scene().clone();
+        let clock = session.last_scene_frame() as f32;
         let rows_done = Arc::new(AtomicU32::new(0));
-        let rows = Arc::clone(&rows_done);
-        let seed = parts.settings.seed;
-        let base_tracer: &'p dyn RayTracer = &*parts.tracer;
+        let cancel = Arc::new(AtomicBool::new(false));
+        let (rows, stop) = (Arc::clone(&rows_done), Arc::clone(&cancel));
+        let seed = self.parts.settings.seed;
+        let base_tracer: &'p dyn RayTracer = &*self.parts.tracer;
         let handle = scope.spawn(move || {
             let at_frame = base_tracer.at_frame(&posed, clock);
             let tracer: &dyn RayTracer = at_frame.as_deref().unwrap_or(base_tracer);
             let settings = PathTracerSettings { pt_spp: spp.max(1), seed, ..Default::default() };
             let pt = PathTracer::new(&posed, tracer, settings);
             let rays = CameraRays::new(&camera, w, h);
-            pt.render(&rays, w, h, &|| {
+            let on_row = || {
                 rows.fetch_add(1, Ordering::Relaxed);
-            })
-            .0
+            };
+            let render = || pt.render_cancellable(&rays, w, h, &on_row, &stop).map(|(image, _)| image);
+            match pool {
+                Some(p) => p.install(render),
+                None => render(),
+            }
         });
-        ReferenceJob { handle, rows_done, rows: h, camera, scene: self.reference_scene(session), spp }
+        ReferenceJob { handle, cancel, rows_done, rows: h, camera, scene: self.reference_scene(session), spp }
     }
 
     /// Reports a running reference's progress; takes a finished one in; every
@@ -571,7 +643,10 @@ impl<'p> SessionState<'p> {
                 return Some(j);
             }
             match j.handle.join() {
-                Ok(image) => self.reference = Some(Reference { image, camera: j.camera, scene: j.scene, spp: j.spp }),
+                Ok(Some(image)) => {
+                    self.reference = Some(Reference { image, camera: j.camera, scene: j.scene, spp: j.spp })
+                }
+                Ok(None) => return None,
                 Err(_) => {
                     let _ = link.reports.send(WorkerReport::Error("the reference render panicked".into()));
                 }
@@ -654,18 +729,16 @@ fn watch_state(path: &std::path::Path) -> (PathBuf, Option<SystemTime>) {
     (path.to_path_buf(), std::fs::metadata(path).and_then(|m| m.modified()).ok())
 }
 
-/// The scene posed at `scene_frame` with the controls' lights and sky, when
-/// it differs from the loaded one (animated, or edited).
-fn posed_scene(parts: &SessionParts, controls: &ViewerControls, scene_frame: u32) -> Option<Scene> {
-    if !parts.scene.is_animated() && !controls.edits_scene() {
-        return None;
-    }
-    let mut posed = parts.scene.clone();
-    posed.set_frame_from(&parts.scene, scene_frame as f32);
-    if controls.edits_scene() {
-        controls.scene_edit()(&parts.scene, &mut posed);
-    }
-    Some(posed)
+/// The reference's own thread pool: half the cores (at least one), so the
+/// frames keep the global pool while it runs. `None` if it cannot be built
+/// (the reference then shares the global pool).
+fn reference_pool() -> Option<rayon::ThreadPool> {
+    let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+    rayon::ThreadPoolBuilder::new()
+        .num_threads((cores / 2).max(1))
+        .thread_name(|i| format!("reference-{i}"))
+        .build()
+        .ok()
 }
 
 /// `name` with anything but letters, digits, `-` and `_` replaced by `_`.

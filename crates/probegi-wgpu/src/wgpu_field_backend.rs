@@ -151,7 +151,8 @@ pub struct WgpuProbeTracer {
     shading: Option<(GpuProbeShade, GpuScene)>,
     /// The camera pass (with `shading`, unless asked to leave the camera to the CPU).
     camera: Option<GpuCameraPass>,
-    sky_radiance: Vec3,
+    /// The sky of the scene as last posed (the camera pass's misses).
+    sky_radiance: Mutex<Vec3>,
     /// Why the probe rays are shaded on the CPU, when they are.
     pub shading_note: Option<String>,
     /// The last traced batch, resident for the shade pass.
@@ -221,7 +222,7 @@ impl WgpuProbeTracer {
             tlas,
             shading,
             camera,
-            sky_radiance: scene.sky_radiance,
+            sky_radiance: Mutex::new(scene.sky_radiance),
             shading_note: note,
             last: Mutex::new(None),
             keep_field: false,
@@ -436,6 +437,9 @@ impl ProbeBatchTracer for WgpuProbeTracer {
     }
 
     fn pose_scene(&self, scene: &Scene, frame: f32) -> Result<(), BackendError> {
+        if let Ok(mut sky) = self.sky_radiance.lock() {
+            *sky = scene.sky_radiance;
+        }
         if scene.has_moving_geometry() {
             let Some((layout, roots)) = self.tlas.as_ref().filter(|(l, _)| l.moves()) else {
                 return Err(BackendError::Unsupported(format!(
@@ -493,7 +497,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                 seed: (seed ^ (seed >> 32)) as u32,
                 area_samples,
                 second_order,
-                sky_radiance: self.sky_radiance,
+                sky_radiance: *self.sky_radiance.lock().unwrap_or_else(|e| e.into_inner()),
             };
             let image = pass.render(&self.ctx, &self.bvh, gpu_field, scene, &f)?;
             if image.direct.len() != direct.len() || image.indirect.len() != indirect.len() {

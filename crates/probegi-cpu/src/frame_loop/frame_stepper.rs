@@ -190,6 +190,12 @@ impl<'a> FrameStepper<'a> {
         Ok(Some(set))
     }
 
+    /// The scene as the last frame saw it: posed at its scene clock and
+    /// edited ([`Self::set_scene_edit`]); the loaded scene when nothing poses it.
+    pub fn frame_scene(&self) -> &Scene {
+        self.frame_scene.as_ref().unwrap_or(self.frame_loop.base_scene)
+    }
+
     /// The render's settings as the stepper keeps them.
     pub fn settings(&self) -> &RenderSettings {
         &self.frame_loop.settings
