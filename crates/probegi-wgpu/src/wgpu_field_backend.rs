@@ -43,6 +43,7 @@ use crate::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace, TraceSegment};
 use crate::camera_frame::{CameraFrame, GpuCameraPass};
 use crate::ddgi_query::GpuDdgiField;
 use crate::gpu_scene::GpuScene;
+use crate::gpu_timer::GpuTimer;
 use crate::probe_blend::GpuProbeBlend;
 use crate::probe_classification::GpuProbeClassification;
 use crate::probe_ray_gen::GpuProbeRayGen;
@@ -612,21 +613,30 @@ impl DeviceField for WgpuProbeTracer {
             let f = self.resident_field(gpu_field, field, upload_atlases, plan)?;
             let probes = batch_shade_probes(batch, volumes);
             let seed32 = (seed ^ (seed >> 32)) as u32;
+            // Timestamp queries where the device has them: the shade pass, then
+            // each member's four blend and border passes.
+            let timer = self.ctx.timestamps.then(|| GpuTimer::new(&self.ctx, 1 + 4 * plan.len() as u32));
+            let shade_timer = timer.as_ref().map(|t| (t, 0));
             let results =
-                shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, &probes, seed32, frame, None)?;
+                shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, &probes, seed32, frame, shade_timer)?;
             // The host waits after each pass so that its wall times are the device's
             // (`bench`); an engine that records the passes itself would not.
             self.ctx.wait()?;
             let shade_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = std::time::Instant::now();
             let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+            let mut recorded = vec![];
             for (i, p) in plan.iter().enumerate() {
                 if p.probe_blend.iter().all(|b| b.is_none()) {
                     continue;
                 }
                 let atlases = f.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
                 let bindings = blend.prepare_resident(&self.ctx, &atlases, p, &results)?;
-                blend.record(&mut encoder, &bindings, None);
+                blend.record(&mut encoder, &bindings, timer.as_ref().map(|t| (t, 1 + 4 * i as u32)));
+                recorded.push(i);
+            }
+            if let Some(t) = &timer {
+                t.resolve(&mut encoder);
             }
             self.ctx.queue.submit([encoder.finish()]);
             self.ctx.wait()?;
@@ -636,6 +646,9 @@ impl DeviceField for WgpuProbeTracer {
             self.ctx.wait()?;
             let mut pass_ms =
                 vec![("shade", shade_ms), ("blend", blend_ms), ("shadow_blend", t.elapsed().as_secs_f64() * 1e3)];
+            if let Some(ms) = timer.as_ref().map(|t| t.read_ms(&self.ctx)).transpose()?.flatten() {
+                pass_ms.extend(gpu_pass_ms(&ms, &recorded));
+            }
             let t = std::time::Instant::now();
             let probe_change = self.measure_changes(f, plan)?;
             if plan.iter().any(|p| p.measure_change) {
@@ -682,4 +695,16 @@ impl DeviceField for WgpuProbeTracer {
         }
         Ok(())
     }
+}
+
+/// The device's own times of `shade_and_blend`'s passes from its timestamps
+/// (`ms`: the shade pass, then four per member), summed over the `recorded`
+/// members: `gpu_shade`, `gpu_blend` (irradiance and distance) and `gpu_border`.
+fn gpu_pass_ms(ms: &[f64], recorded: &[usize]) -> [(&'static str, f64); 3] {
+    let member = |k: usize| recorded.iter().filter_map(|&i| ms.get(1 + 4 * i + k)).sum::<f64>();
+    [
+        ("gpu_shade", ms.first().copied().unwrap_or(0.0)),
+        ("gpu_blend", member(0) + member(1)),
+        ("gpu_border", member(2) + member(3)),
+    ]
 }
