@@ -25,6 +25,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use probegi_core::camera::CameraRays;
 use probegi_cpu::frame_loop::render_frames;
 use probegi_cpu::{PathTracer, PathTracerSettings};
+use probegi_image::LoadedImage;
 use probegi_scene::{BvhSettings, BvhTracer};
 
 use args::{Cli, Command, ReferenceArgs, RenderArgs};
@@ -54,6 +55,13 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Compare(a)) => {
             let mean = probegi_image::compare_files(&a.reference, &a.test, a.out.as_deref())?;
             println!("mean_flip: {mean:.6}");
+            // Two HDR images: also the share of lit pixels rendered dark.
+            if let (Ok(LoadedImage::Hdr(r)), Ok(LoadedImage::Hdr(t))) =
+                (probegi_image::read_image(&a.reference), probegi_image::read_image(&a.test))
+                && let Some(d) = probegi_image::compare::dark_fraction(&r, &t)
+            {
+                println!("dark_fraction: {d:.6}");
+            }
             if let Some(sheet) = &a.out {
                 eprintln!("wrote contact sheet {}", sheet.display());
             }

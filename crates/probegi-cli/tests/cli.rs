@@ -507,6 +507,13 @@ fn gpu_render_keeps_the_field_on_the_device_and_draws_probes_on_the_cpu_camera()
         assert_eq!(json["backend"], "wgpu");
         assert_eq!(json["probe_shade_on"], "gpu");
         assert_eq!(json["camera_on"], if show_probes { "cpu" } else { "gpu" });
+        // Where the device has timestamp queries (lavapipe does), the device's own
+        // shade time sits inside the host's wait around that pass.
+        if let Some(gpu) = json["pass_ms"]["gpu_shade"].as_f64() {
+            let wall = json["pass_ms"]["shade"].as_f64().expect("shade wall time");
+            assert!(gpu > 0.0 && gpu <= wall * 1.05 + 0.5, "gpu_shade {gpu} ms against a {wall} ms wait");
+            assert!(json["pass_ms"]["gpu_blend"].as_f64().is_some_and(|b| b > 0.0), "{json}");
+        }
         // The atlases were read back from the device for the dump.
         assert!(atlases.join("irradiance.exr").exists());
     }

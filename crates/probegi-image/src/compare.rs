@@ -85,6 +85,35 @@ pub fn contact_sheet(width: u32, height: u32, reference: &[u8], test: &[u8], mag
     sheet
 }
 
+/// A pixel is *lit* in the reference when its luminance is at least this
+/// share of the reference's mean luminance.
+pub const DARK_LIT_SHARE_OF_MEAN: f32 = 0.05;
+/// A lit pixel is *dark* in the test below this share of the reference's luminance.
+pub const DARK_BELOW_SHARE: f32 = 0.25;
+
+/// The share of the reference's lit pixels that the test renders dark (the
+/// issue "Denser is better…"'s measure of black walls and stale probes that a
+/// mean error hides): lit is luminance ≥ [`DARK_LIT_SHARE_OF_MEAN`] × the
+/// reference's mean, dark is under [`DARK_BELOW_SHARE`] × the reference's
+/// pixel. `None` when the sizes differ or nothing is lit.
+pub fn dark_fraction(reference: &probegi_core::image::Image, test: &probegi_core::image::Image) -> Option<f32> {
+    if (reference.width, reference.height) != (test.width, test.height) {
+        return None;
+    }
+    let lum = |p: glam::Vec3| p.dot(glam::Vec3::new(0.2126, 0.7152, 0.0722));
+    let n = reference.pixels.len().max(1) as f32;
+    let mean = reference.pixels.iter().map(|p| lum(*p)).sum::<f32>() / n;
+    let (mut lit, mut dark) = (0usize, 0usize);
+    for (r, t) in reference.pixels.iter().zip(&test.pixels) {
+        let lr = lum(*r);
+        if lr >= DARK_LIT_SHARE_OF_MEAN * mean && lr > 0.0 {
+            lit += 1;
+            dark += usize::from(lum(*t) < DARK_BELOW_SHARE * lr);
+        }
+    }
+    (lit > 0).then(|| dark as f32 / lit as f32)
+}
+
 /// The whole `compare` command: loads both files, computes FLIP, optionally
 /// writes the contact sheet. Returns the mean FLIP.
 pub fn compare_files(reference_path: &Path, test_path: &Path, sheet_path: Option<&Path>) -> Result<f32, ImageError> {
@@ -116,6 +145,19 @@ mod tests {
                 [v.saturating_add(shift), v, 255 - v]
             })
             .collect()
+    }
+
+    #[test]
+    fn dark_fraction_counts_lit_pixels_rendered_under_a_quarter() {
+        use probegi_core::image::Image;
+        let mut reference = Image::new(4, 1);
+        reference.pixels = vec![glam::Vec3::ONE, glam::Vec3::ONE, glam::Vec3::ONE, glam::Vec3::ZERO];
+        let mut test = reference.clone();
+        assert_eq!(dark_fraction(&reference, &test), Some(0.0));
+        test.pixels[0] = glam::Vec3::splat(0.2);
+        test.pixels[1] = glam::Vec3::splat(0.3);
+        assert_eq!(dark_fraction(&reference, &test), Some(1.0 / 3.0), "one of three lit pixels under a quarter");
+        assert_eq!(dark_fraction(&Image::new(4, 1), &test), None, "nothing lit");
     }
 
     #[test]

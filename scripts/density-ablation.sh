@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# Issue "Denser is better…", item 1: why a denser field scores worse on Sponza.
+# The shared Dabrovic Sponza, the README camera (-12,2,0 -> 10,4,0), sky 3,
+# normal maps off (the reference has none), FRAMES frames; each configuration
+# against `probegi reference` at SPP spp: HDR-FLIP and the dark fraction (lit
+# reference pixels rendered under a quarter; `probegi compare`).
+# Writes out/density/*.exr, out/density/table.md. A benchmark, not a test.
+# Usage: [W=160 H=90 SPP=1024 FRAMES=100] scripts/density-ablation.sh [CONFIG...]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${OUT:-out/density}
+W=${W:-160}; H=${H:-90}; SPP=${SPP:-1024}; FRAMES=${FRAMES:-100}
+mkdir -p "$OUT"
+cargo build --release --locked -q -p probegi-cli
+BIN=./target/release/probegi
+common=(--scene ../shared/scenes/dabrovic-sponza/sponza.obj --camera-pos=-12,2,0 --camera-target 10,4,0
+  --sky 3,3,3 --set normal_maps=false --width "$W" --height "$H")
+[ -f "$OUT/reference-$W-$SPP.exr" ] ||
+  "$BIN" reference "${common[@]}" --spp "$SPP" --out "$OUT/reference-$W-$SPP.exr" 2>/dev/null
+declare -A CONFIGS=(
+  [fitted-16x8x16]="--probes 16,8,16"
+  [fitted-32x16x12]="--probes 32,16,12"
+  [cascades-3]="--cascades 3 --probes 16,8,16"
+  [fitted-16x8x16-all-active]="--probes 16,8,16 --set probe_states=all-active"
+  [fitted-32x16x12-all-active]="--probes 32,16,12 --set probe_states=all-active"
+  [fitted-32x16x12-no-relocation]="--probes 32,16,12 --set probe_relocation=false"
+  [fitted-32x16x12-bias-x2]="--probes 32,16,12 --set probe_self_shadow_bias=0.6"
+  [fitted-32x16x12-usage]="--probes 32,16,12 --set probe_states=usage"
+  [cascades-3-all-active]="--cascades 3 --probes 16,8,16 --set probe_states=all-active"
+)
+names=("$@")
+[ ${#names[@]} -gt 0 ] || names=(fitted-16x8x16 fitted-32x16x12 cascades-3 fitted-16x8x16-all-active
+  fitted-32x16x12-all-active fitted-32x16x12-no-relocation fitted-32x16x12-bias-x2 fitted-32x16x12-usage
+  cascades-3-all-active)
+echo "| configuration | probes | HDR-FLIP | dark pixels | field update ms |" > "$OUT/table.md"
+echo "|---|---|---|---|---|" >> "$OUT/table.md"
+for name in "${names[@]}"; do
+  # shellcheck disable=SC2086
+  "$BIN" render --gi ddgi --frames "$FRAMES" "${common[@]}" ${CONFIGS[$name]} \
+    --out "$OUT/$name.exr" --stats "$OUT/$name.json" 2>/dev/null
+  cmp=$("$BIN" compare "$OUT/reference-$W-$SPP.exr" "$OUT/$name.exr" --out "$OUT/$name-sheet.png")
+  flip=$(echo "$cmp" | awk '/mean_flip/ {print $2}')
+  dark=$(echo "$cmp" | awk '/dark_fraction/ {printf "%.1f %%", 100 * $2}')
+  probes=$(python3 -c "import json; d=json.load(open('$OUT/$name.json')); print(d['probes'])")
+  upd=$(python3 -c "import json; d=json.load(open('$OUT/$name.json')); print(round(d['field_update_ms'], 1))")
+  echo "| $name | $probes | $flip | $dark | $upd |" | tee -a "$OUT/table.md"
+done
