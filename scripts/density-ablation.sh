@@ -27,13 +27,24 @@ declare -A CONFIGS=(
   [fitted-32x16x12-bias-x2]="--probes 32,16,12 --set probe_self_shadow_bias=0.6"
   [fitted-32x16x12-usage]="--probes 32,16,12 --set probe_states=usage"
   [cascades-3-all-active]="--cascades 3 --probes 16,8,16 --set probe_states=all-active"
+  [fitted-16x8x16-no-chebyshev]="--probes 16,8,16 --set probe_chebyshev_weight=false"
+  [fitted-32x16x12-no-chebyshev]="--probes 32,16,12 --set probe_chebyshev_weight=false"
+  [fitted-32x16x12-no-backface]="--probes 32,16,12 --set probe_backface_weight=false"
+  [fitted-32x16x12-no-crush]="--probes 32,16,12 --set probe_crush_weight=false"
+  [fitted-32x16x12-distance-32]="--probes 32,16,12 --set probe_distance_texels=32"
+  [cascades-3-cover-2x]="--cascades 3 --probes 16,8,16 --set probe_spacing_m=[1.1607,1.1829,0.52]"
+  [cascades-4]="--cascades 4 --probes 16,8,16 --set probe_spacing_m=[0.5803,0.5914,0.26]"
+  [fitted-16x8x16-no-fast-convergence]="--probes 16,8,16 --set probe_fast_convergence=false"
+  [fitted-32x16x12-no-fast-convergence]="--probes 32,16,12 --set probe_fast_convergence=false"
 )
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=(fitted-16x8x16 fitted-32x16x12 cascades-3 fitted-16x8x16-all-active
   fitted-32x16x12-all-active fitted-32x16x12-no-relocation fitted-32x16x12-bias-x2 fitted-32x16x12-usage
   cascades-3-all-active)
-echo "| configuration | probes | HDR-FLIP | dark pixels | field update ms |" > "$OUT/table.md"
-echo "|---|---|---|---|---|" >> "$OUT/table.md"
+[ -f "$OUT/table.md" ] || {
+  echo "| configuration | probes | HDR-FLIP | dark pixels | field update ms |"
+  echo "|---|---|---|---|---|"
+} > "$OUT/table.md"
 for name in "${names[@]}"; do
   # shellcheck disable=SC2086
   "$BIN" render --gi ddgi --frames "$FRAMES" "${common[@]}" ${CONFIGS[$name]} \

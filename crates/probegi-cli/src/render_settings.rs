@@ -106,10 +106,14 @@ pub fn ddgi_method(scene: &Scene, args: &VolumeArgs) -> Result<GiMethod> {
         let spacing = match base.probe_spacing_m {
             Some(s) => s,
             None => {
-                // The coarsest cascade's probe box spans the scene bounds.
+                // The coarsest cascade's probe box spans twice the scene bounds:
+                // centred on a camera anywhere inside them, it covers the whole
+                // scene. (Spanning them once left the far half of Sponza outside
+                // every cascade from a camera at one end of the atrium: HDR-FLIP
+                // 0.165 against 0.124; docs/RESULTS.md, "Denser is better".)
                 let (lo, hi) = scene.bounds().unwrap_or((glam::Vec3::splat(-1.0), glam::Vec3::ONE));
                 let cells = (base.probe_counts.as_vec3() - glam::Vec3::ONE).max(glam::Vec3::ONE);
-                ((hi - lo) / cells / r.powi(n as i32 - 1)).max(glam::Vec3::splat(1e-3))
+                (2.0 * (hi - lo) / cells / r.powi(n as i32 - 1)).max(glam::Vec3::splat(1e-3))
             }
         };
         let set = DdgiFieldSetSettings::cascades(n, &base, spacing, r);
