@@ -63,9 +63,13 @@ impl<'a> ViewSession<'a> {
         let size = (settings.width, settings.height);
         let start = camera_path.first().copied().unwrap_or(*camera);
         let stepper = FrameStepper::new(scene, tracer, &CameraRays::new(&start, size.0, size.1), settings);
+        let fly = FlyCamera::from_camera(camera, fly_speed_m_per_s);
+        // The camera the next frame takes without input (a reference asked for
+        // before the first frame must see that frame's camera).
+        let next = if camera_path.is_empty() { fly.camera() } else { start };
         Self {
             stepper,
-            fly: FlyCamera::from_camera(camera, fly_speed_m_per_s),
+            fly,
             input: InputState::default(),
             on_path: !camera_path.is_empty(),
             camera_path,
@@ -73,7 +77,7 @@ impl<'a> ViewSession<'a> {
             scene_frame: 0,
             paused: false,
             step_once: false,
-            last_camera: start,
+            last_camera: next,
             last_scene_frame: 0,
         }
     }
@@ -89,6 +93,11 @@ impl<'a> ViewSession<'a> {
         self.on_path = carry.on_path && !self.camera_path.is_empty();
         self.scene_frame = carry.scene_frame;
         self.paused = carry.paused;
+        let keyed = self.camera_path.get(self.scene_frame as usize).or(self.camera_path.last());
+        self.last_camera = match (self.on_path, keyed) {
+            (true, Some(k)) => *k,
+            _ => self.fly.camera(),
+        };
     }
 
     /// Applies one input event (it takes effect at the next frame).
