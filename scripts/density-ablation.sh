@@ -34,6 +34,18 @@ declare -A CONFIGS=(
   [fitted-32x16x12-distance-32]="--probes 32,16,12 --set probe_distance_texels=32"
   [cascades-3-cover-2x]="--cascades 3 --probes 16,8,16 --set probe_spacing_m=[1.1607,1.1829,0.52]"
   [cascades-4]="--cascades 4 --probes 16,8,16 --set probe_spacing_m=[0.5803,0.5914,0.26]"
+  [fitted-16x8x12]="--probes 16,8,12"
+  [fitted-16x8x12-no-chebyshev]="--probes 16,8,12 --set probe_chebyshev_weight=false"
+  [fitted-16x8x12-no-backface]="--probes 16,8,12 --set probe_backface_weight=false"
+  [fitted-16x8x12-no-relocation]="--probes 16,8,12 --set probe_relocation=false"
+  [fitted-16x8x12-no-frontface-step]="--probes 16,8,12 --set probe_relocation_min_frontface_rel=0"
+  [fitted-16x8x12-all-active]="--probes 16,8,12 --set probe_states=all-active"
+  [fitted-16x8x12-frontface-1]="--probes 16,8,12 --set probe_relocation_min_frontface_rel=1"
+  [fitted-16x8x12-offset-049]="--probes 16,8,12 --set probe_relocation_offset_limit_rel=0.49"
+  [fitted-16x8x12-iterations-x4]="--probes 16,8,12 --set probe_relocation_iterations=20"
+  [fitted-16x8x12-normal-bias]="--probes 16,8,12 --set probe_bias_mode=normal"
+  [fitted-32x16x16]="--probes 32,16,16"
+  [fitted-32x16x32]="--probes 32,16,32"
   [fitted-16x8x16-no-fast-convergence]="--probes 16,8,16 --set probe_fast_convergence=false"
   [fitted-32x16x12-no-fast-convergence]="--probes 32,16,12 --set probe_fast_convergence=false"
 )
@@ -46,8 +58,13 @@ names=("$@")
   echo "|---|---|---|---|---|"
 } > "$OUT/table.md"
 for name in "${names[@]}"; do
+  config=${CONFIGS[$name]:-}
+  # fitted-AxBxC[-more] without an entry: a fitted A×B×C volume.
+  if [ -z "$config" ] && [[ $name =~ ^fitted-([0-9]+)x([0-9]+)x([0-9]+)$ ]]; then
+    config="--probes ${BASH_REMATCH[1]},${BASH_REMATCH[2]},${BASH_REMATCH[3]}"
+  fi
   # shellcheck disable=SC2086
-  "$BIN" render --gi ddgi --frames "$FRAMES" "${common[@]}" ${CONFIGS[$name]} \
+  "$BIN" render --gi ddgi --frames "$FRAMES" "${common[@]}" $config \
     --out "$OUT/$name.exr" --stats "$OUT/$name.json" 2>/dev/null
   cmp=$("$BIN" compare "$OUT/reference-$W-$SPP.exr" "$OUT/$name.exr" --out "$OUT/$name-sheet.png")
   flip=$(echo "$cmp" | awk '/mean_flip/ {print $2}')

@@ -150,6 +150,19 @@ pub struct DdgiVolumeSettings {
     /// probes wait. Measured in docs/RESULTS.md: off, a budget of half the rays
     /// doubles the lag of a change that reaches every probe.
     pub ray_budget_hysteresis_per_frame: bool,
+    /// Edge buffers (seed 003 §6.2.1's "buffering probes with low hysteresis",
+    /// seed 004 §7.3's leapfrogging planes): in a tracking window, the this many
+    /// planes nearest the face it last scrolled toward, on each axis it has
+    /// scrolled along, blend with at most `volume_edge_buffer_hysteresis`, so
+    /// the field in front of a moving camera converges first. 0 (the default)
+    /// is off: a window that never scrolls is unchanged either way.
+    /// *Deviation:* the seed buffers every edge and never samples it; we lower
+    /// only the leading planes, which camera-aware blending (seed 004 §7.4)
+    /// already reads at a falling weight.
+    pub volume_edge_buffer_planes: u32,
+    /// The edge buffers' hysteresis cap (the seed says "low" without a number;
+    /// measured in docs/RESULTS.md).
+    pub volume_edge_buffer_hysteresis: f32,
 }
 
 impl Default for DdgiVolumeSettings {
@@ -198,6 +211,8 @@ impl Default for DdgiVolumeSettings {
             ray_budget: 0,
             ray_budget_max_interval_frames: 8,
             ray_budget_hysteresis_per_frame: true,
+            volume_edge_buffer_planes: 0,
+            volume_edge_buffer_hysteresis: 0.8,
         }
     }
 }
@@ -264,6 +279,7 @@ impl DdgiVolumeSettings {
         unit("probe_energy_conservation", self.probe_energy_conservation)?;
         unit("probe_crush_threshold", self.probe_crush_threshold)?;
         unit("probe_classification_reach_rel", self.probe_classification_reach_rel)?;
+        unit("volume_edge_buffer_hysteresis", self.volume_edge_buffer_hysteresis)?;
         let positive = |name: &'static str, v: f32| {
             if v.is_finite() && v > 0.0 { Ok(()) } else { Err((name, format!("{v} must be finite and > 0"))) }
         };

@@ -283,3 +283,65 @@ fn a_point_outside_every_volume_gets_no_field_and_a_dense_volume_wins_inside() {
     assert_eq!(set.irradiance(far, Vec3::Y, Vec3::Y), Vec3::ZERO, "beyond every volume: no field");
     assert!(set.irradiance(lo + (hi - lo) * 0.1, Vec3::Y, Vec3::Y).max_element() > 0.0);
 }
+
+/// Runs a 7×3×3 window over `half_roofed_ground` out from under the roof, at
+/// 0.4 m per frame, with `edge_planes` edge-buffer planes, and returns the mean
+/// relative error of the two leading planes' probes against a converged fixed
+/// volume at the same positions, over the frames after the first scroll.
+fn leading_planes_error(edge_planes: u32) -> f32 {
+    let scene = probegi_scene::builtin::half_roofed_ground();
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let bounds = scene.bounds().expect("bounds");
+    let base = DdgiVolumeSettings {
+        probe_rays_per_probe: 128,
+        probe_states: ProbeStatesMode::AllActive,
+        probe_relocation: false,
+        probe_spacing_m: Some(Vec3::ONE),
+        probe_origin_m: Some(Vec3::new(0.0, 0.5, -1.0)),
+        ..Default::default()
+    };
+    let fixed_settings = DdgiVolumeSettings { probe_counts: UVec3::new(41, 3, 3), ..base.clone() };
+    let mut fixed = DdgiFieldSet::new(&DdgiFieldSetSettings::single(fixed_settings), bounds, None);
+    let mut passes = Default::default();
+    for f in 0..60 {
+        fixed.update(&scene, &bvh, &direct, 1, f, &mut passes);
+    }
+    let window = DdgiVolumeSettings {
+        probe_counts: UVec3::new(7, 3, 3),
+        volume_tracks_camera: true,
+        volume_edge_buffer_planes: edge_planes,
+        ..base
+    };
+    let start = Vec3::new(8.0, 1.5, 0.0);
+    let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::single(window), bounds, Some(start));
+    for f in 0..30 {
+        set.update(&scene, &bvh, &direct, 1, f, &mut passes);
+    }
+    let (mut sum, mut n) = (0.0f32, 0);
+    for f in 30..80 {
+        set.set_tracking_target(start + Vec3::new(0.4 * (f - 30) as f32, 0.0, 0.0));
+        set.update(&scene, &bvh, &direct, 1, f, &mut passes);
+        let (v, fv) = (&set.volumes()[0], &fixed.volumes()[0]);
+        for p in 0..v.grid.probe_count() {
+            let c = v.grid.probe_coords(p);
+            if c.x + 2 < v.grid.probe_counts.x || v.grid.origin_m.x <= start.x - 3.0 {
+                continue;
+            }
+            let world = v.grid.probe_position(c);
+            let q = fv.grid.probe_index(((world - fv.grid.origin_m) / fv.grid.spacing_m).round().as_uvec3());
+            let want = tile_mean(fv, q);
+            sum += (tile_mean(v, p) - want).abs() / want;
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f32
+}
+
+#[test]
+fn edge_buffers_bring_the_planes_in_front_of_a_moving_window_closer_to_converged() {
+    let (off, on) = (leading_planes_error(0), leading_planes_error(2));
+    eprintln!("leading planes' mean error against a converged volume: edge buffers off {off:.4}, on {on:.4}");
+    // Measured 0.037 against 0.045 (deterministic seeds).
+    assert!(on < 0.9 * off, "edge buffers: {on} against {off} without");
+}

@@ -83,3 +83,53 @@ fn window_never_shows_a_stale_probe(keep_field: bool) {
     assert!(scrolled >= 9 * 18, "the window moved 20 m: {scrolled}");
     assert!(worst < 0.25, "a probe differs from the fixed volume's at its position by {worst}");
 }
+
+/// Edge buffers (`volume_edge_buffer_planes`) on both backends: a window
+/// scrolling with the field blended on the host and one with the field kept on
+/// the device, both from the GPU's traced and shaded rays, agree texel for
+/// texel; and the buffers do change the field (the same run without them
+/// differs), so the device blends the leading planes with the host's lowered
+/// hysteresis.
+#[test]
+fn edge_buffers_blend_alike_on_the_host_and_on_the_device() {
+    let scene = probegi_scene::builtin::half_roofed_ground();
+    let context = || GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set");
+    let (Some(host_ctx), Some(device_ctx)) = (context(), context()) else { return };
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let host = WgpuProbeTracer::new(host_ctx, &scene, &bvh, true).expect("upload").keeping_field(false);
+    let device = WgpuProbeTracer::new(device_ctx, &scene, &bvh, true).expect("upload").keeping_field(true);
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let bounds = scene.bounds().expect("bounds");
+    let window = |planes: u32| DdgiVolumeSettings {
+        probe_counts: UVec3::new(7, 3, 3),
+        probe_rays_per_probe: 64,
+        probe_states: ProbeStatesMode::AllActive,
+        probe_relocation: false,
+        probe_spacing_m: Some(Vec3::ONE),
+        probe_origin_m: Some(Vec3::new(0.0, 0.5, -1.0)),
+        volume_tracks_camera: true,
+        volume_edge_buffer_planes: planes,
+        ..Default::default()
+    };
+    let start = Vec3::new(8.0, 1.5, 0.0);
+    let run = |planes: u32, gpu: &WgpuProbeTracer| {
+        let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::single(window(planes)), bounds, Some(start));
+        let mut ms = Default::default();
+        for f in 0..24 {
+            set.set_tracking_target(start + Vec3::new(0.5 * f as f32, 0.0, 0.0));
+            set.update_traced_by(&scene, &bvh, Some(gpu), &direct, 1, f, &mut ms).expect("GPU");
+        }
+        set.sync_host_atlases(Some(gpu)).expect("read back");
+        set.volumes()[0].clone()
+    };
+    let (on_host, on_device, without) = (run(2, &host), run(2, &device), run(0, &host));
+    let rel = |a: &DdgiVolume, b: &DdgiVolume| {
+        let scale = a.irradiance.texels.iter().fold(0f32, |m, t| m.max(t.max_element())).max(1e-6);
+        a.irradiance.texels.iter().zip(&b.irradiance.texels).fold(0f32, |m, (p, q)| m.max((*p - *q).abs().max_element()))
+            / scale
+    };
+    let (same, changed) = (rel(&on_host, &on_device), rel(&on_host, &without));
+    eprintln!("edge buffers: device vs host blend {same:.2e}; with vs without buffers {changed:.2e} of the largest texel");
+    assert!(same < 1e-5, "the device's edge-buffer blend differs from the host's by {same}");
+    assert!(changed > 1e-2, "edge buffers changed nothing: {changed}");
+}

@@ -160,6 +160,8 @@ impl DdgiVolume {
                 (frame.active[p] && first != u32::MAX).then(|| {
                     let h = if !self.probe_has_history[p] || self.probe_states[p].is_new() {
                         0.0
+                    } else if self.in_edge_buffer(p) {
+                        self.probe_hysteresis[p].min(self.settings.volume_edge_buffer_hysteresis)
                     } else {
                         self.probe_hysteresis[p]
                     };

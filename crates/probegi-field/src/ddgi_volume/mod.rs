@@ -114,6 +114,9 @@ pub struct DdgiVolume {
     probe_unblended_frames: Vec<u32>,
     /// Frames in a row each probe has traced (the shadowing field's pairs).
     probe_trace_run: Vec<u32>,
+    /// Per axis, the sign of the tracking window's last scroll along it (0:
+    /// never scrolled): its leading faces, for the edge buffers.
+    scroll_leading: glam::IVec3,
 }
 
 /// One volume's per-frame scratch.
@@ -192,6 +195,7 @@ impl DdgiVolume {
             probe_occlusion_change: vec![0.0; probes],
             probe_unblended_frames: vec![0; probes],
             probe_trace_run: vec![0; probes],
+            scroll_leading: glam::IVec3::ZERO,
             settings,
         }
     }
@@ -302,5 +306,37 @@ mod tests {
         assert!((scales(&v.irradiance_events) - 0.5 * 0.85).abs() < 1e-6);
         assert!((scales(&v.visibility_events) - 0.5).abs() < 1e-6);
         assert_eq!(v.irradiance_events.iter().map(|r| r.frames_left).max(), Some(10));
+    }
+
+    #[test]
+    fn edge_buffers_are_the_planes_nearest_the_faces_the_window_scrolled_toward() {
+        let settings = DdgiVolumeSettings {
+            probe_counts: UVec3::new(6, 4, 5),
+            probe_spacing_m: Some(Vec3::ONE),
+            volume_tracks_camera: true,
+            volume_edge_buffer_planes: 2,
+            ..Default::default()
+        };
+        let mut v = DdgiVolume::placed(settings.clone(), (Vec3::ZERO, Vec3::ONE), Some(Vec3::ZERO));
+        let buffered = |v: &DdgiVolume| (0..v.grid.probe_count()).filter(|&p| v.in_edge_buffer(p)).collect::<Vec<_>>();
+        assert!(buffered(&v).is_empty(), "a window that never scrolled has no leading face");
+        // Toward +x, then toward −z: the two +x planes and the two −z planes.
+        assert!(v.scroll_to(Vec3::new(3.0, 0.0, 0.0)) > 0);
+        assert!(v.scroll_to(Vec3::new(3.0, 0.0, -2.0)) > 0);
+        let want: Vec<usize> = (0..v.grid.probe_count())
+            .filter(|&p| {
+                let c = v.grid.probe_coords(p);
+                c.x >= 4 || c.z < 2
+            })
+            .collect();
+        assert_eq!(buffered(&v), want);
+        assert_eq!(want.len(), 2 * 4 * 5 + 6 * 4 * 2 - 2 * 4 * 2);
+        // Off, or a fixed volume: none.
+        v.settings.volume_edge_buffer_planes = 0;
+        assert!(buffered(&v).is_empty());
+        let fixed = DdgiVolumeSettings { volume_tracks_camera: false, ..settings };
+        let mut f = DdgiVolume::placed(fixed, (Vec3::ZERO, Vec3::ONE), None);
+        assert_eq!(f.scroll_to(Vec3::splat(5.0)), 0);
+        assert!(buffered(&f).is_empty());
     }
 }

@@ -24,6 +24,7 @@ impl DdgiVolume {
             return 0;
         }
         self.grid.scroll(cells);
+        self.scroll_leading = IVec3::select(cells.cmpne(IVec3::ZERO), cells.signum(), self.scroll_leading);
         let mut reset = 0;
         for p in 0..self.grid.probe_count() {
             let coords = self.grid.probe_coords(p);
@@ -39,6 +40,22 @@ impl DdgiVolume {
         // another one now, whether or not the usable set changed.
         self.probe_fallback = nearest_usable_probes(&self.grid, &self.probe_usable);
         reset
+    }
+
+    /// Whether storage slot `p` lies in the edge buffer: within
+    /// `volume_edge_buffer_planes` planes of a face the window last scrolled
+    /// toward (`DdgiVolumeSettings::volume_edge_buffer_planes`).
+    pub(crate) fn in_edge_buffer(&self, p: usize) -> bool {
+        let planes = self.settings.volume_edge_buffer_planes;
+        if planes == 0 || !self.settings.volume_tracks_camera {
+            return false;
+        }
+        let (c, n) = (self.grid.probe_coords(p), self.grid.probe_counts);
+        (0..3).any(|a| match self.scroll_leading[a] {
+            1 => c[a] + planes >= n[a],
+            -1 => c[a] < planes,
+            _ => false,
+        })
     }
 
     /// Clears again the tiles of the probes reset since the last blend (after the
