@@ -163,6 +163,12 @@ pub struct DdgiVolumeSettings {
     /// The edge buffers' hysteresis cap (the seed says "low" without a number;
     /// measured in docs/RESULTS.md).
     pub volume_edge_buffer_hysteresis: f32,
+    /// Seed the probes a tracking window scrolls in from the next coarser
+    /// cascade (or sparser volume) instead of starting them from nothing
+    /// (Timberdoodle PGI, `../shared/PEERS.md`; `probegi_field::probe_seeding`):
+    /// their first own blend then weighs the seed with their hysteresis.
+    /// Off by default; measured in docs/RESULTS.md.
+    pub probe_seeding: bool,
 }
 
 impl Default for DdgiVolumeSettings {
@@ -213,6 +219,7 @@ impl Default for DdgiVolumeSettings {
             ray_budget_hysteresis_per_frame: true,
             volume_edge_buffer_planes: 0,
             volume_edge_buffer_hysteresis: 0.8,
+            probe_seeding: false,
         }
     }
 }

@@ -284,37 +284,38 @@ fn a_point_outside_every_volume_gets_no_field_and_a_dense_volume_wins_inside() {
     assert!(set.irradiance(lo + (hi - lo) * 0.1, Vec3::Y, Vec3::Y).max_element() > 0.0);
 }
 
-/// Runs a 7×3×3 window over `half_roofed_ground` out from under the roof, at
-/// 0.4 m per frame, with `edge_planes` edge-buffer planes, and returns the mean
-/// relative error of the two leading planes' probes against a converged fixed
-/// volume at the same positions, over the frames after the first scroll.
-fn leading_planes_error(edge_planes: u32) -> f32 {
+/// Runs `window` (7×3×3 probes, 1 m apart, over `half_roofed_ground`), alone
+/// or as the finest of two cascades, out from under the roof at 0.4 m per
+/// frame, and returns the mean relative error of its two leading planes'
+/// probes against a converged fixed volume at the same positions, over the
+/// frames after the first scroll.
+fn leading_planes_error(window: DdgiVolumeSettings, cascades: u32) -> f32 {
     let scene = probegi_scene::builtin::half_roofed_ground();
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");
-    let base = DdgiVolumeSettings {
-        probe_rays_per_probe: 128,
-        probe_states: ProbeStatesMode::AllActive,
-        probe_relocation: false,
-        probe_spacing_m: Some(Vec3::ONE),
-        probe_origin_m: Some(Vec3::new(0.0, 0.5, -1.0)),
-        ..Default::default()
+    let fixed_settings = DdgiVolumeSettings {
+        probe_counts: UVec3::new(41, 3, 3),
+        volume_tracks_camera: false,
+        volume_edge_buffer_planes: 0,
+        probe_seeding: false,
+        ..window.clone()
     };
-    let fixed_settings = DdgiVolumeSettings { probe_counts: UVec3::new(41, 3, 3), ..base.clone() };
     let mut fixed = DdgiFieldSet::new(&DdgiFieldSetSettings::single(fixed_settings), bounds, None);
     let mut passes = Default::default();
     for f in 0..60 {
         fixed.update(&scene, &bvh, &direct, 1, f, &mut passes);
     }
-    let window = DdgiVolumeSettings {
-        probe_counts: UVec3::new(7, 3, 3),
-        volume_tracks_camera: true,
-        volume_edge_buffer_planes: edge_planes,
-        ..base
+    let set_settings = if cascades > 1 {
+        let mut set = DdgiFieldSetSettings::cascades(cascades, &window, Vec3::ONE, 2.0);
+        // On the fixed volume's lattice.
+        set.volumes.iter_mut().for_each(|v| v.probe_origin_m = window.probe_origin_m);
+        set
+    } else {
+        DdgiFieldSetSettings::single(window)
     };
     let start = Vec3::new(8.0, 1.5, 0.0);
-    let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::single(window), bounds, Some(start));
+    let mut set = DdgiFieldSet::new(&set_settings, bounds, Some(start));
     for f in 0..30 {
         set.update(&scene, &bvh, &direct, 1, f, &mut passes);
     }
@@ -338,10 +339,80 @@ fn leading_planes_error(edge_planes: u32) -> f32 {
     sum / n.max(1) as f32
 }
 
+fn tracking_window() -> DdgiVolumeSettings {
+    DdgiVolumeSettings {
+        probe_counts: UVec3::new(7, 3, 3),
+        probe_rays_per_probe: 128,
+        probe_states: ProbeStatesMode::AllActive,
+        probe_relocation: false,
+        probe_spacing_m: Some(Vec3::ONE),
+        probe_origin_m: Some(Vec3::new(0.0, 0.5, -1.0)),
+        volume_tracks_camera: true,
+        ..Default::default()
+    }
+}
+
 #[test]
 fn edge_buffers_bring_the_planes_in_front_of_a_moving_window_closer_to_converged() {
-    let (off, on) = (leading_planes_error(0), leading_planes_error(2));
+    let off = leading_planes_error(tracking_window(), 1);
+    let on = leading_planes_error(DdgiVolumeSettings { volume_edge_buffer_planes: 2, ..tracking_window() }, 1);
     eprintln!("leading planes' mean error against a converged volume: edge buffers off {off:.4}, on {on:.4}");
     // Measured 0.037 against 0.045 (deterministic seeds).
     assert!(on < 0.9 * off, "edge buffers: {on} against {off} without");
+}
+
+#[test]
+fn seeded_probes_start_from_the_coarser_cascade_and_stay_closer_to_converged() {
+    let off = leading_planes_error(tracking_window(), 2);
+    let on = leading_planes_error(DdgiVolumeSettings { probe_seeding: true, ..tracking_window() }, 2);
+    eprintln!("finest cascade's leading planes' mean error: seeding off {off:.4}, on {on:.4}");
+    // Measured 0.049 against 0.143 (deterministic seeds).
+    assert!(on < 0.5 * off, "seeding: {on} against {off} without");
+}
+
+#[test]
+fn a_seed_is_the_trilinear_mix_of_the_coarser_cascades_usable_tiles() {
+    let scene = probegi_scene::builtin::half_roofed_ground();
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let bounds = scene.bounds().expect("bounds");
+    let window = DdgiVolumeSettings { probe_seeding: true, probe_rays_per_probe: 32, ..tracking_window() };
+    let start = Vec3::new(8.0, 1.5, 0.0);
+    let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::cascades(2, &window, Vec3::ONE, 2.0), bounds, Some(start));
+    let mut passes = Default::default();
+    for f in 0..4 {
+        set.update(&scene, &bvh, &direct, 1, f, &mut passes);
+    }
+    let coarse = set.volumes()[1].clone();
+    assert!(set.set_tracking_target(start + Vec3::new(1.2, 0.0, 0.0)) > 0);
+    let (fine, gamma) = (&set.volumes()[0], window.probe_irradiance_gamma);
+    let seeded: Vec<usize> = (0..fine.grid.probe_count()).filter(|&p| fine.probe_seeded(p)).collect();
+    assert!(seeded.len() >= 9, "a plane of the finest cascade is seeded: {}", seeded.len());
+    for &p in &seeded {
+        assert!(!fine.probe_has_history(p) && !fine.probe_usable(p), "not read before its first blend");
+        let pos = fine.grid.probe_position(fine.grid.probe_coords(p));
+        // By hand: the coarse cage's trilinear weights (every coarse probe is usable here).
+        let a = (pos - coarse.grid.origin_m) / coarse.grid.spacing_m;
+        let base = a.floor();
+        let mut want = vec![Vec3::ZERO; fine.irradiance.tile_len()];
+        for corner in 0..8u32 {
+            let bit = UVec3::new(corner & 1, (corner >> 1) & 1, corner >> 2);
+            let t = a - base;
+            let w3 = Vec3::select(bit.cmpeq(UVec3::ONE), t, Vec3::ONE - t);
+            let q = coarse.grid.probe_index(base.as_uvec3() + bit);
+            for (o, e) in want.iter_mut().zip(coarse.irradiance.tile(q)) {
+                *o += w3.x * w3.y * w3.z * decode_irradiance(*e, gamma);
+            }
+        }
+        for (got, want) in fine.irradiance.tile(p).iter().zip(&want) {
+            let got = decode_irradiance(*got, gamma);
+            assert!((got - *want).abs().max_element() <= 1e-4 * want.max_element().max(1e-3), "{got} vs {want}");
+        }
+        assert!(fine.distance.tile(p).iter().all(|d| d.x > 0.0), "distance seeded too");
+    }
+    fine.validate();
+    // The first blend weighs the seed: the tile is not one frame's estimate alone.
+    set.update(&scene, &bvh, &direct, 1, 4, &mut passes);
+    let fine = &set.volumes()[0];
+    assert!(seeded.iter().all(|&p| fine.probe_has_history(p) && !fine.probe_seeded(p)));
 }

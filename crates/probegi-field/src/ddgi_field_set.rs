@@ -235,7 +235,31 @@ impl DdgiFieldSet {
             return 0;
         }
         self.tracking_target_m = Some(target_m);
-        self.volumes.iter_mut().map(|v| v.scroll_to(target_m)).sum()
+        let scrolled = self.volumes.iter_mut().map(|v| v.scroll_to(target_m)).sum();
+        if scrolled > 0 {
+            self.seed_new_probes();
+        }
+        scrolled
+    }
+
+    /// Plans the seeds of every volume with `probe_seeding` for its probes reset
+    /// since its last blend, and applies them to the host atlases when those
+    /// are current (else a device mixes them before its next blend, and
+    /// [`Self::accept_host_atlases`] repeats them on the copy).
+    fn seed_new_probes(&mut self) {
+        for i in 0..self.volumes.len() {
+            if !self.volumes[i].settings.probe_seeding {
+                continue;
+            }
+            let reset = self.volumes[i].probes_reset_since_blend().to_vec();
+            let seeds = crate::probe_seeding::plan_seeds(&self.volumes, &self.order, i, &reset);
+            if self.field_on_device {
+                seeds.iter().for_each(|s| self.volumes[i].mark_seeded(s.probe as usize));
+            } else {
+                crate::probe_seeding::apply_seeds(&mut self.volumes, i, &seeds);
+            }
+            self.volumes[i].pending_seeds = seeds;
+        }
     }
 
     /// The point tracking windows follow now (the camera), if one was given.
@@ -774,6 +798,12 @@ impl DdgiFieldSet {
             copy(i, v)?;
             // Tiles the host cleared since the device last blended (a scroll) stay clear.
             v.clear_reset_tiles();
+        }
+        // ... or seeded, from the sources as the device will see them.
+        for i in 0..self.volumes.len() {
+            let seeds = std::mem::take(&mut self.volumes[i].pending_seeds);
+            crate::probe_seeding::apply_seeds(&mut self.volumes, i, &seeds);
+            self.volumes[i].pending_seeds = seeds;
         }
         self.field_on_device = false;
         Ok(())

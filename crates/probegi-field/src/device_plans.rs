@@ -32,6 +32,9 @@ pub struct DeviceVolumeBlend<'a> {
     /// Probes whose tiles the host cleared since the last blend (scrolled in):
     /// the device clears its copies before blending.
     pub reset_probes: &'a [u32],
+    /// Seeds for some of `reset_probes` (`crate::probe_seeding`), mixed from
+    /// other volumes' tiles after the clear and before any blend of the frame.
+    pub seeds: &'a [crate::probe_seeding::ProbeSeed],
     /// The shadowing field's share, for a volume that keeps one
     /// ([`DeviceShadowBlend`]; `None` otherwise).
     pub shadow: Option<DeviceShadowBlend>,

@@ -32,6 +32,7 @@ pub mod ddgi_field_set;
 pub mod ddgi_volume;
 pub mod device_plans;
 pub mod probe_ray_gen;
+pub mod probe_seeding;
 pub mod ray_budget;
 pub mod seam;
 

@@ -17,6 +17,8 @@
 //! - [`probe_blend`]: the blend (γ encoding, seed 004 Listing 3's thresholds,
 //!   distance moments, over the CPU's own weight tables) and border passes over
 //!   device-resident atlases (a volume's own, or its range of a resident field);
+//! - [`probe_seeding`]: new probes' tiles mixed from a coarser volume's
+//!   (`probegi_field::probe_seeding`) in the resident field;
 //! - [`probe_change`]: each blended probe's change, the ray budget's signal
 //!   (`probegi_core::probe_change`), read back 4 bytes a probe;
 //! - [`probe_classification`]: seed 004 Listing 5's classification round;
@@ -55,6 +57,7 @@ pub mod probe_change;
 pub mod probe_classification;
 pub mod probe_ray_gen;
 pub mod probe_relocation;
+pub mod probe_seeding;
 pub mod probe_shade;
 pub mod probe_usage;
 pub(crate) mod shader_registry;

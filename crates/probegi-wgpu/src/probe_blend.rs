@@ -242,6 +242,7 @@ impl GpuProbeBlend {
             visibility_scale: frame.visibility_scale,
             distance_clamp_m: frame.distance_clamp_m,
             reset_probes: &[],
+            seeds: &[],
             shadow: None,
             measure_change: false,
             probe_blend_frames: Vec::new(),

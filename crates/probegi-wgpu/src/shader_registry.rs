@@ -13,6 +13,7 @@
 //! | [`PROBE_SHADE`]         | `bvh.wgsl`, `ddgi_query.wgsl`, `scene.wgsl`, `shadow_lighting.wgsl`, `probe_shade.wgsl` |
 //! | [`PROBE_BLEND`]         | `probe_border.wgsl`, `probe_blend.wgsl`                         |
 //! | [`PROBE_CHANGE`]        | `probe_change.wgsl`                                             |
+//! | [`PROBE_SEEDING`]       | `probe_seeding.wgsl`                                            |
 //! | [`PROBE_RELOCATION`]    | `probe_relocation.wgsl`                                         |
 //! | [`PROBE_CLASSIFICATION`]| `bvh.wgsl`, `scene.wgsl`, `probe_classification.wgsl`           |
 //! | [`PROBE_USAGE`]         | `probe_usage.wgsl`                                              |
@@ -87,6 +88,9 @@ pub(crate) const PROBE_BLEND: PassShader =
 /// `probe_change::GpuProbeChange`.
 pub(crate) const PROBE_CHANGE: PassShader =
     PassShader { label: "probe_change.wgsl", files: &[wgsl_file!("probe_change.wgsl")] };
+/// `probe_seeding::GpuProbeSeeding`.
+pub(crate) const PROBE_SEEDING: PassShader =
+    PassShader { label: "probe_seeding.wgsl", files: &[wgsl_file!("probe_seeding.wgsl")] };
 /// `probe_relocation::GpuProbeRelocation`.
 pub(crate) const PROBE_RELOCATION: PassShader =
     PassShader { label: "probe_relocation.wgsl", files: &[wgsl_file!("probe_relocation.wgsl")] };
@@ -110,9 +114,10 @@ pub(crate) const FIELD_QUERY: PassShader =
 
 /// Every pass of the crate (the unit tests compile each).
 #[cfg(test)]
-pub(crate) const PASSES: [&PassShader; 11] = [
+pub(crate) const PASSES: [&PassShader; 12] = [
     &SHADOW_FIELD,
     &PROBE_CHANGE,
+    &PROBE_SEEDING,
     &TRACE_RAYS,
     &PROBE_RAY_GEN,
     &PROBE_SHADE,

@@ -176,6 +176,8 @@ pub struct WgpuProbeTracer {
     shadow: Option<GpuShadowField>,
     /// The ray budget's change measure (with `keeping_field`).
     change: Option<crate::probe_change::GpuProbeChange>,
+    /// New probes' seeds mixed on the device (with `keeping_field`).
+    seeding: Option<crate::probe_seeding::GpuProbeSeeding>,
     /// The last update batch blended on the device, kept with its frame: the
     /// shadowing field casts the next frame's shadow rays from its hits.
     prev_update: Mutex<Option<(u32, GpuRayBatch)>>,
@@ -235,6 +237,7 @@ impl WgpuProbeTracer {
             field: Mutex::new(None),
             shadow: None,
             change: None,
+            seeding: None,
             prev_update: Mutex::new(None),
         })
     }
@@ -259,6 +262,7 @@ impl WgpuProbeTracer {
         // Without it the shadowing field's rays and blend run on the host.
         self.shadow = if self.keep_field { GpuShadowField::new(&self.ctx).ok() } else { None };
         self.change = self.keep_field.then(|| crate::probe_change::GpuProbeChange::new(&self.ctx));
+        self.seeding = self.keep_field.then(|| crate::probe_seeding::GpuProbeSeeding::new(&self.ctx));
         self
     }
 
@@ -368,6 +372,12 @@ impl WgpuProbeTracer {
                     .zero_tiles(&self.ctx, p.reset_probes);
                 f.reset_occlusion_tiles(&self.ctx, i, p.reset_probes);
             }
+        }
+        // Seeds read other volumes' tiles: after every clear, before any blend.
+        for (i, p) in plan.iter().enumerate().filter(|(_, p)| !p.seeds.is_empty() && !upload_atlases) {
+            let seeding = self.seeding.as_ref().ok_or_else(|| GpuError::Input("no seeding pass".into()))?;
+            let target = f.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
+            seeding.seed(&self.ctx, &target, |v| f.member_atlases(v), p.seeds, p.settings.probe_irradiance_gamma)?;
         }
         Ok(f)
     }

@@ -158,7 +158,8 @@ impl DdgiVolume {
             .map(|p| {
                 let first = frame.first_ray[p];
                 (frame.active[p] && first != u32::MAX).then(|| {
-                    let h = if !self.probe_has_history[p] || self.probe_states[p].is_new() {
+                    let fresh = !self.probe_has_history[p] || self.probe_states[p].is_new();
+                    let h = if fresh && !self.probe_seeded[p] {
                         0.0
                     } else if self.in_edge_buffer(p) {
                         self.probe_hysteresis[p].min(self.settings.volume_edge_buffer_hysteresis)
@@ -192,6 +193,7 @@ impl DdgiVolume {
             visibility_scale,
             distance_clamp_m: self.distance_clamp_m(),
             reset_probes: &self.probes_reset_since_blend,
+            seeds: &self.pending_seeds,
             measure_change: frame.measure_change,
             probe_blend_frames: frames,
         }
@@ -222,10 +224,12 @@ impl DdgiVolume {
     fn after_update(&mut self, updated: &[bool]) {
         self.frames_updated += 1;
         self.probes_reset_since_blend.clear();
+        self.pending_seeds.clear();
         let max_h = self.settings.probe_hysteresis;
         self.active_probes_last = updated.iter().filter(|a| **a).count();
         for (p, _) in updated.iter().enumerate().filter(|(_, u)| **u) {
             self.probe_has_history[p] = true;
+            self.probe_seeded[p] = false;
             let state = self.probe_states[p].after_update();
             if matches!(state, ProbeState::Alive | ProbeState::UsageSleeping) {
                 let target = if state == ProbeState::Alive { max_h } else { 0.5 * max_h };

@@ -117,6 +117,12 @@ pub struct DdgiVolume {
     /// Per axis, the sign of the tracking window's last scroll along it (0:
     /// never scrolled): its leading faces, for the edge buffers.
     scroll_leading: glam::IVec3,
+    /// Probes seeded since their reset (`probe_seeding`): their first blend
+    /// weighs the seed instead of replacing it.
+    probe_seeded: Vec<bool>,
+    /// The seeds planned for this volume's probes reset since the last blend,
+    /// for a device that holds the atlases (it mixes them before blending).
+    pub(crate) pending_seeds: Vec<crate::probe_seeding::ProbeSeed>,
 }
 
 /// One volume's per-frame scratch.
@@ -196,6 +202,8 @@ impl DdgiVolume {
             probe_unblended_frames: vec![0; probes],
             probe_trace_run: vec![0; probes],
             scroll_leading: glam::IVec3::ZERO,
+            probe_seeded: vec![false; probes],
+            pending_seeds: Vec::new(),
             settings,
         }
     }
@@ -252,6 +260,24 @@ impl DdgiVolume {
     /// Whether probe `p` has been blended since it was created or last reset.
     pub fn probe_has_history(&self, p: usize) -> bool {
         self.probe_has_history[p]
+    }
+
+    /// Whether probe `p` was seeded since its reset and has not blended yet
+    /// (`probegi_field::probe_seeding`).
+    pub fn probe_seeded(&self, p: usize) -> bool {
+        self.probe_seeded.get(p).copied().unwrap_or(false)
+    }
+
+    /// Marks probe `p` seeded (`probegi_field::probe_seeding`).
+    pub(crate) fn mark_seeded(&mut self, p: usize) {
+        if let Some(s) = self.probe_seeded.get_mut(p) {
+            *s = true;
+        }
+    }
+
+    /// The probes reset since the last blend (scrolled in).
+    pub(crate) fn probes_reset_since_blend(&self) -> &[u32] {
+        &self.probes_reset_since_blend
     }
 
     /// Whether every probe is initialised (relocated and classified).
