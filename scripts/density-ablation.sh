@@ -33,6 +33,7 @@ declare -A CONFIGS=(
   [fitted-32x16x12-no-crush]="--probes 32,16,12 --set probe_crush_weight=false"
   [fitted-32x16x12-distance-32]="--probes 32,16,12 --set probe_distance_texels=32"
   [cascades-3-cover-2x]="--cascades 3 --probes 16,8,16 --set probe_spacing_m=[1.1607,1.1829,0.52]"
+  [cascades-3-20x10x10]="--cascades 3 --probes 20,10,10"
   [cascades-4]="--cascades 4 --probes 16,8,16 --set probe_spacing_m=[0.5803,0.5914,0.26]"
   [fitted-16x8x12]="--probes 16,8,12"
   [fitted-16x8x12-no-chebyshev]="--probes 16,8,12 --set probe_chebyshev_weight=false"
