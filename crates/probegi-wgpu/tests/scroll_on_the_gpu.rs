@@ -84,6 +84,16 @@ fn window_never_shows_a_stale_probe(keep_field: bool) {
     assert!(worst < 0.25, "a probe differs from the fixed volume's at its position by {worst}");
 }
 
+/// Two GPU tracers that trace and shade alike: one blends on the host, the
+/// other keeps the field on the device. `None` without a GPU.
+fn host_and_device_blend(scene: &probegi_scene::Scene, bvh: &BvhTracer) -> Option<(WgpuProbeTracer, WgpuProbeTracer)> {
+    let context = || GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set");
+    let (host_ctx, device_ctx) = (context()?, context()?);
+    let host = WgpuProbeTracer::new(host_ctx, scene, bvh, true).expect("upload").keeping_field(false);
+    let device = WgpuProbeTracer::new(device_ctx, scene, bvh, true).expect("upload").keeping_field(true);
+    Some((host, device))
+}
+
 /// Edge buffers (`volume_edge_buffer_planes`) on both backends: a window
 /// scrolling with the field blended on the host and one with the field kept on
 /// the device, both from the GPU's traced and shaded rays, agree texel for
@@ -93,11 +103,8 @@ fn window_never_shows_a_stale_probe(keep_field: bool) {
 #[test]
 fn edge_buffers_blend_alike_on_the_host_and_on_the_device() {
     let scene = probegi_scene::builtin::half_roofed_ground();
-    let context = || GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set");
-    let (Some(host_ctx), Some(device_ctx)) = (context(), context()) else { return };
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
-    let host = WgpuProbeTracer::new(host_ctx, &scene, &bvh, true).expect("upload").keeping_field(false);
-    let device = WgpuProbeTracer::new(device_ctx, &scene, &bvh, true).expect("upload").keeping_field(true);
+    let Some((host, device)) = host_and_device_blend(&scene, &bvh) else { return };
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");
     let window = |planes: u32| DdgiVolumeSettings {
@@ -149,11 +156,8 @@ fn edge_buffers_blend_alike_on_the_host_and_on_the_device() {
 #[test]
 fn seeded_probes_match_on_the_host_and_on_the_device() {
     let scene = probegi_scene::builtin::half_roofed_ground();
-    let context = || GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set");
-    let (Some(host_ctx), Some(device_ctx)) = (context(), context()) else { return };
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
-    let host = WgpuProbeTracer::new(host_ctx, &scene, &bvh, true).expect("upload").keeping_field(false);
-    let device = WgpuProbeTracer::new(device_ctx, &scene, &bvh, true).expect("upload").keeping_field(true);
+    let Some((host, device)) = host_and_device_blend(&scene, &bvh) else { return };
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");
     let window = |seeding: bool| DdgiVolumeSettings {
