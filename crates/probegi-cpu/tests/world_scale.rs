@@ -4,6 +4,7 @@
 
 use glam::{UVec3, Vec3};
 use probegi_core::camera::CameraRays;
+use probegi_core::ddgi_query::chebyshev_weight;
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::ddgi_volume_blend::VolumeBlending;
 use probegi_core::irradiance_encoding::decode_irradiance;
@@ -13,6 +14,7 @@ use probegi_cpu::probe_shade::{ProbeShadeInputs, shade_probe_rays};
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, SeamError, UpdateStep};
 use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_field::probe_seeding::nearest_texel;
 use probegi_scene::builtin::{cornell_box, furnace_box};
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene};
 
@@ -371,14 +373,17 @@ fn seeded_probes_start_from_the_coarser_cascade_and_stay_closer_to_converged() {
 }
 
 #[test]
-fn a_seed_is_the_trilinear_mix_of_the_coarser_cascades_usable_tiles() {
+fn a_seed_is_the_visibility_weighted_trilinear_mix_of_the_coarser_cascades_tiles() {
     let scene = probegi_scene::builtin::half_roofed_ground();
     let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");
     let window = DdgiVolumeSettings { probe_seeding: true, probe_rays_per_probe: 32, ..tracking_window() };
     let start = Vec3::new(8.0, 1.5, 0.0);
-    let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::cascades(2, &window, Vec3::ONE, 2.0), bounds, Some(start));
+    let mut cascades = DdgiFieldSetSettings::cascades(2, &window, Vec3::ONE, 2.0);
+    // Off the ground plane (a probe on a surface sees it at distance 0).
+    cascades.volumes.iter_mut().for_each(|v| v.probe_origin_m = window.probe_origin_m);
+    let mut set = DdgiFieldSet::new(&cascades, bounds, Some(start));
     let mut passes = Default::default();
     for f in 0..4 {
         set.update(&scene, &bvh, &direct, 1, f, &mut passes);
@@ -391,17 +396,28 @@ fn a_seed_is_the_trilinear_mix_of_the_coarser_cascades_usable_tiles() {
     for &p in &seeded {
         assert!(!fine.probe_has_history(p) && !fine.probe_usable(p), "not read before its first blend");
         let pos = fine.grid.probe_position(fine.grid.probe_coords(p));
-        // By hand: the coarse cage's trilinear weights (every coarse probe is usable here).
+        // By hand: the coarse cage's trilinear weights (every coarse probe is
+        // usable here) times each probe's Chebyshev visibility of the position,
+        // normalised (the trilinear weights alone if no probe sees it).
         let a = (pos - coarse.grid.origin_m) / coarse.grid.spacing_m;
         let base = a.floor();
+        let corners: Vec<(usize, f32)> = (0..8u32)
+            .map(|corner| {
+                let bit = UVec3::new(corner & 1, (corner >> 1) & 1, corner >> 2);
+                let t = a - base;
+                let w3 = Vec3::select(bit.cmpeq(UVec3::ONE), t, Vec3::ONE - t);
+                let q = coarse.grid.probe_index(base.as_uvec3() + bit);
+                let to = pos - coarse.probe_positions[q];
+                let moments = coarse.distance.tile(q)[nearest_texel(to.normalize(), coarse.distance.interior)];
+                (q, w3.x * w3.y * w3.z * chebyshev_weight(moments, to.length()))
+            })
+            .collect();
+        let sum: f32 = corners.iter().map(|c| c.1).sum();
+        assert!(sum > 1e-3, "some coarse probe sees the seeded position");
         let mut want = vec![Vec3::ZERO; fine.irradiance.tile_len()];
-        for corner in 0..8u32 {
-            let bit = UVec3::new(corner & 1, (corner >> 1) & 1, corner >> 2);
-            let t = a - base;
-            let w3 = Vec3::select(bit.cmpeq(UVec3::ONE), t, Vec3::ONE - t);
-            let q = coarse.grid.probe_index(base.as_uvec3() + bit);
+        for (q, w) in corners {
             for (o, e) in want.iter_mut().zip(coarse.irradiance.tile(q)) {
-                *o += w3.x * w3.y * w3.z * decode_irradiance(*e, gamma);
+                *o += w / sum * decode_irradiance(*e, gamma);
             }
         }
         for (got, want) in fine.irradiance.tile(p).iter().zip(&want) {

@@ -17,15 +17,23 @@
 //! cap apply) instead of replacing it. The shadowing field's occlusion maps are
 //! not seeded (they stay reset to lit).
 //!
-//! *Deviations:* the mix has no visibility weights (the coarse probes' distance
-//! moments were taken from other points); a probe that no later volume covers
+//! Each source probe's trilinear weight is multiplied by its Chebyshev
+//! visibility of the new probe's position (`probegi_core::ddgi_query::
+//! chebyshev_weight`, from the source's distance moments at the nearest
+//! interior texel toward it), so a coarse probe behind a wall does not pass on
+//! the other side's light. Where no source probe sees the position, the plain
+//! trilinear weights apply.
+//!
+//! *Deviations:* a probe that no later volume covers
 //! with a usable probe, or whose tile sizes differ from that volume's, starts
 //! from nothing as before. One plan serves both backends: the host applies it
 //! to its atlases ([`apply_seeds`]) and a device that holds them runs the same
 //! mix (`DeviceVolumeBlend::seeds`).
 
 use glam::{Vec2, Vec3};
+use probegi_core::ddgi_query::chebyshev_weight;
 use probegi_core::irradiance_encoding::{decode_irradiance, encode_irradiance};
+use probegi_core::octahedral::oct_encode;
 use probegi_core::probe_atlas::ProbeAtlas;
 
 use crate::ddgi_volume::DdgiVolume;
@@ -39,9 +47,16 @@ pub struct ProbeSeed {
     pub source_volume: u32,
     /// The source probes (storage slots); unused entries have weight 0.
     pub source_probes: [u32; 8],
-    /// The mix's weights, summing to 1.
+    /// The sources' trilinear weights, summing to 1 (before visibility).
     pub weights: [f32; 8],
+    /// The seeded probe's grid position, metres: where visibility is tested.
+    pub position_m: Vec3,
+    /// The sources' positions (relocation offsets included), metres.
+    pub source_positions_m: [Vec3; 8],
 }
+
+/// Below this total visibility-weighted share the plain trilinear weights apply.
+pub const SEED_VISIBLE_WEIGHT_MIN: f32 = 1e-4;
 
 /// The seeds for the probes reset in `volumes[target]` since its last blend
 /// (`reset`), from the volumes after it in `order` (sampling order).
@@ -64,6 +79,8 @@ pub fn plan_seeds(volumes: &[DdgiVolume], order: &[usize], target: usize, reset:
                     source_volume: s as u32,
                     source_probes,
                     weights,
+                    position_m: position,
+                    source_positions_m: source_probes.map(|q| volumes[s].probe_positions[q as usize]),
                 })
         })
         .collect()
@@ -99,7 +116,42 @@ fn seed_from(source: &DdgiVolume, position_m: Vec3) -> Option<([u32; 8], [f32; 8
     Some((probes, weights))
 }
 
-/// One seed's mixed tiles (irradiance encoded with `gamma`, distance moments).
+/// The seed's mix weights: trilinear × each source's Chebyshev visibility of
+/// the seeded position, normalised; the trilinear weights where none sees it.
+pub fn seed_weights(seed: &ProbeSeed, distance: &ProbeAtlas<Vec2>) -> [f32; 8] {
+    let n = distance.interior;
+    let mut w = [0f32; 8];
+    for i in 0..8 {
+        if seed.weights[i] <= 0.0 {
+            continue;
+        }
+        let to = seed.position_m - seed.source_positions_m[i];
+        let d = to.length();
+        let visible = if d > 1e-4 {
+            let moments = distance.tile(seed.source_probes[i] as usize)[nearest_texel(to / d, n)];
+            chebyshev_weight(moments, d)
+        } else {
+            1.0
+        };
+        w[i] = seed.weights[i] * visible;
+    }
+    let sum: f32 = w.iter().sum();
+    if sum < SEED_VISIBLE_WEIGHT_MIN {
+        return seed.weights;
+    }
+    w.map(|x| x / sum)
+}
+
+/// The interior texel of a tile with `n` interior texels per side that holds
+/// direction `dir` (nearest, no filtering), as an index into the bordered tile.
+pub fn nearest_texel(dir: Vec3, n: u32) -> usize {
+    let uv = oct_encode(dir) * 0.5 + Vec2::splat(0.5);
+    let texel = |u: f32| ((u * n as f32).floor() as i64).clamp(0, n as i64 - 1) as usize;
+    (texel(uv.y) + 1) * (n as usize + 2) + texel(uv.x) + 1
+}
+
+/// One seed's mixed tiles (irradiance encoded with `gamma`, distance
+/// moments), with [`seed_weights`].
 pub fn seed_tiles(
     seed: &ProbeSeed,
     irradiance: &ProbeAtlas<Vec3>,
@@ -108,7 +160,8 @@ pub fn seed_tiles(
 ) -> (Vec<Vec3>, Vec<Vec2>) {
     let mut irr = vec![Vec3::ZERO; irradiance.tile_len()];
     let mut dist = vec![Vec2::ZERO; distance.tile_len()];
-    for (&q, &w) in seed.source_probes.iter().zip(&seed.weights).filter(|(_, w)| **w > 0.0) {
+    let weights = seed_weights(seed, distance);
+    for (&q, &w) in seed.source_probes.iter().zip(&weights).filter(|(_, w)| **w > 0.0) {
         for (out, t) in irr.iter_mut().zip(irradiance.tile(q as usize)) {
             *out += w * decode_irradiance(*t, gamma);
         }

@@ -32,8 +32,10 @@ struct SeedEntry {
     source_distance: [u32; 8],
     weights: [f32; 8],
     encoding: [f32; 4],
+    position: [f32; 4],
+    source_positions: [[f32; 4]; 8],
 }
-const _: () = assert!(std::mem::size_of::<SeedEntry>() == 128);
+const _: () = assert!(std::mem::size_of::<SeedEntry>() == 272);
 
 /// Largest dispatch dimension (WebGPU's default limit).
 const MAX_GROUPS: usize = 65_535;
@@ -86,7 +88,9 @@ impl GpuProbeSeeding {
                     dist_len,
                 ],
                 weights: s.weights,
-                encoding: [gamma, 0.0, 0.0, 0.0],
+                encoding: [gamma, target.distance_interior as f32, 0.0, 0.0],
+                position: s.position_m.extend(0.0).to_array(),
+                source_positions: s.source_positions_m.map(|p| p.extend(0.0).to_array()),
                 ..Default::default()
             };
             for (i, &q) in s.source_probes.iter().enumerate() {

@@ -13,7 +13,7 @@
 //! | [`PROBE_SHADE`]         | `bvh.wgsl`, `ddgi_query.wgsl`, `scene.wgsl`, `shadow_lighting.wgsl`, `probe_shade.wgsl` |
 //! | [`PROBE_BLEND`]         | `probe_border.wgsl`, `probe_blend.wgsl`                         |
 //! | [`PROBE_CHANGE`]        | `probe_change.wgsl`                                             |
-//! | [`PROBE_SEEDING`]       | `probe_seeding.wgsl`                                            |
+//! | [`PROBE_SEEDING`]       | `ddgi_query.wgsl`, `probe_seeding.wgsl`                         |
 //! | [`PROBE_RELOCATION`]    | `probe_relocation.wgsl`                                         |
 //! | [`PROBE_CLASSIFICATION`]| `bvh.wgsl`, `scene.wgsl`, `probe_classification.wgsl`           |
 //! | [`PROBE_USAGE`]         | `probe_usage.wgsl`                                              |
@@ -90,7 +90,7 @@ pub(crate) const PROBE_CHANGE: PassShader =
     PassShader { label: "probe_change.wgsl", files: &[wgsl_file!("probe_change.wgsl")] };
 /// `probe_seeding::GpuProbeSeeding`.
 pub(crate) const PROBE_SEEDING: PassShader =
-    PassShader { label: "probe_seeding.wgsl", files: &[wgsl_file!("probe_seeding.wgsl")] };
+    PassShader { label: "probe_seeding.wgsl", files: &[DDGI_QUERY, wgsl_file!("probe_seeding.wgsl")] };
 /// `probe_relocation::GpuProbeRelocation`.
 pub(crate) const PROBE_RELOCATION: PassShader =
     PassShader { label: "probe_relocation.wgsl", files: &[wgsl_file!("probe_relocation.wgsl")] };
@@ -154,7 +154,7 @@ pub(crate) const BVH_INSTANCE_IDENTITY: u32 = 1;
 pub(crate) const BVH_INSTANCE_MOVING: u32 = 2;
 
 /// The `f32` constants of the prelude: WGSL name (the Rust one) and value.
-const F32_CONSTANTS: [(&str, f32); 7] = [
+const F32_CONSTANTS: [(&str, f32); 8] = [
     ("BACKFACE_WEIGHT_FLOOR", ddgi_query::BACKFACE_WEIGHT_FLOOR),
     ("CHEBYSHEV_WEIGHT_FLOOR", ddgi_query::CHEBYSHEV_WEIGHT_FLOOR),
     ("MIN_PROBE_WEIGHT", ddgi_query::MIN_PROBE_WEIGHT),
@@ -162,6 +162,7 @@ const F32_CONSTANTS: [(&str, f32); 7] = [
     ("INSIDE_GEOMETRY_BACKFACE_FRACTION", probe_relocation::INSIDE_GEOMETRY_BACKFACE_FRACTION),
     ("FRONTFACE_STEP_LIMIT_REL", probe_relocation::FRONTFACE_STEP_LIMIT_REL),
     ("BACKFACE_DISTANCE_SCALE", probe_blend::BACKFACE_DISTANCE_SCALE),
+    ("SEED_VISIBLE_WEIGHT_MIN", probegi_field::probe_seeding::SEED_VISIBLE_WEIGHT_MIN),
 ];
 
 /// The `u32` constants of the prelude.
