@@ -86,7 +86,7 @@ pub struct ViewArgs {
     #[arg(long)]
     pub sequence: Option<PathBuf>,
     /// The view the window starts with: full, direct, indirect, albedo,
-    /// normals, probes, irradiance-atlas, distance-atlas.
+    /// normals, probes, irradiance-atlas, distance-atlas, light-visibility.
     #[arg(long)]
     pub view: Option<String>,
     /// Samples per pixel of the reference an input script's `f5` asks for

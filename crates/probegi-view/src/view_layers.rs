@@ -1,7 +1,8 @@
 //! The viewer's debug views of a frame (RTXGI's test harness shows the same
 //! set): the full frame, its direct and indirect terms, the surfaces' diffuse
 //! albedo and shading normals, the probes drawn as spheres shaded by their
-//! irradiance, and a volume's irradiance and distance atlases.
+//! irradiance, a volume's irradiance and distance atlases, and the punctual
+//! lights' visibility (the shadowing field's, seed 003 ch. 5, or exact).
 //!
 //! Full, direct and indirect are the stepper's own terms, from whichever
 //! backend rendered them. Albedo, normals and the probe spheres are drawn on a
@@ -11,6 +12,7 @@
 use probegi_core::camera::CameraRays;
 use probegi_core::image::Image;
 use probegi_cpu::gbuffer::trace_gbuffer;
+use probegi_cpu::light_visibility::light_visibility_image;
 use probegi_cpu::shading::ShadingContext;
 use probegi_field::atlas_view::{distance_grey_image, irradiance_image};
 use probegi_scene::RayTracer;
@@ -38,11 +40,15 @@ pub enum ViewMode {
     IrradianceAtlas,
     /// A volume's distance atlas (mean distance over the clamp, grey).
     DistanceAtlas,
+    /// The punctual lights' visibility at each pixel's surface: the shadowing
+    /// field's (seed 003 ch. 5) where the field keeps one, else exact shadow
+    /// rays (`probegi_cpu::light_visibility`, as `render --ao` writes it).
+    LightVisibility,
 }
 
 impl ViewMode {
     /// Every view, in the panel's order.
-    pub const ALL: [ViewMode; 8] = [
+    pub const ALL: [ViewMode; 9] = [
         ViewMode::Full,
         ViewMode::Direct,
         ViewMode::Indirect,
@@ -51,6 +57,7 @@ impl ViewMode {
         ViewMode::Probes,
         ViewMode::IrradianceAtlas,
         ViewMode::DistanceAtlas,
+        ViewMode::LightVisibility,
     ];
 
     /// The view's name in the panel.
@@ -64,6 +71,7 @@ impl ViewMode {
             ViewMode::Probes => "probes",
             ViewMode::IrradianceAtlas => "irradiance atlas",
             ViewMode::DistanceAtlas => "distance atlas",
+            ViewMode::LightVisibility => "light visibility",
         }
     }
 
@@ -122,6 +130,10 @@ pub fn view_image(
     match (mode, set) {
         (ViewMode::Albedo, _) => Ok(gbuffer_image(&|sp, v| ShadingContext::new(scene, sp, -v).bsdf.diffuse_albedo())),
         (ViewMode::Normals, _) => Ok(gbuffer_image(&|sp, _| sp.shading_normal * 0.5 + 0.5)),
+        (ViewMode::LightVisibility, set) => {
+            let field = set.filter(|s| s.has_shadow_field());
+            Ok(light_visibility_image(scene, tracer, &camera, full.width, full.height, field))
+        }
         (_, None) => Ok(full.clone()),
         (ViewMode::IrradianceAtlas, Some(set)) => {
             Ok(irradiance_image(&set.volumes()[volume.min(set.volumes().len() - 1)]))
