@@ -120,10 +120,9 @@ fn seed_from(source: &DdgiVolume, position_m: Vec3) -> Option<([u32; 8], [f32; 8
 /// the seeded position, normalised; the trilinear weights where none sees it.
 pub fn seed_weights(seed: &ProbeSeed, distance: &ProbeAtlas<Vec2>) -> [f32; 8] {
     let n = distance.interior;
-    let mut w = [0f32; 8];
-    for i in 0..8 {
+    let w: [f32; 8] = std::array::from_fn(|i| {
         if seed.weights[i] <= 0.0 {
-            continue;
+            return 0.0;
         }
         let to = seed.position_m - seed.source_positions_m[i];
         let d = to.length();
@@ -133,8 +132,8 @@ pub fn seed_weights(seed: &ProbeSeed, distance: &ProbeAtlas<Vec2>) -> [f32; 8] {
         } else {
             1.0
         };
-        w[i] = seed.weights[i] * visible;
-    }
+        seed.weights[i] * visible
+    });
     let sum: f32 = w.iter().sum();
     if sum < SEED_VISIBLE_WEIGHT_MIN {
         return seed.weights;
