@@ -86,8 +86,9 @@ pub fn plan_seeds(volumes: &[DdgiVolume], order: &[usize], target: usize, reset:
         .collect()
 }
 
-/// The usable probes of `source`'s cage around `position_m` with their
-/// normalised trilinear weights; `None` outside its probe box or when none is usable.
+/// The usable probes of `source`'s cage around `position_m` (the core's
+/// `ProbeGrid::cage`) with their normalised trilinear weights; `None` outside
+/// its probe box or when none is usable.
 fn seed_from(source: &DdgiVolume, position_m: Vec3) -> Option<([u32; 8], [f32; 8])> {
     let g = &source.grid;
     let a = (position_m - g.origin_m) / g.spacing_m;
@@ -95,17 +96,13 @@ fn seed_from(source: &DdgiVolume, position_m: Vec3) -> Option<([u32; 8], [f32; 8
     if !(a.cmpge(Vec3::ZERO).all() && a.cmple(top).all()) {
         return None;
     }
-    let base = a.floor().min((top - Vec3::ONE).max(Vec3::ZERO));
-    let t = (a - base).clamp(Vec3::ZERO, Vec3::ONE);
+    let cage = g.cage(position_m);
     let (mut probes, mut weights) = ([0u32; 8], [0f32; 8]);
-    for corner in 0..8u32 {
-        let bit = glam::UVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
-        let coords = (base.as_uvec3() + bit).min(g.probe_counts - glam::UVec3::ONE);
-        let w3 = Vec3::select(bit.cmpeq(glam::UVec3::ONE), t, Vec3::ONE - t);
-        let q = g.probe_index(coords);
+    for corner in 0..8 {
+        let q = g.probe_index(cage.corner(corner));
         if source.probe_usable(q) && source.probe_has_history(q) {
-            probes[corner as usize] = q as u32;
-            weights[corner as usize] = w3.x * w3.y * w3.z;
+            probes[corner] = q as u32;
+            weights[corner] = cage.trilinear(corner).element_product();
         }
     }
     let sum: f32 = weights.iter().sum();

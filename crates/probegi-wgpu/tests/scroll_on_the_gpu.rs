@@ -94,6 +94,21 @@ fn host_and_device_blend(scene: &probegi_scene::Scene, bvh: &BvhTracer) -> Optio
     Some((host, device))
 }
 
+/// A 7×3×3 tracking window, 1 m apart, off the ground plane, all probes
+/// active, no relocation: the two tests below vary one setting of it.
+fn scrolling_window() -> DdgiVolumeSettings {
+    DdgiVolumeSettings {
+        probe_counts: UVec3::new(7, 3, 3),
+        probe_rays_per_probe: 64,
+        probe_states: ProbeStatesMode::AllActive,
+        probe_relocation: false,
+        probe_spacing_m: Some(Vec3::ONE),
+        probe_origin_m: Some(Vec3::new(0.0, 0.5, -1.0)),
+        volume_tracks_camera: true,
+        ..Default::default()
+    }
+}
+
 /// Edge buffers (`volume_edge_buffer_planes`) on both backends: a window
 /// scrolling with the field blended on the host and one with the field kept on
 /// the device, both from the GPU's traced and shaded rays, agree texel for
@@ -107,17 +122,7 @@ fn edge_buffers_blend_alike_on_the_host_and_on_the_device() {
     let Some((host, device)) = host_and_device_blend(&scene, &bvh) else { return };
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");
-    let window = |planes: u32| DdgiVolumeSettings {
-        probe_counts: UVec3::new(7, 3, 3),
-        probe_rays_per_probe: 64,
-        probe_states: ProbeStatesMode::AllActive,
-        probe_relocation: false,
-        probe_spacing_m: Some(Vec3::ONE),
-        probe_origin_m: Some(Vec3::new(0.0, 0.5, -1.0)),
-        volume_tracks_camera: true,
-        volume_edge_buffer_planes: planes,
-        ..Default::default()
-    };
+    let window = |planes: u32| DdgiVolumeSettings { volume_edge_buffer_planes: planes, ..scrolling_window() };
     let start = Vec3::new(8.0, 1.5, 0.0);
     let run = |planes: u32, gpu: &WgpuProbeTracer| {
         let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::single(window(planes)), bounds, Some(start));
@@ -160,15 +165,7 @@ fn seeded_probes_match_on_the_host_and_on_the_device() {
     let Some((host, device)) = host_and_device_blend(&scene, &bvh) else { return };
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");
-    let window = |seeding: bool| DdgiVolumeSettings {
-        probe_counts: UVec3::new(7, 3, 3),
-        probe_rays_per_probe: 64,
-        probe_states: ProbeStatesMode::AllActive,
-        probe_relocation: false,
-        volume_tracks_camera: true,
-        probe_seeding: seeding,
-        ..Default::default()
-    };
+    let window = |seeding: bool| DdgiVolumeSettings { probe_seeding: seeding, ..scrolling_window() };
     let start = Vec3::new(8.0, 1.5, 0.0);
     let run = |seeding: bool, gpu: &WgpuProbeTracer| {
         let mut settings = DdgiFieldSetSettings::cascades(2, &window(seeding), Vec3::ONE, 2.0);
