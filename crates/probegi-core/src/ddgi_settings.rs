@@ -87,7 +87,9 @@ pub struct DdgiVolumeSettings {
     pub probe_relocation_offset_limit_rel: f32,
     /// A front face closer than this × the minimum spacing pushes the probe away.
     pub probe_relocation_min_frontface_rel: f32,
-    /// Probe states: `all-active`, `jcgt` (seed 004 §6) or `usage` (seed 003 §6.1).
+    /// Probe states: `all-active`, `jcgt` (seed 004 §6), `usage` (seed 003 §6.1)
+    /// or `screen` (Timberdoodle PGI's screen-driven countdowns; see
+    /// `probegi_core::probe_classification`).
     pub probe_states: ProbeStatesMode,
     /// jcgt classification, first pass: a probe stays Vigilant when a front-face hit
     /// lies within this fraction of the spacing of its grid point on every axis
@@ -101,6 +103,12 @@ pub struct DdgiVolumeSettings {
     /// §6.1 keeps ALIVE probes "for some minimum of frames" without a number; we use
     /// the sleeping interval, so a probe at the rim r is never stale longer than it).
     pub probe_alive_min_frames: u32,
+    /// Screen scheme: frames a probe stays Requested after a camera pixel last
+    /// read its cage (PGI's direct countdown: 63).
+    pub probe_screen_request_frames: u32,
+    /// Screen scheme: Idle probes trace and blend every this many frames,
+    /// interleaved (PGI updates 1/8 of its active probes a frame: 8).
+    pub probe_screen_idle_interval_frames: u32,
     /// Second-order glossy from probes (seed 004 §4.4): the hit of a camera glossy ray
     /// adds its own specular reflection from the probes' irradiance.
     pub glossy_second_order: bool,
@@ -206,6 +214,8 @@ impl Default for DdgiVolumeSettings {
             probe_classification_reach_rel: 0.5,
             probe_sleeping_update_interval: 10,
             probe_alive_min_frames: 10,
+            probe_screen_request_frames: 63,
+            probe_screen_idle_interval_frames: 8,
             glossy_second_order: true,
             probe_area_light_samples: 1,
             shadow_field: false,
@@ -327,6 +337,12 @@ impl DdgiVolumeSettings {
             return Err((
                 "ray_budget_max_interval_frames",
                 format!("{} must be in 1..=1000", self.ray_budget_max_interval_frames),
+            ));
+        }
+        if self.probe_screen_idle_interval_frames == 0 || self.probe_screen_idle_interval_frames > 1000 {
+            return Err((
+                "probe_screen_idle_interval_frames",
+                format!("{} must be in 1..=1000", self.probe_screen_idle_interval_frames),
             ));
         }
         if self.probe_sleeping_update_interval == 0 {

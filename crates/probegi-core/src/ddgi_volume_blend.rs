@@ -146,6 +146,35 @@ pub fn field_set_irradiance(set: &DdgiFieldSetView<'_>, position: Vec3, normal: 
     }
 }
 
+/// The probes a query at `position` reads, as [`field_set_irradiance`] weighs
+/// the members: for every member with weight there, the storage slots of the
+/// eight corners of its biased point's cage (`ProbeGrid::cage`; usable or
+/// not, and not their fallbacks), passed to `visit` as (member index in
+/// sampling order, slot). The screen scheme's requests
+/// (`crate::probe_classification`, `ProbeStatesMode::Screen`).
+pub fn field_set_cage_probes(
+    set: &DdgiFieldSetView<'_>,
+    position: Vec3,
+    normal: Vec3,
+    view_dir: Vec3,
+    mut visit: impl FnMut(usize, usize),
+) {
+    let mut wsum = 0.0f32;
+    for f in 0..set.members.len() {
+        let w = member_weight(set, f, position, wsum);
+        if w <= 0.0 {
+            continue;
+        }
+        wsum += w;
+        let field = &set.members[f].field;
+        let g = field.grid;
+        let cage = g.cage(position + crate::ddgi_query::surface_bias(field.settings, g, normal, view_dir));
+        for i in 0..8 {
+            visit(f, g.probe_index(cage.corner(i)));
+        }
+    }
+}
+
 /// The shadowing field's cage at `position` over the set
 /// (`crate::shadow_field::ShadowCage`): from the first member in sampling
 /// order that keeps occlusion maps, weighs the point (its probe box and one
@@ -262,6 +291,37 @@ mod tests {
         // x = 3.5: Algorithm 1 gives the fine field 0.5 (last cell), the rest is coarse.
         assert!((at(3.5) - (0.5 + 0.5 * 3.0)).abs() < 1e-3, "{}", at(3.5));
         assert!((at(30.0) - 3.0).abs() < 1e-4, "the coarsest cascade covers the world");
+    }
+
+    #[test]
+    fn cage_probes_are_the_weighed_members_cage_corners() {
+        let dense = Uniform::new(grid(0.0, 5, 1.0), 1.0); // probe box [0, 4]³
+        let sparse = Uniform::new(grid(-8.0, 5, 5.0), 3.0); // [-8, 12]³
+        let set = DdgiFieldSetView {
+            members: vec![dense.member(false), sparse.member(false)],
+            blending: VolumeBlending::Density,
+            camera_m: None,
+        };
+        let probes_at = |p: Vec3| {
+            let mut v = Vec::new();
+            field_set_cage_probes(&set, p, Vec3::Y, Vec3::Y, |m, slot| v.push((m, slot)));
+            v
+        };
+        // Inside the dense box the dense member takes all the weight: its cage alone.
+        // Bias: (0.2·n + 0.8·v)·0.75·1 m·0.3 = 0.225 m up; (2.3, 1.275, 2.3) → base (2, 1, 2).
+        let inside = probes_at(Vec3::new(2.3, 1.05, 2.3));
+        let g = &dense.grid;
+        let expect: Vec<(usize, usize)> =
+            (0..8).map(|i| (0, g.probe_index(g.cage(Vec3::new(2.3, 1.275, 2.3)).corner(i)))).collect();
+        assert_eq!(inside, expect);
+        assert!(inside.contains(&(0, g.probe_index(glam::UVec3::new(2, 1, 2)))));
+        assert!(inside.contains(&(0, g.probe_index(glam::UVec3::new(3, 2, 3)))));
+        // In the dense falloff band both members are read; beyond it the sparse alone.
+        let band = probes_at(Vec3::new(4.25, 2.0, 2.0));
+        assert_eq!(band.iter().filter(|(m, _)| *m == 0).count(), 8);
+        assert_eq!(band.iter().filter(|(m, _)| *m == 1).count(), 8);
+        assert!(probes_at(Vec3::new(8.0, 2.0, 2.0)).iter().all(|(m, _)| *m == 1));
+        assert!(probes_at(Vec3::splat(30.0)).is_empty(), "no member weighs a point beyond every volume");
     }
 
     #[test]

@@ -54,6 +54,27 @@
 //!
 //! A probe leaving DEAD replaces its stale history (hysteresis 0) on its first blend.
 //!
+//! **screen** — Timberdoodle PGI's screen-driven updates (`../shared/PEERS.md`,
+//! "Sparse, screen-driven updates"), issue 32 item 4. The camera frame marks
+//! the probes whose cages its pixels read
+//! (`crate::ddgi_volume_blend::field_set_cage_probes`: every member that
+//! weighs the pixel, the eight corners of its biased point's cage). A marked
+//! probe is Requested for `probe_screen_request_frames` frames (PGI's direct
+//! countdown, 63) and traces and blends every frame; the others are Idle and
+//! trace and blend every `probe_screen_idle_interval_frames` frames (8, PGI's
+//! 1/8), in the spatially interleaved phase of [`screen_idle_phase`], so the
+//! idle rays spread evenly over the frames. A probe's blend stands for the
+//! frames since its last one, capped at the idle interval: its hysteresis is
+//! raised to that power (`probe_blend::hysteresis_over_frames`), so an idle
+//! probe converges in wall-clock frames as fast as a requested one.
+//! *Deviations:* PGI never updates an unrequested probe and requests
+//! probes one bounce deep from probe-ray hits (its "indirect" countdown);
+//! we update the rest at the reduced rate instead, which carries off-screen
+//! light to the probes the camera reads without a second request level.
+//! PGI interleaves the requested probes too (1/8 a frame); the issue asks
+//! for them at full rate. Every probe traces until its first blend, and every
+//! probe is usable once blended, as under all-active.
+//!
 //! Queries read only probes that have been blended since they last (re)started:
 //! Off, Sleeping (jcgt), Dead (usage) and Newly Awake / Newly Vigilant probes (not
 //! yet blended in their new state) are excluded. Deviation: the thesis's
@@ -76,6 +97,11 @@ pub enum ProbeStatesMode {
     Jcgt,
     /// Seed 003's ALIVE / SLEEPING / DEAD usage classification.
     Usage,
+    /// Screen-driven updates (Timberdoodle PGI's request countdowns): probes
+    /// whose cages the camera frame reads trace and blend every frame for
+    /// `probe_screen_request_frames` frames, the rest every
+    /// `probe_screen_idle_interval_frames` frames, interleaved.
+    Screen,
 }
 
 /// A probe's state: `Active` under all-active, seed 004 Listing 5's six states under
@@ -112,6 +138,12 @@ pub enum ProbeState {
     /// usage: more than half of its relevant samples are backfaces (inside geometry);
     /// culled from queries, blended only in the frame it turns DEAD.
     Dead,
+    /// screen: a camera pixel read the probe's cage within the last
+    /// `probe_screen_request_frames` frames; traces and blends every frame.
+    Requested,
+    /// screen: no camera pixel read it lately; traces and blends every
+    /// `probe_screen_idle_interval_frames` frames ([`screen_idle_phase`]).
+    Idle,
 }
 
 impl ProbeState {
@@ -129,6 +161,8 @@ impl ProbeState {
             Self::Alive => "alive",
             Self::UsageSleeping => "usage_sleeping",
             Self::Dead => "dead",
+            Self::Requested => "requested",
+            Self::Idle => "idle",
         }
     }
 
@@ -168,6 +202,16 @@ impl ProbeState {
             s => s,
         }
     }
+}
+
+/// The frame phase in which an Idle probe of the screen scheme updates: for
+/// the probe's lattice point `cell` (whole cells from the world origin),
+/// `(x + 2y + 4z) mod interval`, so with the default interval 8 every 2×2×2
+/// block of probes spreads over the eight frames (PGI's interleave). A probe
+/// keeps its cell while a tracking window scrolls, so it keeps its phase.
+pub fn screen_idle_phase(cell: glam::IVec3, interval: u32) -> u32 {
+    let k = cell.x as i64 + 2 * cell.y as i64 + 4 * cell.z as i64;
+    k.rem_euclid(interval.max(1) as i64) as u32
 }
 
 /// Whether a front-face surface point at `offset_m` from a probe's grid point lies

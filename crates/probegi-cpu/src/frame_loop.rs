@@ -467,6 +467,10 @@ impl<'a> FrameLoop<'a> {
         let t = Instant::now();
         let second_order = set.volumes().iter().any(|v| v.settings.glossy_second_order);
         let view = set.view();
+        let mut requests = set.wants_probe_requests().then(|| {
+            let total = set.probe_request_layout().last().copied().unwrap_or(0);
+            vec![0u32; total.div_ceil(32)]
+        });
         let on_device = h.0.camera_frame(
             camera,
             &view,
@@ -477,8 +481,13 @@ impl<'a> FrameLoop<'a> {
             settings.seed,
             &mut self.acc.frame_direct,
             &mut self.acc.indirect,
+            requests.as_mut(),
         );
         drop(view);
+        if let (Some(Ok(_)), Some(words), Some(set)) = (&on_device, &requests, self.field.as_mut()) {
+            // Sized from this set's layout above, so the length holds.
+            let _ = set.submit_probe_requests(words);
+        }
         match on_device {
             Some(Ok((surfaces, unlit))) => {
                 // Primary rays; the device's shadow and glossy rays are not counted.
@@ -560,10 +569,12 @@ impl<'a> FrameLoop<'a> {
                 &mut self.pass_totals,
             );
         }
+        request_probes(self.field.as_mut(), &gbuffer, &mut self.pass_totals);
         self.last_gbuffer = Some(gbuffer);
         self.acc.finish_frame(f, settings, &mut self.stats, on_frame_done);
         Continue(())
     }
+
 
     /// Whether the direct term restarts at this frame: the scene or the camera
     /// changed since the last frame (a camera that holds at its last key
@@ -608,6 +619,23 @@ impl<'a> FrameLoop<'a> {
 }
 
 /// The DDGI figures of `--stats` after the last frame.
+/// The screen scheme's requests (`ProbeStatesMode::Screen`): the probes
+/// whose cages the frame's surface pixels read, for the next update. Timed
+/// under `probe_requests`.
+fn request_probes(field: Option<&mut DdgiFieldSet>, gbuffer: &GBuffer, pass_totals: &mut BTreeMap<&'static str, f64>) {
+    let Some(set) = field.filter(|s| s.wants_probe_requests()) else {
+        return;
+    };
+    let t = Instant::now();
+    let points: Vec<(Vec3, Vec3, Vec3)> = gbuffer
+        .texels
+        .iter()
+        .filter_map(|t| t.surface.as_ref().map(|sp| (sp.position, sp.facing_normal(), t.view_dir_world)))
+        .collect();
+    set.request_probes_at(&points);
+    *pass_totals.entry("probe_requests").or_default() += t.elapsed().as_secs_f64() * 1e3;
+}
+
 fn field_stats(set: &DdgiFieldSet, stats: &mut RenderStats) {
     let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| stats.pass_ms.get(p)).sum();
     stats.probes = Some(set.probe_count());

@@ -101,6 +101,10 @@ pub trait ProbeBatchTracer: Sync {
     /// diffuse albedo, those of them the field left unlit), or `None` to leave
     /// the camera to the CPU. With `field_on_device` the device's own atlases are
     /// the current ones (`field`'s are stale; its per-probe data is current).
+    /// With `probe_requests` (the screen scheme), the device also fills it
+    /// with the request bitset of the probes its pixels' queries read
+    /// (`DdgiFieldSet::probe_request_layout` over `field`'s members; the
+    /// caller sizes it).
     #[allow(clippy::too_many_arguments)]
     fn camera_frame(
         &self,
@@ -113,6 +117,7 @@ pub trait ProbeBatchTracer: Sync {
         _seed: u64,
         _direct: &mut [Vec3],
         _indirect: &mut [Vec3],
+        _probe_requests: Option<&mut Vec<u32>>,
     ) -> Option<Result<(usize, usize), BackendError>> {
         None
     }

@@ -262,6 +262,82 @@ impl DdgiFieldSet {
         }
     }
 
+    /// Whether a volume runs the screen scheme (`ProbeStatesMode::Screen`):
+    /// the camera frame should then report the probes it read, with
+    /// [`Self::request_probes_at`] or [`Self::submit_probe_requests`].
+    pub fn wants_probe_requests(&self) -> bool {
+        self.volumes.iter().any(|v| v.settings.probe_states == probegi_core::ddgi_settings::ProbeStatesMode::Screen)
+    }
+
+    /// The layout of a request bitset ([`Self::submit_probe_requests`]): per
+    /// member in sampling order (the set view's), its first bit; the last
+    /// entry is the total. A device's query numbers probes the same way
+    /// (member by member, storage slots within).
+    pub fn probe_request_layout(&self) -> Vec<usize> {
+        let mut first = vec![0];
+        for &i in &self.order {
+            first.push(first.last().copied().unwrap_or(0) + self.volumes[i].grid.probe_count());
+        }
+        first
+    }
+
+    /// The screen scheme's requests from the camera frame, as a bitset over
+    /// [`Self::probe_request_layout`] (bit `b` of word `b / 32`): each set
+    /// bit requests that probe for the next update. Volumes under other
+    /// schemes ignore theirs. An error when the length is not
+    /// `⌈total / 32⌉` words.
+    pub fn submit_probe_requests(&mut self, words: &[u32]) -> Result<(), SeamError> {
+        let layout = self.probe_request_layout();
+        let total = layout.last().copied().unwrap_or(0);
+        if words.len() != total.div_ceil(32) {
+            return Err(SeamError::WrongLength { what: "probe request words", expected: total.div_ceil(32), got: words.len() });
+        }
+        for (m, &i) in self.order.iter().enumerate() {
+            for p in 0..self.volumes[i].grid.probe_count() {
+                let b = layout[m] + p;
+                if words[b / 32] >> (b % 32) & 1 != 0 {
+                    self.volumes[i].request_probe(p);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The request bitset ([`Self::submit_probe_requests`]) of camera
+    /// pixels at `points` (surface position, unit facing normal, unit
+    /// direction toward the camera): the probes their queries read
+    /// (`probegi_core::ddgi_volume_blend::field_set_cage_probes`).
+    pub fn probe_requests_at(&self, points: &[(Vec3, Vec3, Vec3)]) -> Vec<u32> {
+        use rayon::prelude::*;
+        let layout = self.probe_request_layout();
+        let words = layout.last().copied().unwrap_or(0).div_ceil(32);
+        let view = self.view();
+        points
+            .par_chunks(1024)
+            .map(|chunk| {
+                let mut w = vec![0u32; words];
+                for &(p, n, v) in chunk {
+                    probegi_core::ddgi_volume_blend::field_set_cage_probes(&view, p, n, v, |m, slot| {
+                        let b = layout[m] + slot;
+                        w[b / 32] |= 1 << (b % 32);
+                    });
+                }
+                w
+            })
+            .reduce(|| vec![0u32; words], |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x |= y);
+                a
+            })
+    }
+
+    /// [`Self::probe_requests_at`] then [`Self::submit_probe_requests`]: the
+    /// screen scheme's requests of camera pixels at `points`.
+    pub fn request_probes_at(&mut self, points: &[(Vec3, Vec3, Vec3)]) {
+        let words = self.probe_requests_at(points);
+        // The words are this set's own layout, so the length holds.
+        let _ = self.submit_probe_requests(&words);
+    }
+
     /// The point tracking windows follow now (the camera), if one was given.
     pub fn tracking_target(&self) -> Option<Vec3> {
         self.tracking_target_m
@@ -366,6 +442,7 @@ impl DdgiFieldSet {
         // Shadow rays are made on the host: a batch with them keeps per-ray arrays.
         let per_ray = !self.update_rays_on_device || self.has_host_shadow_rays();
         self.batch.clear(ProbeRayBatchKind::Update, per_ray);
+        self.volumes.iter_mut().for_each(|v| v.tick_screen_requests());
         self.apply_ray_budget();
         for i in 0..self.volumes.len() {
             self.volumes[i].plan_update(&mut self.frames[i], self.seed, self.frame, i as u32, &mut self.batch);

@@ -101,6 +101,7 @@ impl FieldControls {
             ProbeStatesMode::AllActive => "all-active",
             ProbeStatesMode::Jcgt => "jcgt",
             ProbeStatesMode::Usage => "usage",
+            ProbeStatesMode::Screen => "screen",
         };
         vec![
             format!("probe_hysteresis={}", self.hysteresis),

@@ -178,6 +178,7 @@ fn field_panel(ui: &mut Ui, state: &mut PanelState) {
         ui.radio_value(&mut f.probe_states, ProbeStatesMode::AllActive, "all active");
         ui.radio_value(&mut f.probe_states, ProbeStatesMode::Jcgt, "jcgt");
         ui.radio_value(&mut f.probe_states, ProbeStatesMode::Usage, "usage");
+        ui.radio_value(&mut f.probe_states, ProbeStatesMode::Screen, "screen");
     });
     ui.checkbox(&mut f.relocation, "relocation");
     ui.checkbox(&mut f.shadow_field, "shadowing field");

@@ -35,7 +35,8 @@ pub(crate) struct CameraParams {
     pub(crate) right: [f32; 4],
     /// xyz: the up axis; w: the height (pixels).
     pub(crate) up: [f32; 4],
-    /// Frame, seed, area-light samples, second-order glossy.
+    /// Frame, seed, area-light samples, flags (1: second-order glossy, 2:
+    /// shadowing field, 4: probe requests).
     pub(crate) info: [u32; 4],
     /// xyz: the sky's radiance.
     pub(crate) sky: [f32; 4],
@@ -61,6 +62,9 @@ pub struct CameraFrame<'a> {
     pub second_order: bool,
     /// Radiance of the sky for rays that miss.
     pub sky_radiance: Vec3,
+    /// The screen scheme's requests: the words of the request bitset
+    /// (`DdgiFieldSet::probe_request_layout`) to fill, 0 for none.
+    pub request_words: u32,
 }
 
 /// One camera frame read back.
@@ -74,6 +78,9 @@ pub struct CameraImage {
     pub surfaces: usize,
     /// Those of them that got no light from the field.
     pub unlit: usize,
+    /// The probes the frame's queries read, as the request bitset
+    /// (`CameraFrame::request_words` words; empty without requests).
+    pub requests: Vec<u32>,
 }
 
 /// The camera pass's pipeline (`camera_frame.wgsl` with the BVH, the field and
@@ -84,14 +91,14 @@ pub struct GpuCameraPass {
 }
 
 impl GpuCameraPass {
-    /// Storage buffers the pass binds per stage: its own 2, the BVH's, the
+    /// Storage buffers the pass binds per stage: its own 3, the BVH's, the
     /// field's and the scene's.
-    pub const STORAGE_BUFFERS: u32 = 2 + BVH_STORAGE_BUFFERS + FIELD_STORAGE_BUFFERS + SCENE_STORAGE_BUFFERS;
+    pub const STORAGE_BUFFERS: u32 = 3 + BVH_STORAGE_BUFFERS + FIELD_STORAGE_BUFFERS + SCENE_STORAGE_BUFFERS;
 
     /// The pipeline on `ctx`; an error where the device binds too few storage buffers.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         ctx.check_pipeline(Self::STORAGE_BUFFERS, "the camera pass")?;
-        let layout = ctx.pass_layout("camera frame", &[false, false]);
+        let layout = ctx.pass_layout("camera frame", &[false, false, false]);
         let bvh = bvh_bind_group_layout(&ctx.device);
         let field = GpuDdgiField::bind_group_layout(&ctx.device);
         let scene = scene_bind_group_layout(&ctx.device);
@@ -127,7 +134,12 @@ impl GpuCameraPass {
             forward: forward.extend(aspect).into(),
             right: right.extend(w).into(),
             up: up.extend(h).into(),
-            info: [f.frame, f.seed, f.area_samples, f.second_order as u32 | (field.shadow_field as u32) << 1],
+            info: [
+                f.frame,
+                f.seed,
+                f.area_samples,
+                f.second_order as u32 | (field.shadow_field as u32) << 1 | ((f.request_words > 0) as u32) << 2,
+            ],
             sky: f.sky_radiance.extend(0.0).into(),
         };
         let device = &ctx.device;
@@ -141,6 +153,13 @@ impl GpuCameraPass {
             })
         };
         let (direct, indirect) = (image("camera direct"), image("camera indirect"));
+        // Zeroed at creation; at least one word so the binding is never empty.
+        let requests = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("camera probe requests"),
+            size: 4 * f.request_words.max(1) as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("camera frame"),
             layout: &self.layout,
@@ -148,6 +167,7 @@ impl GpuCameraPass {
                 wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: direct.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 2, resource: indirect.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: requests.as_entire_binding() },
             ],
         });
         let mut encoder = device.create_command_encoder(&Default::default());
@@ -166,12 +186,18 @@ impl GpuCameraPass {
             Ok(bytemuck::cast_slice::<u8, [f32; 4]>(&bytes).to_vec())
         };
         let (d, i) = (read(&direct)?, read(&indirect)?);
+        let requests = if f.request_words > 0 {
+            bytemuck::cast_slice::<u8, u32>(&ctx.read_back(&requests)?).to_vec()
+        } else {
+            Vec::new()
+        };
         let v3 = |t: &[f32; 4]| Vec3::new(t[0], t[1], t[2]);
         Ok(CameraImage {
             direct: d.iter().map(v3).collect(),
             indirect: i.iter().map(v3).collect(),
             surfaces: i.iter().filter(|t| t[3] > 0.5).count(),
             unlit: i.iter().filter(|t| t[3] > 1.5).count(),
+            requests,
         })
     }
 }

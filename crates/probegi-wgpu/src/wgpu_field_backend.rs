@@ -481,6 +481,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         seed: u64,
         direct: &mut [Vec3],
         indirect: &mut [Vec3],
+        mut probe_requests: Option<&mut Vec<u32>>,
     ) -> Option<Result<(usize, usize), BackendError>> {
         let pass = self.camera.as_ref()?;
         let (_, scene) = self.shading.as_ref()?;
@@ -509,8 +510,12 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                 area_samples,
                 second_order,
                 sky_radiance: *self.sky_radiance.lock().unwrap_or_else(|e| e.into_inner()),
+                request_words: probe_requests.as_ref().map_or(0, |r| r.len() as u32),
             };
             let image = pass.render(&self.ctx, &self.bvh, gpu_field, scene, &f)?;
+            if let Some(r) = probe_requests.as_deref_mut() {
+                r.copy_from_slice(&image.requests);
+            }
             if image.direct.len() != direct.len() || image.indirect.len() != indirect.len() {
                 return Err(GpuError::Input(format!(
                     "{} camera pixels for a {}-pixel frame",

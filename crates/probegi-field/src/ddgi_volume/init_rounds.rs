@@ -246,6 +246,10 @@ impl DdgiVolume {
             match self.settings.probe_states {
                 ProbeStatesMode::AllActive => self.probe_states[p] = ProbeState::Active,
                 ProbeStatesMode::Usage => self.probe_states[p] = ProbeState::Alive,
+                ProbeStatesMode::Screen => {
+                    let requested = self.probe_request_countdown[p] > 0;
+                    self.probe_states[p] = if requested { ProbeState::Requested } else { ProbeState::Idle };
+                }
                 ProbeStatesMode::Jcgt => {}
             }
             self.probe_pending_init[p] = false;

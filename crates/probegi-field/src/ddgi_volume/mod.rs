@@ -11,6 +11,8 @@
 //!   classification from the frame's hits (seed 003 §6.1);
 //! - `blend_inputs`: scene-event hysteresis (seed 004 §4.3), the backface rule
 //!   (seed 004 §4.1), the blend and the borders;
+//! - `screen_requests`: the screen scheme's countdowns from the camera frame's
+//!   requests, and which probes trace in a frame;
 //! - `scrolling`: a tracking window's whole-cell move over the circular buffer.
 //!
 //! A probe's first update (and a Newly Awake / Newly Vigilant probe's, and a
@@ -30,6 +32,7 @@ use crate::probe_ray_gen::ProbeRayDirections;
 mod blend_inputs;
 mod init_rounds;
 mod probe_budget;
+mod screen_requests;
 mod scrolling;
 mod shadow_rays;
 mod update_plan;
@@ -123,6 +126,10 @@ pub struct DdgiVolume {
     /// The seeds planned for this volume's probes reset since the last blend,
     /// for a device that holds the atlases (it mixes them before blending).
     pub(crate) pending_seeds: Vec<crate::probe_seeding::ProbeSeed>,
+    /// Screen scheme (`screen_requests`): frames each probe stays Requested,
+    /// and whether a camera pixel read it since the last update.
+    probe_request_countdown: Vec<u32>,
+    probe_requested: Vec<bool>,
 }
 
 /// One volume's per-frame scratch.
@@ -151,6 +158,9 @@ pub struct VolumeFrame {
     /// A device blend measures each probe's change (a ray budget reads it;
     /// a host blend always reports it).
     pub measure_change: bool,
+    /// Screen scheme: per probe, the frames its blend stands for (empty
+    /// under the other schemes; `screen_requests`).
+    pub(crate) screen_blend_frames: Vec<u32>,
 }
 
 impl DdgiVolume {
@@ -204,6 +214,8 @@ impl DdgiVolume {
             scroll_leading: glam::IVec3::ZERO,
             probe_seeded: vec![false; probes],
             pending_seeds: Vec::new(),
+            probe_request_countdown: vec![0; probes],
+            probe_requested: vec![false; probes],
             settings,
         }
     }

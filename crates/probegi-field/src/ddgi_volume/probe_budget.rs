@@ -35,7 +35,7 @@ impl DdgiVolume {
             vec![1.0; self.grid.probe_count()]
         };
         for (p, state) in self.probe_states.iter().enumerate() {
-            if !state.traces() {
+            if !self.traces_in_frame(p, frame_index) {
                 continue;
             }
             let age = self.probe_untraced_frames[p].saturating_add(1);
@@ -87,11 +87,16 @@ impl DdgiVolume {
             .collect()
     }
 
-    /// Per probe, the frames its blend this frame stands for: under a budget
+    /// Per probe, the frames its blend this frame stands for: under the screen
+    /// scheme the frames since it last traced, capped at the idle interval
+    /// (`screen_requests`); under a budget
     /// with `ray_budget_hysteresis_per_frame`, the frames since it last blended
     /// (capped at the floor's interval), so that each texel's hysteresis, after
     /// Listing 3, is raised to that power; else 1.
     pub(super) fn blend_frames(&self, frame: &VolumeFrame) -> Vec<u32> {
+        if !frame.screen_blend_frames.is_empty() {
+            return frame.screen_blend_frames.clone();
+        }
         if frame.budget_traces.is_none() || !self.settings.ray_budget_hysteresis_per_frame {
             return vec![1; self.grid.probe_count()];
         }

@@ -26,10 +26,9 @@ impl DdgiVolume {
     ) {
         let probes = self.grid.probe_count();
         let interval = self.settings.probe_sleeping_update_interval;
-        frame.tracing = match &frame.budget_traces {
-            Some(chosen) => self.probe_states.iter().zip(chosen).map(|(s, c)| s.traces() && *c).collect(),
-            None => self.probe_states.iter().map(|s| s.traces()).collect(),
-        };
+        let chosen = |p: usize| frame.budget_traces.as_ref().is_none_or(|c| c[p]);
+        frame.tracing = (0..probes).map(|p| self.traces_in_frame(p, frame_index) && chosen(p)).collect();
+        self.screen_blend_frames(frame);
         self.count_untraced_frames(frame);
         frame.active = self.probe_states.iter().map(|s| s.updates_in_frame(frame_index, interval)).collect();
         frame.rays = generate_probe_rays(&self.settings, self.stream_seed(seed), frame_index);

@@ -8,6 +8,10 @@
 //   indirect = diffuse albedo/π × ddgi_irradiance (ddgi_query.wgsl, group 2).
 // Pixels that see nothing get the sky. The CPU accumulates `direct` over frames.
 // `indirect.w` flags surfaces with a diffuse albedo (1) and those of them unlit (2).
+// With flag 4 (the screen scheme's requests) every surface pixel also sets, in
+// `camera_requests`, the bits of the probes its query reads
+// (probegi_core::ddgi_volume_blend::field_set_cage_probes; bit = the member's
+// first probe in ddgi_probes + the storage slot, DdgiFieldSet::probe_request_layout).
 // Must match `probegi_wgpu::camera_frame::CameraParams` (#[repr(C)], 96 bytes).
 
 struct CameraParams {
@@ -15,13 +19,36 @@ struct CameraParams {
     forward: vec4<f32>,  // xyz; w = aspect
     right: vec4<f32>,    // xyz; w = width (pixels)
     up: vec4<f32>,       // xyz; w = height (pixels)
-    info: vec4<u32>,     // frame, seed, area samples, flags (1: second-order glossy, 2: shadowing field)
+    info: vec4<u32>,     // frame, seed, area samples, flags (1: second-order glossy, 2: shadowing field,
+                         // 4: probe requests)
     sky: vec4<f32>,
 };
 
 @group(0) @binding(0) var<uniform> camera: CameraParams;
 @group(0) @binding(1) var<storage, read_write> camera_direct: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> camera_indirect: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read_write> camera_requests: array<atomic<u32>>;
+
+// probegi_core::ddgi_volume_blend::field_set_cage_probes: sets the request bit
+// of the eight cage corners of the biased point in every member that weighs it.
+fn camera_request_probes(position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>) {
+    let n = ddgi_set.header.x;
+    var wsum = 0.0;
+    for (var f = 0u; f < n; f++) {
+        let w = ddgi_member_weight(f, position, wsum);
+        if (!(w > 0.0)) {
+            continue;
+        }
+        wsum += w;
+        let v = ddgi_set.volumes[f];
+        let cage = ddgi_cage(v, position + ddgi_surface_bias(v, normal, view_dir));
+        for (var i = 0u; i < 8u; i++) {
+            let o = vec3<i32>(i32(i & 1u), i32((i >> 1u) & 1u), i32((i >> 2u) & 1u));
+            let bit = v.extra.x + ddgi_probe_index(v, vec3<u32>(min(cage.base + o, cage.max_c)));
+            atomicOr(&camera_requests[bit / 32u], 1u << (bit % 32u));
+        }
+    }
+}
 
 fn camera_finite(v: vec3<f32>) -> bool {
     return all(abs(v) <= vec3<f32>(SCENE_F32_MAX));
@@ -96,6 +123,9 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     camera_direct[i] = vec4<f32>(select(vec3<f32>(0.0), l, camera_finite(l)), 0.0);
     let e = ddgi_irradiance(sp.position, scene_facing_normal(sp), to_viewer);
+    if ((camera.info.w & 4u) != 0u) {
+        camera_request_probes(sp.position, scene_facing_normal(sp), to_viewer);
+    }
     // w: 1 for a surface with a diffuse albedo, 2 when the field gave it nothing
     // (the `frame_unlit_fraction` statistic: a black wall shows up here).
     let albedo = bsdf_diffuse_albedo(bsdf);

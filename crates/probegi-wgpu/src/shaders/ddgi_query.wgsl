@@ -4,7 +4,8 @@
 //   probegi_core::ddgi_query::irradiance         (seed 003 §4.4 eq. 4.4–4.10, seed 004 §2.2 eq. 2, §4.1–4.2),
 //   probegi_core::ddgi_query::surface_bias       (seed 004 eq. 2 / seed 003 eq. 4.11),
 //   probegi_core::ddgi_query::{chebyshev_weight, backface_weight},
-//   probegi_core::ddgi_volume_blend::{volume_blend_weight, cascade_field_weight, field_set_irradiance}
+//   probegi_core::ddgi_volume_blend::{volume_blend_weight, cascade_field_weight, member_weight,
+//                                      field_set_irradiance}
 //                                                 (seed 004 §7.4, seed 003 §6.2 Algorithms 1–2),
 //   probegi_core::probe_grid::{ProbeGrid::probe_index, ProbeGrid::cage} (circular tracking windows),
 //   probegi_core::probe_atlas::BilinearFootprint, probegi_core::octahedral::oct_encode,
@@ -280,6 +281,30 @@ fn ddgi_cascade_field_weight(v: DdgiVolume, point: vec3<f32>) -> f32 {
     return w.x * w.y * w.z;
 }
 
+// probegi_core::ddgi_volume_blend::member_weight: member `f`'s share at
+// `position` by the set's scheme, given the weight `wsum` the members before it
+// took (0 once they took it all).
+fn ddgi_member_weight(f: u32, position: vec3<f32>, wsum: f32) -> f32 {
+    let n = ddgi_set.header.x;
+    if (wsum >= 1.0) {
+        return 0.0;
+    }
+    let v = ddgi_set.volumes[f];
+    var w = 0.0;
+    if (ddgi_set.header.y == 0u) {
+        let camera_aware = v.extra.y != 0u && f + 1u < n && ddgi_set.header.z != 0u;
+        w = ddgi_volume_blend_weight(v, position, camera_aware);
+    } else if (f + 1u < n || wsum > 0.9) {
+        w = ddgi_cascade_field_weight(v, position);
+    } else {
+        w = 1.0;
+    }
+    if (!(w > 0.0)) {
+        return 0.0;
+    }
+    return w * clamp(1.0 - wsum, 0.0, 1.0);
+}
+
 // probegi_core::ddgi_volume_blend::field_set_irradiance: irradiance (W/m²) at a
 // surface point with unit `normal`; `view_dir` points from the surface to the viewer.
 fn ddgi_irradiance(position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>) -> vec3<f32> {
@@ -292,20 +317,7 @@ fn ddgi_irradiance(position: vec3<f32>, normal: vec3<f32>, view_dir: vec3<f32>) 
         if (wsum >= 1.0) {
             break;
         }
-        let v = ddgi_set.volumes[f];
-        var w = 0.0;
-        if (ddgi_set.header.y == 0u) {
-            let camera_aware = v.extra.y != 0u && f + 1u < n && ddgi_set.header.z != 0u;
-            w = ddgi_volume_blend_weight(v, position, camera_aware);
-        } else if (f + 1u < n || wsum > 0.9) {
-            w = ddgi_cascade_field_weight(v, position);
-        } else {
-            w = 1.0;
-        }
-        if (!(w > 0.0)) {
-            continue;
-        }
-        w *= clamp(1.0 - wsum, 0.0, 1.0);
+        let w = ddgi_member_weight(f, position, wsum);
         if (!(w > 0.0)) {
             continue;
         }

@@ -1,0 +1,78 @@
+//! The screen scheme's states (`ProbeStatesMode::Screen`; Timberdoodle PGI's
+//! request countdowns, `probegi_core::probe_classification` module docs):
+//! the camera frame's requests arrive between updates
+//! ([`DdgiVolume::request_probe`]); each update first turns them into
+//! countdowns and states ([`DdgiVolume::tick_screen_requests`]), then traces
+//! the Requested probes, the probes without history and the Idle probes in
+//! their interleaved phase ([`DdgiVolume::traces_in_frame`]).
+
+use probegi_core::ddgi_settings::ProbeStatesMode;
+use probegi_core::probe_classification::{ProbeState, screen_idle_phase};
+
+use super::{DdgiVolume, VolumeFrame};
+
+impl DdgiVolume {
+    /// Marks storage slot `p` as read by a camera pixel since the last update
+    /// (screen scheme; ignored under the others and for a slot out of range).
+    pub fn request_probe(&mut self, p: usize) {
+        if let Some(r) = self.probe_requested.get_mut(p) {
+            *r = true;
+        }
+    }
+
+    /// Frames probe `p` stays Requested (0: Idle).
+    pub fn probe_request_countdown(&self, p: usize) -> u32 {
+        self.probe_request_countdown.get(p).copied().unwrap_or(0)
+    }
+
+    /// Screen scheme, at the start of an update: a probe requested since the
+    /// last update restarts its countdown at `probe_screen_request_frames`,
+    /// the others count one frame down; a probe with frames left is
+    /// Requested, else Idle. Probes not yet initialised keep their state.
+    pub(crate) fn tick_screen_requests(&mut self) {
+        if self.settings.probe_states != ProbeStatesMode::Screen {
+            return;
+        }
+        let frames = self.settings.probe_screen_request_frames;
+        for p in 0..self.grid.probe_count() {
+            let countdown = &mut self.probe_request_countdown[p];
+            *countdown = if std::mem::take(&mut self.probe_requested[p]) { frames } else { countdown.saturating_sub(1) };
+            if !self.probe_pending_init[p] {
+                self.probe_states[p] = if *countdown > 0 { ProbeState::Requested } else { ProbeState::Idle };
+            }
+        }
+    }
+
+    /// Whether probe `p`'s state traces in frame `frame`: under the screen
+    /// scheme a Requested probe or one without history always, an Idle one in
+    /// its phase of `probe_screen_idle_interval_frames`
+    /// (`probegi_core::probe_classification::screen_idle_phase`); under the
+    /// other schemes, as the state says.
+    pub(crate) fn traces_in_frame(&self, p: usize, frame: u32) -> bool {
+        let state = self.probe_states[p];
+        if state != ProbeState::Idle || !self.probe_has_history[p] {
+            return state.traces();
+        }
+        let interval = self.settings.probe_screen_idle_interval_frames.max(1);
+        frame % interval == screen_idle_phase(self.world_cell(p), interval)
+    }
+
+    /// Probe `p`'s lattice point in whole cells from the world origin: a
+    /// probe keeps it while a tracking window scrolls around it.
+    fn world_cell(&self, p: usize) -> glam::IVec3 {
+        let g = &self.grid;
+        (g.origin_m / g.spacing_m).round().as_ivec3() + g.probe_coords(p).as_ivec3()
+    }
+
+    /// Screen scheme: per probe, the frames its blend this frame stands for,
+    /// the frames since it last traced (capped at the idle interval), for
+    /// the probes that trace in `frame`; read before the trace counts reset.
+    pub(super) fn screen_blend_frames(&self, frame: &mut VolumeFrame) {
+        frame.screen_blend_frames.clear();
+        if self.settings.probe_states != ProbeStatesMode::Screen {
+            return;
+        }
+        let cap = self.settings.probe_screen_idle_interval_frames.max(1);
+        frame.screen_blend_frames.extend(self.probe_untraced_frames.iter().map(|n| n.saturating_add(1).min(cap)));
+    }
+}
