@@ -575,7 +575,6 @@ impl<'a> FrameLoop<'a> {
         Continue(())
     }
 
-
     /// Whether the direct term restarts at this frame: the scene or the camera
     /// changed since the last frame (a camera that holds at its last key
     /// accumulates again).

@@ -75,7 +75,11 @@ pub fn draw_probes(volume: &DdgiVolume, camera: &CameraRays, gbuffer: &GBuffer, 
                     state => {
                         let e = volume.irradiance.sample_bilinear(probe, oct_encode(n));
                         let l = decode_irradiance(e, gamma);
-                        if matches!(state, ProbeState::UsageSleeping | ProbeState::Idle) { l * Vec3::new(0.3, 0.5, 1.0) } else { l }
+                        if matches!(state, ProbeState::UsageSleeping | ProbeState::Idle) {
+                            l * Vec3::new(0.3, 0.5, 1.0)
+                        } else {
+                            l
+                        }
                     }
                 };
             }

@@ -290,7 +290,11 @@ impl DdgiFieldSet {
         let layout = self.probe_request_layout();
         let total = layout.last().copied().unwrap_or(0);
         if words.len() != total.div_ceil(32) {
-            return Err(SeamError::WrongLength { what: "probe request words", expected: total.div_ceil(32), got: words.len() });
+            return Err(SeamError::WrongLength {
+                what: "probe request words",
+                expected: total.div_ceil(32),
+                got: words.len(),
+            });
         }
         for (m, &i) in self.order.iter().enumerate() {
             for p in 0..self.volumes[i].grid.probe_count() {
@@ -324,10 +328,13 @@ impl DdgiFieldSet {
                 }
                 w
             })
-            .reduce(|| vec![0u32; words], |mut a, b| {
-                a.iter_mut().zip(b).for_each(|(x, y)| *x |= y);
-                a
-            })
+            .reduce(
+                || vec![0u32; words],
+                |mut a, b| {
+                    a.iter_mut().zip(b).for_each(|(x, y)| *x |= y);
+                    a
+                },
+            )
     }
 
     /// [`Self::probe_requests_at`] then [`Self::submit_probe_requests`]: the

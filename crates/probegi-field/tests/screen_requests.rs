@@ -89,7 +89,10 @@ fn requested_probes_trace_every_frame_and_idle_ones_once_per_interval() {
         let want = 1.0 - alpha.powi(traced_at[p] as i32);
         assert!((texel(&set, p) - want).abs() < 1e-4, "probe {p}: {} against {want}", texel(&set, p));
     }
-    assert!(traced_at.iter().filter(|f| **f == IDLE_INTERVAL).count() > requested.len(), "idle probes in the last phase");
+    assert!(
+        traced_at.iter().filter(|f| **f == IDLE_INTERVAL).count() > requested.len(),
+        "idle probes in the last phase"
+    );
     // The countdown runs out without new requests: the probes turn Idle.
     let v = &set.volumes()[0];
     assert_eq!(v.probe_states[requested[0] as usize], ProbeState::Requested);

@@ -36,7 +36,8 @@ impl DdgiVolume {
         let frames = self.settings.probe_screen_request_frames;
         for p in 0..self.grid.probe_count() {
             let countdown = &mut self.probe_request_countdown[p];
-            *countdown = if std::mem::take(&mut self.probe_requested[p]) { frames } else { countdown.saturating_sub(1) };
+            *countdown =
+                if std::mem::take(&mut self.probe_requested[p]) { frames } else { countdown.saturating_sub(1) };
             if !self.probe_pending_init[p] {
                 self.probe_states[p] = if *countdown > 0 { ProbeState::Requested } else { ProbeState::Idle };
             }
