@@ -77,16 +77,16 @@ fn requested_probes_trace_every_frame_and_idle_ones_once_per_interval() {
         traced.iter().for_each(|&p| traces[p as usize] += 1);
         traced.iter().for_each(|&p| traced_at[p as usize] = frame);
     }
-    for p in 0..probes {
+    for (p, &n) in traces.iter().enumerate() {
         let want = if requested.contains(&(p as u32)) { IDLE_INTERVAL } else { 1 };
-        assert_eq!(traces[p], want, "probe {p} traced {} times in {IDLE_INTERVAL} frames", traces[p]);
+        assert_eq!(n, want, "probe {p} traced {n} times in {IDLE_INTERVAL} frames");
     }
     // Frames of sky 1 after a black start: a requested probe blended every
     // frame at α, an idle probe once, in frame f, at α^f, standing for the f
     // frames since frame 0: both hold 1 − α^f (γ-encoded; 1 encodes to 1).
     let alpha: f32 = DdgiVolumeSettings::default().probe_hysteresis;
-    for p in 0..probes {
-        let want = 1.0 - alpha.powi(traced_at[p] as i32);
+    for (p, &f) in traced_at.iter().enumerate() {
+        let want = 1.0 - alpha.powi(f as i32);
         assert!((texel(&set, p) - want).abs() < 1e-4, "probe {p}: {} against {want}", texel(&set, p));
     }
     assert!(
