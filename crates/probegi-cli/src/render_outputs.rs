@@ -189,6 +189,7 @@ fn render_stats_json(run: &RenderRun<'_>) -> Result<serde_json::Value> {
         "bvh_build_ms": run.bvh.build_time.as_secs_f64() * 1e3,
         "probes": run.stats.probes,
         "rays_per_frame": run.stats.rays_per_frame,
+        "probe_rays_traced": run.stats.probe_rays_traced,
         "field_update_ms": run.stats.field_update_ms,
         "field_update_mrays_per_s": run.stats.field_update_mrays_per_s,
         "probe_states": run.stats.probe_states,

@@ -113,6 +113,10 @@ pub struct RenderStats {
     pub probes: Option<usize>,
     /// DDGI only: probe rays per frame.
     pub rays_per_frame: Option<u64>,
+    /// DDGI only: probe rays over every frame's field update (initialisation
+    /// rounds included); over `frames`, the mean a scheme that varies its
+    /// rays per frame (screen states, a budget) traced.
+    pub probe_rays_traced: u64,
     /// Mean milliseconds per frame of the field update: DDGI's four update passes
     /// plus border ([`FIELD_UPDATE_PASSES`]), SH's `SH_UPDATE_PASSES`.
     pub field_update_ms: Option<f64>,
@@ -428,7 +432,10 @@ impl<'a> FrameLoop<'a> {
             let batch_tracer = settings.probe_tracer.as_ref().map(|h| &*h.0);
             let (scene, tracer, direct, pass_totals) = (frame.scene, frame.tracer, frame.direct, &mut self.pass_totals);
             match set.update_traced_by(scene, tracer, batch_tracer, direct, settings.seed, f, pass_totals) {
-                Ok(rays) => self.stats.rays_traced += rays,
+                Ok(rays) => {
+                    self.stats.rays_traced += rays;
+                    self.stats.probe_rays_traced += rays;
+                }
                 Err(e) => {
                     self.stats.error = Some(format!("frame {f}: probe trace: {e}"));
                     return Break(());

@@ -116,3 +116,76 @@ fn other_schemes_ignore_requests() {
     assert_eq!(update(&mut set, 1, 1.0).len(), probes);
     assert!(set.volumes()[0].probe_states.iter().all(|s| *s == ProbeState::Active));
 }
+
+/// Two tracking cascades under the screen scheme, every probe blended once
+/// under a sky of 1; with `seeding`, the probes the fine window scrolls in
+/// take their tiles from the coarse one.
+fn scrolled_cascades(seeding: bool) -> (DdgiFieldSet, Vec<usize>) {
+    let cascade = |spacing: f32| DdgiVolumeSettings {
+        probe_counts: UVec3::splat(4),
+        probe_spacing_m: Some(Vec3::splat(spacing)),
+        volume_tracks_camera: true,
+        probe_rays_per_probe: 16,
+        probe_states: ProbeStatesMode::Screen,
+        probe_fast_convergence: false,
+        probe_relocation: false,
+        probe_seeding: seeding,
+        ..Default::default()
+    };
+    let bounds = (Vec3::splat(-50.0), Vec3::splat(50.0));
+    let volumes = vec![
+        DdgiVolume::placed(cascade(1.0), bounds, Some(Vec3::ZERO)),
+        DdgiVolume::placed(cascade(4.0), bounds, Some(Vec3::ZERO)),
+    ];
+    let mut set =
+        DdgiFieldSet::from_volumes(volumes, probegi_core::ddgi_settings::VolumeBlending::Cascades, Some(Vec3::ZERO));
+    for frame in 0..3 {
+        update(&mut set, frame, 1.0);
+    }
+    // One fine cell along +x: a plane of 16 probes scrolls in; the coarse window stays.
+    assert_eq!(set.set_tracking_target(Vec3::new(1.0, 0.0, 0.0)), 16);
+    let fine = &set.volumes()[0];
+    let reset: Vec<usize> = (0..fine.grid.probe_count()).filter(|&p| !fine.probe_has_history(p)).collect();
+    assert_eq!(reset.len(), 16);
+    (set, reset)
+}
+
+#[test]
+fn seeded_probes_are_read_at_once_and_wait_for_their_phase() {
+    let (mut seeded, reset) = scrolled_cascades(true);
+    let (mut plain, _) = scrolled_cascades(false);
+    // Frame 3: without seeds every new probe traces for its first blend; seeded
+    // ones wait for their idle phase (interval 8: a few of them a frame).
+    let fine_traces =
+        |traced: &[(u32, u32)]| traced.iter().filter(|(v, p)| *v == 0 && reset.contains(&(*p as usize))).count();
+    let traced = |set: &mut DdgiFieldSet| {
+        let mut step = set.begin_update(1, 3);
+        while set.ray_batch().kind == ProbeRayBatchKind::Initialization {
+            let misses = vec![ProbeRayHit::MISS; set.ray_batch().len()];
+            step = set.submit_hits(&misses).expect("init round");
+        }
+        assert_eq!(step, UpdateStep::TraceRays);
+        let t: Vec<(u32, u32)> = set.ray_batch().probes.iter().map(|p| (p.volume, p.probe)).collect();
+        let misses = vec![ProbeRayHit::MISS; set.ray_batch().len()];
+        set.submit_hits(&misses).expect("hits");
+        let radiance = vec![Vec3::ONE; set.ray_batch().len()];
+        set.submit_radiance(&radiance).expect("blend");
+        t
+    };
+    let (t_plain, t_seeded) = (traced(&mut plain), traced(&mut seeded));
+    assert_eq!(fine_traces(&t_plain), 16, "unseeded new probes trace at once");
+    let waiting = 16 - fine_traces(&t_seeded);
+    assert!(waiting >= 8, "{waiting} of 16 seeded probes wait for their phase");
+    // Those that waited are readable with the coarse cascade's light (sky 1, encoded 1).
+    let fine = &seeded.volumes()[0];
+    for &p in reset.iter().filter(|&&p| !t_seeded.contains(&(0, p as u32))) {
+        assert!(fine.probe_usable(p), "seeded probe {p} is readable before its first blend");
+        // Sky 1 blended from frame 0 with hysteresis 0 first: every coarse texel is 1.
+        assert!(
+            (texel(&seeded, p) - 1.0).abs() < 1e-3,
+            "seeded probe {p} holds the coarse light: {}",
+            texel(&seeded, p)
+        );
+    }
+    fine.validate();
+}

@@ -309,14 +309,15 @@ impl DdgiVolume {
     }
 
     /// Atlas invariants: every texel finite and non-negative, every border equal to
-    /// its source texel, and no probe readable before its first blend.
+    /// its source texel, and no probe readable before its first blend (or,
+    /// under the screen scheme, its seed).
     pub fn validate(&self) {
         assert!(self.irradiance.texels.iter().all(|t| t.is_finite() && t.min_element() >= 0.0), "irradiance atlas");
         assert!(self.distance.texels.iter().all(|t| t.is_finite() && t.min_element() >= 0.0), "distance atlas");
         for p in 0..self.grid.probe_count() {
             check_borders(self.irradiance.tile(p), self.irradiance.interior);
             check_borders(self.distance.tile(p), self.distance.interior);
-            assert!(!self.probe_usable[p] || self.probe_has_history[p], "probe {p} is readable before its first blend");
+            assert!(!self.probe_usable[p] || self.probe_has_content(p), "probe {p} is readable before its first blend");
         }
     }
 }

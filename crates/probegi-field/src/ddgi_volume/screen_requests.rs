@@ -3,8 +3,11 @@
 //! the camera frame's requests arrive between updates
 //! ([`DdgiVolume::request_probe`]); each update first turns them into
 //! countdowns and states ([`DdgiVolume::tick_screen_requests`]), then traces
-//! the Requested probes, the probes without history and the Idle probes in
-//! their interleaved phase ([`DdgiVolume::traces_in_frame`]).
+//! the Requested probes, the probes without content and the Idle probes in
+//! their interleaved phase ([`DdgiVolume::traces_in_frame`]). With
+//! `probe_seeding`, a probe a tracking window scrolls in has content from its
+//! seed: queries read it at once, and unless requested it waits for its
+//! phase, as PGI's seeded probes wait for their interleaved update.
 
 use probegi_core::ddgi_settings::ProbeStatesMode;
 use probegi_core::probe_classification::{ProbeState, screen_idle_phase};
@@ -45,13 +48,14 @@ impl DdgiVolume {
     }
 
     /// Whether probe `p`'s state traces in frame `frame`: under the screen
-    /// scheme a Requested probe or one without history always, an Idle one in
+    /// scheme a Requested probe or one without content (neither blended nor
+    /// seeded) always, an Idle one in
     /// its phase of `probe_screen_idle_interval_frames`
     /// (`probegi_core::probe_classification::screen_idle_phase`); under the
     /// other schemes, as the state says.
     pub(crate) fn traces_in_frame(&self, p: usize, frame: u32) -> bool {
         let state = self.probe_states[p];
-        if state != ProbeState::Idle || !self.probe_has_history[p] {
+        if state != ProbeState::Idle || !self.probe_has_content(p) {
             return state.traces();
         }
         let interval = self.settings.probe_screen_idle_interval_frames.max(1);

@@ -16,14 +16,22 @@ impl DdgiVolume {
     /// Recomputes which probes queries may read, and the fallback table if that changed.
     pub(super) fn refresh_usable(&mut self) {
         let mut changed = false;
-        for (p, u) in self.probe_usable.iter_mut().enumerate() {
-            let now = self.probe_states[p].usable_in_queries() && self.probe_has_history[p];
-            changed |= *u != now;
-            *u = now;
+        for p in 0..self.probe_usable.len() {
+            let now = self.probe_states[p].usable_in_queries() && self.probe_has_content(p);
+            changed |= self.probe_usable[p] != now;
+            self.probe_usable[p] = now;
         }
         if changed {
             self.probe_fallback = nearest_usable_probes(&self.grid, &self.probe_usable);
         }
+    }
+
+    /// Whether probe `p`'s tiles hold light a query may read: it has blended
+    /// since its reset or, under the screen scheme, it was seeded (Timberdoodle
+    /// PGI's seeded probes wait for their interleaved update; under the other
+    /// schemes a seeded probe blends in the frame it was seeded anyway).
+    pub(super) fn probe_has_content(&self, p: usize) -> bool {
+        self.probe_has_history[p] || (self.probe_seeded[p] && self.settings.probe_states == ProbeStatesMode::Screen)
     }
 
     /// Number of probes per state name.
