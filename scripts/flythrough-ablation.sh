@@ -5,7 +5,8 @@
 # down. Four cascades of 12×6×12 probes (1 m innermost, as scripts/world-scale.sh),
 # 128 rays per probe, each configuration against `probegi reference --frame K` at
 # SPP spp at frames FLIP_FRAMES, plus the per-frame change of the indirect term.
-# Writes out/fly/*.exr, out/fly/table.md. A benchmark, not a test: ~10 min on 2 cores.
+# Writes out/fly/*.exr, out/fly/table.md (FLIP per frame, the indirect term's
+# change, the mean probe rays per frame). A benchmark, not a test: ~10 min on 2 cores.
 # Usage: [W=160 H=90 SPP=256 FRAMES=120] scripts/flythrough-ablation.sh [CONFIG...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -39,6 +40,10 @@ declare -A CONFIGS=(
   [base-seed-2]="--seed 2"
   [seeding]="--set probe_seeding=true"
   [seeding-edge-buffers]="--set probe_seeding=true --set volume_edge_buffer_planes=2"
+  [all-active]="--set probe_states=all-active"
+  [screen]="--set probe_states=screen"
+  [screen-seeding]="--set probe_states=screen --set probe_seeding=true"
+  [screen-seeding-edge-buffers]="--set probe_states=screen --set probe_seeding=true --set volume_edge_buffer_planes=2"
 )
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=(base edge-buffers seeding seeding-edge-buffers)
@@ -49,7 +54,8 @@ for k in $FLIP_FRAMES; do
 done
 [ -f "$OUT/table.md" ] || {
   printf '| configuration |'; for k in $FLIP_FRAMES; do printf ' FLIP frame %s |' "$k"; done
-  printf ' indirect mean change per frame: median, max |\n|---|'; for _ in $FLIP_FRAMES; do printf -- '---|'; done; printf -- '---|\n'
+  printf ' indirect mean change per frame: median, max | probe rays per frame |\n|---|'
+  for _ in $FLIP_FRAMES; do printf -- '---|'; done; printf -- '---|---|\n'
 } > "$OUT/table.md"
 for name in "${names[@]}"; do
   # shellcheck disable=SC2086
@@ -63,6 +69,7 @@ for name in "${names[@]}"; do
   change=$(python3 -c "
 import json; m = [sum(v) / 3 for v in json.load(open('$OUT/$name.json'))['frame_indirect_means']]
 c = sorted(abs(m[i] - m[i - 1]) / max(m[i - 1], 1e-9) for i in range(1, len(m)))
-print(f'{100 * c[len(c) // 2]:.1f} %, {100 * c[-1]:.1f} %')")
+d = json.load(open('$OUT/$name.json'))
+print(f'{100 * c[len(c) // 2]:.1f} %, {100 * c[-1]:.1f} % | {d["probe_rays_traced"] / d["frames"]:.0f}')")
   echo "$row $change |" | tee -a "$OUT/table.md"
 done
