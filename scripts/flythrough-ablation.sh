@@ -69,7 +69,7 @@ for name in "${names[@]}"; do
   change=$(python3 -c "
 import json; m = [sum(v) / 3 for v in json.load(open('$OUT/$name.json'))['frame_indirect_means']]
 c = sorted(abs(m[i] - m[i - 1]) / max(m[i - 1], 1e-9) for i in range(1, len(m)))
-d = json.load(open('$OUT/$name.json'))
-print(f'{100 * c[len(c) // 2]:.1f} %, {100 * c[-1]:.1f} % | {d["probe_rays_traced"] / d["frames"]:.0f}')")
+d = json.load(open('$OUT/$name.json')); r = d['probe_rays_traced'] / d['frames']
+print(f'{100 * c[len(c) // 2]:.1f} %, {100 * c[-1]:.1f} % | {r:.0f}')")
   echo "$row $change |" | tee -a "$OUT/table.md"
 done

@@ -339,6 +339,12 @@ impl DdgiVolumeSettings {
                 format!("{} must be in 1..=1000", self.ray_budget_max_interval_frames),
             ));
         }
+        if self.probe_screen_request_frames == 0 || self.probe_screen_request_frames > 10_000 {
+            return Err((
+                "probe_screen_request_frames",
+                format!("{} must be in 1..=10000", self.probe_screen_request_frames),
+            ));
+        }
         if self.probe_screen_idle_interval_frames == 0 || self.probe_screen_idle_interval_frames > 1000 {
             return Err((
                 "probe_screen_idle_interval_frames",

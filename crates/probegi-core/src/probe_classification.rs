@@ -72,10 +72,14 @@
 //! we update the rest at the reduced rate instead, which carries off-screen
 //! light to the probes the camera reads without a second request level.
 //! PGI interleaves the requested probes too (1/8 a frame); the issue asks
-//! for them at full rate. Every probe traces until its first blend, and every
-//! probe is usable once blended, as under all-active.
+//! for them at full rate. Every probe traces until its first blend (or, with
+//! `probe_seeding`, is read from its seed and waits for its phase), and every
+//! probe is usable once blended, as under all-active. With a shadowing field
+//! an Idle probe traces in its phase and the frame after, since its occlusion
+//! maps blend from the surfels of the frame before.
 //!
-//! Queries read only probes that have been blended since they last (re)started:
+//! Queries read only probes that have been blended since they last (re)started
+//! (or, under the screen scheme, seeded since):
 //! Off, Sleeping (jcgt), Dead (usage) and Newly Awake / Newly Vigilant probes (not
 //! yet blended in their new state) are excluded. Deviation: the thesis's
 //! "logarithmic" hysteresis ramps are not specified further; we move the hysteresis

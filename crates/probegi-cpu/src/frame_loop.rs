@@ -624,7 +624,6 @@ impl<'a> FrameLoop<'a> {
     }
 }
 
-/// The DDGI figures of `--stats` after the last frame.
 /// The screen scheme's requests (`ProbeStatesMode::Screen`): the probes
 /// whose cages the frame's surface pixels read, for the next update. Timed
 /// under `probe_requests`.
@@ -642,6 +641,7 @@ fn request_probes(field: Option<&mut DdgiFieldSet>, gbuffer: &GBuffer, pass_tota
     *pass_totals.entry("probe_requests").or_default() += t.elapsed().as_secs_f64() * 1e3;
 }
 
+/// The DDGI figures of `--stats` after the last frame.
 fn field_stats(set: &DdgiFieldSet, stats: &mut RenderStats) {
     let update_ms: f64 = FIELD_UPDATE_PASSES.iter().filter_map(|p| stats.pass_ms.get(p)).sum();
     stats.probes = Some(set.probe_count());

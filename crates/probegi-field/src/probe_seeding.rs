@@ -11,8 +11,11 @@
 //! moments of the mixture). Borders are mixed with the interior, so they still
 //! equal their sources.
 //!
-//! A seeded probe is still not read before its first own blend (queries skip
-//! probes without history, as before), but that blend weighs the seed with the
+//! Under the jcgt, usage and all-active schemes a seeded probe is still not
+//! read before its first own blend (queries skip probes without history, as
+//! before; it blends in the frame it was seeded). Under the screen scheme it
+//! is read at once and, unless the camera requests it, waits for its
+//! interleaved phase (`ddgi_volume::screen_requests`). Its first blend weighs the seed with the
 //! probe's hysteresis (Listing 3's per-texel drops and the edge buffers'
 //! cap apply) instead of replacing it. The shadowing field's occlusion maps are
 //! not seeded (they stay reset to lit).

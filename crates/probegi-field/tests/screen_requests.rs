@@ -189,3 +189,31 @@ fn seeded_probes_are_read_at_once_and_wait_for_their_phase() {
     }
     fine.validate();
 }
+
+/// With a shadowing field, whose occlusion maps blend from a probe's
+/// surfels of the frame before, an Idle probe traces in pairs of frames.
+#[test]
+fn idle_probes_trace_in_pairs_with_a_shadowing_field() {
+    let mut set = screen_set();
+    set.volumes_mut()[0] = DdgiVolume::new(
+        DdgiVolumeSettings { shadow_field: true, ..set.volumes()[0].settings.clone() },
+        (Vec3::ZERO, Vec3::new(6.0, 3.0, 5.0)),
+    );
+    let probes = set.probe_count();
+    update(&mut set, 0, 0.0);
+    let mut traced_in = vec![Vec::new(); probes];
+    for frame in 1..=2 * IDLE_INTERVAL + 1 {
+        update(&mut set, frame, 1.0).iter().for_each(|&p| traced_in[p as usize].push(frame));
+    }
+    for (p, frames) in traced_in.iter().enumerate() {
+        // Two traces per interval, each next to another.
+        let inside: Vec<u32> = frames.iter().copied().filter(|f| (2..=2 * IDLE_INTERVAL).contains(f)).collect();
+        assert!((3..=4).contains(&inside.len()), "probe {p}: traced in {frames:?}");
+        for f in inside {
+            assert!(
+                frames.contains(&(f - 1)) || frames.contains(&(f + 1)),
+                "probe {p}: traced in {frames:?}, not in pairs"
+            );
+        }
+    }
+}

@@ -40,7 +40,8 @@ fn two_cascades(scene: &Scene) -> DdgiFieldSet {
         ..screen_settings(UVec3::new(8, 4, 8))
     };
     let coarse = screen_settings(UVec3::new(6, 3, 6));
-    let volumes = vec![DdgiVolume::new(fine, (lo, hi)), DdgiVolume::new(coarse, (lo, hi))];
+    // Given coarse first: the set samples (and numbers the bits) finest first.
+    let volumes = vec![DdgiVolume::new(coarse, (lo, hi)), DdgiVolume::new(fine, (lo, hi))];
     DdgiFieldSet::from_volumes(volumes, VolumeBlending::Cascades, None)
 }
 

@@ -317,7 +317,10 @@ impl DdgiVolume {
         for p in 0..self.grid.probe_count() {
             check_borders(self.irradiance.tile(p), self.irradiance.interior);
             check_borders(self.distance.tile(p), self.distance.interior);
-            assert!(!self.probe_usable[p] || self.probe_has_content(p), "probe {p} is readable before its first blend");
+            assert!(
+                !self.probe_usable[p] || self.probe_has_content(p),
+                "probe {p} is readable before its first blend or seed"
+            );
         }
     }
 }

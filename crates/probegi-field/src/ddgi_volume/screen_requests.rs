@@ -16,8 +16,12 @@ use super::{DdgiVolume, VolumeFrame};
 
 impl DdgiVolume {
     /// Marks storage slot `p` as read by a camera pixel since the last update
-    /// (screen scheme; ignored under the others and for a slot out of range).
+    /// (screen scheme; not recorded under the others nor for a slot out of
+    /// range).
     pub fn request_probe(&mut self, p: usize) {
+        if self.settings.probe_states != ProbeStatesMode::Screen {
+            return;
+        }
         if let Some(r) = self.probe_requested.get_mut(p) {
             *r = true;
         }
@@ -51,33 +55,46 @@ impl DdgiVolume {
     /// scheme a Requested probe or one without content (neither blended nor
     /// seeded) always, an Idle one in
     /// its phase of `probe_screen_idle_interval_frames`
-    /// (`probegi_core::probe_classification::screen_idle_phase`); under the
-    /// other schemes, as the state says.
+    /// (`probegi_core::probe_classification::screen_idle_phase`) and, with a
+    /// shadowing field, the frame after; under the other schemes, as the
+    /// state says.
     pub(crate) fn traces_in_frame(&self, p: usize, frame: u32) -> bool {
         let state = self.probe_states[p];
         if state != ProbeState::Idle || !self.probe_has_content(p) {
             return state.traces();
         }
         let interval = self.settings.probe_screen_idle_interval_frames.max(1);
-        frame % interval == screen_idle_phase(self.world_cell(p), interval)
+        let phase = screen_idle_phase(self.world_cell(p), interval);
+        let now = frame % interval;
+        // A shadowing field blends a probe's occlusion maps from the surfels of
+        // its trace the frame before (`shadow_rays`): with one, an Idle probe
+        // traces two frames in a row, in its phase and the next.
+        now == phase || (self.shadow.is_some() && now == (phase + 1) % interval)
     }
 
     /// Probe `p`'s lattice point in whole cells from the world origin: a
     /// probe keeps it while a tracking window scrolls around it.
     fn world_cell(&self, p: usize) -> glam::IVec3 {
         let g = &self.grid;
-        (g.origin_m / g.spacing_m).round().as_ivec3() + g.probe_coords(p).as_ivec3()
+        // floor(x + ½), not round(): a tie never flips with the origin's sign.
+        (g.origin_m / g.spacing_m + 0.5).floor().as_ivec3() + g.probe_coords(p).as_ivec3()
     }
 
-    /// Screen scheme: per probe, the frames its blend this frame stands for,
-    /// the frames since it last traced (capped at the idle interval), for
-    /// the probes that trace in `frame`; read before the trace counts reset.
+    /// Screen scheme: per probe, the frames its blend this frame would stand
+    /// for, the frames since it last traced, capped at the idle interval
+    /// (under a ray budget, which may hold an Idle probe back past its phase,
+    /// at the larger of that and `ray_budget_max_interval_frames`); read
+    /// before the trace counts reset. The scheme's own α^k does not depend on
+    /// `ray_budget_hysteresis_per_frame`.
     pub(super) fn screen_blend_frames(&self, frame: &mut VolumeFrame) {
         frame.screen_blend_frames.clear();
         if self.settings.probe_states != ProbeStatesMode::Screen {
             return;
         }
-        let cap = self.settings.probe_screen_idle_interval_frames.max(1);
+        let mut cap = self.settings.probe_screen_idle_interval_frames.max(1);
+        if frame.budget_traces.is_some() {
+            cap = cap.max(self.settings.ray_budget_max_interval_frames);
+        }
         frame.screen_blend_frames.extend(self.probe_untraced_frames.iter().map(|n| n.saturating_add(1).min(cap)));
     }
 }

@@ -1,7 +1,8 @@
 //! Scrolling: a tracking window's whole-cell move over the circular buffer of
 //! probe storage slots (seed 004's camera-following volume). Probes that scroll
 //! in are reset: their history is cleared, queries skip them until their first
-//! blend, and they wait for initialisation like new probes.
+//! blend (under the screen scheme, until their first blend or seed), and they
+//! wait for initialisation like new probes.
 
 use glam::{IVec3, Vec2, Vec3};
 use probegi_core::ddgi_query::nearest_usable_probes;
