@@ -39,6 +39,14 @@ pub struct DdgiVolumeSettings {
     /// and moves with it in whole-cell steps over a circular buffer; planes that
     /// scroll in are reset and re-initialised. Blended camera-aware (§7.4).
     pub volume_tracks_camera: bool,
+    /// A tracking window keeps its probe box inside these bounds `[lo, hi]`
+    /// (m) on every axis where it is smaller than them, and centred on them
+    /// where it is not: it follows the camera only as far as probes there
+    /// still cover the scene, instead of spending them outside it (a camera
+    /// at one end of Sponza's atrium left half of each cascade outside the
+    /// building). `None` (the default): it follows the camera freely.
+    /// `--cascades` sets it to the scene bounds.
+    pub volume_tracking_bounds_m: Option<[Vec3; 2]>,
     /// Rays traced per probe per frame (RTXGI default 256; seed 000 Table 2 sweeps 32–256).
     pub probe_rays_per_probe: u32,
     /// Interior irradiance texels per side (seed 004 Table 2: 8×8 with the 1-texel border).
@@ -187,6 +195,7 @@ impl Default for DdgiVolumeSettings {
             probe_spacing_m: None,
             volume_bounds_m: None,
             volume_tracks_camera: false,
+            volume_tracking_bounds_m: None,
             probe_rays_per_probe: 256,
             probe_irradiance_texels: 6,
             probe_distance_texels: 14,
@@ -265,6 +274,11 @@ impl DdgiVolumeSettings {
             && !(lo.is_finite() && hi.is_finite() && hi.cmpgt(lo).all())
         {
             return Err(("volume_bounds_m", format!("[{lo}, {hi}] must be finite with hi > lo on every axis")));
+        }
+        if let Some([lo, hi]) = self.volume_tracking_bounds_m
+            && !(lo.is_finite() && hi.is_finite() && hi.cmpge(lo).all())
+        {
+            return Err(("volume_tracking_bounds_m", format!("[{lo}, {hi}] must be finite with hi ≥ lo on every axis")));
         }
         if let Some(s) = self.probe_spacing_m
             && !(self.probe_origin_m.unwrap_or(Vec3::ZERO) + s * self.probe_counts.as_vec3()).is_finite()

@@ -112,6 +112,18 @@ impl ProbeGrid {
         IVec3::new(step(d.x, c.x), step(d.y, c.y), step(d.z, c.z))
     }
 
+    /// The point a tracking window of this grid's counts and spacing should
+    /// centre on to follow `target_m` without leaving `bounds` (`[lo, hi]`):
+    /// per axis, `target_m` clamped so that the probe box stays inside the
+    /// bounds, or the bounds' centre where the box is larger than them.
+    pub fn tracking_target_within(&self, target_m: Vec3, bounds: [Vec3; 2]) -> Vec3 {
+        let half = self.spacing_m * (self.probe_counts.as_vec3() - Vec3::ONE) * 0.5;
+        let [lo, hi] = bounds;
+        let (min, max) = (lo + half, hi - half);
+        let centre = (lo + hi) * 0.5;
+        Vec3::select(min.cmple(max), target_m.clamp(min.min(max), max.max(min)), centre)
+    }
+
     /// A grid of `counts` probes `spacing_m` apart, centred on `target_m` and
     /// snapped to the lattice of whole cells from `anchor_m` (so windows that start
     /// anywhere land on the same world lattice, and nested cascades whose spacings
@@ -238,6 +250,18 @@ mod tests {
         assert_eq!(g.probe_position(UVec3::new(3, 1, 0)), Vec3::new(3.5, 1.5, 0.5));
         assert_eq!(g.base_probe(Vec3::new(1.7, 0.2, 0.5)), IVec3::new(1, 0, 0));
         assert_eq!(g.base_probe(Vec3::new(-5.0, 9.0, 0.5)), IVec3::new(0, 1, 0));
+    }
+
+    #[test]
+    fn a_tracking_target_is_held_inside_the_bounds_or_at_their_centre() {
+        // 5 probes 1 m apart per axis: a box 4 m across, half 2 m.
+        let g = ProbeGrid::new(Vec3::ZERO, UVec3::new(5, 5, 9), Vec3::ONE);
+        let bounds = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(10.0, 3.0, 20.0)];
+        // x: inside [2, 8] stays, beyond clamps; y: the box (4 m) is larger than
+        // the bounds (3 m): their centre; z: half 4 m, [4, 16].
+        let t = g.tracking_target_within(Vec3::new(5.0, 9.0, -3.0), bounds);
+        assert_eq!(t, Vec3::new(5.0, 1.5, 4.0));
+        assert_eq!(g.tracking_target_within(Vec3::new(9.5, 0.0, 30.0), bounds), Vec3::new(8.0, 1.5, 16.0));
     }
 
     #[test]

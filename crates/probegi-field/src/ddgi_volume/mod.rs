@@ -178,7 +178,13 @@ impl DdgiVolume {
         let fitted = ProbeGrid::fit_to_bounds(lo, hi, counts);
         let spacing = settings.probe_spacing_m.unwrap_or(fitted.spacing_m);
         let grid = match (settings.volume_tracks_camera, camera_m) {
-            (true, Some(c)) => ProbeGrid::centred_on(c, settings.probe_origin_m.unwrap_or(Vec3::ZERO), counts, spacing),
+            (true, Some(c)) => {
+                let c = match settings.volume_tracking_bounds_m {
+                    Some(b) => ProbeGrid::new(Vec3::ZERO, counts, spacing).tracking_target_within(c, b),
+                    None => c,
+                };
+                ProbeGrid::centred_on(c, settings.probe_origin_m.unwrap_or(Vec3::ZERO), counts, spacing)
+            }
             _ => ProbeGrid::new(settings.probe_origin_m.unwrap_or(fitted.origin_m), counts, spacing),
         };
         let probes = grid.probe_count();

@@ -11,7 +11,8 @@ use probegi_core::probe_classification::ProbeState;
 use super::DdgiVolume;
 
 impl DdgiVolume {
-    /// Moves a tracking window so that `target_m` stays within a cell of its
+    /// Moves a tracking window so that `target_m` (held inside
+    /// `volume_tracking_bounds_m` where set) stays within a cell of its
     /// centre (seed 004 §7.3). Only the grid origin and the circular buffer's phase
     /// change; the probes of the planes that enter are reset (atlas tiles cleared,
     /// offset 0, no history, so they blend with hysteresis 0 and are not read
@@ -20,6 +21,10 @@ impl DdgiVolume {
         if !self.settings.volume_tracks_camera || !target_m.is_finite() {
             return 0;
         }
+        let target_m = match self.settings.volume_tracking_bounds_m {
+            Some(b) => self.grid.tracking_target_within(target_m, b),
+            None => target_m,
+        };
         let cells = self.grid.tracking_scroll_cells(target_m);
         if cells == IVec3::ZERO {
             return 0;
