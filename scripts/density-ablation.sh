@@ -46,6 +46,8 @@ declare -A CONFIGS=(
   [fitted-16x8x12-iterations-x4]="--probes 16,8,12 --set probe_relocation_iterations=20"
   [fitted-16x8x12-normal-bias]="--probes 16,8,12 --set probe_bias_mode=normal"
   [fitted-32x16x16]="--probes 32,16,16"
+  [cascades-3-clamped]="--cascades 3 --probes 16,8,16 --set volume_tracking_bounds_m=[[-17.41,-0.91,-7.8],[17.42,15.66,7.81]]"
+  [cascades-3-clamped-1x]="--cascades 3 --probes 16,8,16 --set volume_tracking_bounds_m=[[-17.41,-0.91,-7.8],[17.42,15.66,7.81]] --set probe_spacing_m=[0.5803,0.5914,0.26]"
   [fitted-32x16x32]="--probes 32,16,32"
   [fitted-16x8x16-no-fast-convergence]="--probes 16,8,16 --set probe_fast_convergence=false"
   [fitted-32x16x12-no-fast-convergence]="--probes 32,16,12 --set probe_fast_convergence=false"

@@ -852,8 +852,12 @@ pub fn apply_scene_setting(scene: &mut Scene, assignment: &str) -> std::result::
 
 /// Every key `--set` and a `[volume]` table accept.
 pub fn volume_setting_keys() -> Vec<String> {
-    let all =
-        DdgiVolumeSettings { probe_origin_m: Some(Vec3::ZERO), probe_spacing_m: Some(Vec3::ONE), ..Default::default() };
+    let all = DdgiVolumeSettings {
+        probe_origin_m: Some(Vec3::ZERO),
+        probe_spacing_m: Some(Vec3::ONE),
+        volume_tracking_bounds_m: Some([Vec3::ZERO, Vec3::ONE]),
+        ..Default::default()
+    };
     setting_keys(&all)
 }
 
