@@ -278,7 +278,10 @@ impl DdgiVolumeSettings {
         if let Some([lo, hi]) = self.volume_tracking_bounds_m
             && !(lo.is_finite() && hi.is_finite() && hi.cmpge(lo).all())
         {
-            return Err(("volume_tracking_bounds_m", format!("[{lo}, {hi}] must be finite with hi ≥ lo on every axis")));
+            return Err((
+                "volume_tracking_bounds_m",
+                format!("[{lo}, {hi}] must be finite with hi ≥ lo on every axis"),
+            ));
         }
         if let Some(s) = self.probe_spacing_m
             && !(self.probe_origin_m.unwrap_or(Vec3::ZERO) + s * self.probe_counts.as_vec3()).is_finite()
