@@ -45,6 +45,9 @@ declare -A CONFIGS=(
   [screen]="--set probe_states=screen"
   [screen-edge-buffers]="--set probe_states=screen --set volume_edge_buffer_planes=2"
   [items-2-4]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true"
+  [ramp]="--set probe_hysteresis_ramp=true"
+  [screen-edge-buffers-ramp]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_hysteresis_ramp=true"
+  [items-2-4-ramp]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --set probe_hysteresis_ramp=true"
 )
 names=("$@")
 [ ${#names[@]} -gt 0 ] || names=(default items-2-4 screen-edge-buffers)

@@ -179,6 +179,15 @@ pub struct DdgiVolumeSettings {
     /// The edge buffers' hysteresis cap (the seed says "low" without a number;
     /// measured in docs/RESULTS.md).
     pub volume_edge_buffer_hysteresis: f32,
+    /// A probe's first blends after it (re)starts average its samples
+    /// equally: blend n (from 0) uses at most hysteresis 1 − 1/(n + 1), until
+    /// that reaches `probe_hysteresis` (33 blends at 0.97), so a new probe's
+    /// field is as old as the probe instead of keeping its first, darkest
+    /// frames at α^n (a running mean, then the papers' exponential one; PGI
+    /// ramps its per-texel hysteresis up by 0.1 per update instead). A seeded
+    /// probe counts its seed as its first blend. Off by default; measured in
+    /// docs/RESULTS.md.
+    pub probe_hysteresis_ramp: bool,
     /// Seed the probes a tracking window scrolls in from the next coarser
     /// cascade (or sparser volume) instead of starting them from nothing
     /// (Timberdoodle PGI, `../shared/PEERS.md`; `probegi_field::probe_seeding`):
@@ -239,6 +248,7 @@ impl Default for DdgiVolumeSettings {
             volume_edge_buffer_planes: 0,
             volume_edge_buffer_hysteresis: 0.8,
             probe_seeding: false,
+            probe_hysteresis_ramp: false,
         }
     }
 }

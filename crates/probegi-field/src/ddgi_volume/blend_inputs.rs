@@ -166,6 +166,13 @@ impl DdgiVolume {
                     } else {
                         self.probe_hysteresis[p]
                     };
+                    let h = if self.settings.probe_hysteresis_ramp {
+                        // Blends so far, the seed counting as one: 0 for a fresh probe.
+                        let n = if fresh { self.probe_seeded[p] as u32 } else { self.probe_blends[p] };
+                        h.min(1.0 - 1.0 / (n as f32 + 1.0))
+                    } else {
+                        h
+                    };
                     (first as usize, h)
                 })
             })
@@ -228,6 +235,9 @@ impl DdgiVolume {
         let max_h = self.settings.probe_hysteresis;
         self.active_probes_last = updated.iter().filter(|a| **a).count();
         for (p, _) in updated.iter().enumerate().filter(|(_, u)| **u) {
+            let fresh = !self.probe_has_history[p] || self.probe_states[p].is_new();
+            let seed = self.probe_seeded[p] as u32;
+            self.probe_blends[p] = if fresh { 1 + seed } else { self.probe_blends[p].saturating_add(1) };
             self.probe_has_history[p] = true;
             self.probe_seeded[p] = false;
             let state = self.probe_states[p].after_update();

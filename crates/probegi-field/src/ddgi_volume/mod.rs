@@ -130,6 +130,8 @@ pub struct DdgiVolume {
     /// and whether a camera pixel read it since the last update.
     probe_request_countdown: Vec<u32>,
     probe_requested: Vec<bool>,
+    /// Blends since the probe's history last restarted (`probe_hysteresis_ramp`).
+    probe_blends: Vec<u32>,
 }
 
 /// One volume's per-frame scratch.
@@ -222,6 +224,7 @@ impl DdgiVolume {
             pending_seeds: Vec::new(),
             probe_request_countdown: vec![0; probes],
             probe_requested: vec![false; probes],
+            probe_blends: vec![0; probes],
             settings,
         }
     }

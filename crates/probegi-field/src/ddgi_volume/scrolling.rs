@@ -95,6 +95,7 @@ impl DdgiVolume {
         self.probe_trace_run[p] = 0;
         self.probe_seeded[p] = false;
         self.probe_request_countdown[p] = 0;
+        self.probe_blends[p] = 0;
         self.probe_requested[p] = false;
         self.probes_reset_since_blend.push(p as u32);
         if let Some(shadow) = self.shadow.as_mut() {
