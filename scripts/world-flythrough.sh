@@ -8,7 +8,7 @@
 # the mean probe rays per frame; and the last frame against a static camera
 # converged at the same spot (300 frames). Plots both curves (matplotlib).
 # Writes OUT/table.md, OUT/flythrough.png. A benchmark, not a test (~40 min on
-# 2 cores). Usage: [W=160 H=90 SPP=256] scripts/world-flythrough.sh [CONFIG...]
+# 2 cores). Usage: [W=160 H=90 SPP=256 REUSE=0] scripts/world-flythrough.sh [CONFIG...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-out/world-fly}
@@ -39,6 +39,14 @@ world() { # N: N×N copies, 35 m × 16 m apart, sun and sky
   printf ']\n'
 } > "$fly"
 { world 4; printf '[camera]\nposition = [35.0, 6.0, 0.0]\ntarget = [45.0, 5.0, 0.0]\nfov_y_deg = 65.0\n'; } > "$still"
+# The same pose drifting by 1 mm over the run: a camera that moves, so its
+# direct light is one sample per frame as on the flythrough (a still camera
+# accumulates it, and its antialiased textures score better).
+{
+  world 4; printf '[camera]\nposition = [35.0, 6.0, 0.0]\ntarget = [45.0, 5.0, 0.0]\nfov_y_deg = 65.0\n'
+  printf 'keyframes = [\n  { frame = 0, position = [35.0, 6.0, 0.0], target = [45.0, 5.0, 0.0] },\n'
+  printf '  { frame = 299, position = [35.0, 6.0, 0.0], target = [45.0, 5.0, 0.001] },\n]\n'
+} > "$OUT/sponza-4x4-last-frame-moving.toml"
 CASCADES=(--gi ddgi --cascades 4 --probes 12,6,12 --set probe_spacing_m=1.0 --rays-per-probe 128 --set normal_maps=false)
 declare -A CONFIGS=(
   [default]=""
@@ -60,7 +68,13 @@ done
   "$BIN" render --scene "$still" "${CASCADES[@]}" --frames "$FRAMES" --width "$W" --height "$H" \
     --out "$OUT/static.exr" --stats "$OUT/static.json" 2>/dev/null
 static=$("$BIN" compare "$OUT/reference-299.exr" "$OUT/static.exr" | awk '/mean_flip/ {printf "%.3f", $2}')
+[ -f "$OUT/static-moving.exr" ] ||
+  "$BIN" render --scene "$OUT/sponza-4x4-last-frame-moving.toml" "${CASCADES[@]}" --frames "$FRAMES" --width "$W" \
+    --height "$H" --out "$OUT/static-moving.exr" 2>/dev/null
+moving=$("$BIN" compare "$OUT/reference-299.exr" "$OUT/static-moving.exr" | awk '/mean_flip/ {printf "%.3f", $2}')
 for name in "${names[@]}"; do
+  # REUSE=1 keeps a configuration's earlier run.
+  [ "${REUSE:-0}" = 1 ] && [ -f "$OUT/$name-flip.txt" ] && continue
   # shellcheck disable=SC2086
   "$BIN" render --scene "$fly" "${CASCADES[@]}" ${CONFIGS[$name]} --frames "$FRAMES" --width "$W" --height "$H" \
     --sequence "$OUT/$name" --sequence-exr --out "$OUT/$name.exr" --stats "$OUT/$name.json" 2>/dev/null
@@ -69,12 +83,12 @@ for name in "${names[@]}"; do
       awk -v k="$k" '/mean_flip/ {print k, $2}'
   done > "$OUT/$name-flip.txt"
 done
-python3 - "$OUT" "$static" "${names[@]}" <<'EOF'
+python3 - "$OUT" "$static" "$moving" "${names[@]}" <<'EOF'
 import json, sys
 import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-out, static, names = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
+out, static, moving, names = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), sys.argv[4:]
 fig, (a, b) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
 rows = []
 for n in names:
@@ -86,16 +100,17 @@ for n in names:
     b.plot(range(1, len(m)), change, label=n, linewidth=0.8)
     c = sorted(change)
     rows.append((n, flip, c[len(c) // 2], c[-1], d["probe_rays_traced"] / d["frames"]))
-a.axhline(static, color="grey", linestyle="--", label=f"static camera at frame 299 ({static:.3f})")
+a.axhline(static, color="grey", linestyle="--", label=f"still camera at frame 299 ({static:.3f})")
+a.axhline(moving, color="black", linestyle=":", label=f"same pose, direct not accumulated ({moving:.3f})")
 a.set_ylabel("HDR-FLIP vs reference"); a.legend(fontsize=8)
 b.set_ylabel("indirect mean change, %"); b.set_xlabel("frame"); b.set_yscale("log")
 fig.tight_layout(); fig.savefig(f"{out}/flythrough.png", dpi=100)
 with open(f"{out}/table.md", "w") as t:
     ks = [k for k, _ in rows[0][1]]
-    t.write("| configuration | " + " | ".join(f"frame {int(k)}" for k in ks) + " | last − static | indirect change: median, max | probe rays per frame |\n")
-    t.write("|---|" + "---|" * (len(ks) + 3) + "\n")
+    t.write("| configuration | " + " | ".join(f"frame {int(k)}" for k in ks) + " | last − still | last − same pose moving | indirect change: median, max | probe rays per frame |\n")
+    t.write("|---|" + "---|" * (len(ks) + 4) + "\n")
     for n, flip, med, mx, rays in rows:
-        t.write(f"| {n} | " + " | ".join(f"{f:.3f}" for _, f in flip) + f" | {flip[-1][1] - static:+.3f} | {med:.1f} %, {mx:.1f} % | {rays:.0f} |\n")
-    t.write(f"\nStatic camera at frame 299's pose, 300 frames: {static:.3f}\n")
+        t.write(f"| {n} | " + " | ".join(f"{f:.3f}" for _, f in flip) + f" | {flip[-1][1] - static:+.3f} | {flip[-1][1] - moving:+.3f} | {med:.1f} %, {mx:.1f} % | {rays:.0f} |\n")
+    t.write(f"\nStill camera at frame 299's pose, 300 frames: {static:.3f}; the same pose drifting 1 mm (direct light not accumulated): {moving:.3f}\n")
 print(open(f"{out}/table.md").read())
 EOF
