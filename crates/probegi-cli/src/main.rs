@@ -44,6 +44,16 @@ fn main() -> ExitCode {
     }
 }
 
+/// Writes `line` to stdout. A reader that closed the pipe early (`| head -1`)
+/// ends the output quietly instead of a panic.
+pub(crate) fn print_line(line: &str) -> Result<()> {
+    use std::io::Write;
+    match writeln!(std::io::stdout().lock(), "{line}") {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e).context("writing to stdout"),
+        _ => Ok(()),
+    }
+}
+
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         None => {
@@ -54,13 +64,13 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Reference(a)) => reference(&a),
         Some(Command::Compare(a)) => {
             let mean = probegi_image::compare_files(&a.reference, &a.test, a.out.as_deref())?;
-            println!("mean_flip: {mean:.6}");
+            print_line(&format!("mean_flip: {mean:.6}"))?;
             // Two HDR images: also the share of lit pixels rendered dark.
             if let (Ok(LoadedImage::Hdr(r)), Ok(LoadedImage::Hdr(t))) =
                 (probegi_image::read_image(&a.reference), probegi_image::read_image(&a.test))
                 && let Some(d) = probegi_image::compare::dark_fraction(&r, &t)
             {
-                println!("dark_fraction: {d:.6}");
+                print_line(&format!("dark_fraction: {d:.6}"))?;
             }
             if let Some(sheet) = &a.out {
                 eprintln!("wrote contact sheet {}", sheet.display());
@@ -71,8 +81,7 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::View(a)) => view::run(&a),
         Some(Command::Bench(a)) => {
             let report = bench::run(&a)?;
-            println!("{}", serde_json::to_string_pretty(&report)?);
-            Ok(())
+            print_line(&serde_json::to_string_pretty(&report)?)
         }
     }
 }

@@ -101,7 +101,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         write_radiance(p, &out.image)?;
     }
     if args.bench {
-        println!("{}", serde_json::to_string_pretty(&bench_report(&scene.name, adapter, &out))?);
+        crate::print_line(&serde_json::to_string_pretty(&bench_report(&scene.name, adapter, &out))?)?;
     }
     let at = out.camera.position_m;
     eprintln!(
