@@ -25,6 +25,7 @@ declare -A CONFIGS=(
   [cascades-3-free-2x]="--cascades 3 --probes 16,8,16 --set volume_tracking_bounds_m=[[-1e6,-1e6,-1e6],[1e6,1e6,1e6]] --set probe_spacing_m=[1.1607,1.1829,0.52]"
   [cascades-4]="--cascades 4 --probes 16,8,16"
   [cascades-3-ratio-1.5]="--cascades 3 --probes 16,8,16 --cascade-ratio 1.5"
+  [cascades-3-ratio-1.5-seed2]="--cascades 3 --probes 16,8,16 --cascade-ratio 1.5 --seed 2"
   [cascades-3-screen]="--cascades 3 --probes 16,8,16 --set probe_states=screen"
   [fitted-16x8x16-all-active]="--probes 16,8,16 --set probe_states=all-active"
   [fitted-32x16x12-all-active]="--probes 32,16,12 --set probe_states=all-active"
