@@ -246,8 +246,9 @@ pub struct RenderArgs {
     /// Global illumination method.
     #[arg(long, value_enum, default_value_t = GiArg::None)]
     pub gi: GiArg,
-    /// Frames to run; a static scene's direct light accumulates over them, the
-    /// DDGI field updates once per frame and the final indirect light is the last frame's.
+    /// Frames to run; a static scene's direct light (and diffuse albedo) accumulates
+    /// over them, the DDGI field updates once per frame and the final indirect light
+    /// is the last frame's irradiance × the accumulated albedo.
     #[arg(long, default_value_t = 1)]
     pub frames: u32,
     #[command(flatten)]
@@ -273,7 +274,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub stats: Option<PathBuf>,
     /// Write every frame into this folder as frame-NNNN.png (what the frame would
-    /// show if it were the last: accumulated direct light + that frame's indirect).
+    /// show if it were the last: accumulated direct light + that frame's irradiance × the accumulated albedo).
     #[arg(long)]
     pub sequence: Option<PathBuf>,
     /// With --sequence, also write frame-NNNN.exr (linear radiance).

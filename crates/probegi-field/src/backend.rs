@@ -95,9 +95,8 @@ pub trait ProbeBatchTracer: Sync {
     }
 
     /// Renders the frame's camera image on the other device (the G-buffer and
-    /// camera passes of `probegi_cpu::frame_loop` under DDGI): per pixel the
-    /// direct term (emission, direct light, glossy reflections) into `direct` and
-    /// the field term into `indirect`, returning (pixels on a surface with a
+    /// camera passes of `probegi_cpu::frame_loop` under DDGI) into `out`
+    /// ([`CameraFrameOut`]), returning (pixels on a surface with a
     /// diffuse albedo, those of them the field left unlit), or `None` to leave
     /// the camera to the CPU. With `field_on_device` the device's own atlases are
     /// the current ones (`field`'s are stale; its per-probe data is current).
@@ -115,8 +114,7 @@ pub trait ProbeBatchTracer: Sync {
         _second_order: bool,
         _frame: u32,
         _seed: u64,
-        _direct: &mut [Vec3],
-        _indirect: &mut [Vec3],
+        _out: CameraFrameOut<'_>,
         _probe_requests: Option<&mut Vec<u32>>,
     ) -> Option<Result<(usize, usize), BackendError>> {
         None
@@ -126,6 +124,18 @@ pub trait ProbeBatchTracer: Sync {
     fn device_field(&self) -> Option<&dyn DeviceField> {
         None
     }
+}
+
+/// Where a camera frame writes, per pixel, row-major
+/// ([`ProbeBatchTracer::camera_frame`]).
+pub struct CameraFrameOut<'a> {
+    /// The direct term: emission, direct light, glossy reflections.
+    pub direct: &'a mut [Vec3],
+    /// The field term: diffuse albedo/π × the field's irradiance.
+    pub indirect: &'a mut [Vec3],
+    /// The diffuse albedo that weighs `indirect` (zero where the pixel sees no
+    /// surface), so that a still camera's accumulated albedo can antialias it.
+    pub albedo: &'a mut [Vec3],
 }
 
 /// The passes of a device that keeps an update's hits and the field's atlases

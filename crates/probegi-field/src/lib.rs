@@ -36,7 +36,7 @@ pub mod probe_seeding;
 pub mod ray_budget;
 pub mod seam;
 
-pub use backend::{BackendError, DeviceField, ProbeBatchTracer, ProbeTracerHandle};
+pub use backend::{BackendError, CameraFrameOut, DeviceField, ProbeBatchTracer, ProbeTracerHandle};
 pub use ddgi_field_set::DdgiFieldSet;
 pub use ddgi_volume::{DdgiVolume, SceneEvent};
 pub use device_plans::DeviceBlendOutput;

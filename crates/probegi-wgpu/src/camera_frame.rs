@@ -74,6 +74,8 @@ pub struct CameraImage {
     pub direct: Vec<Vec3>,
     /// Indirect diffuse from the field per pixel, row-major.
     pub indirect: Vec<Vec3>,
+    /// The diffuse albedo that weighs `indirect` per pixel, row-major.
+    pub albedo: Vec<Vec3>,
     /// Pixels on a surface with a diffuse albedo.
     pub surfaces: usize,
     /// Those of them that got no light from the field.
@@ -144,15 +146,16 @@ impl GpuCameraPass {
         };
         let device = &ctx.device;
         let params = ctx.buffer_with("camera params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        let image = |label| {
+        let image = |label, texels_per_pixel: u64| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size: n * 16,
+                size: n * 16 * texels_per_pixel,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             })
         };
-        let (direct, indirect) = (image("camera direct"), image("camera indirect"));
+        // `camera_direct` holds two texels per pixel: the direct term, then the albedo.
+        let (direct, indirect) = (image("camera direct and albedo", 2), image("camera indirect", 1));
         // Zeroed at creation; at least one word so the binding is never empty.
         let requests = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera probe requests"),
@@ -193,7 +196,8 @@ impl GpuCameraPass {
         };
         let v3 = |t: &[f32; 4]| Vec3::new(t[0], t[1], t[2]);
         Ok(CameraImage {
-            direct: d.iter().map(v3).collect(),
+            direct: d.iter().step_by(2).map(v3).collect(),
+            albedo: d.iter().skip(1).step_by(2).map(v3).collect(),
             indirect: i.iter().map(v3).collect(),
             surfaces: i.iter().filter(|t| t[3] > 0.5).count(),
             unlit: i.iter().filter(|t| t[3] > 1.5).count(),

@@ -31,7 +31,7 @@ use glam::Vec3;
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_volume_blend::DdgiFieldSetView;
 use probegi_core::probe_classification::ProbeUsageCounts;
-use probegi_field::backend::{BackendError, DeviceField, ProbeBatchTracer};
+use probegi_field::backend::{BackendError, CameraFrameOut, DeviceField, ProbeBatchTracer};
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::device_plans::{
     DeviceBlendOutput, DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
@@ -479,8 +479,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         second_order: bool,
         frame: u32,
         seed: u64,
-        direct: &mut [Vec3],
-        indirect: &mut [Vec3],
+        out: CameraFrameOut<'_>,
         mut probe_requests: Option<&mut Vec<u32>>,
     ) -> Option<Result<(usize, usize), BackendError>> {
         let pass = self.camera.as_ref()?;
@@ -516,15 +515,18 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             if let Some(r) = probe_requests.as_deref_mut() {
                 r.copy_from_slice(&image.requests);
             }
-            if image.direct.len() != direct.len() || image.indirect.len() != indirect.len() {
+            let pixels = out.direct.len();
+            if [image.direct.len(), image.indirect.len(), image.albedo.len()] != [pixels; 3]
+                || [out.indirect.len(), out.albedo.len()] != [pixels; 2]
+            {
                 return Err(GpuError::Input(format!(
-                    "{} camera pixels for a {}-pixel frame",
-                    image.direct.len(),
-                    direct.len()
+                    "{} camera pixels for a {pixels}-pixel frame",
+                    image.direct.len()
                 )));
             }
-            direct.copy_from_slice(&image.direct);
-            indirect.copy_from_slice(&image.indirect);
+            out.direct.copy_from_slice(&image.direct);
+            out.indirect.copy_from_slice(&image.indirect);
+            out.albedo.copy_from_slice(&image.albedo);
             Ok((image.surfaces, image.unlit))
         };
         Some(run().map_err(BackendError::from))

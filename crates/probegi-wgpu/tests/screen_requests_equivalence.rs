@@ -4,6 +4,8 @@
 //! CPU marks them from its G-buffer (`DdgiFieldSet::probe_requests_at`), and
 //! the two bitsets agree; over a render, the same probes are requested, the
 //! same rays are traced, and the images agree within the backends' noise.
+//! The device also returns the diffuse albedo its field term used, the CPU's
+//! at the same pixels.
 
 use std::sync::Arc;
 
@@ -12,9 +14,10 @@ use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode, VolumeBlending};
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::gbuffer::trace_gbuffer;
+use probegi_cpu::shading::ShadingContext;
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
-use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
+use probegi_field::{CameraFrameOut, ProbeBatchTracer, ProbeTracerHandle};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 mod common;
 
@@ -65,11 +68,28 @@ fn the_device_requests_the_probes_the_cpu_requests() {
         .collect();
     let host = set.probe_requests_at(&points);
     let mut device = vec![0u32; host.len()];
-    let (mut direct, mut indirect) = (vec![Vec3::ZERO; (W * H) as usize], vec![Vec3::ZERO; (W * H) as usize]);
+    let [mut direct, mut indirect, mut albedo] = [(); 3].map(|_| vec![Vec3::ZERO; (W * H) as usize]);
     let view = set.view();
-    gpu.camera_frame(&camera, &view, false, 1, false, 0, 7, &mut direct, &mut indirect, Some(&mut device))
+    let out = CameraFrameOut { direct: &mut direct, indirect: &mut indirect, albedo: &mut albedo };
+    gpu.camera_frame(&camera, &view, false, 1, false, 0, 7, out, Some(&mut device))
         .expect("the device renders the camera")
         .expect("camera frame");
+    // The albedo the device weighed its field term with, against the CPU's at the
+    // same pixel centres (the still camera's accumulation reads it).
+    let same_albedo = gbuffer
+        .texels
+        .iter()
+        .zip(&albedo)
+        .filter(|(t, a)| {
+            let cpu = t
+                .surface
+                .as_ref()
+                .map_or(Vec3::ZERO, |sp| ShadingContext::new(&scene, sp, t.view_dir_world).bsdf.diffuse_albedo());
+            (cpu - **a).abs().max_element() < 1e-4
+        })
+        .count();
+    assert!(albedo.iter().any(|a| a.max_element() > 0.0), "the device returned no albedo");
+    assert!(same_albedo as f32 >= 0.99 * albedo.len() as f32, "{same_albedo} of {} pixels", albedo.len());
     let (h, d) = (bits(&host), bits(&device));
     let layout = set.probe_request_layout();
     let in_member = |b: &[usize], m: usize| b.iter().filter(|&&x| x >= layout[m] && x < layout[m + 1]).count();

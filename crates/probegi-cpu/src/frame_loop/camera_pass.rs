@@ -66,6 +66,7 @@ pub(super) fn shade_camera(
 ) -> (u64, usize, usize) {
     let CameraPasses { scene, direct, direct_settings, .. } = *passes;
     let (direct_out, indirect_out) = (&mut acc.frame_direct, &mut acc.indirect);
+    let albedo_out = &mut acc.frame_albedo;
     use rayon::prelude::*;
     let w = gbuffer.width as usize;
     let ddgi = match &field {
@@ -75,14 +76,16 @@ pub(super) fn shade_camera(
     direct_out
         .par_chunks_mut(w)
         .zip(indirect_out.par_chunks_mut(w))
+        .zip(albedo_out.par_chunks_mut(w))
         .enumerate()
-        .map(|(y, (drow, irow))| {
+        .map(|(y, ((drow, irow), arow))| {
             let (mut rays, mut surfaces, mut unlit) = (0u64, 0usize, 0usize);
-            for (x, (d, i)) in drow.iter_mut().zip(irow.iter_mut()).enumerate() {
+            for (x, ((d, i), a)) in drow.iter_mut().zip(irow.iter_mut()).zip(arow.iter_mut()).enumerate() {
                 let texel = &gbuffer.texels[y * w + x];
                 let Some(sp) = &texel.surface else {
                     *d = scene.sky_radiance;
                     *i = Vec3::ZERO;
+                    *a = Vec3::ZERO;
                     continue;
                 };
                 let pixel = (y * w + x) as u64;
@@ -116,6 +119,7 @@ pub(super) fn shade_camera(
                     Vec3::ZERO
                 };
                 let albedo = ctx.bsdf.diffuse_albedo();
+                *a = albedo;
                 let diffuse = albedo.max_element() > 0.0;
                 surfaces += diffuse as usize;
                 *i = match &field {

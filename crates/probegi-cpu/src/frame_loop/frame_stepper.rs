@@ -18,7 +18,7 @@ use crate::direct::DirectLighting;
 pub struct FrameLayers {
     /// The direct term (averaged over the frames it has accumulated).
     pub direct: Image,
-    /// The indirect term of the last frame.
+    /// The indirect term: the last frame's irradiance × the accumulated albedo.
     pub indirect: Image,
 }
 
@@ -143,11 +143,10 @@ impl<'a> FrameStepper<'a> {
     pub fn layers(&self) -> FrameLayers {
         let fl = &self.frame_loop;
         let (width, height) = (fl.settings.width, fl.settings.height);
-        let k = fl.acc.accumulated.max(1) as f64;
-        let direct = fl.acc.direct_sum.iter().map(|d| (*d / k).as_vec3()).collect();
+        let direct = (0..fl.acc.direct_sum.len()).map(|p| fl.acc.direct(p)).collect();
         FrameLayers {
             direct: Image { width, height, pixels: direct },
-            indirect: Image { width, height, pixels: fl.acc.indirect.clone() },
+            indirect: Image { width, height, pixels: fl.acc.indirect_image() },
         }
     }
 

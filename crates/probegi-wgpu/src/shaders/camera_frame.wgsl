@@ -6,7 +6,9 @@
 //              hit gets emission + direct light + diffuse albedo/π × the field (and,
 //              with second-order glossy, its specular reflection of the field);
 //   indirect = diffuse albedo/π × ddgi_irradiance (ddgi_query.wgsl, group 2).
-// Pixels that see nothing get the sky. The CPU accumulates `direct` over frames.
+// Pixels that see nothing get the sky. `camera_direct` holds two texels per pixel:
+// the direct term at 2i and the diffuse albedo that weighs `indirect` at 2i + 1.
+// The CPU accumulates both over a still camera's frames.
 // `indirect.w` flags surfaces with a diffuse albedo (1) and those of them unlit (2).
 // With flag 4 (the screen scheme's requests) every surface pixel also sets, in
 // `camera_requests`, the bits of the probes its query reads
@@ -74,7 +76,8 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
         + camera.up.xyz * (ndc_y * camera.origin.w));
     let hit = bvh_trace(bvh_make_ray(camera.origin.xyz, dir, 0.0, SCENE_F32_MAX), false);
     if (hit.leaf == BVH_NO_HIT) {
-        camera_direct[i] = vec4<f32>(camera.sky.xyz, 0.0);
+        camera_direct[2u * i] = vec4<f32>(camera.sky.xyz, 0.0);
+        camera_direct[2u * i + 1u] = vec4<f32>(0.0);
         camera_indirect[i] = vec4<f32>(0.0);
         return;
     }
@@ -121,7 +124,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
-    camera_direct[i] = vec4<f32>(select(vec3<f32>(0.0), l, camera_finite(l)), 0.0);
+    camera_direct[2u * i] = vec4<f32>(select(vec3<f32>(0.0), l, camera_finite(l)), 0.0);
     let e = ddgi_irradiance(sp.position, scene_facing_normal(sp), to_viewer);
     if ((camera.info.w & 4u) != 0u) {
         camera_request_probes(sp.position, scene_facing_normal(sp), to_viewer);
@@ -133,5 +136,6 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (max(max(albedo.x, albedo.y), albedo.z) > 0.0) {
         flag = select(1.0, 2.0, !(max(max(e.x, e.y), e.z) > 0.0));
     }
+    camera_direct[2u * i + 1u] = vec4<f32>(albedo, 0.0);
     camera_indirect[i] = vec4<f32>(albedo / SCENE_PI * e, flag);
 }
