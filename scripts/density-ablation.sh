@@ -5,14 +5,14 @@
 # against `probegi reference` at SPP spp: HDR-FLIP and the dark fraction (lit
 # reference pixels rendered under a quarter; `probegi compare`).
 # Writes out/density/*.exr, out/density/table.md. A benchmark, not a test.
-# Usage: [W=160 H=90 SPP=1024 FRAMES=100] scripts/density-ablation.sh [CONFIG...]
+# Usage: [W=160 H=90 SPP=1024 FRAMES=100 BIN=] scripts/density-ablation.sh [CONFIG...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-out/density}
 W=${W:-160}; H=${H:-90}; SPP=${SPP:-1024}; FRAMES=${FRAMES:-100}
 mkdir -p "$OUT"
-cargo build --release --locked -q -p probegi-cli
-BIN=./target/release/probegi
+# BIN=path: run that binary as is (no build).
+[ -n "${BIN:-}" ] || { cargo build --release --locked -q -p probegi-cli; BIN=./target/release/probegi; }
 common=(--scene ../shared/scenes/dabrovic-sponza/sponza.obj --camera-pos=-12,2,0 --camera-target 10,4,0
   --sky 3,3,3 --set normal_maps=false --width "$W" --height "$H")
 [ -f "$OUT/reference-$W-$SPP.exr" ] ||
@@ -27,6 +27,8 @@ declare -A CONFIGS=(
   [cascades-3-ratio-1.5]="--cascades 3 --probes 16,8,16 --cascade-ratio 1.5"
   [cascades-3-ratio-1.5-seed2]="--cascades 3 --probes 16,8,16 --cascade-ratio 1.5 --seed 2"
   [cascades-3-screen]="--cascades 3 --probes 16,8,16 --set probe_states=screen"
+  [cascades-3-ratio-2]="--cascades 3 --probes 16,8,16 --cascade-ratio 2"
+  [cascades-3-fit-cells]="--cascades 3 --probes 16,8,16 --set probe_spacing_m=[0.96722,0.92,0.43333]"
   [fitted-16x8x16-all-active]="--probes 16,8,16 --set probe_states=all-active"
   [fitted-32x16x12-all-active]="--probes 32,16,12 --set probe_states=all-active"
   [fitted-32x16x12-no-relocation]="--probes 32,16,12 --set probe_relocation=false"

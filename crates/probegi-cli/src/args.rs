@@ -220,9 +220,10 @@ pub struct VolumeArgs {
     /// Camera-centred DDGI cascades (seed 003 §6.2): N nested tracking windows, each
     /// --cascade-ratio times the spacing of the one inside it. The innermost spacing
     /// is `--set probe_spacing_m=S` (a scalar or X,Y,Z), else fitted so that the
-    /// coarsest cascade spans the scene bounds. Every window stays inside the
-    /// scene bounds where it is smaller than them (`volume_tracking_bounds_m`),
-    /// so the coarsest covers the scene from any camera. Without it, one volume as before
+    /// coarsest cascade is the scene's fitted grid (probes at cell centres). Every
+    /// window stays half a cell inside the scene bounds where it is smaller than
+    /// them (`volume_tracking_bounds_m`), so the coarsest covers the scene from
+    /// any camera. Without it, one volume as before
     /// (or the scene file's `[[volumes]]`).
     #[arg(long)]
     pub cascades: Option<u32>,

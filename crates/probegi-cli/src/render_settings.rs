@@ -110,13 +110,16 @@ pub fn ddgi_method(scene: &Scene, args: &VolumeArgs) -> Result<GiMethod> {
         let spacing = match base.probe_spacing_m {
             Some(s) => s,
             None => {
-                // The coarsest cascade's probe box spans the scene bounds: held
-                // inside them, it covers the whole scene from any camera. (A
-                // window that followed the camera freely needed twice the bounds
-                // to cover Sponza from one end of the atrium, and left its far
-                // arches to 4.6 m probes: HDR-FLIP 0.120 at 300 frames against
-                // 0.108 now; docs/RESULTS.md, "Denser is better".)
-                let cells = (base.probe_counts.as_vec3() - glam::Vec3::ONE).max(glam::Vec3::ONE);
+                // The coarsest cascade is the fitted grid of the scene bounds:
+                // probes at the centres of `counts` equal cells
+                // (`ProbeGrid::fit_to_bounds`), half a cell off the outermost
+                // walls; it covers the whole scene from any camera. (A window
+                // that followed the camera freely needed twice the bounds to
+                // cover Sponza from one end of the atrium, and left its far
+                // arches to 4.6 m probes: HDR-FLIP 0.120 at 300 frames. Probes
+                // on the bounds' faces instead: 0.104; at the cell centres
+                // 0.089. docs/RESULTS.md, "Denser is better".)
+                let cells = base.probe_counts.as_vec3().max(glam::Vec3::ONE);
                 ((hi - lo) / cells / r.powi(n as i32 - 1)).max(glam::Vec3::splat(1e-3))
             }
         };

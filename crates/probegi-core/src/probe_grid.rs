@@ -113,15 +113,47 @@ impl ProbeGrid {
     }
 
     /// The point a tracking window of this grid's counts and spacing should
-    /// centre on to follow `target_m` without leaving `bounds` (`[lo, hi]`):
-    /// per axis, `target_m` clamped so that the probe box stays inside the
-    /// bounds, or the bounds' centre where the box is larger than them.
+    /// centre on to follow `target_m` without leaving `bounds` (`[lo, hi]`).
+    /// Per axis, `target_m` is clamped so that the probe box, on this grid's
+    /// lattice (whole cells from `origin_m`), keeps its outer planes at least
+    /// half a cell inside the bounds. Where the box is larger than that, the
+    /// bounds' centre is returned.
+    ///
+    /// The half cell: a scene's bounds touch its outermost surfaces, so a plane
+    /// on them (or just beyond, after the lattice snap) puts probes on or
+    /// behind the outer walls, where they see both sides and leak the sunlit
+    /// outside into the rooms within. Fitted grids keep the same margin
+    /// ([`Self::fit_to_bounds`]).
     pub fn tracking_target_within(&self, target_m: Vec3, bounds: [Vec3; 2]) -> Vec3 {
-        let half = self.spacing_m * (self.probe_counts.as_vec3() - Vec3::ONE) * 0.5;
+        let s = self.spacing_m;
+        let half = s * (self.probe_counts.as_vec3() - Vec3::ONE) * 0.5;
         let [lo, hi] = bounds;
-        let (min, max) = (lo + half, hi - half);
+        let anchor = self.origin_m;
+        // The lowest and highest lattice origins whose box lies within the bounds
+        // shrunk by half a cell.
+        let first = anchor + ((lo + s * 0.5 - anchor) / s).ceil() * s;
+        let last = anchor + ((hi - s * 0.5 - half * 2.0 - anchor) / s).floor() * s;
+        let (min, max) = (first + half, last + half);
         let centre = (lo + hi) * 0.5;
         Vec3::select(min.cmple(max), target_m.clamp(min.min(max), max.max(min)), centre)
+    }
+
+    /// The lattice anchor of a tracking window of `counts` probes `spacing_m`
+    /// apart held inside `bounds` (`[lo, hi]`), unless `origin_m` fixes the
+    /// lattice. Per axis: where the probe box fits within the bounds less half a
+    /// cell at each end, planes at the centres of whole cells from `lo`, as a
+    /// fitted grid's are; where it does not (the window then sits still at the
+    /// bounds' centre), the lattice that centres it on them exactly.
+    pub fn tracking_anchor(origin_m: Option<Vec3>, bounds: Option<[Vec3; 2]>, counts: UVec3, spacing_m: Vec3) -> Vec3 {
+        match (origin_m, bounds) {
+            (Some(o), _) => o,
+            (None, Some([lo, hi])) => {
+                let extent = spacing_m * (counts.as_vec3() - Vec3::ONE);
+                let fits = extent.cmple(hi - lo - spacing_m);
+                Vec3::select(fits, lo + spacing_m * 0.5, (lo + hi - extent) * 0.5)
+            }
+            (None, None) => Vec3::ZERO,
+        }
     }
 
     /// A grid of `counts` probes `spacing_m` apart, centred on `target_m` and
@@ -254,14 +286,27 @@ mod tests {
 
     #[test]
     fn a_tracking_target_is_held_inside_the_bounds_or_at_their_centre() {
-        // 5 probes 1 m apart per axis: a box 4 m across, half 2 m.
+        // 5 probes 1 m apart per axis: a box 4 m across, half 2 m; on the
+        // lattice of whole metres.
         let g = ProbeGrid::new(Vec3::ZERO, UVec3::new(5, 5, 9), Vec3::ONE);
         let bounds = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(10.0, 3.0, 20.0)];
-        // x: inside [2, 8] stays, beyond clamps; y: the box (4 m) is larger than
-        // the bounds (3 m): their centre; z: half 4 m, [4, 16].
+        // x: the outer planes at least half a cell inside, on the lattice: box
+        // origins in [1, 5], targets in [3, 7]; y: the box (4 m) is larger than
+        // the bounds (3 m): their centre; z: half 4 m, origins in [1, 11].
         let t = g.tracking_target_within(Vec3::new(5.0, 9.0, -3.0), bounds);
-        assert_eq!(t, Vec3::new(5.0, 1.5, 4.0));
-        assert_eq!(g.tracking_target_within(Vec3::new(9.5, 0.0, 30.0), bounds), Vec3::new(8.0, 1.5, 16.0));
+        assert_eq!(t, Vec3::new(5.0, 1.5, 5.0));
+        assert_eq!(g.tracking_target_within(Vec3::new(9.5, 0.0, 30.0), bounds), Vec3::new(7.0, 1.5, 15.0));
+        // On a lattice anchored half a cell inside the bounds (a fitted grid's
+        // planes), the first plane lands exactly there.
+        let anchor = ProbeGrid::tracking_anchor(None, Some(bounds), UVec3::new(5, 5, 9), Vec3::ONE);
+        // y: the box (4 m) does not fit the 3 m bounds: centred on them exactly.
+        assert_eq!(anchor, Vec3::new(0.5, -0.5, 0.5));
+        let g = ProbeGrid::new(anchor, UVec3::new(5, 5, 9), Vec3::ONE);
+        let t = g.tracking_target_within(Vec3::new(-4.0, 9.0, 30.0), bounds);
+        let placed = ProbeGrid::centred_on(t, anchor, g.probe_counts, g.spacing_m);
+        assert_eq!(placed.origin_m.x, 0.5, "first plane half a cell inside lo");
+        assert_eq!(placed.origin_m.z + 8.0, 19.5, "last plane half a cell inside hi");
+        assert_eq!(placed.origin_m.y, -0.5, "the box centred on the bounds: [-0.5, 3.5]");
     }
 
     #[test]

@@ -181,11 +181,13 @@ impl DdgiVolume {
         let spacing = settings.probe_spacing_m.unwrap_or(fitted.spacing_m);
         let grid = match (settings.volume_tracks_camera, camera_m) {
             (true, Some(c)) => {
-                let c = match settings.volume_tracking_bounds_m {
-                    Some(b) => ProbeGrid::new(Vec3::ZERO, counts, spacing).tracking_target_within(c, b),
+                let bounds = settings.volume_tracking_bounds_m;
+                let anchor = ProbeGrid::tracking_anchor(settings.probe_origin_m, bounds, counts, spacing);
+                let c = match bounds {
+                    Some(b) => ProbeGrid::new(anchor, counts, spacing).tracking_target_within(c, b),
                     None => c,
                 };
-                ProbeGrid::centred_on(c, settings.probe_origin_m.unwrap_or(Vec3::ZERO), counts, spacing)
+                ProbeGrid::centred_on(c, anchor, counts, spacing)
             }
             _ => ProbeGrid::new(settings.probe_origin_m.unwrap_or(fitted.origin_m), counts, spacing),
         };
