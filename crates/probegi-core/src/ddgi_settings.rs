@@ -39,13 +39,15 @@ pub struct DdgiVolumeSettings {
     /// and moves with it in whole-cell steps over a circular buffer; planes that
     /// scroll in are reset and re-initialised. Blended camera-aware (§7.4).
     pub volume_tracks_camera: bool,
-    /// A tracking window keeps its probe box inside these bounds `[lo, hi]`
-    /// (m) on every axis where it is smaller than them, and centred on them
-    /// where it is not: it follows the camera only as far as probes there
-    /// still cover the scene, instead of spending them outside it (a camera
-    /// at one end of Sponza's atrium left half of each cascade outside the
-    /// building). `None` (the default): it follows the camera freely.
-    /// `--cascades` sets it to the scene bounds.
+    /// A tracking window keeps its probe box at least half a cell inside these
+    /// bounds `[lo, hi]` (m), on a lattice of cell centres from `lo`, on every
+    /// axis where it fits, and centred on them where it does not: it follows
+    /// the camera only as far as probes there still cover the scene, instead of
+    /// spending them outside it (a camera at one end of Sponza's atrium left
+    /// half of each cascade outside the building), and never puts a plane on
+    /// the bounds' faces, the outermost walls (`ProbeGrid::tracking_target_within`).
+    /// `None` (the default): it follows the camera freely. `--cascades` sets
+    /// it to the scene bounds.
     pub volume_tracking_bounds_m: Option<[Vec3; 2]>,
     /// Rays traced per probe per frame (RTXGI default 256; seed 000 Table 2 sweeps 32–256).
     pub probe_rays_per_probe: u32,
@@ -419,11 +421,12 @@ pub struct DdgiFieldSetSettings {
 
 /// Spacing ratio between neighbouring cascades, `--cascades`' default.
 /// *Deviation:* seed 003 §6.2 halves the probe density per cascade (2). With
-/// the coarsest cascade spanning the scene, 1.5 makes the finer cascades
-/// coarser and wider: on Sponza (3 × 16×8×16, 300 frames) HDR-FLIP 0.098 and
-/// 0.097 over two seeds against 0.108 and 0.107 at 2, level with the best
-/// fitted grid of the same probe count (docs/RESULTS.md, "Cascades held
-/// inside the scene").
+/// the coarsest cascade the scene's fitted grid, 1.5 makes the finer cascades
+/// coarser and wider. On Sponza (3 × 16×8×16, 300 frames) it scores HDR-FLIP
+/// 0.089 against 0.095 at 2, below the best fitted grid of the same probe
+/// count (0.093); docs/RESULTS.md, "Probe planes off the outer walls". In the
+/// 4×4 world of Sponza copies, ratio 2's middle cascades still light a gallery
+/// from outside: 0.170 there against 0.134 at 1.5.
 pub const DEFAULT_CASCADE_SPACING_RATIO: f32 = 1.5;
 
 impl DdgiFieldSetSettings {
