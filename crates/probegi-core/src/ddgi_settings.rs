@@ -44,10 +44,10 @@ pub struct DdgiVolumeSettings {
     /// axis where it fits, and centred on them where it does not: it follows
     /// the camera only as far as probes there still cover the scene, instead of
     /// spending them outside it (a camera at one end of Sponza's atrium left
-    /// half of each cascade outside the building), and never puts a plane on
-    /// the bounds' faces, the outermost walls (`ProbeGrid::tracking_target_within`).
-    /// `None` (the default): it follows the camera freely. `--cascades` sets
-    /// it to the scene bounds.
+    /// half of each cascade outside the building), and, where it fits, puts no
+    /// plane on the bounds' faces, the outermost walls
+    /// (`ProbeGrid::tracking_target_within`). `None` (the default): it follows
+    /// the camera freely. `--cascades` sets it to the scene bounds.
     pub volume_tracking_bounds_m: Option<[Vec3; 2]>,
     /// Rays traced per probe per frame (RTXGI default 256; seed 000 Table 2 sweeps 32–256).
     pub probe_rays_per_probe: u32,

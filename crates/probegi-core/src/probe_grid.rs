@@ -116,8 +116,9 @@ impl ProbeGrid {
     /// centre on to follow `target_m` without leaving `bounds` (`[lo, hi]`).
     /// Per axis, `target_m` is clamped so that the probe box, on this grid's
     /// lattice (whole cells from `origin_m`), keeps its outer planes at least
-    /// half a cell inside the bounds. Where the box is larger than that, the
-    /// bounds' centre is returned.
+    /// half a cell inside the bounds. Where no lattice position does (the box
+    /// is larger than that, or a lattice fixed by `probe_origin_m` has no slot
+    /// in a range narrower than a cell), the bounds' centre is returned.
     ///
     /// The half cell: a scene's bounds touch its outermost surfaces, so a plane
     /// on them (or just beyond, after the lattice snap) puts probes on or
@@ -130,9 +131,12 @@ impl ProbeGrid {
         let [lo, hi] = bounds;
         let anchor = self.origin_m;
         // The lowest and highest lattice origins whose box lies within the bounds
-        // shrunk by half a cell.
-        let first = anchor + ((lo + s * 0.5 - anchor) / s).ceil() * s;
-        let last = anchor + ((hi - s * 0.5 - half * 2.0 - anchor) / s).floor() * s;
+        // shrunk by half a cell. The quotients are often whole numbers up to
+        // rounding (the origin drifts by whole cells as the window scrolls), so
+        // a thousandth of a cell decides for the nearer whole one.
+        const WHOLE_CELL_TOLERANCE: f32 = 1e-3;
+        let first = anchor + ((lo + s * 0.5 - anchor) / s - WHOLE_CELL_TOLERANCE).ceil() * s;
+        let last = anchor + ((hi - s * 0.5 - half * 2.0 - anchor) / s + WHOLE_CELL_TOLERANCE).floor() * s;
         let (min, max) = (first + half, last + half);
         let centre = (lo + hi) * 0.5;
         Vec3::select(min.cmple(max), target_m.clamp(min.min(max), max.max(min)), centre)
@@ -158,8 +162,10 @@ impl ProbeGrid {
 
     /// A grid of `counts` probes `spacing_m` apart, centred on `target_m` and
     /// snapped to the lattice of whole cells from `anchor_m` (so windows that start
-    /// anywhere land on the same world lattice, and nested cascades whose spacings
-    /// are multiples of each other share probe planes).
+    /// anywhere land on the same world lattice, and, anchored alike, nested
+    /// cascades whose spacings are multiples of each other share probe planes;
+    /// windows held inside bounds are anchored per spacing,
+    /// [`Self::tracking_anchor`], and do not).
     pub fn centred_on(target_m: Vec3, anchor_m: Vec3, counts: UVec3, spacing_m: Vec3) -> Self {
         let half = spacing_m * (counts.as_vec3() - Vec3::ONE) * 0.5;
         let cell = ((target_m - half - anchor_m) / spacing_m).round();
@@ -307,6 +313,32 @@ mod tests {
         assert_eq!(placed.origin_m.x, 0.5, "first plane half a cell inside lo");
         assert_eq!(placed.origin_m.z + 8.0, 19.5, "last plane half a cell inside hi");
         assert_eq!(placed.origin_m.y, -0.5, "the box centred on the bounds: [-0.5, 3.5]");
+    }
+
+    #[test]
+    fn a_window_scrolled_by_whole_cells_keeps_the_same_clamped_range() {
+        // A spacing and bounds that are not whole numbers: the origin drifts by
+        // rounding as the window scrolls, and the range it may take must not.
+        let (counts, s) = (UVec3::new(12, 6, 12), Vec3::splat(0.3));
+        let bounds = [Vec3::new(-17.0, -0.9, -7.8), Vec3::new(17.3, 15.65, 7.8)];
+        let anchor = ProbeGrid::tracking_anchor(None, Some(bounds), counts, s);
+        let g = ProbeGrid::new(anchor, counts, s);
+        let far = Vec3::new(1e3, 1e3, 1e3);
+        let near = Vec3::splat(-1e3);
+        let mut moved = g;
+        for _ in 0..37 {
+            moved.scroll(IVec3::new(1, 1, 1));
+        }
+        for target in [far, near] {
+            let (a, b) = (g.tracking_target_within(target, bounds), moved.tracking_target_within(target, bounds));
+            assert!((a - b).abs().max_element() < 1e-3, "{a} vs {b}");
+            let placed = ProbeGrid::centred_on(a, anchor, counts, s);
+            let (lo, hi) = (placed.origin_m, placed.origin_m + s * (counts.as_vec3() - Vec3::ONE));
+            assert!(lo.cmpge(bounds[0] + s * 0.5 - 1e-4).all() && hi.cmple(bounds[1] - s * 0.5 + 1e-4).all());
+            // Pressed against a face: its outer plane within a cell of half a cell inside.
+            let gap = if target == far { bounds[1] - hi } else { lo - bounds[0] };
+            assert!(gap.cmplt(s * 1.5).all(), "{gap}");
+        }
     }
 
     #[test]

@@ -185,18 +185,22 @@ pub type SceneEdit<'a> = Box<dyn Fn(&Scene, &mut Scene) + 'a>;
 /// The render's running sums between frames.
 ///
 /// A still camera's direct term and diffuse albedo accumulate over its jittered
-/// frames; its field term is the last frame's irradiance, weighed by the
-/// accumulated albedo rather than by the last frame's one sample of it
-/// (demodulation, as real-time denoisers do: the albedo is antialiased, the
-/// irradiance stays current). One jittered texture sample per pixel otherwise
-/// leaves texel-sized speckle in the indirect light: on Sponza's walls 1.4 % of
-/// the reference-lit pixels rendered under a quarter of it, 0.8 % demodulated.
+/// frames; its field term is the field's irradiance/π at the pixel's last
+/// diffuse sample, weighed by the accumulated albedo rather than by one sample
+/// of it (demodulation, as real-time denoisers do: the albedo is antialiased,
+/// the irradiance stays current). One jittered texture sample per pixel
+/// otherwise leaves texel-sized speckle in the indirect light: on Sponza's
+/// walls 1.4 % of the reference-lit pixels rendered under a quarter of it,
+/// 0.8 % demodulated. A moving camera restarts the means, so its frames are
+/// albedo × irradiance/π at their own samples, as before.
 struct Accumulation {
     direct_sum: Vec<DVec3>,
     frame_direct: Vec<Vec3>,
-    /// The last frame's field term: its diffuse albedo/π × irradiance.
-    indirect: Vec<Vec3>,
-    /// The last frame's diffuse albedo per pixel (zero off surfaces).
+    /// This frame's irradiance/π from the field per pixel.
+    frame_irradiance: Vec<Vec3>,
+    /// Irradiance/π at the last sample of each pixel that had a diffuse albedo.
+    irradiance: Vec<Vec3>,
+    /// This frame's diffuse albedo per pixel (zero off surfaces).
     frame_albedo: Vec<Vec3>,
     albedo_sum: Vec<DVec3>,
     accumulated: u32,
@@ -207,15 +211,16 @@ impl Accumulation {
         Self {
             direct_sum: vec![DVec3::ZERO; pixels],
             frame_direct: vec![Vec3::ZERO; pixels],
-            indirect: vec![Vec3::ZERO; pixels],
+            frame_irradiance: vec![Vec3::ZERO; pixels],
+            irradiance: vec![Vec3::ZERO; pixels],
             frame_albedo: vec![Vec3::ZERO; pixels],
             albedo_sum: vec![DVec3::ZERO; pixels],
             accumulated: 0,
         }
     }
 
-    /// Adds the frame's direct term and albedo; an animated scene (or camera)
-    /// restarts the means.
+    /// Adds the frame's direct term and albedo, and keeps its irradiance where
+    /// it saw a diffuse surface; an animated scene (or camera) restarts the means.
     fn add_frame(&mut self, restart: bool) {
         if restart {
             self.accumulated = 0;
@@ -225,8 +230,11 @@ impl Accumulation {
         for (a, p) in self.direct_sum.iter_mut().zip(&self.frame_direct) {
             *a += p.as_dvec3();
         }
-        for (a, p) in self.albedo_sum.iter_mut().zip(&self.frame_albedo) {
-            *a += p.as_dvec3();
+        for (p, albedo) in self.frame_albedo.iter().enumerate() {
+            self.albedo_sum[p] += albedo.as_dvec3();
+            if albedo.max_element() > 0.0 {
+                self.irradiance[p] = self.frame_irradiance[p];
+            }
         }
         self.accumulated += 1;
     }
@@ -236,13 +244,10 @@ impl Accumulation {
         (self.direct_sum[p] / self.accumulated.max(1) as f64).as_vec3()
     }
 
-    /// Pixel `p`'s field term: the last frame's, its albedo replaced per
-    /// channel by the mean albedo where the last frame had one.
+    /// Pixel `p`'s field term: the mean diffuse albedo × the irradiance/π of
+    /// its last diffuse sample.
     fn indirect(&self, p: usize) -> Vec3 {
-        let last = self.frame_albedo[p];
-        let mean = (self.albedo_sum[p] / self.accumulated.max(1) as f64).as_vec3();
-        let scale = Vec3::select(last.cmpgt(Vec3::ZERO), mean / last.max(Vec3::splat(f32::MIN_POSITIVE)), Vec3::ONE);
-        self.indirect[p] * scale
+        (self.albedo_sum[p] / self.accumulated.max(1) as f64).as_vec3() * self.irradiance[p]
     }
 
     /// The composed image: mean direct term plus the antialiased field term.
@@ -252,7 +257,7 @@ impl Accumulation {
 
     /// The field term as the image shows it ([`Self::indirect`]).
     fn indirect_image(&self) -> Vec<Vec3> {
-        (0..self.indirect.len()).map(|p| self.indirect(p)).collect()
+        (0..self.irradiance.len()).map(|p| self.indirect(p)).collect()
     }
 
     /// Records frame `f`'s means and hands its image to the caller.
@@ -265,8 +270,9 @@ impl Accumulation {
     ) {
         let compose = || Image { width: settings.width, height: settings.height, pixels: self.pixels() };
         stats.frame_means.push(self.mean());
-        let indirect_sum: DVec3 = (0..self.indirect.len()).map(|p| self.indirect(p).as_dvec3()).sum();
-        stats.frame_indirect_means.push((indirect_sum / self.indirect.len().max(1) as f64).as_vec3());
+        let n = self.irradiance.len();
+        let indirect_sum: DVec3 = (0..n).map(|p| self.indirect(p).as_dvec3()).sum();
+        stats.frame_indirect_means.push((indirect_sum / n.max(1) as f64).as_vec3());
         on_frame_done(f, &compose);
     }
 
@@ -529,7 +535,7 @@ impl<'a> FrameLoop<'a> {
             settings.seed,
             CameraFrameOut {
                 direct: &mut self.acc.frame_direct,
-                indirect: &mut self.acc.indirect,
+                irradiance_over_pi: &mut self.acc.frame_irradiance,
                 albedo: &mut self.acc.frame_albedo,
             },
             requests.as_mut(),
@@ -717,19 +723,26 @@ mod tests {
         let e_over_pi = Vec3::new(2.0, 3.0, 4.0);
         for albedo in [Vec3::new(0.2, 0.1, 0.0), Vec3::new(0.6, 0.3, 0.5)] {
             acc.frame_albedo = vec![albedo, Vec3::ZERO];
-            acc.indirect = vec![albedo * e_over_pi, Vec3::ZERO];
+            acc.frame_irradiance = vec![e_over_pi, Vec3::ZERO];
             acc.frame_direct = vec![Vec3::ONE, Vec3::splat(0.5)];
             acc.add_frame(false);
         }
-        // Mean albedo (0.4, 0.2, 0.25): blue's last sample (0.5) was its only one.
+        // Mean albedo (0.4, 0.2, 0.25).
         let want = Vec3::new(0.4, 0.2, 0.25) * e_over_pi;
         assert!((acc.indirect(0) - want).abs().max_element() < 1e-6, "{} vs {want}", acc.indirect(0));
         assert_eq!(acc.indirect(1), Vec3::ZERO, "no surface, no field term");
         assert!((acc.pixels()[0] - (Vec3::ONE + want)).abs().max_element() < 1e-6);
+        // A last sample off the surface (the sky past a silhouette) dilutes the
+        // albedo and keeps the surface's irradiance.
+        acc.frame_albedo = vec![Vec3::ZERO; 2];
+        acc.frame_irradiance = vec![Vec3::ZERO; 2];
+        acc.add_frame(false);
+        let want = Vec3::new(0.8, 0.4, 0.5) / 3.0 * e_over_pi;
+        assert!((acc.indirect(0) - want).abs().max_element() < 1e-6, "{} vs {want}", acc.indirect(0));
         // A moving camera restarts the means: the frame's own sample again.
         acc.frame_albedo = vec![Vec3::splat(0.8), Vec3::ZERO];
-        acc.indirect = vec![Vec3::splat(0.8) * e_over_pi, Vec3::ZERO];
+        acc.frame_irradiance = vec![e_over_pi * 2.0, Vec3::ZERO];
         acc.add_frame(true);
-        assert!((acc.indirect(0) - Vec3::splat(0.8) * e_over_pi).abs().max_element() < 1e-6);
+        assert!((acc.indirect(0) - Vec3::splat(0.8) * e_over_pi * 2.0).abs().max_element() < 1e-6);
     }
 }

@@ -131,10 +131,11 @@ pub trait ProbeBatchTracer: Sync {
 pub struct CameraFrameOut<'a> {
     /// The direct term: emission, direct light, glossy reflections.
     pub direct: &'a mut [Vec3],
-    /// The field term: diffuse albedo/π × the field's irradiance.
-    pub indirect: &'a mut [Vec3],
-    /// The diffuse albedo that weighs `indirect` (zero where the pixel sees no
-    /// surface), so that a still camera's accumulated albedo can antialias it.
+    /// The field's irradiance at the pixel's surface, over π: the field term
+    /// before its diffuse albedo.
+    pub irradiance_over_pi: &'a mut [Vec3],
+    /// The diffuse albedo that weighs `irradiance_over_pi` (zero where the pixel
+    /// sees no surface); a still camera accumulates it, so that it is antialiased.
     pub albedo: &'a mut [Vec3],
 }
 

@@ -72,9 +72,9 @@ pub struct CameraFrame<'a> {
 pub struct CameraImage {
     /// Direct light per pixel, row-major.
     pub direct: Vec<Vec3>,
-    /// Indirect diffuse from the field per pixel, row-major.
-    pub indirect: Vec<Vec3>,
-    /// The diffuse albedo that weighs `indirect` per pixel, row-major.
+    /// The field's irradiance/π per pixel, row-major.
+    pub irradiance_over_pi: Vec<Vec3>,
+    /// The diffuse albedo that weighs it per pixel, row-major.
     pub albedo: Vec<Vec3>,
     /// Pixels on a surface with a diffuse albedo.
     pub surfaces: usize,
@@ -155,7 +155,8 @@ impl GpuCameraPass {
             })
         };
         // `camera_direct` holds two texels per pixel: the direct term, then the albedo.
-        let (direct, indirect) = (image("camera direct and albedo", 2), image("camera indirect", 1));
+        ctx.check_buffer(n * 32, "the camera frame's direct term and albedo")?;
+        let (direct, irradiance) = (image("camera direct and albedo", 2), image("camera irradiance", 1));
         // Zeroed at creation; at least one word so the binding is never empty.
         let requests = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera probe requests"),
@@ -169,7 +170,7 @@ impl GpuCameraPass {
             entries: &[
                 wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 1, resource: direct.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: indirect.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: irradiance.as_entire_binding() },
                 wgpu::BindGroupEntry { binding: 3, resource: requests.as_entire_binding() },
             ],
         });
@@ -188,7 +189,7 @@ impl GpuCameraPass {
             let bytes = ctx.read_back(b)?;
             Ok(bytemuck::cast_slice::<u8, [f32; 4]>(&bytes).to_vec())
         };
-        let (d, i) = (read(&direct)?, read(&indirect)?);
+        let (d, i) = (read(&direct)?, read(&irradiance)?);
         let requests = if f.request_words > 0 {
             bytemuck::cast_slice::<u8, u32>(&ctx.read_back(&requests)?).to_vec()
         } else {
@@ -198,7 +199,7 @@ impl GpuCameraPass {
         Ok(CameraImage {
             direct: d.iter().step_by(2).map(v3).collect(),
             albedo: d.iter().skip(1).step_by(2).map(v3).collect(),
-            indirect: i.iter().map(v3).collect(),
+            irradiance_over_pi: i.iter().map(v3).collect(),
             surfaces: i.iter().filter(|t| t[3] > 0.5).count(),
             unlit: i.iter().filter(|t| t[3] > 1.5).count(),
             requests,

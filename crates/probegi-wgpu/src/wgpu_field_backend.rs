@@ -516,8 +516,8 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                 r.copy_from_slice(&image.requests);
             }
             let pixels = out.direct.len();
-            if [image.direct.len(), image.indirect.len(), image.albedo.len()] != [pixels; 3]
-                || [out.indirect.len(), out.albedo.len()] != [pixels; 2]
+            if [image.direct.len(), image.irradiance_over_pi.len(), image.albedo.len()] != [pixels; 3]
+                || [out.irradiance_over_pi.len(), out.albedo.len()] != [pixels; 2]
             {
                 return Err(GpuError::Input(format!(
                     "{} camera pixels for a {pixels}-pixel frame",
@@ -525,7 +525,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                 )));
             }
             out.direct.copy_from_slice(&image.direct);
-            out.indirect.copy_from_slice(&image.indirect);
+            out.irradiance_over_pi.copy_from_slice(&image.irradiance_over_pi);
             out.albedo.copy_from_slice(&image.albedo);
             Ok((image.surfaces, image.unlit))
         };

@@ -68,9 +68,9 @@ fn the_device_requests_the_probes_the_cpu_requests() {
         .collect();
     let host = set.probe_requests_at(&points);
     let mut device = vec![0u32; host.len()];
-    let [mut direct, mut indirect, mut albedo] = [(); 3].map(|_| vec![Vec3::ZERO; (W * H) as usize]);
+    let [mut direct, mut irradiance, mut albedo] = [(); 3].map(|_| vec![Vec3::ZERO; (W * H) as usize]);
     let view = set.view();
-    let out = CameraFrameOut { direct: &mut direct, indirect: &mut indirect, albedo: &mut albedo };
+    let out = CameraFrameOut { direct: &mut direct, irradiance_over_pi: &mut irradiance, albedo: &mut albedo };
     gpu.camera_frame(&camera, &view, false, 1, false, 0, 7, out, Some(&mut device))
         .expect("the device renders the camera")
         .expect("camera frame");

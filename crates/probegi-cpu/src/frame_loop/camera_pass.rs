@@ -43,8 +43,8 @@ pub(super) struct CameraPasses<'a> {
 }
 
 /// The camera pass: per pixel, emission + direct light into `direct_out` and, with
-/// a DDGI volume or SH probes, the diffuse albedo/π × the field's irradiance into
-/// `indirect_out`.
+/// a DDGI volume or SH probes, the field's irradiance/π into `indirect_out` and
+/// the diffuse albedo that weighs it into the frame's albedo.
 /// Glossy pixels under DDGI also trace one reflected ray per frame (seed 004 §4.4),
 /// importance-sampled from the GGX lobe, whose hit is shaded with direct light plus
 /// probe irradiance (and, with `glossy_second_order`, the hit's own specular
@@ -65,7 +65,7 @@ pub(super) fn shade_camera(
     nonfinite: &std::sync::atomic::AtomicU64,
 ) -> (u64, usize, usize) {
     let CameraPasses { scene, direct, direct_settings, .. } = *passes;
-    let (direct_out, indirect_out) = (&mut acc.frame_direct, &mut acc.indirect);
+    let (direct_out, indirect_out) = (&mut acc.frame_direct, &mut acc.frame_irradiance);
     let albedo_out = &mut acc.frame_albedo;
     use rayon::prelude::*;
     let w = gbuffer.width as usize;
@@ -126,7 +126,8 @@ pub(super) fn shade_camera(
                     Some(f) => {
                         let e = f.irradiance(sp.position, sp.facing_normal(), texel.view_dir_world);
                         unlit += (diffuse && e.max_element() <= 0.0) as usize;
-                        albedo * FRAC_1_PI * e
+                        // Weighed by the (accumulated) albedo when composed.
+                        e * FRAC_1_PI
                     }
                     None => Vec3::ZERO,
                 };

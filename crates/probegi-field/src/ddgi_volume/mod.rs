@@ -179,9 +179,11 @@ impl DdgiVolume {
         let (lo, hi) = settings.volume_bounds_m.map_or(scene_bounds, |[lo, hi]| (lo, hi));
         let fitted = ProbeGrid::fit_to_bounds(lo, hi, counts);
         let spacing = settings.probe_spacing_m.unwrap_or(fitted.spacing_m);
-        let grid = match (settings.volume_tracks_camera, camera_m) {
+        let bounds = settings.volume_tracking_bounds_m;
+        // A window held inside bounds starts at their centre until a camera is given.
+        let start = camera_m.or(bounds.map(|[lo, hi]| (lo + hi) * 0.5));
+        let grid = match (settings.volume_tracks_camera, start) {
             (true, Some(c)) => {
-                let bounds = settings.volume_tracking_bounds_m;
                 let anchor = ProbeGrid::tracking_anchor(settings.probe_origin_m, bounds, counts, spacing);
                 let c = match bounds {
                     Some(b) => ProbeGrid::new(anchor, counts, spacing).tracking_target_within(c, b),

@@ -5,11 +5,12 @@
 //              to the glossy ray on glossy pixels) + one GGX-sampled glossy ray whose
 //              hit gets emission + direct light + diffuse albedo/π × the field (and,
 //              with second-order glossy, its specular reflection of the field);
-//   indirect = diffuse albedo/π × ddgi_irradiance (ddgi_query.wgsl, group 2).
+//   irradiance = ddgi_irradiance / π (ddgi_query.wgsl, group 2), which the host
+//              weighs by the diffuse albedo (accumulated over a still camera's frames).
 // Pixels that see nothing get the sky. `camera_direct` holds two texels per pixel:
-// the direct term at 2i and the diffuse albedo that weighs `indirect` at 2i + 1.
+// the direct term at 2i and the diffuse albedo that weighs `irradiance` at 2i + 1.
 // The CPU accumulates both over a still camera's frames.
-// `indirect.w` flags surfaces with a diffuse albedo (1) and those of them unlit (2).
+// `camera_irradiance[i].w` flags surfaces with a diffuse albedo (1) and those of them unlit (2).
 // With flag 4 (the screen scheme's requests) every surface pixel also sets, in
 // `camera_requests`, the bits of the probes its query reads
 // (probegi_core::ddgi_volume_blend::field_set_cage_probes; bit = the member's
@@ -28,7 +29,7 @@ struct CameraParams {
 
 @group(0) @binding(0) var<uniform> camera: CameraParams;
 @group(0) @binding(1) var<storage, read_write> camera_direct: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read_write> camera_indirect: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> camera_irradiance: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read_write> camera_requests: array<atomic<u32>>;
 
 // probegi_core::ddgi_volume_blend::field_set_cage_probes: sets the request bit
@@ -78,7 +79,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (hit.leaf == BVH_NO_HIT) {
         camera_direct[2u * i] = vec4<f32>(camera.sky.xyz, 0.0);
         camera_direct[2u * i + 1u] = vec4<f32>(0.0);
-        camera_indirect[i] = vec4<f32>(0.0);
+        camera_irradiance[i] = vec4<f32>(0.0);
         return;
     }
     let sp = scene_surface_point(bvh_triangle_id(hit.leaf), hit.instance, hit.bary, hit.backface);
@@ -137,5 +138,5 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
         flag = select(1.0, 2.0, !(max(max(e.x, e.y), e.z) > 0.0));
     }
     camera_direct[2u * i + 1u] = vec4<f32>(albedo, 0.0);
-    camera_indirect[i] = vec4<f32>(albedo / SCENE_PI * e, flag);
+    camera_irradiance[i] = vec4<f32>(e / SCENE_PI, flag);
 }
