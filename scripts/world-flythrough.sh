@@ -19,14 +19,9 @@ cargo build --release --locked -q -p probegi-cli
 BIN=./target/release/probegi
 fly="$OUT/sponza-4x4-fly.toml"
 still="$OUT/sponza-4x4-last-frame.toml"
-world() { # N: N×N copies, 35 m × 16 m apart, sun and sky
-  echo "# $1×$1 copies of Dabrovic Sponza (CC BY-NC, © 2002 Marko Dabrovic; ../shared/scenes)."
-  echo 'sky_radiance = [0.15, 0.18, 0.25]'
-  for ((i = 0; i < $1; i++)); do for ((j = 0; j < $1; j++)); do
-    printf '[[meshes]]\npath = "shared:scenes/dabrovic-sponza/sponza.obj"\ntranslation = [%s, 0.0, %s]\n' $((i * 35)) $((j * 16))
-  done; done
-  printf '[[lights]]\nkind = "directional"\ndirection = [0.25, -1.0, 0.15]\ncolor = [1.0, 0.92, 0.8]\nintensity = 12.0\n'
-}
+# shellcheck source=scripts/sponza-world.sh
+. scripts/sponza-world.sh
+world() { sponza_world "$1"; }
 {
   world 4
   printf '[camera]\nposition = [-13.0, 3.0, 0.0]\ntarget = [0.0, 4.0, 0.0]\nfov_y_deg = 65.0\n'

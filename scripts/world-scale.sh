@@ -19,15 +19,12 @@ mkdir -p "$OUT"
 cargo build --release --locked -q
 BIN=./target/release/probegi
 
+# shellcheck source=scripts/sponza-world.sh
+. scripts/sponza-world.sh
 world() { # N [flythrough]
   local n=$1 f="$OUT/sponza-$1x$1${2:+-fly}.toml"
   {
-    echo "# $n×$n copies of Dabrovic Sponza (CC BY-NC, © 2002 Marko Dabrovic; ../shared/scenes), 35 m × 16 m apart."
-    echo 'sky_radiance = [0.15, 0.18, 0.25]'
-    for ((i = 0; i < n; i++)); do for ((j = 0; j < n; j++)); do
-      printf '[[meshes]]\npath = "shared:scenes/dabrovic-sponza/sponza.obj"\ntranslation = [%s, 0.0, %s]\n' $((i * 35)) $((j * 16))
-    done; done
-    printf '[[lights]]\nkind = "directional"\ndirection = [0.25, -1.0, 0.15]\ncolor = [1.0, 0.92, 0.8]\nintensity = 12.0\n'
+    sponza_world "$n"
     printf '[camera]\nposition = [-12.0, 2.5, -1.0]\ntarget = [4.0, 4.5, 0.5]\nfov_y_deg = 65.0\n'
     if [ -n "${2:-}" ]; then
       # Along copy (0, 0)'s atrium, up through its open roof, over the roofs to

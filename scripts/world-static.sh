@@ -15,13 +15,10 @@ W=${W:-160}; H=${H:-120}; SPP=${SPP:-256}; FRAMES=${FRAMES:-48}
 mkdir -p "$OUT"
 cargo build --release --locked -q -p probegi-cli
 BIN=./target/release/probegi
-world() { # N: N×N copies, 35 m × 16 m apart, sun and sky, the camera in copy (0, 0)
-  echo "# $1×$1 copies of Dabrovic Sponza (CC BY-NC, © 2002 Marko Dabrovic; ../shared/scenes)."
-  echo 'sky_radiance = [0.15, 0.18, 0.25]'
-  for ((i = 0; i < $1; i++)); do for ((j = 0; j < $1; j++)); do
-    printf '[[meshes]]\npath = "shared:scenes/dabrovic-sponza/sponza.obj"\ntranslation = [%s, 0.0, %s]\n' $((i * 35)) $((j * 16))
-  done; done
-  printf '[[lights]]\nkind = "directional"\ndirection = [0.25, -1.0, 0.15]\ncolor = [1.0, 0.92, 0.8]\nintensity = 12.0\n'
+# shellcheck source=scripts/sponza-world.sh
+. scripts/sponza-world.sh
+world() { # N: the camera in copy (0, 0)
+  sponza_world "$1"
   printf '[camera]\nposition = [-12.0, 2.5, -1.0]\ntarget = [4.0, 4.5, 0.5]\nfov_y_deg = 65.0\n'
 }
 CASCADES=(--gi ddgi --cascades 4 --probes 12,6,12 --set probe_spacing_m=1.0 --rays-per-probe 128 --set normal_maps=false)
