@@ -269,25 +269,30 @@ impl Accumulation {
         on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
     ) {
         let compose = || Image { width: settings.width, height: settings.height, pixels: self.pixels() };
-        stats.frame_means.push(self.mean());
-        let n = self.irradiance.len();
-        let indirect_sum: DVec3 = (0..n).map(|p| self.indirect(p).as_dvec3()).sum();
-        stats.frame_indirect_means.push((indirect_sum / n.max(1) as f64).as_vec3());
+        let (mean, indirect_mean) = self.means();
+        stats.frame_means.push(mean);
+        stats.frame_indirect_means.push(indirect_mean);
         on_frame_done(f, &compose);
     }
 
     /// Notes frame `f` in `stats.black_frames` when its image is all black
     /// although `scene` has light sources and `surfaces` pixels see a surface.
     fn check_black(&self, f: u32, scene: &Scene, surfaces: usize, stats: &mut RenderStats) {
-        if surfaces > 0 && self.mean() == Vec3::ZERO && scene.has_light_sources() {
+        if surfaces > 0 && self.means().0 == Vec3::ZERO && scene.has_light_sources() {
             stats.black_frames.push(f);
         }
     }
 
-    /// Mean of the composed image, without composing it.
-    fn mean(&self) -> Vec3 {
-        let sum: DVec3 = (0..self.direct_sum.len()).map(|p| (self.direct(p) + self.indirect(p)).as_dvec3()).sum();
-        (sum / self.direct_sum.len().max(1) as f64).as_vec3()
+    /// Means of the composed image and of its field term, without composing it.
+    fn means(&self) -> (Vec3, Vec3) {
+        let (mut all, mut field) = (DVec3::ZERO, DVec3::ZERO);
+        for p in 0..self.direct_sum.len() {
+            let indirect = self.indirect(p).as_dvec3();
+            all += self.direct(p).as_dvec3() + indirect;
+            field += indirect;
+        }
+        let n = self.direct_sum.len().max(1) as f64;
+        ((all / n).as_vec3(), (field / n).as_vec3())
     }
 }
 

@@ -146,17 +146,18 @@ impl GpuCameraPass {
         };
         let device = &ctx.device;
         let params = ctx.buffer_with("camera params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        let image = |label, texels_per_pixel: u64| {
-            device.create_buffer(&wgpu::BufferDescriptor {
+        let image = |label, texels_per_pixel: u64| -> Result<wgpu::Buffer, GpuError> {
+            let size = n * 16 * texels_per_pixel;
+            ctx.check_buffer(size, label)?;
+            Ok(device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size: n * 16 * texels_per_pixel,
+                size,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
-            })
+            }))
         };
         // `camera_direct` holds two texels per pixel: the direct term, then the albedo.
-        ctx.check_buffer(n * 32, "the camera frame's direct term and albedo")?;
-        let (direct, irradiance) = (image("camera direct and albedo", 2), image("camera irradiance", 1));
+        let (direct, irradiance) = (image("camera direct and albedo", 2)?, image("camera irradiance", 1)?);
         // Zeroed at creation; at least one word so the binding is never empty.
         let requests = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera probe requests"),

@@ -43,7 +43,7 @@ pub(super) struct CameraPasses<'a> {
 }
 
 /// The camera pass: per pixel, emission + direct light into `direct_out` and, with
-/// a DDGI volume or SH probes, the field's irradiance/π into `indirect_out` and
+/// a DDGI volume or SH probes, the field's irradiance/π into `irradiance_out` and
 /// the diffuse albedo that weighs it into the frame's albedo.
 /// Glossy pixels under DDGI also trace one reflected ray per frame (seed 004 §4.4),
 /// importance-sampled from the GGX lobe, whose hit is shaded with direct light plus
@@ -65,7 +65,7 @@ pub(super) fn shade_camera(
     nonfinite: &std::sync::atomic::AtomicU64,
 ) -> (u64, usize, usize) {
     let CameraPasses { scene, direct, direct_settings, .. } = *passes;
-    let (direct_out, indirect_out) = (&mut acc.frame_direct, &mut acc.frame_irradiance);
+    let (direct_out, irradiance_out) = (&mut acc.frame_direct, &mut acc.frame_irradiance);
     let albedo_out = &mut acc.frame_albedo;
     use rayon::prelude::*;
     let w = gbuffer.width as usize;
@@ -75,7 +75,7 @@ pub(super) fn shade_camera(
     };
     direct_out
         .par_chunks_mut(w)
-        .zip(indirect_out.par_chunks_mut(w))
+        .zip(irradiance_out.par_chunks_mut(w))
         .zip(albedo_out.par_chunks_mut(w))
         .enumerate()
         .map(|(y, ((drow, irow), arow))| {
