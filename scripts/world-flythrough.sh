@@ -48,6 +48,10 @@ declare -A CONFIGS=(
   [screen]="--set probe_states=screen"
   [screen-edge-buffers]="--set probe_states=screen --set volume_edge_buffer_planes=2"
   [items-2-4]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true"
+  [items-2-4-temporal-off]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-frames 0"
+  [items-2-4-unclamped]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-clip-sigma 0"
+  [items-2-4-t8]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-frames 8"
+  [items-2-4-t8-unclamped]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-frames 8 --temporal-clip-sigma 0"
   [ramp]="--set probe_hysteresis_ramp=true"
   [screen-edge-buffers-ramp]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_hysteresis_ramp=true"
   [items-2-4-ramp]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --set probe_hysteresis_ramp=true"
@@ -75,7 +79,7 @@ for name in "${names[@]}"; do
     --sequence "$OUT/$name" --sequence-exr --out "$OUT/$name.exr" --stats "$OUT/$name.json" 2>/dev/null
   for k in "${KS[@]}"; do
     "$BIN" compare "$OUT/reference-$k.exr" "$(printf '%s/%s/frame-%04d.exr' "$OUT" "$name" "$k")" |
-      awk -v k="$k" '/mean_flip/ {print k, $2}'
+      awk -v k="$k" '/mean_flip/ {f = $2} /dark_fraction/ {d = $2} END {print k, f, d}'
   done > "$OUT/$name-flip.txt"
 done
 python3 - "$OUT" "$static" "$moving" "${names[@]}" <<'EOF'
@@ -88,13 +92,14 @@ fig, (a, b) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
 rows = []
 for n in names:
     d = json.load(open(f"{out}/{n}.json"))
-    flip = [tuple(map(float, l.split())) for l in open(f"{out}/{n}-flip.txt")]
+    kfd = [tuple(map(float, l.split())) for l in open(f"{out}/{n}-flip.txt")]
+    flip, dark = [(k, f) for k, f, *_ in kfd], kfd[-1][2] if len(kfd[-1]) > 2 else float("nan")
     m = [sum(v) / 3 for v in d["frame_indirect_means"]]
     change = [100 * abs(m[i] - m[i - 1]) / max(m[i - 1], 1e-9) for i in range(1, len(m))]
     a.plot([k for k, _ in flip], [f for _, f in flip], marker="o", label=n)
     b.plot(range(1, len(m)), change, label=n, linewidth=0.8)
     c = sorted(change)
-    rows.append((n, flip, c[len(c) // 2], c[-1], d["probe_rays_traced"] / d["frames"]))
+    rows.append((n, flip, c[len(c) // 2], c[-1], d["probe_rays_traced"] / d["frames"], dark))
 a.axhline(static, color="grey", linestyle="--", label=f"still camera at frame 299 ({static:.3f})")
 a.axhline(moving, color="black", linestyle=":", label=f"same pose, direct not accumulated ({moving:.3f})")
 a.set_ylabel("HDR-FLIP vs reference"); a.legend(fontsize=8)
@@ -102,10 +107,10 @@ b.set_ylabel("indirect mean change, %"); b.set_xlabel("frame"); b.set_yscale("lo
 fig.tight_layout(); fig.savefig(f"{out}/flythrough.png", dpi=100)
 with open(f"{out}/table.md", "w") as t:
     ks = [k for k, _ in rows[0][1]]
-    t.write("| configuration | " + " | ".join(f"frame {int(k)}" for k in ks) + " | last − still | last − same pose moving | indirect change: median, max | probe rays per frame |\n")
-    t.write("|---|" + "---|" * (len(ks) + 4) + "\n")
-    for n, flip, med, mx, rays in rows:
-        t.write(f"| {n} | " + " | ".join(f"{f:.3f}" for _, f in flip) + f" | {flip[-1][1] - static:+.3f} | {flip[-1][1] - moving:+.3f} | {med:.1f} %, {mx:.1f} % | {rays:.0f} |\n")
+    t.write("| configuration | " + " | ".join(f"frame {int(k)}" for k in ks) + " | last − still | last − same pose moving | last frame's dark pixels | indirect change: median, max | probe rays per frame |\n")
+    t.write("|---|" + "---|" * (len(ks) + 5) + "\n")
+    for n, flip, med, mx, rays, dark in rows:
+        t.write(f"| {n} | " + " | ".join(f"{f:.3f}" for _, f in flip) + f" | {flip[-1][1] - static:+.3f} | {flip[-1][1] - moving:+.3f} | {100 * dark:.1f} % | {med:.1f} %, {mx:.1f} % | {rays:.0f} |\n")
     t.write(f"\nStill camera at frame 299's pose, 300 frames: {static:.3f}; the same pose drifting 1 mm (direct light not accumulated): {moving:.3f}\n")
 print(open(f"{out}/table.md").read())
 EOF

@@ -66,6 +66,7 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
             show_probes: false,
             camera_path: Vec::new(),
             probe_tracer: None,
+            temporal: Default::default(),
         };
         render_frames(&scene, &bvh, &camera, &settings, |_, _| {}).stats
     };

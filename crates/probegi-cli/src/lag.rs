@@ -99,6 +99,7 @@ fn render_sequence(
         show_probes: false,
         camera_path: Vec::new(),
         probe_tracer: None,
+        temporal: Default::default(),
     };
     let mut out = vec![];
     render_frames(scene, &bvh, &rays, &settings, |f, image| {

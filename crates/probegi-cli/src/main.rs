@@ -111,9 +111,13 @@ fn render(args: &RenderArgs) -> Result<()> {
     if args.frames == 0 {
         bail!("--frames must be at least 1");
     }
+    if !(args.temporal_clip_sigma >= 0.0 && args.temporal_clip_sigma.is_finite()) {
+        bail!("--temporal-clip-sigma must be a finite number ≥ 0 (got {})", args.temporal_clip_sigma);
+    }
     check_render_outputs(args)?;
-    // G-buffer texel, frame and accumulation buffers.
-    let (scene, camera) = prepare(&args.scene, &args.volume.set, 160)?;
+    // G-buffer texel, frame and accumulation buffers, and a moving camera's
+    // reprojection (frame_loop::accumulation: about 130 bytes kept, 90 while it runs).
+    let (scene, camera) = prepare(&args.scene, &args.volume.set, 280)?;
     check_posed_bounds(&scene, args.frames.saturating_sub(1) as f32)?;
     let gi = render_settings::gi_method(&scene, args)?;
     // Static geometry in one BVH, moving objects instanced (see probegi_scene::bvh).

@@ -12,7 +12,7 @@ use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_core::sh_settings::ShProbeSettings;
 use probegi_cpu::DirectSettings;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings};
+use probegi_cpu::frame_loop::{GiMethod, RenderSettings, TemporalSettings};
 use probegi_cpu::probe_trace::ddgi_volume_bytes;
 use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
 use probegi_scene::Scene;
@@ -41,6 +41,10 @@ pub fn render_settings(
         show_probes: args.show_probes,
         camera_path,
         probe_tracer: gpu.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
+        temporal: TemporalSettings {
+            temporal_history_frames: args.temporal_frames,
+            temporal_clip_sigma: args.temporal_clip_sigma,
+        },
     }
 }
 

@@ -17,6 +17,7 @@ use probegi_view::viewer_worker::{SessionParts, ViewSource, WorkerOptions};
 use crate::args::{GiArg, RenderArgs, ViewArgs};
 use crate::render_outputs::write_radiance;
 use crate::scene_setup::{check_posed_bounds, prepare};
+use probegi_cpu::frame_loop::TemporalSettings;
 
 /// The render arguments a view run stands for (its scene, GI, volume,
 /// backend; no file outputs).
@@ -30,6 +31,8 @@ fn render_args(args: &ViewArgs, frames: u32) -> RenderArgs {
         show_probes: false,
         ao: None,
         area_samples: args.area_samples,
+        temporal_frames: TemporalSettings::default().temporal_history_frames,
+        temporal_clip_sigma: TemporalSettings::default().temporal_clip_sigma,
         out: args.screenshot.clone().unwrap_or_default(),
         stats: None,
         sequence: None,

@@ -8,7 +8,8 @@
 //! The direct term (emission + direct light) of a static scene accumulates over
 //! frames; the indirect term is the last frame's irradiance, so the image shows
 //! the field as it stands after N updates, weighed by the diffuse albedo
-//! accumulated with the direct term (antialiased; see `Accumulation`).
+//! accumulated with the direct term (antialiased; see `Accumulation`). A moving
+//! camera reprojects both sums from the last frame (`accumulation`'s temporal filter).
 //!
 //! [`render_frames`] steps a [`FrameStepper`] (one frame at a time, each with
 //! the camera its caller chooses: the viewer's fly camera) over the frames; the
@@ -16,6 +17,7 @@
 //! ARCHITECTURE.md's per-frame data flow (pose, field update, camera image),
 //! then composes the output; the `camera` pass itself is in `camera_pass`.
 
+mod accumulation;
 mod camera_pass;
 mod frame_stepper;
 
@@ -23,7 +25,7 @@ use std::collections::BTreeMap;
 use std::ops::ControlFlow::{self, Break, Continue};
 use std::time::Instant;
 
-use glam::{DVec3, Vec3};
+use glam::Vec3;
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_core::image::Image;
@@ -34,6 +36,8 @@ use crate::field_update::FieldSetUpdate;
 use crate::gbuffer::{GBuffer, trace_gbuffer};
 use crate::scene_events::SceneChangeDetector;
 use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
+pub use accumulation::TemporalSettings;
+use accumulation::{Accumulation, History};
 use camera_pass::{CameraPasses, IndirectField, shade_camera};
 pub use frame_stepper::{FrameLayers, FrameStepper};
 
@@ -81,6 +85,9 @@ pub struct RenderSettings {
     /// Who traces the DDGI probe ray batches: `None` for the CPU tracer (the
     /// default), or a [`probegi_field::ProbeBatchTracer`] (the CLI's `--backend wgpu`).
     pub probe_tracer: Option<probegi_field::ProbeTracerHandle>,
+    /// The temporal filter of a moving camera (default [`TemporalSettings::default`],
+    /// the CLI's `--temporal-frames` and `--temporal-clip-sigma`).
+    pub temporal: TemporalSettings,
 }
 
 impl Default for RenderSettings {
@@ -97,6 +104,7 @@ impl Default for RenderSettings {
             show_probes: false,
             camera_path: Vec::new(),
             probe_tracer: None,
+            temporal: TemporalSettings::default(),
         }
     }
 }
@@ -182,84 +190,7 @@ pub const FIELD_UPDATE_PASSES: [&str; 6] = ["ray_gen", "trace", "shade", "blend"
 /// [`FrameStepper::set_scene_edit`]).
 pub type SceneEdit<'a> = Box<dyn Fn(&Scene, &mut Scene) + 'a>;
 
-/// The render's running sums between frames.
-///
-/// A still camera's direct term and diffuse albedo accumulate over its jittered
-/// frames; its field term is the field's irradiance/π at the pixel's last
-/// diffuse sample, weighed by the accumulated albedo rather than by one sample
-/// of it (demodulation, as real-time denoisers do: the albedo is antialiased,
-/// the irradiance stays current). One jittered texture sample per pixel
-/// otherwise leaves texel-sized speckle in the indirect light: on Sponza's
-/// walls 1.4 % of the reference-lit pixels rendered under a quarter of it,
-/// 0.8 % demodulated. A moving camera restarts the means, so its frames are
-/// albedo × irradiance/π at their own samples, as before.
-struct Accumulation {
-    direct_sum: Vec<DVec3>,
-    frame_direct: Vec<Vec3>,
-    /// This frame's irradiance/π from the field per pixel.
-    frame_irradiance: Vec<Vec3>,
-    /// Irradiance/π at the last sample of each pixel that had a diffuse albedo.
-    irradiance: Vec<Vec3>,
-    /// This frame's diffuse albedo per pixel (zero off surfaces).
-    frame_albedo: Vec<Vec3>,
-    albedo_sum: Vec<DVec3>,
-    accumulated: u32,
-}
-
 impl Accumulation {
-    fn new(pixels: usize) -> Self {
-        Self {
-            direct_sum: vec![DVec3::ZERO; pixels],
-            frame_direct: vec![Vec3::ZERO; pixels],
-            frame_irradiance: vec![Vec3::ZERO; pixels],
-            irradiance: vec![Vec3::ZERO; pixels],
-            frame_albedo: vec![Vec3::ZERO; pixels],
-            albedo_sum: vec![DVec3::ZERO; pixels],
-            accumulated: 0,
-        }
-    }
-
-    /// Adds the frame's direct term and albedo, and keeps its irradiance where
-    /// it saw a diffuse surface; an animated scene (or camera) restarts the means.
-    fn add_frame(&mut self, restart: bool) {
-        if restart {
-            self.accumulated = 0;
-            self.direct_sum.iter_mut().for_each(|a| *a = DVec3::ZERO);
-            self.albedo_sum.iter_mut().for_each(|a| *a = DVec3::ZERO);
-        }
-        for (a, p) in self.direct_sum.iter_mut().zip(&self.frame_direct) {
-            *a += p.as_dvec3();
-        }
-        for (p, albedo) in self.frame_albedo.iter().enumerate() {
-            self.albedo_sum[p] += albedo.as_dvec3();
-            if albedo.max_element() > 0.0 {
-                self.irradiance[p] = self.frame_irradiance[p];
-            }
-        }
-        self.accumulated += 1;
-    }
-
-    /// Pixel `p`'s mean direct term over the accumulated frames.
-    fn direct(&self, p: usize) -> Vec3 {
-        (self.direct_sum[p] / self.accumulated.max(1) as f64).as_vec3()
-    }
-
-    /// Pixel `p`'s field term: the mean diffuse albedo × the irradiance/π of
-    /// its last diffuse sample.
-    fn indirect(&self, p: usize) -> Vec3 {
-        (self.albedo_sum[p] / self.accumulated.max(1) as f64).as_vec3() * self.irradiance[p]
-    }
-
-    /// The composed image: mean direct term plus the antialiased field term.
-    fn pixels(&self) -> Vec<Vec3> {
-        (0..self.direct_sum.len()).map(|p| self.direct(p) + self.indirect(p)).collect()
-    }
-
-    /// The field term as the image shows it ([`Self::indirect`]).
-    fn indirect_image(&self) -> Vec<Vec3> {
-        (0..self.irradiance.len()).map(|p| self.indirect(p)).collect()
-    }
-
     /// Records frame `f`'s means and hands its image to the caller.
     fn finish_frame(
         &self,
@@ -281,18 +212,6 @@ impl Accumulation {
         if surfaces > 0 && self.means().0 == Vec3::ZERO && scene.has_light_sources() {
             stats.black_frames.push(f);
         }
-    }
-
-    /// Means of the composed image and of its field term, without composing it.
-    fn means(&self) -> (Vec3, Vec3) {
-        let (mut all, mut field) = (DVec3::ZERO, DVec3::ZERO);
-        for p in 0..self.direct_sum.len() {
-            let indirect = self.indirect(p).as_dvec3();
-            all += self.direct(p).as_dvec3() + indirect;
-            field += indirect;
-        }
-        let n = self.direct_sum.len().max(1) as f64;
-        ((all / n).as_vec3(), (field / n).as_vec3())
     }
 }
 
@@ -319,8 +238,9 @@ fn make_field_set(gi: &GiMethod, scene: &Scene, camera_m: Vec3) -> Option<DdgiFi
 /// (for `--sequence`), at a cost only when called.
 ///
 /// An animated scene (`Scene::is_animated`) is set to each frame's state before
-/// the frame, and its direct term is that frame's alone (no accumulation), as is a
-/// moving camera's (`settings.camera_path`). Scene changes reach the DDGI set
+/// the frame, and its direct term is that frame's alone (no accumulation); a
+/// moving camera's (`settings.camera_path`) is reprojected from the frames
+/// before (`settings.temporal`, see `accumulation`). Scene changes reach the DDGI set
 /// through `scene_events::SceneChangeDetector` (light toggles, object jumps,
 /// probes woken around movers). Moving objects are placed by `tracer.at_frame`
 /// (pass `instances`). Tracking windows follow the frame's camera.
@@ -417,7 +337,7 @@ impl<'a> FrameLoop<'a> {
             field,
             sh,
             camera_direct,
-            acc: Accumulation::new(settings.width as usize * settings.height as usize),
+            acc: Accumulation::new(settings.width, settings.height),
             stats: RenderStats::default(),
             pass_totals: BTreeMap::new(),
             last_gbuffer: None,
@@ -542,6 +462,7 @@ impl<'a> FrameLoop<'a> {
                 direct: &mut self.acc.frame_direct,
                 irradiance_over_pi: &mut self.acc.frame_irradiance,
                 albedo: &mut self.acc.frame_albedo,
+                hit_distance_m: &mut self.acc.frame_distance_m,
             },
             requests.as_mut(),
         );
@@ -555,7 +476,7 @@ impl<'a> FrameLoop<'a> {
                 // Primary rays; the device's shadow and glossy rays are not counted.
                 self.stats.rays_traced += settings.width as u64 * settings.height as u64;
                 self.stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
-                self.acc.add_frame(self.restarts_direct(frame));
+                self.acc.add_frame(frame.camera, self.history(frame));
                 self.acc.check_black(f, frame.scene, surfaces, &mut self.stats);
                 *self.pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
                 self.acc.finish_frame(f, settings, &mut self.stats, on_frame_done);
@@ -583,6 +504,9 @@ impl<'a> FrameLoop<'a> {
         let (gbuffer, rays) = trace_gbuffer(scene, tracer, camera, settings.width, settings.height, f, settings.seed);
         *self.pass_totals.entry("gbuffer").or_default() += t.elapsed().as_secs_f64() * 1e3;
         self.stats.rays_traced += rays;
+        for (t, texel) in self.acc.frame_distance_m.iter_mut().zip(&gbuffer.texels) {
+            *t = texel.surface.as_ref().map_or(0.0, |sp| sp.position.distance(camera.origin_world));
+        }
 
         if let Some(p) = self.sh.as_mut() {
             p.recentre(camera.origin_world, camera.forward_world());
@@ -614,7 +538,7 @@ impl<'a> FrameLoop<'a> {
         if indirect_field_used {
             self.stats.frame_unlit_fraction.push(unlit as f32 / surfaces.max(1) as f32);
         }
-        self.acc.add_frame(self.restarts_direct(frame));
+        self.acc.add_frame(frame.camera, self.history(frame));
         self.acc.check_black(f, scene, surfaces, &mut self.stats);
 
         *self.pass_totals.entry("camera").or_default() += t.elapsed().as_secs_f64() * 1e3;
@@ -637,12 +561,17 @@ impl<'a> FrameLoop<'a> {
         Continue(())
     }
 
-    /// Whether the direct term restarts at this frame: the scene or the camera
-    /// changed since the last frame (a camera that holds at its last key
-    /// accumulates again).
-    fn restarts_direct(&self, frame: &Frame<'_>) -> bool {
-        let camera_moved = self.prev_camera.as_ref().is_some_and(|c| c != frame.camera);
-        self.self_animated || self.scene_edit_changed || camera_moved
+    /// What this frame does to the image's sums: a changed scene starts them
+    /// again, a moved camera reprojects them, a still one (or one that holds at
+    /// its last key) adds to them.
+    fn history(&self, frame: &Frame<'_>) -> History {
+        if self.self_animated || self.scene_edit_changed {
+            return History::Restart;
+        }
+        match &self.prev_camera {
+            Some(from) if from != frame.camera => History::Reproject { from: *from, settings: self.settings.temporal },
+            _ => History::Accumulate,
+        }
     }
 
     /// After the last frame: the field back on the host, the statistics, the
@@ -714,40 +643,4 @@ fn field_stats(set: &DdgiFieldSet, stats: &mut RenderStats) {
     stats.volumes = Some(set.volumes().len());
     stats.batch_rays = Some(set.last_batch_rays);
     stats.batch_rays_per_volume = Some(set.last_batch_rays_per_volume.clone());
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A still camera's field term: the last frame's irradiance weighed by the
-    /// albedo accumulated over its frames, per channel; a restart forgets it.
-    #[test]
-    fn the_field_term_takes_the_accumulated_albedo() {
-        let mut acc = Accumulation::new(2);
-        let e_over_pi = Vec3::new(2.0, 3.0, 4.0);
-        for albedo in [Vec3::new(0.2, 0.1, 0.0), Vec3::new(0.6, 0.3, 0.5)] {
-            acc.frame_albedo = vec![albedo, Vec3::ZERO];
-            acc.frame_irradiance = vec![e_over_pi, Vec3::ZERO];
-            acc.frame_direct = vec![Vec3::ONE, Vec3::splat(0.5)];
-            acc.add_frame(false);
-        }
-        // Mean albedo (0.4, 0.2, 0.25).
-        let want = Vec3::new(0.4, 0.2, 0.25) * e_over_pi;
-        assert!((acc.indirect(0) - want).abs().max_element() < 1e-6, "{} vs {want}", acc.indirect(0));
-        assert_eq!(acc.indirect(1), Vec3::ZERO, "no surface, no field term");
-        assert!((acc.pixels()[0] - (Vec3::ONE + want)).abs().max_element() < 1e-6);
-        // A last sample off the surface (the sky past a silhouette) dilutes the
-        // albedo and keeps the surface's irradiance.
-        acc.frame_albedo = vec![Vec3::ZERO; 2];
-        acc.frame_irradiance = vec![Vec3::ZERO; 2];
-        acc.add_frame(false);
-        let want = Vec3::new(0.8, 0.4, 0.5) / 3.0 * e_over_pi;
-        assert!((acc.indirect(0) - want).abs().max_element() < 1e-6, "{} vs {want}", acc.indirect(0));
-        // A moving camera restarts the means: the frame's own sample again.
-        acc.frame_albedo = vec![Vec3::splat(0.8), Vec3::ZERO];
-        acc.frame_irradiance = vec![e_over_pi * 2.0, Vec3::ZERO];
-        acc.add_frame(true);
-        assert!((acc.indirect(0) - Vec3::splat(0.8) * e_over_pi * 2.0).abs().max_element() < 1e-6);
-    }
 }

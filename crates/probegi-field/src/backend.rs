@@ -137,6 +137,10 @@ pub struct CameraFrameOut<'a> {
     /// The diffuse albedo that weighs `irradiance_over_pi` (zero where the pixel
     /// sees no surface); a still camera accumulates it, so that it is antialiased.
     pub albedo: &'a mut [Vec3],
+    /// The distance along the pixel's primary ray to the surface it met,
+    /// metres (0 where it met nothing): where a moving camera's temporal
+    /// filter finds the pixel's point in the last frame.
+    pub hit_distance_m: &'a mut [f32],
 }
 
 /// The passes of a device that keeps an update's hits and the field's atlases

@@ -76,6 +76,8 @@ pub struct CameraImage {
     pub irradiance_over_pi: Vec<Vec3>,
     /// The diffuse albedo that weighs it per pixel, row-major.
     pub albedo: Vec<Vec3>,
+    /// The primary ray's hit distance per pixel, metres (0: no hit), row-major.
+    pub hit_distance_m: Vec<f32>,
     /// Pixels on a surface with a diffuse albedo.
     pub surfaces: usize,
     /// Those of them that got no light from the field.
@@ -200,6 +202,7 @@ impl GpuCameraPass {
         Ok(CameraImage {
             direct: d.iter().step_by(2).map(v3).collect(),
             albedo: d.iter().skip(1).step_by(2).map(v3).collect(),
+            hit_distance_m: d.iter().skip(1).step_by(2).map(|t| t[3]).collect(),
             irradiance_over_pi: i.iter().map(v3).collect(),
             surfaces: i.iter().filter(|t| t[3] > 0.5).count(),
             unlit: i.iter().filter(|t| t[3] > 1.5).count(),

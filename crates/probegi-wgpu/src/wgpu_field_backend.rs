@@ -516,8 +516,10 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                 r.copy_from_slice(&image.requests);
             }
             let pixels = out.direct.len();
-            if [image.direct.len(), image.irradiance_over_pi.len(), image.albedo.len()] != [pixels; 3]
-                || [out.irradiance_over_pi.len(), out.albedo.len()] != [pixels; 2]
+            let produced =
+                [image.direct.len(), image.irradiance_over_pi.len(), image.albedo.len(), image.hit_distance_m.len()];
+            if produced != [pixels; 4]
+                || [out.irradiance_over_pi.len(), out.albedo.len(), out.hit_distance_m.len()] != [pixels; 3]
             {
                 return Err(GpuError::Input(format!(
                     "{} camera pixels for a {pixels}-pixel frame",
@@ -527,6 +529,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             out.direct.copy_from_slice(&image.direct);
             out.irradiance_over_pi.copy_from_slice(&image.irradiance_over_pi);
             out.albedo.copy_from_slice(&image.albedo);
+            out.hit_distance_m.copy_from_slice(&image.hit_distance_m);
             Ok((image.surfaces, image.unlit))
         };
         Some(run().map_err(BackendError::from))

@@ -40,6 +40,7 @@ fn render(
     frames: u32,
     seed: u64,
     s: &DdgiVolumeSettings,
+    path: &[CameraRays],
     gpu: Option<Arc<WgpuProbeTracer>>,
 ) -> Image {
     let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
@@ -52,6 +53,7 @@ fn render(
         gi: GiMethod::Ddgi(Box::new(s.clone())),
         direct: DirectSettings { direct_area_samples: AREA_SAMPLES, ..Default::default() },
         probe_tracer: gpu.map(|g| ProbeTracerHandle(g as Arc<dyn ProbeBatchTracer>)),
+        camera_path: path.to_vec(),
         ..Default::default()
     };
     let out = render_frames(scene, &cpu, &camera, &rs, |_, _| {});
@@ -64,14 +66,19 @@ fn render(
 }
 
 fn check(name: &str, scene: Scene, s: DdgiVolumeSettings, size: u32, frames: u32) {
+    check_path(name, scene, s, size, frames, &[]);
+}
+
+/// [`check`] with the camera following `path` (empty: the scene's camera).
+fn check_path(name: &str, scene: Scene, s: DdgiVolumeSettings, size: u32, frames: u32, path: &[CameraRays]) {
     let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
     let gpu = WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true)
         .expect("upload")
         .keeping_field(true);
     assert!(gpu.renders_camera(), "{name}: {:?}", gpu.shading_note);
-    let a = render(&scene, size, frames, 3, &s, None);
-    let b = render(&scene, size, frames, 4, &s, None);
-    let g = render(&scene, size, frames, 3, &s, Some(Arc::new(gpu)));
+    let a = render(&scene, size, frames, 3, &s, path, None);
+    let b = render(&scene, size, frames, 4, &s, path, None);
+    let g = render(&scene, size, frames, 3, &s, path, Some(Arc::new(gpu)));
     let flip = |x: &Image, y: &Image| probegi_image::mean_flip_hdr(x, y).expect("same size");
     let (noise, f) = (flip(&a, &b), flip(&a, &g));
     eprintln!(
@@ -133,6 +140,25 @@ fn textured_sponza_frame_on_the_gpu() {
     });
     scene.sky_radiance = glam::Vec3::splat(3.0);
     check("sponza (textures, bump maps)", scene, small(UVec3::new(12, 6, 6)), 64, 24);
+}
+
+/// A camera dollying through Sponza: the moving camera's temporal filter
+/// reprojects both backends' frames alike (the device returns its hit
+/// distances; the host filters).
+#[test]
+fn moving_camera_through_sponza_on_the_gpu() {
+    let mut scene = load_scene(&shared("dabrovic-sponza/sponza.obj")).expect("shared Sponza");
+    scene.sky_radiance = glam::Vec3::splat(3.0);
+    let (start, target) = (glam::Vec3::new(-12.0, 2.0, 0.0), glam::Vec3::new(10.0, 4.0, 0.0));
+    scene.camera = Some(probegi_core::camera::Camera { position: start, target, up: glam::Vec3::Y, fov_y_deg: 60.0 });
+    let path: Vec<CameraRays> = (0..24)
+        .map(|f| {
+            let at = start + glam::Vec3::new(0.08, 0.02, 0.01) * f as f32;
+            let camera = probegi_core::camera::Camera { position: at, ..scene.camera.expect("camera") };
+            CameraRays::new(&camera, 64, 64)
+        })
+        .collect();
+    check_path("sponza, moving camera", scene, small(UVec3::new(12, 6, 6)), 64, 24, &path);
 }
 
 #[test]
@@ -220,13 +246,13 @@ fn normal_and_bump_mapped_planes_shade_the_same_on_both_backends() {
             .expect("upload")
             .keeping_field(true);
         let s = small(UVec3::new(4, 2, 4));
-        let a = render(&scene, 64, 1, 3, &s, None);
-        let g = render(&scene, 64, 1, 3, &s, Some(Arc::new(gpu)));
+        let a = render(&scene, 64, 1, 3, &s, &[], None);
+        let g = render(&scene, 64, 1, 3, &s, &[], Some(Arc::new(gpu)));
         // Without the map the plane is smooth: the map must show.
         let mut plain = scene.clone();
         plain.materials[0].normal_texture = None;
         plain.materials[0].bump_texture = None;
-        let smooth = render(&plain, 64, 1, 3, &s, None);
+        let smooth = render(&plain, 64, 1, 3, &s, &[], None);
         let flip = |x: &Image, y: &Image| probegi_image::mean_flip_hdr(x, y).expect("same size");
         let (f, shows) = (flip(&a, &g), flip(&a, &smooth));
         eprintln!("{name}: HDR-FLIP CPU vs GPU {f:.5}; CPU with vs without the map {shows:.4}");
@@ -316,11 +342,11 @@ fn gltf_material_inputs_shade_the_same_on_both_backends() {
         .keeping_field(true);
     assert!(gpu.renders_camera() && gpu.shades(), "{:?}", gpu.shading_note);
     let s = small(UVec3::new(4, 2, 4));
-    let a = render(&scene, 64, 1, 3, &s, None);
-    let g = render(&scene, 64, 1, 3, &s, Some(Arc::new(gpu)));
+    let a = render(&scene, 64, 1, 3, &s, &[], None);
+    let g = render(&scene, 64, 1, 3, &s, &[], Some(Arc::new(gpu)));
     // The textures, their samplers and transforms, the second set and the
     // vertex colours must show: the factors alone render differently.
-    let plain = render(&gltf_material_plane(false), 64, 1, 3, &s, None);
+    let plain = render(&gltf_material_plane(false), 64, 1, 3, &s, &[], None);
     let flip = |x: &Image, y: &Image| probegi_image::mean_flip_hdr(x, y).expect("same size");
     let (f, shows) = (flip(&a, &g), flip(&a, &plain));
     eprintln!("glTF material plane: HDR-FLIP CPU vs GPU {f:.5}; CPU with vs without its inputs {shows:.4}");

@@ -133,7 +133,7 @@ impl<'a> FrameStepper<'a> {
         }
         fl.settings.width = width;
         fl.settings.height = height;
-        fl.acc = super::Accumulation::new(width as usize * height as usize);
+        fl.acc = super::Accumulation::new(width, height);
         fl.prev_camera = None;
         fl.last_gbuffer = None;
     }
@@ -143,7 +143,7 @@ impl<'a> FrameStepper<'a> {
     pub fn layers(&self) -> FrameLayers {
         let fl = &self.frame_loop;
         let (width, height) = (fl.settings.width, fl.settings.height);
-        let direct = (0..fl.acc.direct_sum.len()).map(|p| fl.acc.direct(p)).collect();
+        let direct = (0..fl.acc.len()).map(|p| fl.acc.direct(p)).collect();
         FrameLayers {
             direct: Image { width, height, pixels: direct },
             indirect: Image { width, height, pixels: fl.acc.indirect_image() },

@@ -8,7 +8,8 @@
 //   irradiance = ddgi_irradiance / π (ddgi_query.wgsl, group 2), which the host
 //              weighs by the diffuse albedo (accumulated over a still camera's frames).
 // Pixels that see nothing get the sky. `camera_direct` holds two texels per pixel:
-// the direct term at 2i and the diffuse albedo that weighs `irradiance` at 2i + 1.
+// the direct term at 2i and the diffuse albedo that weighs `irradiance` at 2i + 1,
+// whose w is the primary ray's hit distance (0: no hit; the temporal filter's depth).
 // The CPU accumulates both over a still camera's frames.
 // `camera_irradiance[i].w` flags surfaces with a diffuse albedo (1) and those of them unlit (2).
 // With flag 4 (the screen scheme's requests) every surface pixel also sets, in
@@ -137,6 +138,6 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (max(max(albedo.x, albedo.y), albedo.z) > 0.0) {
         flag = select(1.0, 2.0, !(max(max(e.x, e.y), e.z) > 0.0));
     }
-    camera_direct[2u * i + 1u] = vec4<f32>(albedo, 0.0);
+    camera_direct[2u * i + 1u] = vec4<f32>(albedo, hit.t);
     camera_irradiance[i] = vec4<f32>(e / SCENE_PI, flag);
 }
