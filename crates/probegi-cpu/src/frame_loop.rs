@@ -462,7 +462,8 @@ impl<'a> FrameLoop<'a> {
                 direct: &mut self.acc.frame_direct,
                 irradiance_over_pi: &mut self.acc.frame_irradiance,
                 albedo: &mut self.acc.frame_albedo,
-                hit_distance_m: &mut self.acc.frame_distance_m,
+                position_m: &mut self.acc.frame_position_m,
+                normal: &mut self.acc.frame_normal,
             },
             requests.as_mut(),
         );
@@ -504,8 +505,11 @@ impl<'a> FrameLoop<'a> {
         let (gbuffer, rays) = trace_gbuffer(scene, tracer, camera, settings.width, settings.height, f, settings.seed);
         *self.pass_totals.entry("gbuffer").or_default() += t.elapsed().as_secs_f64() * 1e3;
         self.stats.rays_traced += rays;
-        for (t, texel) in self.acc.frame_distance_m.iter_mut().zip(&gbuffer.texels) {
-            *t = texel.surface.as_ref().map_or(0.0, |sp| sp.position.distance(camera.origin_world));
+        let surfaces = self.acc.frame_position_m.iter_mut().zip(self.acc.frame_normal.iter_mut());
+        for ((x, n), texel) in surfaces.zip(&gbuffer.texels) {
+            let sp = texel.surface.as_ref();
+            *x = sp.map_or(Vec3::ZERO, |sp| sp.position);
+            *n = sp.map_or(Vec3::ZERO, |sp| sp.facing_geometric_normal());
         }
 
         if let Some(p) = self.sh.as_mut() {

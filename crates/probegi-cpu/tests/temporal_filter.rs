@@ -67,6 +67,7 @@ fn a_moving_camera_ends_closer_to_the_still_image_with_the_filter() {
         "against the still image: filtered FLIP {flip_on:.4}, dark {dark_on:.4}; unfiltered {flip_off:.4}, {dark_off:.4}"
     );
     assert!(filtered.pixels.iter().all(|p| p.is_finite()), "non-finite pixels");
-    assert!(flip_on < 0.75 * flip_off, "filtered {flip_on} against unfiltered {flip_off}");
-    assert!(dark_on <= dark_off, "dark pixels: filtered {dark_on} against unfiltered {dark_off}");
+    // Measured: 0.065 against 0.100, and 0.9 % against 4.1 % dark.
+    assert!(flip_on < 0.8 * flip_off, "filtered {flip_on} against unfiltered {flip_off}");
+    assert!(dark_on < 0.5 * dark_off, "dark pixels: filtered {dark_on} against unfiltered {dark_off}");
 }

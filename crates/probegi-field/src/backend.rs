@@ -137,10 +137,12 @@ pub struct CameraFrameOut<'a> {
     /// The diffuse albedo that weighs `irradiance_over_pi` (zero where the pixel
     /// sees no surface); a still camera accumulates it, so that it is antialiased.
     pub albedo: &'a mut [Vec3],
-    /// The distance along the pixel's primary ray to the surface it met,
-    /// metres (0 where it met nothing): where a moving camera's temporal
-    /// filter finds the pixel's point in the last frame.
-    pub hit_distance_m: &'a mut [f32],
+    /// Where the pixel's primary ray met the scene, metres, world space: where
+    /// a moving camera's temporal filter finds the pixel in the last frame.
+    pub position_m: &'a mut [Vec3],
+    /// The geometric normal there, facing the camera; zero where the ray met
+    /// nothing (the sky).
+    pub normal: &'a mut [Vec3],
 }
 
 /// The passes of a device that keeps an update's hits and the field's atlases

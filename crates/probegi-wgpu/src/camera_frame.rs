@@ -76,8 +76,10 @@ pub struct CameraImage {
     pub irradiance_over_pi: Vec<Vec3>,
     /// The diffuse albedo that weighs it per pixel, row-major.
     pub albedo: Vec<Vec3>,
-    /// The primary ray's hit distance per pixel, metres (0: no hit), row-major.
-    pub hit_distance_m: Vec<f32>,
+    /// The primary ray's hit point per pixel, metres, row-major.
+    pub position_m: Vec<Vec3>,
+    /// The geometric normal facing the camera per pixel (zero: no hit), row-major.
+    pub normal: Vec<Vec3>,
     /// Pixels on a surface with a diffuse albedo.
     pub surfaces: usize,
     /// Those of them that got no light from the field.
@@ -158,8 +160,9 @@ impl GpuCameraPass {
                 mapped_at_creation: false,
             }))
         };
-        // `camera_direct` holds two texels per pixel: the direct term, then the albedo.
-        let (direct, irradiance) = (image("camera direct and albedo", 2)?, image("camera irradiance", 1)?);
+        // `camera_direct` holds three texels per pixel: the direct term, the
+        // albedo, the hit point (their w: the normal's octahedral coordinates, a hit).
+        let (direct, irradiance) = (image("camera direct, albedo and normal", 3)?, image("camera irradiance", 1)?);
         // Zeroed at creation; at least one word so the binding is never empty.
         let requests = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera probe requests"),
@@ -200,13 +203,24 @@ impl GpuCameraPass {
         };
         let v3 = |t: &[f32; 4]| Vec3::new(t[0], t[1], t[2]);
         Ok(CameraImage {
-            direct: d.iter().step_by(2).map(v3).collect(),
-            albedo: d.iter().skip(1).step_by(2).map(v3).collect(),
-            hit_distance_m: d.iter().skip(1).step_by(2).map(|t| t[3]).collect(),
+            direct: d.iter().step_by(3).map(v3).collect(),
+            albedo: d.iter().skip(1).step_by(3).map(v3).collect(),
+            position_m: d.iter().skip(2).step_by(3).map(v3).collect(),
+            normal: d.chunks_exact(3).map(camera_normal).collect(),
             irradiance_over_pi: i.iter().map(v3).collect(),
             surfaces: i.iter().filter(|t| t[3] > 0.5).count(),
             unlit: i.iter().filter(|t| t[3] > 1.5).count(),
             requests,
         })
+    }
+}
+
+/// A pixel's normal from its three `camera_direct` texels: the octahedral
+/// coordinates in the first two's w, zero where the third's w flags no hit.
+fn camera_normal(texels: &[[f32; 4]]) -> Vec3 {
+    if texels[2][3] > 0.5 {
+        probegi_core::octahedral::oct_decode(glam::Vec2::new(texels[0][3], texels[1][3]))
+    } else {
+        Vec3::ZERO
     }
 }

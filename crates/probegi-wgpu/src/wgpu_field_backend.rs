@@ -516,11 +516,15 @@ impl ProbeBatchTracer for WgpuProbeTracer {
                 r.copy_from_slice(&image.requests);
             }
             let pixels = out.direct.len();
-            let produced =
-                [image.direct.len(), image.irradiance_over_pi.len(), image.albedo.len(), image.hit_distance_m.len()];
-            if produced != [pixels; 4]
-                || [out.irradiance_over_pi.len(), out.albedo.len(), out.hit_distance_m.len()] != [pixels; 3]
-            {
+            let produced = [
+                image.direct.len(),
+                image.irradiance_over_pi.len(),
+                image.albedo.len(),
+                image.position_m.len(),
+                image.normal.len(),
+            ];
+            let given = [out.irradiance_over_pi.len(), out.albedo.len(), out.position_m.len(), out.normal.len()];
+            if produced != [pixels; 5] || given != [pixels; 4] {
                 return Err(GpuError::Input(format!(
                     "{} camera pixels for a {pixels}-pixel frame",
                     image.direct.len()
@@ -529,7 +533,8 @@ impl ProbeBatchTracer for WgpuProbeTracer {
             out.direct.copy_from_slice(&image.direct);
             out.irradiance_over_pi.copy_from_slice(&image.irradiance_over_pi);
             out.albedo.copy_from_slice(&image.albedo);
-            out.hit_distance_m.copy_from_slice(&image.hit_distance_m);
+            out.position_m.copy_from_slice(&image.position_m);
+            out.normal.copy_from_slice(&image.normal);
             Ok((image.surfaces, image.unlit))
         };
         Some(run().map_err(BackendError::from))

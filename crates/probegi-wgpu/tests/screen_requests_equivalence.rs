@@ -5,8 +5,8 @@
 //! the two bitsets agree; over a render, the same probes are requested, the
 //! same rays are traced, and the images agree within the backends' noise.
 //! The device also returns the diffuse albedo its field term used and the
-//! primary rays' hit distances (the temporal filter's depth), the CPU's at
-//! the same pixels.
+//! primary rays' hit points and normals (the temporal filter's surface),
+//! the CPU's at the same pixels.
 
 use std::sync::Arc;
 
@@ -71,12 +71,14 @@ fn the_device_requests_the_probes_the_cpu_requests() {
     let mut device = vec![0u32; host.len()];
     let [mut direct, mut irradiance, mut albedo] = [(); 3].map(|_| vec![Vec3::ZERO; (W * H) as usize]);
     let view = set.view();
-    let mut hit_distance_m = vec![0.0f32; (W * H) as usize];
+    let mut position_m = vec![Vec3::ZERO; (W * H) as usize];
+    let mut normal = vec![Vec3::ZERO; (W * H) as usize];
     let out = CameraFrameOut {
         direct: &mut direct,
         irradiance_over_pi: &mut irradiance,
         albedo: &mut albedo,
-        hit_distance_m: &mut hit_distance_m,
+        position_m: &mut position_m,
+        normal: &mut normal,
     };
     gpu.camera_frame(&camera, &view, false, 1, false, 0, 7, out, Some(&mut device))
         .expect("the device renders the camera")
@@ -97,22 +99,24 @@ fn the_device_requests_the_probes_the_cpu_requests() {
         .count();
     assert!(albedo.iter().any(|a| a.max_element() > 0.0), "the device returned no albedo");
     assert!(same_albedo as f32 >= 0.99 * albedo.len() as f32, "{same_albedo} of {} pixels", albedo.len());
-    // The hit distances, against the CPU's G-buffer points (0 off surfaces).
-    let same_distance = gbuffer
+    // The hit points, against the CPU's G-buffer points (every pixel of the
+    // closed room meets a surface).
+    let same_point = gbuffer
         .texels
         .iter()
-        .zip(&hit_distance_m)
-        .filter(|(t, d)| {
-            let cpu = t.surface.as_ref().map_or(0.0, |sp| sp.position.distance(camera.origin_world));
-            (cpu - **d).abs() <= 1e-4 * cpu.max(1.0)
+        .zip(&position_m)
+        .filter(|(t, x)| {
+            t.surface.as_ref().is_some_and(|sp| sp.position.distance(**x) <= 1e-4 * sp.position.length().max(1.0))
         })
         .count();
-    assert!(hit_distance_m.iter().all(|d| *d > 0.0), "the door room is closed: every pixel meets a surface");
-    assert!(
-        same_distance as f32 >= 0.99 * hit_distance_m.len() as f32,
-        "{same_distance} of {} distances",
-        hit_distance_m.len()
-    );
+    assert!(same_point as f32 >= 0.99 * position_m.len() as f32, "{same_point} of {} points", position_m.len());
+    let same_normal = gbuffer
+        .texels
+        .iter()
+        .zip(&normal)
+        .filter(|(t, n)| t.surface.as_ref().is_some_and(|sp| sp.facing_geometric_normal().dot(**n) > 0.999))
+        .count();
+    assert!(same_normal as f32 >= 0.99 * normal.len() as f32, "{same_normal} of {} normals", normal.len());
     let (h, d) = (bits(&host), bits(&device));
     let layout = set.probe_request_layout();
     let in_member = |b: &[usize], m: usize| b.iter().filter(|&&x| x >= layout[m] && x < layout[m + 1]).count();

@@ -13,11 +13,13 @@
 //! A moving camera reprojects the sums instead of starting them again
 //! (temporal antialiasing: Karis, "High-quality temporal supersampling",
 //! SIGGRAPH 2014 course; Salvi, "An excursion in temporal supersampling",
-//! GDC 2016). Each pixel's surface point (its centre ray at the distance its
-//! jittered sample met) is projected into the last frame's camera, and the
-//! last frame's means are read bilinearly from the taps that saw the same
-//! surface: a depth test in the last view, whose tolerance follows the local
-//! depth slope so that grazing floors pass and silhouettes fail. A pixel that
+//! GDC 2016). Each pixel's surface point (where its centre ray meets the
+//! tangent plane of its jittered sample's surface) is projected into the last frame's camera, and the
+//! last frame's means are read from the taps that saw the same surface: near
+//! the point's tangent plane and on its side (a plane-distance and normal
+//! test as in SVGF, Schied et al. 2017), so that grazing floors pass and
+//! silhouettes fail. Catmull-Rom taps, since bilinear's blur
+//! compounds frame after frame. A pixel that
 //! sees the sky reads the taps that saw the sky. The history then weighs at
 //! most [`TemporalSettings::temporal_history_frames`] − 1 frames against the
 //! new one. The direct term's history is clamped to the new frame's 3 × 3
@@ -38,18 +40,20 @@ use rayon::prelude::*;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TemporalSettings {
     /// The most frames a moving camera's pixel averages, the new one included
-    /// (default 16); 0 or 1 turns the filter off: each moving frame is then
-    /// its own sample, as before the filter.
+    /// (default 4: each resampling of the history blurs it a little, and on
+    /// the 4×4 flythrough 4 scored better than 2, 8 or 16); 0 or 1 turns the
+    /// filter off: each moving frame is then its own sample.
     pub temporal_history_frames: u32,
     /// The direct term's history is clamped to the new frame's 3 × 3
     /// neighbourhood mean ± this many standard deviations, per channel
-    /// (default 1.25, Salvi 2016's range); 0 leaves it unclamped.
+    /// (default 1.25, Salvi 2016's range); 0 leaves it unclamped, which on the
+    /// flythrough let sunlit surfaces ghost across the frame.
     pub temporal_clip_sigma: f32,
 }
 
 impl Default for TemporalSettings {
     fn default() -> Self {
-        Self { temporal_history_frames: 16, temporal_clip_sigma: 1.25 }
+        Self { temporal_history_frames: 4, temporal_clip_sigma: 1.25 }
     }
 }
 
@@ -86,13 +90,15 @@ pub(super) struct Accumulation {
     pub(super) frame_irradiance: Vec<Vec3>,
     /// This frame's diffuse albedo per pixel (zero off surfaces).
     pub(super) frame_albedo: Vec<Vec3>,
-    /// This frame's distance along each pixel's primary ray to the surface it
-    /// met, metres (0 where it met nothing).
-    pub(super) frame_distance_m: Vec<f32>,
+    /// This frame's primary-ray hit point per pixel, metres.
+    pub(super) frame_position_m: Vec<Vec3>,
+    /// This frame's geometric normal per pixel, facing the camera (zero where
+    /// the ray met nothing).
+    pub(super) frame_normal: Vec<Vec3>,
     /// Irradiance/π at the last sample of each pixel that had a diffuse albedo.
     irradiance: Vec<Vec3>,
     /// The surface point each pixel saw in the last frame (`None`: the sky).
-    points: Vec<Option<Vec3>>,
+    points: Vec<Option<Surface>>,
 }
 
 impl Accumulation {
@@ -106,7 +112,8 @@ impl Accumulation {
             frame_direct: vec![Vec3::ZERO; pixels],
             frame_irradiance: vec![Vec3::ZERO; pixels],
             frame_albedo: vec![Vec3::ZERO; pixels],
-            frame_distance_m: vec![0.0; pixels],
+            frame_position_m: vec![Vec3::ZERO; pixels],
+            frame_normal: vec![Vec3::ZERO; pixels],
             irradiance: vec![Vec3::ZERO; pixels],
             points: vec![None; pixels],
         }
@@ -144,17 +151,30 @@ impl Accumulation {
         self.points = points;
     }
 
-    /// The surface point of each pixel this frame: its centre ray through
-    /// `camera` at the distance its sample met (`None` where it met nothing).
-    fn frame_points(&self, camera: &CameraRays) -> Vec<Option<Vec3>> {
+    /// What each pixel saw this frame through `camera`: where its centre ray
+    /// meets the tangent plane of its sample's surface (the pixel's own point,
+    /// whatever its jitter; the sample's point where that ray runs along the
+    /// plane), and the normal; `None` where the sample met nothing.
+    fn frame_points(&self, camera: &CameraRays) -> Vec<Option<Surface>> {
         let w = self.width;
-        let distances = &self.frame_distance_m;
-        (0..distances.len())
+        let (positions, normals) = (&self.frame_position_m, &self.frame_normal);
+        (0..positions.len())
             .into_par_iter()
             .map(|p| {
-                let t = distances[p];
-                let centre = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
-                (t > 0.0 && t.is_finite()).then(|| camera.origin_world + camera.ray_dir_world(centre.0, centre.1) * t)
+                let (sample, normal) = (positions[p], normals[p]);
+                if normal == Vec3::ZERO || !sample.is_finite() {
+                    return None;
+                }
+                let dir = camera.ray_dir_world((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
+                let (along, facing) = ((sample - camera.origin_world).dot(normal), dir.dot(normal));
+                let t = along / facing;
+                let sample_t = sample.distance(camera.origin_world);
+                let point = if facing.abs() > 1e-3 && t > 0.5 * sample_t && t < 2.0 * sample_t {
+                    camera.origin_world + dir * t
+                } else {
+                    sample
+                };
+                Some(Surface { point, normal })
             })
             .collect()
     }
@@ -162,22 +182,21 @@ impl Accumulation {
     /// Replaces the sums by those of the last frame reprojected to `to`'s
     /// pixels (`points`: what they see now), each capped to
     /// `temporal_history_frames` − 1 frames and its direct term clamped.
-    fn reproject(&mut self, from: &CameraRays, to: &CameraRays, points: &[Option<Vec3>], s: TemporalSettings) {
-        let forward = from.forward_world();
-        let depth_then: Vec<f32> =
-            points.iter().map(|x| x.map_or(f32::INFINITY, |x| (x - from.origin_world).dot(forward))).collect();
+    fn reproject(&mut self, from: &CameraRays, to: &CameraRays, points: &[Option<Surface>], s: TemporalSettings) {
         let frames_max = (s.temporal_history_frames - 1) as f64;
+        let w = self.width;
         let history: Vec<PixelHistory> = (0..self.len())
             .into_par_iter()
             .map(|p| {
-                let mut h = self.history_at(p, from, to, points, &depth_then);
+                let mut h = self.history_at(p, from, to, points);
                 if h.count > frames_max {
                     let k = frames_max / h.count;
                     (h.direct_sum, h.albedo_sum, h.count) = (h.direct_sum * k, h.albedo_sum * k, frames_max);
                 }
                 if s.temporal_clip_sigma > 0.0 && h.count > 0.0 {
-                    let mean = h.direct_sum / h.count;
-                    h.direct_sum = self.clamp_to_neighbourhood(p, mean, s.temporal_clip_sigma) * h.count;
+                    let sigma = s.temporal_clip_sigma;
+                    h.direct_sum =
+                        clamp_to_neighbourhood(&self.frame_direct, w, p, h.direct_sum / h.count, sigma) * h.count;
                 }
                 h
             })
@@ -194,31 +213,20 @@ impl Accumulation {
     /// taps that pass where the central 2 × 2 all do (sharper than bilinear,
     /// whose blur compounds frame after frame), else bilinear over those of
     /// the 2 × 2 that pass.
-    fn history_at(
-        &self,
-        p: usize,
-        from: &CameraRays,
-        to: &CameraRays,
-        points: &[Option<Vec3>],
-        depth_then: &[f32],
-    ) -> PixelHistory {
+    fn history_at(&self, p: usize, from: &CameraRays, to: &CameraRays, points: &[Option<Surface>]) -> PixelHistory {
         let (w, h) = (self.width, self.len() / self.width);
         let (x, y) = (p % w, p / w);
         let seen = match points[p] {
-            Some(point) => point,
+            Some(surface) => surface.point,
             None => from.origin_world + to.ray_dir_world(x as f32 + 0.5, y as f32 + 0.5),
         };
         let Some(at) = from.project_world(seen) else {
             return PixelHistory::default();
         };
-        // Two pixels' worth of slope: both frames' samples are jittered.
-        let tolerance = 0.03 * depth_then[p] + 2.0 * depth_slope(depth_then, w, h, x, y);
         let same_surface = |q: usize| {
             self.count[q] > 0.0
                 && match (points[p], self.points[q]) {
-                    (Some(_), Some(then)) => {
-                        ((then - from.origin_world).dot(from.forward_world()) - depth_then[p]).abs() <= tolerance
-                    }
+                    (Some(now), Some(then)) => now.continues(&then, from),
                     (None, None) => true,
                     _ => false,
                 }
@@ -268,23 +276,6 @@ impl Accumulation {
         }
     }
 
-    /// `mean` clamped, per channel, to the new frame's direct term around
-    /// pixel `p` (3 × 3): its mean ± `sigma` standard deviations.
-    fn clamp_to_neighbourhood(&self, p: usize, mean: DVec3, sigma: f32) -> DVec3 {
-        let (w, h) = (self.width, self.len() / self.width);
-        let (x, y) = ((p % w) as i64, (p / w) as i64);
-        let (mut m1, mut m2, mut n) = (DVec3::ZERO, DVec3::ZERO, 0.0);
-        for (qx, qy) in (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy))) {
-            if qx >= 0 && qy >= 0 && qx < w as i64 && qy < h as i64 {
-                let v = self.frame_direct[qy as usize * w + qx as usize].as_dvec3();
-                (m1, m2, n) = (m1 + v, m2 + v * v, n + 1.0);
-            }
-        }
-        let mu = m1 / n;
-        let spread = (m2 / n - mu * mu).max(DVec3::ZERO).sqrt() * sigma as f64;
-        mean.clamp(mu - spread, mu + spread)
-    }
-
     /// Pixel `p`'s mean direct term over the frames in its sums.
     pub(super) fn direct(&self, p: usize) -> Vec3 {
         (self.direct_sum[p] / self.count[p].max(1.0)).as_vec3()
@@ -319,6 +310,23 @@ impl Accumulation {
     }
 }
 
+/// `mean` clamped, per channel, to `frame` (a `width`-wide image) around
+/// pixel `p` (3 × 3): its mean ± `sigma` standard deviations.
+fn clamp_to_neighbourhood(frame: &[Vec3], width: usize, p: usize, mean: DVec3, sigma: f32) -> DVec3 {
+    let (w, h) = (width as i64, (frame.len() / width) as i64);
+    let (x, y) = ((p % width) as i64, (p / width) as i64);
+    let (mut m1, mut m2, mut n) = (DVec3::ZERO, DVec3::ZERO, 0.0);
+    for (qx, qy) in (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy))) {
+        if qx >= 0 && qy >= 0 && qx < w && qy < h {
+            let v = frame[(qy * w + qx) as usize].as_dvec3();
+            (m1, m2, n) = (m1 + v, m2 + v * v, n + 1.0);
+        }
+    }
+    let mu = m1 / n;
+    let spread = (m2 / n - mu * mu).max(DVec3::ZERO).sqrt() * sigma as f64;
+    mean.clamp(mu - spread, mu + spread)
+}
+
 /// Catmull-Rom weights of the taps at −1, 0, 1 and 2 for a point `t` ∈ [0, 1)
 /// past tap 0 (they sum to 1).
 fn catmull_rom(t: f32) -> [f32; 4] {
@@ -330,27 +338,26 @@ fn catmull_rom(t: f32) -> [f32; 4] {
     ]
 }
 
-/// How fast the depth `depth` changes around pixel (`x`, `y`) of a `w` × `h`
-/// image: per axis, the smaller step to a neighbour (so that a silhouette on
-/// one side does not count), the larger of the two axes. Infinite depths
-/// (the sky) are left out.
-fn depth_slope(depth: &[f32], w: usize, h: usize, x: usize, y: usize) -> f32 {
-    let at = |x: usize, y: usize| depth[y * w + x];
-    let z = at(x, y);
-    if !z.is_finite() {
-        return 0.0;
+/// What a pixel saw: the surface point at its centre ray and the geometric
+/// normal there, facing the camera.
+#[derive(Clone, Copy, Debug)]
+struct Surface {
+    point: Vec3,
+    normal: Vec3,
+}
+
+impl Surface {
+    /// Whether `then`, seen from `from` in the last frame, lies on the same
+    /// surface as this point: within 5 % of its depth in `from` of this
+    /// point's tangent plane (so that a floor seen edge-on still passes and a
+    /// silhouette does not), on the same side (so that the far face of a thin
+    /// wall does not). Measured on the 4×4 flythrough (docs/RESULTS.md): a
+    /// tighter plane or normals within 37° or 60° of each other cost more in
+    /// aliasing than they saved in ghosts.
+    fn continues(&self, then: &Surface, from: &CameraRays) -> bool {
+        let depth = (self.point - from.origin_world).dot(from.forward_world());
+        (then.point - self.point).dot(self.normal).abs() <= 0.05 * depth && then.normal.dot(self.normal) >= 0.0
     }
-    let step = |a: Option<f32>, b: Option<f32>| {
-        let d = |v: Option<f32>| v.filter(|v| v.is_finite()).map(|v| (v - z).abs());
-        match (d(a), d(b)) {
-            (Some(a), Some(b)) => a.min(b),
-            (Some(a), None) | (None, Some(a)) => a,
-            (None, None) => 0.0,
-        }
-    };
-    let horizontal = step((x > 0).then(|| at(x - 1, y)), (x + 1 < w).then(|| at(x + 1, y)));
-    let vertical = step((y > 0).then(|| at(x, y - 1)), (y + 1 < h).then(|| at(x, y + 1)));
-    horizontal.max(vertical)
 }
 
 #[cfg(test)]
@@ -408,7 +415,8 @@ mod tests {
             let (x, y) = ((p % W as usize) as f32 + 0.5, (p / W as usize) as f32 + 0.5);
             let dir = camera.ray_dir_world(x, y);
             let z_m = if near.contains(&p) { -1.0 } else { WALL_Z_M };
-            acc.frame_distance_m[p] = z_m / dir.z;
+            acc.frame_position_m[p] = camera.origin_world + dir * (z_m / dir.z);
+            acc.frame_normal[p] = Vec3::Z;
             acc.frame_direct[p] = Vec3::splat(direct((camera.origin_world + dir * (WALL_Z_M / dir.z)).x));
             acc.frame_albedo[p] = Vec3::splat(0.5);
             acc.frame_irradiance[p] = Vec3::ONE;
@@ -480,12 +488,14 @@ mod tests {
         wall_frame(&mut acc, &a, |_| 1.0, &[]);
         // The left half of the first frame sees the sky (value 5).
         for p in (0..acc.len()).filter(|p| p % W as usize <= 3) {
-            (acc.frame_distance_m[p], acc.frame_direct[p], acc.frame_albedo[p]) = (0.0, Vec3::splat(5.0), Vec3::ZERO);
+            (acc.frame_normal[p], acc.frame_direct[p], acc.frame_albedo[p]) =
+                (Vec3::ZERO, Vec3::splat(5.0), Vec3::ZERO);
         }
         acc.add_frame(&a, History::Accumulate);
         wall_frame(&mut acc, &b, |_| 1.0, &[]);
         for p in 0..acc.len() {
-            (acc.frame_distance_m[p], acc.frame_direct[p], acc.frame_albedo[p]) = (0.0, Vec3::splat(7.0), Vec3::ZERO);
+            (acc.frame_normal[p], acc.frame_direct[p], acc.frame_albedo[p]) =
+                (Vec3::ZERO, Vec3::splat(7.0), Vec3::ZERO);
         }
         acc.add_frame(&b, History::Reproject { from: a, settings: unclamped(16) });
         for y in 0..W as usize {
@@ -497,5 +507,20 @@ mod tests {
                 assert!((got - want).abs() < 1e-3, "({x}, {y}): {got} vs {want}");
             }
         }
+    }
+
+    /// The surface test: points of one floor pass however far apart along it
+    /// (seen edge-on), a point 30 cm above it at 4 m does not, nor the far
+    /// face of a thin slab.
+    #[test]
+    fn the_same_surface_is_its_tangent_plane_on_its_side() {
+        let from = camera_at(0.0);
+        let floor = |x: f32, z: f32| Surface { point: Vec3::new(x, -1.0, z), normal: Vec3::Y };
+        let now = floor(0.0, -4.0);
+        assert!(now.continues(&floor(0.3, -7.0), &from), "the same floor, 3 m further along");
+        let above = Surface { point: Vec3::new(0.0, -0.7, -4.0), ..now };
+        assert!(!now.continues(&above, &from), "30 cm above it");
+        let underside = Surface { point: Vec3::new(0.0, -1.05, -4.0), normal: -Vec3::Y };
+        assert!(!now.continues(&underside, &from), "the slab's underside");
     }
 }

@@ -7,9 +7,11 @@
 //              with second-order glossy, its specular reflection of the field);
 //   irradiance = ddgi_irradiance / π (ddgi_query.wgsl, group 2), which the host
 //              weighs by the diffuse albedo (accumulated over a still camera's frames).
-// Pixels that see nothing get the sky. `camera_direct` holds two texels per pixel:
-// the direct term at 2i and the diffuse albedo that weighs `irradiance` at 2i + 1,
-// whose w is the primary ray's hit distance (0: no hit; the temporal filter's depth).
+// Pixels that see nothing get the sky. `camera_direct` holds three texels per pixel:
+// the direct term at 3i, the diffuse albedo that weighs `irradiance` at 3i + 1,
+// and the hit point at 3i + 2 (w: 1 for a hit, 0 for none); the w of the first
+// two hold the octahedral coordinates (ddgi_oct_encode) of the geometric normal
+// facing the camera. Point and normal are the temporal filter's surface.
 // The CPU accumulates both over a still camera's frames.
 // `camera_irradiance[i].w` flags surfaces with a diffuse albedo (1) and those of them unlit (2).
 // With flag 4 (the screen scheme's requests) every surface pixel also sets, in
@@ -78,8 +80,9 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
         + camera.up.xyz * (ndc_y * camera.origin.w));
     let hit = bvh_trace(bvh_make_ray(camera.origin.xyz, dir, 0.0, SCENE_F32_MAX), false);
     if (hit.leaf == BVH_NO_HIT) {
-        camera_direct[2u * i] = vec4<f32>(camera.sky.xyz, 0.0);
-        camera_direct[2u * i + 1u] = vec4<f32>(0.0);
+        camera_direct[3u * i] = vec4<f32>(camera.sky.xyz, 0.0);
+        camera_direct[3u * i + 1u] = vec4<f32>(0.0);
+        camera_direct[3u * i + 2u] = vec4<f32>(0.0);
         camera_irradiance[i] = vec4<f32>(0.0);
         return;
     }
@@ -126,7 +129,8 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
-    camera_direct[2u * i] = vec4<f32>(select(vec3<f32>(0.0), l, camera_finite(l)), 0.0);
+    let oct = ddgi_oct_encode(scene_facing_geometric_normal(sp));
+    camera_direct[3u * i] = vec4<f32>(select(vec3<f32>(0.0), l, camera_finite(l)), oct.x);
     let e = ddgi_irradiance(sp.position, scene_facing_normal(sp), to_viewer);
     if ((camera.info.w & 4u) != 0u) {
         camera_request_probes(sp.position, scene_facing_normal(sp), to_viewer);
@@ -138,6 +142,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (max(max(albedo.x, albedo.y), albedo.z) > 0.0) {
         flag = select(1.0, 2.0, !(max(max(e.x, e.y), e.z) > 0.0));
     }
-    camera_direct[2u * i + 1u] = vec4<f32>(albedo, hit.t);
+    camera_direct[3u * i + 1u] = vec4<f32>(albedo, oct.y);
+    camera_direct[3u * i + 2u] = vec4<f32>(sp.position, 1.0);
     camera_irradiance[i] = vec4<f32>(e / SCENE_PI, flag);
 }
