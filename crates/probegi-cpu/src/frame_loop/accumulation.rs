@@ -67,6 +67,52 @@ pub(super) enum History {
     Reproject { from: CameraRays, settings: TemporalSettings },
 }
 
+/// A pixel's means in the last frame, as the reprojection reads them.
+#[derive(Clone, Copy)]
+struct LastMeans {
+    direct: Vec3,
+    albedo: Vec3,
+    irradiance: Vec3,
+    count: f32,
+}
+
+/// The weighed sum of a pixel's history taps.
+#[derive(Default)]
+struct TapSum {
+    direct: Vec3,
+    albedo: Vec3,
+    irradiance: Vec3,
+    count: f32,
+    weight: f32,
+}
+
+impl TapSum {
+    fn add(&mut self, tap: &LastMeans, k: f32) {
+        self.direct += tap.direct * k;
+        self.albedo += tap.albedo * k;
+        self.irradiance += tap.irradiance * k;
+        self.count += tap.count * k;
+        self.weight += k;
+    }
+
+    /// The taps' means renormalised over their weight (an empty history
+    /// where no weight is left, as where every tap failed).
+    fn history(&self) -> PixelHistory {
+        if self.weight < 1e-4 {
+            return PixelHistory::default();
+        }
+        // Catmull-Rom's negative lobes may overshoot below zero at an edge.
+        let n = (self.count / self.weight).max(0.0) as f64;
+        let mean = |v: Vec3| (v / self.weight).max(Vec3::ZERO);
+        PixelHistory {
+            direct_sum: mean(self.direct).as_dvec3() * n,
+            albedo_sum: mean(self.albedo).as_dvec3() * n,
+            count: n,
+            irradiance: mean(self.irradiance),
+        }
+    }
+}
+
 /// A pixel's sums as the reprojection carries them over.
 #[derive(Clone, Copy, Default)]
 struct PixelHistory {
@@ -185,10 +231,23 @@ impl Accumulation {
     fn reproject(&mut self, from: &CameraRays, to: &CameraRays, points: &[Option<Surface>], s: TemporalSettings) {
         let frames_max = (s.temporal_history_frames - 1) as f64;
         let w = self.width;
+        let last: Vec<LastMeans> = (0..self.len())
+            .into_par_iter()
+            .map(|q| {
+                let n = self.count[q];
+                let mean = |sum: DVec3| if n > 0.0 { (sum / n).as_vec3() } else { Vec3::ZERO };
+                LastMeans {
+                    direct: mean(self.direct_sum[q]),
+                    albedo: mean(self.albedo_sum[q]),
+                    irradiance: self.irradiance[q],
+                    count: n as f32,
+                }
+            })
+            .collect();
         let history: Vec<PixelHistory> = (0..self.len())
             .into_par_iter()
             .map(|p| {
-                let mut h = self.history_at(p, from, to, points);
+                let mut h = self.history_at(p, from, to, points, &last);
                 if h.count > frames_max {
                     let k = frames_max / h.count;
                     (h.direct_sum, h.albedo_sum, h.count) = (h.direct_sum * k, h.albedo_sum * k, frames_max);
@@ -201,10 +260,10 @@ impl Accumulation {
                 h
             })
             .collect();
-        for (p, h) in history.into_iter().enumerate() {
-            (self.direct_sum[p], self.albedo_sum[p], self.count[p]) = (h.direct_sum, h.albedo_sum, h.count);
-            self.irradiance[p] = h.irradiance;
-        }
+        self.direct_sum.par_iter_mut().zip(&history).for_each(|(a, h)| *a = h.direct_sum);
+        self.albedo_sum.par_iter_mut().zip(&history).for_each(|(a, h)| *a = h.albedo_sum);
+        self.count.par_iter_mut().zip(&history).for_each(|(a, h)| *a = h.count);
+        self.irradiance.par_iter_mut().zip(&history).for_each(|(a, h)| *a = h.irradiance);
     }
 
     /// Pixel `p`'s history: the last frame's means around where its point (or,
@@ -213,7 +272,14 @@ impl Accumulation {
     /// taps that pass where the central 2 × 2 all do (sharper than bilinear,
     /// whose blur compounds frame after frame), else bilinear over those of
     /// the 2 × 2 that pass.
-    fn history_at(&self, p: usize, from: &CameraRays, to: &CameraRays, points: &[Option<Surface>]) -> PixelHistory {
+    fn history_at(
+        &self,
+        p: usize,
+        from: &CameraRays,
+        to: &CameraRays,
+        points: &[Option<Surface>],
+        last: &[LastMeans],
+    ) -> PixelHistory {
         let (w, h) = (self.width, self.len() / self.width);
         let (x, y) = (p % w, p / w);
         let seen = match points[p] {
@@ -241,39 +307,22 @@ impl Accumulation {
         let (cx, cy) = (catmull_rom(ax), catmull_rom(ay));
         let passing = |dx: i64, dy: i64| tap(dx, dy).filter(|&q| same_surface(q));
         let centre = [(0, 0), (1, 0), (0, 1), (1, 1)];
-        let taps: Vec<(usize, f32)> = if centre.iter().all(|&(dx, dy)| passing(dx, dy).is_some()) {
-            let grid = (0..16i64).map(|k| (k % 4 - 1, k / 4 - 1, cx[(k % 4) as usize] * cy[(k / 4) as usize]));
-            grid.filter_map(|(dx, dy, k)| passing(dx, dy).map(|q| (q, k))).collect()
+        let mut sum = TapSum::default();
+        if centre.iter().all(|&(dx, dy)| passing(dx, dy).is_some()) {
+            for k in 0..16i64 {
+                if let Some(q) = passing(k % 4 - 1, k / 4 - 1) {
+                    sum.add(&last[q], cx[(k % 4) as usize] * cy[(k / 4) as usize]);
+                }
+            }
         } else {
             let bilinear = [(1.0 - ax) * (1.0 - ay), ax * (1.0 - ay), (1.0 - ax) * ay, ax * ay];
-            centre.iter().zip(bilinear).filter_map(|(&(dx, dy), k)| passing(dx, dy).map(|q| (q, k))).collect()
-        };
-        self.weighed_history(&taps)
-    }
-
-    /// The means of taps `(q, weight)` weighed and renormalised (zero
-    /// weights, as where every tap failed, give an empty history).
-    fn weighed_history(&self, taps: &[(usize, f32)]) -> PixelHistory {
-        let (mut out, mut weight) = (PixelHistory::default(), 0.0f64);
-        for &(q, k) in taps {
-            let (k, n) = (k as f64, self.count[q]);
-            out.direct_sum += self.direct_sum[q] / n * k;
-            out.albedo_sum += self.albedo_sum[q] / n * k;
-            out.count += n * k;
-            out.irradiance += self.irradiance[q] * k as f32;
-            weight += k;
+            for (&(dx, dy), k) in centre.iter().zip(bilinear) {
+                if let Some(q) = passing(dx, dy) {
+                    sum.add(&last[q], k);
+                }
+            }
         }
-        if weight < 1e-4 {
-            return PixelHistory::default();
-        }
-        // Catmull-Rom's negative lobes may overshoot below zero at an edge.
-        let n = (out.count / weight).max(0.0);
-        PixelHistory {
-            direct_sum: (out.direct_sum / weight).max(DVec3::ZERO) * n,
-            albedo_sum: (out.albedo_sum / weight).max(DVec3::ZERO) * n,
-            count: n,
-            irradiance: (out.irradiance / weight as f32).max(Vec3::ZERO),
-        }
+        sum.history()
     }
 
     /// Pixel `p`'s mean direct term over the frames in its sums.
