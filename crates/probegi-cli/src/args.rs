@@ -270,7 +270,7 @@ pub struct RenderArgs {
     pub area_samples: u32,
     /// A moving camera's temporal filter: each pixel averages at most this many
     /// frames, reprojected from the last frame's view where they saw the same
-    /// surface; 0 turns it off (every moving frame its own sample).
+    /// surface; 0 or 1 turns it off (every moving frame its own sample).
     #[arg(long, default_value_t = probegi_cpu::frame_loop::TemporalSettings::default().temporal_history_frames)]
     pub temporal_frames: u32,
     /// The temporal filter clamps the direct term's history to the new frame's

@@ -115,9 +115,7 @@ fn render(args: &RenderArgs) -> Result<()> {
         bail!("--temporal-clip-sigma must be a finite number ≥ 0 (got {})", args.temporal_clip_sigma);
     }
     check_render_outputs(args)?;
-    // G-buffer texel, frame and accumulation buffers, and a moving camera's
-    // reprojection (frame_loop::accumulation: about 130 bytes kept, 90 while it runs).
-    let (scene, camera) = prepare(&args.scene, &args.volume.set, 280)?;
+    let (scene, camera) = prepare(&args.scene, &args.volume.set, crate::render_settings::IMAGE_BYTES_PER_PIXEL)?;
     check_posed_bounds(&scene, args.frames.saturating_sub(1) as f32)?;
     let gi = render_settings::gi_method(&scene, args)?;
     // Static geometry in one BVH, moving objects instanced (see probegi_scene::bvh).

@@ -21,6 +21,12 @@ use crate::args::{GiArg, RenderArgs, SceneArgs, VolumeArgs};
 use crate::gpu_backend::WgpuProbeTracer;
 use crate::memory::check_memory;
 
+/// Host bytes per image pixel that a render or a view holds: the G-buffer
+/// texel and the frame buffers (about 160), and the camera image's sums with
+/// a moving camera's reprojection (`frame_loop::accumulation`: about 160
+/// kept, 140 while it runs).
+pub const IMAGE_BYTES_PER_PIXEL: u64 = 460;
+
 /// The frame loop's settings of `render`: the image, frames and seed of the
 /// arguments, the GI method `gi`, the camera path, and `gpu` (`--backend wgpu`)
 /// as the probe tracer.

@@ -70,7 +70,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         bail!("--fly-speed must be a positive number of metres per second");
     }
     let render = render_args(args, frames);
-    let (scene, camera) = prepare(&args.scene, &args.volume.set, 160)?;
+    let (scene, camera) = prepare(&args.scene, &args.volume.set, crate::render_settings::IMAGE_BYTES_PER_PIXEL)?;
     check_posed_bounds(&scene, frames.saturating_sub(1) as f32)?;
     let gi = crate::render_settings::gi_method(&scene, &render)?;
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
@@ -242,7 +242,7 @@ impl CliViewSource {
         let args = self.args_for(controls);
         let frames = args.exit_after_frames.unwrap_or(100_000);
         let render = render_args(&args, frames);
-        let (scene, camera) = prepare(&args.scene, &args.volume.set, 160)?;
+        let (scene, camera) = prepare(&args.scene, &args.volume.set, crate::render_settings::IMAGE_BYTES_PER_PIXEL)?;
         let gi = crate::render_settings::gi_method(&scene, &render)?;
         let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
         let gpu = crate::gpu_backend::render_probe_tracer(args.backend, &gi, &scene, &bvh)?;

@@ -224,3 +224,25 @@ fn camera_normal(texels: &[[f32; 4]]) -> Vec3 {
         Vec3::ZERO
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use probegi_core::octahedral::oct_encode;
+
+    /// `camera_frame.wgsl` packs a pixel's normal as `ddgi_oct_encode` (which
+    /// mirrors `oct_encode`) into the w of its first two texels and flags a
+    /// hit in the third's; the host's decode gives the normal back, and zero
+    /// for a miss.
+    #[test]
+    fn the_packed_normal_decodes() {
+        for n in [Vec3::Y, -Vec3::Z, Vec3::new(0.3, -0.8, 0.52).normalize(), Vec3::new(-0.6, 0.1, -0.79).normalize()] {
+            let uv = oct_encode(n);
+            let texels = [[0.0, 0.0, 0.0, uv.x], [0.0, 0.0, 0.0, uv.y], [1.0, 2.0, 3.0, 1.0]];
+            let got = camera_normal(&texels);
+            assert!(got.dot(n) > 1.0 - 1e-5, "{n} → {got}");
+        }
+        let miss = [[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]];
+        assert_eq!(camera_normal(&miss), Vec3::ZERO);
+    }
+}

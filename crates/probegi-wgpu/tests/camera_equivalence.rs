@@ -144,7 +144,7 @@ fn textured_sponza_frame_on_the_gpu() {
 
 /// A camera dollying through Sponza: the moving camera's temporal filter
 /// reprojects both backends' frames alike (the device returns its hit
-/// distances; the host filters).
+/// points and normals; the host filters).
 #[test]
 fn moving_camera_through_sponza_on_the_gpu() {
     let mut scene = load_scene(&shared("dabrovic-sponza/sponza.obj")).expect("shared Sponza");
