@@ -27,6 +27,7 @@ declare -A CONFIGS=(
   [cascades-3-ratio-1.5]="--cascades 3 --probes 16,8,16 --cascade-ratio 1.5"
   [cascades-3-ratio-1.5-seed2]="--cascades 3 --probes 16,8,16 --cascade-ratio 1.5 --seed 2"
   [cascades-3-screen]="--cascades 3 --probes 16,8,16 --set probe_states=screen"
+  [cascades-3-jcgt]="--cascades 3 --probes 16,8,16 --set probe_states=jcgt"
   [cascades-3-ratio-2]="--cascades 3 --probes 16,8,16 --cascade-ratio 2"
   [cascades-3-fit-cells]="--cascades 3 --probes 16,8,16 --set probe_spacing_m=[0.96722,0.92,0.43333]"
   [fitted-16x8x16-all-active]="--probes 16,8,16 --set probe_states=all-active"

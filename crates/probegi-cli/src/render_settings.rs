@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
 use probegi_core::camera::CameraRays;
-use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
+use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::sh_settings::ShProbeSettings;
 use probegi_cpu::DirectSettings;
 use probegi_cpu::frame_loop::{GiMethod, RenderSettings, TemporalSettings};
@@ -112,7 +112,17 @@ pub fn ddgi_method(scene: &Scene, args: &VolumeArgs) -> Result<GiMethod> {
         if !(1.0..=16.0).contains(&r) {
             bail!("--cascade-ratio {r}: must be in [1, 16]");
         }
-        let mut base = volume_settings(scene, args)?;
+        // Camera-centred cascades update the probes the camera's pixels read
+        // (the screen scheme, Timberdoodle PGI's request countdowns) unless a
+        // scene file names states other than jcgt or `--set` names any: it renders what
+        // all-active probes render at a quarter of their rays, where seed
+        // 003's jcgt states cost 0.016, and its cost follows the view, not
+        // the world (docs/RESULTS.md, "Denser is better").
+        let mut file = scene.volume.clone().unwrap_or_default();
+        if file.probe_states == ProbeStatesMode::Jcgt {
+            file.probe_states = ProbeStatesMode::Screen;
+        }
+        let mut base = apply_volume_args(file, args)?;
         let (lo, hi) = scene.bounds().unwrap_or((glam::Vec3::splat(-1.0), glam::Vec3::ONE));
         // Every window stays inside the scene bounds (where it is smaller than
         // them), so no cascade spends probes outside the scene.

@@ -418,6 +418,9 @@ fn cascades_volumes_and_a_keyframed_camera_from_the_command_line() {
     let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
     assert_eq!(json["volumes"], 2);
     assert_eq!(json["probes"], 54);
+    // Camera-centred cascades update by the screen scheme unless told otherwise.
+    let states = json["probe_states"].as_object().expect("states");
+    assert!(states.keys().all(|k| k == "requested" || k == "idle"), "{states:?}");
     let split: Vec<u64> =
         json["batch_rays_per_volume"].as_array().expect("split").iter().map(|v| v.as_u64().expect("n")).collect();
     assert_eq!(split.iter().sum::<u64>(), json["batch_rays"].as_u64().expect("batch"));
