@@ -43,22 +43,15 @@ fn window_never_shows_a_stale_probe(keep_field: bool) {
     assert!(gpu.shades());
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let bounds = scene.bounds().expect("bounds");
-    let base = DdgiVolumeSettings {
-        probe_rays_per_probe: 256,
-        probe_states: ProbeStatesMode::AllActive,
-        probe_relocation: false,
-        probe_spacing_m: Some(Vec3::ONE),
-        probe_origin_m: Some(Vec3::new(0.0, 0.5, -1.0)),
-        ..Default::default()
-    };
+    let window = DdgiVolumeSettings { probe_rays_per_probe: 256, ..scrolling_window() };
     // The reference: a fixed volume over the corridor on the same lattice, CPU, converged.
-    let fixed_settings = DdgiVolumeSettings { probe_counts: UVec3::new(41, 3, 3), ..base.clone() };
+    let fixed_settings =
+        DdgiVolumeSettings { probe_counts: UVec3::new(41, 3, 3), volume_tracks_camera: false, ..window.clone() };
     let mut fixed = DdgiFieldSet::new(&DdgiFieldSetSettings::single(fixed_settings), bounds, None);
     let mut ms = Default::default();
     for f in 0..40 {
         fixed.update(&scene, &bvh, &direct, 1, f, &mut ms);
     }
-    let window = DdgiVolumeSettings { probe_counts: UVec3::new(7, 3, 3), volume_tracks_camera: true, ..base };
     let start = Vec3::new(8.0, 1.5, 0.0);
     let mut set = DdgiFieldSet::new(&DdgiFieldSetSettings::single(window), bounds, Some(start));
     for f in 0..40 {
@@ -95,7 +88,7 @@ fn host_and_device_blend(scene: &probegi_scene::Scene, bvh: &BvhTracer) -> Optio
 }
 
 /// A 7×3×3 tracking window, 1 m apart, off the ground plane, all probes
-/// active, no relocation: the two tests below vary one setting of it.
+/// active, no relocation: every test here varies one or two settings of it.
 fn scrolling_window() -> DdgiVolumeSettings {
     DdgiVolumeSettings {
         probe_counts: UVec3::new(7, 3, 3),
