@@ -47,7 +47,7 @@ fn hostile_batch(rng: &mut Pcg32, inside: Vec3, n: usize) -> ProbeRayBatch {
 }
 
 /// The CPU's answers and the GPU's through the seam, from a worker thread
-/// that must finish within `secs`.
+/// that must finish within `secs` (its device dropped before it answers).
 /// Per ray, the closest hit or `None` for a miss.
 type Hits = Vec<Option<RayHit>>;
 
@@ -66,6 +66,10 @@ fn trace_both(scene: Scene, batch: ProbeRayBatch, secs: u64) -> Option<(Hits, Hi
         let cpu: Hits = rays.map(|r| bvh.closest_hit(&r)).collect();
         let mut hits = vec![];
         gpu.closest_hits(&batch, false, &mut hits).expect("GPU trace");
+        // The device is torn down before the answer goes out: a device still
+        // being destroyed on this thread while the test process exits
+        // corrupted the heap under lavapipe ("corrupted size vs. prev_size").
+        drop(gpu);
         let _ = tx.send(Some((cpu, hits)));
     });
     rx.recv_timeout(Duration::from_secs(secs)).unwrap_or_else(|_| panic!("a hostile batch did not finish in {secs} s"))
