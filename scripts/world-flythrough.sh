@@ -51,7 +51,6 @@ declare -A CONFIGS=(
   [items-2-4-temporal-off]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-frames 0"
   [items-2-4-unclamped]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-clip-sigma 0"
   [items-2-4-t2]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-frames 2"
-  [items-2-4-t4]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-frames 4"
   [items-2-4-t8]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-frames 8"
   [items-2-4-t8-unclamped]="--set probe_states=screen --set volume_edge_buffer_planes=2 --set probe_seeding=true --temporal-frames 8 --temporal-clip-sigma 0"
   [ramp]="--set probe_hysteresis_ramp=true"

@@ -1,5 +1,7 @@
 //! The command-line contract: outputs, JSON keys, and clear non-zero exits on bad input.
 
+mod common;
+
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
@@ -7,18 +9,8 @@ fn probegi(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_probegi")).args(args).output().expect("spawn probegi")
 }
 
-/// This test process's scratch folder, emptied at its first use: a folder
-/// left by an earlier run whose process had the same id would otherwise hold
-/// outputs that checks of "nothing written" find.
 fn tmp(name: &str) -> PathBuf {
-    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
-    let dir = DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("probegi-cli-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("mkdir");
-        dir
-    });
-    dir.join(name)
+    common::scratch("probegi-cli", name)
 }
 
 fn stderr(o: &Output) -> String {

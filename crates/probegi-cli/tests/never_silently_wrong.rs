@@ -3,6 +3,8 @@
 //! keyframe paths validated at load; moving geometry bounded before a render;
 //! outputs checked before a render and nothing left behind when one fails.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -10,18 +12,8 @@ fn probegi(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_probegi")).args(args).output().expect("spawn probegi")
 }
 
-/// This test process's scratch folder, emptied at its first use: a folder
-/// left by an earlier run whose process had the same id would otherwise hold
-/// outputs that checks of "nothing written" find.
 fn tmp(name: &str) -> PathBuf {
-    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
-    let dir = DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("probegi-nsw-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("mkdir");
-        dir
-    });
-    dir.join(name)
+    common::scratch("probegi-nsw", name)
 }
 
 fn s(p: &Path) -> String {

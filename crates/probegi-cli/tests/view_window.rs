@@ -5,21 +5,13 @@
 //! window that is neither black nor the clear colour. Without `xvfb-run` the
 //! test skips with a warning, unless `PROBEGI_REQUIRE_DISPLAY=1`.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// This test process's scratch folder, emptied at its first use: a folder
-/// left by an earlier run whose process had the same id would otherwise hold
-/// outputs that checks of "nothing written" find.
 fn tmp(name: &str) -> PathBuf {
-    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
-    let dir = DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("probegi-view-window-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("mkdir");
-        dir
-    });
-    dir.join(name)
+    common::scratch("probegi-view-window", name)
 }
 
 fn script() -> String {

@@ -505,8 +505,8 @@ impl<'a> FrameLoop<'a> {
         let (gbuffer, rays) = trace_gbuffer(scene, tracer, camera, settings.width, settings.height, f, settings.seed);
         *self.pass_totals.entry("gbuffer").or_default() += t.elapsed().as_secs_f64() * 1e3;
         self.stats.rays_traced += rays;
-        let surfaces = self.acc.frame_position_m.iter_mut().zip(self.acc.frame_normal.iter_mut());
-        for ((x, n), texel) in surfaces.zip(&gbuffer.texels) {
+        let hits = self.acc.frame_position_m.iter_mut().zip(self.acc.frame_normal.iter_mut());
+        for ((x, n), texel) in hits.zip(&gbuffer.texels) {
             let sp = texel.surface.as_ref();
             *x = sp.map_or(Vec3::ZERO, |sp| sp.position);
             *n = sp.map_or(Vec3::ZERO, |sp| sp.facing_geometric_normal());
