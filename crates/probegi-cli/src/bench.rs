@@ -67,6 +67,7 @@ fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
             camera_path: Vec::new(),
             probe_tracer: None,
             temporal: Default::default(),
+            device_readback_lag_frames: 0,
         };
         render_frames(&scene, &bvh, &camera, &settings, |_, _| {}).stats
     };
@@ -127,7 +128,9 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
     let gpu = match args.backend {
         crate::gpu_backend::Backend::Cpu => None,
-        crate::gpu_backend::Backend::Wgpu => Some(crate::gpu_backend::wgpu_probe_tracer(&scene, &bvh)?),
+        crate::gpu_backend::Backend::Wgpu => {
+            Some(crate::gpu_backend::wgpu_probe_tracer(&scene, &bvh)?.timing_passes(true))
+        }
     };
     let batch_tracer = gpu.as_ref().map(|g| g as &dyn probegi_field::ProbeBatchTracer);
     let sweep = DdgiSweep { args, scene: &scene, bvh: &bvh, direct: &direct, bounds, gpu: gpu.as_ref(), batch_tracer };

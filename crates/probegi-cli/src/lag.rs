@@ -100,6 +100,7 @@ fn render_sequence(
         camera_path: Vec::new(),
         probe_tracer: None,
         temporal: Default::default(),
+        device_readback_lag_frames: 0,
     };
     let mut out = vec![];
     render_frames(scene, &bvh, &rays, &settings, |f, image| {

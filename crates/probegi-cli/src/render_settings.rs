@@ -51,6 +51,8 @@ pub fn render_settings(
             temporal_history_frames: args.temporal_frames,
             temporal_clip_sigma: args.temporal_clip_sigma,
         },
+        // `render` takes each frame's statistics as it ends (the viewer sets its own lag).
+        device_readback_lag_frames: 0,
     }
 }
 

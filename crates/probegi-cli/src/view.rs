@@ -76,7 +76,8 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let gpu = crate::gpu_backend::render_probe_tracer(args.backend, &gi, &scene, &bvh)?;
     let adapter = gpu.as_ref().map(|g| g.adapter_name().to_string());
-    let settings = crate::render_settings::render_settings(&render, &scene, gi, gpu);
+    let mut settings = crate::render_settings::render_settings(&render, &scene, gi, gpu);
+    settings.device_readback_lag_frames = probegi_view::view_session::VIEWER_READBACK_LAG_FRAMES;
     let diagonal = scene.bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
     // A keyframed camera plays (as in `render`) unless a --camera-* flag fixes it.
     let s = &args.scene;
@@ -93,10 +94,12 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let mut written: Result<()> = Ok(());
-    let out = run_scripted(&scene, &bvh, &camera, &settings, &run, |f, image| {
+    let out = run_scripted(&scene, &bvh, &camera, &settings, &run, |f, session| {
         if let (Some(dir), Ok(())) = (&args.sequence, &written) {
-            written = write_radiance(&dir.join(format!("frame-{f:04}.png")), image);
+            let image = session.image()?;
+            written = write_radiance(&dir.join(format!("frame-{f:04}.png")), &image);
         }
+        Ok(())
     })
     .map_err(anyhow::Error::msg)?;
     written?;
@@ -122,12 +125,14 @@ pub fn run(args: &ViewArgs) -> Result<()> {
 /// the field update and the camera frame take on average.
 fn bench_report(scene: &str, adapter: Option<String>, out: &ScriptedOutput) -> serde_json::Value {
     let [median, p95, max] = frame_time_percentiles(&out.frame_ms);
+    let [host_median, host_p95, host_max] = frame_time_percentiles(&out.host_ms);
     let stats = &out.render.stats;
     serde_json::json!({
         "scene": scene,
         "adapter": adapter,
         "frames": out.frame_ms.len(),
         "frame_ms": { "median": median, "p95": p95, "max": max },
+        "host_ms": { "median": host_median, "p95": host_p95, "max": host_max },
         "field_update_ms": stats.field_update_ms,
         "camera_ms": stats.pass_ms.get("camera"),
         "rays_per_frame": stats.rays_per_frame,
@@ -247,7 +252,8 @@ impl CliViewSource {
         let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
         let gpu = crate::gpu_backend::render_probe_tracer(args.backend, &gi, &scene, &bvh)?;
         let adapter = gpu.as_ref().map(|g| g.adapter_name().to_string());
-        let settings = crate::render_settings::render_settings(&render, &scene, gi, gpu);
+        let mut settings = crate::render_settings::render_settings(&render, &scene, gi, gpu);
+        settings.device_readback_lag_frames = probegi_view::view_session::VIEWER_READBACK_LAG_FRAMES;
         let diagonal = scene.bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
         let s = &args.scene;
         let fixed = s.camera_pos.is_some() || s.camera_target.is_some() || s.fov_y.is_some();

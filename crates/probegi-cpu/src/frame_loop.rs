@@ -19,9 +19,10 @@
 
 mod accumulation;
 mod camera_pass;
+mod device_resident;
 mod frame_stepper;
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::ops::ControlFlow::{self, Break, Continue};
 use std::time::Instant;
 
@@ -88,6 +89,13 @@ pub struct RenderSettings {
     /// The temporal filter of a moving camera (default [`TemporalSettings::default`],
     /// the CLI's `--temporal-frames` and `--temporal-clip-sigma`).
     pub temporal: TemporalSettings,
+    /// Where a `probe_tracer` keeps the camera frame on its device
+    /// ([`probegi_field::DeviceFrame`]): how many frames late its statistics
+    /// (means, unlit and non-finite counts, the screen scheme's requests) may
+    /// come back. 0 (the default, `probegi render`) waits for each frame's, so
+    /// that the bookkeeping is the CPU's frame for frame; the viewer takes 2
+    /// and never waits while the device keeps up.
+    pub device_readback_lag_frames: u32,
 }
 
 impl Default for RenderSettings {
@@ -105,6 +113,7 @@ impl Default for RenderSettings {
             camera_path: Vec::new(),
             probe_tracer: None,
             temporal: TemporalSettings::default(),
+            device_readback_lag_frames: 0,
         }
     }
 }
@@ -305,6 +314,11 @@ struct FrameLoop<'a> {
     detector: SceneChangeDetector,
     /// The camera of the last frame rendered (a different one restarts the direct term).
     prev_camera: Option<CameraRays>,
+    /// The frames a device kept the camera frame of (`device_frame`) whose
+    /// statistics have not come back yet: (frame, the scene had light sources).
+    device_pending: VecDeque<(u32, bool)>,
+    /// The last frame's image lives on the device, not in `acc`.
+    device_image: bool,
 }
 
 impl<'a> FrameLoop<'a> {
@@ -343,6 +357,8 @@ impl<'a> FrameLoop<'a> {
             last_gbuffer: None,
             detector: SceneChangeDetector::new(),
             prev_camera: None,
+            device_pending: VecDeque::new(),
+            device_image: false,
         }
     }
 
@@ -443,6 +459,12 @@ impl<'a> FrameLoop<'a> {
         let (Some(h), Some(set), false) = (&settings.probe_tracer, self.field.as_ref(), settings.show_probes) else {
             return None;
         };
+        if h.0.device_frame().is_some() {
+            let handle = h.clone();
+            let df = handle.0.device_frame()?;
+            return Some(self.camera_image_kept_on_device(df, frame, on_frame_done));
+        }
+        self.device_image = false;
         let t = Instant::now();
         let second_order = set.volumes().iter().any(|v| v.settings.glossy_second_order);
         let view = set.view();
@@ -500,6 +522,7 @@ impl<'a> FrameLoop<'a> {
         on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
     ) -> ControlFlow<()> {
         let Frame { index: f, scene, tracer, direct, camera } = *frame;
+        self.device_image = false;
         let settings = &self.settings;
         let t = Instant::now();
         let (gbuffer, rays) = trace_gbuffer(scene, tracer, camera, settings.width, settings.height, f, settings.seed);
@@ -581,6 +604,8 @@ impl<'a> FrameLoop<'a> {
     /// After the last frame: the field back on the host, the statistics, the
     /// composed image (with `show_probes`, the probes drawn on it).
     fn finish(mut self) -> RenderOutput {
+        self.drain_device_readouts();
+        let device_image = self.device_layer(probegi_field::FrameLayer::Full);
         let settings = &self.settings;
         // The field as the render leaves it, on the host (a device may hold it).
         if let Some(set) = self.field.as_mut()
@@ -601,7 +626,14 @@ impl<'a> FrameLoop<'a> {
             stats.probes = Some(p.cascades.probe_count());
             stats.field_update_ms = Some(SH_UPDATE_PASSES.iter().filter_map(|k| stats.pass_ms.get(k)).sum());
         }
-        let mut pixels = acc.pixels();
+        let mut pixels = match device_image {
+            Some(Ok(image)) => image.pixels,
+            Some(Err(e)) => {
+                stats.error.get_or_insert(e);
+                vec![Vec3::ZERO; acc.len()]
+            }
+            None => acc.pixels(),
+        };
         if let (true, Some(set), Some(g)) = (settings.show_probes, &field, &last_gbuffer) {
             for v in set.volumes() {
                 crate::probe_vis::draw_probes(v, &last_camera, g, &mut pixels);

@@ -124,6 +124,20 @@ pub trait ProbeBatchTracer: Sync {
     fn device_field(&self) -> Option<&dyn DeviceField> {
         None
     }
+
+    /// Wall milliseconds the host has spent blocked waiting for this tracer's
+    /// device so far (`None`: it keeps no count); a benchmark's frame time
+    /// less the difference is the host's share of the frame.
+    fn device_wait_ms(&self) -> Option<f64> {
+        None
+    }
+
+    /// The camera frame kept on the device, start to finish
+    /// ([`crate::device_frame`]), when this tracer renders it there; the
+    /// frame loop then reads no pixels back but those it is asked for.
+    fn device_frame(&self) -> Option<&dyn crate::device_frame::DeviceFrame> {
+        None
+    }
 }
 
 /// Where a camera frame writes, per pixel, row-major

@@ -19,7 +19,9 @@
 //! - [`ray_budget`]: which probes trace under a per-frame ray budget;
 //! - [`backend`]: the traits a backend implements ([`ProbeBatchTracer`] for
 //!   trace and shade, [`DeviceField`] for the field-resident passes) and their
-//!   typed error.
+//!   typed error;
+//! - [`device_frame`]: the interface of a camera frame that stays on its
+//!   device ([`DeviceFrame`]).
 //!
 //! Depends on `probegi-core` (maths, layouts, settings) and `probegi-scene`
 //! (the backend trait hands hits as the scene's `RayHit` and poses the scene).
@@ -30,6 +32,7 @@ pub mod atlas_view;
 pub mod backend;
 pub mod ddgi_field_set;
 pub mod ddgi_volume;
+pub mod device_frame;
 pub mod device_plans;
 pub mod probe_ray_gen;
 pub mod probe_seeding;
@@ -39,5 +42,6 @@ pub mod seam;
 pub use backend::{BackendError, CameraFrameOut, DeviceField, ProbeBatchTracer, ProbeTracerHandle};
 pub use ddgi_field_set::DdgiFieldSet;
 pub use ddgi_volume::{DdgiVolume, SceneEvent};
+pub use device_frame::{DeviceFrame, DeviceFrameInput, DeviceFrameReadout, FrameHistory, FrameLayer};
 pub use device_plans::DeviceBlendOutput;
 pub use seam::{ProbeRayBatch, ProbeRayHit, SeamError, UpdateStep};

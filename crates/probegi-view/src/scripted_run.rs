@@ -42,6 +42,9 @@ pub struct ScriptedOutput {
     pub render: RenderOutput,
     /// Wall milliseconds of each frame (input, field update, camera frame).
     pub frame_ms: Vec<f64>,
+    /// Of each frame's, the milliseconds the host did not spend blocked on
+    /// the device (`ProbeBatchTracer::device_wait_ms`; the whole frame on the CPU).
+    pub host_ms: Vec<f64>,
 }
 
 /// Median, 95th percentile and largest of `ms` (nearest rank; zeros when empty).
@@ -57,33 +60,36 @@ pub fn frame_time_percentiles(ms: &[f64]) -> [f64; 3] {
 
 /// Runs `run` over `scene` with `settings` (size, seed, GI, probe tracer; its
 /// `frames` and `camera_path` are not read), the fly camera starting at
-/// `camera`; `on_frame` sees each frame's image. An error names the frame and
-/// the pass that failed.
+/// `camera`; `on_frame` sees each frame's session, and reads its image only
+/// if it needs it (`ViewSession::image`: a device that keeps the frame reads
+/// nothing back otherwise). An error names the frame and the pass that failed.
 pub fn run_scripted(
     scene: &Scene,
     tracer: &dyn RayTracer,
     camera: &Camera,
     settings: &RenderSettings,
     run: &ScriptedRun<'_>,
-    mut on_frame: impl FnMut(u32, &Image),
+    mut on_frame: impl FnMut(u32, &ViewSession<'_>) -> Result<(), String>,
 ) -> Result<ScriptedOutput, String> {
     let mut session = ViewSession::new(scene, tracer, camera, settings, run.fly_speed_m_per_s, run.camera_path.clone());
     let mut events = run.script.events.iter().peekable();
-    let mut last = None;
-    let mut frame_ms = Vec::with_capacity(run.frames as usize);
-    for f in 0..run.frames.max(1) {
-        let t = std::time::Instant::now();
+    let frames = run.frames.max(1) as usize;
+    let (mut frame_ms, mut host_ms) = (Vec::with_capacity(frames), Vec::with_capacity(frames));
+    let waited_ms = || settings.probe_tracer.as_ref().and_then(|h| h.0.device_wait_ms()).unwrap_or(0.0);
+    for f in 0..frames as u32 {
+        let (t, waited) = (std::time::Instant::now(), waited_ms());
         while let Some((_, e)) = events.next_if(|(at, _)| *at <= f) {
             session.apply(*e);
         }
-        let image = session.frame(run.frame_dt_s)?;
-        frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        on_frame(f, &image);
-        last = Some(image);
+        session.advance(run.frame_dt_s)?;
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        frame_ms.push(ms);
+        host_ms.push((ms - (waited_ms() - waited)).max(0.0));
+        on_frame(f, &session)?;
     }
-    let image = last.ok_or("no frame ran")?;
+    let image = session.image()?;
     let (render, camera) = session.finish();
-    Ok(ScriptedOutput { image, camera, render, frame_ms })
+    Ok(ScriptedOutput { image, camera, render, frame_ms, host_ms })
 }
 
 #[cfg(test)]

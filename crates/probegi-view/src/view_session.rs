@@ -17,6 +17,11 @@ use probegi_scene::{RayTracer, Scene};
 use crate::fly_camera::{FlyCamera, FlyInput};
 use crate::input_script::{InputState, ScriptEvent};
 
+/// Frames late the viewer takes a device frame's statistics
+/// (`RenderSettings::device_readback_lag_frames`): with two frames in flight
+/// the host never waits for the device while it keeps up.
+pub const VIEWER_READBACK_LAG_FRAMES: u32 = 2;
+
 /// The viewer's per-frame state over a [`FrameStepper`].
 pub struct ViewSession<'a> {
     stepper: FrameStepper<'a>,
@@ -118,6 +123,26 @@ impl<'a> ViewSession<'a> {
         }
         self.last_camera = camera;
         Ok(image)
+    }
+
+    /// [`Self::frame`] without the image: a device that keeps the frame
+    /// reads nothing back ([`Self::image`] reads it when needed).
+    pub fn advance(&mut self, dt_s: f32) -> Result<(), String> {
+        let camera = self.next_camera(dt_s);
+        self.stepper.set_scene_frame(Some(self.scene_frame));
+        self.stepper.advance(&CameraRays::new(&camera, self.size.0, self.size.1))?;
+        self.last_scene_frame = self.scene_frame;
+        let step = std::mem::take(&mut self.step_once);
+        if !self.paused || step {
+            self.scene_frame += 1;
+        }
+        self.last_camera = camera;
+        Ok(())
+    }
+
+    /// The last frame's image (read back where a device keeps it).
+    pub fn image(&self) -> Result<Image, String> {
+        self.stepper.image()
     }
 
     /// The camera of the next frame (see the module docs).

@@ -50,7 +50,7 @@ fn view(scene: &Scene, bvh: &BvhTracer, s: &RenderSettings, script: &InputScript
         fly_speed_m_per_s: 1.0,
         camera_path: scene.camera_path(FRAMES),
     };
-    let out = run_scripted(scene, bvh, &camera, s, &run, |_, _| {}).expect("scripted run");
+    let out = run_scripted(scene, bvh, &camera, s, &run, |_, _| Ok(())).expect("scripted run");
     assert!(out.render.stats.error.is_none(), "{:?}", out.render.stats.error);
     (out.image, out.camera.position_m)
 }

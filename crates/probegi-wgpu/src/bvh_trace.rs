@@ -600,7 +600,7 @@ impl GpuRayTrace {
             }
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             self.record(&mut encoder, bvh, &batch, None);
-            ctx.queue.submit([encoder.finish()]);
+            ctx.submit(encoder.finish());
             out.extend(self.download(ctx, &batch)?);
         }
         Ok(out)

@@ -116,8 +116,65 @@ impl GpuCameraPass {
         Ok(Self { layout, pipeline })
     }
 
+    /// The uniform block of frame `f` (an error where the rays' size is not the frame's).
+    pub(crate) fn params(f: &CameraFrame<'_>, shadow_field: bool) -> Result<CameraParams, GpuError> {
+        let ([forward, right, up], [tan, aspect, w, h]) = f.camera.basis();
+        if w as u32 != f.width || h as u32 != f.height {
+            return Err(GpuError::Input(format!("camera rays for {w}×{h}, frame of {}×{}", f.width, f.height)));
+        }
+        let o = f.camera.origin_world;
+        Ok(CameraParams {
+            origin: [o.x, o.y, o.z, tan],
+            forward: forward.extend(aspect).into(),
+            right: right.extend(w).into(),
+            up: up.extend(h).into(),
+            info: [
+                f.frame,
+                f.seed,
+                f.area_samples,
+                f.second_order as u32 | (shadow_field as u32) << 1 | ((f.request_words > 0) as u32) << 2,
+            ],
+            sky: f.sky_radiance.extend(0.0).into(),
+        })
+    }
+
+    /// Records the pass of frame `f` into `encoder`, writing `targets`
+    /// (its uniform block already written to `targets.params`).
+    pub(crate) fn record(
+        &self,
+        ctx: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        (bvh, field, scene): (&GpuBvh, &GpuDdgiField, &GpuScene),
+        f: &CameraFrame<'_>,
+        targets: &CameraTargets<'_>,
+        timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
+    ) {
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("camera frame"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: targets.params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: targets.direct.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: targets.irradiance.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: targets.requests.as_entire_binding() },
+            ],
+        });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("camera frame"),
+            timestamp_writes: timestamps,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(PASS_GROUP, &bind_group, &[]);
+        pass.set_bind_group(BVH_GROUP, bvh.bind_group(), &[]);
+        pass.set_bind_group(FIELD_GROUP, field.bind_group(), &[]);
+        pass.set_bind_group(SCENE_GROUP, scene.bind_group(), &[]);
+        pass.dispatch_workgroups(f.width.div_ceil(8), f.height.div_ceil(8), 1);
+    }
+
     /// The frame's direct and indirect terms, row-major, and (surface pixels with
-    /// a diffuse albedo, those of them the field left unlit).
+    /// a diffuse albedo, those of them the field left unlit), read back: the
+    /// host path (`ProbeBatchTracer::camera_frame`) and the equivalence tests.
+    /// The device-resident frame (`device_frame`) records the same pass instead.
     pub fn render(
         &self,
         ctx: &GpuContext,
@@ -130,24 +187,7 @@ impl GpuCameraPass {
         if n == 0 {
             return Ok(CameraImage::default());
         }
-        let ([forward, right, up], [tan, aspect, w, h]) = f.camera.basis();
-        if w as u32 != f.width || h as u32 != f.height {
-            return Err(GpuError::Input(format!("camera rays for {w}×{h}, frame of {}×{}", f.width, f.height)));
-        }
-        let o = f.camera.origin_world;
-        let params = CameraParams {
-            origin: [o.x, o.y, o.z, tan],
-            forward: forward.extend(aspect).into(),
-            right: right.extend(w).into(),
-            up: up.extend(h).into(),
-            info: [
-                f.frame,
-                f.seed,
-                f.area_samples,
-                f.second_order as u32 | (field.shadow_field as u32) << 1 | ((f.request_words > 0) as u32) << 2,
-            ],
-            sky: f.sky_radiance.extend(0.0).into(),
-        };
+        let params = Self::params(f, field.shadow_field)?;
         let device = &ctx.device;
         let params = ctx.buffer_with("camera params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let image = |label, texels_per_pixel: u64| -> Result<wgpu::Buffer, GpuError> {
@@ -170,27 +210,10 @@ impl GpuCameraPass {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("camera frame"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: direct.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: irradiance.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: requests.as_entire_binding() },
-            ],
-        });
+        let targets = CameraTargets { params: &params, direct: &direct, irradiance: &irradiance, requests: &requests };
         let mut encoder = device.create_command_encoder(&Default::default());
-        {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(PASS_GROUP, &bind_group, &[]);
-            pass.set_bind_group(BVH_GROUP, bvh.bind_group(), &[]);
-            pass.set_bind_group(FIELD_GROUP, field.bind_group(), &[]);
-            pass.set_bind_group(SCENE_GROUP, scene.bind_group(), &[]);
-            pass.dispatch_workgroups(f.width.div_ceil(8), f.height.div_ceil(8), 1);
-        }
-        ctx.queue.submit([encoder.finish()]);
+        self.record(ctx, &mut encoder, (bvh, field, scene), f, &targets, None);
+        ctx.submit(encoder.finish());
         let read = |b: &wgpu::Buffer| -> Result<Vec<[f32; 4]>, GpuError> {
             let bytes = ctx.read_back(b)?;
             Ok(bytemuck::cast_slice::<u8, [f32; 4]>(&bytes).to_vec())
@@ -202,17 +225,27 @@ impl GpuCameraPass {
             Vec::new()
         };
         let v3 = |t: &[f32; 4]| Vec3::new(t[0], t[1], t[2]);
+        let flags = |t: &[f32; 4]| (t[3] + 0.5) as u32 & 3;
         Ok(CameraImage {
             direct: d.iter().step_by(3).map(v3).collect(),
             albedo: d.iter().skip(1).step_by(3).map(v3).collect(),
             position_m: d.iter().skip(2).step_by(3).map(v3).collect(),
             normal: d.chunks_exact(3).map(camera_normal).collect(),
             irradiance_over_pi: i.iter().map(v3).collect(),
-            surfaces: i.iter().filter(|t| t[3] > 0.5).count(),
-            unlit: i.iter().filter(|t| t[3] > 1.5).count(),
+            surfaces: i.iter().filter(|t| flags(t) != 0).count(),
+            unlit: i.iter().filter(|t| flags(t) == 2).count(),
             requests,
         })
     }
+}
+
+/// Where the camera pass writes: its uniform block, `camera_direct` (three
+/// texels a pixel), `camera_irradiance` (one) and the request bitset.
+pub(crate) struct CameraTargets<'a> {
+    pub(crate) params: &'a wgpu::Buffer,
+    pub(crate) direct: &'a wgpu::Buffer,
+    pub(crate) irradiance: &'a wgpu::Buffer,
+    pub(crate) requests: &'a wgpu::Buffer,
 }
 
 /// A pixel's normal from its three `camera_direct` texels: the octahedral

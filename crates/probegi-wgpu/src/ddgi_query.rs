@@ -473,7 +473,7 @@ impl GpuFieldQuery {
             pass.set_bind_group(FIELD_GROUP, field.bind_group(), &[]);
             pass.dispatch_workgroups(groups_x, groups_y, 1);
         }
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit(encoder.finish());
         let bytes = ctx.read_back(&output)?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
         Ok(v.iter().map(|e| Vec3::new(e[0], e[1], e[2])).collect())

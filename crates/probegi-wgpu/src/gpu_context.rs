@@ -53,11 +53,46 @@ pub struct GpuContext {
 
 /// Bytes uploaded (buffers made from host data, queue writes) and read back,
 /// counted where every pass moves them: [`GpuContext::buffer_with`],
-/// [`GpuContext::write_buffer`] and [`GpuContext::read_buffer`].
+/// [`GpuContext::write_buffer`] and [`GpuContext::read_buffer`]; and the
+/// submissions ([`GpuContext::submit`]) and blocking waits
+/// ([`GpuContext::wait`], every blocking read-back) with the time spent in them.
 #[derive(Debug, Default)]
 struct TransferCounts {
     up: std::sync::atomic::AtomicU64,
     down: std::sync::atomic::AtomicU64,
+    submissions: std::sync::atomic::AtomicU64,
+    waits: std::sync::atomic::AtomicU64,
+    wait_ns: std::sync::atomic::AtomicU64,
+}
+
+/// What a [`GpuContext`] has done so far (differences between two readings
+/// give a frame's): counts, not timings, so a test may hold them, except
+/// `wait_ms`, the host's wall time blocked in waits (a benchmark's host share).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GpuCounters {
+    /// Command submissions to the queue.
+    pub submissions: u64,
+    /// Times the host blocked until the device finished (waits and blocking read-backs).
+    pub blocking_waits: u64,
+    /// Bytes uploaded (buffers made from host data, queue writes).
+    pub bytes_up: u64,
+    /// Bytes read back to the host.
+    pub bytes_down: u64,
+    /// Wall milliseconds the host spent blocked in those waits.
+    pub wait_ms: f64,
+}
+
+impl std::ops::Sub for GpuCounters {
+    type Output = GpuCounters;
+    fn sub(self, o: GpuCounters) -> GpuCounters {
+        GpuCounters {
+            submissions: self.submissions - o.submissions,
+            blocking_waits: self.blocking_waits - o.blocking_waits,
+            bytes_up: self.bytes_up - o.bytes_up,
+            bytes_down: self.bytes_down - o.bytes_down,
+            wait_ms: self.wait_ms - o.wait_ms,
+        }
+    }
 }
 
 /// One compute pass of [`GpuContext::run_passes`]: the pipeline, its bind groups
@@ -194,6 +229,40 @@ impl GpuContext {
         (self.transfers.up.load(Relaxed), self.transfers.down.load(Relaxed))
     }
 
+    /// Submissions, blocking waits and bytes moved so far ([`GpuCounters`]).
+    pub fn counters(&self) -> GpuCounters {
+        use std::sync::atomic::Ordering::Relaxed;
+        let t = &self.transfers;
+        GpuCounters {
+            submissions: t.submissions.load(Relaxed),
+            blocking_waits: t.waits.load(Relaxed),
+            bytes_up: t.up.load(Relaxed),
+            bytes_down: t.down.load(Relaxed),
+            wait_ms: t.wait_ns.load(Relaxed) as f64 * 1e-6,
+        }
+    }
+
+    /// Submits one command buffer (counted).
+    pub fn submit(&self, commands: wgpu::CommandBuffer) {
+        self.transfers.submissions.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.queue.submit([commands]);
+    }
+
+    /// Blocks until every submitted command has run (counted, and timed).
+    fn blocking_poll(&self) -> Result<(), String> {
+        use std::sync::atomic::Ordering::Relaxed;
+        let t = std::time::Instant::now();
+        let r = self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| e.to_string());
+        self.transfers.waits.fetch_add(1, Relaxed);
+        self.transfers.wait_ns.fetch_add(t.elapsed().as_nanos() as u64, Relaxed);
+        r
+    }
+
+    /// Counts `bytes` as read back (a caller that maps a staging buffer itself).
+    pub(crate) fn count_read_back(&self, bytes: u64) {
+        self.transfers.down.fetch_add(bytes, std::sync::atomic::Ordering::Relaxed);
+    }
+
     /// A buffer holding `contents` (counted as uploaded).
     pub(crate) fn buffer_with(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
         self.transfers.up.fetch_add(contents.len() as u64, std::sync::atomic::Ordering::Relaxed);
@@ -232,12 +301,12 @@ impl GpuContext {
             }
             pass.dispatch_workgroups(*x, *y, 1);
         }
-        self.queue.submit([encoder.finish()]);
+        self.submit(encoder.finish());
     }
 
-    /// Waits until every submitted command has run.
+    /// Waits until every submitted command has run (a blocking wait, counted).
     pub fn wait(&self) -> Result<(), GpuError> {
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Device(e.to_string()))
+        self.blocking_poll().map_err(GpuError::Device)
     }
 
     /// Copies a `COPY_SRC` buffer into a staging buffer and reads it back.
@@ -250,7 +319,7 @@ impl GpuContext {
         });
         let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, buffer.size());
-        self.queue.submit([encoder.finish()]);
+        self.submit(encoder.finish());
         self.read_buffer(&staging)
     }
 
@@ -264,7 +333,7 @@ impl GpuContext {
         });
         let mut encoder = self.device.create_command_encoder(&Default::default());
         encoder.copy_buffer_to_buffer(buffer, offset, &staging, 0, bytes);
-        self.queue.submit([encoder.finish()]);
+        self.submit(encoder.finish());
         let mut out = self.read_buffer(&staging)?;
         out.truncate(bytes as usize);
         Ok(out)
@@ -277,7 +346,7 @@ impl GpuContext {
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        self.blocking_poll().map_err(GpuError::Readback)?;
         rx.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
         let bytes = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?.to_vec();
         buffer.unmap();

@@ -7,6 +7,9 @@
 //!   inside the traversal; also over a caller's own triangle soup;
 //! - [`camera_frame`]: the camera frame (primary rays, direct light, glossy
 //!   rays, the field query);
+//! - [`device_frame`]: the camera frame kept on the device start to finish
+//!   (accumulation, the temporal filter, composition, tone mapping and the
+//!   frame's statistics), one submission a frame, statistics read late;
 //! - [`ddgi_query`]: the query of a set of volumes as WGSL an engine includes,
 //!   the field on the device, and a batch query over points;
 //! - [`gpu_context`]: a headless device on any adapter, or a device and queue
@@ -49,6 +52,7 @@
 pub mod bvh_trace;
 pub mod camera_frame;
 pub mod ddgi_query;
+pub mod device_frame;
 pub mod gpu_context;
 pub mod gpu_scene;
 pub mod gpu_timer;
@@ -64,5 +68,5 @@ pub(crate) mod shader_registry;
 pub mod shadow_field;
 pub mod wgpu_field_backend;
 
-pub use gpu_context::{GpuContext, GpuError};
+pub use gpu_context::{GpuContext, GpuCounters, GpuError};
 pub use wgpu_field_backend::WgpuProbeTracer;

@@ -141,7 +141,7 @@ impl GpuVolumeAtlases {
             });
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             encoder.copy_buffer_to_buffer(buffer, offset, &staging, 0, size);
-            ctx.queue.submit([encoder.finish()]);
+            ctx.submit(encoder.finish());
             ctx.read_buffer(&staging)
         };
         let irr_bytes = read(&self.irradiance, self.irradiance_bytes())?;
@@ -199,7 +199,7 @@ impl GpuProbeBlend {
         let bindings = self.prepare(ctx, atlases, frame)?;
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         self.record(&mut encoder, &bindings, None);
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit(encoder.finish());
         ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Device(e.to_string()))?;
         Ok(())
     }

@@ -131,7 +131,7 @@ impl GpuProbeRayGen {
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit(encoder.finish());
         Ok(())
     }
 }

@@ -198,7 +198,7 @@ impl GpuProbeShade {
             pass.set_bind_group(SCENE_GROUP, scene.bind_group(), &[]);
             pass.dispatch_workgroups(gx, gy, 1);
         }
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit(encoder.finish());
         Ok(radiance)
     }
 }

@@ -20,6 +20,7 @@
 //! | [`CAMERA_FRAME`]        | `bvh.wgsl`, `ddgi_query.wgsl`, `scene.wgsl`, `shadow_lighting.wgsl`, `camera_frame.wgsl` |
 //! | [`SHADOW_FIELD`]        | `bvh.wgsl`, `scene.wgsl`, `probe_border.wgsl`, `shadow_field.wgsl` |
 //! | [`FIELD_QUERY`]         | `ddgi_query.wgsl`, `field_query.wgsl`                           |
+//! | [`DEVICE_FRAME`]        | `device_frame.wgsl`                                             |
 //!
 //! The one substitution: `ddgi_query.wgsl` names its group `DDGI_GROUP`, which
 //! [`compose`] fills with [`FIELD_GROUP`] and `ddgi_query::query_wgsl` with
@@ -108,13 +109,17 @@ pub(crate) const CAMERA_FRAME: PassShader = PassShader {
 /// `shadow_field::GpuShadowField`.
 pub(crate) const SHADOW_FIELD: PassShader =
     PassShader { label: "shadow_field.wgsl", files: &[BVH, SCENE, PROBE_BORDER, wgsl_file!("shadow_field.wgsl")] };
+/// `device_frame::GpuFrame`.
+pub(crate) const DEVICE_FRAME: PassShader =
+    PassShader { label: "device_frame.wgsl", files: &[wgsl_file!("device_frame.wgsl")] };
 /// `ddgi_query::GpuFieldQuery`.
 pub(crate) const FIELD_QUERY: PassShader =
     PassShader { label: "field_query.wgsl", files: &[DDGI_QUERY, wgsl_file!("field_query.wgsl")] };
 
 /// Every pass of the crate (the unit tests compile each).
 #[cfg(test)]
-pub(crate) const PASSES: [&PassShader; 12] = [
+pub(crate) const PASSES: [&PassShader; 13] = [
+    &DEVICE_FRAME,
     &SHADOW_FIELD,
     &PROBE_CHANGE,
     &PROBE_SEEDING,

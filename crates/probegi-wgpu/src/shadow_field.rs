@@ -151,7 +151,7 @@ impl GpuShadowField {
         ctx.run_passes("shadow rays", &[(&self.pipelines[0], groups(&gen_group), (gx, gy))]);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         trace.record(&mut encoder, bvh, &shadow, None);
-        ctx.queue.submit([encoder.finish()]);
+        ctx.submit(encoder.finish());
         ctx.run_passes(
             "shadow blend",
             &[

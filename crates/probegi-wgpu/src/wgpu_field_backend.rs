@@ -33,6 +33,7 @@ use probegi_core::ddgi_volume_blend::DdgiFieldSetView;
 use probegi_core::probe_classification::ProbeUsageCounts;
 use probegi_field::backend::{BackendError, CameraFrameOut, DeviceField, ProbeBatchTracer};
 use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_field::device_frame::{DeviceFrame, DeviceFrameInput, DeviceFrameReadout, FrameLayer};
 use probegi_field::device_plans::{
     DeviceBlendOutput, DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
 };
@@ -42,6 +43,7 @@ use probegi_scene::{BvhTracer, RayHit, Scene, TlasLayout};
 use crate::bvh_trace::{GpuBvh, GpuRay, GpuRayBatch, GpuRayTrace, TraceSegment};
 use crate::camera_frame::{CameraFrame, GpuCameraPass};
 use crate::ddgi_query::GpuDdgiField;
+use crate::device_frame::{GpuFrame, GpuFrameInput};
 use crate::gpu_scene::GpuScene;
 use crate::gpu_timer::GpuTimer;
 use crate::probe_blend::GpuProbeBlend;
@@ -181,6 +183,13 @@ pub struct WgpuProbeTracer {
     /// The last update batch blended on the device, kept with its frame: the
     /// shadowing field casts the next frame's shadow rays from its hits.
     prev_update: Mutex<Option<(u32, GpuRayBatch)>>,
+    /// The camera frame kept on the device (`device_frame`), made with the
+    /// first frame, where `device_frame_on` (and the camera is on the GPU).
+    frame: Mutex<Option<GpuFrame>>,
+    device_frame_on: bool,
+    /// The host waits after each pass of the update so that its wall times are
+    /// the device's (`bench`; [`WgpuProbeTracer::timing_passes`]).
+    timing: bool,
 }
 
 impl WgpuProbeTracer {
@@ -239,6 +248,9 @@ impl WgpuProbeTracer {
             change: None,
             seeding: None,
             prev_update: Mutex::new(None),
+            frame: Mutex::new(None),
+            device_frame_on: true,
+            timing: false,
         })
     }
 
@@ -278,6 +290,23 @@ impl WgpuProbeTracer {
     /// equal the host's bit for bit, not to the 2.4e-5 of sin and cos on the device).
     pub fn generating_rays(mut self, generate: bool) -> Self {
         self.ray_gen = (self.keep_field && generate).then(|| GpuProbeRayGen::new(&self.ctx));
+        self
+    }
+
+    /// With `device` false, the camera frame comes back to the host every
+    /// frame (`ProbeBatchTracer::camera_frame`) instead of staying on the
+    /// device (`device_frame`); the CPU then accumulates and composes it.
+    pub fn keeping_frame(mut self, device: bool) -> Self {
+        self.device_frame_on = device;
+        self
+    }
+
+    /// With `timing`, the host waits for the device after each pass of the
+    /// update and reads its timestamps back, so that `pass_ms` holds the
+    /// device's times (`probegi bench`); without (the default), the update's
+    /// passes are submitted without waiting.
+    pub fn timing_passes(mut self, timing: bool) -> Self {
+        self.timing = timing;
         self
     }
 
@@ -339,7 +368,7 @@ impl WgpuProbeTracer {
         resident.configure(&self.ctx, static_only, &trace_segments(batch));
         let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
         self.trace.record(&mut encoder, &self.bvh, &resident, None);
-        self.ctx.queue.submit([encoder.finish()]);
+        self.ctx.submit(encoder.finish());
         Ok(resident)
     }
 
@@ -543,6 +572,87 @@ impl ProbeBatchTracer for WgpuProbeTracer {
     fn device_field(&self) -> Option<&dyn DeviceField> {
         self.resident_passes.is_some().then_some(self as &dyn DeviceField)
     }
+
+    fn device_wait_ms(&self) -> Option<f64> {
+        Some(self.ctx.counters().wait_ms)
+    }
+
+    fn device_frame(&self) -> Option<&dyn DeviceFrame> {
+        (self.device_frame_on && self.camera.is_some()).then_some(self as &dyn DeviceFrame)
+    }
+}
+
+impl WgpuProbeTracer {
+    /// Runs `f` with the field the camera reads: the one the device holds
+    /// (its atlases current) or, without one, the host's uploaded.
+    fn with_camera_field<T>(
+        &self,
+        field: &DdgiFieldSetView<'_>,
+        field_on_device: bool,
+        f: impl FnOnce(&GpuDdgiField) -> Result<T, GpuError>,
+    ) -> Result<T, GpuError> {
+        let resident = self.field.lock().map_err(|_| GpuError::Input("a GPU pass panicked earlier".into()))?;
+        match (field_on_device, resident.as_ref()) {
+            (true, Some(gpu_field)) => {
+                gpu_field.refresh(&self.ctx, field, false)?;
+                f(gpu_field)
+            }
+            (true, None) => Err(GpuError::Input("the device lost the field it held".into())),
+            (false, _) => f(&GpuDdgiField::upload(&self.ctx, field)?),
+        }
+    }
+
+    /// The device frame, locked.
+    fn frame_state(&self) -> Result<std::sync::MutexGuard<'_, Option<GpuFrame>>, BackendError> {
+        self.frame.lock().map_err(poisoned)
+    }
+}
+
+impl DeviceFrame for WgpuProbeTracer {
+    fn render_frame(&self, input: &DeviceFrameInput<'_>) -> Result<Vec<DeviceFrameReadout>, BackendError> {
+        let (Some(pass), Some((_, scene))) = (self.camera.as_ref(), self.shading.as_ref()) else {
+            return Err(BackendError::Unsupported("this tracer renders no camera frame".into()));
+        };
+        let ([_, _, _], [_, _, w, h]) = input.camera.basis();
+        let mut frame = self.frame_state()?;
+        let frame = frame.get_or_insert_with(|| GpuFrame::new(&self.ctx));
+        let camera = CameraFrame {
+            camera: input.camera,
+            width: w as u32,
+            height: h as u32,
+            frame: input.frame,
+            seed: (input.seed ^ (input.seed >> 32)) as u32,
+            area_samples: input.area_samples,
+            second_order: input.second_order,
+            sky_radiance: *self.sky_radiance.lock().unwrap_or_else(|e| e.into_inner()),
+            request_words: input.request_words,
+        };
+        let frame_input =
+            GpuFrameInput { camera, history: input.history, readback_lag_frames: input.readback_lag_frames };
+        self.with_camera_field(input.field, input.field_on_device, |gpu_field| {
+            frame.render(&self.ctx, pass, (&self.bvh, gpu_field, scene), &frame_input)
+        })
+        .map_err(BackendError::from)
+    }
+
+    fn drain_readouts(&self) -> Result<Vec<DeviceFrameReadout>, BackendError> {
+        match self.frame_state()?.as_mut() {
+            Some(frame) => frame.drain(&self.ctx).map_err(BackendError::from),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    fn read_layer(&self, layer: FrameLayer) -> Result<Vec<Vec3>, BackendError> {
+        let frame = self.frame_state()?;
+        let frame = frame.as_ref().ok_or_else(|| BackendError::Unsupported("no device frame yet".into()))?;
+        frame.read_layer(&self.ctx, layer).map_err(BackendError::from)
+    }
+
+    fn read_rgba8(&self, layer: FrameLayer) -> Result<Vec<u8>, BackendError> {
+        let frame = self.frame_state()?;
+        let frame = frame.as_ref().ok_or_else(|| BackendError::Unsupported("no device frame yet".into()))?;
+        frame.read_rgba8(&self.ctx, layer).map_err(BackendError::from)
+    }
 }
 
 impl DeviceField for WgpuProbeTracer {
@@ -557,7 +667,9 @@ impl DeviceField for WgpuProbeTracer {
         }
         let run = || -> Result<Vec<ProbeUsageCounts>, BackendError> {
             let resident = self.trace_resident(batch, false)?;
-            self.ctx.wait()?;
+            if self.timing {
+                self.ctx.wait()?;
+            }
             let counts = match usage_cage_diagonals_m {
                 Some(diagonals) => usage.counts(&self.ctx, &resident, &batch.probes, diagonals)?,
                 None => vec![],
@@ -640,13 +752,16 @@ impl DeviceField for WgpuProbeTracer {
             let seed32 = (seed ^ (seed >> 32)) as u32;
             // Timestamp queries where the device has them: the shade pass, then
             // each member's four blend and border passes.
-            let timer = self.ctx.timestamps.then(|| GpuTimer::new(&self.ctx, 1 + 4 * plan.len() as u32));
+            let timer =
+                (self.timing && self.ctx.timestamps).then(|| GpuTimer::new(&self.ctx, 1 + 4 * plan.len() as u32));
             let shade_timer = timer.as_ref().map(|t| (t, 0));
             let results =
                 shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, &probes, seed32, frame, shade_timer)?;
-            // The host waits after each pass so that its wall times are the device's
-            // (`bench`); an engine that records the passes itself would not.
-            self.ctx.wait()?;
+            // With `timing` the host waits after each pass so that its wall times
+            // are the device's (`bench`); otherwise the passes queue up unwaited.
+            if self.timing {
+                self.ctx.wait()?;
+            }
             let shade_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = std::time::Instant::now();
             let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
@@ -663,12 +778,16 @@ impl DeviceField for WgpuProbeTracer {
             if let Some(t) = &timer {
                 t.resolve(&mut encoder);
             }
-            self.ctx.queue.submit([encoder.finish()]);
-            self.ctx.wait()?;
+            self.ctx.submit(encoder.finish());
+            if self.timing {
+                self.ctx.wait()?;
+            }
             let blend_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = std::time::Instant::now();
             self.shadow_update(f, scene, plan)?;
-            self.ctx.wait()?;
+            if self.timing {
+                self.ctx.wait()?;
+            }
             let mut pass_ms =
                 vec![("shade", shade_ms), ("blend", blend_ms), ("shadow_blend", t.elapsed().as_secs_f64() * 1e3)];
             if let Some(ms) = timer.as_ref().map(|t| t.read_ms(&self.ctx)).transpose()?.flatten() {

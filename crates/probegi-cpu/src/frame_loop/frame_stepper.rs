@@ -65,6 +65,26 @@ impl<'a> FrameStepper<'a> {
         }
     }
 
+    /// Renders the next frame through `camera` without composing its image
+    /// (a device that keeps the frame reads nothing back; [`Self::image`]
+    /// reads it when needed). Errors as [`Self::step`].
+    pub fn advance(&mut self, camera: &CameraRays) -> Result<(), String> {
+        match self.step_with(camera, &mut |_, _| {}) {
+            ControlFlow::Continue(()) => Ok(()),
+            Break(()) => Err(self.error()),
+        }
+    }
+
+    /// The last frame's image: from the device that keeps it (a read-back),
+    /// else composed from the host's sums.
+    pub fn image(&self) -> Result<Image, String> {
+        let fl = &self.frame_loop;
+        match fl.device_layer(probegi_field::FrameLayer::Full) {
+            Some(image) => image,
+            None => Ok(Image { width: fl.settings.width, height: fl.settings.height, pixels: fl.acc.pixels() }),
+        }
+    }
+
     /// [`Self::step`] handing the frame to `on_frame_done` (its image composed
     /// only when called).
     pub(crate) fn step_with(
@@ -143,6 +163,12 @@ impl<'a> FrameStepper<'a> {
     pub fn layers(&self) -> FrameLayers {
         let fl = &self.frame_loop;
         let (width, height) = (fl.settings.width, fl.settings.height);
+        let on_device = |layer| fl.device_layer(layer).and_then(Result::ok);
+        if let (Some(direct), Some(indirect)) =
+            (on_device(probegi_field::FrameLayer::Direct), on_device(probegi_field::FrameLayer::Indirect))
+        {
+            return FrameLayers { direct, indirect };
+        }
         let direct = (0..fl.acc.len()).map(|p| fl.acc.direct(p)).collect();
         FrameLayers {
             direct: Image { width, height, pixels: direct },

@@ -13,7 +13,8 @@
 // two hold the octahedral coordinates (ddgi_oct_encode) of the geometric normal
 // facing the camera. Point and normal are the temporal filter's surface.
 // The CPU accumulates both over a still camera's frames.
-// `camera_irradiance[i].w` flags surfaces with a diffuse albedo (1) and those of them unlit (2).
+// `camera_irradiance[i].w` flags surfaces with a diffuse albedo (1) and those of them unlit (2),
+// plus 4 where the direct term was non-finite (written as 0).
 // With flag 4 (the screen scheme's requests) every surface pixel also sets, in
 // `camera_requests`, the bits of the probes its query reads
 // (probegi_core::ddgi_volume_blend::field_set_cage_probes; bit = the member's
@@ -142,6 +143,8 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (max(max(albedo.x, albedo.y), albedo.z) > 0.0) {
         flag = select(1.0, 2.0, !(max(max(e.x, e.y), e.z) > 0.0));
     }
+    // + 4: the direct term came out NaN or infinite and was written as 0.
+    flag += select(4.0, 0.0, camera_finite(l));
     camera_direct[3u * i + 1u] = vec4<f32>(albedo, oct.y);
     camera_direct[3u * i + 2u] = vec4<f32>(sp.position, 1.0);
     camera_irradiance[i] = vec4<f32>(e / SCENE_PI, flag);

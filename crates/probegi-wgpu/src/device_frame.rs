@@ -1,0 +1,436 @@
+//! The camera frame kept on the device, start to finish (issue 44): the
+//! camera pass (`camera_frame`), then `shaders/device_frame.wgsl`'s resolve
+//! (accumulation, or a moved camera's temporal filter), compose (+ tone map to
+//! RGBA8) and statistics passes, all recorded into one submission over images
+//! allocated once per size. The host gets 48 bytes of statistics and the
+//! screen scheme's request words a frame, through a ring of staging buffers
+//! mapped without waiting ([`FrameReadbackRing`]); pixels come back only when
+//! asked ([`GpuFrame::read_layer`], [`GpuFrame::read_rgba8`]).
+//!
+//! Like kajiya's frame state, [`GpuFrame`] owns what lives across frames (the
+//! camera images, the two history buffers it ping-pongs between, the
+//! statistics and the ring); each frame's handles (bind groups, the encoder)
+//! are made per frame.
+//!
+//! The CPU frame loop is the reference: each WGSL function names the Rust one
+//! it mirrors (`probegi_cpu::frame_loop::accumulation`).
+//!
+//! *Deviations:* the history holds running means in f32 where the CPU holds
+//! f64 sums (the same arithmetic to rounding: a mean keeps f32's relative
+//! precision however many frames it has seen); the frame's means are a tree
+//! sum in f32 (relative error about log2(pixels) · 2⁻²⁴, against the CPU's f64).
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use probegi_core::camera::CameraRays;
+use probegi_field::device_frame::{DeviceFrameReadout, FrameHistory, FrameLayer};
+
+use crate::bvh_trace::GpuBvh;
+use crate::camera_frame::{CameraFrame, CameraParams, CameraTargets, GpuCameraPass};
+use crate::ddgi_query::GpuDdgiField;
+use crate::gpu_context::{GpuContext, GpuError};
+use crate::gpu_scene::GpuScene;
+use crate::shader_registry::DEVICE_FRAME;
+
+/// A camera in `device_frame.wgsl`'s `FrameCamera` layout.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct FrameCamera {
+    origin: [f32; 4],
+    forward: [f32; 4],
+    right: [f32; 4],
+    up: [f32; 4],
+}
+
+impl FrameCamera {
+    fn of(c: &CameraRays) -> Self {
+        let ([forward, right, up], [tan, aspect, w, h]) = c.basis();
+        let o = c.origin_world;
+        Self {
+            origin: [o.x, o.y, o.z, tan],
+            forward: forward.extend(aspect).into(),
+            right: right.extend(w).into(),
+            up: up.extend(h).into(),
+        }
+    }
+}
+
+/// The frame passes' uniform block; must match `FrameParams` in `device_frame.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct FrameParams {
+    to: FrameCamera,
+    from: FrameCamera,
+    /// Mode (0 accumulate, 1 restart, 2 reproject), history frames − 1, the
+    /// RGBA8 layer (0 full, 1 direct, 2 indirect), `frame_compose`'s workgroups.
+    info: [u32; 4],
+    /// x: the direct history's clip, standard deviations.
+    clip: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<FrameParams>() == 160);
+
+/// `FrameStats` in `device_frame.wgsl`: the means, then the counts.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct FrameStatsBlock {
+    mean: [f32; 4],
+    indirect_mean: [f32; 4],
+    /// Surfaces, unlit surfaces, non-finite pixels, unused.
+    counts: [u32; 4],
+}
+const STATS_BYTES: u64 = std::mem::size_of::<FrameStatsBlock>() as u64;
+const _: () = assert!(STATS_BYTES == 48);
+
+/// Texels (16 bytes) a pixel of the history holds (see `device_frame.wgsl`).
+const HISTORY_TEXELS: u64 = 4;
+
+/// Device memory a `width` × `height` frame keeps (the camera images, two
+/// histories, the RGBA8 image and the partial sums), for a caller's budget.
+pub fn frame_bytes(width: u32, height: u32) -> u64 {
+    let n = width as u64 * height as u64;
+    n * 16 * (3 + 1 + 2 * HISTORY_TEXELS) + n * 4 + width.div_ceil(8) as u64 * height.div_ceil(8) as u64 * 32
+}
+
+/// The frame's images on the device, allocated once per size.
+struct FrameImages {
+    width: u32,
+    height: u32,
+    camera_params: wgpu::Buffer,
+    frame_params: wgpu::Buffer,
+    direct: wgpu::Buffer,
+    irradiance: wgpu::Buffer,
+    /// The two histories; `current` holds the last frame's.
+    history: [wgpu::Buffer; 2],
+    current: usize,
+    /// Bind groups reading history `i` and writing `1 − i`.
+    bind_groups: [wgpu::BindGroup; 2],
+    stats: wgpu::Buffer,
+    rgba8: wgpu::Buffer,
+    requests: wgpu::Buffer,
+    request_words: u32,
+    /// No frame has run at this size yet: the first one restarts the sums.
+    fresh: bool,
+}
+
+/// One staging buffer of the ring: the frame it holds, and whether its map has
+/// completed.
+struct ReadbackSlot {
+    buffer: wgpu::Buffer,
+    frame: u32,
+    request_words: u32,
+    mapped: Arc<AtomicBool>,
+}
+
+/// A small ring of staging buffers for the frames' statistics and requests,
+/// read one or more frames late without waiting (a slot is waited for only
+/// when every slot is still in flight, or when asked to drain).
+#[derive(Default)]
+pub struct FrameReadbackRing {
+    free: Vec<wgpu::Buffer>,
+    in_flight: VecDeque<ReadbackSlot>,
+}
+
+impl FrameReadbackRing {
+    /// A staging buffer for `words` request words, reused when one of the size is free.
+    fn take(&mut self, ctx: &GpuContext, words: u32) -> wgpu::Buffer {
+        let size = STATS_BYTES + 4 * words as u64;
+        if let Some(i) = self.free.iter().position(|b| b.size() == size) {
+            return self.free.swap_remove(i);
+        }
+        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// Starts mapping `buffer` (submitted) for frame `frame`.
+    fn push(&mut self, buffer: wgpu::Buffer, frame: u32, request_words: u32) {
+        let mapped = Arc::new(AtomicBool::new(false));
+        let flag = mapped.clone();
+        buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| flag.store(r.is_ok(), Ordering::Release));
+        self.in_flight.push_back(ReadbackSlot { buffer, frame, request_words, mapped });
+    }
+
+    /// The readouts whose maps have completed, oldest first (in frame order:
+    /// a later one waits for the earlier), after a non-blocking poll; with
+    /// `keep` slots at most left in flight (waiting for the oldest otherwise).
+    fn collect(&mut self, ctx: &GpuContext, keep: usize) -> Result<Vec<DeviceFrameReadout>, GpuError> {
+        let _ = ctx.device.poll(wgpu::PollType::Poll);
+        let mut out = Vec::new();
+        while let Some(slot) = self.in_flight.front() {
+            if !slot.mapped.load(Ordering::Acquire) {
+                if self.in_flight.len() <= keep {
+                    break;
+                }
+                ctx.wait()?;
+                if !slot.mapped.load(Ordering::Acquire) {
+                    return Err(GpuError::Readback("a frame's statistics could not be mapped".into()));
+                }
+            }
+            let Some(slot) = self.in_flight.pop_front() else { break };
+            out.push(read_slot(ctx, &slot)?);
+            slot.buffer.unmap();
+            self.free.push(slot.buffer);
+        }
+        Ok(out)
+    }
+}
+
+/// A mapped slot's statistics and requests.
+fn read_slot(ctx: &GpuContext, slot: &ReadbackSlot) -> Result<DeviceFrameReadout, GpuError> {
+    let view = slot.buffer.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
+    let bytes: &[u8] = &view;
+    ctx.count_read_back(bytes.len() as u64);
+    let stats: FrameStatsBlock = bytemuck::pod_read_unaligned(&bytes[..STATS_BYTES as usize]);
+    let words = &bytes[STATS_BYTES as usize..];
+    let requests = if slot.request_words > 0 { bytemuck::pod_collect_to_vec::<u8, u32>(words) } else { Vec::new() };
+    let v3 = |v: [f32; 4]| Vec3::new(v[0], v[1], v[2]);
+    Ok(DeviceFrameReadout {
+        frame: slot.frame,
+        mean: v3(stats.mean),
+        indirect_mean: v3(stats.indirect_mean),
+        surfaces: stats.counts[0] as u64,
+        unlit: stats.counts[1] as u64,
+        nonfinite: stats.counts[2] as u64,
+        requests,
+    })
+}
+
+/// One frame for [`GpuFrame::render`]: the camera pass's settings and what
+/// happens to the history.
+pub struct GpuFrameInput<'a> {
+    /// The camera pass's frame.
+    pub camera: CameraFrame<'a>,
+    /// Accumulate, restart or reproject.
+    pub history: FrameHistory,
+    /// Frames the statistics may come back late (0: wait for this frame's).
+    pub readback_lag_frames: u32,
+}
+
+/// The device-resident frame (see the module docs).
+pub struct GpuFrame {
+    layout: wgpu::BindGroupLayout,
+    pipelines: [wgpu::ComputePipeline; 3],
+    images: Option<FrameImages>,
+    ring: FrameReadbackRing,
+}
+
+impl GpuFrame {
+    /// The frame passes' pipelines on `ctx` (images come with the first frame).
+    pub fn new(ctx: &GpuContext) -> Self {
+        let layout = ctx.pass_layout("device frame", &[true, true, true, false, false, false, false]);
+        let pipelines =
+            ctx.compute_pipelines(&DEVICE_FRAME, &[Some(&layout)], ["frame_resolve", "frame_compose", "frame_stats"]);
+        Self { layout, pipelines, images: None, ring: FrameReadbackRing::default() }
+    }
+
+    /// The images for a `width` × `height` frame with `words` request words
+    /// (over `layout`), made again when either changes.
+    fn ensure_images<'i>(
+        layout: &wgpu::BindGroupLayout,
+        images: &'i mut Option<FrameImages>,
+        ctx: &GpuContext,
+        (width, height, words): (u32, u32, u32),
+    ) -> Result<&'i mut FrameImages, GpuError> {
+        let fits = images.as_ref().is_some_and(|i| (i.width, i.height, i.request_words) == (width, height, words));
+        if !fits {
+            *images = Some(Self::make_images(layout, ctx, width, height, words)?);
+        }
+        images.as_mut().ok_or_else(|| GpuError::Input("no frame images".into()))
+    }
+
+    fn make_images(
+        layout: &wgpu::BindGroupLayout,
+        ctx: &GpuContext,
+        width: u32,
+        height: u32,
+        words: u32,
+    ) -> Result<FrameImages, GpuError> {
+        let n = width as u64 * height as u64;
+        let storage = |label: &str, bytes: u64| -> Result<wgpu::Buffer, GpuError> {
+            ctx.check_buffer(bytes, label)?;
+            Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes.max(16),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }))
+        };
+        let uniform = |label: &str, bytes: u64| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: bytes,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let groups = width.div_ceil(8) as u64 * height.div_ceil(8) as u64;
+        let direct = storage("camera direct, albedo and point", n * 48)?;
+        let irradiance = storage("camera irradiance", n * 16)?;
+        let history = [storage("frame history a", n * 16 * HISTORY_TEXELS)?, storage("frame history b", n * 64)?];
+        let partials = storage("frame partial sums", groups * 32)?;
+        let stats = storage("frame statistics", STATS_BYTES)?;
+        let rgba8 = storage("frame rgba8", n * 4)?;
+        let requests = storage("camera probe requests", 4 * words.max(1) as u64)?;
+        let frame_params = uniform("frame params", std::mem::size_of::<FrameParams>() as u64);
+        let group = |read: usize| {
+            let b =
+                [&frame_params, &direct, &irradiance, &history[read], &history[1 - read], &partials, &stats, &rgba8];
+            let entries: Vec<wgpu::BindGroupEntry<'_>> = b
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect();
+            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("device frame"),
+                layout,
+                entries: &entries,
+            })
+        };
+        let bind_groups = [group(0), group(1)];
+        Ok(FrameImages {
+            width,
+            height,
+            camera_params: uniform("camera params", std::mem::size_of::<CameraParams>() as u64),
+            frame_params,
+            direct,
+            irradiance,
+            history,
+            current: 0,
+            bind_groups,
+            stats,
+            rgba8,
+            requests,
+            request_words: words,
+            fresh: true,
+        })
+    }
+
+    /// Records and submits frame `input` (one submission: the camera pass, the
+    /// resolve, compose and statistics passes, the copy of the statistics into
+    /// the ring) and returns the readouts that came back meanwhile (with
+    /// `readback_lag_frames` 0, this frame's, waited for).
+    pub fn render(
+        &mut self,
+        ctx: &GpuContext,
+        pass: &GpuCameraPass,
+        resources: (&GpuBvh, &GpuDdgiField, &GpuScene),
+        input: &GpuFrameInput<'_>,
+    ) -> Result<Vec<DeviceFrameReadout>, GpuError> {
+        let f = &input.camera;
+        if f.width == 0 || f.height == 0 {
+            return Err(GpuError::Input("a camera frame of no pixels".into()));
+        }
+        let camera_params = GpuCameraPass::params(f, resources.1.shadow_field)?;
+        let Self { layout, pipelines: [resolve, compose, stats], images, ring } = self;
+        let staging = ring.take(ctx, f.request_words);
+        let images = Self::ensure_images(layout, images, ctx, (f.width, f.height, f.request_words))?;
+        let (mode, frames_max, clip) = match (&input.history, images.fresh) {
+            (_, true) | (FrameHistory::Restart, _) => (1, 0, 0.0),
+            (FrameHistory::Accumulate, _) => (0, 0, 0.0),
+            (FrameHistory::Reproject { history_frames, .. }, _) if *history_frames <= 1 => (1, 0, 0.0),
+            (FrameHistory::Reproject { history_frames, clip_sigma, .. }, _) => (2, history_frames - 1, *clip_sigma),
+        };
+        let from = match &input.history {
+            FrameHistory::Reproject { from, .. } => FrameCamera::of(from),
+            _ => FrameCamera::default(),
+        };
+        let (gx, gy) = (f.width.div_ceil(8), f.height.div_ceil(8));
+        let params = FrameParams {
+            to: FrameCamera::of(f.camera),
+            from,
+            info: [mode, frames_max, 0, gx * gy],
+            clip: [clip.max(0.0), 0.0, 0.0, 0.0],
+        };
+        ctx.write_buffer(&images.camera_params, 0, bytemuck::bytes_of(&camera_params));
+        ctx.write_buffer(&images.frame_params, 0, bytemuck::bytes_of(&params));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        encoder.clear_buffer(&images.stats, 0, None);
+        if f.request_words > 0 {
+            encoder.clear_buffer(&images.requests, 0, None);
+        }
+        let targets = CameraTargets {
+            params: &images.camera_params,
+            direct: &images.direct,
+            irradiance: &images.irradiance,
+            requests: &images.requests,
+        };
+        pass.record(ctx, &mut encoder, resources, f, &targets, None);
+        let group = &images.bind_groups[images.current];
+        for (pipeline, (x, y)) in [(resolve, (gx, gy)), (compose, (gx, gy)), (stats, (1, 1))] {
+            let mut p = encoder.begin_compute_pass(&Default::default());
+            p.set_pipeline(pipeline);
+            p.set_bind_group(0, group, &[]);
+            p.dispatch_workgroups(x, y, 1);
+        }
+        encoder.copy_buffer_to_buffer(&images.stats, 0, &staging, 0, STATS_BYTES);
+        if f.request_words > 0 {
+            encoder.copy_buffer_to_buffer(&images.requests, 0, &staging, STATS_BYTES, 4 * f.request_words as u64);
+        }
+        ctx.submit(encoder.finish());
+        images.current = 1 - images.current;
+        images.fresh = false;
+        ring.push(staging, f.frame, f.request_words);
+        ring.collect(ctx, input.readback_lag_frames as usize)
+    }
+
+    /// Waits for every readout still in flight.
+    pub fn drain(&mut self, ctx: &GpuContext) -> Result<Vec<DeviceFrameReadout>, GpuError> {
+        self.ring.collect(ctx, 0)
+    }
+
+    /// The last frame's `layer`, linear, row-major (reads the history back: 64
+    /// bytes a pixel, a blocking wait).
+    pub fn read_layer(&self, ctx: &GpuContext, layer: FrameLayer) -> Result<Vec<Vec3>, GpuError> {
+        let images = self.images.as_ref().filter(|i| !i.fresh).ok_or_else(|| GpuError::Input("no frame yet".into()))?;
+        let bytes = ctx.read_back(&images.history[images.current])?;
+        let texels: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        let v3 = |t: &[f32; 4]| Vec3::new(t[0], t[1], t[2]);
+        Ok(texels
+            .chunks_exact(HISTORY_TEXELS as usize)
+            .map(|h| {
+                let (direct, field) = (v3(&h[0]), v3(&h[1]) * v3(&h[2]));
+                match layer {
+                    FrameLayer::Full => direct + field,
+                    FrameLayer::Direct => direct,
+                    FrameLayer::Indirect => field,
+                }
+            })
+            .collect())
+    }
+
+    /// The last frame's `layer` tone-mapped on the device, RGBA8 row-major (a
+    /// compose pass for `layer`, then a blocking read-back of 4 bytes a pixel).
+    pub fn read_rgba8(&self, ctx: &GpuContext, layer: FrameLayer) -> Result<Vec<u8>, GpuError> {
+        let images = self.images.as_ref().filter(|i| !i.fresh).ok_or_else(|| GpuError::Input("no frame yet".into()))?;
+        let layer_index = match layer {
+            FrameLayer::Full => 0u32,
+            FrameLayer::Direct => 1,
+            FrameLayer::Indirect => 2,
+        };
+        // Field `info.z` of the uniform block: 2 cameras of 64 bytes, then mode and frames.
+        ctx.write_buffer(&images.frame_params, 128 + 8, bytemuck::bytes_of(&layer_index));
+        let (gx, gy) = (images.width.div_ceil(8), images.height.div_ceil(8));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            // The group that wrote the current history reads it as `history_next`.
+            let mut p = encoder.begin_compute_pass(&Default::default());
+            p.set_pipeline(&self.pipelines[1]);
+            p.set_bind_group(0, &images.bind_groups[1 - images.current], &[]);
+            p.dispatch_workgroups(gx, gy, 1);
+        }
+        ctx.submit(encoder.finish());
+        ctx.read_back(&images.rgba8)
+    }
+
+    /// Device memory the frame holds now.
+    pub fn bytes(&self) -> u64 {
+        self.images.as_ref().map_or(0, |i| frame_bytes(i.width, i.height))
+    }
+}
