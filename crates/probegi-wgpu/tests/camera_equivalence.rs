@@ -171,8 +171,8 @@ fn instanced_forest_frame_on_the_gpu() {
 
 #[test]
 fn moving_box_frame_on_the_gpu() {
-    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/moving-box.toml");
-    let mut scene = load_scene(&path.to_string_lossy()).expect("moving box");
+    let path = common::repo_file("scenes/moving-box.toml");
+    let mut scene = load_scene(&path).expect("moving box");
     // Its box glows, so the emitters' distribution follows its growing area too.
     let mut glow = probegi_scene::Material::diffuse("glow", glam::Vec3::splat(0.5));
     glow.emissive_factor = glam::Vec3::new(2.0, 1.5, 1.0);
@@ -364,8 +364,8 @@ fn a_keyframed_light_moves_and_switches_off_on_the_gpu_as_on_the_cpu() {
     // mean) follows the light on both backends; single frames' full means are
     // dominated by the jittered ceiling emitter's edge pixels, so those are
     // compared over ten-frame windows.
-    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes/cornell-moving-light.toml");
-    let scene = load_scene(&path.to_string_lossy()).expect("scene");
+    let path = common::repo_file("scenes/cornell-moving-light.toml");
+    let scene = load_scene(&path).expect("scene");
     assert!(scene.is_animated());
     let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };
     let gpu = WgpuProbeTracer::new(ctx, &scene, &BvhTracer::for_scene(&scene, BvhSettings::default()), true)

@@ -14,6 +14,8 @@
 //! the device computes from the initialisation rounds' hits (to 1e-6 m); reruns
 //! bit-identical.
 
+mod common;
+
 use probegi_cpu::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;
 
@@ -203,9 +205,7 @@ fn sponza_is_relocated_and_classified_on_the_gpu_as_on_the_host() {
     // whose nearest probes lie behind them; see probegi_core::probe_classification):
     // it keeps 67 probes there, and a covering pass run as one long invocation was
     // cut short on lavapipe (18 kept, 49 states wrong) before it ran in chunks.
-    let path =
-        std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes/dabrovic-sponza/sponza.obj");
-    let scene = probegi_scene::load_scene(&path.to_string_lossy()).expect("the shared Sponza");
+    let scene = probegi_scene::load_scene(&common::shared("dabrovic-sponza/sponza.obj")).expect("the shared Sponza");
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let (Some(host), Some(device)) = (gpu(&scene, &bvh, false), gpu(&scene, &bvh, true)) else { return };
     let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());

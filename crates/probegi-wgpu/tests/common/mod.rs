@@ -21,13 +21,34 @@ pub fn context() -> Option<GpuContext> {
     GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set")
 }
 
-/// A file under `../shared/scenes`.
+/// The shared data folder (the one holding `scenes/`): `$PROBEGI_SHARED_DIR` when
+/// set (`probegi_scene::file_lookup::SHARED_DIR_ENV`, the binary's convention),
+/// else `shared/` beside the checkout this test was built in. The variable lets
+/// a test binary run away from its checkout (`scripts/gpu-tests.sh run`).
+pub fn shared_dir() -> std::path::PathBuf {
+    match std::env::var_os(probegi_scene::file_lookup::SHARED_DIR_ENV) {
+        Some(dir) => std::path::PathBuf::from(dir),
+        None => std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"),
+    }
+}
+
+/// A file of this repository, `rel` from its root (`scenes/moving-box.toml`): the
+/// checkout the test was built in, or else the first ancestor of the working
+/// directory that has it (a test binary run from another copy's root, as
+/// `scripts/gpu-tests.sh run` does on a machine without the toolchain).
+pub fn repo_file(rel: &str) -> String {
+    let built = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel);
+    let here = std::env::current_dir().ok();
+    let found = std::iter::once(built)
+        .chain(here.iter().flat_map(|d| d.ancestors().map(|a| a.join(rel))))
+        .find(|p| p.is_file())
+        .unwrap_or_else(|| panic!("{rel} is neither in the checkout the test was built in nor above {here:?}"));
+    found.to_string_lossy().into_owned()
+}
+
+/// A file under the shared folder's `scenes/` (see [`shared_dir`]).
 pub fn shared(path: &str) -> String {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/scenes")
-        .join(path)
-        .to_string_lossy()
-        .into_owned()
+    shared_dir().join("scenes").join(path).to_string_lossy().into_owned()
 }
 
 /// `scene` on the device as `--backend wgpu` has it: the field kept there and
