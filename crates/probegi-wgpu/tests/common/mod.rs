@@ -1,8 +1,11 @@
 //! What the GPU tests share: the device (or a clear skip), the field-keeping
-//! tracer `--backend wgpu` uses, a small DDGI render on either backend, and
-//! the shared scenes.
+//! tracer `--backend wgpu` uses, a small DDGI render on either backend, the
+//! shared scenes, and how far a device's ray-triangle answer may stray from the
+//! CPU's (`trace_error`).
 
 #![allow(dead_code)]
+
+pub mod trace_error;
 
 use std::sync::Arc;
 
