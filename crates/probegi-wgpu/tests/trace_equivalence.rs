@@ -428,3 +428,68 @@ fn hostile_rays_finish_as_misses_or_as_on_the_cpu() {
     hostile_rays_agree(&ctx, &load_scene(&common::shared("dabrovic-sponza/sponza.obj")).expect("shared Sponza"));
     hostile_rays_agree(&ctx, &load_scene("builtin:forest").expect("built-in forest (shared pine)"));
 }
+
+/// obvhs `RtTriangle::intersect` as a device may run it: every dot and cross
+/// product fused (`mul_add`), and the reciprocal of D off by 2.5 ulp either way
+/// (`off` = ±1). Returns t and the barycentrics of vertices 1 and 2.
+fn fused_intersect(ray: &Ray, p: [Vec3; 3], off: f32) -> (f32, glam::Vec2) {
+    let dot = |a: Vec3, b: Vec3| a.x.mul_add(b.x, a.y.mul_add(b.y, a.z * b.z));
+    let cross = |a: Vec3, b: Vec3| {
+        Vec3::new(a.y.mul_add(b.z, -(a.z * b.y)), a.z.mul_add(b.x, -(a.x * b.z)), a.x.mul_add(b.y, -(a.y * b.x)))
+    };
+    let (e1, e2) = (p[0] - p[1], p[2] - p[0]);
+    let ng = e1.cross(e2);
+    let c = p[0] - ray.origin;
+    let r = cross(ray.dir, c);
+    let inv_det = (1.0 / dot(ng, ray.dir)) * (1.0 + off * 2.5 * f32::EPSILON);
+    (dot(ng, c) * inv_det, glam::Vec2::new(dot(r, e2) * inv_det, dot(r, e1) * inv_det))
+}
+
+/// The tolerances of `common::trace_error` hold against a device emulated on
+/// the CPU: the CPU's closest hits recomputed with fused multiply-adds and an
+/// approximate reciprocal (in the copy's space for instances, the ray moved
+/// there with fused operations too) stay within them in t and barycentrics, in
+/// the Cornell box, Sibenik and the instanced forest. Needs no device.
+#[test]
+fn the_tolerances_cover_a_device_that_fuses_and_approximates_emulated_on_the_cpu() {
+    let scenes = [
+        probegi_scene::builtin::cornell_box(),
+        load_scene(&common::shared("sibenik/sibenik.obj")).expect("shared Sibenik"),
+        load_scene("builtin:forest").expect("built-in forest (shared pine)"),
+    ];
+    for scene in &scenes {
+        let cpu = BvhTracer::for_scene(scene, BvhSettings::default());
+        let (mut worst_dt, mut worst_bary, mut hits) = (0f64, 0f64, 0);
+        for (k, r) in random_rays(scene, 20_000, 0.0).iter().enumerate() {
+            let Some(hit) = cpu.closest_hit(r) else { continue };
+            let tri = trace_error::world_triangle(scene, 0.0, &hit);
+            let tol = trace_error::hit_tolerance(r, hit.t, &tri);
+            let (local, p) = match scene.instances.get(hit.instance as usize) {
+                Some(inst) => {
+                    let m = inst.world_from_local.inverse();
+                    let fused = |v: Vec3, w: f32| {
+                        let (x, y, z) = (Vec3::from(m.matrix3.x_axis), Vec3::from(m.matrix3.y_axis), m.matrix3.z_axis);
+                        x.mul_add(Vec3::splat(v.x), y.mul_add(Vec3::splat(v.y), Vec3::from(z) * v.z))
+                            + Vec3::from(m.translation) * w
+                    };
+                    let mesh = &scene.prototypes[inst.prototype as usize].mesh;
+                    let p = mesh.triangles[hit.triangle as usize].map(|v| mesh.positions[v as usize]);
+                    (Ray { origin: fused(r.origin, 1.0), dir: fused(r.dir, 0.0), ..*r }, p)
+                }
+                None => (*r, scene.mesh.triangles[hit.triangle as usize].map(|v| scene.mesh.positions[v as usize])),
+            };
+            let (t, bary) = fused_intersect(&local, p, if k % 2 == 0 { 1.0 } else { -1.0 });
+            worst_dt = worst_dt.max((t - hit.t).abs() as f64 / tol.dt);
+            worst_bary = worst_bary.max((bary - hit.barycentric).abs().max_element() as f64 / tol.bary);
+            hits += 1;
+        }
+        eprintln!(
+            "{hits} hits: emulated device Δt up to {worst_dt:.3}, barycentrics up to {worst_bary:.3} of the tolerance"
+        );
+        assert!(hits > 2_000, "{hits} hits");
+        assert!(
+            worst_dt <= 1.0 && worst_bary <= 1.0,
+            "Δt {worst_dt} or barycentrics {worst_bary} beyond the tolerance"
+        );
+    }
+}
