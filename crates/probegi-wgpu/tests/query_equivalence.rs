@@ -65,7 +65,9 @@ const U: f32 = f32::EPSILON / 2.0;
 /// - a bilinear texel sample, 4 products and 3 sums of non-negative terms with
 ///   weights that take 3u each: 7u;
 /// - the half decode e²·√e (γ = 5): 2.5 × 7u, 2u for the products, and the
-///   square root, which WGSL inherits from 1/inverseSqrt (2 + 2.5 ulp, 9u): 29u;
+///   square root, which WGSL inherits from 1/inverseSqrt (2 + 2.5 ulp, 9u): 29u
+///   (every field here has the default γ = 5; another γ takes `pow`, inherited
+///   from exp2(y·log2 x), which this count does not cover: `compare` refuses it);
 /// - the backface weight ((n̂·n + 1)/2)² + 0.2 with n̂ = normalize(probe − x)
 ///   (inherited from x/length(x): 3u + 9u + 5u = 17u a component): the dot is off
 ///   by 20u, the square by 23u absolute, over the 0.2 floor: 116u;
@@ -125,13 +127,15 @@ fn with_distances<'b>(view: &DdgiFieldSetView<'b>, atlases: &'b [ProbeAtlas<Vec2
 }
 
 /// The CPU query's own spread under the device's backward errors: the largest
-/// change (over channels) when m₁, m₂ or one position coordinate moves by its
-/// backward error either way, summed over those five groups. The device's
+/// change (over channels) when m₁, m₂ (each uniformly and tile by tile) or
+/// one position coordinate moves by its backward error either way, summed over
+/// those seven groups. The device's
 /// answer differs from the CPU's by at most twice it (each side within it of
 /// the exact one on the unrounded inputs) beyond the smooth rounding.
 struct Sensitivity<'a> {
-    /// The view with m₁ moved up and down, then m₂.
-    moved_moments: [DdgiFieldSetView<'a>; 4],
+    /// The view with m₁ moved up and down, uniformly then tile by tile, then m₂
+    /// likewise: pairs of opposite moves.
+    moved_moments: [DdgiFieldSetView<'a>; 8],
     /// R: the largest corner coordinate of any member's grid.
     reach: f32,
 }
@@ -172,18 +176,35 @@ fn compare(ctx: &GpuContext, view: &DdgiFieldSetView<'_>, pts: &[QueryPoint]) {
     assert!(lit > pts.len() / 2, "too few lit points to test: {lit}");
     assert!(gpu.iter().all(|e| e.is_finite()));
 
+    assert!(
+        view.members.iter().all(|m| m.field.settings.probe_irradiance_gamma == 5.0),
+        "SMOOTH_ERROR_REL counts the γ = 5 decode only"
+    );
     let scale = largest_value(view);
     let smooth = SMOOTH_ERROR_REL * scale;
-    let moved: Vec<Vec<ProbeAtlas<Vec2>>> = [(0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0)]
+    // m₁ then m₂, each moved by its backward error: all tiles one way, then each
+    // tile a pseudo-random way (so that corners whose changes would cancel under
+    // a uniform move are also tried), both signs of each.
+    let moved: Vec<Vec<ProbeAtlas<Vec2>>> = [(0, false), (0, true), (1, false), (1, true)]
         .iter()
-        .map(|&(k, sign)| {
-            let f = 1.0 + sign * MOMENT_BACKWARD_REL[k];
-            let moment = |m: Vec2| if k == 0 { Vec2::new(m.x * f, m.y) } else { Vec2::new(m.x, m.y * f) };
+        .flat_map(|&(k, mixed)| [1.0, -1.0].map(|sign| (k, mixed, sign)))
+        .map(|(k, mixed, sign)| {
             view.members
                 .iter()
-                .map(|m| ProbeAtlas {
-                    texels: m.field.distance.texels.iter().map(|t| moment(*t)).collect(),
-                    ..m.field.distance.clone()
+                .map(|m| {
+                    let d = m.field.distance;
+                    let tile = d.tile_len();
+                    let texels = d
+                        .texels
+                        .iter()
+                        .enumerate()
+                        .map(|(i, t)| {
+                            let flip = mixed && Pcg32::new(i as u64 / tile as u64, 5).next_u32() & 1 == 1;
+                            let f = 1.0 + if flip { -sign } else { sign } * MOMENT_BACKWARD_REL[k];
+                            if k == 0 { Vec2::new(t.x * f, t.y) } else { Vec2::new(t.x, t.y * f) }
+                        })
+                        .collect();
+                    ProbeAtlas { texels, ..d.clone() }
                 })
                 .collect()
         })
