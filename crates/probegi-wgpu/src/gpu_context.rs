@@ -67,7 +67,8 @@ struct TransferCounts {
 
 /// What a [`GpuContext`] has done so far (differences between two readings
 /// give a frame's): counts, not timings, so a test may hold them, except
-/// `wait_ms`, the host's wall time blocked in waits (a benchmark's host share).
+/// `wait_ms`, the host's wall time blocked in waits and inside submissions (a
+/// benchmark's host share is the rest).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GpuCounters {
     /// Command submissions to the queue.
@@ -78,7 +79,7 @@ pub struct GpuCounters {
     pub bytes_up: u64,
     /// Bytes read back to the host.
     pub bytes_down: u64,
-    /// Wall milliseconds the host spent blocked in those waits.
+    /// Wall milliseconds the host spent blocked in those waits and inside submissions.
     pub wait_ms: f64,
 }
 
@@ -242,10 +243,15 @@ impl GpuContext {
         }
     }
 
-    /// Submits one command buffer (counted).
+    /// Submits one command buffer (counted). The time the driver holds the
+    /// host inside the submit (a queue still busy with earlier work: lavapipe
+    /// runs the work on the host's own cores) counts as waiting for the device.
     pub fn submit(&self, commands: wgpu::CommandBuffer) {
-        self.transfers.submissions.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        use std::sync::atomic::Ordering::Relaxed;
+        let t = std::time::Instant::now();
+        self.transfers.submissions.fetch_add(1, Relaxed);
         self.queue.submit([commands]);
+        self.transfers.wait_ns.fetch_add(t.elapsed().as_nanos() as u64, Relaxed);
     }
 
     /// Blocks until every submitted command has run (counted, and timed).
