@@ -3,11 +3,13 @@
 # device that has the driver but no toolchain (../shared/device/README.md):
 #   1. scripts/gpu-frame-bench.sh (the viewer's frame: Sponza with cascades at
 #      720p, 1080p and 4K, still and flying; the 4×4 world at 1080p);
-#   2. `render --stats --backend wgpu` on builtin:sponza-sun --cascades 3 at the
+#   2. scripts/gpu-tests.sh run (the packed GPU test binaries), when packed;
+#   3. `render --stats --backend wgpu` on builtin:sponza-sun --cascades 3 at the
 #      four sizes of the issue's first table (20 frames), camera and field ms;
-#   3. scripts/gpu-bench.sh on Sibenik (GRIDS/RAYS trimmed by GPU_BENCH_GRIDS,
-#      GPU_BENCH_RAYS), time-limited;
-#   4. scripts/gpu-tests.sh run (the packed GPU test binaries), when packed.
+#   4. scripts/gpu-bench.sh on Sibenik (GRIDS/RAYS trimmed by GPU_BENCH_GRIDS,
+#      GPU_BENCH_RAYS).
+# Each step has a time limit (FRAME_BENCH_S, TESTS_S, RENDER_S each, GPU_BENCH_S),
+# so that the whole fits one device call of under 8 minutes.
 # Prepare here with: bash ../shared/device/prepare.sh cornell-box dabrovic-sponza
 #   sibenik scrub-pine; bash scripts/gpu-tests.sh pack; then on the device:
 #   bash .device/on-device.sh 'bash scripts/gpu-device-check.sh'
@@ -20,14 +22,20 @@ mkdir -p "$OUT"
 export PROBEGI_SHARED_DIR=${PROBEGI_SHARED_DIR:-$(cd ../shared && pwd)}
 
 echo "## 1. The viewer's frame (gpu-frame-bench)"
-OUT="$OUT/frame" BIN="$BIN" FRAMES=${FRAMES:-150} timeout 240 bash scripts/gpu-frame-bench.sh || echo "gpu-frame-bench failed or timed out"
+OUT="$OUT/frame" BIN="$BIN" FRAMES=${FRAMES:-120} timeout ${FRAME_BENCH_S:-150} bash scripts/gpu-frame-bench.sh || echo "gpu-frame-bench failed or timed out"
 
-echo; echo "## 2. render --stats --backend wgpu, builtin:sponza-sun --cascades 3, 20 frames"
+echo; echo "## 2. GPU test binaries"
+if [ -f .device/tests/probegi-wgpu-tests.tar.xz ]; then
+  OUT="$OUT/tests" timeout ${TESTS_S:-200} bash scripts/gpu-tests.sh run || echo "some GPU test binaries failed (logs in $OUT/tests)"
+else
+  echo "no packed test binaries (.device/tests)"
+fi
+echo; echo "## 3. render --stats --backend wgpu, builtin:sponza-sun --cascades 3, 20 frames"
 echo "| size | camera ms | field update ms | frame means ok |"
 echo "|---|---|---|---|"
 for size in 480x270 960x540 1920x1080 3840x2160; do
   s="$OUT/render-$size.json"
-  if timeout 90 "$BIN" render --scene builtin:sponza-sun --gi ddgi --cascades 3 --backend wgpu --frames 20 \
+  if timeout ${RENDER_S:-40} "$BIN" render --scene builtin:sponza-sun --gi ddgi --cascades 3 --backend wgpu --frames 20 \
     --width "${size%x*}" --height "${size#*x}" --out "$OUT/render-$size.exr" --stats "$s" >/dev/null 2>"$OUT/render-$size.log"; then
     python3 - "$s" "$size" <<'PY'
 import json, sys
@@ -39,16 +47,10 @@ PY
   fi
 done
 
-echo; echo "## 3. gpu-bench (Sibenik)"
+echo; echo "## 4. gpu-bench (Sibenik)"
 OUT="$OUT/gpu-bench" BIN="$BIN" GRIDS=${GPU_BENCH_GRIDS:-16,8,16 32,16,32 32,32,32} RAYS=${GPU_BENCH_RAYS:-128 256} \
-  timeout 150 bash scripts/gpu-bench.sh >/dev/null 2>"$OUT/gpu-bench.log" && cat "$OUT/gpu-bench/table.md" ||
+  timeout ${GPU_BENCH_S:-90} bash scripts/gpu-bench.sh >/dev/null 2>"$OUT/gpu-bench.log" && cat "$OUT/gpu-bench/table.md" ||
   { echo "gpu-bench failed or timed out"; tail -3 "$OUT/gpu-bench.log"; }
 
-echo; echo "## 4. GPU test binaries"
-if [ -f .device/tests/probegi-wgpu-tests.tar.xz ]; then
-  OUT="$OUT/tests" timeout 240 bash scripts/gpu-tests.sh run || echo "some GPU test binaries failed (logs in $OUT/tests)"
-else
-  echo "no packed test binaries (.device/tests)"
-fi
 # What comes back: the tables above, and a tarball of the JSON and logs.
 tar -czf "$OUT/../gpu-device-check.tar.gz" -C "$OUT" . 2>/dev/null || true

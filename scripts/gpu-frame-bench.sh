@@ -20,6 +20,7 @@ OUT=${OUT:-out/gpu-frame-bench}
 BIN=${BIN:-./target/release/probegi}
 FRAMES=${FRAMES:-150}
 SIZES=${SIZES:-1280x720 1920x1080 3840x2160}
+WORLD_SIZE=${WORLD_SIZE:-1920x1080}
 mkdir -p "$OUT"
 
 if ! { ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1'; } && ! ls /usr/lib/x86_64-linux-gnu/libvulkan.so.1 >/dev/null 2>&1; then
@@ -55,7 +56,7 @@ for size in $SIZES; do
   run "sponza-still-$size" builtin:sponza-sun "$size" && runs+=("sponza-still-$size")
   run "sponza-flight-$size" builtin:sponza-sun "$size" scenes/sponza-flight.script && runs+=("sponza-flight-$size")
 done
-run "world-4x4-still-1920x1080" "$world" 1920x1080 && runs+=("world-4x4-still-1920x1080")
+run "world-4x4-still-$WORLD_SIZE" "$world" "$WORLD_SIZE" && runs+=("world-4x4-still-$WORLD_SIZE")
 
 python3 - "$OUT" "${runs[@]}" >"$OUT/table.md" <<'PY'
 import json, sys
