@@ -64,12 +64,12 @@ out, names = sys.argv[1], sys.argv[2:]
 rows = [(n, json.load(open(f"{out}/{n}.json"))) for n in names]
 adapter = rows[0][1].get("adapter") if rows else "?"
 print(f"`view --headless --bench` on {adapter}, 3 cascades (screen scheme), frames after the warm-up\n")
-print("| run | frames | median ms | p95 ms | max ms | host ms (median) | camera ms | field update ms |")
-print("|---|---|---|---|---|---|---|---|")
+print("| run | frames | mean ms (period) | median ms | p95 ms | max ms | host ms (mean) | camera ms | field update ms |")
+print("|---|---|---|---|---|---|---|---|---|")
 f = lambda v: "—" if v is None else f"{v:.2f}"
 for n, d in rows:
     fm, hm = d["frame_ms"], d.get("host_ms", {})
-    print(f"| {n} | {d['frames'] - d.get('warmup_frames', 0)} | {f(fm['median'])} | {f(fm['p95'])} | {f(fm['max'])} "
-          f"| {f(hm.get('median'))} | {f(d.get('camera_ms'))} | {f(d.get('field_update_ms'))} |")
+    print(f"| {n} | {d['frames'] - d.get('warmup_frames', 0)} | {f(fm.get('mean'))} | {f(fm['median'])} | {f(fm['p95'])} "
+          f"| {f(fm['max'])} | {f(hm.get('mean'))} | {f(d.get('camera_ms'))} | {f(d.get('field_update_ms'))} |")
 PY
 cat "$OUT/table.md"

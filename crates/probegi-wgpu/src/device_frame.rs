@@ -120,6 +120,8 @@ struct FrameImages {
 /// completed.
 struct ReadbackSlot {
     buffer: wgpu::Buffer,
+    /// The submission that fills it.
+    submission: wgpu::SubmissionIndex,
     frame: u32,
     request_words: u32,
     mapped: Arc<AtomicBool>,
@@ -149,12 +151,12 @@ impl FrameReadbackRing {
         })
     }
 
-    /// Starts mapping `buffer` (submitted) for frame `frame`.
-    fn push(&mut self, buffer: wgpu::Buffer, frame: u32, request_words: u32) {
+    /// Starts mapping `buffer` (filled by `submission`) for frame `frame`.
+    fn push(&mut self, buffer: wgpu::Buffer, submission: wgpu::SubmissionIndex, frame: u32, request_words: u32) {
         let mapped = Arc::new(AtomicBool::new(false));
         let flag = mapped.clone();
         buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| flag.store(r.is_ok(), Ordering::Release));
-        self.in_flight.push_back(ReadbackSlot { buffer, frame, request_words, mapped });
+        self.in_flight.push_back(ReadbackSlot { buffer, submission, frame, request_words, mapped });
     }
 
     /// The readouts whose maps have completed, oldest first (in frame order:
@@ -168,7 +170,8 @@ impl FrameReadbackRing {
                 if self.in_flight.len() <= keep {
                     break;
                 }
-                ctx.wait()?;
+                // The oldest frame only: the frames after it keep running.
+                ctx.wait_for(slot.submission.clone())?;
                 if !slot.mapped.load(Ordering::Acquire) {
                     return Err(GpuError::Readback("a frame's statistics could not be mapped".into()));
                 }
@@ -373,10 +376,10 @@ impl GpuFrame {
         if f.request_words > 0 {
             encoder.copy_buffer_to_buffer(&images.requests, 0, &staging, STATS_BYTES, 4 * f.request_words as u64);
         }
-        ctx.submit(encoder.finish());
+        let submission = ctx.submit(encoder.finish());
         images.current = 1 - images.current;
         images.fresh = false;
-        ring.push(staging, f.frame, f.request_words);
+        ring.push(staging, submission, f.frame, f.request_words);
         ring.collect(ctx, input.readback_lag_frames as usize)
     }
 

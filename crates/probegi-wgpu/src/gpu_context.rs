@@ -246,12 +246,24 @@ impl GpuContext {
     /// Submits one command buffer (counted). The time the driver holds the
     /// host inside the submit (a queue still busy with earlier work: lavapipe
     /// runs the work on the host's own cores) counts as waiting for the device.
-    pub fn submit(&self, commands: wgpu::CommandBuffer) {
+    pub fn submit(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
         use std::sync::atomic::Ordering::Relaxed;
         let t = std::time::Instant::now();
         self.transfers.submissions.fetch_add(1, Relaxed);
-        self.queue.submit([commands]);
+        let index = self.queue.submit([commands]);
         self.transfers.wait_ns.fetch_add(t.elapsed().as_nanos() as u64, Relaxed);
+        index
+    }
+
+    /// Blocks until submission `index` has run (a blocking wait, counted and
+    /// timed), not the ones after it.
+    pub fn wait_for(&self, index: wgpu::SubmissionIndex) -> Result<(), GpuError> {
+        use std::sync::atomic::Ordering::Relaxed;
+        let t = std::time::Instant::now();
+        let r = self.device.poll(wgpu::PollType::Wait { submission_index: Some(index), timeout: None });
+        self.transfers.waits.fetch_add(1, Relaxed);
+        self.transfers.wait_ns.fetch_add(t.elapsed().as_nanos() as u64, Relaxed);
+        r.map(|_| ()).map_err(|e| GpuError::Device(e.to_string()))
     }
 
     /// Blocks until every submitted command has run (counted, and timed).

@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::shared;
+use common::{shared, trace_error};
 
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -92,9 +92,10 @@ fn hostile_batches_through_the_seam_finish_and_agree_with_the_cpu() {
     ];
     let mut rng = Pcg32::new(seed, 0x5ea3);
     let start = Instant::now();
-    let (mut batches, mut refused, mut hits, mut extreme_differ) = (0, 0, 0, 0);
+    let (mut batches, mut refused, mut hits, mut extreme_differ, mut near_ties) = (0, 0, 0, 0, 0);
     while batches < 2 || start.elapsed().as_secs_f64() < budget {
         let scene = scenes[batches % 2].clone();
+        let scene_for_ties = scene.clone();
         let (lo, hi) = scene.bounds().expect("geometry");
         let batch = hostile_batch(&mut rng, (lo + hi) * 0.5, 2048);
         let Some((cpu, gpu)) = trace_both(scene, batch.clone(), 120) else {
@@ -114,18 +115,99 @@ fn hostile_batches_through_the_seam_finish_and_agree_with_the_cpu() {
             }
             // Where a ray's numbers are near f32::MAX the CPU's SIMD node test and
             // the GPU's scalar one round differently, so they may pick another
-            // triangle; both must still answer. Elsewhere they agree exactly.
+            // triangle; both must still answer. Elsewhere they agree, but for a
+            // near tie a device that fuses and approximates may break the other
+            // way (tests/common/trace_error): counted against `NEAR_TIES_MAX`.
             if extreme(&ray) {
                 extreme_differ += (c != g) as usize;
-            } else {
-                assert_eq!(c, g, "ray {ray:?}");
+            } else if c != g {
+                assert_near_a_tie(&scene_for_ties, &ray, cpu[i], gpu[i]);
+                near_ties += 1;
             }
         }
         batches += 1;
     }
     eprintln!(
         "{batches} batches of 2048 hostile rays: {refused} refused, {hits} hits, CPU = GPU but for \
-         {extreme_differ} rays with components beyond ±{EXTREME:e}"
+         {extreme_differ} rays with components beyond ±{EXTREME:e} and {near_ties} near ties"
     );
     assert!(refused > 0 && hits > 0, "{refused} refused, {hits} hits");
+    assert!(near_ties <= NEAR_TIES_MAX.max(hits / 100), "{near_ties} near ties in {hits} hits");
+}
+
+/// Near ties allowed over a run (at least; 1 % of the hits where more). A tie
+/// needs a hit within a few ulps of an edge, of the segment's end or of another
+/// surface, or an origin on a surface's plane, each checked one by one
+/// ([`assert_near_a_tie`]); lavapipe gives none, and an H200 broke the exact
+/// comparison this replaces on a subnormal origin ([`starts_on_it`]).
+const NEAR_TIES_MAX: usize = 6;
+
+/// Two closest hits of one ray that differ must be a near tie: both hit
+/// distances within their tolerances of each other, or a hit within its
+/// tolerance of an edge, of the segment's end, of its start (the origin on the
+/// triangle's plane), or on an alpha-cut triangle (whose coverage test is one
+/// more boundary a rounding may cross).
+fn assert_near_a_tie(scene: &Scene, ray: &Ray, c: Option<RayHit>, g: Option<RayHit>) {
+    let tol = |h: &RayHit| trace_error::hit_tolerance(ray, h.t, &trace_error::world_triangle(scene, 0.0, h));
+    let tie = match (c, g) {
+        (Some(a), Some(b)) => (a.t - b.t).abs() as f64 <= tol(&a).dt + tol(&b).dt,
+        _ => false,
+    };
+    let near = [c, g].iter().flatten().any(|h| {
+        let t = tol(h);
+        trace_error::near_an_edge(h, &t)
+            || (ray.t_max.is_finite() && (ray.t_max - h.t) as f64 <= t.dt)
+            || starts_on_it(scene, ray, h)
+            || cut_out(scene, h)
+    });
+    assert!(tie || near, "the GPU's closest hit {g:?} and the CPU's {c:?} differ far from a tie: {ray:?}");
+}
+
+/// Whether the ray starts on the hit's triangle's plane, within what either
+/// side's plane distance may round to: the dot product's 4u·|c| a side
+/// (`trace_error`), and a subnormal coordinate, which a device may flush to
+/// zero (Vulkan lets shaders flush denormals). Such a ray may start on the
+/// surface (a hit at t = 0) on one side and just off it on the other. An H200
+/// met one: an origin 1e-40 m above Sponza's floor, a hit at t = 0 there and
+/// a miss on the CPU.
+fn starts_on_it(scene: &Scene, ray: &Ray, hit: &RayHit) -> bool {
+    let [p0, p1, p2] = trace_error::world_triangle(scene, 0.0, hit).p;
+    let n = (p1 - p0).cross(p2 - p0).normalize();
+    let c = p0 - ray.origin.as_dvec3();
+    n.dot(c).abs() <= 8.0 * trace_error::UNIT_ROUNDOFF * c.length() + 4.0 * f32::MIN_POSITIVE as f64
+}
+
+/// Whether the hit's triangle has an alpha cutout.
+fn cut_out(scene: &Scene, hit: &RayHit) -> bool {
+    let mesh = match scene.instances.get(hit.instance as usize) {
+        Some(inst) => &scene.prototypes[inst.prototype as usize].mesh,
+        None => &scene.mesh,
+    };
+    let material = scene.material(mesh.triangle_materials[hit.triangle as usize]);
+    material.alpha_mode != probegi_scene::material::AlphaMode::Opaque
+}
+
+/// The one disagreement an H200 gave (its run of this test): the GPU hit
+/// triangle 0 at t = 0 from an origin 1e-40 m off its plane, which it may flush
+/// to zero; the CPU missed. That is a tie at the segment's start, and a ray
+/// starting a metre off the plane is not.
+#[test]
+fn a_subnormal_origin_on_a_plane_is_a_tie() {
+    let scenes = [
+        load_scene(&shared("dabrovic-sponza/sponza.obj")).expect("shared Sponza"),
+        load_scene("builtin:forest").expect("built-in forest (shared pine)"),
+    ];
+    let hit = RayHit {
+        t: 0.0,
+        triangle: 0,
+        barycentric: glam::Vec2::new(0.028417127, 0.4836097),
+        backface: true,
+        instance: u32::MAX,
+    };
+    let ray =
+        Ray::segment(Vec3::new(-0.8195162, 1e-40, 0.60134125), Vec3::new(1.1754944e-38, 0.15504909, 0.40107214), 1e4);
+    let on = |scene: &Scene, ray: &Ray| starts_on_it(scene, ray, &hit);
+    assert!(scenes.iter().any(|s| on(s, &ray)), "the H200's ray starts on triangle 0's plane in one of the scenes");
+    let off = Ray { origin: ray.origin + Vec3::Y, ..ray };
+    assert!(scenes.iter().all(|s| !on(s, &off)), "a metre above it is no tie");
 }
