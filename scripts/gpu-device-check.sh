@@ -21,6 +21,21 @@ BIN=${BIN:-./target/release/probegi}
 mkdir -p "$OUT"
 export PROBEGI_SHARED_DIR=${PROBEGI_SHARED_DIR:-$(cd ../shared && pwd)}
 
+# An H200 container of 2026-12-04 had the NVIDIA driver's GLX library refuse
+# Vulkan ("Could not get 'vkCreateInstance' via 'vk_icdGetInstanceProcAddr' for
+# ICD libGLX_nvidia.so.0") while its EGL library, the same driver's other
+# entry point, worked: without an adapter, try a manifest naming that one.
+has_adapter() { "$BIN" bench --gi ddgi --backend wgpu --grids 4,4,4 --rays 32 --frames 1 --repeat 1 2>/dev/null | grep -q '"adapter"'; }
+if ! has_adapter; then
+  for egl in /usr/local/nvidia/lib64/libEGL_nvidia.so.0 /usr/lib/x86_64-linux-gnu/libEGL_nvidia.so.0; do
+    [ -e "$egl" ] || continue
+    icd=$(mktemp --suffix=.json)
+    printf '{"file_format_version":"1.0.1","ICD":{"library_path":"%s","api_version":"1.3.0"}}\n' "$egl" >"$icd"
+    export VK_ICD_FILENAMES=$icd VK_DRIVER_FILES=$icd
+    if has_adapter; then echo "Vulkan through $egl ($icd)"; break; fi
+  done
+fi
+
 echo "## 1. The viewer's frame (gpu-frame-bench)"
 OUT="$OUT/frame" BIN="$BIN" FRAMES=${FRAMES:-120} timeout ${FRAME_BENCH_S:-150} bash scripts/gpu-frame-bench.sh || echo "gpu-frame-bench failed or timed out"
 

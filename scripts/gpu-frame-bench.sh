@@ -5,8 +5,11 @@
 # `--cascades` defaults) at 1280×720, 1920×1080 and 3840×2160, with a still camera
 # and with scenes/sponza-flight.script; and the 4×4 world of Sponza copies
 # (scripts/sponza-world.sh) at 1920×1080 with the same cascades. Prints a Markdown
-# table (median and p95 frame, the host's share of a frame, camera and field
-# update ms a frame) and writes OUT/table.md and one JSON per run.
+# table (mean, median and p95 frame, the host's share of a frame, camera and
+# field update ms a frame, and the device's own time of each camera-frame pass
+# from timestamp queries where the adapter has them) and writes OUT/table.md and
+# one JSON per run. The field update's per-pass device times are
+# `probegi bench --backend wgpu`'s (scripts/gpu-bench.sh).
 #
 # Needs only the release binary (BIN, default target/release/probegi, built here
 # when missing and cargo exists) and ../shared/scenes (or PROBEGI_SHARED_DIR).
@@ -64,12 +67,14 @@ out, names = sys.argv[1], sys.argv[2:]
 rows = [(n, json.load(open(f"{out}/{n}.json"))) for n in names]
 adapter = rows[0][1].get("adapter") if rows else "?"
 print(f"`view --headless --bench` on {adapter}, 3 cascades (screen scheme), frames after the warm-up\n")
-print("| run | frames | mean ms (period) | median ms | p95 ms | max ms | host ms (mean) | camera ms | field update ms |")
-print("|---|---|---|---|---|---|---|---|---|")
+print("| run | frames | mean ms (period) | median ms | p95 ms | max ms | host ms (mean) | camera ms | field update ms "
+      "| GPU: camera / resolve / compose / stats ms |")
+print("|---|---|---|---|---|---|---|---|---|---|")
 f = lambda v: "—" if v is None else f"{v:.2f}"
 for n, d in rows:
     fm, hm = d["frame_ms"], d.get("host_ms", {})
     print(f"| {n} | {d['frames'] - d.get('warmup_frames', 0)} | {f(fm.get('mean'))} | {f(fm['median'])} | {f(fm['p95'])} "
-          f"| {f(fm['max'])} | {f(hm.get('mean'))} | {f(d.get('camera_ms'))} | {f(d.get('field_update_ms'))} |")
+          f"| {f(fm['max'])} | {f(hm.get('mean'))} | {f(d.get('camera_ms'))} | {f(d.get('field_update_ms'))} "
+          f"| {' / '.join(f(g.get(k)) for k in ('gpu_camera', 'gpu_frame_resolve', 'gpu_frame_compose', 'gpu_frame_stats')) if (g := d.get('gpu_pass_ms')) else '—'} |")
 PY
 cat "$OUT/table.md"

@@ -148,6 +148,8 @@ fn bench_report(scene: &str, adapter: Option<String>, out: &ScriptedOutput) -> s
         "host_ms": { "mean": host_mean, "median": host_median, "p95": host_p95, "max": host_max },
         "field_update_ms": stats.field_update_ms,
         "camera_ms": stats.pass_ms.get("camera"),
+        // The device's own times of the frame's passes (timestamp queries, read late).
+        "gpu_pass_ms": stats.pass_ms.iter().filter(|(k, _)| k.starts_with("gpu_")).collect::<std::collections::BTreeMap<_, _>>(),
         "rays_per_frame": stats.rays_per_frame,
     })
 }

@@ -88,7 +88,15 @@ pub struct DeviceFrameReadout {
     pub nonfinite: u64,
     /// The screen scheme's request bitset (empty without requests).
     pub requests: Vec<u32>,
+    /// The device's own milliseconds for each of the frame's passes, named by
+    /// [`DEVICE_FRAME_PASSES`], where the device has timestamp queries (empty otherwise).
+    pub gpu_pass_ms: Vec<f64>,
 }
+
+/// The passes of a frame kept on the device, as `RenderStats::pass_ms` names
+/// their device times: the camera pass, then the resolve (accumulation or the
+/// temporal filter), compose (+ tone map) and statistics passes.
+pub const DEVICE_FRAME_PASSES: [&str; 4] = ["gpu_camera", "gpu_frame_resolve", "gpu_frame_compose", "gpu_frame_stats"];
 
 /// Which image of the frame to read back.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

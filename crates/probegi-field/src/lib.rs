@@ -42,6 +42,8 @@ pub mod seam;
 pub use backend::{BackendError, CameraFrameOut, DeviceField, ProbeBatchTracer, ProbeTracerHandle};
 pub use ddgi_field_set::DdgiFieldSet;
 pub use ddgi_volume::{DdgiVolume, SceneEvent};
-pub use device_frame::{DeviceFrame, DeviceFrameInput, DeviceFrameReadout, FrameHistory, FrameLayer};
+pub use device_frame::{
+    DEVICE_FRAME_PASSES, DeviceFrame, DeviceFrameInput, DeviceFrameReadout, FrameHistory, FrameLayer,
+};
 pub use device_plans::DeviceBlendOutput;
 pub use seam::{ProbeRayBatch, ProbeRayHit, SeamError, UpdateStep};

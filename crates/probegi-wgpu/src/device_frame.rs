@@ -27,7 +27,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use probegi_core::camera::CameraRays;
-use probegi_field::device_frame::{DeviceFrameReadout, FrameHistory, FrameLayer};
+use probegi_field::device_frame::{DEVICE_FRAME_PASSES, DeviceFrameReadout, FrameHistory, FrameLayer};
 
 use crate::bvh_trace::GpuBvh;
 use crate::camera_frame::{CameraFrame, CameraParams, CameraTargets, GpuCameraPass};
@@ -83,6 +83,8 @@ struct FrameStatsBlock {
     counts: [u32; 4],
 }
 const STATS_BYTES: u64 = std::mem::size_of::<FrameStatsBlock>() as u64;
+/// Begin and end timestamps of the frame's passes (`DEVICE_FRAME_PASSES`), 8 bytes each.
+const TIMESTAMP_BYTES: u64 = DEVICE_FRAME_PASSES.len() as u64 * 16;
 const _: () = assert!(STATS_BYTES == 48);
 
 /// Texels (16 bytes) a pixel of the history holds (see `device_frame.wgsl`).
@@ -124,6 +126,8 @@ struct ReadbackSlot {
     submission: wgpu::SubmissionIndex,
     frame: u32,
     request_words: u32,
+    /// Timestamps follow the requests; ms per tick (0: none).
+    tick_ms: f64,
     mapped: Arc<AtomicBool>,
 }
 
@@ -139,7 +143,7 @@ pub struct FrameReadbackRing {
 impl FrameReadbackRing {
     /// A staging buffer for `words` request words, reused when one of the size is free.
     fn take(&mut self, ctx: &GpuContext, words: u32) -> wgpu::Buffer {
-        let size = STATS_BYTES + 4 * words as u64;
+        let size = STATS_BYTES + 4 * words as u64 + if ctx.timestamps { TIMESTAMP_BYTES } else { 0 };
         if let Some(i) = self.free.iter().position(|b| b.size() == size) {
             return self.free.swap_remove(i);
         }
@@ -152,11 +156,18 @@ impl FrameReadbackRing {
     }
 
     /// Starts mapping `buffer` (filled by `submission`) for frame `frame`.
-    fn push(&mut self, buffer: wgpu::Buffer, submission: wgpu::SubmissionIndex, frame: u32, request_words: u32) {
+    fn push(
+        &mut self,
+        buffer: wgpu::Buffer,
+        submission: wgpu::SubmissionIndex,
+        frame: u32,
+        request_words: u32,
+        tick_ms: f64,
+    ) {
         let mapped = Arc::new(AtomicBool::new(false));
         let flag = mapped.clone();
         buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| flag.store(r.is_ok(), Ordering::Release));
-        self.in_flight.push_back(ReadbackSlot { buffer, submission, frame, request_words, mapped });
+        self.in_flight.push_back(ReadbackSlot { buffer, submission, frame, request_words, tick_ms, mapped });
     }
 
     /// The readouts whose maps have completed, oldest first (in frame order:
@@ -191,8 +202,12 @@ fn read_slot(ctx: &GpuContext, slot: &ReadbackSlot) -> Result<DeviceFrameReadout
     let bytes: &[u8] = &view;
     ctx.count_read_back(bytes.len() as u64);
     let stats: FrameStatsBlock = bytemuck::pod_read_unaligned(&bytes[..STATS_BYTES as usize]);
-    let words = &bytes[STATS_BYTES as usize..];
+    let words_end = STATS_BYTES as usize + 4 * slot.request_words as usize;
+    let words = &bytes[STATS_BYTES as usize..words_end];
     let requests = if slot.request_words > 0 { bytemuck::pod_collect_to_vec::<u8, u32>(words) } else { Vec::new() };
+    let ticks: Vec<u64> =
+        if slot.tick_ms > 0.0 { bytemuck::pod_collect_to_vec(&bytes[words_end..]) } else { Vec::new() };
+    let gpu_pass_ms = ticks.chunks_exact(2).map(|t| t[1].saturating_sub(t[0]) as f64 * slot.tick_ms).collect();
     let v3 = |v: [f32; 4]| Vec3::new(v[0], v[1], v[2]);
     Ok(DeviceFrameReadout {
         frame: slot.frame,
@@ -202,6 +217,7 @@ fn read_slot(ctx: &GpuContext, slot: &ReadbackSlot) -> Result<DeviceFrameReadout
         unlit: stats.counts[1] as u64,
         nonfinite: stats.counts[2] as u64,
         requests,
+        gpu_pass_ms,
     })
 }
 
@@ -222,6 +238,9 @@ pub struct GpuFrame {
     pipelines: [wgpu::ComputePipeline; 3],
     images: Option<FrameImages>,
     ring: FrameReadbackRing,
+    /// Timestamps of the frame's passes and their resolve buffer, where the
+    /// device has timestamp queries; read late with the statistics.
+    timestamps: Option<(wgpu::QuerySet, wgpu::Buffer)>,
 }
 
 impl GpuFrame {
@@ -230,7 +249,22 @@ impl GpuFrame {
         let layout = ctx.pass_layout("device frame", &[true, true, true, false, false, false, false]);
         let pipelines =
             ctx.compute_pipelines(&DEVICE_FRAME, &[Some(&layout)], ["frame_resolve", "frame_compose", "frame_stats"]);
-        Self { layout, pipelines, images: None, ring: FrameReadbackRing::default() }
+        let passes = DEVICE_FRAME_PASSES.len() as u32;
+        let timestamps = ctx.timestamps.then(|| {
+            let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("frame pass timestamps"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2 * passes,
+            });
+            let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("frame timestamp resolve"),
+                size: TIMESTAMP_BYTES,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            (set, resolve)
+        });
+        Self { layout, pipelines, images: None, ring: FrameReadbackRing::default(), timestamps }
     }
 
     /// The images for a `width` × `height` frame with `words` request words
@@ -331,7 +365,14 @@ impl GpuFrame {
             return Err(GpuError::Input("a camera frame of no pixels".into()));
         }
         let camera_params = GpuCameraPass::params(f, resources.1.shadow_field)?;
-        let Self { layout, pipelines: [resolve, compose, stats], images, ring } = self;
+        let Self { layout, pipelines: [resolve, compose, stats], images, ring, timestamps } = self;
+        let writes = |i: u32| {
+            timestamps.as_ref().map(|(set, _)| wgpu::ComputePassTimestampWrites {
+                query_set: set,
+                beginning_of_pass_write_index: Some(2 * i),
+                end_of_pass_write_index: Some(2 * i + 1),
+            })
+        };
         let staging = ring.take(ctx, f.request_words);
         let images = Self::ensure_images(layout, images, ctx, (f.width, f.height, f.request_words))?;
         let (mode, frames_max, clip) = match (&input.history, images.fresh) {
@@ -364,22 +405,36 @@ impl GpuFrame {
             irradiance: &images.irradiance,
             requests: &images.requests,
         };
-        pass.record(ctx, &mut encoder, resources, f, &targets, None);
+        pass.record(ctx, &mut encoder, resources, f, &targets, writes(0));
         let group = &images.bind_groups[images.current];
-        for (pipeline, (x, y)) in [(resolve, (gx, gy)), (compose, (gx, gy)), (stats, (1, 1))] {
-            let mut p = encoder.begin_compute_pass(&Default::default());
+        for (k, (pipeline, (x, y))) in
+            [(resolve, (gx, gy)), (compose, (gx, gy)), (stats, (1, 1))].into_iter().enumerate()
+        {
+            let mut p = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes: writes(1 + k as u32),
+            });
             p.set_pipeline(pipeline);
             p.set_bind_group(0, group, &[]);
             p.dispatch_workgroups(x, y, 1);
         }
         encoder.copy_buffer_to_buffer(&images.stats, 0, &staging, 0, STATS_BYTES);
+        let words_bytes = 4 * f.request_words as u64;
         if f.request_words > 0 {
-            encoder.copy_buffer_to_buffer(&images.requests, 0, &staging, STATS_BYTES, 4 * f.request_words as u64);
+            encoder.copy_buffer_to_buffer(&images.requests, 0, &staging, STATS_BYTES, words_bytes);
         }
-        let submission = ctx.submit(encoder.finish());
+        if let Some((set, resolve)) = timestamps.as_ref() {
+            encoder.resolve_query_set(set, 0..2 * DEVICE_FRAME_PASSES.len() as u32, resolve, 0);
+            encoder.copy_buffer_to_buffer(resolve, 0, &staging, STATS_BYTES + words_bytes, TIMESTAMP_BYTES);
+        }
+        let tick_ms = if timestamps.is_some() { ctx.queue.get_timestamp_period() as f64 * 1e-6 } else { 0.0 };
+        // The frame's one submission: with deferring, the field update's passes
+        // recorded before it go with it.
+        ctx.submit(encoder.finish());
+        let submission = ctx.flush().ok_or_else(|| GpuError::Input("the frame was not submitted".into()))?;
         images.current = 1 - images.current;
         images.fresh = false;
-        ring.push(staging, submission, f.frame, f.request_words);
+        ring.push(staging, submission, f.frame, f.request_words, tick_ms);
         ring.collect(ctx, input.readback_lag_frames as usize)
     }
 

@@ -49,6 +49,11 @@ pub struct GpuContext {
     /// Bytes this crate's passes moved across the bus, host to device and back
     /// (what `bench --backend wgpu` reports per frame).
     transfers: TransferCounts,
+    /// While deferring ([`GpuContext::defer_submissions`]): the command buffers
+    /// recorded since the last [`GpuContext::flush`], in order.
+    pending: std::sync::Mutex<Option<Vec<wgpu::CommandBuffer>>>,
+    /// The last submission made to the queue.
+    last_submission: std::sync::Mutex<Option<wgpu::SubmissionIndex>>,
 }
 
 /// Bytes uploaded (buffers made from host data, queue writes) and read back,
@@ -126,6 +131,8 @@ impl GpuContext {
             adapter_name: format!("{} ({:?}, {})", info.name, info.backend, info.driver),
             timestamps: !required_features.is_empty(),
             transfers: TransferCounts::default(),
+            pending: Default::default(),
+            last_submission: Default::default(),
         })
     }
 
@@ -150,7 +157,15 @@ impl GpuContext {
     /// A device and queue the caller owns (an engine's).
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, adapter_name: impl Into<String>) -> Self {
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        Self { device, queue, adapter_name: adapter_name.into(), timestamps, transfers: TransferCounts::default() }
+        Self {
+            device,
+            queue,
+            adapter_name: adapter_name.into(),
+            timestamps,
+            transfers: TransferCounts::default(),
+            pending: Default::default(),
+            last_submission: Default::default(),
+        }
     }
 
     /// An error, not wgpu's panic, when a storage buffer of `bytes` exceeds what
@@ -243,15 +258,55 @@ impl GpuContext {
         }
     }
 
-    /// Submits one command buffer (counted). The time the driver holds the
-    /// host inside the submit (a queue still busy with earlier work: lavapipe
-    /// runs the work on the host's own cores) counts as waiting for the device.
-    pub fn submit(&self, commands: wgpu::CommandBuffer) -> wgpu::SubmissionIndex {
+    /// With `on`, the passes' command buffers and buffer writes are recorded in
+    /// order and go to the queue together at the next [`Self::flush`] (one
+    /// submission: a frame's field update and camera frame), or before any
+    /// blocking read-back or wait; off flushes what is pending and submits
+    /// each at once again. Buffer writes are then copies recorded in the same
+    /// order, not `Queue::write_buffer` (which lands before the whole submission).
+    pub fn defer_submissions(&self, on: bool) {
+        if !on {
+            self.flush();
+        }
+        let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+        match (on, pending.is_some()) {
+            (true, false) => *pending = Some(Vec::new()),
+            (false, true) => *pending = None,
+            _ => {}
+        }
+    }
+
+    /// Submits one command buffer, or records it while deferring (counted when
+    /// it reaches the queue). The time the driver holds the host inside a
+    /// submission (a queue still busy with earlier work: lavapipe runs the work
+    /// on the host's own cores) counts as waiting for the device.
+    pub fn submit(&self, commands: wgpu::CommandBuffer) {
+        let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(list) = pending.as_mut() {
+            list.push(commands);
+            return;
+        }
+        drop(pending);
+        self.queue_submit(vec![commands]);
+    }
+
+    /// Submits what deferring recorded, as one submission, and returns the
+    /// last submission made (this one, or an earlier one when nothing was pending).
+    pub fn flush(&self) -> Option<wgpu::SubmissionIndex> {
+        let list = self.pending.lock().unwrap_or_else(|e| e.into_inner()).as_mut().map(std::mem::take);
+        match list {
+            Some(list) if !list.is_empty() => Some(self.queue_submit(list)),
+            _ => self.last_submission.lock().unwrap_or_else(|e| e.into_inner()).clone(),
+        }
+    }
+
+    fn queue_submit(&self, commands: Vec<wgpu::CommandBuffer>) -> wgpu::SubmissionIndex {
         use std::sync::atomic::Ordering::Relaxed;
         let t = std::time::Instant::now();
         self.transfers.submissions.fetch_add(1, Relaxed);
-        let index = self.queue.submit([commands]);
+        let index = self.queue.submit(commands);
         self.transfers.wait_ns.fetch_add(t.elapsed().as_nanos() as u64, Relaxed);
+        *self.last_submission.lock().unwrap_or_else(|e| e.into_inner()) = Some(index.clone());
         index
     }
 
@@ -287,10 +342,23 @@ impl GpuContext {
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
     }
 
-    /// Writes `data` into `buffer` at `offset` through the queue (counted as uploaded).
+    /// Writes `data` into `buffer` at `offset` (counted as uploaded): through
+    /// the queue, or, while deferring, as a copy recorded after the passes
+    /// before it.
     pub(crate) fn write_buffer(&self, buffer: &wgpu::Buffer, offset: u64, data: &[u8]) {
         self.transfers.up.fetch_add(data.len() as u64, std::sync::atomic::Ordering::Relaxed);
-        self.queue.write_buffer(buffer, offset, data);
+        if self.pending.lock().unwrap_or_else(|e| e.into_inner()).is_none() || data.is_empty() {
+            self.queue.write_buffer(buffer, offset, data);
+            return;
+        }
+        let staging = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("deferred write"),
+            contents: data,
+            usage: wgpu::BufferUsages::COPY_SRC,
+        });
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&staging, 0, buffer, offset, data.len() as u64);
+        self.submit(encoder.finish());
     }
 
     /// A storage buffer of `bytes` a pass writes and the host reads back.
@@ -322,8 +390,10 @@ impl GpuContext {
         self.submit(encoder.finish());
     }
 
-    /// Waits until every submitted command has run (a blocking wait, counted).
+    /// Waits until every submitted command has run (a blocking wait, counted;
+    /// what deferring recorded is submitted first).
     pub fn wait(&self) -> Result<(), GpuError> {
+        self.flush();
         self.blocking_poll().map_err(GpuError::Device)
     }
 
@@ -359,6 +429,8 @@ impl GpuContext {
 
     /// Copies `buffer` (a `MAP_READ | COPY_DST` staging buffer already filled) into a vector.
     pub(crate) fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+        // The copy into `buffer` may be among the recorded commands: they go first.
+        self.flush();
         let slice = buffer.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {

@@ -200,8 +200,7 @@ impl GpuProbeBlend {
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         self.record(&mut encoder, &bindings, None);
         ctx.submit(encoder.finish());
-        ctx.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Device(e.to_string()))?;
-        Ok(())
+        ctx.wait()
     }
 
     /// Uploads `frame`'s inputs and binds them with `atlases`.

@@ -614,6 +614,9 @@ impl DeviceFrame for WgpuProbeTracer {
             return Err(BackendError::Unsupported("this tracer renders no camera frame".into()));
         };
         let ([_, _, _], [_, _, w, h]) = input.camera.basis();
+        // From the first frame kept here on, each frame's passes (update and
+        // camera) reach the queue as one submission, at the frame's end.
+        self.ctx.defer_submissions(true);
         let mut frame = self.frame_state()?;
         let frame = frame.get_or_insert_with(|| GpuFrame::new(&self.ctx));
         let camera = CameraFrame {

@@ -104,6 +104,9 @@ impl FrameLoop<'_> {
             stats.frame_indirect_means.push(r.indirect_mean);
             stats.frame_unlit_fraction.push(r.unlit as f32 / r.surfaces.max(1) as f32);
             stats.nonfinite_pixels += r.nonfinite;
+            for (name, ms) in probegi_field::DEVICE_FRAME_PASSES.iter().zip(&r.gpu_pass_ms) {
+                *self.pass_totals.entry(name).or_default() += ms;
+            }
             if r.surfaces > 0 && r.mean == glam::Vec3::ZERO && lights {
                 stats.black_frames.push(r.frame);
             }
