@@ -109,8 +109,8 @@ pub fn view_image(
 ) -> Result<Image, String> {
     match mode {
         ViewMode::Full => return Ok(full.clone()),
-        ViewMode::Direct => return Ok(session.stepper().layers().direct),
-        ViewMode::Indirect => return Ok(session.stepper().layers().indirect),
+        ViewMode::Direct => return Ok(session.stepper().layers()?.direct),
+        ViewMode::Indirect => return Ok(session.stepper().layers()?.indirect),
         _ => {}
     }
     let has_field = session.stepper_mut().sync_field_to_host()?.is_some();

@@ -2,8 +2,9 @@
 //! camera pass (`camera_frame`), then `shaders/device_frame.wgsl`'s resolve
 //! (accumulation, or a moved camera's temporal filter), compose (+ tone map to
 //! RGBA8) and statistics passes, all recorded into one submission over images
-//! allocated once per size. The host gets 48 bytes of statistics and the
-//! screen scheme's request words a frame, through a ring of staging buffers
+//! allocated once per size. The host gets 48 bytes of statistics, the
+//! screen scheme's request words and (where the device has timestamp
+//! queries) 64 bytes of pass timestamps a frame, through a ring of staging buffers
 //! mapped without waiting ([`FrameReadbackRing`]); pixels come back only when
 //! asked ([`GpuFrame::read_layer`], [`GpuFrame::read_rgba8`]).
 //!
@@ -65,7 +66,7 @@ impl FrameCamera {
 struct FrameParams {
     to: FrameCamera,
     from: FrameCamera,
-    /// Mode (0 accumulate, 1 restart, 2 reproject), history frames − 1, the
+    /// Mode (0 accumulate, 1 restart, 2 reproject, 3 no history), history frames − 1, the
     /// RGBA8 layer (0 full, 1 direct, 2 indirect), `frame_compose`'s workgroups.
     info: [u32; 4],
     /// x: the direct history's clip, standard deviations.
@@ -188,9 +189,18 @@ impl FrameReadbackRing {
                 }
             }
             let Some(slot) = self.in_flight.pop_front() else { break };
-            out.push(read_slot(ctx, &slot)?);
+            let readout = read_slot(ctx, &slot);
             slot.buffer.unmap();
             self.free.push(slot.buffer);
+            match readout {
+                Ok(r) => out.push(r),
+                // The frames before it are booked; this one's figures are lost.
+                Err(e) if !out.is_empty() => {
+                    eprintln!("warning: frame {}'s statistics could not be read: {e}", slot.frame);
+                    break;
+                }
+                Err(e) => return Err(e),
+            }
         }
         Ok(out)
     }
@@ -219,6 +229,25 @@ fn read_slot(ctx: &GpuContext, slot: &ReadbackSlot) -> Result<DeviceFrameReadout
         requests,
         gpu_pass_ms,
     })
+}
+
+/// Records the copies of the frame's statistics, request words and (resolved)
+/// timestamps into `staging`, in that order.
+fn record_readback(
+    encoder: &mut wgpu::CommandEncoder,
+    images: &FrameImages,
+    staging: &wgpu::Buffer,
+    timestamps: Option<&(wgpu::QuerySet, wgpu::Buffer)>,
+) {
+    encoder.copy_buffer_to_buffer(&images.stats, 0, staging, 0, STATS_BYTES);
+    let words_bytes = 4 * images.request_words as u64;
+    if images.request_words > 0 {
+        encoder.copy_buffer_to_buffer(&images.requests, 0, staging, STATS_BYTES, words_bytes);
+    }
+    if let Some((set, resolve)) = timestamps {
+        encoder.resolve_query_set(set, 0..2 * DEVICE_FRAME_PASSES.len() as u32, resolve, 0);
+        encoder.copy_buffer_to_buffer(resolve, 0, staging, STATS_BYTES + words_bytes, TIMESTAMP_BYTES);
+    }
 }
 
 /// One frame for [`GpuFrame::render`]: the camera pass's settings and what
@@ -376,7 +405,8 @@ impl GpuFrame {
         let staging = ring.take(ctx, f.request_words);
         let images = Self::ensure_images(layout, images, ctx, (f.width, f.height, f.request_words))?;
         let (mode, frames_max, clip) = match (&input.history, images.fresh) {
-            (_, true) | (FrameHistory::Restart, _) => (1, 0, 0.0),
+            (_, true) => (3, 0, 0.0),
+            (FrameHistory::Restart, _) => (1, 0, 0.0),
             (FrameHistory::Accumulate, _) => (0, 0, 0.0),
             (FrameHistory::Reproject { history_frames, .. }, _) if *history_frames <= 1 => (1, 0, 0.0),
             (FrameHistory::Reproject { history_frames, clip_sigma, .. }, _) => (2, history_frames - 1, *clip_sigma),
@@ -418,15 +448,7 @@ impl GpuFrame {
             p.set_bind_group(0, group, &[]);
             p.dispatch_workgroups(x, y, 1);
         }
-        encoder.copy_buffer_to_buffer(&images.stats, 0, &staging, 0, STATS_BYTES);
-        let words_bytes = 4 * f.request_words as u64;
-        if f.request_words > 0 {
-            encoder.copy_buffer_to_buffer(&images.requests, 0, &staging, STATS_BYTES, words_bytes);
-        }
-        if let Some((set, resolve)) = timestamps.as_ref() {
-            encoder.resolve_query_set(set, 0..2 * DEVICE_FRAME_PASSES.len() as u32, resolve, 0);
-            encoder.copy_buffer_to_buffer(resolve, 0, &staging, STATS_BYTES + words_bytes, TIMESTAMP_BYTES);
-        }
+        record_readback(&mut encoder, images, &staging, timestamps.as_ref());
         let tick_ms = if timestamps.is_some() { ctx.queue.get_timestamp_period() as f64 * 1e-6 } else { 0.0 };
         // The frame's one submission: with deferring, the field update's passes
         // recorded before it go with it.

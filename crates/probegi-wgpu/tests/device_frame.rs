@@ -185,6 +185,7 @@ fn a_steady_frame_waits_for_nothing_and_reads_back_no_pixel() {
         let image = stepper.image().expect("read back on request");
         assert_eq!(image.pixels.len(), (size * size) as usize);
         assert!(image.mean().max_element() > 0.0);
+        check_tone_map(&gpu, &image);
     }
     // Bytes read back a frame: the same at 32² and 96² pixels (9× the pixels);
     // late readouts land in whichever frame polls them, so compare the totals.
@@ -192,4 +193,27 @@ fn a_steady_frame_waits_for_nothing_and_reads_back_no_pixel() {
     assert_eq!(total(&per_size[0]), total(&per_size[1]), "bytes read back grow with the image");
     assert!(total(&per_size[1]) < 6 * 4 * 1024, "no pixel comes back: {}", total(&per_size[1]));
     assert_eq!(per_size[0][0].submissions, per_size[1][0].submissions);
+}
+
+/// The device's tone map (`read_rgba8`, the frame compose pass) is
+/// `probegi_core::color::tonemap_rgb8` of the frame, code for code but where
+/// `pow` in the sRGB curve, which WGSL computes as exp2(y·log2 x) to a few
+/// ulps, rounds across a code's half-way point: ±1 code, and then on a few
+/// pixels at most (a code step is 1/255 against a few 1e-7 of error).
+fn check_tone_map(gpu: &Arc<WgpuProbeTracer>, image: &Image) {
+    let df = gpu.device_frame().expect("the frame is kept on the device");
+    let rgba = df.read_rgba8(probegi_field::FrameLayer::Full).expect("tone-mapped frame");
+    assert_eq!(rgba.len(), image.pixels.len() * 4);
+    let mut off_by_one = 0;
+    for (p, px) in image.pixels.iter().enumerate() {
+        let want = probegi_core::color::tonemap_rgb8(*px);
+        let got = &rgba[4 * p..4 * p + 4];
+        assert_eq!(got[3], 255, "alpha");
+        for c in 0..3 {
+            let d = (got[c] as i32 - want[c] as i32).abs();
+            assert!(d <= 1, "pixel {p} channel {c}: {} vs {}", got[c], want[c]);
+            off_by_one += d as usize;
+        }
+    }
+    assert!(off_by_one * 100 <= image.pixels.len() * 3, "{off_by_one} channels off by one code");
 }

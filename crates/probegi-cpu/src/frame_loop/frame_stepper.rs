@@ -154,26 +154,28 @@ impl<'a> FrameStepper<'a> {
         fl.settings.width = width;
         fl.settings.height = height;
         fl.acc = super::Accumulation::new(width, height);
+        // The device's image is of the old size until the next frame.
+        fl.device_image = false;
         fl.prev_camera = None;
         fl.last_gbuffer = None;
     }
 
     /// The last frame's layers: the direct term (its mean over the frames it
     /// has accumulated) and the indirect term, each of the frame's size.
-    pub fn layers(&self) -> FrameLayers {
+    /// An error when the device that keeps the frame could not read it back.
+    pub fn layers(&self) -> Result<FrameLayers, String> {
         let fl = &self.frame_loop;
         let (width, height) = (fl.settings.width, fl.settings.height);
-        let on_device = |layer| fl.device_layer(layer).and_then(Result::ok);
         if let (Some(direct), Some(indirect)) =
-            (on_device(probegi_field::FrameLayer::Direct), on_device(probegi_field::FrameLayer::Indirect))
+            (fl.device_layer(probegi_field::FrameLayer::Direct), fl.device_layer(probegi_field::FrameLayer::Indirect))
         {
-            return FrameLayers { direct, indirect };
+            return Ok(FrameLayers { direct: direct?, indirect: indirect? });
         }
         let direct = (0..fl.acc.len()).map(|p| fl.acc.direct(p)).collect();
-        FrameLayers {
+        Ok(FrameLayers {
             direct: Image { width, height, pixels: direct },
             indirect: Image { width, height, pixels: fl.acc.indirect_image() },
-        }
+        })
     }
 
     /// The statistics so far (pass times are totals until [`Self::finish`]

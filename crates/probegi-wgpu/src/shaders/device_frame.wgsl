@@ -30,7 +30,7 @@ struct FrameCamera {
 struct FrameParams {
     now_cam: FrameCamera,   // this frame's camera
     last_cam: FrameCamera,  // the last frame's (mode 2)
-    info: vec4<u32>,     // mode (0 accumulate, 1 restart, 2 reproject), history frames − 1,
+    info: vec4<u32>,     // mode (0 accumulate, 1 restart, 2 reproject, 3 no history: a new size), history frames − 1,
                          // layer for RGBA8 (0 full, 1 direct, 2 indirect), workgroups of frame_compose
     clip: vec4<f32>,     // x: temporal_clip_sigma
 };
@@ -309,6 +309,9 @@ fn frame_resolve(@builtin(global_invocation_id) gid: vec3<u32>) {
     let mode = frame.info.x;
     if (mode == 0u) {
         hist = frame_means_of(p);
+    } else if (mode == 1u) {
+        // Accumulation::add_frame's restart clears the sums, not the last irradiance.
+        hist.irradiance = history_prev[4u * p + 2u].xyz;
     } else if (mode == 2u) {
         hist = frame_history_at(gid.x, gid.y, now);
         let frames_max = f32(frame.info.y);
