@@ -35,7 +35,11 @@ pub use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 /// shading to lack something a scene needs, the probe rays and the camera would
 /// be shaded on the CPU, with a line that says why (`shading_note`).
 pub fn wgpu_probe_tracer(scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTracer> {
-    let ctx = GpuContext::headless().context("--backend wgpu")?;
+    wgpu_probe_tracer_on(GpuContext::headless().context("--backend wgpu")?, scene, bvh)
+}
+
+/// [`wgpu_probe_tracer`] on a device the caller made (the viewer's window's).
+pub fn wgpu_probe_tracer_on(ctx: GpuContext, scene: &Scene, bvh: &BvhTracer) -> Result<WgpuProbeTracer> {
     let g = WgpuProbeTracer::new(ctx, scene, bvh, true)
         .context("--backend wgpu: putting the scene on the device")?
         .keeping_field(true);
@@ -56,13 +60,27 @@ pub fn render_probe_tracer(
     scene: &Scene,
     bvh: &BvhTracer,
 ) -> Result<Option<Arc<WgpuProbeTracer>>> {
+    render_probe_tracer_on(backend, gi, scene, bvh, None)
+}
+
+/// [`render_probe_tracer`], on `ctx` where given (the viewer's shared device).
+pub fn render_probe_tracer_on(
+    backend: Backend,
+    gi: &GiMethod,
+    scene: &Scene,
+    bvh: &BvhTracer,
+    ctx: Option<GpuContext>,
+) -> Result<Option<Arc<WgpuProbeTracer>>> {
     Ok(match backend {
         Backend::Cpu => None,
         Backend::Wgpu => {
             if !matches!(gi, GiMethod::Ddgi(_) | GiMethod::DdgiSet(_)) {
                 bail!("--backend wgpu runs the DDGI field and its camera frame on the GPU: it needs --gi ddgi");
             }
-            Some(Arc::new(wgpu_probe_tracer(scene, bvh)?))
+            Some(Arc::new(match ctx {
+                Some(ctx) => wgpu_probe_tracer_on(ctx, scene, bvh)?,
+                None => wgpu_probe_tracer(scene, bvh)?,
+            }))
         }
     })
 }

@@ -12,7 +12,9 @@ use probegi_view::view_layers::ViewMode;
 use probegi_view::viewer_controls::{GiChoice, ViewerControls};
 use probegi_view::viewer_prefs::ViewerPrefs;
 use probegi_view::viewer_window::WindowOptions;
-use probegi_view::viewer_worker::{SessionParts, ViewSource, WorkerOptions};
+use probegi_view::viewer_worker::{FramePresenter, SessionParts, SharedDevice, ViewSource, WorkerOptions};
+use probegi_wgpu::GpuContext;
+use std::sync::Arc;
 
 use crate::args::{GiArg, RenderArgs, ViewArgs};
 use crate::render_outputs::write_radiance;
@@ -258,15 +260,22 @@ impl CliViewSource {
         args
     }
 
-    fn build(&self, controls: Option<&ViewerControls>) -> Result<SessionParts> {
+    fn build(&self, controls: Option<&ViewerControls>, device: Option<&SharedDevice>) -> Result<SessionParts> {
         let args = self.args_for(controls);
         let frames = args.exit_after_frames.unwrap_or(100_000);
         let render = render_args(&args, frames);
         let (scene, camera) = prepare(&args.scene, &args.volume.set, crate::render_settings::IMAGE_BYTES_PER_PIXEL)?;
         let gi = crate::render_settings::gi_method(&scene, &render)?;
         let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
-        let gpu = crate::gpu_backend::render_probe_tracer(args.backend, &gi, &scene, &bvh)?;
+        // The window's own device, where it shares one: the frame reaches it as a texture.
+        let ctx = device.map(|d| GpuContext::from_device(d.device.clone(), d.queue.clone(), d.adapter_name.clone()));
+        let gpu = crate::gpu_backend::render_probe_tracer_on(args.backend, &gi, &scene, &bvh, ctx)?;
         let adapter = gpu.as_ref().map(|g| g.adapter_name().to_string());
+        let presenter: Option<FramePresenter> =
+            gpu.as_ref().filter(|g| device.is_some() && g.renders_camera()).map(|g| {
+                let g = Arc::clone(g);
+                Box::new(move |layer| g.present_frame(layer).map_err(|e| e.to_string())) as FramePresenter
+            });
         let mut settings = crate::render_settings::render_settings(&render, &scene, gi, gpu);
         settings.device_readback_lag_frames = probegi_view::view_session::VIEWER_READBACK_LAG_FRAMES;
         let diagonal = scene.bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
@@ -287,6 +296,7 @@ impl CliViewSource {
                 GiArg::Sh => GiChoice::Sh,
             },
             cascades: args.volume.cascades.unwrap_or(0),
+            presenter,
             tracer: Box::new(bvh),
             scene,
         })
@@ -294,8 +304,8 @@ impl CliViewSource {
 }
 
 impl ViewSource for CliViewSource {
-    fn load(&self, controls: Option<&ViewerControls>) -> Result<SessionParts, String> {
-        self.build(controls).map_err(|e| format!("{e:#}"))
+    fn load(&self, controls: Option<&ViewerControls>, device: Option<&SharedDevice>) -> Result<SessionParts, String> {
+        self.build(controls, device).map_err(|e| format!("{e:#}"))
     }
 
     fn watched_file(&self) -> Option<std::path::PathBuf> {

@@ -106,5 +106,29 @@ fn a_window_flies_the_script_and_matches_the_headless_run() {
     assert!(colours.len() > 200, "the window shows {} colours: nothing drawn", colours.len());
     let lit = px.iter().filter(|p| p[0] > 60 && u16::from(p[0]) > u16::from(p[2]) + 20).count();
     assert!(lit > 1000, "the Cornell box's red wall is on screen ({lit} red pixels)");
+    assert_shows_the_frame(&b, width as usize, &px);
     let _ = std::fs::remove_dir_all(headless_shot.parent().expect("dir"));
+}
+
+/// The window shows the frame as `render` tone-maps it, whichever way it
+/// reaches the window (a texture on the shared device, or RGBA8 from the
+/// host): inside the live frame's rectangle (a 200-pixel square well inside
+/// it: the frame is drawn at the panel's top left, scaled to about 670
+/// pixels), almost every pixel is one of the frame's own tone-mapped colours
+/// (nearest filtering adds none), within the device tone map's ±1 code. A
+/// frame decoded from sRGB once too often, or not tone-mapped, fails: its
+/// colours are others.
+fn assert_shows_the_frame(frame: &probegi_core::image::Image, width: usize, px: &[[u8; 3]]) {
+    let colours: std::collections::HashSet<[u8; 3]> =
+        frame.pixels.iter().map(|p| probegi_core::color::tonemap_rgb8(*p)).collect();
+    let near = |c: [u8; 3]| {
+        (0..27).any(|k| {
+            let d = [k % 3, (k / 3) % 3, k / 9].map(|d| d as i16 - 1);
+            let q = [0, 1, 2].map(|i| (c[i] as i16 + d[i]).clamp(0, 255) as u8);
+            colours.contains(&q)
+        })
+    };
+    let inside: Vec<[u8; 3]> = (100..300).flat_map(|y| (100..300).map(move |x| px[y * width + x])).collect();
+    let shown = inside.iter().filter(|c| near(**c)).count() as f64 / inside.len() as f64;
+    assert!(shown > 0.9, "only {:.0} % of the live frame's pixels are the frame's colours", shown * 100.0);
 }

@@ -26,7 +26,7 @@ use crate::input_script::{FlyKey, ScriptEvent};
 use crate::viewer_panels::{PanelAction, PanelState, panels_ui};
 use crate::viewer_prefs::ViewerPrefs;
 use crate::viewer_worker::{
-    LatestFrame, ViewSource, WorkerCommand, WorkerLink, WorkerOptions, WorkerReport, run_worker,
+    LatestFrame, SharedDevice, ViewSource, WorkerCommand, WorkerLink, WorkerOptions, WorkerReport, run_worker,
 };
 
 /// How the window runs.
@@ -71,11 +71,16 @@ pub fn run_window(source: Box<dyn ViewSource>, worker: WorkerOptions, opts: Wind
     let (rep_tx, rep_rx) = mpsc::channel();
     let latest: LatestFrame = Arc::new(Mutex::new(None));
     let link = WorkerLink { commands: cmd_rx, reports: rep_tx, latest: Arc::clone(&latest) };
+    // One device for the window and the field: the worker's GPU passes run on
+    // the device egui draws with, and the frame reaches the window as a texture.
+    let device = shared_device();
+    let worker_device = device.clone();
     let worker_thread = std::thread::Builder::new()
         .name("probegi-view-frames".into())
-        .spawn(move || run_worker(&*source, &worker, &link))
+        .spawn(move || run_worker(&*source, &worker, &link, worker_device.as_ref()))
         .map_err(|e| format!("starting the frame worker: {e}"))?;
     let mut app = ViewerApp::new(opts, cmd_tx.clone(), rep_rx, latest);
+    app.device = device;
     let run = event_loop.run_app(&mut app).map_err(|e| format!("the window's event loop: {e}"));
     let _ = cmd_tx.send(WorkerCommand::Quit);
     drop(cmd_tx);
@@ -86,6 +91,34 @@ pub fn run_window(source: Box<dyn ViewSource>, worker: WorkerOptions, opts: Wind
     let worker_result = worker_thread.join().map_err(|_| "the frame worker panicked".to_string())?;
     run?;
     app.outcome.take().unwrap_or(Ok(())).and(worker_result)
+}
+
+/// A device for the window and the frame worker to share (the adapter's
+/// limits, timestamp queries where it has them, as `GpuContext::headless`
+/// asks), or `None` with a line saying why: each then makes its own.
+fn shared_device() -> Option<SharedDevice> {
+    if std::env::var_os("PROBEGI_VIEW_SEPARATE_DEVICES").is_some() {
+        eprintln!("probegi view: PROBEGI_VIEW_SEPARATE_DEVICES: the window and the field make their own devices");
+        return None;
+    }
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+    let options =
+        wgpu::RequestAdapterOptions { power_preference: wgpu::PowerPreference::HighPerformance, ..Default::default() };
+    let made = pollster::block_on(instance.request_adapter(&options)).map_err(|e| e.to_string()).and_then(|adapter| {
+        let required_features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
+        let descriptor = wgpu::DeviceDescriptor {
+            label: Some("probegi view"),
+            required_features,
+            required_limits: adapter.limits(),
+            ..Default::default()
+        };
+        let (device, queue) = pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| e.to_string())?;
+        let info = adapter.get_info();
+        let adapter_name = format!("{} ({:?}, {})", info.name, info.backend, info.driver);
+        Ok(SharedDevice { instance: instance.clone(), adapter, device, queue, adapter_name })
+    });
+    made.inspect_err(|e| eprintln!("probegi view: no device to share ({e}); the window and the field make their own"))
+        .ok()
 }
 
 /// The GPU side of the window.
@@ -99,6 +132,9 @@ struct Gfx {
 #[derive(Default)]
 struct Textures {
     live: Option<TextureHandle>,
+    /// The live frame as a texture on the shared device, registered with
+    /// egui-wgpu: its id, size and the worker's serial for it.
+    live_native: Option<(egui::TextureId, [usize; 2], u64)>,
     reference: Option<TextureHandle>,
     heat: Option<TextureHandle>,
 }
@@ -107,6 +143,8 @@ struct ViewerApp {
     opts: WindowOptions,
     prefs: ViewerPrefs,
     ctx: egui::Context,
+    /// The device shared with the frame worker (`None`: each made its own).
+    device: Option<SharedDevice>,
     gfx: Option<Gfx>,
     commands: Sender<WorkerCommand>,
     reports: Receiver<WorkerReport>,
@@ -143,6 +181,7 @@ impl ViewerApp {
             opts,
             ctx: egui::Context::default(),
             gfx: None,
+            device: None,
             commands,
             reports,
             latest,
@@ -270,12 +309,48 @@ impl ViewerApp {
             }
         }
         let frame = self.latest.lock().ok().and_then(|mut s| s.take());
-        if let Some(f) = frame {
-            let image = ColorImage::from_rgba_unmultiplied([f.width as usize, f.height as usize], &f.rgba);
-            set_texture(&self.ctx, &mut self.textures.live, "live", image);
+        if let Some(mut f) = frame {
+            match f.texture.take() {
+                Some((texture, serial)) => self.show_native(&texture, serial),
+                None => {
+                    let image = ColorImage::from_rgba_unmultiplied([f.width as usize, f.height as usize], &f.rgba);
+                    set_texture(&self.ctx, &mut self.textures.live, "live", image);
+                    self.free_native();
+                }
+            }
             if let Some(p) = self.panels.as_mut() {
                 p.push_frame(f);
             }
+        }
+    }
+
+    /// Shows `texture` (on the shared device) as the live frame, registering
+    /// it with egui-wgpu when it is another texture than the one shown.
+    fn show_native(&mut self, texture: &wgpu::Texture, serial: u64) {
+        let Some(state) = self.gfx.as_ref().and_then(|g| g.painter.render_state()) else { return };
+        let size = [texture.width() as usize, texture.height() as usize];
+        let view = texture.create_view(&Default::default());
+        let mut renderer = state.renderer.write();
+        match self.textures.live_native {
+            Some((_, _, s)) if s == serial => {}
+            Some((id, _, _)) => {
+                renderer.update_egui_texture_from_wgpu_texture(&state.device, &view, wgpu::FilterMode::Nearest, id);
+                self.textures.live_native = Some((id, size, serial));
+            }
+            None => {
+                let id = renderer.register_native_texture(&state.device, &view, wgpu::FilterMode::Nearest);
+                self.textures.live_native = Some((id, size, serial));
+            }
+        }
+        self.textures.live = None;
+    }
+
+    /// Forgets the native live texture (the frame comes from the host again).
+    fn free_native(&mut self) {
+        if let (Some((id, _, _)), Some(state)) =
+            (self.textures.live_native.take(), self.gfx.as_ref().and_then(|g| g.painter.render_state()))
+        {
+            state.renderer.write().free_texture(&id);
         }
     }
 
@@ -437,18 +512,22 @@ fn set_texture(ctx: &egui::Context, slot: &mut Option<TextureHandle>, name: &str
 /// The live frame; with a reference, a 2 × 2 grid: live and reference on
 /// top, the FLIP heat map below the live frame.
 fn central_ui(ui: &mut egui::Ui, textures: &Textures, panels: Option<&PanelState>) {
-    let Some(live) = &textures.live else {
-        ui.centered_and_justified(|ui| ui.label("rendering the first frame…"));
-        return;
+    let live = match (&textures.live, textures.live_native) {
+        (Some(t), _) => (t.id(), t.size()),
+        (None, Some((id, size, _))) => (id, size),
+        (None, None) => {
+            ui.centered_and_justified(|ui| ui.label("rendering the first frame…"));
+            return;
+        }
     };
     let reference = panels.and_then(|p| p.reference.as_ref()).filter(|r| r.rgba.is_some());
     let cells = if reference.is_some() { 2.0 } else { 1.0 };
     let avail = ui.available_size();
-    let [w, h] = live.size().map(|s| s as f32);
+    let [w, h] = live.1.map(|s| s as f32);
     let scale = ((avail.x / cells - 8.0) / w).min((avail.y / cells - 8.0) / h).max(0.01);
     let size = egui::vec2(w * scale, h * scale);
     ui.horizontal(|ui| {
-        ui.image((live.id(), size));
+        ui.image((live.0, size));
         if let (Some(_), Some(t)) = (reference, &textures.reference) {
             ui.image((t.id(), size));
         }
@@ -477,7 +556,7 @@ impl ApplicationHandler for ViewerApp {
         if self.gfx.is_some() {
             return;
         }
-        match open_window(event_loop, &self.ctx, &self.opts.title) {
+        match open_window(event_loop, &self.ctx, &self.opts.title, self.device.as_ref()) {
             Ok(g) => self.gfx = Some(g),
             Err(e) => {
                 self.outcome = Some(Err(e));
@@ -540,13 +619,27 @@ impl ApplicationHandler for ViewerApp {
 }
 
 /// The window, its wgpu surface and egui's winit state.
-fn open_window(event_loop: &ActiveEventLoop, ctx: &egui::Context, title: &str) -> Result<Gfx, String> {
+fn open_window(
+    event_loop: &ActiveEventLoop,
+    ctx: &egui::Context,
+    title: &str,
+    device: Option<&SharedDevice>,
+) -> Result<Gfx, String> {
     let attributes =
         Window::default_attributes().with_title(title).with_inner_size(winit::dpi::LogicalSize::new(1280.0, 760.0));
     let window = Arc::new(event_loop.create_window(attributes).map_err(|e| no_display_message(&e.to_string()))?);
+    let mut config = egui_wgpu::WgpuConfiguration::default();
+    if let Some(d) = device {
+        config.wgpu_setup = egui_wgpu::WgpuSetup::Existing(egui_wgpu::WgpuSetupExisting {
+            instance: d.instance.clone(),
+            adapter: d.adapter.clone(),
+            device: d.device.clone(),
+            queue: d.queue.clone(),
+        });
+    }
     let mut painter = pollster::block_on(egui_wgpu::winit::Painter::new(
         ctx.clone(),
-        egui_wgpu::WgpuConfiguration::default(),
+        config,
         false,
         egui_wgpu::RendererOptions::default(),
     ));

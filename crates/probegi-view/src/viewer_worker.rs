@@ -28,6 +28,13 @@ use crate::view_layers::{ViewMode, to_rgba8, view_image};
 use crate::view_session::{ViewCarry, ViewSession};
 use crate::viewer_controls::{GiChoice, ViewerControls};
 
+/// The image a frame report carries: RGBA8 from the host, or a texture on
+/// the window's device.
+enum FrameImage {
+    Rgba(Vec<u8>),
+    Texture(wgpu::Texture, u64),
+}
+
 /// What a session is built from: what the CLI's scene setup makes of its
 /// arguments and the panels' controls.
 pub struct SessionParts {
@@ -49,13 +56,37 @@ pub struct SessionParts {
     pub gi: GiChoice,
     /// Camera-centred cascades (0: the scene's volumes).
     pub cascades: u32,
+    /// Where the frame stays on a device the window shares
+    /// ([`SharedDevice`]): the last frame's layer, tone-mapped, as a texture
+    /// on that device, which the window draws with no pixel crossing to the host.
+    pub presenter: Option<FramePresenter>,
+}
+
+/// A session's way to the frame a shared device keeps ([`SessionParts::presenter`]).
+pub type FramePresenter = Box<dyn Fn(probegi_field::FrameLayer) -> Result<wgpu::Texture, String> + Send + Sync>;
+
+/// The window's device, shared with the field's (`probegi view`'s one device):
+/// what egui-wgpu draws with and what a session's GPU passes run on.
+#[derive(Clone, Debug)]
+pub struct SharedDevice {
+    /// The instance the adapter came from.
+    pub instance: wgpu::Instance,
+    /// The adapter.
+    pub adapter: wgpu::Adapter,
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// The adapter's name and driver, as `GpuContext::adapter_name` spells it.
+    pub adapter_name: String,
 }
 
 /// Builds sessions: the CLI's scene setup.
 pub trait ViewSource: Send {
     /// A session for `controls` (`None`: as the command line says). An error
     /// names the file and the place.
-    fn load(&self, controls: Option<&ViewerControls>) -> Result<SessionParts, String>;
+    /// With `device`, GPU work runs on the window's own device.
+    fn load(&self, controls: Option<&ViewerControls>, device: Option<&SharedDevice>) -> Result<SessionParts, String>;
     /// The scene file to watch for changes (`None`: a built-in scene).
     fn watched_file(&self) -> Option<PathBuf>;
 }
@@ -108,8 +139,11 @@ pub struct FrameReport {
     pub frame: u32,
     /// The scene clock.
     pub scene_frame: u32,
-    /// The view's image, tone-mapped RGBA8.
+    /// The view's image, tone-mapped RGBA8 (empty where `texture` holds it).
     pub rgba: Vec<u8>,
+    /// The view's image in a texture on the window's own device (sRGB), with
+    /// a serial that changes whenever the texture is another one.
+    pub texture: Option<(wgpu::Texture, u64)>,
     /// Its size, pixels.
     pub width: u32,
     /// Its size, pixels.
@@ -196,13 +230,18 @@ pub struct WorkerLink {
 
 /// Runs the worker until `Quit`, a scripted run's last frame, or the window
 /// goes away. Returns the first error of a scripted run.
-pub fn run_worker(source: &dyn ViewSource, opts: &WorkerOptions, link: &WorkerLink) -> Result<(), String> {
+pub fn run_worker(
+    source: &dyn ViewSource,
+    opts: &WorkerOptions,
+    link: &WorkerLink,
+    device: Option<&SharedDevice>,
+) -> Result<(), String> {
     let mut controls: Option<ViewerControls> = None;
     let mut carry: Option<ViewCarry> = None;
     let mut frames_total = 0u32;
     let mut frame_ms = Vec::new();
     loop {
-        let failure = match source.load(controls.as_ref()) {
+        let failure = match source.load(controls.as_ref(), device) {
             Err(e) => e,
             Ok(parts) => {
                 let first = controls.is_none();
@@ -310,7 +349,13 @@ struct SessionState<'p> {
     frames_total: u32,
     /// Wall milliseconds of every frame so far (all sessions).
     frame_ms: Vec<f64>,
+    /// The last full frame on the host (`None` where it stays on the device:
+    /// [`Self::full_image`] reads it back when a reference or screenshot needs it).
     last_full: Option<Image>,
+    /// The size of the texture the window was last given, and a serial that
+    /// changes with the texture.
+    presented_size: Option<(u32, u32)>,
+    texture_serial: u64,
     prev_pass_totals: BTreeMap<&'static str, f64>,
     reference: Option<Reference>,
     watch_file: Option<PathBuf>,
@@ -335,6 +380,8 @@ impl<'p> SessionState<'p> {
             frames_total,
             frame_ms: Vec::new(),
             last_full: None,
+            presented_size: None,
+            texture_serial: 0,
             prev_pass_totals: BTreeMap::new(),
             reference: None,
             watch_file,
@@ -412,7 +459,7 @@ impl<'p> SessionState<'p> {
                         }
                         *job = Some(self.start_reference(scope, pool, session, spp));
                     }
-                    WorkerCommand::Screenshot => self.screenshot(link),
+                    WorkerCommand::Screenshot => self.screenshot(session, link),
                     WorkerCommand::Reload => rebuild = true,
                     WorkerCommand::Quit => return Ok(SessionEnd::Quit),
                 }
@@ -424,7 +471,7 @@ impl<'p> SessionState<'p> {
             frame_in_session += 1;
             *job = self.poll_reference(job.take(), session, link, frame_in_session);
             if self.opts.exit_after_frames.is_some_and(|n| self.frames_total >= n) {
-                return self.finish_scripted(link);
+                return self.finish_scripted(session, link);
             }
             if frame_in_session.is_multiple_of(30) && self.scene_file_changed() {
                 let _ = link.reports.send(WorkerReport::Message("scene file changed: reloading".into()));
@@ -506,15 +553,40 @@ impl<'p> SessionState<'p> {
         let t = Instant::now();
         let dt_s = self.opts.fixed_dt_s.unwrap_or_else(|| self.last_frame_at.elapsed().as_secs_f32().min(0.1));
         self.last_frame_at = Instant::now();
-        let full = session.frame(dt_s).map_err(|e| format!("frame {}: {e}", self.frames_total))?;
-        let view = view_image(self.controls.view, &full, session, &*self.parts.tracer, self.controls.atlas_volume)?;
-        let report = self.report(session, &view, t.elapsed().as_secs_f64() * 1e3);
+        let layer = match self.controls.view {
+            ViewMode::Full => Some(probegi_field::FrameLayer::Full),
+            ViewMode::Direct => Some(probegi_field::FrameLayer::Direct),
+            ViewMode::Indirect => Some(probegi_field::FrameLayer::Indirect),
+            _ => None,
+        };
+        let report = match (self.parts.presenter.as_ref(), layer) {
+            // The frame stays on the window's device: a texture, no pixel read back.
+            (Some(present), Some(layer)) => {
+                session.advance(dt_s).map_err(|e| format!("frame {}: {e}", self.frames_total))?;
+                let texture = present(layer).map_err(|e| format!("frame {}: {e}", self.frames_total))?;
+                let size = texture.size();
+                if self.presented_size != Some((size.width, size.height)) {
+                    self.presented_size = Some((size.width, size.height));
+                    self.texture_serial += 1;
+                }
+                self.last_full = None;
+                let shown = FrameImage::Texture(texture, self.texture_serial);
+                self.report(session, shown, (size.width, size.height), t.elapsed().as_secs_f64() * 1e3)
+            }
+            _ => {
+                let full = session.frame(dt_s).map_err(|e| format!("frame {}: {e}", self.frames_total))?;
+                let (mode, volume) = (self.controls.view, self.controls.atlas_volume);
+                let view = view_image(mode, &full, session, &*self.parts.tracer, volume)?;
+                self.last_full = Some(full);
+                let size = (view.width, view.height);
+                self.report(session, FrameImage::Rgba(to_rgba8(&view)), size, t.elapsed().as_secs_f64() * 1e3)
+            }
+        };
         // A reference compares frames of its own size: the size holds while one exists.
         if !referencing && self.reference.is_none() {
             self.adapt_size(session, report.frame_ms);
         }
         self.frame_ms.push(report.frame_ms);
-        self.last_full = Some(full);
         self.frames_total += 1;
         if let Ok(mut slot) = link.latest.lock() {
             *slot = Some(report);
@@ -523,7 +595,7 @@ impl<'p> SessionState<'p> {
     }
 
     /// The stats panel's figures for the frame just rendered.
-    fn report(&mut self, session: &ViewSession<'_>, view: &Image, frame_ms: f64) -> FrameReport {
+    fn report(&mut self, session: &ViewSession<'_>, view: FrameImage, size: (u32, u32), frame_ms: f64) -> FrameReport {
         let totals = session.stepper().pass_totals_ms();
         let pass_ms =
             totals.iter().map(|(k, v)| (*k, v - self.prev_pass_totals.get(k).copied().unwrap_or(0.0))).collect();
@@ -543,9 +615,16 @@ impl<'p> SessionState<'p> {
         FrameReport {
             frame: self.frames_total,
             scene_frame: session.last_scene_frame(),
-            rgba: to_rgba8(view),
-            width: view.width,
-            height: view.height,
+            rgba: match &view {
+                FrameImage::Rgba(rgba) => rgba.clone(),
+                FrameImage::Texture(..) => Vec::new(),
+            },
+            texture: match view {
+                FrameImage::Texture(t, serial) => Some((t, serial)),
+                FrameImage::Rgba(_) => None,
+            },
+            width: size.0,
+            height: size.1,
             frame_size: session.size(),
             frame_ms,
             pass_ms,
@@ -661,7 +740,8 @@ impl<'p> SessionState<'p> {
     /// The finished reference beside the live frame: FLIP while the camera
     /// and size are where it was taken.
     fn send_reference(&self, session: &ViewSession<'_>, link: &WorkerLink) {
-        let (Some(r), Some(live)) = (&self.reference, &self.last_full) else { return };
+        let (Some(r), Some(live)) = (&self.reference, self.full_image(session)) else { return };
+        let live = &live;
         let same_view = r.camera == session.last_camera()
             && (r.image.width, r.image.height) == (live.width, live.height)
             && r.scene == self.reference_scene(session);
@@ -686,8 +766,8 @@ impl<'p> SessionState<'p> {
     }
 
     /// The screenshot key: the last full frame as PNG and linear EXR.
-    fn screenshot(&self, link: &WorkerLink) {
-        let Some(img) = &self.last_full else { return };
+    fn screenshot(&self, session: &ViewSession<'_>, link: &WorkerLink) {
+        let Some(img) = &self.full_image(session) else { return };
         let stem = format!("{}-frame{:04}", file_safe(&self.parts.scene.name), self.frames_total);
         let mut written = vec![];
         for ext in ["png", "exr"] {
@@ -704,12 +784,19 @@ impl<'p> SessionState<'p> {
     }
 
     /// The scripted run's end: the screenshot, then `Done`.
-    fn finish_scripted(&self, link: &WorkerLink) -> Result<SessionEnd, String> {
-        if let (Some(path), Some(img)) = (&self.opts.screenshot, &self.last_full) {
-            probegi_image::write_image(path, img).map_err(|e| e.to_string())?;
+    fn finish_scripted(&self, session: &ViewSession<'_>, link: &WorkerLink) -> Result<SessionEnd, String> {
+        if let Some(path) = &self.opts.screenshot {
+            let img = self.full_image(session).ok_or("no frame to write")?;
+            probegi_image::write_image(path, &img).map_err(|e| e.to_string())?;
         }
         let _ = link.reports.send(WorkerReport::Done(self.frame_ms.clone()));
         Ok(SessionEnd::Quit)
+    }
+
+    /// The last full frame on the host: the one kept, else read back from the
+    /// device that holds it.
+    fn full_image(&self, session: &ViewSession<'_>) -> Option<Image> {
+        self.last_full.clone().or_else(|| session.image().ok().filter(|i| !i.pixels.is_empty()))
     }
 
     /// Whether the watched scene file's modification time moved.

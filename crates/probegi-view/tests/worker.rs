@@ -16,7 +16,7 @@ use probegi_scene::{BvhSettings, BvhTracer, load_scene};
 use probegi_view::view_layers::ViewMode;
 use probegi_view::viewer_controls::{GiChoice, ViewerControls};
 use probegi_view::viewer_worker::{
-    SessionParts, ViewSource, WorkerCommand, WorkerLink, WorkerOptions, WorkerReport, run_worker,
+    SessionParts, SharedDevice, ViewSource, WorkerCommand, WorkerLink, WorkerOptions, WorkerReport, run_worker,
 };
 
 /// The Cornell box at 24×24 with a small field; `controls` pick the rays.
@@ -26,7 +26,7 @@ struct CornellSource {
 }
 
 impl ViewSource for CornellSource {
-    fn load(&self, controls: Option<&ViewerControls>) -> Result<SessionParts, String> {
+    fn load(&self, controls: Option<&ViewerControls>, _device: Option<&SharedDevice>) -> Result<SessionParts, String> {
         let scene = load_scene("builtin:cornell-box").map_err(|e| e.to_string())?;
         let rays = controls.and_then(|c| c.field).map_or(32, |f| f.rays_per_probe);
         let hysteresis = controls.and_then(|c| c.field).map_or(0.97, |f| f.hysteresis);
@@ -47,6 +47,7 @@ impl ViewSource for CornellSource {
             adapter: None,
             gi: GiChoice::Ddgi,
             cascades: 0,
+            presenter: None,
             tracer,
             scene,
         })
@@ -91,7 +92,7 @@ fn the_worker_renders_rebuilds_references_and_screenshots() {
     let watched = dir.join("scene.toml");
     std::fs::write(&watched, "# v1\n").expect("write");
     let source = CornellSource { watched: watched.clone() };
-    let worker = std::thread::spawn(move || run_worker(&source, &opts, &link));
+    let worker = std::thread::spawn(move || run_worker(&source, &opts, &link, None));
 
     let ready = wait_for(&rep_rx, "the first session", |r| match r {
         WorkerReport::Ready(c) => Some(c),

@@ -71,8 +71,16 @@ struct FrameParams {
     info: [u32; 4],
     /// x: the direct history's clip, standard deviations.
     clip: [f32; 4],
+    /// x: the RGBA8 image's row pitch in pixels (rows padded to 256 bytes, as
+    /// a copy into a texture wants them).
+    layout: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<FrameParams>() == 160);
+const _: () = assert!(std::mem::size_of::<FrameParams>() == 176);
+
+/// The RGBA8 image's row pitch in pixels: `width` rounded up to 256 bytes.
+fn rgba8_pitch(width: u32) -> u32 {
+    width.div_ceil(64) * 64
+}
 
 /// `FrameStats` in `device_frame.wgsl`: the means, then the counts.
 #[repr(C)]
@@ -95,7 +103,8 @@ const HISTORY_TEXELS: u64 = 4;
 /// histories, the RGBA8 image and the partial sums), for a caller's budget.
 pub fn frame_bytes(width: u32, height: u32) -> u64 {
     let n = width as u64 * height as u64;
-    n * 16 * (3 + 1 + 2 * HISTORY_TEXELS) + n * 4 + width.div_ceil(8) as u64 * height.div_ceil(8) as u64 * 32
+    let rgba8 = rgba8_pitch(width) as u64 * height as u64 * 4;
+    n * 16 * (3 + 1 + 2 * HISTORY_TEXELS) + rgba8 + width.div_ceil(8) as u64 * height.div_ceil(8) as u64 * 32
 }
 
 /// The frame's images on the device, allocated once per size.
@@ -113,6 +122,9 @@ struct FrameImages {
     bind_groups: [wgpu::BindGroup; 2],
     stats: wgpu::Buffer,
     rgba8: wgpu::Buffer,
+    /// The RGBA8 image as a texture on the device (sRGB-encoded), for a window
+    /// on the same device ([`GpuFrame::present`]); made with the first.
+    texture: Option<wgpu::Texture>,
     requests: wgpu::Buffer,
     request_words: u32,
     /// No frame has run at this size yet: the first one restarts the sums.
@@ -342,7 +354,7 @@ impl GpuFrame {
         let history = [storage("frame history a", n * 16 * HISTORY_TEXELS)?, storage("frame history b", n * 64)?];
         let partials = storage("frame partial sums", groups * 32)?;
         let stats = storage("frame statistics", STATS_BYTES)?;
-        let rgba8 = storage("frame rgba8", n * 4)?;
+        let rgba8 = storage("frame rgba8", rgba8_pitch(width) as u64 * height as u64 * 4)?;
         let requests = storage("camera probe requests", 4 * words.max(1) as u64)?;
         let frame_params = uniform("frame params", std::mem::size_of::<FrameParams>() as u64);
         let group = |read: usize| {
@@ -372,6 +384,7 @@ impl GpuFrame {
             bind_groups,
             stats,
             rgba8,
+            texture: None,
             requests,
             request_words: words,
             fresh: true,
@@ -421,6 +434,7 @@ impl GpuFrame {
             from,
             info: [mode, frames_max, 0, gx * gy],
             clip: [clip.max(0.0), 0.0, 0.0, 0.0],
+            layout: [rgba8_pitch(f.width), 0, 0, 0],
         };
         ctx.write_buffer(&images.camera_params, 0, bytemuck::bytes_of(&camera_params));
         ctx.write_buffer(&images.frame_params, 0, bytemuck::bytes_of(&params));
@@ -485,10 +499,15 @@ impl GpuFrame {
             .collect())
     }
 
-    /// The last frame's `layer` tone-mapped on the device, RGBA8 row-major (a
-    /// compose pass for `layer`, then a blocking read-back of 4 bytes a pixel).
-    pub fn read_rgba8(&self, ctx: &GpuContext, layer: FrameLayer) -> Result<Vec<u8>, GpuError> {
-        let images = self.images.as_ref().filter(|i| !i.fresh).ok_or_else(|| GpuError::Input("no frame yet".into()))?;
+    /// Records a compose pass that tone-maps the last frame's `layer` into
+    /// the RGBA8 image (the frame's own pass wrote the full frame there).
+    fn record_compose(
+        &self,
+        ctx: &GpuContext,
+        images: &FrameImages,
+        layer: FrameLayer,
+        encoder: &mut wgpu::CommandEncoder,
+    ) {
         let layer_index = match layer {
             FrameLayer::Full => 0u32,
             FrameLayer::Direct => 1,
@@ -497,16 +516,68 @@ impl GpuFrame {
         // Field `info.z` of the uniform block: 2 cameras of 64 bytes, then mode and frames.
         ctx.write_buffer(&images.frame_params, 128 + 8, bytemuck::bytes_of(&layer_index));
         let (gx, gy) = (images.width.div_ceil(8), images.height.div_ceil(8));
+        // The group that wrote the current history reads it as `history_next`.
+        let mut p = encoder.begin_compute_pass(&Default::default());
+        p.set_pipeline(&self.pipelines[1]);
+        p.set_bind_group(0, &images.bind_groups[1 - images.current], &[]);
+        p.dispatch_workgroups(gx, gy, 1);
+    }
+
+    /// The last frame's `layer` tone-mapped on the device, RGBA8 row-major (a
+    /// compose pass for `layer`, then a blocking read-back of 4 bytes a pixel).
+    pub fn read_rgba8(&self, ctx: &GpuContext, layer: FrameLayer) -> Result<Vec<u8>, GpuError> {
+        let images = self.images.as_ref().filter(|i| !i.fresh).ok_or_else(|| GpuError::Input("no frame yet".into()))?;
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        {
-            // The group that wrote the current history reads it as `history_next`.
-            let mut p = encoder.begin_compute_pass(&Default::default());
-            p.set_pipeline(&self.pipelines[1]);
-            p.set_bind_group(0, &images.bind_groups[1 - images.current], &[]);
-            p.dispatch_workgroups(gx, gy, 1);
-        }
+        self.record_compose(ctx, images, layer, &mut encoder);
         ctx.submit(encoder.finish());
-        ctx.read_back(&images.rgba8)
+        let padded = ctx.read_back(&images.rgba8)?;
+        let (row, pitch) = (images.width as usize * 4, rgba8_pitch(images.width) as usize * 4);
+        Ok(padded.chunks_exact(pitch).flat_map(|r| &r[..row]).copied().collect())
+    }
+
+    /// The last frame's `layer`, tone-mapped, in a texture on this device
+    /// (`Rgba8Unorm` holding sRGB-encoded bytes, as egui-wgpu draws its own;
+    /// the frame's size), for a window that shares the
+    /// device: a compose pass for `layer` where it is not the full frame and
+    /// a copy into the texture, submitted without waiting. No pixel reaches the host.
+    pub fn present(&mut self, ctx: &GpuContext, layer: FrameLayer) -> Result<wgpu::Texture, GpuError> {
+        let this = &*self;
+        let images = this.images.as_ref().filter(|i| !i.fresh).ok_or_else(|| GpuError::Input("no frame yet".into()))?;
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        if layer != FrameLayer::Full {
+            this.record_compose(ctx, images, layer, &mut encoder);
+        }
+        let size = wgpu::Extent3d { width: images.width, height: images.height, depth_or_array_layers: 1 };
+        let texture = images.texture.clone().unwrap_or_else(|| {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("frame"),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8Unorm,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            })
+        });
+        encoder.copy_buffer_to_texture(
+            wgpu::TexelCopyBufferInfo {
+                buffer: &images.rgba8,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(rgba8_pitch(images.width) * 4),
+                    rows_per_image: None,
+                },
+            },
+            texture.as_image_copy(),
+            size,
+        );
+        ctx.submit(encoder.finish());
+        ctx.flush();
+        if let Some(images) = self.images.as_mut() {
+            images.texture = Some(texture.clone());
+        }
+        Ok(texture)
     }
 
     /// Device memory the frame holds now.

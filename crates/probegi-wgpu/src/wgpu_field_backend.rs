@@ -602,6 +602,15 @@ impl WgpuProbeTracer {
         }
     }
 
+    /// The last frame's `layer`, tone-mapped, in a texture on this tracer's
+    /// device (`GpuFrame::present`): what a window that shares the device
+    /// (`GpuContext::from_device`) draws, no pixel crossing to the host.
+    pub fn present_frame(&self, layer: FrameLayer) -> Result<wgpu::Texture, BackendError> {
+        let mut frame = self.frame_state()?;
+        let frame = frame.as_mut().ok_or_else(|| BackendError::Unsupported("no device frame yet".into()))?;
+        frame.present(&self.ctx, layer).map_err(BackendError::from)
+    }
+
     /// The device frame, locked.
     fn frame_state(&self) -> Result<std::sync::MutexGuard<'_, Option<GpuFrame>>, BackendError> {
         self.frame.lock().map_err(poisoned)

@@ -17,7 +17,7 @@
 //   4p: direct mean, w = frames in it;  4p + 1: albedo mean, w = the normal's oct.x;
 //   4p + 2: irradiance/π at the last diffuse sample, w = oct.y;
 //   4p + 3: the surface point at the pixel's centre ray, w = 1 (0: the sky).
-// Must match `probegi_wgpu::device_frame::FrameParams` (#[repr(C)], 160 bytes) and
+// Must match `probegi_wgpu::device_frame::FrameParams` (#[repr(C)], 176 bytes) and
 // `FrameStatsBlock` (48 bytes).
 
 struct FrameCamera {
@@ -33,6 +33,7 @@ struct FrameParams {
     info: vec4<u32>,     // mode (0 accumulate, 1 restart, 2 reproject, 3 no history: a new size), history frames − 1,
                          // layer for RGBA8 (0 full, 1 direct, 2 indirect), workgroups of frame_compose
     clip: vec4<f32>,     // x: temporal_clip_sigma
+    pitch: vec4<u32>,    // x: frame_rgba8's row pitch, pixels (rows of 256-byte multiples)
 };
 
 struct FrameStats {
@@ -398,7 +399,7 @@ fn frame_compose(
         } else if (frame.info.z == 2u) {
             shown = field;
         }
-        frame_rgba8[p] = frame_rgba8_of(shown);
+        frame_rgba8[gid.y * frame.pitch.x + gid.x] = frame_rgba8_of(shown);
         // camera_frame.wgsl's flags: 1 a diffuse surface, 2 one the field left unlit, + 4 non-finite direct.
         let flags = u32(camera_irradiance[p].w + 0.5);
         if ((flags & 3u) != 0u) {
