@@ -16,6 +16,7 @@
 //!   sum of |w| ≤ 1.6, and the clamp's σ computed in f32 against f64 (the
 //!   variance E[x²] − E[x]² loses up to log2(E[x²]/σ²) bits: 1e-5 relative
 //!   for the contrasts a 3 × 3 Cornell neighbourhood has).
+//!
 //! Every pixel must then agree within [`PIXEL_REL_TOL`] = 1e-4 of the image's
 //! largest value (ten times the sum above), except where a discrete choice
 //! sits within that error of its boundary: the surface test (5 % of depth
