@@ -50,6 +50,11 @@ fn view(scene: &Scene, bvh: &BvhTracer, s: &RenderSettings, script: &InputScript
         fly_speed_m_per_s: 1.0,
         camera_path: scene.camera_path(FRAMES),
     };
+    // The viewer takes a device frame's statistics two frames late; `render` waits for each.
+    let s = &RenderSettings {
+        device_readback_lag_frames: probegi_view::view_session::VIEWER_READBACK_LAG_FRAMES,
+        ..s.clone()
+    };
     let out = run_scripted(scene, bvh, &camera, s, &run, |_, _| Ok(())).expect("scripted run");
     assert!(out.render.stats.error.is_none(), "{:?}", out.render.stats.error);
     (out.image, out.camera.position_m)

@@ -218,3 +218,18 @@ fn check_tone_map(gpu: &Arc<WgpuProbeTracer>, image: &Image) {
     }
     assert!(off_by_one * 100 <= image.pixels.len() * 3, "{off_by_one} channels off by one code");
 }
+
+/// The device keeps its frame across renders (the tracer outlives a
+/// stepper): a second render on one tracer starts its sums again, and so
+/// equals a render on a fresh tracer, pixel for pixel but for rounding.
+#[test]
+fn a_second_render_on_one_tracer_starts_its_sums_again() {
+    let scene = probegi_scene::builtin::cornell_box();
+    let (Some(reused), Some(fresh)) = (tracer(&scene, true), tracer(&scene, true)) else { return };
+    let path = cornell_path(&scene, 64, 8, 0);
+    // The first render ends elsewhere (its camera moved), so that its sums are another view's.
+    let _first = render(&scene, 64, 8, &cornell_path(&scene, 64, 2, 6), &reused);
+    let (second, alone) = (render(&scene, 64, 8, &path, &reused), render(&scene, 64, 8, &path, &fresh));
+    let off = pixels_off(&alone.image, &second.image);
+    assert_eq!(off, 0, "{off} pixels of the second render differ from a fresh tracer's");
+}

@@ -30,7 +30,11 @@ impl FrameLoop<'_> {
         let (f, settings) = (frame.index, &self.settings);
         let Some(set) = self.field.as_ref() else { return Break(()) };
         let t = Instant::now();
+        // The device keeps its frame across steppers (a tracer outlives a
+        // render): this loop's first frame there starts the sums, as a new
+        // `Accumulation` does on the host.
         let history = match self.history(frame) {
+            _ if !self.device_image => FrameHistory::Restart,
             History::Accumulate => FrameHistory::Accumulate,
             History::Restart => FrameHistory::Restart,
             History::Reproject { from, settings } => FrameHistory::Reproject {
