@@ -596,6 +596,10 @@ impl<'p> SessionState<'p> {
 
     /// The stats panel's figures for the frame just rendered.
     fn report(&mut self, session: &ViewSession<'_>, view: FrameImage, size: (u32, u32), frame_ms: f64) -> FrameReport {
+        let (rgba, texture) = match view {
+            FrameImage::Rgba(rgba) => (rgba, None),
+            FrameImage::Texture(t, serial) => (Vec::new(), Some((t, serial))),
+        };
         let totals = session.stepper().pass_totals_ms();
         let pass_ms =
             totals.iter().map(|(k, v)| (*k, v - self.prev_pass_totals.get(k).copied().unwrap_or(0.0))).collect();
@@ -615,14 +619,8 @@ impl<'p> SessionState<'p> {
         FrameReport {
             frame: self.frames_total,
             scene_frame: session.last_scene_frame(),
-            rgba: match &view {
-                FrameImage::Rgba(rgba) => rgba.clone(),
-                FrameImage::Texture(..) => Vec::new(),
-            },
-            texture: match view {
-                FrameImage::Texture(t, serial) => Some((t, serial)),
-                FrameImage::Rgba(_) => None,
-            },
+            rgba,
+            texture,
             width: size.0,
             height: size.1,
             frame_size: session.size(),

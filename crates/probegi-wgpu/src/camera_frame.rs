@@ -118,16 +118,16 @@ impl GpuCameraPass {
 
     /// The uniform block of frame `f` (an error where the rays' size is not the frame's).
     pub(crate) fn params(f: &CameraFrame<'_>, shadow_field: bool) -> Result<CameraParams, GpuError> {
-        let ([forward, right, up], [tan, aspect, w, h]) = f.camera.basis();
+        let (_, [_, _, w, h]) = f.camera.basis();
         if w as u32 != f.width || h as u32 != f.height {
             return Err(GpuError::Input(format!("camera rays for {w}×{h}, frame of {}×{}", f.width, f.height)));
         }
-        let o = f.camera.origin_world;
+        let [origin, forward, right, up] = camera_texels(f.camera);
         Ok(CameraParams {
-            origin: [o.x, o.y, o.z, tan],
-            forward: forward.extend(aspect).into(),
-            right: right.extend(w).into(),
-            up: up.extend(h).into(),
+            origin,
+            forward,
+            right,
+            up,
             info: [
                 f.frame,
                 f.seed,
@@ -237,6 +237,15 @@ impl GpuCameraPass {
             requests,
         })
     }
+}
+
+/// A camera as the shaders read it (`CameraParams`'s and `device_frame.wgsl`'s
+/// `FrameCamera`'s first four texels): the eye with tan(fov_y / 2), then the
+/// forward, right and up axes with the aspect, the width and the height.
+pub(crate) fn camera_texels(c: &CameraRays) -> [[f32; 4]; 4] {
+    let ([forward, right, up], [tan, aspect, w, h]) = c.basis();
+    let o = c.origin_world;
+    [[o.x, o.y, o.z, tan], forward.extend(aspect).into(), right.extend(w).into(), up.extend(h).into()]
 }
 
 /// Where the camera pass writes: its uniform block, `camera_direct` (three

@@ -31,7 +31,7 @@ use probegi_core::camera::CameraRays;
 use probegi_field::device_frame::{DEVICE_FRAME_PASSES, DeviceFrameReadout, FrameHistory, FrameLayer};
 
 use crate::bvh_trace::GpuBvh;
-use crate::camera_frame::{CameraFrame, CameraParams, CameraTargets, GpuCameraPass};
+use crate::camera_frame::{CameraFrame, CameraParams, CameraTargets, GpuCameraPass, camera_texels};
 use crate::ddgi_query::GpuDdgiField;
 use crate::gpu_context::{GpuContext, GpuError};
 use crate::gpu_scene::GpuScene;
@@ -49,14 +49,8 @@ struct FrameCamera {
 
 impl FrameCamera {
     fn of(c: &CameraRays) -> Self {
-        let ([forward, right, up], [tan, aspect, w, h]) = c.basis();
-        let o = c.origin_world;
-        Self {
-            origin: [o.x, o.y, o.z, tan],
-            forward: forward.extend(aspect).into(),
-            right: right.extend(w).into(),
-            up: up.extend(h).into(),
-        }
+        let [origin, forward, right, up] = camera_texels(c);
+        Self { origin, forward, right, up }
     }
 }
 

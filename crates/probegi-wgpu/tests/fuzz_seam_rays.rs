@@ -158,7 +158,7 @@ fn assert_near_a_tie(scene: &Scene, ray: &Ray, c: Option<RayHit>, g: Option<RayH
         trace_error::near_an_edge(h, &t)
             || (ray.t_max.is_finite() && (ray.t_max - h.t) as f64 <= t.dt)
             || starts_on_it(scene, ray, h)
-            || cut_out(scene, h)
+            || trace_error::cut_out(scene, h)
     });
     assert!(tie || near, "the GPU's closest hit {g:?} and the CPU's {c:?} differ far from a tie: {ray:?}");
 }
@@ -175,16 +175,6 @@ fn starts_on_it(scene: &Scene, ray: &Ray, hit: &RayHit) -> bool {
     let n = (p1 - p0).cross(p2 - p0).normalize();
     let c = p0 - ray.origin.as_dvec3();
     n.dot(c).abs() <= 8.0 * trace_error::UNIT_ROUNDOFF * c.length() + 4.0 * f32::MIN_POSITIVE as f64
-}
-
-/// Whether the hit's triangle has an alpha cutout.
-fn cut_out(scene: &Scene, hit: &RayHit) -> bool {
-    let mesh = match scene.instances.get(hit.instance as usize) {
-        Some(inst) => &scene.prototypes[inst.prototype as usize].mesh,
-        None => &scene.mesh,
-    };
-    let material = scene.material(mesh.triangle_materials[hit.triangle as usize]);
-    material.alpha_mode != probegi_scene::material::AlphaMode::Opaque
 }
 
 /// The one disagreement an H200 gave (its run of this test): the GPU hit

@@ -91,19 +91,6 @@ fn gpu_trace(
     trace.download(ctx, &batch).expect("hits")
 }
 
-/// Whether the hit's triangle is cut out by an alpha mask: its coverage test
-/// (bilinear coverage at the hit's uv against the cutoff) is one more boundary a
-/// rounding of the barycentrics may cross, whose distance this test does not
-/// measure; disagreements there count against the expected number alone.
-fn cut_out(scene: &Scene, hit: &RayHit) -> bool {
-    let mesh = match scene.instances.get(hit.instance as usize) {
-        Some(inst) => &scene.prototypes[inst.prototype as usize].mesh,
-        None => &scene.mesh,
-    };
-    let material = scene.material(mesh.triangle_materials[hit.triangle as usize]);
-    material.alpha_mode != probegi_scene::material::AlphaMode::Opaque
-}
-
 /// A hit and its tolerance, on the scene as posed for the trace; the hit must
 /// be a true meeting of the ray with the triangle it names
 /// (`trace_error::is_genuine`), whichever side reported it.
@@ -154,7 +141,7 @@ fn expected_for(
 fn near_a_boundary(scene: &Scene, ray: &Ray, hit: &(RayHit, HitTolerance)) -> bool {
     trace_error::near_an_edge(&hit.0, &hit.1)
         || (ray.t_max.is_finite() && (ray.t_max - hit.0.t) as f64 <= hit.1.dt)
-        || cut_out(scene, &hit.0)
+        || trace_error::cut_out(scene, &hit.0)
 }
 
 /// Two closest hits of one ray that differ (hit/miss, triangle or copy) must be

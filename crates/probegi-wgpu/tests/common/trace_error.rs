@@ -162,3 +162,16 @@ pub fn is_genuine(ray: &Ray, hit: &RayHit, tri: &WorldTriangle, tol: &HitToleran
         && (bary - hit.barycentric.as_dvec2()).abs().max_element() <= tol.bary
         && bary.x.min(bary.y).min(w) >= -tol.bary
 }
+
+/// Whether the hit's triangle is cut out by an alpha mask: its coverage test
+/// (bilinear coverage at the hit's uv against the cutoff) is one more boundary
+/// a rounding of the barycentrics may cross, whose distance these bounds do
+/// not measure.
+pub fn cut_out(scene: &Scene, hit: &RayHit) -> bool {
+    let mesh = match scene.instances.get(hit.instance as usize) {
+        Some(inst) => &scene.prototypes[inst.prototype as usize].mesh,
+        None => &scene.mesh,
+    };
+    let material = scene.material(mesh.triangle_materials[hit.triangle as usize]);
+    material.alpha_mode != probegi_scene::material::AlphaMode::Opaque
+}
