@@ -78,8 +78,11 @@ pub struct ViewArgs {
     #[arg(long)]
     pub fly_speed: Option<f32>,
     /// Print frame-time percentiles as JSON on stdout: with --headless the
-    /// frames' and the field update's share of them; in a scripted window
-    /// run the UI's frame interval beside the frame worker's frame time.
+    /// frames' mean and percentiles after the warm-up, the host's share of
+    /// them (less the time blocked on the device), the field update's and the
+    /// camera frame's, and the device's per-pass times where it has
+    /// timestamps; in a scripted window run the UI's frame interval beside the
+    /// frame worker's frame time.
     #[arg(long)]
     pub bench: bool,
     /// Write every frame into this folder as frame-NNNN.png (tone-mapped).
