@@ -154,6 +154,30 @@ fn run_ddgi(args: &BenchArgs) -> Result<serde_json::Value> {
     }))
 }
 
+/// The host's share of a timed field update (`--backend wgpu`): wall
+/// milliseconds a frame less the time blocked on the device (waits, read-backs
+/// and submissions), with the submissions and waits a frame. `null` on the CPU,
+/// where the host is the whole update.
+fn host_share_json(
+    gpu: Option<&WgpuProbeTracer>,
+    before: Option<probegi_wgpu::GpuCounters>,
+    wall_ms: f64,
+    frames: u32,
+) -> serde_json::Value {
+    let (Some(g), Some(before)) = (gpu, before) else {
+        return json!(null);
+    };
+    let d = g.ctx.counters() - before;
+    let per_frame = |x: f64| x / frames.max(1) as f64;
+    json!({
+        "update_wall_ms": wall_ms,
+        "host_ms": (wall_ms - per_frame(d.wait_ms)).max(0.0),
+        "device_wait_ms": per_frame(d.wait_ms),
+        "submissions": per_frame(d.submissions as f64),
+        "blocking_waits": per_frame(d.blocking_waits as f64),
+    })
+}
+
 /// What every configuration of a `bench --gi ddgi` sweep shares: the scene,
 /// its BVH and direct light, and the GPU where `--backend wgpu` traces.
 #[derive(Clone, Copy)]
@@ -181,10 +205,14 @@ impl DdgiSweep<'_> {
         let init_ms = warmup.get("probe_init").copied().unwrap_or(0.0);
         let mut pass_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
         let bus_before = gpu.map(|g| g.ctx.bytes_transferred());
+        let counters_before = gpu.map(|g| g.ctx.counters());
+        let t = Instant::now();
         for f in 1..=args.frames {
             set.update_traced_by(scene, bvh, batch_tracer, direct, args.seed, f, &mut pass_ms)
                 .map_err(anyhow::Error::msg)?;
         }
+        let wall_ms = t.elapsed().as_secs_f64() * 1e3 / args.frames as f64;
+        let host = host_share_json(gpu, counters_before, wall_ms, args.frames);
         let bus = bus_json(gpu, bus_before, args.frames, set.ray_batch());
         // After the timed frames: the field back on the host, as the update left
         // it (the GPU passes alone below start from it).
@@ -237,6 +265,7 @@ impl DdgiSweep<'_> {
             "shade_blend_border_over_trace": (get("shade") + get("blend") + get("border")) / get("trace"),
             "gpu": gpu_row,
             "bus_bytes_per_frame": bus,
+            "host": host,
         }))
     }
 }

@@ -93,6 +93,14 @@ pub struct DdgiVolumeSettings {
     pub probe_relocation: bool,
     /// Optimizer iterations (seed 004: five).
     pub probe_relocation_iterations: u32,
+    /// Rays per probe in each initialisation round (relocation and
+    /// classification, seed 004 Listing 5's distance-only traces). Seed 004
+    /// names no count; RTXGI runs both on 32 "fixed" rays a probe
+    /// (`RTXGI_DDGI_NUM_FIXED_RAYS`), and so does this default, so that start-up
+    /// costs about one update, not six full traces of every probe. Each round
+    /// still turns the set by its own random rotation (unlike RTXGI's fixed
+    /// directions: our rounds run once, so five rotations see more directions).
+    pub probe_init_rays_per_probe: u32,
     /// Largest offset per axis as a fraction of the spacing (RTXGI 0.45; < 0.5 keeps grid indexing).
     pub probe_relocation_offset_limit_rel: f32,
     /// A front face closer than this × the minimum spacing pushes the probe away.
@@ -228,6 +236,7 @@ impl Default for DdgiVolumeSettings {
             probe_new_distribution_threshold: 0.8,
             probe_relocation: true,
             probe_relocation_iterations: 5,
+            probe_init_rays_per_probe: 32,
             probe_relocation_offset_limit_rel: 0.45,
             probe_relocation_min_frontface_rel: 0.5,
             probe_states: ProbeStatesMode::Jcgt,
@@ -362,6 +371,12 @@ impl DdgiVolumeSettings {
                 format!("{} must be at most 100", self.probe_relocation_iterations),
             ));
         }
+        if !(1..=65_536).contains(&self.probe_init_rays_per_probe) {
+            return Err((
+                "probe_init_rays_per_probe",
+                format!("{} must be in 1..=65536", self.probe_init_rays_per_probe),
+            ));
+        }
         if self.ray_budget_max_interval_frames == 0 || self.ray_budget_max_interval_frames > 1000 {
             return Err((
                 "ray_budget_max_interval_frames",
@@ -480,6 +495,7 @@ mod tests {
         assert_eq!(s.probe_irradiance_gamma, 5.0);
         assert_eq!(s.probe_self_shadow_bias, 0.3);
         assert_eq!(s.probe_crush_threshold, 0.2);
+        assert_eq!((s.probe_relocation_iterations, s.probe_init_rays_per_probe), (5, 32));
         assert!(s.validate().is_ok());
     }
 
@@ -492,6 +508,7 @@ mod tests {
         };
         assert_eq!(bad(|s| s.probe_counts = UVec3::new(0, 4, 4)), "probe_counts");
         assert_eq!(bad(|s| s.probe_rays_per_probe = 0), "probe_rays_per_probe");
+        assert_eq!(bad(|s| s.probe_init_rays_per_probe = 0), "probe_init_rays_per_probe");
         assert_eq!(bad(|s| s.probe_spacing_m = Some(Vec3::new(1.0, -1.0, 1.0))), "probe_spacing_m");
         assert_eq!(bad(|s| s.probe_hysteresis = 1.5), "probe_hysteresis");
         assert_eq!(bad(|s| s.probe_hysteresis = -0.1), "probe_hysteresis");

@@ -266,6 +266,93 @@ pub fn uncovered_point_probe(
     best.map(|(p, _)| p)
 }
 
+/// The cage probes of a surface point that lie on the surface's front side
+/// (strictly in front of its plane), as [`uncovered_point_probe`] reads them:
+/// their indices and how many there are.
+pub fn front_side_cage_probes(
+    grid: &ProbeGrid,
+    probe_positions: &[Vec3],
+    point: Vec3,
+    normal: Vec3,
+) -> ([u32; 8], usize) {
+    let cage = grid.cage(point);
+    let mut front = [0u32; 8];
+    let mut count = 0;
+    for i in 0..8 {
+        let p = grid.probe_index(cage.corner(i));
+        if (probe_positions[p] - point).dot(normal) > 0.0 {
+            front[count] = p as u32;
+            count += 1;
+        }
+    }
+    (front, count)
+}
+
+/// One surface point the covering pass must serve: the first pass kept none of
+/// its front-side cage probes. `ray` is its ray in the batch (the greedy order),
+/// `probe` the heaviest eligible front-side probe ([`uncovered_point_probe`]
+/// over the first pass's kept flags), `front` / `front_count` its front-side
+/// cage probes ([`front_side_cage_probes`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CoverProposal {
+    /// The point's ray in the batch: greedy order.
+    pub ray: u32,
+    /// The probe it would keep.
+    pub probe: u32,
+    /// Its front-side cage probes (the first `front_count`).
+    pub front: [u32; 8],
+    /// How many of `front` are set.
+    pub front_count: usize,
+}
+
+/// Jacobi rounds of [`cover_proposals`]: the greedy pass's dependency chains
+/// longer than this end in the fix-up (measured on the shared scenes at
+/// 32 rays a probe: see the round's module docs).
+pub const COVER_ITERATIONS: u32 = 32;
+
+/// The covering pass, order-free: which probes the points of `proposals` keep
+/// on top of `kept_first` (the first pass), over `probe_count` probes.
+///
+/// The greedy pass in ray order keeps point i's proposal exactly when no
+/// earlier point that kept its own proposal kept one of i's front-side probes.
+/// Here that recursion runs as Jacobi rounds over every point at once, each
+/// round a minimum per probe ("the first ray that keeps this probe"), so a
+/// device runs it with one atomic minimum per point and both backends agree
+/// bit for bit. After `iterations` rounds (the chains of the shared scenes are
+/// shorter: the result is then the greedy pass's) a fix-up keeps the proposal
+/// of any point still uncovered, so every point is served whatever the count.
+/// Returns the kept flags, the first pass's included.
+pub fn cover_proposals(kept_first: &[bool], proposals: &[CoverProposal], iterations: u32) -> Vec<bool> {
+    let n = kept_first.len();
+    // First round: every point keeps its proposal.
+    let mut first_keeper = vec![u32::MAX; n];
+    for c in proposals {
+        first_keeper[c.probe as usize] = first_keeper[c.probe as usize].min(c.ray);
+    }
+    for _ in 0..iterations {
+        let mut next = vec![u32::MAX; n];
+        for c in proposals {
+            let covered = c.front[..c.front_count].iter().any(|&p| first_keeper[p as usize] < c.ray);
+            if !covered {
+                next[c.probe as usize] = next[c.probe as usize].min(c.ray);
+            }
+        }
+        if next == first_keeper {
+            break;
+        }
+        first_keeper = next;
+    }
+    let kept: Vec<bool> = (0..n).map(|p| kept_first[p] || first_keeper[p] != u32::MAX).collect();
+    // Fix-up: a point a cut-short chain left uncovered keeps its proposal.
+    let mut out = kept.clone();
+    for c in proposals {
+        if !c.front[..c.front_count].iter().any(|&p| kept[p as usize]) {
+            out[c.probe as usize] = true;
+        }
+    }
+    out
+}
+
 /// One probe as the classification round sees it, for a backend that runs the
 /// round elsewhere (the GPU's `probe_classification` pass).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -374,6 +461,69 @@ mod tests {
         assert_eq!(ProbeState::NewlyVigilant.after_update(), ProbeState::Vigilant);
         assert!(!ProbeState::Off.usable_in_queries() && ProbeState::Vigilant.usable_in_queries());
         assert!(!ProbeState::NewlyAwake.usable_in_queries() && !ProbeState::NewlyVigilant.usable_in_queries());
+    }
+
+    /// The greedy covering pass as the module docs state it: points in ray order, each
+    /// keeps its proposal unless a front-side probe is kept already.
+    fn greedy_cover(kept_first: &[bool], proposals: &[CoverProposal]) -> Vec<bool> {
+        let mut kept = kept_first.to_vec();
+        let mut order: Vec<&CoverProposal> = proposals.iter().collect();
+        order.sort_by_key(|c| c.ray);
+        for c in order {
+            if !c.front[..c.front_count].iter().any(|&p| kept[p as usize]) {
+                kept[c.probe as usize] = true;
+            }
+        }
+        kept
+    }
+
+    #[test]
+    fn the_order_free_covering_pass_is_the_greedy_pass_and_always_covers() {
+        let mut rng = crate::rng::Pcg32::new(7, 3);
+        let mut below = |n: u32| (rng.next_f32() * n as f32) as u32 % n;
+        for case in 0..200 {
+            let probes = 6 + below(30) as usize;
+            // Probes 0 and 1 were kept by the first pass; no proposal sees them.
+            let kept_first: Vec<bool> = (0..probes).map(|p| p < 2).collect();
+            let count = 1 + below(60) as usize;
+            let mut rays: Vec<u32> = (0..count as u32 * 3).collect();
+            let proposals: Vec<CoverProposal> = (0..count)
+                .map(|_| {
+                    let ray = rays.swap_remove(below(rays.len() as u32) as usize);
+                    let front_count = 1 + below(8) as usize;
+                    let mut front = [0u32; 8];
+                    for f in front.iter_mut().take(front_count) {
+                        *f = 2 + below(probes as u32 - 2);
+                    }
+                    let probe = front[below(front_count as u32) as usize];
+                    CoverProposal { ray, probe, front, front_count }
+                })
+                .collect();
+            let covered =
+                |kept: &[bool]| proposals.iter().all(|c| c.front[..c.front_count].iter().any(|&p| kept[p as usize]));
+            let greedy = greedy_cover(&kept_first, &proposals);
+            assert_eq!(cover_proposals(&kept_first, &proposals, 1000), greedy, "case {case}: converged rounds");
+            for rounds in 0..4 {
+                let kept = cover_proposals(&kept_first, &proposals, rounds);
+                assert!(covered(&kept), "case {case}: {rounds} rounds leave a point uncovered");
+                assert!(kept[0] && kept[1], "case {case}: the first pass's probes stay kept");
+            }
+        }
+        // A chain in ray order: a (ray 0) keeps probe 2, which covers b (ray 1);
+        // c (ray 2) sees only probe 4 and b's proposal 3: greedy keeps 2 and 4.
+        let mk = |ray, probe, f: &[u32]| {
+            let mut front = [0u32; 8];
+            front[..f.len()].copy_from_slice(f);
+            CoverProposal { ray, probe, front, front_count: f.len() }
+        };
+        let chain = [mk(2, 4, &[3, 4]), mk(0, 2, &[2]), mk(1, 3, &[2, 3])];
+        let first = vec![false; 5];
+        assert_eq!(greedy_cover(&first, &chain), vec![false, false, true, false, true]);
+        assert_eq!(cover_proposals(&first, &chain, COVER_ITERATIONS), greedy_cover(&first, &chain));
+        // No round: every proposal is kept. One round: b and c see the first
+        // round's keepers 2 and 3 and drop theirs; the fix-up gives c back its 4.
+        assert_eq!(cover_proposals(&first, &chain, 0), vec![false, false, true, true, true]);
+        assert_eq!(cover_proposals(&first, &chain, 1), vec![false, false, true, false, true]);
     }
 
     #[test]

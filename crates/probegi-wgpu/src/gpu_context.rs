@@ -105,6 +105,17 @@ impl std::ops::Sub for GpuCounters {
 /// from group 0 on (`None`: unused), and the workgroups in x and y.
 pub(crate) type PassStep<'a> = (&'a wgpu::ComputePipeline, Vec<Option<&'a wgpu::BindGroup>>, (u32, u32));
 
+/// The workgroups of one step of [`GpuContext::run_dispatches`].
+pub(crate) enum Dispatch<'a> {
+    /// Workgroups in x and y.
+    Groups(u32, u32),
+    /// Workgroups (x, y, z as three `u32`) that an earlier step wrote into
+    /// `args` at byte `offset`: copied into `via` (`INDIRECT | COPY_DST`, bound
+    /// to no pass: a buffer a pass binds cannot also hold its indirect
+    /// arguments) just before the pass, then dispatched from it.
+    Indirect { args: &'a wgpu::Buffer, offset: u64, via: &'a wgpu::Buffer },
+}
+
 impl GpuContext {
     /// A headless device on the compiled backends (Vulkan, Metal, DX12).
     pub fn headless() -> Result<Self, GpuError> {
@@ -375,8 +386,22 @@ impl GpuContext {
     /// unused one, workgroups x and y), one compute pass each so every step sees
     /// what the steps before it wrote.
     pub(crate) fn run_passes(&self, label: &str, steps: &[PassStep<'_>]) {
+        let steps: Vec<_> = steps.iter().map(|(p, g, (x, y))| (*p, g.clone(), Dispatch::Groups(*x, *y))).collect();
+        self.run_dispatches(label, &steps);
+    }
+
+    /// [`Self::run_passes`] where a step may take its workgroups from a buffer
+    /// an earlier step wrote ([`Dispatch::Indirect`]).
+    pub(crate) fn run_dispatches(
+        &self,
+        label: &str,
+        steps: &[(&wgpu::ComputePipeline, Vec<Option<&wgpu::BindGroup>>, Dispatch<'_>)],
+    ) {
         let mut encoder = self.device.create_command_encoder(&Default::default());
-        for (pipeline, groups, (x, y)) in steps {
+        for (pipeline, groups, dispatch) in steps {
+            if let Dispatch::Indirect { args, offset, via } = dispatch {
+                encoder.copy_buffer_to_buffer(args, *offset, via, 0, 12);
+            }
             let mut pass =
                 encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
             pass.set_pipeline(pipeline);
@@ -385,7 +410,10 @@ impl GpuContext {
                     pass.set_bind_group(i as u32, *g, &[]);
                 }
             }
-            pass.dispatch_workgroups(*x, *y, 1);
+            match dispatch {
+                Dispatch::Groups(x, y) => pass.dispatch_workgroups(*x, *y, 1),
+                Dispatch::Indirect { via, .. } => pass.dispatch_workgroups_indirect(via, 0),
+            }
         }
         self.submit(encoder.finish());
     }

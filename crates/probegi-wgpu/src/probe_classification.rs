@@ -3,12 +3,15 @@
 //! `classify_jcgt_pending` with `probegi_core::probe_classification::{probe_watches,
 //! uncovered_point_probe}`: per probe of one volume, whether it is inside geometry
 //! and whether it is kept (it watches a front face, or the covering pass chose it
-//! for a surface point no front-side cage probe served). The covering pass runs
-//! one invocation at a time over chunks of probes (about 4096 rays each), in the
-//! CPU's probe and ray order, so both backends keep the same probes (a single
-//! invocation over the shared Sponza's 131 072 rays was cut short on lavapipe).
-//! The rays and hits stay where the trace left them; the host reads back 16
-//! bytes a probe.
+//! for a surface point no front-side cage probe served). The covering pass is
+//! `probegi_core::probe_classification::cover_proposals`: a list of proposals
+//! (one thread per ray), then [`COVER_ITERATIONS`] Jacobi rounds of the greedy
+//! pass's recursion (two dispatches each, the per-point one dispatched
+//! indirectly over the list), the keepers marked, a fix-up; every step an
+//! atomic minimum or an idempotent flag, so both backends keep the same probes. (It
+//! replaced one invocation walking every ray in order, which took seconds at
+//! 32³ probes on an H200.) The rays and hits stay where the trace left them; the
+//! host reads back 16 bytes a probe.
 //!
 //! The round is the field's own plan (`probegi_field::device_plans::DeviceClassification`).
 //! Its probes are packed into two rows each, not uploaded as they are:
@@ -16,10 +19,11 @@
 //! `Option<u32>`, two `bool`s and a `Vec3`, which have no GPU layout.
 
 use bytemuck::{Pod, Zeroable};
+use probegi_core::probe_classification::COVER_ITERATIONS;
 use probegi_field::device_plans::DeviceClassification;
 
 use crate::bvh_trace::{GpuBvh, GpuRayBatch, bvh_bind_group_layout, dispatch_2d};
-use crate::gpu_context::{GpuContext, GpuError};
+use crate::gpu_context::{Dispatch, GpuContext, GpuError};
 use crate::gpu_scene::{GpuScene, scene_bind_group_layout};
 use crate::shader_registry::{
     BVH_GROUP, BVH_STORAGE_BUFFERS, PROBE_CLASSIFICATION, SCENE_GROUP, SCENE_STORAGE_BUFFERS,
@@ -36,40 +40,56 @@ pub(crate) struct ClassifyParams {
     pub(crate) probe_counts: [u32; 3],
     pub(crate) groups_x: u32,
     pub(crate) scroll_offsets: [u32; 3],
-    /// The covering pass's chunk: first probe and probe count.
-    pub(crate) cover_first: u32,
+    /// The Jacobi round of `classify_clear` / `classify_round` (its parity picks the keeper arrays).
+    pub(crate) cover_round: u32,
     pub(crate) reach_rel: f32,
     pub(crate) bias_m: f32,
-    pub(crate) cover_count: u32,
-    pub(crate) _pad: f32,
+    /// Rounds run: `classify_mark` reads the last round's keeper array.
+    pub(crate) cover_rounds: u32,
+    /// Threads of the per-ray passes: probes × rays per probe.
+    pub(crate) ray_threads: u32,
+    /// Workgroups along x of the per-ray passes.
+    pub(crate) ray_groups_x: u32,
+    pub(crate) _pad: [u32; 3],
 }
-const _: () = assert!(std::mem::size_of::<ClassifyParams>() == 80);
+const _: () = assert!(std::mem::size_of::<ClassifyParams>() == 96);
 
-/// Rays one invocation of the covering pass walks per dispatch.
-const COVER_CHUNK_RAYS: u32 = 4096;
-
-/// The classification round's two pipelines (the first pass, the covering pass).
+/// The classification round's pipelines: the first pass, then the covering
+/// pass's proposals, rounds (clear, round), marks and fix-up.
 pub struct GpuProbeClassification {
     layout: wgpu::BindGroupLayout,
     first: wgpu::ComputePipeline,
-    cover: wgpu::ComputePipeline,
+    propose: wgpu::ComputePipeline,
+    args: wgpu::ComputePipeline,
+    clear: wgpu::ComputePipeline,
+    round: wgpu::ComputePipeline,
+    mark: wgpu::ComputePipeline,
+    fixup: wgpu::ComputePipeline,
 }
 
 impl GpuProbeClassification {
-    /// Storage buffers per stage: its own 5, the BVH's and the scene's.
-    pub const STORAGE_BUFFERS: u32 = 5 + BVH_STORAGE_BUFFERS + SCENE_STORAGE_BUFFERS;
+    /// Storage buffers per stage: its own 7, the BVH's and the scene's.
+    pub const STORAGE_BUFFERS: u32 = 7 + BVH_STORAGE_BUFFERS + SCENE_STORAGE_BUFFERS;
 
     /// The pipelines on `ctx`; an error where the device binds too few storage buffers.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         ctx.check_pipeline(Self::STORAGE_BUFFERS, "the probe classification pass")?;
-        let layout = ctx.pass_layout("probe classification", &[true, true, true, true, false]);
+        let layout = ctx.pass_layout("probe classification", &[true, true, true, true, false, false, false]);
         let (bvh_layout, scene_layout) = (bvh_bind_group_layout(&ctx.device), scene_bind_group_layout(&ctx.device));
-        let [first, cover] = ctx.compute_pipelines(
+        let [first, propose, args, clear, round, mark, fixup] = ctx.compute_pipelines(
             &PROBE_CLASSIFICATION,
             &[Some(&layout), Some(&bvh_layout), None, Some(&scene_layout)],
-            ["classify_first", "classify_cover"],
+            [
+                "classify_first",
+                "classify_propose",
+                "classify_args",
+                "classify_clear",
+                "classify_round",
+                "classify_mark",
+                "classify_fixup",
+            ],
         );
-        Ok(Self { first, cover, layout })
+        Ok(Self { layout, first, propose, args, clear, round, mark, fixup })
     }
 
     /// Per probe of `round` (the field's plan for one volume): (inside
@@ -94,6 +114,8 @@ impl GpuProbeClassification {
             batch.check_rays(first, round.rays_per_probe)?;
         }
         let (gx, gy) = dispatch_2d(n as u32);
+        let ray_threads = n as u32 * round.rays_per_probe;
+        let (rx, ry) = dispatch_2d(ray_threads);
         let params = ClassifyParams {
             origin_m: g.origin_m.into(),
             probe_count: n as u32,
@@ -102,17 +124,14 @@ impl GpuProbeClassification {
             probe_counts: g.probe_counts.into(),
             groups_x: gx,
             scroll_offsets: g.probe_scroll_offsets.into(),
-            cover_first: 0,
+            cover_round: 0,
             reach_rel: round.reach_rel,
             bias_m: round.bias_m,
-            cover_count: 0,
-            _pad: 0.0,
+            cover_rounds: COVER_ITERATIONS,
+            ray_threads,
+            ray_groups_x: rx,
+            _pad: [0; 3],
         };
-        // The covering pass in chunks of about COVER_CHUNK_RAYS rays, in probe order.
-        let chunk = (COVER_CHUNK_RAYS / round.rays_per_probe.max(1)).max(1);
-        let chunks: Vec<ClassifyParams> = (0..(n as u32).div_ceil(chunk))
-            .map(|c| ClassifyParams { cover_first: c * chunk, cover_count: chunk, ..params })
-            .collect();
         let rows: Vec<[u32; 4]> = round
             .probes
             .iter()
@@ -120,36 +139,60 @@ impl GpuProbeClassification {
             .collect();
         let positions: Vec<[f32; 4]> = round.probes.iter().map(|p| p.position_m.extend(0.0).into()).collect();
         let storage = wgpu::BufferUsages::STORAGE;
-        let params = ctx.buffer_with("classify params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let rows = ctx.buffer_with("classify probes", bytemuck::cast_slice(&rows), storage);
         let positions = ctx.buffer_with("classify positions", bytemuck::cast_slice(&positions), storage);
         let out = ctx.output_buffer("classify out", n as u64 * 16);
-        let bind = |params: wgpu::Buffer| {
+        // Indirect workgroups, count, then (ray, probe) per proposal (at most one a ray).
+        let list = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("classify proposals"),
+            size: (4 + 2 * ray_threads as u64) * 4,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let indirect = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("classify indirect"),
+            size: 16,
+            usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let keepers = ctx.output_buffer("classify keepers", 2 * n as u64 * 4);
+        let bind = |p: &ClassifyParams| {
+            let params = ctx.buffer_with("classify params", bytemuck::bytes_of(p), wgpu::BufferUsages::UNIFORM);
             let buffers = [params, batch.rays_buffer().clone(), batch.hits_buffer().clone()];
-            let buffers = [buffers.as_slice(), &[rows.clone(), positions.clone(), out.clone()]].concat();
+            let own = [rows.clone(), positions.clone(), out.clone(), list.clone(), keepers.clone()];
+            let buffers = [buffers.as_slice(), &own].concat();
             crate::gpu_context::buffers_bind_group(&ctx.device, "probe classification", &self.layout, &buffers)
         };
-        let mut bind_groups = vec![bind(params)];
-        for c in &chunks {
-            let p = ctx.buffer_with("classify cover params", bytemuck::bytes_of(c), wgpu::BufferUsages::UNIFORM);
-            bind_groups.push(bind(p));
+        let base = bind(&params);
+        let rounds: Vec<wgpu::BindGroup> =
+            (0..COVER_ITERATIONS).map(|k| bind(&ClassifyParams { cover_round: k, ..params })).collect();
+        // The first pass, the proposals, the rounds (each reads what the step
+        // before it wrote), the marks and the fix-up.
+        let per_probe = || Dispatch::Groups(gx, gy);
+        let listed = || Dispatch::Indirect { args: &list, offset: 0, via: &indirect };
+        let mut order = vec![
+            (&self.first, &base, per_probe()),
+            (&self.propose, &base, Dispatch::Groups(rx, ry)),
+            (&self.args, &base, Dispatch::Groups(1, 1)),
+        ];
+        for g in &rounds {
+            order.push((&self.clear, g, per_probe()));
+            order.push((&self.round, g, listed()));
         }
-        // The first pass, then the covering pass chunk after chunk (each reads what
-        // the steps before it wrote).
-        let steps: Vec<_> = bind_groups
-            .iter()
-            .enumerate()
-            .map(|(k, g)| {
-                let (pipeline, groups) = if k == 0 { (&self.first, (gx, gy)) } else { (&self.cover, (1, 1)) };
+        order.push((&self.mark, &base, per_probe()));
+        order.push((&self.fixup, &base, listed()));
+        let steps: Vec<_> = order
+            .into_iter()
+            .map(|(pipeline, g, dispatch)| {
                 let mut bind = vec![Some(g), None, None, None];
                 bind[BVH_GROUP as usize] = Some(bvh.bind_group());
                 bind[SCENE_GROUP as usize] = Some(scene.bind_group());
-                (pipeline, bind, groups)
+                (pipeline, bind, dispatch)
             })
             .collect();
-        ctx.run_passes("probe classification", &steps);
+        ctx.run_dispatches("probe classification", &steps);
         let bytes = ctx.read_back(&out)?;
         let v: &[[u32; 4]] = bytemuck::cast_slice(&bytes);
-        Ok(v.iter().take(n).map(|o| (o[0] != 0, o[1] != 0)).collect())
+        Ok(v.iter().take(n).map(|o| (o[0] != 0, o[1] != 0 || o[3] != 0)).collect())
     }
 }

@@ -202,9 +202,10 @@ fn gpu_usage_counts_equal_the_core_function_over_the_same_hits() {
 #[test]
 fn sponza_is_relocated_and_classified_on_the_gpu_as_on_the_host() {
     // The shared Sponza at 16×8×16 is where the covering pass matters (thick walls
-    // whose nearest probes lie behind them; see probegi_core::probe_classification):
-    // it keeps 67 probes there, and a covering pass run as one long invocation was
-    // cut short on lavapipe (18 kept, 49 states wrong) before it ran in chunks.
+    // whose nearest probes lie behind them; see probegi_core::probe_classification).
+    // A covering pass run as one long invocation was cut short on lavapipe (49
+    // states wrong); the order-free pass (`cover_proposals`) runs as short
+    // dispatches and must keep the host's probes exactly.
     let scene = probegi_scene::load_scene(&common::shared("dabrovic-sponza/sponza.obj")).expect("the shared Sponza");
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let (Some(host), Some(device)) = (gpu(&scene, &bvh, false), gpu(&scene, &bvh, true)) else { return };

@@ -1,6 +1,7 @@
 //! Initialisation rounds of a volume (seed 004 Listing 5, first step): before a
 //! probe traces for the field it is placed and classified against the static
-//! geometry in distance-only rounds, `probe_relocation_iterations` rounds of the
+//! geometry in distance-only rounds of `probe_init_rays_per_probe` rays a probe
+//! (RTXGI's 32 fixed rays), `probe_relocation_iterations` rounds of the
 //! position optimizer (`probegi_core::probe_relocation`), then with jcgt states
 //! one classification round (`probegi_core::probe_classification`). The rounds
 //! run for every probe when the volume is created, and for the planes a tracking
@@ -12,13 +13,14 @@ use glam::Vec3;
 use probegi_core::ddgi_query::max_surface_bias_m;
 use probegi_core::ddgi_settings::ProbeStatesMode;
 use probegi_core::probe_classification::{
-    ClassificationProbe, ProbeState, classify_jcgt, probe_watches, uncovered_point_probe,
+    COVER_ITERATIONS, ClassificationProbe, CoverProposal, ProbeState, classify_jcgt, cover_proposals,
+    front_side_cage_probes, probe_watches, uncovered_point_probe,
 };
 use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats, relocation_step};
 use rayon::prelude::*;
 
 use crate::device_plans::{DeviceClassification, DeviceRelocationProbe};
-use crate::probe_ray_gen::probe_ray_directions;
+use crate::probe_ray_gen::{probe_ray_rotation, rotated_fibonacci};
 use crate::seam::{ProbeRayBatch, ProbeRayHit};
 
 use super::{DdgiVolume, VolumeFrame};
@@ -117,7 +119,8 @@ impl DdgiVolume {
         let Some(&kind) = self.init_rounds().get(round) else {
             return false;
         };
-        frame.init_dirs = probe_ray_directions(&self.settings, self.stream_seed(seed), init_frame(kind));
+        let rotation = probe_ray_rotation(self.stream_seed(seed), init_frame(kind));
+        frame.init_dirs = rotated_fibonacci(rotation, self.settings.probe_init_rays_per_probe);
         frame.ray_count = frame.init_dirs.len();
         frame.first_ray = vec![u32::MAX; self.grid.probe_count()];
         for p in 0..self.grid.probe_count() {
@@ -194,13 +197,13 @@ impl DdgiVolume {
         let reach = self.settings.probe_classification_reach_rel;
         let (grid, pending) = (&self.grid, &self.probe_pending_init);
         let dirs = &frame.init_dirs;
-        // Front-face hits of probe p as (position, facing normal).
+        // Front-face hits of probe p as (batch ray, position, facing normal).
         let front_hits = |p: usize| {
             let first = frame.first_ray[p] as usize;
             (first..first + n).filter_map(move |r| {
                 let h = hits[r];
                 (h.distance_m > 0.0 && h.distance_m.is_finite())
-                    .then(|| (batch.origins_m[r] + batch.directions[r] * h.distance_m, h.normal))
+                    .then(|| (r as u32, batch.origins_m[r] + batch.directions[r] * h.distance_m, h.normal))
             })
         };
         let first: Vec<(bool, bool)> = (0..grid.probe_count())
@@ -213,22 +216,31 @@ impl DdgiVolume {
                 let d = &distances[f..f + n];
                 let coords = grid.probe_coords(p);
                 let grid_point = grid.probe_position(coords);
-                let watches = front_hits(p).any(|(pos, _)| probe_watches(grid, coords, pos - grid_point, reach, bias));
+                let watches =
+                    front_hits(p).any(|(_, pos, _)| probe_watches(grid, coords, pos - grid_point, reach, bias));
                 (is_inside_geometry(&probe_ray_stats(dirs, d)), watches)
             })
             .collect();
         let eligible: Vec<bool> = (0..grid.probe_count()).map(|p| pending[p] && !first[p].0).collect();
-        let mut kept: Vec<bool> = (0..grid.probe_count())
+        let kept: Vec<bool> = (0..grid.probe_count())
             .map(|p| if pending[p] { !first[p].0 && first[p].1 } else { self.probe_states[p].traces() })
             .collect();
+        // The covering pass, order-free (`cover_proposals`): what each point the
+        // first pass left uncovered would keep, then the greedy rounds over them.
         let positions = &self.probe_positions;
-        for p in (0..grid.probe_count()).filter(|&p| pending[p] && frame.first_ray[p] != u32::MAX) {
-            for (pos, normal) in front_hits(p) {
-                if let Some(q) = uncovered_point_probe(grid, positions, &kept, &eligible, pos, normal) {
-                    kept[q] = true;
-                }
-            }
-        }
+        let (kept_first, eligible) = (&kept, &eligible);
+        let proposals: Vec<CoverProposal> = (0..grid.probe_count())
+            .into_par_iter()
+            .filter(|&p| pending[p] && frame.first_ray[p] != u32::MAX)
+            .flat_map_iter(|p| {
+                front_hits(p).filter_map(move |(ray, pos, normal)| {
+                    let q = uncovered_point_probe(grid, positions, kept_first, eligible, pos, normal)?;
+                    let (front, front_count) = front_side_cage_probes(grid, positions, pos, normal);
+                    Some(CoverProposal { ray, probe: q as u32, front, front_count })
+                })
+            })
+            .collect();
+        let kept = cover_proposals(&kept, &proposals, COVER_ITERATIONS);
         for p in 0..grid.probe_count() {
             if pending[p] {
                 self.probe_states[p] = classify_jcgt(first[p].0, kept[p]);

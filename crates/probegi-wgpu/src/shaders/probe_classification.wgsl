@@ -4,11 +4,15 @@
 // uncovered_point_probe} and probegi_core::probe_relocation::is_inside_geometry):
 // - `classify_first`, one thread per probe: inside geometry (more than 25 %
 //   backfaces) and whether a front-face hit lies in the box the probe watches;
-// - `classify_cover`, one thread for the whole volume: the covering pass, in probe
-//   and ray order as on the CPU (sequential, so deterministic and greedy), keeps a
-//   front-side cage probe for every surface point a pending probe saw. It runs as
-//   a sequence of dispatches over chunks of probes (one long invocation is cut
-//   short on some drivers: lavapipe stopped a 131 072-ray loop after ~20 000).
+// - the covering pass, probegi_core::probe_classification::cover_proposals:
+//   `classify_propose`, one thread per ray of the round, lists what each
+//   front-face point the first pass left uncovered would keep (and takes an
+//   atomic minimum of its ray per probe); `classify_args` sizes the indirect
+//   dispatches over that list; then `classify_clear` + `classify_round` per
+//   Jacobi round (the greedy pass's recursion in ray order, every listed point
+//   at once), `classify_mark` (the rounds' probes kept) and `classify_fixup` (a
+//   point still uncovered keeps its proposal). Order-free, so the CPU's result
+//   bit for bit.
 // Included after bvh.wgsl and scene.wgsl (groups 1 and 3) for the hits' facing
 // shading normals. Must match `probegi_wgpu::probe_classification::ClassifyParams`
 // and the trace pass's `GpuRay` / `GpuRayHit`.
@@ -21,11 +25,15 @@ struct ClassifyParams {
     probe_counts: vec3<u32>,
     groups_x: u32,
     scroll_offsets: vec3<u32>,
-    cover_first: u32,          // classify_cover: the first probe of this dispatch's chunk
+    cover_round: u32,          // classify_clear / classify_round: the Jacobi round (parity: keeper array)
     reach_rel: f32,
     bias_m: f32,
-    cover_count: u32,          // classify_cover: probes in the chunk
-    _pad0: f32,
+    cover_rounds: u32,         // classify_mark: rounds run (parity: the last keeper array)
+    ray_threads: u32,          // per-ray passes: probe_count × rays_per_probe
+    ray_groups_x: u32,         // per-ray passes: workgroups along x
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 };
 
 struct ClassifyRay {
@@ -50,8 +58,14 @@ struct ClassifyHit {
 @group(0) @binding(3) var<storage, read> classify_probes: array<vec4<u32>>;
 // Per probe: position with its relocation offset (m).
 @group(0) @binding(4) var<storage, read> classify_positions: array<vec4<f32>>;
-// Per probe: inside geometry, kept (watches / chosen to cover), eligible, 0.
+// Per probe: inside geometry, kept (first pass, then the rounds' keepers),
+// eligible, kept by the fix-up.
 @group(0) @binding(5) var<storage, read_write> classify_out: array<vec4<u32>>;
+// The proposals: [0..3) the indirect workgroups over them (x, y, 1), [3] their
+// count, then per proposal its ray and the probe it would keep.
+@group(0) @binding(6) var<storage, read_write> classify_list: array<atomic<u32>>;
+// Two arrays of probe_count: per probe, the first ray that keeps it (Jacobi ping-pong).
+@group(0) @binding(7) var<storage, read_write> classify_keepers: array<atomic<u32>>;
 
 const CLASSIFY_NONE: u32 = 0xffffffffu;
 
@@ -114,6 +128,11 @@ fn classify_first(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     if (p >= classify_params.probe_count) {
         return;
     }
+    atomicStore(&classify_keepers[p], CLASSIFY_NONE);
+    atomicStore(&classify_keepers[classify_params.probe_count + p], CLASSIFY_NONE);
+    if (p == 0u) {
+        atomicStore(&classify_list[3], 0u);
+    }
     let probe = classify_probes[p];
     let pending = probe.y != 0u;
     if (!pending || probe.x == CLASSIFY_NONE) {
@@ -141,28 +160,52 @@ fn classify_first(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocati
     classify_out[p] = vec4<u32>(u32(inside), u32(!inside && watches), u32(!inside), 0u);
 }
 
-// probegi_core::probe_classification::uncovered_point_probe, over the kept flags in classify_out.
-fn classify_uncovered(point: vec3<f32>, normal: vec3<f32>) -> u32 {
-    // probegi_core::probe_grid::ProbeGrid::cage
+// probegi_core::probe_grid::ProbeGrid::cage of `point`: its base corner, the
+// fractions within the cell, and the largest coordinates.
+struct ClassifyCage {
+    base: vec3<u32>,
+    alpha: vec3<f32>,
+    max_c: vec3<u32>,
+};
+
+fn classify_cage(point: vec3<f32>) -> ClassifyCage {
+    var c: ClassifyCage;
     let max_c = vec3<f32>(max(vec3<i32>(classify_params.probe_counts) - vec3<i32>(1), vec3<i32>(0)));
     let rel = (point - classify_params.origin_m) / classify_params.spacing_m;
-    let base = vec3<u32>(clamp(floor(rel), vec3<f32>(0.0), max_c));
-    let base_pos = classify_params.origin_m + classify_params.spacing_m * vec3<f32>(base);
-    let alpha = clamp((point - base_pos) / classify_params.spacing_m, vec3<f32>(0.0), vec3<f32>(1.0));
+    c.base = vec3<u32>(clamp(floor(rel), vec3<f32>(0.0), max_c));
+    let base_pos = classify_params.origin_m + classify_params.spacing_m * vec3<f32>(c.base);
+    c.alpha = clamp((point - base_pos) / classify_params.spacing_m, vec3<f32>(0.0), vec3<f32>(1.0));
+    c.max_c = vec3<u32>(max_c);
+    return c;
+}
+
+// Corner i of the cage (x in bit 0, y in bit 1, z in bit 2), as a probe index.
+fn classify_cage_probe(c: ClassifyCage, i: u32) -> u32 {
+    let o = vec3<u32>(i & 1u, (i >> 1u) & 1u, (i >> 2u) & 1u);
+    return classify_probe_index(min(c.base + o, c.max_c));
+}
+
+// Whether probe p lies strictly in front of the surface at `point` with `normal`.
+fn classify_in_front(p: u32, point: vec3<f32>, normal: vec3<f32>) -> bool {
+    return dot(classify_positions[p].xyz - point, normal) > 0.0;
+}
+
+// probegi_core::probe_classification::uncovered_point_probe, over the first
+// pass's kept flags in classify_out.
+fn classify_uncovered(point: vec3<f32>, normal: vec3<f32>) -> u32 {
+    let c = classify_cage(point);
     var best = CLASSIFY_NONE;
     var best_w = 0.0;
     for (var i = 0u; i < 8u; i++) {
-        let o = vec3<u32>(i & 1u, (i >> 1u) & 1u, (i >> 2u) & 1u);
-        let corner = min(base + o, vec3<u32>(max_c));
-        let p = classify_probe_index(corner);
-        if (dot(classify_positions[p].xyz - point, normal) <= 0.0) {
+        let p = classify_cage_probe(c, i);
+        if (!classify_in_front(p, point, normal)) {
             continue;
         }
         if (classify_out[p].y != 0u) {
             return CLASSIFY_NONE;
         }
-        let fo = vec3<f32>(o);
-        let t = (vec3<f32>(1.0) - alpha) * (vec3<f32>(1.0) - fo) + alpha * fo;
+        let fo = vec3<f32>(vec3<u32>(i & 1u, (i >> 1u) & 1u, (i >> 2u) & 1u));
+        let t = (vec3<f32>(1.0) - c.alpha) * (vec3<f32>(1.0) - fo) + c.alpha * fo;
         let w = t.x * t.y * t.z;
         if (classify_out[p].z != 0u && (best == CLASSIFY_NONE || w > best_w)) {
             best = p;
@@ -172,23 +215,125 @@ fn classify_uncovered(point: vec3<f32>, normal: vec3<f32>) -> u32 {
     return best;
 }
 
+// The batch ray of per-ray thread `t` (probe t / rays, its ray t % rays), or
+// none where the probe is not pending or did not trace.
+fn classify_thread_ray(wid: vec3<u32>, lid: u32) -> u32 {
+    let t = (wid.y * classify_params.ray_groups_x + wid.x) * 64u + lid;
+    if (t >= classify_params.ray_threads) {
+        return CLASSIFY_NONE;
+    }
+    let n = max(classify_params.rays_per_probe, 1u);
+    let probe = classify_probes[t / n];
+    if (probe.y == 0u || probe.x == CLASSIFY_NONE) {
+        return CLASSIFY_NONE;
+    }
+    return probe.x + t % n;
+}
+
+@compute @workgroup_size(64)
+fn classify_propose(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let r = classify_thread_ray(wid, lid);
+    if (r == CLASSIFY_NONE) {
+        return;
+    }
+    var q = CLASSIFY_NONE;
+    let f = classify_front_hit(r);
+    if (f.ok) {
+        q = classify_uncovered(f.point, f.normal);
+    }
+    if (q != CLASSIFY_NONE) {
+        let i = atomicAdd(&classify_list[3], 1u);
+        atomicStore(&classify_list[4u + 2u * i], r);
+        atomicStore(&classify_list[5u + 2u * i], q);
+        atomicMin(&classify_keepers[q], r);
+    }
+}
+
+// The workgroups of 64 over the listed proposals, in x (at most 65 535) and y.
 @compute @workgroup_size(1)
-fn classify_cover() {
-    let n = classify_params.rays_per_probe;
-    let end = min(classify_params.cover_first + classify_params.cover_count, classify_params.probe_count);
-    for (var p = classify_params.cover_first; p < end; p++) {
-        let probe = classify_probes[p];
-        if (probe.y == 0u || probe.x == CLASSIFY_NONE) {
+fn classify_args() {
+    let groups = (atomicLoad(&classify_list[3]) + 63u) / 64u;
+    let x = clamp(groups, 1u, 65535u);
+    atomicStore(&classify_list[0], x);
+    atomicStore(&classify_list[1], (groups + x - 1u) / x);
+    atomicStore(&classify_list[2], 1u);
+}
+
+// The proposal of an indirect thread: (ray, probe), or none past the list.
+fn classify_listed(wid: vec3<u32>, lid: u32) -> vec2<u32> {
+    let i = (wid.y * atomicLoad(&classify_list[0]) + wid.x) * 64u + lid;
+    if (i >= atomicLoad(&classify_list[3])) {
+        return vec2<u32>(CLASSIFY_NONE);
+    }
+    return vec2<u32>(atomicLoad(&classify_list[4u + 2u * i]), atomicLoad(&classify_list[5u + 2u * i]));
+}
+
+// Whether a front-side cage probe of ray r's point has a keeper before r in
+// keeper array `array_index` (classify_mark's kept flags when it is none).
+fn classify_covered(r: u32, array_index: u32) -> bool {
+    let f = classify_front_hit(r);
+    let c = classify_cage(f.point);
+    for (var i = 0u; i < 8u; i++) {
+        let p = classify_cage_probe(c, i);
+        if (!classify_in_front(p, f.point, f.normal)) {
             continue;
         }
-        for (var r = probe.x; r < probe.x + n; r++) {
-            let f = classify_front_hit(r);
-            if (!f.ok) { continue; }
-            let q = classify_uncovered(f.point, f.normal);
-            if (q != CLASSIFY_NONE) {
-                classify_out[q].y = 1u;
+        if (array_index == CLASSIFY_NONE) {
+            if (classify_out[p].y != 0u) {
+                return true;
             }
+        } else if (atomicLoad(&classify_keepers[array_index * classify_params.probe_count + p]) < r) {
+            return true;
+        }
+    }
+    return false;
+}
+
+// Clears the keeper array round `cover_round` writes.
+@compute @workgroup_size(64)
+fn classify_clear(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let p = (wid.y * classify_params.groups_x + wid.x) * 64u + lid;
+    if (p < classify_params.probe_count) {
+        let to = (classify_params.cover_round + 1u) & 1u;
+        atomicStore(&classify_keepers[to * classify_params.probe_count + p], CLASSIFY_NONE);
+    }
+}
+
+// One Jacobi round: a point keeps its proposal unless an earlier keeper of the
+// last round kept one of its front-side probes.
+@compute @workgroup_size(64)
+fn classify_round(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let listed = classify_listed(wid, lid);
+    let r = listed.x;
+    let q = listed.y;
+    if (r == CLASSIFY_NONE) {
+        return;
+    }
+    let last = classify_params.cover_round & 1u;
+    if (!classify_covered(r, last)) {
+        atomicMin(&classify_keepers[(last ^ 1u) * classify_params.probe_count + q], r);
+    }
+}
+
+// The rounds' keepers join the first pass's kept probes.
+@compute @workgroup_size(64)
+fn classify_mark(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let p = (wid.y * classify_params.groups_x + wid.x) * 64u + lid;
+    if (p < classify_params.probe_count) {
+        let last = classify_params.cover_rounds & 1u;
+        if (atomicLoad(&classify_keepers[last * classify_params.probe_count + p]) != CLASSIFY_NONE) {
+            classify_out[p].y = 1u;
         }
     }
 }
 
+// A point the rounds left uncovered (rounds cut short) keeps its proposal.
+@compute @workgroup_size(64)
+fn classify_fixup(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let listed = classify_listed(wid, lid);
+    let r = listed.x;
+    let q = listed.y;
+    if (r != CLASSIFY_NONE && !classify_covered(r, CLASSIFY_NONE)) {
+        classify_out[q].w = 1u;
+    }
+}
