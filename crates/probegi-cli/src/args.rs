@@ -274,11 +274,11 @@ pub struct RenderArgs {
     /// A moving camera's temporal filter: each pixel averages at most this many
     /// frames, reprojected from the last frame's view where they saw the same
     /// surface; 0 or 1 turns it off (every moving frame its own sample).
-    #[arg(long, default_value_t = probegi_cpu::frame_loop::TemporalSettings::default().temporal_history_frames)]
+    #[arg(long, default_value_t = probegi_frame::frame_loop::TemporalSettings::default().temporal_history_frames)]
     pub temporal_frames: u32,
     /// The temporal filter clamps the direct term's history to the new frame's
     /// 3×3 neighbourhood mean ± this many standard deviations; 0: no clamp.
-    #[arg(long, default_value_t = probegi_cpu::frame_loop::TemporalSettings::default().temporal_clip_sigma)]
+    #[arg(long, default_value_t = probegi_frame::frame_loop::TemporalSettings::default().temporal_clip_sigma)]
     pub temporal_clip_sigma: f32,
     /// Output image: .png (tone-mapped sRGB) or .exr (linear radiance).
     #[arg(long, default_value = "out/render.png")]

@@ -10,12 +10,12 @@ use anyhow::{Context, Result, bail};
 use glam::Vec3;
 use probegi_core::rng::{Pcg32, hash_combine};
 use probegi_core::sampling::sample_uniform_sphere;
-use probegi_cpu::field_update::FieldSetUpdate;
-use probegi_cpu::frame_loop::FIELD_UPDATE_PASSES;
 use probegi_cpu::probe_trace::ddgi_volume_bytes;
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_frame::field_update::FieldSetUpdate;
+use probegi_frame::frame_loop::FIELD_UPDATE_PASSES;
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene, load_scene};
 use rayon::prelude::*;
 use serde_json::json;
@@ -45,7 +45,7 @@ pub fn run(args: &BenchArgs) -> Result<serde_json::Value> {
 fn run_sh(args: &BenchArgs) -> Result<serde_json::Value> {
     use probegi_core::camera::CameraRays;
     use probegi_core::sh_settings::ShProbeSettings;
-    use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+    use probegi_frame::frame_loop::{GiMethod, RenderSettings, render_frames};
 
     if args.frames == 0 {
         bail!("--frames must be at least 1");

@@ -11,9 +11,9 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
-use probegi_cpu::frame_loop::GiMethod;
 use probegi_field::ddgi_field_set::ProbeRayBatch;
 use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_frame::frame_loop::GiMethod;
 use probegi_scene::{BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
 use probegi_wgpu::bvh_trace::GpuRayBatch;
@@ -109,16 +109,16 @@ pub fn time_gpu_passes(
     let rotation = probegi_field::probe_ray_gen::probe_ray_rotation(volume.stream_seed(1), 1);
     let ray_gen = probegi_wgpu::probe_ray_gen::GpuProbeRayGen::new(ctx);
     let (_atlases, blend, bindings) = blend_pass(ctx, volume, batch)?;
-    let timer = GpuTimer::new(ctx, 8);
-    let names =
-        ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], PASS_NAMES[3], "shade", "ray_gen", "trace_batch_order"];
+    // Timestamp slots: the trace, the blend's passes, shade, ray generation, the batch-order trace.
+    let timer = GpuTimer::new(ctx, 7);
+    let names = ["trace", PASS_NAMES[0], PASS_NAMES[1], PASS_NAMES[2], "shade", "ray_gen", "trace_batch_order"];
     // The update's thread order (direction-major per volume), and batch order for comparison.
     let segment = probegi_wgpu::bvh_trace::TraceSegment {
         first_ray: 0,
         probe_count: origins.len() as u32,
         rays_per_probe: n as u32,
     };
-    let traced = ray_gen.generate(ctx, &gpu.trace, origins, max_m, rotation, n as u32, Some((&timer, 6)))?;
+    let traced = ray_gen.generate(ctx, &gpu.trace, origins, max_m, rotation, n as u32, Some((&timer, 5)))?;
     ctx.wait()?;
     // The shade pass over every ray of the batch, with the set's field on the device.
     let field = probegi_wgpu::ddgi_query::GpuDdgiField::upload(ctx, &set.view())?;
@@ -138,12 +138,12 @@ pub fn time_gpu_passes(
     for k in 0..repeat {
         if k > 0 {
             // Time the ray generation again, into the same kind of batch.
-            ray_gen.generate(ctx, &gpu.trace, origins, max_m, rotation, n as u32, Some((&timer, 6)))?;
+            ray_gen.generate(ctx, &gpu.trace, origins, max_m, rotation, n as u32, Some((&timer, 5)))?;
             ctx.wait()?;
         }
         traced.configure(ctx, false, &[]);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        gpu.trace.record(&mut encoder, &gpu.bvh, &traced, timer.writes(7));
+        gpu.trace.record(&mut encoder, &gpu.bvh, &traced, timer.writes(6));
         ctx.queue.submit([encoder.finish()]);
         ctx.wait()?;
         traced.configure(ctx, false, &[segment]);
@@ -158,7 +158,7 @@ pub fn time_gpu_passes(
         ctx.queue.submit([encoder.finish()]);
         ctx.wait()?;
         if let Some((shade, scene)) = gpu.shading() {
-            shade.shade(ctx, &gpu.bvh, &field, scene, &traced, &shade_probes, 1, 1, Some((&timer, 5)))?;
+            shade.shade(ctx, &gpu.bvh, &field, scene, &traced, &shade_probes, 1, 1, Some((&timer, 4)))?;
         }
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         timer.resolve(&mut encoder);
@@ -215,7 +215,7 @@ fn gpu_passes_json(
     gpu: &WgpuProbeTracer,
     s: &DdgiVolumeSettings,
     traced: &GpuRayBatch,
-    names: [&str; 8],
+    names: [&str; 7],
     best: Option<Vec<f64>>,
     wall_trace_ms: f64,
 ) -> serde_json::Value {

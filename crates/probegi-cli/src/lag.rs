@@ -16,7 +16,7 @@ use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
 use probegi_cpu::DirectSettings;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_image::plot::{LinePlot, PALETTE, Series};
 use probegi_scene::light::LightKeyframe;
 use probegi_scene::{BvhSettings, BvhTracer, ObjectAnimation, Scene, TransformKeyframe, load_scene};

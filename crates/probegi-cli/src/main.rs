@@ -23,8 +23,8 @@ use anyhow::{Context, Result, bail};
 use clap::Parser;
 use indicatif::{ProgressBar, ProgressStyle};
 use probegi_core::camera::CameraRays;
-use probegi_cpu::frame_loop::render_frames;
 use probegi_cpu::{PathTracer, PathTracerSettings};
+use probegi_frame::frame_loop::render_frames;
 use probegi_image::LoadedImage;
 use probegi_scene::{BvhSettings, BvhTracer};
 

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::RenderStats;
 use probegi_field::ddgi_field_set::DdgiFieldSet;
+use probegi_frame::frame_loop::RenderStats;
 use probegi_scene::{BvhTracer, Scene};
 
 use crate::args::RenderArgs;

@@ -12,9 +12,9 @@ use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::sh_settings::ShProbeSettings;
 use probegi_cpu::DirectSettings;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, TemporalSettings};
 use probegi_cpu::probe_trace::ddgi_volume_bytes;
 use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings, TemporalSettings};
 use probegi_scene::Scene;
 
 use crate::args::{GiArg, RenderArgs, SceneArgs, VolumeArgs};

@@ -7,7 +7,7 @@ use probegi_scene::{BvhSettings, BvhTracer};
 use probegi_view::input_script::InputScript;
 use probegi_view::scripted_run::{ScriptedOutput, ScriptedRun, frame_time_percentiles, run_scripted};
 
-use probegi_cpu::frame_loop::RenderSettings;
+use probegi_frame::frame_loop::RenderSettings;
 use probegi_view::view_layers::ViewMode;
 use probegi_view::viewer_controls::{GiChoice, ViewerControls};
 use probegi_view::viewer_prefs::ViewerPrefs;
@@ -19,7 +19,7 @@ use std::sync::Arc;
 use crate::args::{GiArg, RenderArgs, ViewArgs};
 use crate::render_outputs::write_radiance;
 use crate::scene_setup::{check_posed_bounds, prepare};
-use probegi_cpu::frame_loop::TemporalSettings;
+use probegi_frame::frame_loop::TemporalSettings;
 
 /// The render arguments a view run stands for (its scene, GI, volume,
 /// backend; no file outputs).

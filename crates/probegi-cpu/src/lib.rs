@@ -1,18 +1,17 @@
 //! probegi-cpu: the CPU renderers. Threads live here (rayon), never in the core.
 //!
-//! The frame of `probegi render`:
-//! - [`frame_loop`]: the per-frame loop, its passes in order ([`render_frames`]).
+//! The passes of the host's camera frame (the loop that runs them in order is
+//! `probegi-frame`'s):
 //! - [`gbuffer`]: the G-buffer pass, one primary ray per pixel.
 //! - [`direct`]: direct light (emission, punctual, area lights and sky).
 //! - [`glossy`]: second-order glossy reflections read from the probes.
 //! - [`probe_vis`]: `--show-probes`, probes drawn as spheres in the image.
 //! - [`light_visibility`]: `--ao`, punctual lights' visibility from the shadowing field or shadow rays.
 //!
-//! The DDGI field update on the CPU (seeds 003 and 004):
-//! - [`field_update`]: the field set's seam driven with this crate's tracing and shading.
+//! The DDGI field update's passes on the CPU (seeds 003 and 004; the seam is
+//! driven by `probegi-frame`'s `field_update`):
 //! - [`probe_trace`]: the trace pass, probe rays to closest hits and seam hits.
 //! - [`probe_shade`]: the shade pass, the radiance each probe ray brings back.
-//! - [`scene_events`]: scene changes (light toggles, moving objects) reported to the field.
 //!
 //! Screen-space SH probes (seed 001):
 //! - [`sh_probes`]: the cascades and their per-frame update.
@@ -28,7 +27,6 @@
 #![warn(missing_docs)]
 
 pub mod direct;
-pub mod frame_loop;
 pub mod gbuffer;
 pub mod glossy;
 pub mod light_sampling;
@@ -38,13 +36,10 @@ pub mod path_tracer;
 pub mod shading;
 
 pub use direct::{DirectLighting, DirectSettings};
-pub use frame_loop::{GiMethod, RenderOutput, RenderSettings, RenderStats, render_frames};
 pub use path_tracer::{PathTracer, PathTracerSettings};
-pub mod field_update;
 pub mod probe_shade;
 pub mod probe_trace;
 pub mod probe_vis;
-pub mod scene_events;
 pub mod sh_inject;
 pub mod sh_probes;
 pub mod sh_screen_samples;

@@ -4,8 +4,8 @@
 use glam::Vec3;
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{RenderSettings, render_frames};
 use probegi_cpu::{PathTracer, PathTracerSettings};
+use probegi_frame::frame_loop::{RenderSettings, render_frames};
 use probegi_scene::builtin::{add_polygon, furnace_box};
 use probegi_scene::{BvhSettings, BvhTracer, LightKind, Material, PunctualLight, Scene};
 use std::f32::consts::PI;

@@ -2,7 +2,7 @@
 //! stored converged image). Small images and probe counts keep these fast; the
 //! convergence maths is the same at any size.
 
-use probegi_cpu::field_update::VolumeUpdate;
+use probegi_frame::field_update::VolumeUpdate;
 use std::path::PathBuf;
 
 use glam::{UVec3, Vec3};
@@ -10,9 +10,9 @@ use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_query::irradiance;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_frame::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
 use probegi_image::{LoadedImage, mean_flip_hdr, read_image};
 use probegi_scene::builtin::{cornell_box, furnace_box};
 use probegi_scene::{BvhSettings, BvhTracer, Scene};

@@ -10,7 +10,7 @@ use glam::{UVec3, Vec3};
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::builtin::cornell_box;
 use probegi_scene::light::{LightKeyframe, PunctualLight};

@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::{PathTracer, PathTracerSettings};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 

@@ -10,7 +10,7 @@ use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::color::luminance;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
+use probegi_frame::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
 use probegi_image::mean_flip_hdr;
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 

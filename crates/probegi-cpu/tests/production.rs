@@ -8,9 +8,9 @@ use glam::{UVec3, Vec3};
 use probegi_core::ddgi_query::irradiance;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::probe_classification::ProbeState;
-use probegi_cpu::field_update::VolumeUpdate;
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_volume::{DdgiVolume, SceneEvent};
+use probegi_frame::field_update::VolumeUpdate;
 use probegi_scene::builtin::{add_box, add_polygon, cornell_box};
 use probegi_scene::{BvhSettings, BvhTracer, Material, Scene};
 

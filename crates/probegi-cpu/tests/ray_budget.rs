@@ -8,10 +8,10 @@ use std::collections::BTreeMap;
 
 use glam::UVec3;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
-use probegi_cpu::field_update::FieldSetUpdate;
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_frame::field_update::FieldSetUpdate;
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 
 const RAYS: u32 = 64;

@@ -7,7 +7,7 @@ use glam::Vec3;
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::image::Image;
 use probegi_core::sh_settings::ShProbeSettings;
-use probegi_cpu::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
+use probegi_frame::frame_loop::{GiMethod, RenderOutput, RenderSettings, render_frames};
 use probegi_image::{LoadedImage, mean_flip_hdr, read_image};
 use probegi_scene::builtin::{cornell_box, furnace_box};
 use probegi_scene::{BvhSettings, BvhTracer, Scene};

@@ -6,10 +6,10 @@ use std::collections::BTreeMap;
 
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
-use probegi_cpu::field_update::FieldSetUpdate;
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_frame::field_update::FieldSetUpdate;
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene, load_scene};
 
 /// `scene` (a TOML scene file's text) loaded from a temporary file.

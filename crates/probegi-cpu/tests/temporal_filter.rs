@@ -12,7 +12,7 @@ use glam::UVec3;
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, TemporalSettings, render_frames};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings, TemporalSettings, render_frames};
 use probegi_image::compare::dark_fraction;
 use probegi_image::mean_flip_hdr;
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};

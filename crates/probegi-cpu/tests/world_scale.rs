@@ -8,13 +8,13 @@ use probegi_core::ddgi_query::chebyshev_weight;
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::ddgi_volume_blend::VolumeBlending;
 use probegi_core::irradiance_encoding::decode_irradiance;
-use probegi_cpu::field_update::{FieldSetUpdate, VolumeUpdate};
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::probe_shade::{ProbeShadeInputs, shade_probe_rays};
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::{DdgiFieldSet, ProbeRayHit, SeamError, UpdateStep};
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::probe_seeding::nearest_texel;
+use probegi_frame::field_update::{FieldSetUpdate, VolumeUpdate};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_scene::builtin::{cornell_box, furnace_box};
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene};
 

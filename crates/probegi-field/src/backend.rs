@@ -95,7 +95,7 @@ pub trait ProbeBatchTracer: Sync {
     }
 
     /// Renders the frame's camera image on the other device (the G-buffer and
-    /// camera passes of `probegi_cpu::frame_loop` under DDGI) into `out`
+    /// camera passes of `probegi_frame::frame_loop` under DDGI) into `out`
     /// ([`CameraFrameOut`]), returning (pixels on a surface with a
     /// diffuse albedo, those of them the field left unlit), or `None` to leave
     /// the camera to the CPU. With `field_on_device` the device's own atlases are

@@ -60,7 +60,7 @@
 //! ([`DdgiFieldSet::field_on_device`]) until the device's are copied back
 //! ([`DdgiFieldSet::accept_host_atlases`]); a host blend refuses to run until then.
 //!
-//! `probegi_cpu::field_update` is the convenience that plays both caller roles
+//! `probegi_frame::field_update` is the convenience that plays both caller roles
 //! with probegi's own scene, tracer and shading, on either path.
 
 use std::collections::BTreeMap;
@@ -445,6 +445,9 @@ impl DdgiFieldSet {
                 self.expected = UpdateStep::TraceRays;
                 return UpdateStep::TraceRays;
             }
+            // No probe traces in this round (every pending probe has settled):
+            // on to the next.
+            self.init_round += 1;
         }
         // Shadow rays are made on the host: a batch with them keeps per-ray arrays.
         let per_ray = !self.update_rays_on_device || self.has_host_shadow_rays();

@@ -6,7 +6,7 @@
 //! counts for `--stats` and the black-frame guard, the screen scheme's probe
 //! requests), one or more frames late, without waiting.
 //!
-//! The CPU frame loop (`probegi_cpu::frame_loop::accumulation`) is the
+//! The CPU frame loop (`probegi_frame::frame_loop::accumulation`) is the
 //! reference: a device implementing [`DeviceFrame`] mirrors its accumulation,
 //! temporal filter, composition and statistics. Pixels cross to the host only
 //! when asked ([`DeviceFrame::read_layer`], [`DeviceFrame::read_rgba8`]): the

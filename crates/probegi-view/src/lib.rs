@@ -5,7 +5,7 @@
 //! - [`input_script`]: timed key and mouse events from a small text format,
 //!   so a run is reproducible without a person;
 //! - [`view_session`]: one viewer frame (input, fly camera, then
-//!   `probegi_cpu::frame_loop::FrameStepper`, on either backend), with a scene
+//!   `probegi_frame::frame_loop::FrameStepper`, on either backend), with a scene
 //!   clock that pauses and steps;
 //! - [`scripted_run`]: the headless run (`probegi view --headless`);
 //! - [`view_layers`]: the debug views (direct, indirect, albedo, normals,

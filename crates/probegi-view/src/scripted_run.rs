@@ -1,14 +1,14 @@
 //! The headless run (`probegi view --headless`): frame by frame the script's
 //! events reach the fly camera (a keyframed camera plays until the input
 //! first moves it), the camera moves, and the field updates and
-//! the frame renders through `probegi_cpu::frame_loop::FrameStepper`, the same
+//! the frame renders through `probegi_frame::frame_loop::FrameStepper`, the same
 //! stepper `probegi render` drives, on the CPU or (with the settings' probe
 //! tracer) on the GPU. The scene clock is the frame index; each frame is
 //! `frame_dt_s` of fly time, fixed so a run is the same on every machine.
 
 use probegi_core::camera::Camera;
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{RenderOutput, RenderSettings};
+use probegi_frame::frame_loop::{RenderOutput, RenderSettings};
 use probegi_scene::{RayTracer, Scene};
 
 use crate::fly_camera::FlyCamera;

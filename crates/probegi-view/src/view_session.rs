@@ -2,7 +2,7 @@
 //! input events reach the fly camera (a keyframed camera plays until the
 //! input first moves it; R returns to it), the camera moves by the frame's
 //! time step, and the field updates and the frame renders through
-//! `probegi_cpu::frame_loop::FrameStepper`, the stepper `probegi render`
+//! `probegi_frame::frame_loop::FrameStepper`, the stepper `probegi render`
 //! drives, on the CPU or (with the settings' probe tracer) on the GPU.
 //!
 //! The scene clock is a frame count of its own: it advances one per frame
@@ -11,7 +11,7 @@
 
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{FrameStepper, RenderSettings};
+use probegi_frame::frame_loop::{FrameStepper, RenderSettings};
 use probegi_scene::{RayTracer, Scene};
 
 use crate::fly_camera::{FlyCamera, FlyInput};
@@ -230,7 +230,7 @@ impl<'a> ViewSession<'a> {
     }
 
     /// Ends the session: the stepper's output (field, statistics, image).
-    pub fn finish(self) -> (probegi_cpu::frame_loop::RenderOutput, FlyCamera) {
+    pub fn finish(self) -> (probegi_frame::frame_loop::RenderOutput, FlyCamera) {
         (self.stepper.finish(), self.fly)
     }
 }

@@ -195,7 +195,7 @@ impl ViewerControls {
 
     /// The scene edit for `FrameStepper::set_scene_edit`: each light's
     /// intensity and the sky set from the base scene's by these switches.
-    pub fn scene_edit(&self) -> probegi_cpu::frame_loop::SceneEdit<'static> {
+    pub fn scene_edit(&self) -> probegi_frame::frame_loop::SceneEdit<'static> {
         let scales: Vec<f32> =
             self.lights.iter().map(|l| if l.enabled { l.intensity_scale.max(0.0) } else { 0.0 }).collect();
         let sky = self.sky_scale.max(0.0);

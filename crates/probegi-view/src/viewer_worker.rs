@@ -19,8 +19,8 @@ use std::time::{Instant, SystemTime};
 
 use probegi_core::camera::{Camera, CameraRays};
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::RenderSettings;
 use probegi_cpu::{PathTracer, PathTracerSettings};
+use probegi_frame::frame_loop::RenderSettings;
 use probegi_scene::{RayTracer, Scene};
 
 use crate::input_script::{InputScript, ScriptEvent, ViewerKey};

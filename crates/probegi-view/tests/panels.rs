@@ -7,7 +7,7 @@
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 use probegi_view::view_session::ViewSession;
 use probegi_view::viewer_controls::{GiChoice, ViewerControls};

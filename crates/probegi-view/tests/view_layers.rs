@@ -6,8 +6,8 @@
 
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings};
 use probegi_cpu::light_visibility::light_visibility_image;
+use probegi_frame::frame_loop::{GiMethod, RenderSettings};
 use probegi_scene::{BvhSettings, BvhTracer, load_scene};
 use probegi_view::view_layers::{ViewMode, view_image};
 use probegi_view::view_session::ViewSession;

@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings};
 use probegi_scene::{BvhSettings, BvhTracer, load_scene};
 use probegi_view::view_layers::ViewMode;
 use probegi_view::viewer_controls::{GiChoice, ViewerControls};

@@ -2,7 +2,7 @@
 //! through the same BVH, surfaces, textures and the BSDF as the probe shade,
 //! direct light with shadow rays, one GGX-sampled glossy ray per glossy pixel,
 //! and the field query for indirect diffuse, mirroring the CPU's G-buffer and
-//! camera passes under DDGI (`probegi_cpu::gbuffer`, `probegi_cpu::frame_loop`).
+//! camera passes under DDGI (`probegi_cpu::gbuffer`, `probegi_frame::frame_loop`).
 //! The CPU reads back the frame's direct and indirect terms (it accumulates the
 //! direct one over frames, as on the CPU).
 //!

@@ -14,7 +14,7 @@
 //! are made per frame.
 //!
 //! The CPU frame loop is the reference: each WGSL function names the Rust one
-//! it mirrors (`probegi_cpu::frame_loop::accumulation`).
+//! it mirrors (`probegi_frame::frame_loop::accumulation`).
 //!
 //! *Deviations:* the history holds running means in f32 where the CPU holds
 //! f64 sums (the same arithmetic to rounding: a mean keeps f32's relative

@@ -180,10 +180,10 @@ pub struct BlendFrame<'a> {
     pub distance_clamp_m: f32,
 }
 
-/// The four compute pipelines (blend irradiance / distance, border irradiance / distance).
+/// The three compute pipelines ([`PASS_NAMES`]).
 pub struct GpuProbeBlend {
     layout: wgpu::BindGroupLayout,
-    pipelines: [wgpu::ComputePipeline; 4],
+    pipelines: [wgpu::ComputePipeline; 3],
 }
 
 impl GpuProbeBlend {
@@ -298,13 +298,14 @@ impl GpuProbeBlend {
         });
         let rows = (probes as u32).div_ceil(per_row);
         let groups = |texels: u32| texels.div_ceil(WORKGROUP);
-        let dispatches = [groups(ni * ni), groups(nd * nd), groups((ni + 2) * (ni + 2)), groups((nd + 2) * (nd + 2))];
+        // The blend: one workgroup per probe; the borders: one thread per tile texel.
+        let dispatches = [1, groups((ni + 2) * (ni + 2)), groups((nd + 2) * (nd + 2))];
         Ok(BlendBindings { bind_group, dispatches, per_row, rows })
     }
 
-    /// Records the four passes (blend irradiance, blend distance, border
-    /// irradiance, border distance); with `timer`, pass k writes its timestamps
-    /// at `timer.1 + k`.
+    /// Records the three passes ([`PASS_NAMES`]: blend, border irradiance,
+    /// border distance); with `timer`, pass k writes its timestamps at
+    /// `timer.1 + k`.
     pub fn record(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -324,13 +325,15 @@ impl GpuProbeBlend {
     }
 }
 
-/// The names of [`GpuProbeBlend::record`]'s passes, in order.
-pub const PASS_NAMES: [&str; 4] = ["blend_irradiance", "blend_distance", "border_irradiance", "border_distance"];
+/// The names of [`GpuProbeBlend::record`]'s passes, in order: the blend of
+/// both atlases (one workgroup per probe, its rays staged in workgroup memory),
+/// then each atlas's borders.
+pub const PASS_NAMES: [&str; 3] = ["blend_probe", "border_irradiance", "border_distance"];
 
 /// One frame's blend inputs on the device, bound to a volume's atlases.
 pub struct BlendBindings {
     bind_group: wgpu::BindGroup,
-    dispatches: [u32; 4],
+    dispatches: [u32; 3],
     per_row: u32,
     rows: u32,
 }

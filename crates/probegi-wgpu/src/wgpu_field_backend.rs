@@ -763,9 +763,10 @@ impl DeviceField for WgpuProbeTracer {
             let probes = batch_shade_probes(batch, volumes);
             let seed32 = (seed ^ (seed >> 32)) as u32;
             // Timestamp queries where the device has them: the shade pass, then
-            // each member's four blend and border passes.
-            let timer =
-                (self.timing && self.ctx.timestamps).then(|| GpuTimer::new(&self.ctx, 1 + 4 * plan.len() as u32));
+            // each member's blend and border passes.
+            let per_member = crate::probe_blend::PASS_NAMES.len() as u32;
+            let timer = (self.timing && self.ctx.timestamps)
+                .then(|| GpuTimer::new(&self.ctx, 1 + per_member * plan.len() as u32));
             let shade_timer = timer.as_ref().map(|t| (t, 0));
             let results =
                 shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, &probes, seed32, frame, shade_timer)?;
@@ -784,7 +785,7 @@ impl DeviceField for WgpuProbeTracer {
                 }
                 let atlases = f.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
                 let bindings = blend.prepare_resident(&self.ctx, &atlases, p, &results)?;
-                blend.record(&mut encoder, &bindings, timer.as_ref().map(|t| (t, 1 + 4 * i as u32)));
+                blend.record(&mut encoder, &bindings, timer.as_ref().map(|t| (t, 1 + per_member * i as u32)));
                 recorded.push(i);
             }
             if let Some(t) = &timer {
@@ -854,13 +855,11 @@ impl DeviceField for WgpuProbeTracer {
 }
 
 /// The device's own times of `shade_and_blend`'s passes from its timestamps
-/// (`ms`: the shade pass, then four per member), summed over the `recorded`
-/// members: `gpu_shade`, `gpu_blend` (irradiance and distance) and `gpu_border`.
+/// (`ms`: the shade pass, then `probe_blend::PASS_NAMES` per member), summed
+/// over the `recorded` members: `gpu_shade`, `gpu_blend` (both atlases) and
+/// `gpu_border`.
 fn gpu_pass_ms(ms: &[f64], recorded: &[usize]) -> [(&'static str, f64); 3] {
-    let member = |k: usize| recorded.iter().filter_map(|&i| ms.get(1 + 4 * i + k)).sum::<f64>();
-    [
-        ("gpu_shade", ms.first().copied().unwrap_or(0.0)),
-        ("gpu_blend", member(0) + member(1)),
-        ("gpu_border", member(2) + member(3)),
-    ]
+    let per_member = crate::probe_blend::PASS_NAMES.len();
+    let member = |k: usize| recorded.iter().filter_map(|&i| ms.get(1 + per_member * i + k)).sum::<f64>();
+    [("gpu_shade", ms.first().copied().unwrap_or(0.0)), ("gpu_blend", member(0)), ("gpu_border", member(1) + member(2))]
 }

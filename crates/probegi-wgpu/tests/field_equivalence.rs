@@ -16,7 +16,7 @@
 
 mod common;
 
-use probegi_cpu::field_update::FieldSetUpdate;
+use probegi_frame::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -25,11 +25,11 @@ use glam::UVec3;
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene};
 use probegi_wgpu::GpuContext;
 use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;

@@ -16,7 +16,7 @@
 
 mod common;
 
-use probegi_cpu::field_update::FieldSetUpdate;
+use probegi_frame::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;
 
 use glam::UVec3;
@@ -238,8 +238,8 @@ fn cascades_kept_on_the_gpu_converge_in_the_furnace() {
     // buffer), the camera frame reading it there: L = Le / (1 − ρ) = 2.
     use probegi_core::camera::CameraRays;
     use probegi_core::ddgi_settings::DdgiFieldSetSettings;
-    use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
     use probegi_field::ProbeTracerHandle;
+    use probegi_frame::frame_loop::{GiMethod, RenderSettings, render_frames};
     let scene = probegi_scene::builtin::furnace_box(0.5, 1.0);
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let Some(ctx) = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set") else { return };

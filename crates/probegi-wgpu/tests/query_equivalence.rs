@@ -20,7 +20,7 @@
 
 mod common;
 
-use probegi_cpu::field_update::FieldSetUpdate;
+use probegi_frame::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;
 
 use glam::Vec2;

@@ -13,12 +13,12 @@ use std::sync::Arc;
 use glam::{UVec3, Vec3};
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode, VolumeBlending};
-use probegi_cpu::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_cpu::gbuffer::trace_gbuffer;
 use probegi_cpu::shading::ShadingContext;
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::{CameraFrameOut, ProbeBatchTracer, ProbeTracerHandle};
+use probegi_frame::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
 mod common;
 

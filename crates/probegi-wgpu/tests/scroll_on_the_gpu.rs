@@ -11,10 +11,10 @@
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::irradiance_encoding::decode_irradiance;
-use probegi_cpu::field_update::FieldSetUpdate;
 use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
+use probegi_frame::field_update::FieldSetUpdate;
 use probegi_scene::{BvhSettings, BvhTracer};
 use probegi_wgpu::GpuContext;
 use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;

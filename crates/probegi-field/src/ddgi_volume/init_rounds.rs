@@ -5,7 +5,17 @@
 //! position optimizer (`probegi_core::probe_relocation`), then with jcgt states
 //! one classification round (`probegi_core::probe_classification`). The rounds
 //! run for every probe when the volume is created, and for the planes a tracking
-//! window scrolls in. `plan_init_round` / `accept_init_round` are the host path;
+//! window scrolls in.
+//!
+//! The relocation rounds trace one set of directions, as RTXGI's fixed rays do
+//! (its relocation runs every frame on the same 32 directions "to produce
+//! temporally stable results"). A probe whose round left its offset as it was
+//! would trace the same rays from the same point in the next round and stay put
+//! again, so it skips the rounds after: the result is that of every round run
+//! in full, for a fraction of the rays (most probes in open space never move).
+//! The classification round turns the set by its own rotation.
+//!
+//! `plan_init_round` / `accept_init_round` are the host path;
 //! `device_relocation` / `device_classification` and their `accept_*` twins the
 //! field-resident device path.
 
@@ -94,6 +104,7 @@ impl DdgiVolume {
         for &(p, o) in offsets {
             let p = p as usize;
             if p < self.probe_offsets.len() && self.probe_pending_init[p] {
+                self.probe_relocation_settled[p] = o == self.probe_offsets[p];
                 self.probe_offsets[p] = o;
                 self.probe_positions[p] = self.grid.probe_position(self.grid.probe_coords(p)) + o;
             }
@@ -123,8 +134,10 @@ impl DdgiVolume {
         frame.init_dirs = rotated_fibonacci(rotation, self.settings.probe_init_rays_per_probe);
         frame.ray_count = frame.init_dirs.len();
         frame.first_ray = vec![u32::MAX; self.grid.probe_count()];
+        // After the first relocation round only the probes that moved trace.
+        let settled = |p: usize| matches!(kind, InitRound::Relocation(i) if i > 0) && self.probe_relocation_settled[p];
         for p in 0..self.grid.probe_count() {
-            if self.probe_pending_init[p] {
+            if self.probe_pending_init[p] && !settled(p) {
                 frame.first_ray[p] = batch.push_probe(
                     volume,
                     p as u32,
@@ -162,12 +175,15 @@ impl DdgiVolume {
                 let settings = &self.settings;
                 let pending = &self.probe_pending_init;
                 let planned = &frame.first_ray;
-                self.probe_offsets.par_iter_mut().enumerate().for_each(|(p, offset)| {
+                let offsets = self.probe_offsets.par_iter_mut().zip(self.probe_relocation_settled.par_iter_mut());
+                offsets.enumerate().for_each(|(p, (offset, settled))| {
                     if !pending[p] || planned[p] == u32::MAX {
                         return;
                     }
-                    *offset =
+                    let next =
                         relocation_step(*offset, &probe_ray_stats(dirs, &distances[rays_of(p)]), spacing, settings);
+                    *settled = next == *offset;
+                    *offset = next;
                 });
                 for p in 0..self.grid.probe_count() {
                     self.probe_positions[p] =
@@ -279,10 +295,11 @@ pub(super) enum InitRound {
 }
 
 /// Pseudo-frames for initialisation rounds, far from real ones, so their
-/// directions differ from frame 0's.
+/// directions differ from frame 0's: every relocation round the same (RTXGI's
+/// fixed rays), classification its own.
 pub(super) fn init_frame(round: InitRound) -> u32 {
     match round {
-        InitRound::Relocation(i) => u32::MAX - i,
+        InitRound::Relocation(_) => u32::MAX,
         InitRound::Classification => u32::MAX - 1000,
     }
 }

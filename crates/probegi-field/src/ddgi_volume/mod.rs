@@ -96,6 +96,9 @@ pub struct DdgiVolume {
     probe_alive_frames: Vec<u32>,
     /// Probes waiting for initialisation (relocation, classification).
     probe_pending_init: Vec<bool>,
+    /// Initialisation: the probe's last relocation round left its offset as it
+    /// was, so later rounds (same rays, same origin) would too (`init_rounds`).
+    probe_relocation_settled: Vec<bool>,
     initialized: bool,
     irradiance_events: Vec<HysteresisReduction>,
     visibility_events: Vec<HysteresisReduction>,
@@ -211,6 +214,7 @@ impl DdgiVolume {
             probe_has_history: vec![false; probes],
             probe_alive_frames: vec![0; probes],
             probe_pending_init: vec![true; probes],
+            probe_relocation_settled: vec![false; probes],
             initialized: false,
             irradiance_events: Vec::new(),
             visibility_events: Vec::new(),

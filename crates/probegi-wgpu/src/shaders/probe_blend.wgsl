@@ -59,61 +59,72 @@ fn probe_of(wid: vec3<u32>) -> u32 {
     return wid.y + wid.z * params.probes_per_row;
 }
 
-// One blend thread's texel: its probe, interior texel (i, j) and direction, and
-// the probe's hysteresis; `valid` is false past the grid or for a probe that does
-// not update this frame (hysteresis < 0).
-struct TexelJob {
-    valid: bool,
-    probe: u32,
-    n: u32,
-    i: u32,
-    j: u32,
-    hysteresis: f32,
-    frames: u32,
-    first_ray: u32,
-    texel: u32,     // row-major interior texel, the weight tables' index
-};
+// Rays of a probe staged in workgroup memory by `blend_probe` (RTXGI's
+// ProbeBlendingCS with RTXGI_DDGI_BLEND_SHARED_MEMORY): 16 bytes each, 8 KiB in
+// all, half of WebGPU's guaranteed 16 KiB. A volume with more rays per probe
+// reads them from ray_results (the branch is uniform: a volume's ray count).
+const MAX_STAGED_RAYS: u32 = 512u;
+var<workgroup> staged_rays: array<vec4<f32>, 512>;
+var<workgroup> staged_probe: vec4<u32>;
 
-fn interior_job(gid: vec3<u32>, wid: vec3<u32>, n: u32) -> TexelJob {
-    var job: TexelJob;
-    job.probe = probe_of(wid);
-    job.n = n;
-    job.valid = job.probe < params.probe_count && gid.x < n * n;
-    if (!job.valid) { return job; }
-    let pb = probe_blend[job.probe];
-    job.first_ray = pb.x;
-    job.hysteresis = bitcast<f32>(pb.y);
-    job.frames = pb.z;
-    job.valid = job.hysteresis >= 0.0;
-    job.i = gid.x % n;
-    job.j = gid.x / n;
-    job.texel = gid.x;
-    return job;
+// Ray r of the probe whose rays start at batch ray `first`: xyz radiance, w the
+// signed blend distance.
+fn probe_ray(first: u32, r: u32) -> vec4<f32> {
+    if (params.rays_per_probe <= MAX_STAGED_RAYS) {
+        return staged_rays[r];
+    }
+    return ray_results[first + r];
 }
 
-// probegi_core::probe_blend::blend_irradiance_tile, one thread per interior texel.
+// One workgroup per probe: its rays staged once, then every interior texel of
+// both atlases (irradiance first), 64 at a time. Each texel sums its weight
+// table's rays in the CPU's order, as one thread per texel did before.
 @compute @workgroup_size(64)
-fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
-    let job = interior_job(gid, wid, params.irradiance_interior);
-    if (!job.valid) { return; }
-    let probe = job.probe;
-    let n = job.n;
-    let h0 = job.hysteresis;
+fn blend_probe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let probe = probe_of(wid);
+    if (probe >= params.probe_count) { return; }
+    if (lid == 0u) {
+        staged_probe = probe_blend[probe];
+    }
+    // x its first ray, y its hysteresis bits (< 0: not updated), z its frames.
+    let pb = workgroupUniformLoad(&staged_probe);
+    let h0 = bitcast<f32>(pb.y);
+    if (h0 < 0.0) { return; }
+    if (params.rays_per_probe <= MAX_STAGED_RAYS) {
+        for (var r = lid; r < params.rays_per_probe; r += 64u) {
+            staged_rays[r] = ray_results[pb.x + r];
+        }
+    }
+    workgroupBarrier();
+    let ni2 = params.irradiance_interior * params.irradiance_interior;
+    let total = ni2 + params.distance_interior * params.distance_interior;
+    for (var t = lid; t < total; t += 64u) {
+        if (t < ni2) {
+            blend_irradiance_texel(probe, pb.x, h0, pb.z, t);
+        } else {
+            blend_distance_texel(probe, pb.x, h0, pb.z, t - ni2);
+        }
+    }
+}
+
+// probegi_core::probe_blend::blend_irradiance_tile for row-major interior texel
+// `texel` of `probe` (rays from `first`, hysteresis h0 over `frames` frames).
+fn blend_irradiance_texel(probe: u32, first: u32, h0: f32, frames: u32, texel: u32) {
+    let n = params.irradiance_interior;
     var sum = vec3<f32>(0.0);
     var wsum = 0.0;
-    let first = job.first_ray;
-    let e0 = blend_weights[job.texel];
-    let e1 = blend_weights[job.texel + 1u];
+    let e0 = blend_weights[texel];
+    let e1 = blend_weights[texel + 1u];
     for (var e = e0; e < e1; e++) {
         let k = params.weight_entries_first + 2u * e;
         let w = bitcast<f32>(blend_weights[k + 1u]);
-        let l = ray_results[first + blend_weights[k]].xyz;
+        let l = probe_ray(first, blend_weights[k]).xyz;
         if (is_finite3(l)) {
             sum += l * w;
             wsum += w;
         }
     }
-    let idx = params.irradiance_first + probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
+    let idx = params.irradiance_first + probe * (n + 2u) * (n + 2u) + interior_texel_index(n, texel % n, texel / n);
     if (wsum <= 0.0) {
         irradiance[idx].w = 0.0;
         return;
@@ -131,7 +142,7 @@ fn blend_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(work
             h = max(h - 0.15, 0.0);
         }
     }
-    h = hysteresis_over_frames(h, job.frames);
+    h = hysteresis_over_frames(h, frames);
     let blended = encoded * (1.0 - h) + old * h;
     let change = texel_change(old, encoded);
     if (is_finite3(blended)) {
@@ -166,32 +177,27 @@ fn texel_change(history: vec3<f32>, estimate: vec3<f32>) -> f32 {
     return min((d.x + d.y + d.z) / den, 1.0);
 }
 
-// probegi_core::probe_blend::blend_distance_tile, one thread per interior texel.
-@compute @workgroup_size(64)
-fn blend_distance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
-    let job = interior_job(gid, wid, params.distance_interior);
-    if (!job.valid) { return; }
-    let probe = job.probe;
-    let n = job.n;
-    let h0 = job.hysteresis;
+// probegi_core::probe_blend::blend_distance_tile for row-major interior texel
+// `texel` of `probe` (see blend_irradiance_texel).
+fn blend_distance_texel(probe: u32, first: u32, h0: f32, frames: u32, texel: u32) {
+    let n = params.distance_interior;
     var sum = vec2<f32>(0.0);
     var wsum = 0.0;
-    let first = job.first_ray;
     let offsets = params.irradiance_interior * params.irradiance_interior + 1u;
-    let e0 = blend_weights[offsets + job.texel];
-    let e1 = blend_weights[offsets + job.texel + 1u];
+    let e0 = blend_weights[offsets + texel];
+    let e1 = blend_weights[offsets + texel + 1u];
     for (var e = e0; e < e1; e++) {
         let k = params.weight_entries_first + 2u * e;
         let w = bitcast<f32>(blend_weights[k + 1u]);
-        let signed = ray_results[first + blend_weights[k]].w;
+        let signed = probe_ray(first, blend_weights[k]).w;
         if (signed != signed) { continue; } // NaN before min, which may drop it
         let d = min(abs(signed), params.distance_clamp_m);
         sum += vec2<f32>(d, d * d) * w;
         wsum += w;
     }
     if (wsum <= 0.0) { return; }
-    let idx = params.distance_first + probe * (n + 2u) * (n + 2u) + interior_texel_index(n, job.i, job.j);
-    let h = hysteresis_over_frames(h0 * params.visibility_scale, job.frames);
+    let idx = params.distance_first + probe * (n + 2u) * (n + 2u) + interior_texel_index(n, texel % n, texel / n);
+    let h = hysteresis_over_frames(h0 * params.visibility_scale, frames);
     let blended = (sum / wsum) * (1.0 - h) + distance[idx] * h;
     if (all(abs(blended) <= vec2<f32>(3.4028235e38))) {
         distance[idx] = blended;

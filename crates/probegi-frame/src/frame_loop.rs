@@ -32,15 +32,15 @@ use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_core::image::Image;
 use probegi_scene::{RayTracer, Scene};
 
-use crate::direct::{DirectLighting, DirectSettings};
 use crate::field_update::FieldSetUpdate;
-use crate::gbuffer::{GBuffer, trace_gbuffer};
 use crate::scene_events::SceneChangeDetector;
-use crate::sh_probes::{SH_UPDATE_PASSES, ShProbes};
 pub use accumulation::TemporalSettings;
 use accumulation::{Accumulation, History};
 use camera_pass::{CameraPasses, IndirectField, shade_camera};
 pub use frame_stepper::{FrameLayers, FrameStepper};
+use probegi_cpu::direct::{DirectLighting, DirectSettings};
+use probegi_cpu::gbuffer::{GBuffer, trace_gbuffer};
+use probegi_cpu::sh_probes::{SH_UPDATE_PASSES, ShProbes};
 
 use probegi_core::sh_settings::ShProbeSettings;
 use probegi_field::CameraFrameOut;
@@ -275,8 +275,29 @@ struct Frame<'f> {
     index: u32,
     scene: &'f Scene,
     tracer: &'f dyn RayTracer,
-    direct: &'f DirectLighting<'f>,
+    direct: &'f FrameDirect<'f>,
     camera: &'f CameraRays,
+}
+
+/// A frame's direct lighting for the passes the CPU runs, built on first use
+/// (an animated scene's lights move): a frame whose field update and camera
+/// frame stay on a device never builds it.
+struct FrameDirect<'f> {
+    base: &'f DirectLighting<'f>,
+    posed: &'f std::cell::OnceCell<DirectLighting<'f>>,
+    animated: bool,
+    scene: &'f Scene,
+    tracer: &'f dyn RayTracer,
+}
+
+impl<'f> FrameDirect<'f> {
+    /// The frame's lighting: the base scene's, or that of the frame's pose.
+    fn get(&self) -> &DirectLighting<'f> {
+        if !self.animated {
+            return self.base;
+        }
+        self.posed.get_or_init(|| self.base.for_frame(self.scene, self.tracer))
+    }
 }
 
 /// [`render_frames`] between frames: the settings, the field (DDGI set or SH
@@ -418,8 +439,15 @@ impl<'a> FrameLoop<'a> {
                 self.stats.probes_woken += self.detector.observe(frame.scene, set).probes_woken as u64;
             }
             let batch_tracer = settings.probe_tracer.as_ref().map(|h| &*h.0);
-            let (scene, tracer, direct, pass_totals) = (frame.scene, frame.tracer, frame.direct, &mut self.pass_totals);
-            match set.update_traced_by(scene, tracer, batch_tracer, direct, settings.seed, f, pass_totals) {
+            let (scene, tracer, pass_totals) = (frame.scene, frame.tracer, &mut self.pass_totals);
+            // A device that keeps the field shades there: no CPU lighting.
+            let updated = match batch_tracer.filter(|bt| bt.device_field().is_some()) {
+                Some(device) => set.update_on_device(scene, tracer, device, settings.seed, f, pass_totals),
+                None => {
+                    set.update_traced_by(scene, tracer, batch_tracer, frame.direct.get(), settings.seed, f, pass_totals)
+                }
+            };
+            match updated {
                 Ok(rays) => {
                     self.stats.rays_traced += rays;
                     self.stats.probe_rays_traced += rays;
@@ -521,7 +549,8 @@ impl<'a> FrameLoop<'a> {
         frame: &Frame<'_>,
         on_frame_done: &mut impl FnMut(u32, &dyn Fn() -> Image),
     ) -> ControlFlow<()> {
-        let Frame { index: f, scene, tracer, direct, camera } = *frame;
+        let Frame { index: f, scene, tracer, camera, .. } = *frame;
+        let direct = frame.direct.get();
         self.device_image = false;
         let settings = &self.settings;
         let t = Instant::now();
@@ -636,7 +665,7 @@ impl<'a> FrameLoop<'a> {
         };
         if let (true, Some(set), Some(g)) = (settings.show_probes, &field, &last_gbuffer) {
             for v in set.volumes() {
-                crate::probe_vis::draw_probes(v, &last_camera, g, &mut pixels);
+                probegi_cpu::probe_vis::draw_probes(v, &last_camera, g, &mut pixels);
             }
         }
         let image = Image { width: settings.width, height: settings.height, pixels };

@@ -12,7 +12,7 @@ use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_scene::{RayTracer, Scene};
 
 use super::{Frame, FrameLoop, RenderOutput, RenderSettings};
-use crate::direct::DirectLighting;
+use probegi_cpu::direct::DirectLighting;
 
 /// A frame's two terms, as [`FrameStepper::layers`] returns them.
 pub struct FrameLayers {
@@ -102,9 +102,10 @@ impl<'a> FrameStepper<'a> {
             return Break(());
         };
         let tracer: &dyn RayTracer = frame_tracer.as_deref().unwrap_or(*tracer);
-        let frame_direct_lighting = frame_loop.animated.then(|| static_direct.for_frame(scene, tracer));
-        let direct = frame_direct_lighting.as_ref().unwrap_or(static_direct);
-        let frame = Frame { index: f, scene, tracer, direct, camera };
+        let posed = std::cell::OnceCell::new();
+        let direct =
+            super::FrameDirect { base: static_direct, posed: &posed, animated: frame_loop.animated, scene, tracer };
+        let frame = Frame { index: f, scene, tracer, direct: &direct, camera };
         let flow = match frame_loop.update_field(&frame) {
             ControlFlow::Continue(()) => frame_loop.camera_image(&frame, on_frame_done),
             Break(()) => Break(()),

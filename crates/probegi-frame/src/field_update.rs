@@ -16,9 +16,9 @@ use probegi_field::ddgi_field_set::{DdgiFieldSet, HostHits, ProbeRayHit, UpdateS
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::probe_ray_gen::probe_ray_directions;
 
-use crate::direct::DirectLighting;
-use crate::probe_shade::{ProbeShadeInputs, shade_probe_rays};
-use crate::probe_trace::{probe_ray_hits, trace_probe_batch, trace_probe_distances};
+use probegi_cpu::direct::DirectLighting;
+use probegi_cpu::probe_shade::{ProbeShadeInputs, shade_probe_rays};
+use probegi_cpu::probe_trace::{probe_ray_hits, trace_probe_batch, trace_probe_distances};
 
 /// The convenience update on a [`DdgiFieldSet`] (see the module docs).
 pub trait FieldSetUpdate {
@@ -51,6 +51,22 @@ pub trait FieldSetUpdate {
         tracer: &dyn RayTracer,
         batch_tracer: Option<&dyn ProbeBatchTracer>,
         direct: &DirectLighting<'_>,
+        seed: u64,
+        frame: u32,
+        pass_ms: &mut BTreeMap<&'static str, f64>,
+    ) -> Result<u64, BackendError>;
+
+    /// [`Self::update_traced_by`] on a batch tracer that keeps the field on its
+    /// device ([`ProbeBatchTracer::device_field`]) and shades there: no CPU
+    /// lighting is built or read, so a frame whose update and camera frame
+    /// both stay on the device runs none of `probegi_cpu`'s passes. Where a
+    /// round would need the CPU to shade after all, the update ends with
+    /// [`BackendError::Unsupported`] (use `update_traced_by`).
+    fn update_on_device(
+        &mut self,
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        device: &dyn ProbeBatchTracer,
         seed: u64,
         frame: u32,
         pass_ms: &mut BTreeMap<&'static str, f64>,
@@ -104,34 +120,59 @@ impl FieldSetUpdate for DdgiFieldSet {
         frame: u32,
         pass_ms: &mut BTreeMap<&'static str, f64>,
     ) -> Result<u64, BackendError> {
-        let mut driver = SeamDriver::new(scene, tracer, batch_tracer, direct, seed, frame);
-        // A device that makes the update rays itself gets them per probe: no
-        // O(rays) arrays on the host (filled after all if the host traces them).
-        self.set_update_rays_on_device(driver.device.is_some_and(|d| d.generates_update_rays()));
-        // The shadowing field serves the lights as posed for this frame.
-        self.set_shadow_lights(&scene.lights);
-        self.set_shadow_on_device(driver.device.is_some_and(|d| d.blends_shadow_field()));
-        let mut step = self.begin_update(seed, frame);
-        loop {
-            step = match step {
-                UpdateStep::TraceRays => driver.trace_rays(self)?,
-                UpdateStep::ShadeRays if driver.on_device => driver.shade_and_blend_on_device(self)?,
-                UpdateStep::ShadeRays => driver.shade_on_host(self)?,
-                UpdateStep::Done => break,
-            };
+        let driver = SeamDriver::new(scene, tracer, batch_tracer, Some(direct), seed, frame);
+        drive_seam(self, driver, pass_ms)
+    }
+
+    fn update_on_device(
+        &mut self,
+        scene: &Scene,
+        tracer: &dyn RayTracer,
+        device: &dyn ProbeBatchTracer,
+        seed: u64,
+        frame: u32,
+        pass_ms: &mut BTreeMap<&'static str, f64>,
+    ) -> Result<u64, BackendError> {
+        if device.device_field().is_none() {
+            return Err(BackendError::Unsupported("update_on_device: the batch tracer keeps no field".into()));
         }
-        // The set's own passes (ray_gen, blend, border; init and classify bookkeeping
-        // are inside the timed trace steps above).
-        for (k, v) in &self.last_pass_ms {
-            if !matches!(*k, "probe_init" | "classify") {
-                *pass_ms.entry(k).or_default() += v;
-            }
-        }
-        for (k, v) in driver.own_ms {
+        let driver = SeamDriver::new(scene, tracer, Some(device), None, seed, frame);
+        drive_seam(self, driver, pass_ms)
+    }
+}
+
+/// One update of `set` through its seam by `driver`; see [`FieldSetUpdate`].
+fn drive_seam(
+    set: &mut DdgiFieldSet,
+    mut driver: SeamDriver<'_>,
+    pass_ms: &mut BTreeMap<&'static str, f64>,
+) -> Result<u64, BackendError> {
+    // A device that makes the update rays itself gets them per probe: no
+    // O(rays) arrays on the host (filled after all if the host traces them).
+    set.set_update_rays_on_device(driver.device.is_some_and(|d| d.generates_update_rays()));
+    // The shadowing field serves the lights as posed for this frame.
+    set.set_shadow_lights(&driver.scene.lights);
+    set.set_shadow_on_device(driver.device.is_some_and(|d| d.blends_shadow_field()));
+    let mut step = set.begin_update(driver.seed, driver.frame);
+    loop {
+        step = match step {
+            UpdateStep::TraceRays => driver.trace_rays(set)?,
+            UpdateStep::ShadeRays if driver.on_device => driver.shade_and_blend_on_device(set)?,
+            UpdateStep::ShadeRays => driver.shade_on_host(set)?,
+            UpdateStep::Done => break,
+        };
+    }
+    // The set's own passes (ray_gen, blend, border; init and classify bookkeeping
+    // are inside the timed trace steps above).
+    for (k, v) in &set.last_pass_ms {
+        if !matches!(*k, "probe_init" | "classify") {
             *pass_ms.entry(k).or_default() += v;
         }
-        Ok(driver.traced)
     }
+    for (k, v) in driver.own_ms {
+        *pass_ms.entry(k).or_default() += v;
+    }
+    Ok(driver.traced)
 }
 
 /// Adds the milliseconds since `t` to pass `name` in `ms`.
@@ -152,7 +193,9 @@ struct SeamDriver<'u> {
     scene: &'u Scene,
     tracer: &'u dyn RayTracer,
     batch_tracer: Option<&'u dyn ProbeBatchTracer>,
-    direct: &'u DirectLighting<'u>,
+    /// The CPU's lighting, for rays the CPU shades (`None`: the device shades
+    /// them all, `FieldSetUpdate::update_on_device`).
+    direct: Option<&'u DirectLighting<'u>>,
     seed: u64,
     frame: u32,
     /// Static geometry alone, for initialisation rounds (`None`: all of it is).
@@ -174,7 +217,7 @@ impl<'u> SeamDriver<'u> {
         scene: &'u Scene,
         tracer: &'u dyn RayTracer,
         batch_tracer: Option<&'u dyn ProbeBatchTracer>,
-        direct: &'u DirectLighting<'u>,
+        direct: Option<&'u DirectLighting<'u>>,
         seed: u64,
         frame: u32,
     ) -> Self {
@@ -307,22 +350,20 @@ impl<'u> SeamDriver<'u> {
         // The host shades (the field's previous light) and blends.
         set.sync_host_atlases(self.batch_tracer)?;
         let view = set.view();
-        let inputs = ProbeShadeInputs {
-            scene: self.scene,
-            direct: self.direct,
-            field: &view,
-            volumes: set.volumes(),
-            batch: set.ray_batch(),
-            hits: &self.batch_hits,
-            seed,
-            frame,
-        };
-        let on_device = self
-            .batch_tracer
-            .and_then(|bt| bt.shade_batch(inputs.batch, &view, inputs.volumes, seed, frame, &mut self.radiance));
+        let (batch, volumes) = (set.ray_batch(), set.volumes());
+        let on_device =
+            self.batch_tracer.and_then(|bt| bt.shade_batch(batch, &view, volumes, seed, frame, &mut self.radiance));
         match on_device {
             Some(result) => result?,
-            None => self.traced += shade_probe_rays(&inputs, &mut self.radiance),
+            None => {
+                let direct = self.direct.ok_or_else(|| {
+                    BackendError::Unsupported("the device left the probe rays to the CPU to shade".into())
+                })?;
+                let hits = &self.batch_hits;
+                let inputs =
+                    ProbeShadeInputs { scene: self.scene, direct, field: &view, volumes, batch, hits, seed, frame };
+                self.traced += shade_probe_rays(&inputs, &mut self.radiance);
+            }
         }
         drop(view);
         time("shade", t, &mut self.own_ms);

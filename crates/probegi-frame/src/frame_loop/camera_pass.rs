@@ -10,9 +10,9 @@ use probegi_scene::{Ray, RayTracer, Scene};
 use std::f32::consts::FRAC_1_PI;
 
 use super::Accumulation;
-use crate::direct::{DirectLighting, DirectSettings};
-use crate::gbuffer::GBuffer;
-use crate::shading::{ShadingContext, lambert_cos};
+use probegi_cpu::direct::{DirectLighting, DirectSettings};
+use probegi_cpu::gbuffer::GBuffer;
+use probegi_cpu::shading::{ShadingContext, lambert_cos};
 
 /// Where the camera pass reads indirect irradiance.
 pub(super) enum IndirectField<'a> {
@@ -97,7 +97,7 @@ pub(super) fn shade_camera(
                 let cage = passes.shadow_field.map(|set| set.shadow_cage(sp.position, sp.facing_normal(), view_dir));
                 let field_visibility =
                     cage.map(|cage| move |_: &probegi_scene::SurfacePoint, wi: Vec3| cage.map(|c| c.visibility(wi)));
-                let visibility = field_visibility.as_ref().map(|v| v as &crate::shading::PunctualVisibility<'_>);
+                let visibility = field_visibility.as_ref().map(|v| v as &probegi_cpu::shading::PunctualVisibility<'_>);
                 let (l, k) = direct.reflected_with(sp, &ctx, direct_settings, !glossy_rays, visibility, &mut rng);
                 rays += k;
                 let mut l = scene.emitted(sp) + l;
@@ -177,7 +177,7 @@ fn shade_glossy_hit(
     let e = field_set_irradiance(field, sp.position, sp.facing_normal(), -ray_dir);
     let mut out = scene.emitted(sp) + l + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e;
     if second_order {
-        out += crate::glossy::second_order_specular(field, sp, &ctx, ray_dir);
+        out += probegi_cpu::glossy::second_order_specular(field, sp, &ctx, ray_dir);
     }
     (out, rays)
 }
