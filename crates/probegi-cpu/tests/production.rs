@@ -278,3 +278,61 @@ fn listing_3_thresholds_do_not_bias_a_noisy_converged_field() {
         assert!((fast / plain - 1.0).abs() < 0.02, "{rays} rays: {fast} vs {plain}");
     }
 }
+
+#[test]
+fn settled_probes_skip_relocation_rounds_without_changing_an_offset() {
+    // The relocation rounds share one set of directions, so a probe whose round
+    // left it in place skips the rounds after (`init_rounds`). Against every
+    // probe traced in every round by hand with the same directions, the offsets
+    // must be the same, for fewer rays.
+    use probegi_core::probe_relocation::{probe_ray_stats, relocation_step};
+    use probegi_cpu::probe_trace::trace_probe_distances;
+    use probegi_field::ddgi_field_set::DdgiFieldSet;
+    use probegi_field::probe_ray_gen::{probe_ray_rotation, rotated_fibonacci};
+    use probegi_frame::field_update::FieldSetUpdate;
+    let scene = cornell_box();
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    // Cells of 0.125 m: probes near walls and the boxes, some inside the boxes.
+    let settings = DdgiVolumeSettings { probe_counts: UVec3::splat(8), probe_rays_per_probe: 64, ..Default::default() };
+    let bounds = scene.bounds().expect("geometry");
+    let mut set = DdgiFieldSet::single(DdgiVolume::new(settings.clone(), bounds));
+    set.update(&scene, &bvh, &direct, 5, 0, &mut Default::default());
+    let v = &set.volumes()[0];
+
+    let rays = settings.probe_init_rays_per_probe;
+    let dirs = rotated_fibonacci(probe_ray_rotation(v.stream_seed(5), u32::MAX), rays);
+    let grid_points: Vec<Vec3> =
+        (0..v.grid.probe_count()).map(|p| v.grid.probe_position(v.grid.probe_coords(p))).collect();
+    let mut offsets = vec![Vec3::ZERO; grid_points.len()];
+    let mut moved_after_first = 0;
+    for round in 0..settings.probe_relocation_iterations {
+        let positions: Vec<Vec3> = grid_points.iter().zip(&offsets).map(|(g, o)| *g + *o).collect();
+        let d = trace_probe_distances(&bvh, &positions, &dirs, settings.probe_max_ray_distance_m);
+        for (p, o) in offsets.iter_mut().enumerate() {
+            let next = relocation_step(
+                *o,
+                &probe_ray_stats(&dirs, &d[p * rays as usize..][..rays as usize]),
+                v.grid.spacing_m,
+                &settings,
+            );
+            moved_after_first += (round > 0 && next != *o) as usize;
+            *o = next;
+        }
+    }
+    let moved = offsets.iter().filter(|o| **o != Vec3::ZERO).count();
+    assert!(moved > 10, "only {moved} probes moved: the case does not exercise relocation");
+    for (p, (host, by_hand)) in v.probe_offsets.iter().zip(&offsets).enumerate() {
+        assert_eq!(host, by_hand, "probe {p}: offset with settled probes skipped vs every round in full");
+    }
+    // Every probe traces the first relocation round and the classification
+    // round; only the probes still moving trace rounds 2 to 5.
+    let probes = v.grid.probe_count() as u64;
+    let full = (settings.probe_relocation_iterations as u64 + 1) * probes * rays as u64;
+    assert!(set.last_init_rays < full / 2, "{} initialisation rays of {full}", set.last_init_rays);
+    assert!(set.last_init_rays >= 2 * probes * rays as u64, "{} initialisation rays", set.last_init_rays);
+    eprintln!(
+        "{moved} probes moved ({moved_after_first} moves after the first round); {} of {full} rays",
+        set.last_init_rays
+    );
+}

@@ -315,3 +315,36 @@ fn a_coarse_first_set_blends_every_volume_into_its_own_atlases_on_the_gpu() {
         assert_eq!(h.probe_states, d.probe_states);
     }
 }
+
+#[test]
+fn an_update_on_the_device_needs_no_cpu_lighting_and_is_the_same_update() {
+    // `FieldSetUpdate::update_on_device` (what the frame loop runs where the
+    // device keeps the field) against `update_traced_by` with the CPU's
+    // lighting on a second device: the same states and atlases bit for bit,
+    // since both run the same device passes; on a tracer that keeps no field
+    // it is an error, not a CPU fallback.
+    let scene = probegi_scene::builtin::cornell_box();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let (Some(a), Some(b), Some(host)) = (gpu(&scene, &bvh, true), gpu(&scene, &bvh, true), gpu(&scene, &bvh, false))
+    else {
+        return;
+    };
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let settings = DdgiVolumeSettings { probe_counts: UVec3::splat(4), probe_rays_per_probe: 64, ..Default::default() };
+    let bounds = scene.bounds().expect("geometry");
+    let mut sets = [0, 1].map(|_| DdgiFieldSet::single(DdgiVolume::new(settings.clone(), bounds)));
+    for f in 0..3 {
+        let mut ms = BTreeMap::new();
+        sets[0].update_on_device(&scene, &bvh, &a, 3, f, &mut ms).expect("update on the device");
+        sets[1].update_traced_by(&scene, &bvh, Some(&b), &direct, 3, f, &mut ms).expect("update traced by");
+    }
+    for (set, t) in sets.iter_mut().zip([&a, &b]) {
+        set.sync_host_atlases(Some(t)).expect("read back");
+    }
+    let (x, y) = (&sets[0].volumes()[0], &sets[1].volumes()[0]);
+    assert_eq!(x.probe_states, y.probe_states);
+    assert_eq!(max_difference(x, y), (0.0, 0.0), "atlases");
+    let mut other = DdgiFieldSet::single(DdgiVolume::new(settings, bounds));
+    let err = other.update_on_device(&scene, &bvh, &host, 3, 0, &mut BTreeMap::new());
+    assert!(err.is_err_and(|e| e.to_string().contains("keeps no field")), "a tracer without a field");
+}
