@@ -382,8 +382,8 @@ impl DdgiFieldSet {
         self.volumes.iter().map(|v| v.rays_per_frame()).sum()
     }
 
-    /// With `on_device`, update batches from the next [`Self::begin_update`] on
-    /// carry their rays per probe only (origins and the `generated` records,
+    /// With `on_device`, update batches and initialisation rounds from the next
+    /// [`Self::begin_update`] on carry their rays per probe only (origins and the `generated` records,
     /// O(probes) on the host), for a device that makes the rays where it traces
     /// them. A caller that then traces or shades on the host after all calls
     /// [`Self::fill_ray_arrays`] first.
@@ -428,7 +428,9 @@ impl DdgiFieldSet {
             if pending.is_empty() {
                 break;
             }
-            self.batch.clear(ProbeRayBatchKind::Initialization, true);
+            // A device that makes the update rays makes these too (no per-ray
+            // arrays; a host trace fills them first).
+            self.batch.clear(ProbeRayBatchKind::Initialization, !self.update_rays_on_device);
             for &i in &pending {
                 let has_round = self.volumes[i].plan_init_round(
                     &mut self.frames[i],

@@ -132,7 +132,7 @@ pub struct ProbeRayBatch {
     /// probe blends this frame, so that its rays' radiance is needed (back-face
     /// hits aside, whose radiance is zero by rule).
     pub probe_needs_radiance: Vec<bool>,
-    /// Update batches: how each volume's rays were made (see [`GeneratedProbeRays`]).
+    /// How each volume's rays were made (see [`GeneratedProbeRays`]): update batches and initialisation rounds.
     pub generated: Vec<GeneratedProbeRays>,
     /// Rays in the batch (the per-ray arrays' length when they are filled).
     ray_count: usize,

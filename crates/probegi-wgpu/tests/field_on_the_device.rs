@@ -348,3 +348,35 @@ fn an_update_on_the_device_needs_no_cpu_lighting_and_is_the_same_update() {
     let err = other.update_on_device(&scene, &bvh, &host, 3, 0, &mut BTreeMap::new());
     assert!(err.is_err_and(|e| e.to_string().contains("keeps no field")), "a tracer without a field");
 }
+
+#[test]
+fn initialisation_rounds_on_a_device_that_makes_its_rays_upload_no_ray() {
+    // With the device generating the rays (`generating_rays`), the start-up's
+    // relocation and classification batches are planned per probe as the
+    // update's are: what goes up in frame 0 is O(probes), not one origin and
+    // direction a ray. Sponza at 16×8×16: 2 048 probes × 32 rays a round;
+    // measured 0.59 MB besides the field against 7.9 MB of rays before.
+    let scene = probegi_scene::load_scene(&common::shared("dabrovic-sponza/sponza.obj")).expect("the shared Sponza");
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let Some(device) = gpu_generating(&scene, &bvh, true, true) else { return };
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let settings = DdgiVolumeSettings { probe_counts: UVec3::new(16, 8, 16), ..Default::default() };
+    let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, scene.bounds().expect("geometry")));
+    let before = device.ctx.counters();
+    set.update_traced_by(&scene, &bvh, Some(&device), &direct, 7, 0, &mut BTreeMap::new()).expect("frame 0");
+    let up = (device.ctx.counters() - before).bytes_up;
+    let (reloc, classify) = device.init_rounds_on_device();
+    assert!(reloc >= 1 && classify == 1, "rounds on the device: {reloc} relocation, {classify} classification");
+    // One round's rays as uploaded before: 32 bytes a ray (origin, t_min, direction, t_max).
+    let one_round = set.last_init_rays / (reloc as u64 + 1) * 32;
+    eprintln!(
+        "frame 0 uploaded {up} bytes, the resident field {}; {} initialisation rays; a round's rays {one_round} bytes",
+        device.field_bytes(),
+        set.last_init_rays
+    );
+    // Besides the resident field (its atlases go up whole on the first update)
+    // only per-probe data: less than one round's rays (each round uploaded
+    // its rays before, 7.9 MB here).
+    let besides = up - device.field_bytes();
+    assert!(besides < one_round, "frame 0 uploaded {besides} bytes besides the field: a round's rays are {one_round}");
+}

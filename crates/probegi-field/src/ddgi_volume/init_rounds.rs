@@ -134,6 +134,7 @@ impl DdgiVolume {
         frame.init_dirs = rotated_fibonacci(rotation, self.settings.probe_init_rays_per_probe);
         frame.ray_count = frame.init_dirs.len();
         frame.first_ray = vec![u32::MAX; self.grid.probe_count()];
+        let first_probe = batch.probes.len() as u32;
         // After the first relocation round only the probes that moved trace.
         let settled = |p: usize| matches!(kind, InitRound::Relocation(i) if i > 0) && self.probe_relocation_settled[p];
         for p in 0..self.grid.probe_count() {
@@ -147,6 +148,16 @@ impl DdgiVolume {
                 );
             }
         }
+        // How the rays were made, for a device that makes them itself (as the
+        // update's): then the batch holds no per-ray arrays.
+        batch.generated.push(crate::seam::GeneratedProbeRays {
+            volume,
+            first_probe,
+            probe_count: batch.probes.len() as u32 - first_probe,
+            rays_per_probe: frame.ray_count as u32,
+            rotation,
+            max_distance_m: self.settings.probe_max_ray_distance_m,
+        });
         true
     }
 
