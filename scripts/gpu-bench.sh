@@ -1,9 +1,13 @@
 #!/usr/bin/env bash
-# Issue "The whole frame on the GPU…", device check: `probegi bench --gi ddgi
-# --backend wgpu` on the shared Sibenik at seed 000 Table 2's probe grids
-# (16×8×16, 32×8×32, 32×16×32, 32×32×32) and rays per probe (32–256), 8×8
-# irradiance tiles as in the paper (6 interior texels + border, the default). Writes out/gpu-bench/sibenik.json and
-# out/gpu-bench/table.md (GPU trace Mrays/s beside the paper's RTX 3080 figures).
+# Issues "The whole frame on the GPU…" and "The field update at the seeds' GPU
+# rates…", device check: `probegi bench --gi ddgi --backend wgpu` on the shared
+# Sibenik at seed 000 Table 2's probe grids (16×8×16, 32×8×32, 32×16×32,
+# 32×32×32) and rays per probe (32–256), 8×8 irradiance tiles as in the paper
+# (6 interior texels + border, the default), for each of STATES (default: jcgt
+# and all-active probe states). Writes out/gpu-bench/sibenik-STATE.json and
+# out/gpu-bench/table.md: per state, whole update / GPU passes / trace Mrays/s
+# beside the paper's RTX 3080 figures, start-up over one update and the host's
+# ms an update.
 # Meant for a machine with an NVIDIA GPU and its Vulkan driver; runs in a few
 # minutes. Uses a prebuilt binary when BIN points at one (the device machines
 # reach no crate registry), else builds it.
@@ -46,35 +50,54 @@ args=()
 for g in $GRIDS; do args+=(--grids "$g"); done
 for r in $RAYS; do args+=(--rays "$r"); done
 # Default texels: 6 interior + border = the paper's 8×8 probe resolution.
-"$BIN" bench --gi ddgi --backend wgpu --scene "$SCENE" "${args[@]}" --frames "$FRAMES" --repeat 3 >"$OUT/sibenik.json"
+# Both probe-state schemes the issue asks for: the default (jcgt: a third of
+# Sibenik's probes trace) and every probe active, as the seeds' tables count.
+STATES=${STATES:-jcgt all-active}
+for state in $STATES; do
+  "$BIN" bench --gi ddgi --backend wgpu --scene "$SCENE" "${args[@]}" --frames "$FRAMES" --repeat 3 \
+    --set "probe_states=$state" >"$OUT/sibenik-$state.json"
+done
 
-python3 - "$OUT/sibenik.json" >"$OUT/table.md" <<'PY'
+python3 - "$OUT" $STATES >"$OUT/table.md" <<'PY'
 import json, sys
-d = json.load(open(sys.argv[1]))
+out, states = sys.argv[1], sys.argv[2:]
 # Seed 000 Table 2: Sibenik, RTX 3080, hardware ray tracing, Mrays/s.
 paper = {32: [15.1, 57.4, 101.1, 155.2], 64: [29.5, 103.8, 160.2, 216.8],
          128: [56.8, 161.7, 225.1, 277.3], 256: [100.7, 224.1, 283.8, 316.1]}
 grids = [[16, 8, 16], [32, 8, 32], [32, 16, 32], [32, 32, 32]]
-rows = {(tuple(r["probes"]), r["rays_per_probe"]): r for r in d["sweep"]}
-print(f"GPU trace of the field update on {d['adapter']}, Sibenik ({d['triangles']} triangles), "
-      "WGSL CWBVH traversal, Mrays/s (seed 000 Table 2's RTX 3080 with hardware ray tracing in brackets)\n")
-print("| rays | " + " | ".join("×".join(map(str, g)) for g in grids) + " |")
-print("|---|" + "---|" * len(grids))
-for rays in [32, 64, 128, 256]:
-    cells = []
-    for k, g in enumerate(grids):
-        r = rows.get((tuple(g), rays))
-        gpu = r and r.get("gpu")
-        cells.append(f"{gpu['trace_mrays_per_s']:.1f} ({paper[rays][k]})" if gpu else f"– ({paper[rays][k]})")
-    print(f"| {rays} | " + " | ".join(cells) + " |")
-print("\nAll GPU passes (trace, shade, blend, border; relocation and classification stay on the CPU), Mrays/s:\n")
-print("| rays | " + " | ".join("×".join(map(str, g)) for g in grids) + " |")
-print("|---|" + "---|" * len(grids))
-for rays in [32, 64, 128, 256]:
-    cells = []
-    for g in grids:
-        r = rows.get((tuple(g), rays))
-        cells.append(f"{r['gpu']['gpu_passes_mrays_per_s']:.1f}" if r and r.get("gpu") else "–")
-    print(f"| {rays} | " + " | ".join(cells) + " |")
+for state in states:
+    d = json.load(open(f"{out}/sibenik-{state}.json"))
+    rows = {(tuple(r["probes"]), r["rays_per_probe"]): r for r in d["sweep"]}
+    print(f"\n## probe_states={state}: {d['adapter']}, Sibenik ({d['triangles']} triangles)\n")
+    print("Whole field update / GPU passes alone / GPU trace alone, Mrays/s over the update's rays "
+          "(seed 000 Table 2's RTX 3080 with hardware ray tracing in brackets):\n")
+    print("| rays | " + " | ".join("×".join(map(str, g)) for g in grids) + " |")
+    print("|---|" + "---|" * len(grids))
+    for rays in [32, 64, 128, 256]:
+        cells = []
+        for k, g in enumerate(grids):
+            r = rows.get((tuple(g), rays))
+            gpu = r and r.get("gpu")
+            if gpu:
+                cells.append(f"{r['field_update_mrays_per_s']:.0f} / {gpu['gpu_passes_mrays_per_s']:.0f} / "
+                             f"{gpu['trace_mrays_per_s']:.0f} ({paper[rays][k]})")
+            else:
+                cells.append(f"– ({paper[rays][k]})")
+        print(f"| {rays} | " + " | ".join(cells) + " |")
+    print("\nStart-up over one update (probe_init_ms / field_update_ms), and the host's ms an update "
+          "(wall less the time blocked on the device):\n")
+    print("| rays | " + " | ".join("×".join(map(str, g)) for g in grids) + " |")
+    print("|---|" + "---|" * len(grids))
+    for rays in [32, 64, 128, 256]:
+        cells = []
+        for g in grids:
+            r = rows.get((tuple(g), rays))
+            if r:
+                host = (r.get("host") or {}).get("host_ms")
+                cells.append(f"{r['probe_init_ms'] / r['field_update_ms']:.2f}; host {host:.2f} ms" if host is not None
+                             else f"{r['probe_init_ms'] / r['field_update_ms']:.2f}")
+            else:
+                cells.append("–")
+        print(f"| {rays} | " + " | ".join(cells) + " |")
 PY
 cat "$OUT/table.md"

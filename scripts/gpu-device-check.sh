@@ -64,7 +64,7 @@ done
 
 echo; echo "## 4. gpu-bench (Sibenik)"
 OUT="$OUT/gpu-bench" BIN="$BIN" GRIDS=${GPU_BENCH_GRIDS:-16,8,16 32,16,32 32,32,32} RAYS=${GPU_BENCH_RAYS:-128 256} \
-  timeout ${GPU_BENCH_S:-90} bash scripts/gpu-bench.sh >/dev/null 2>"$OUT/gpu-bench.log" && cat "$OUT/gpu-bench/table.md" ||
+  timeout ${GPU_BENCH_S:-180} bash scripts/gpu-bench.sh >/dev/null 2>"$OUT/gpu-bench.log" && cat "$OUT/gpu-bench/table.md" ||
   { echo "gpu-bench failed or timed out"; tail -3 "$OUT/gpu-bench.log"; }
 
 # What comes back: the tables above, and a tarball of the JSON and logs.
