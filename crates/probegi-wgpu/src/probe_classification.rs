@@ -9,8 +9,8 @@
 //! pass's recursion (two dispatches each, the per-point one dispatched
 //! indirectly over the list), the keepers marked, a fix-up; every step an
 //! atomic minimum or an idempotent flag, so both backends keep the same probes. (It
-//! replaced one invocation walking every ray in order, which took seconds at
-//! 32³ probes on an H200.) The rays and hits stay where the trace left them; the
+//! replaced one invocation walking every ray in order, the likely cause of an
+//! 11.5 s start-up at 32³ probes on an H200.) The rays and hits stay where the trace left them; the
 //! host reads back 16 bytes a probe.
 //!
 //! The round is the field's own plan (`probegi_field::device_plans::DeviceClassification`).
