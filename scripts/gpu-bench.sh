@@ -65,39 +65,37 @@ out, states = sys.argv[1], sys.argv[2:]
 paper = {32: [15.1, 57.4, 101.1, 155.2], 64: [29.5, 103.8, 160.2, 216.8],
          128: [56.8, 161.7, 225.1, 277.3], 256: [100.7, 224.1, 283.8, 316.1]}
 grids = [[16, 8, 16], [32, 8, 32], [32, 16, 32], [32, 32, 32]]
+def table(rows, cell):
+    """One Markdown table: a row per ray count, a column per grid, cell(row or None, k)."""
+    print("| rays | " + " | ".join("×".join(map(str, g)) for g in grids) + " |")
+    print("|---|" + "---|" * len(grids))
+    for rays in [32, 64, 128, 256]:
+        cells = [cell(rows.get((tuple(g), rays)), rays, k) for k, g in enumerate(grids)]
+        print(f"| {rays} | " + " | ".join(cells) + " |")
+
+def rates(r, rays, k):
+    gpu = r and r.get("gpu")
+    if not gpu:
+        return f"– ({paper[rays][k]})"
+    return (f"{r['field_update_mrays_per_s']:.0f} / {gpu['gpu_passes_mrays_per_s']:.0f} / "
+            f"{gpu['trace_mrays_per_s']:.0f} ({paper[rays][k]})")
+
+def startup(r, rays, k):
+    if not r:
+        return "–"
+    ratio = f"{r['probe_init_ms'] / r['field_update_ms']:.2f}"
+    host = (r.get("host") or {}).get("host_ms")
+    return ratio if host is None else f"{ratio}; host {host:.2f} ms"
+
 for state in states:
     d = json.load(open(f"{out}/sibenik-{state}.json"))
     rows = {(tuple(r["probes"]), r["rays_per_probe"]): r for r in d["sweep"]}
     print(f"\n## probe_states={state}: {d['adapter']}, Sibenik ({d['triangles']} triangles)\n")
     print("Whole field update / GPU passes alone / GPU trace alone, Mrays/s over the update's rays "
           "(seed 000 Table 2's RTX 3080 with hardware ray tracing in brackets):\n")
-    print("| rays | " + " | ".join("×".join(map(str, g)) for g in grids) + " |")
-    print("|---|" + "---|" * len(grids))
-    for rays in [32, 64, 128, 256]:
-        cells = []
-        for k, g in enumerate(grids):
-            r = rows.get((tuple(g), rays))
-            gpu = r and r.get("gpu")
-            if gpu:
-                cells.append(f"{r['field_update_mrays_per_s']:.0f} / {gpu['gpu_passes_mrays_per_s']:.0f} / "
-                             f"{gpu['trace_mrays_per_s']:.0f} ({paper[rays][k]})")
-            else:
-                cells.append(f"– ({paper[rays][k]})")
-        print(f"| {rays} | " + " | ".join(cells) + " |")
+    table(rows, rates)
     print("\nStart-up over one update (probe_init_ms / field_update_ms), and the host's ms an update "
           "(wall less the time blocked on the device):\n")
-    print("| rays | " + " | ".join("×".join(map(str, g)) for g in grids) + " |")
-    print("|---|" + "---|" * len(grids))
-    for rays in [32, 64, 128, 256]:
-        cells = []
-        for g in grids:
-            r = rows.get((tuple(g), rays))
-            if r:
-                host = (r.get("host") or {}).get("host_ms")
-                cells.append(f"{r['probe_init_ms'] / r['field_update_ms']:.2f}; host {host:.2f} ms" if host is not None
-                             else f"{r['probe_init_ms'] / r['field_update_ms']:.2f}")
-            else:
-                cells.append("–")
-        print(f"| {rays} | " + " | ".join(cells) + " |")
+    table(rows, startup)
 PY
 cat "$OUT/table.md"

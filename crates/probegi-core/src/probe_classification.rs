@@ -257,11 +257,7 @@ pub fn uncovered_point_probe(
 ) -> Option<usize> {
     let cage = grid.cage(point);
     let mut best: Option<(usize, f32)> = None;
-    for i in 0..8 {
-        let p = grid.probe_index(cage.corner(i));
-        if (probe_positions[p] - point).dot(normal) <= 0.0 {
-            continue;
-        }
+    for (i, p) in front_side_corners(grid, &cage, probe_positions, point, normal) {
         if kept[p] {
             return None;
         }
@@ -272,6 +268,20 @@ pub fn uncovered_point_probe(
         }
     }
     best.map(|(p, _)| p)
+}
+
+/// The corners of `cage` (the cage of `point`) whose probes lie on the
+/// surface's front side, strictly in front of its plane: (corner, probe index).
+fn front_side_corners<'a>(
+    grid: &'a ProbeGrid,
+    cage: &'a crate::probe_grid::Cage,
+    probe_positions: &'a [Vec3],
+    point: Vec3,
+    normal: Vec3,
+) -> impl Iterator<Item = (usize, usize)> + 'a {
+    (0..8)
+        .map(|i| (i, grid.probe_index(cage.corner(i))))
+        .filter(move |&(_, p)| (probe_positions[p] - point).dot(normal) > 0.0)
 }
 
 /// The cage probes of a surface point that lie on the surface's front side
@@ -286,12 +296,9 @@ pub fn front_side_cage_probes(
     let cage = grid.cage(point);
     let mut front = [0u32; 8];
     let mut count = 0;
-    for i in 0..8 {
-        let p = grid.probe_index(cage.corner(i));
-        if (probe_positions[p] - point).dot(normal) > 0.0 {
-            front[count] = p as u32;
-            count += 1;
-        }
+    for (_, p) in front_side_corners(grid, &cage, probe_positions, point, normal) {
+        front[count] = p as u32;
+        count += 1;
     }
     (front, count)
 }
@@ -319,7 +326,7 @@ pub struct CoverProposal {
 pub const COVER_ITERATIONS: u32 = 32;
 
 /// The covering pass, order-free: which probes the points of `proposals` keep
-/// on top of `kept_first` (the first pass), over `probe_count` probes.
+/// on top of `kept_first` (the first pass; one flag a probe of the volume).
 ///
 /// The greedy pass in ray order keeps point i's proposal exactly when no
 /// earlier point that kept its own proposal kept one of i's front-side probes.
@@ -337,8 +344,9 @@ pub fn cover_proposals(kept_first: &[bool], proposals: &[CoverProposal], iterati
     for c in proposals {
         first_keeper[c.probe as usize] = first_keeper[c.probe as usize].min(c.ray);
     }
+    let mut next = vec![u32::MAX; n];
     for _ in 0..iterations {
-        let mut next = vec![u32::MAX; n];
+        next.fill(u32::MAX);
         for c in proposals {
             let covered = c.front[..c.front_count].iter().any(|&p| first_keeper[p as usize] < c.ray);
             if !covered {
@@ -348,7 +356,7 @@ pub fn cover_proposals(kept_first: &[bool], proposals: &[CoverProposal], iterati
         if next == first_keeper {
             break;
         }
-        first_keeper = next;
+        std::mem::swap(&mut first_keeper, &mut next);
     }
     let kept: Vec<bool> = (0..n).map(|p| kept_first[p] || first_keeper[p] != u32::MAX).collect();
     // Fix-up: a point a cut-short chain left uncovered keeps its proposal.

@@ -23,10 +23,12 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::input_script::{FlyKey, ScriptEvent};
+use crate::viewer_controls::ViewerControls;
 use crate::viewer_panels::{PanelAction, PanelState, panels_ui};
 use crate::viewer_prefs::ViewerPrefs;
 use crate::viewer_worker::{
-    LatestFrame, SharedDevice, ViewSource, WorkerCommand, WorkerLink, WorkerOptions, WorkerReport, run_worker,
+    LatestFrame, ReferenceReport, SharedDevice, ViewSource, WorkerCommand, WorkerLink, WorkerOptions, WorkerReport,
+    run_worker,
 };
 
 /// How the window runs.
@@ -250,48 +252,13 @@ impl ViewerApp {
                 }
             };
             match report {
-                WorkerReport::Ready(mut c) => {
-                    let first = self.panels.is_none();
-                    if first && self.opts.prefs_path.is_some() && self.opts.start_view.is_none() {
-                        c.view = self.prefs.view;
-                        self.send(WorkerCommand::Controls(c.clone()));
-                    }
-                    let panels = self.panels.get_or_insert_with(|| {
-                        let mut p = PanelState::new(c.clone(), &self.opts.scene_name, self.opts.cpu_backend);
-                        p.reference_spp = self.prefs.reference_spp;
-                        p
-                    });
-                    panels.controls = c;
-                    if !first {
-                        // A new session: an old reference no longer describes it.
-                        panels.reference = None;
-                        self.textures.reference = None;
-                        self.textures.heat = None;
-                    }
-                }
+                WorkerReport::Ready(c) => self.take_ready(c),
                 WorkerReport::Controls(c) => {
                     if let Some(p) = self.panels.as_mut() {
                         p.controls = c;
                     }
                 }
-                WorkerReport::Reference(r) => {
-                    let size = [r.width as usize, r.height as usize];
-                    if let Some(rgba) = &r.rgba {
-                        let image = ColorImage::from_rgba_unmultiplied(size, rgba);
-                        set_texture(&self.ctx, &mut self.textures.reference, "reference", image);
-                    }
-                    match &r.heat_rgba {
-                        Some(rgba) => {
-                            let image = ColorImage::from_rgba_unmultiplied(size, rgba);
-                            set_texture(&self.ctx, &mut self.textures.heat, "flip", image);
-                        }
-                        None if r.rgba.is_some() => self.textures.heat = None,
-                        None => {}
-                    }
-                    if let Some(p) = self.panels.as_mut() {
-                        p.reference = Some(r);
-                    }
-                }
+                WorkerReport::Reference(r) => self.take_reference(r),
                 WorkerReport::Message(m) => self.status(m),
                 WorkerReport::Error(e) => {
                     eprintln!("probegi view: {e}");
@@ -308,6 +275,53 @@ impl ViewerApp {
                 }
             }
         }
+        self.take_frame();
+    }
+
+    /// A session is ready: its controls, the panels made for the first one (with
+    /// the saved view), an old reference dropped for a later one.
+    fn take_ready(&mut self, mut c: ViewerControls) {
+        let first = self.panels.is_none();
+        if first && self.opts.prefs_path.is_some() && self.opts.start_view.is_none() {
+            c.view = self.prefs.view;
+            self.send(WorkerCommand::Controls(c.clone()));
+        }
+        let panels = self.panels.get_or_insert_with(|| {
+            let mut p = PanelState::new(c.clone(), &self.opts.scene_name, self.opts.cpu_backend);
+            p.reference_spp = self.prefs.reference_spp;
+            p
+        });
+        panels.controls = c;
+        if !first {
+            // A new session: an old reference no longer describes it.
+            panels.reference = None;
+            self.textures.reference = None;
+            self.textures.heat = None;
+        }
+    }
+
+    /// A reference render came: its image and FLIP heat map as textures.
+    fn take_reference(&mut self, r: ReferenceReport) {
+        let size = [r.width as usize, r.height as usize];
+        if let Some(rgba) = &r.rgba {
+            let image = ColorImage::from_rgba_unmultiplied(size, rgba);
+            set_texture(&self.ctx, &mut self.textures.reference, "reference", image);
+        }
+        match &r.heat_rgba {
+            Some(rgba) => {
+                let image = ColorImage::from_rgba_unmultiplied(size, rgba);
+                set_texture(&self.ctx, &mut self.textures.heat, "flip", image);
+            }
+            None if r.rgba.is_some() => self.textures.heat = None,
+            None => {}
+        }
+        if let Some(p) = self.panels.as_mut() {
+            p.reference = Some(r);
+        }
+    }
+
+    /// The worker's newest frame: a texture on the shared device, or RGBA8 to upload.
+    fn take_frame(&mut self) {
         let frame = self.latest.lock().ok().and_then(|mut s| s.take());
         if let Some(mut f) = frame {
             match f.texture.take() {

@@ -102,10 +102,9 @@ impl GpuProbeClassification {
         batch: &GpuRayBatch,
         round: &DeviceClassification<'_>,
     ) -> Result<Vec<(bool, bool)>, GpuError> {
-        let g = round.grid;
         let n = round.probes.len();
-        if n != g.probe_count() {
-            return Err(GpuError::Input(format!("{n} probes for a grid of {}", g.probe_count())));
+        if n != round.grid.probe_count() {
+            return Err(GpuError::Input(format!("{n} probes for a grid of {}", round.grid.probe_count())));
         }
         if n == 0 {
             return Ok(vec![]);
@@ -113,53 +112,12 @@ impl GpuProbeClassification {
         for first in round.probes.iter().filter_map(|p| p.first_ray) {
             batch.check_rays(first, round.rays_per_probe)?;
         }
-        let (gx, gy) = dispatch_2d(n as u32);
-        let ray_threads = n as u32 * round.rays_per_probe;
-        let (rx, ry) = dispatch_2d(ray_threads);
-        let params = ClassifyParams {
-            origin_m: g.origin_m.into(),
-            probe_count: n as u32,
-            spacing_m: g.spacing_m.into(),
-            rays_per_probe: round.rays_per_probe,
-            probe_counts: g.probe_counts.into(),
-            groups_x: gx,
-            scroll_offsets: g.probe_scroll_offsets.into(),
-            cover_round: 0,
-            reach_rel: round.reach_rel,
-            bias_m: round.bias_m,
-            cover_rounds: COVER_ITERATIONS,
-            ray_threads,
-            ray_groups_x: rx,
-            _pad: [0; 3],
-        };
-        let rows: Vec<[u32; 4]> = round
-            .probes
-            .iter()
-            .map(|p| [p.first_ray.unwrap_or(u32::MAX), p.pending as u32, p.traces as u32, 0])
-            .collect();
-        let positions: Vec<[f32; 4]> = round.probes.iter().map(|p| p.position_m.extend(0.0).into()).collect();
-        let storage = wgpu::BufferUsages::STORAGE;
-        let rows = ctx.buffer_with("classify probes", bytemuck::cast_slice(&rows), storage);
-        let positions = ctx.buffer_with("classify positions", bytemuck::cast_slice(&positions), storage);
-        let out = ctx.output_buffer("classify out", n as u64 * 16);
-        // Indirect workgroups, count, then (ray, probe) per proposal (at most one a ray).
-        let list = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("classify proposals"),
-            size: (4 + 2 * ray_threads as u64) * 4,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let indirect = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("classify indirect"),
-            size: 16,
-            usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let keepers = ctx.output_buffer("classify keepers", 2 * n as u64 * 4);
+        let params = classify_params(round)?;
+        let b = ClassifyBuffers::new(ctx, round);
         let bind = |p: &ClassifyParams| {
             let params = ctx.buffer_with("classify params", bytemuck::bytes_of(p), wgpu::BufferUsages::UNIFORM);
             let buffers = [params, batch.rays_buffer().clone(), batch.hits_buffer().clone()];
-            let own = [rows.clone(), positions.clone(), out.clone(), list.clone(), keepers.clone()];
+            let own = [b.rows.clone(), b.positions.clone(), b.out.clone(), b.list.clone(), b.keepers.clone()];
             let buffers = [buffers.as_slice(), &own].concat();
             crate::gpu_context::buffers_bind_group(&ctx.device, "probe classification", &self.layout, &buffers)
         };
@@ -168,11 +126,12 @@ impl GpuProbeClassification {
             (0..COVER_ITERATIONS).map(|k| bind(&ClassifyParams { cover_round: k, ..params })).collect();
         // The first pass, the proposals, the rounds (each reads what the step
         // before it wrote), the marks and the fix-up.
-        let per_probe = || Dispatch::Groups(gx, gy);
-        let listed = || Dispatch::Indirect { args: &list, offset: 0, via: &indirect };
+        let per_probe = || Dispatch::Groups(params.groups_x, dispatch_2d(n as u32).1);
+        let listed = || Dispatch::Indirect { args: &b.list, offset: 0, via: &b.indirect };
+        let per_ray = Dispatch::Groups(params.ray_groups_x, dispatch_2d(params.ray_threads).1);
         let mut order = vec![
             (&self.first, &base, per_probe()),
-            (&self.propose, &base, Dispatch::Groups(rx, ry)),
+            (&self.propose, &base, per_ray),
             (&self.args, &base, Dispatch::Groups(1, 1)),
         ];
         for g in &rounds {
@@ -191,8 +150,78 @@ impl GpuProbeClassification {
             })
             .collect();
         ctx.run_dispatches("probe classification", &steps);
-        let bytes = ctx.read_back(&out)?;
+        let bytes = ctx.read_back(&b.out)?;
         let v: &[[u32; 4]] = bytemuck::cast_slice(&bytes);
         Ok(v.iter().take(n).map(|o| (o[0] != 0, o[1] != 0 || o[3] != 0)).collect())
+    }
+}
+
+/// The round's uniform block (the covering rounds differ only in `cover_round`);
+/// an error where its per-ray threads overflow a `u32`.
+fn classify_params(round: &DeviceClassification<'_>) -> Result<ClassifyParams, GpuError> {
+    let (g, n) = (round.grid, round.probes.len() as u32);
+    let ray_threads = n
+        .checked_mul(round.rays_per_probe)
+        .ok_or_else(|| GpuError::Input(format!("{n} probes × {} rays overflow a u32", round.rays_per_probe)))?;
+    Ok(ClassifyParams {
+        origin_m: g.origin_m.into(),
+        probe_count: n,
+        spacing_m: g.spacing_m.into(),
+        rays_per_probe: round.rays_per_probe,
+        probe_counts: g.probe_counts.into(),
+        groups_x: dispatch_2d(n).0,
+        scroll_offsets: g.probe_scroll_offsets.into(),
+        cover_round: 0,
+        reach_rel: round.reach_rel,
+        bias_m: round.bias_m,
+        cover_rounds: COVER_ITERATIONS,
+        ray_threads,
+        ray_groups_x: dispatch_2d(ray_threads).0,
+        _pad: [0; 3],
+    })
+}
+
+/// The round's own buffers: its probes packed in two rows (first ray, pending,
+/// traces; position), the per-probe output, the proposal list with its
+/// indirect workgroups, and the two keeper arrays.
+struct ClassifyBuffers {
+    rows: wgpu::Buffer,
+    positions: wgpu::Buffer,
+    out: wgpu::Buffer,
+    list: wgpu::Buffer,
+    indirect: wgpu::Buffer,
+    keepers: wgpu::Buffer,
+}
+
+impl ClassifyBuffers {
+    fn new(ctx: &GpuContext, round: &DeviceClassification<'_>) -> Self {
+        let n = round.probes.len() as u64;
+        let rows: Vec<[u32; 4]> = round
+            .probes
+            .iter()
+            .map(|p| [p.first_ray.unwrap_or(u32::MAX), p.pending as u32, p.traces as u32, 0])
+            .collect();
+        let positions: Vec<[f32; 4]> = round.probes.iter().map(|p| p.position_m.extend(0.0).into()).collect();
+        // At most one proposal a traced ray: sized by the rays the round traced.
+        let traced_rays =
+            round.probes.iter().filter(|p| p.first_ray.is_some()).count() as u64 * round.rays_per_probe as u64;
+        let storage = wgpu::BufferUsages::STORAGE;
+        let buffer = |label, size, usage| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        Self {
+            rows: ctx.buffer_with("classify probes", bytemuck::cast_slice(&rows), storage),
+            positions: ctx.buffer_with("classify positions", bytemuck::cast_slice(&positions), storage),
+            out: ctx.output_buffer("classify out", n * 16),
+            // Indirect workgroups, count, then (ray, probe) per proposal.
+            list: buffer("classify proposals", (4 + 2 * traced_rays) * 4, storage | wgpu::BufferUsages::COPY_SRC),
+            indirect: buffer("classify indirect", 16, wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST),
+            keepers: ctx.output_buffer("classify keepers", 2 * n * 4),
+        }
     }
 }

@@ -320,6 +320,37 @@ impl WgpuProbeTracer {
         self.field.lock().ok().and_then(|f| f.as_ref().map(|f| f.bytes())).unwrap_or(0)
     }
 
+    /// Records and submits the blend and border passes of every member of
+    /// `plan` that blends this frame, over the shade pass's `results` in the
+    /// resident field `f` (with `timer`, member i's passes at slots from
+    /// 1 + i × `probe_blend::PASS_NAMES.len()`). Returns the members recorded.
+    fn record_blends(
+        &self,
+        blend: &GpuProbeBlend,
+        f: &GpuDdgiField,
+        plan: &[DeviceVolumeBlend<'_>],
+        results: &wgpu::Buffer,
+        timer: Option<&GpuTimer>,
+    ) -> Result<Vec<usize>, GpuError> {
+        let per_member = crate::probe_blend::PASS_NAMES.len() as u32;
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        let mut recorded = vec![];
+        for (i, p) in plan.iter().enumerate() {
+            if p.probe_blend.iter().all(|b| b.is_none()) {
+                continue;
+            }
+            let atlases = f.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
+            let bindings = blend.prepare_resident(&self.ctx, &atlases, p, results)?;
+            blend.record(&mut encoder, &bindings, timer.map(|t| (t, 1 + per_member * i as u32)));
+            recorded.push(i);
+        }
+        if let Some(t) = timer {
+            t.resolve(&mut encoder);
+        }
+        self.ctx.submit(encoder.finish());
+        Ok(recorded)
+    }
+
     /// `batch`'s rays generated on the device, when it records how to make all
     /// of them and this tracer keeps the field.
     fn generate_rays(&self, batch: &ProbeRayBatch) -> Result<Option<GpuRayBatch>, GpuError> {
@@ -777,21 +808,7 @@ impl DeviceField for WgpuProbeTracer {
             }
             let shade_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = std::time::Instant::now();
-            let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-            let mut recorded = vec![];
-            for (i, p) in plan.iter().enumerate() {
-                if p.probe_blend.iter().all(|b| b.is_none()) {
-                    continue;
-                }
-                let atlases = f.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
-                let bindings = blend.prepare_resident(&self.ctx, &atlases, p, &results)?;
-                blend.record(&mut encoder, &bindings, timer.as_ref().map(|t| (t, 1 + per_member * i as u32)));
-                recorded.push(i);
-            }
-            if let Some(t) = &timer {
-                t.resolve(&mut encoder);
-            }
-            self.ctx.submit(encoder.finish());
+            let recorded = self.record_blends(blend, f, plan, &results, timer.as_ref())?;
             if self.timing {
                 self.ctx.wait()?;
             }
