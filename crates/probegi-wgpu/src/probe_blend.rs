@@ -1,8 +1,11 @@
 //! The blend and border passes on the GPU (`shaders/probe_blend.wgsl`), mirroring
 //! `probegi_core::probe_blend::{blend_irradiance_tile, blend_distance_tile}` and
 //! `probegi_core::probe_border::update_tile_border` (seed 003 §4.5, seed 004
-//! §2.3 eq. 1, §4.2 Listing 1, §4.3 Listing 3). One thread per interior texel per
-//! probe, over the frame's sparse texel-to-ray weight tables as
+//! §2.3 eq. 1, §4.2 Listing 1, §4.3 Listing 3). One workgroup per probe stages
+//! the probe's rays in workgroup memory (RTXGI's `ProbeBlendingCS` with
+//! `RTXGI_DDGI_BLEND_SHARED_MEMORY`; up to 512 rays, more are read from the
+//! batch), then blends every interior texel of both atlases, over the frame's
+//! sparse texel-to-ray weight tables as
 //! `probegi_core::probe_blend::BlendWeights` builds them, uploaded (one owner of
 //! the weights: the same entries summed in the same order as on the CPU, and no
 //! `pow(cos, k)` per texel and ray on the device).
