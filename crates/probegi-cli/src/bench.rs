@@ -15,6 +15,7 @@ use probegi_cpu::{DirectLighting, DirectSettings};
 use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_frame::field_update::FieldSetUpdate;
+use probegi_frame::field_update::HOST_PLAN_PASS;
 use probegi_frame::frame_loop::FIELD_UPDATE_PASSES;
 use probegi_scene::{BvhSettings, BvhTracer, Ray, RayTracer, Scene, load_scene};
 use rayon::prelude::*;
@@ -178,6 +179,55 @@ fn host_share_json(
     })
 }
 
+/// The fewest updates [`pipelined_json`] runs back to back, whatever `--frames` says.
+const PIPELINED_MIN_FRAMES: u32 = 4;
+
+/// The field update as the frame loop runs it on the GPU backend: no pass
+/// waited for, each update's passes recorded and submitted together (one
+/// submission), the updates of `frames` back to back and one wait after the
+/// last. `update_ms` (wall time over the updates, that wait included) is what
+/// a frame pays for the field; `host_ms` is the host's share, the time inside
+/// the update calls less any time blocked on the device (with lavapipe that
+/// includes the driver's own work inside a submission, counted as waiting),
+/// and `field_set_ms` the field set's own part of it ([`HOST_PLAN_PASS`]:
+/// planning and bookkeeping, no command recording), which `update` returns.
+fn pipelined_json(
+    gpu: &WgpuProbeTracer,
+    frames: std::ops::RangeInclusive<u32>,
+    mut update: impl FnMut(u32) -> Result<f64>,
+    rays_per_frame: u64,
+) -> Result<serde_json::Value> {
+    let ctx = &gpu.ctx;
+    gpu.set_timing_passes(false);
+    ctx.wait()?;
+    let before = ctx.counters();
+    let (t, count) = (Instant::now(), frames.clone().count());
+    let (mut inside_ms, mut waited_in_ms, mut field_set_ms) = (0.0, 0.0, 0.0);
+    for f in frames {
+        let (t_update, waited) = (Instant::now(), ctx.counters().wait_ms);
+        ctx.defer_submissions(true);
+        let result = update(f);
+        ctx.defer_submissions(false);
+        field_set_ms += result?;
+        inside_ms += t_update.elapsed().as_secs_f64() * 1e3;
+        waited_in_ms += ctx.counters().wait_ms - waited;
+    }
+    ctx.wait()?;
+    let wall_ms = t.elapsed().as_secs_f64() * 1e3;
+    gpu.set_timing_passes(true);
+    let d = ctx.counters() - before;
+    let per = |x: f64| x / count as f64;
+    Ok(json!({
+        "updates": count,
+        "update_ms": per(wall_ms),
+        "mrays_per_s": rays_per_frame as f64 / (per(wall_ms) * 1e-3) / 1e6,
+        "host_ms": per((inside_ms - waited_in_ms).max(0.0)),
+        "field_set_ms": per(field_set_ms),
+        "submissions": per(d.submissions as f64),
+        "blocking_waits": per(d.blocking_waits as f64 - 1.0),
+    }))
+}
+
 /// What every configuration of a `bench --gi ddgi` sweep shares: the scene,
 /// its BVH and direct light, and the GPU where `--backend wgpu` traces.
 #[derive(Clone, Copy)]
@@ -214,6 +264,20 @@ impl DdgiSweep<'_> {
         let wall_ms = t.elapsed().as_secs_f64() * 1e3 / args.frames as f64;
         let host = host_share_json(gpu, counters_before, wall_ms, args.frames);
         let bus = bus_json(gpu, bus_before, args.frames, set.ray_batch());
+        let pipelined = match gpu {
+            Some(g) => {
+                let frames = (args.frames + 1)..=(args.frames + args.frames.max(PIPELINED_MIN_FRAMES));
+                let rays = set.volumes()[0].rays_per_frame();
+                let update = |f: u32| {
+                    let mut ms = BTreeMap::new();
+                    set.update_traced_by(scene, bvh, batch_tracer, direct, args.seed, f, &mut ms)
+                        .map_err(anyhow::Error::msg)?;
+                    Ok(ms.get(HOST_PLAN_PASS).copied().unwrap_or(0.0))
+                };
+                pipelined_json(g, frames, update, rays)?
+            }
+            None => json!(null),
+        };
         // After the timed frames: the field back on the host, as the update left
         // it (the GPU passes alone below start from it).
         set.sync_host_atlases(batch_tracer).map_err(anyhow::Error::msg)?;
@@ -266,6 +330,7 @@ impl DdgiSweep<'_> {
             "gpu": gpu_row,
             "bus_bytes_per_frame": bus,
             "host": host,
+            "pipelined": pipelined,
         }))
     }
 }

@@ -556,6 +556,45 @@ fn gpu_render_keeps_the_field_on_the_device_and_draws_probes_on_the_cpu_camera()
 }
 
 #[test]
+fn gpu_bench_runs_the_pipelined_update_as_one_submission_without_a_wait() {
+    if std::env::var_os("PROBEGI_REQUIRE_GPU").is_none() {
+        eprintln!("skipped: PROBEGI_REQUIRE_GPU is not set");
+        return;
+    }
+    for states in ["jcgt", "all-active"] {
+        let set = format!("probe_states={states}");
+        let o = probegi(&[
+            "bench",
+            "--gi",
+            "ddgi",
+            "--backend",
+            "wgpu",
+            "--grids",
+            "4,4,4",
+            "--rays",
+            "32",
+            "--frames",
+            "1",
+            "--repeat",
+            "1",
+            "--set",
+            &set,
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let json: serde_json::Value = serde_json::from_slice(&o.stdout).expect("bench json");
+        let piped = &json["sweep"][0]["pipelined"];
+        // At least 4 updates back to back whatever --frames says; each one submission, none waited for.
+        assert_eq!(piped["updates"], 4, "{piped}");
+        assert_eq!(piped["submissions"].as_f64(), Some(1.0), "{piped}");
+        assert_eq!(piped["blocking_waits"].as_f64(), Some(0.0), "{piped}");
+        let (host, field_set) =
+            (piped["host_ms"].as_f64().expect("host"), piped["field_set_ms"].as_f64().expect("set"));
+        assert!(field_set > 0.0 && field_set <= host, "{piped}");
+        assert!(piped["mrays_per_s"].as_f64().is_some_and(|r| r > 0.0), "{piped}");
+    }
+}
+
+#[test]
 fn ray_budget_inputs_are_checked_before_rendering() {
     for (set, key) in [
         ("ray_budget=-5", "ray_budget"),

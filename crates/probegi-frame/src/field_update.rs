@@ -153,7 +153,9 @@ fn drive_seam(
     // The shadowing field serves the lights as posed for this frame.
     set.set_shadow_lights(&driver.scene.lights);
     set.set_shadow_on_device(driver.device.is_some_and(|d| d.blends_shadow_field()));
+    let t = Instant::now();
     let mut step = set.begin_update(driver.seed, driver.frame);
+    time(HOST_PLAN_PASS, t, &mut driver.own_ms);
     loop {
         step = match step {
             UpdateStep::TraceRays => driver.trace_rays(set)?,
@@ -174,6 +176,13 @@ fn drive_seam(
     }
     Ok(driver.traced)
 }
+
+/// The `pass_ms` entry of the field set's own host work in an update:
+/// planning (probe states, the batch's probe records) and, where the device
+/// traces, shades and blends, the blend plan and the bookkeeping of the
+/// results (state transitions, hysteresis ramps). Neither the passes nor the
+/// recording of their commands are in it.
+pub const HOST_PLAN_PASS: &str = "host_plan";
 
 /// Adds the milliseconds since `t` to pass `name` in `ms`.
 fn time(name: &'static str, t: Instant, ms: &mut BTreeMap<&'static str, f64>) {
@@ -308,7 +317,10 @@ impl<'u> SeamDriver<'u> {
                 .then(|| set.volumes().iter().map(|v| v.grid.spacing_m.length()).collect::<Vec<_>>());
             if let Some(counts) = bt.trace_resident(set.ray_batch(), usage.as_deref()) {
                 self.traced += set.ray_batch().len() as u64;
-                let step = set.submit_device_hits(&counts?).unwrap_or_else(seam_bug);
+                let counts = counts?;
+                let t_plan = Instant::now();
+                let step = set.submit_device_hits(&counts).unwrap_or_else(seam_bug);
+                time(HOST_PLAN_PASS, t_plan, &mut self.own_ms);
                 self.on_device = true;
                 time("trace", t, &mut self.own_ms);
                 return Ok(Some(step));
@@ -324,7 +336,9 @@ impl<'u> SeamDriver<'u> {
             .batch_tracer
             .and_then(|bt| bt.device_field())
             .ok_or_else(|| BackendError::Unsupported("the device that traced the batch is gone".into()))?;
+        let t_plan = Instant::now();
         let plan = set.device_blend_plan()?;
+        time(HOST_PLAN_PASS, t_plan, &mut self.own_ms);
         let view = set.view();
         let output = bt.shade_and_blend(
             set.ray_batch(),
@@ -339,7 +353,10 @@ impl<'u> SeamDriver<'u> {
         for (pass, ms) in output.pass_ms {
             *self.own_ms.entry(pass).or_default() += ms;
         }
-        Ok(set.submit_device_blend(&output.probe_change)?)
+        let t_plan = Instant::now();
+        let step = set.submit_device_blend(&output.probe_change)?;
+        time(HOST_PLAN_PASS, t_plan, &mut self.own_ms);
+        Ok(step)
     }
 
     /// `UpdateStep::ShadeRays` after a trace whose hits are on the host: the

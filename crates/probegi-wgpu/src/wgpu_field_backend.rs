@@ -189,7 +189,7 @@ pub struct WgpuProbeTracer {
     device_frame_on: bool,
     /// The host waits after each pass of the update so that its wall times are
     /// the device's (`bench`; [`WgpuProbeTracer::timing_passes`]).
-    timing: bool,
+    timing: std::sync::atomic::AtomicBool,
 }
 
 impl WgpuProbeTracer {
@@ -250,7 +250,7 @@ impl WgpuProbeTracer {
             prev_update: Mutex::new(None),
             frame: Mutex::new(None),
             device_frame_on: true,
-            timing: false,
+            timing: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
@@ -305,9 +305,20 @@ impl WgpuProbeTracer {
     /// update and reads its timestamps back, so that `pass_ms` holds the
     /// device's times (`probegi bench`); without (the default), the update's
     /// passes are submitted without waiting.
-    pub fn timing_passes(mut self, timing: bool) -> Self {
-        self.timing = timing;
+    pub fn timing_passes(self, timing: bool) -> Self {
+        self.set_timing_passes(timing);
         self
+    }
+
+    /// [`Self::timing_passes`] on a tracer in use: `bench` times the same
+    /// field's update both ways, passes waited for one by one and pipelined.
+    pub fn set_timing_passes(&self, timing: bool) {
+        self.timing.store(timing, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Whether the update's passes are waited for one by one ([`Self::timing_passes`]).
+    fn timing(&self) -> bool {
+        self.timing.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// Whether update batches keep the field on the device.
@@ -710,7 +721,7 @@ impl DeviceField for WgpuProbeTracer {
         }
         let run = || -> Result<Vec<ProbeUsageCounts>, BackendError> {
             let resident = self.trace_resident(batch, false)?;
-            if self.timing {
+            if self.timing() {
                 self.ctx.wait()?;
             }
             let counts = match usage_cage_diagonals_m {
@@ -796,26 +807,26 @@ impl DeviceField for WgpuProbeTracer {
             // Timestamp queries where the device has them: the shade pass, then
             // each member's blend and border passes.
             let per_member = crate::probe_blend::PASS_NAMES.len() as u32;
-            let timer = (self.timing && self.ctx.timestamps)
+            let timer = (self.timing() && self.ctx.timestamps)
                 .then(|| GpuTimer::new(&self.ctx, 1 + per_member * plan.len() as u32));
             let shade_timer = timer.as_ref().map(|t| (t, 0));
             let results =
                 shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, &probes, seed32, frame, shade_timer)?;
             // With `timing` the host waits after each pass so that its wall times
             // are the device's (`bench`); otherwise the passes queue up unwaited.
-            if self.timing {
+            if self.timing() {
                 self.ctx.wait()?;
             }
             let shade_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = std::time::Instant::now();
             let recorded = self.record_blends(blend, f, plan, &results, timer.as_ref())?;
-            if self.timing {
+            if self.timing() {
                 self.ctx.wait()?;
             }
             let blend_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = std::time::Instant::now();
             self.shadow_update(f, scene, plan)?;
-            if self.timing {
+            if self.timing() {
                 self.ctx.wait()?;
             }
             let mut pass_ms =
