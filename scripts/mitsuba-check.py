@@ -452,6 +452,8 @@ class Scene:
     sky: np.ndarray
     camera: Camera | None
     warnings: list[str]
+    # An environment map instead of `sky` (probegi's [sky_map]): path, intensity, rotation_deg.
+    sky_map: dict | None = None
 
 
 def merge(dst: Scene, src: Scene) -> None:
@@ -462,6 +464,8 @@ def merge(dst: Scene, src: Scene) -> None:
     dst.materials += src.materials
     dst.lights += src.lights
     dst.sky = np.maximum(dst.sky, src.sky)
+    if dst.sky_map is None:
+        dst.sky_map = src.sky_map
     dst.warnings += src.warnings
     if dst.camera is None:
         dst.camera = src.camera
@@ -962,11 +966,16 @@ def parse_camera(d: dict) -> Camera:
     )
 
 
+def resolve_path(spec: str, base: Path) -> Path:
+    """A file named in a scene file: `shared:PATH` or relative to the file (scene_file.rs)."""
+    return shared_dir() / spec[len("shared:") :] if spec.startswith("shared:") else base / spec
+
+
 def load_sub(spec: str, base: Path, opts: dict, frame: float, bump: bool) -> Scene:
     if spec.startswith("builtin:"):
         sub = load_scene(spec, frame, bump)
     else:
-        path = shared_dir() / spec[len("shared:") :] if spec.startswith("shared:") else base / spec
+        path = resolve_path(spec, base)
         sub = load_obj(path, bump) if path.suffix.lower() == ".obj" else load_scene(str(path), frame, bump)
     apply_normals_rule(sub, opts.get("normals", "file"), float(opts.get("crease_angle_deg", 180.0)))
     return sub
@@ -1105,6 +1114,13 @@ def load_toml(path: Path, text: str, base: Path, frame: float, bump: bool) -> Sc
     scene.lights += [parse_light(l, frame) for l in f.get("lights", [])]
     if "sky_radiance" in f:
         scene.sky = np.asarray(f["sky_radiance"], np.float64)
+    if "sky_map" in f:
+        m = f["sky_map"]
+        scene.sky_map = {
+            "path": str(resolve_path(m["path"], base)),
+            "intensity": float(m.get("intensity", 1.0)),
+            "rotation_deg": float(m.get("rotation_deg", 0.0)),
+        }
     if "camera" in f:
         scene.camera = parse_camera(f["camera"])
     return scene
@@ -2373,7 +2389,20 @@ def build_mitsuba_scene(mi, ProbegiBSDF, GltfPunctual, scene: Scene, cam: Camera
     if n_gltf:
         how = "ProbegiBSDF (probegi's Material::bsdf)" if args.shading_model == "probegi" else "Mitsuba `principled`"
         notes.append(f"{n_gltf} glTF metallic-roughness material(s): {how}; {n_normal} with normal maps")
-    if float(scene.sky.max()) > 0:
+    if scene.sky_map is not None:
+        # probegi's convention is Mitsuba's envmap (environment_map.rs): the same
+        # file, scale and turn about +y; --sky-map-extra-rotation-deg turns
+        # Mitsuba's alone (a sensitivity check that must fail).
+        m = scene.sky_map
+        turn = m["rotation_deg"] + float(args.sky_map_extra_rotation_deg)
+        d["sky"] = {
+            "type": "envmap",
+            "filename": m["path"],
+            "scale": m["intensity"],
+            "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], turn),
+        }
+        notes.append(f"sky map {m['path']} × {m['intensity']}, turned {m['rotation_deg']}° (Mitsuba {turn}°)")
+    elif float(scene.sky.max()) > 0:
         d["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [float(x) for x in scene.sky]}}
     for i, l in enumerate(scene.lights):
         c = [float(x) * l.intensity for x in l.color]
@@ -2477,6 +2506,15 @@ def main() -> int:
     ap.add_argument("--camera-up", type=vec3, help=neg)
     ap.add_argument("--fov-y", type=float, help="vertical field of view, degrees")
     ap.add_argument("--sky", type=vec3, help="constant sky radiance R,G,B (overrides the scene's)")
+    ap.add_argument("--sky-map", help="equirectangular .exr/.hdr sky (overrides the scene's sky)")
+    ap.add_argument("--sky-intensity", type=float, default=1.0, help="the sky map's radiance scale")
+    ap.add_argument("--sky-rotation-deg", type=float, default=0.0, help="the sky map's turn about +y")
+    ap.add_argument(
+        "--sky-map-extra-rotation-deg",
+        type=float,
+        default=0.0,
+        help="turn Mitsuba's sky map alone by this much more (a sensitivity check: 90 must fail)",
+    )
     ap.add_argument("--max-depth", type=int, default=64, help="probegi's --max-depth (Mitsuba gets N + 1)")
     ap.add_argument("--frame", type=float, default=0.0, help="light keyframes evaluated at this frame")
     ap.add_argument("--seed", type=int, default=0, help="probegi seed; Mitsuba uses seed+1 and seed+2")
@@ -2527,6 +2565,13 @@ def main() -> int:
             print(f"warning: {w}", file=sys.stderr)
         if args.sky is not None:
             scene.sky = args.sky
+            scene.sky_map = None
+        if args.sky_map is not None:
+            scene.sky_map = {
+                "path": str(Path(args.sky_map).resolve()),
+                "intensity": args.sky_intensity,
+                "rotation_deg": args.sky_rotation_deg,
+            }
         if args.no_cutouts:
             for m in scene.materials:
                 m.alpha_tex, m.alpha_factor = None, 1.0
@@ -2584,6 +2629,10 @@ def main() -> int:
             ]
             if args.sky is not None:
                 cmd.append(f"--sky={fmt3(args.sky)}")
+            if scene.sky_map is not None:
+                m = scene.sky_map
+                cmd += [f"--sky-map={m['path']}", f"--sky-intensity={m['intensity']!r}"]
+                cmd.append(f"--sky-rotation-deg={m['rotation_deg']!r}")
             if args.no_bump:
                 cmd.append("--set=normal_maps=false")
             if args.no_cutouts:
@@ -2602,6 +2651,9 @@ def main() -> int:
             sky = np.asarray(scene.sky, np.float64)
             tol = 1e-4 * max(float(sky.max()), 1.0)
             obj = (np.abs(b - sky).max(-1) > tol) | (np.abs(b2 - sky).max(-1) > tol)
+            if scene.sky_map is not None:
+                # Pixels that see the map differ between seeds too: no object mask.
+                obj = np.ones(obj.shape, bool)
             row["object_px"] = float(obj.mean())
             if obj.any():
                 row["ratio_obj"] = a[obj].mean(0) / np.maximum(b[obj].mean(0), 1e-12)

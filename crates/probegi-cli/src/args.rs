@@ -194,8 +194,19 @@ pub struct SceneArgs {
     #[arg(long)]
     pub fov_y: Option<f32>,
     /// Constant sky radiance R,G,B for rays that leave the scene (default: the scene's, else black).
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true, conflicts_with = "sky_map")]
     pub sky: Option<Vec3>,
+    /// An equirectangular HDR sky (.exr or Radiance .hdr) lighting the scene
+    /// instead of a constant one; Mitsuba's `envmap` convention (docs/SCENES.md).
+    #[arg(long)]
+    pub sky_map: Option<std::path::PathBuf>,
+    /// Radiance scale of the sky map (default: the scene's, else 1).
+    #[arg(long, allow_hyphen_values = true)]
+    pub sky_intensity: Option<f32>,
+    /// Rotation of the sky map about the up axis in degrees (+90: its centre
+    /// turns from +Z to +X; default: the scene's, else 0).
+    #[arg(long, allow_hyphen_values = true)]
+    pub sky_rotation_deg: Option<f32>,
     /// Random seed; the same seed gives the same image on any number of threads.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

@@ -30,7 +30,9 @@ pub fn prepare(args: &SceneArgs, set: &[String], bytes_per_pixel: u64) -> Result
             bail!("--sky {sky} must be non-negative");
         }
         scene.sky_radiance = sky;
+        scene.sky_map = None;
     }
+    apply_sky_map(&mut scene, args)?;
     let mut camera = scene.default_camera();
     if let Some(p) = args.camera_pos {
         camera.position = p;
@@ -58,4 +60,34 @@ pub fn prepare(args: &SceneArgs, set: &[String], bytes_per_pixel: u64) -> Result
 /// at every frame up to `last_frame` (`Scene::check_posed_bounds`).
 pub fn check_posed_bounds(scene: &Scene, last_frame: f32) -> Result<()> {
     scene.check_posed_bounds(last_frame).map_err(|e| anyhow::anyhow!("scene {}: {e}", scene.name))
+}
+
+/// `--sky-map`, `--sky-intensity` and `--sky-rotation-deg`: a map from the
+/// command line replaces the scene's sky; the other two adjust whichever map
+/// the scene then has.
+fn apply_sky_map(scene: &mut Scene, args: &SceneArgs) -> Result<()> {
+    if let Some(path) = &args.sky_map {
+        let map = probegi_scene::EnvironmentMap::load(path).map_err(|e| anyhow::anyhow!("--sky-map: {e}"))?;
+        scene.sky_map = Some(probegi_scene::SkyMap::new(std::sync::Arc::new(map)));
+    }
+    let adjusts = args.sky_intensity.is_some() || args.sky_rotation_deg.is_some();
+    let Some(map) = scene.sky_map.as_mut() else {
+        if adjusts {
+            bail!("--sky-intensity and --sky-rotation-deg need a sky map (--sky-map, or [sky_map] in the scene file)");
+        }
+        return Ok(());
+    };
+    if let Some(i) = args.sky_intensity {
+        if !i.is_finite() || i < 0.0 {
+            bail!("--sky-intensity {i} must be finite and non-negative");
+        }
+        map.intensity = i;
+    }
+    if let Some(r) = args.sky_rotation_deg {
+        if !r.is_finite() {
+            bail!("--sky-rotation-deg {r} must be finite");
+        }
+        map.rotation_deg = r;
+    }
+    Ok(())
 }

@@ -10,6 +10,10 @@
 //!   cosine-weighted BSDF sample is already proportional to the unoccluded
 //!   integrand, so a separate sky light sample would draw from the same density
 //!   and MIS between two identical strategies only doubles the rays;
+//! - an environment map (`Scene::sky_map`) by next-event estimation drawn from
+//!   its luminance density (`probegi_scene::environment_map`) combined with BSDF
+//!   sampling by the power heuristic: a small bright sun is found by the light
+//!   sample, a glossy reflection of it by the BSDF sample;
 //! - Russian roulette from `pt_rr_start_depth`, survival = max throughput channel
 //!   (≤ 0.95); hard stop at `pt_max_depth` vertices.
 //!
@@ -26,7 +30,7 @@ use probegi_core::sampling::power_heuristic;
 use probegi_scene::{Ray, RayTracer, Scene, SurfacePoint};
 
 use crate::light_sampling::AreaLights;
-use crate::shading::{ShadingContext, lambert_cos, punctual_direct, shadow_ray_to};
+use crate::shading::{ShadingContext, lambert_cos, punctual_direct, shadow_ray_along, shadow_ray_to};
 
 /// Settings of the reference path tracer (`probegi reference`).
 #[derive(Clone, Copy, Debug)]
@@ -153,6 +157,38 @@ impl<'a> PathTracer<'a> {
         (ctx.eval(s.wi) * s.radiance * (cos * w / s.pdf_solid_angle), 1)
     }
 
+    /// One next-event sample of the environment map at `sp`, MIS-weighted
+    /// against BSDF sampling (draws two numbers, only when the scene has a map).
+    fn sky_map_nee(&self, sp: &SurfacePoint, ctx: &ShadingContext, rng: &mut Pcg32) -> (Vec3, u64) {
+        let Some(map) = &self.scene.sky_map else { return (Vec3::ZERO, 0) };
+        let u = rng.next_vec2();
+        if !self.settings.pt_light_sampling {
+            return (Vec3::ZERO, 0);
+        }
+        let Some(s) = map.sample(u) else { return (Vec3::ZERO, 0) };
+        let Some(cos) = lambert_cos(sp, s.wi) else { return (Vec3::ZERO, 0) };
+        if s.radiance == Vec3::ZERO || s.pdf_solid_angle <= 0.0 {
+            return (Vec3::ZERO, 0);
+        }
+        if self.tracer.occluded(&shadow_ray_along(sp, s.wi, f32::INFINITY)) {
+            return (Vec3::ZERO, 1);
+        }
+        let w = power_heuristic(s.pdf_solid_angle, ctx.pdf(s.wi));
+        (ctx.eval(s.wi) * s.radiance * (cos * w / s.pdf_solid_angle), 1)
+    }
+
+    /// The sky a path that left the scene along `dir` adds: an environment map's
+    /// MIS-weighted against its own light sample after a BSDF sample.
+    fn sky_on_miss(&self, dir: Vec3, prev_bsdf_pdf: Option<f32>) -> Vec3 {
+        let scene = self.scene;
+        match (&scene.sky_map, prev_bsdf_pdf) {
+            (Some(map), Some(pdf)) if self.settings.pt_light_sampling => {
+                map.radiance(dir) * power_heuristic(pdf, map.pdf(dir))
+            }
+            _ => scene.sky_toward(dir),
+        }
+    }
+
     /// Radiance arriving along `ray`, and the number of rays traced.
     pub fn radiance(&self, mut ray: Ray, rng: &mut Pcg32) -> (Vec3, u64) {
         let scene = self.scene;
@@ -165,7 +201,7 @@ impl<'a> PathTracer<'a> {
         for depth in 0..self.settings.pt_max_depth {
             rays += 1;
             let Some(hit) = self.tracer.closest_hit(&ray) else {
-                l += throughput * scene.sky_radiance;
+                l += throughput * self.sky_on_miss(ray.dir, prev_bsdf_pdf);
                 break;
             };
             let sp = scene.surface_point(&hit);
@@ -188,6 +224,9 @@ impl<'a> PathTracer<'a> {
 
             let (ld, n) = self.area_light_nee(&sp, &ctx, rng);
             l += throughput * ld;
+            rays += n;
+            let (ls, n) = self.sky_map_nee(&sp, &ctx, rng);
+            l += throughput * ls;
             rays += n;
             let (lp, n) = punctual_direct(scene, self.tracer, &sp, &ctx);
             l += throughput * lp;

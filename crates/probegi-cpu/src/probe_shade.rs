@@ -98,7 +98,7 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                 }
                 let dir = batch.directions[i];
                 *r = match (&inputs.hits[i], &points[i]) {
-                    (None, _) => inputs.scene.sky_radiance,
+                    (None, _) => inputs.scene.sky_toward(dir),
                     (Some(_), None) => Vec3::ZERO,
                     (Some(_), Some(sp)) => {
                         let ctx = ShadingContext::new(inputs.scene, sp, -dir);

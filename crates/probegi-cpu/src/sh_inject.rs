@@ -165,7 +165,7 @@ pub fn injection_samples(
         });
     }
     let k = settings.sh_sky_samples_per_probe;
-    if k > 0 && scene.sky_radiance != Vec3::ZERO {
+    if k > 0 && scene.has_sky() {
         let rotation = sample_uniform_rotation(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()));
         for i in 0..k {
             let dir = rotation * spherical_fibonacci(i, k);
@@ -175,7 +175,7 @@ pub fn injection_samples(
                     continue;
                 }
             }
-            out.push((dir, scene.sky_radiance, 4.0 * PI / k as f32 * scale));
+            out.push((dir, scene.sky_toward(dir), 4.0 * PI / k as f32 * scale));
         }
     }
     rays

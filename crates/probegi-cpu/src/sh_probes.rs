@@ -178,7 +178,7 @@ fn update_probe(
     } else {
         progressive_update_toward(coeffs, probe, blocks, settings.sh_hysteresis);
     }
-    if settings.sh_light_injection && (!emitters.is_empty() || scene.sky_radiance != Vec3::ZERO) {
+    if settings.sh_light_injection && (!emitters.is_empty() || scene.has_sky()) {
         light.clear();
         rays += injection_samples(scene, tracer, emitters, settings, probe, rng, light);
         progressive_update(coeffs, light.iter().copied(), settings.sh_hysteresis);

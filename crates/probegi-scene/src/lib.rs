@@ -7,6 +7,7 @@
 //! - [`material`]: metallic-roughness materials with the OBJ/MTL fields beside them.
 //! - [`texture`]: 8-bit textures, their samplers and lookups.
 //! - [`light`]: punctual lights (KHR_lights_punctual semantics and units).
+//! - [`environment_map`]: the equirectangular HDR sky (EXR, Radiance `.hdr`), its lookup and sampling.
 //! - [`shapes`]: hand-made geometry: polygons, boxes, rooms.
 //! - `bounds`: axis-aligned bounds under a transform (crate-internal).
 //!
@@ -32,6 +33,7 @@ mod bounds;
 pub mod builtin;
 pub mod bvh;
 pub mod bvh_walk;
+pub mod environment_map;
 pub mod error;
 pub mod file_lookup;
 pub mod gltf_file;
@@ -50,6 +52,7 @@ pub mod tracer;
 pub use animation::{MotionPath, ObjectAnimation, SceneObject, TransformKeyframe};
 pub use bvh::{BvhCutTriangle, BvhCutoutMask, BvhExport, BvhSettings, BvhTracer, TlasExport, TlasInstance, TlasLayout};
 pub use bvh_walk::TraceGuardCounts;
+pub use environment_map::{EnvironmentMap, SkyMap, SkySample};
 pub use error::SceneError;
 pub use light::{LightKind, PunctualLight};
 pub use load::load_scene;

@@ -1,5 +1,5 @@
 //! The scene model: one merged triangle mesh, its materials and textures, punctual
-//! lights, a constant sky and an optional camera. Emissive triangles are the area
+//! lights, a constant sky or an environment map, and an optional camera. Emissive triangles are the area
 //! lights. Scenes are y-up, in metres. Rigid [`SceneObject`]s are ranges of the
 //! mesh that move over frames; [`Scene::set_frame_from`] poses them (and the
 //! lights) for a frame, and a tracer built with `BvhTracer::for_scene` follows
@@ -46,8 +46,12 @@ pub struct Scene {
     /// Frames per second of the animation clock, for animations authored in
     /// seconds (glTF); frame `f` is at `f / frames_per_second` seconds.
     pub frames_per_second: f32,
-    /// Constant radiance of rays that leave the scene, W·sr⁻¹·m⁻² per channel.
+    /// Constant radiance of rays that leave the scene, W·sr⁻¹·m⁻² per channel
+    /// (unused where `sky_map` is set).
     pub sky_radiance: Vec3,
+    /// An environment map in place of the constant sky (see
+    /// [`crate::environment_map`]); [`Scene::sky_toward`] reads whichever is set.
+    pub sky_map: Option<crate::environment_map::SkyMap>,
     /// The camera the file asked for, if any; when the camera is animated, the
     /// first key's camera.
     pub camera: Option<Camera>,
@@ -251,6 +255,7 @@ impl Default for Scene {
             instances: Vec::new(),
             frames_per_second: 30.0,
             sky_radiance: Vec3::ZERO,
+            sky_map: None,
             camera: None,
             camera_keyframes: Vec::new(),
             volume: None,
@@ -627,10 +632,27 @@ impl Scene {
     pub fn has_light_sources(&self) -> bool {
         let lit = |l: &crate::light::PunctualLight| l.intensity > 0.0 && l.color.max_element() > 0.0;
         let emits = |&m: &u32| self.materials.get(m as usize).is_some_and(|m| m.is_emissive());
-        self.sky_radiance.max_element() > 0.0
+        self.has_sky()
             || self.lights.iter().any(lit)
             || self.mesh.triangle_materials.iter().any(emits)
             || self.prototypes.iter().any(|p| p.mesh.triangle_materials.iter().any(emits))
+    }
+
+    /// The radiance a ray that leaves the scene along unit direction `dir`
+    /// sees: the environment map's there, else the constant sky.
+    pub fn sky_toward(&self, dir: Vec3) -> Vec3 {
+        match &self.sky_map {
+            Some(map) => map.radiance(dir),
+            None => self.sky_radiance,
+        }
+    }
+
+    /// Whether rays that leave the scene see any light.
+    pub fn has_sky(&self) -> bool {
+        match &self.sky_map {
+            Some(map) => !map.is_black(),
+            None => self.sky_radiance.max_element() > 0.0,
+        }
     }
 
     /// Whether the camera is animated: it has keyframes (then
@@ -739,6 +761,14 @@ impl Scene {
         self.validate_mesh()?;
         if !self.sky_radiance.is_finite() || self.sky_radiance.min_element() < 0.0 {
             return Err("sky_radiance must be finite and non-negative".into());
+        }
+        if let Some(map) = &self.sky_map {
+            if !map.intensity.is_finite() || map.intensity < 0.0 {
+                return Err(format!("sky map intensity {} must be finite and non-negative", map.intensity));
+            }
+            if !map.rotation_deg.is_finite() {
+                return Err(format!("sky map rotation {} must be finite", map.rotation_deg));
+            }
         }
         for (i, l) in self.lights.iter().enumerate() {
             l.validate().map_err(|e| format!("light {i}: {e}"))?;

@@ -5,7 +5,11 @@
 //! errors, so a typo never silently does nothing.
 //!
 //! ```toml
-//! sky_radiance = [0.0, 0.0, 0.0]
+//! sky_radiance = [0.0, 0.0, 0.0]                  # constant sky, or instead:
+//! # [sky_map]                                     # an equirectangular HDR sky (docs/SCENES.md)
+//! # path = "sunset.exr"                           # .exr or Radiance .hdr, relative to this file
+//! # intensity = 1.0                               # radiance scale
+//! # rotation_deg = 0.0                            # about +y; +90° turns the map's centre from +z to +x
 //! frames_per_second = 30.0                        # animation clock (glTF seconds)
 //!
 //! [[meshes]]
@@ -90,6 +94,25 @@ use crate::error::{Result, SceneError};
 use crate::light::PunctualLight;
 use crate::scene::{CameraKeyframe, Scene};
 
+/// `[sky_map]`: an equirectangular HDR image lighting the scene
+/// ([`crate::environment_map`]).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SkyMapEntry {
+    /// `.exr` or Radiance `.hdr`, relative to the scene file (or `shared:PATH`).
+    pub path: String,
+    /// Radiance scale of every texel.
+    #[serde(default = "unit_intensity")]
+    pub intensity: f32,
+    /// Rotation about the up axis, degrees (+90°: the map's centre turns from +z to +x).
+    #[serde(default)]
+    pub rotation_deg: f32,
+}
+
+fn unit_intensity() -> f32 {
+    1.0
+}
+
 /// A whole scene file, as parsed (the module doc shows every table).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -106,6 +129,9 @@ pub struct SceneFile {
     /// Constant radiance of rays that leave the scene; black when absent.
     #[serde(default)]
     pub sky_radiance: Option<Vec3>,
+    /// `[sky_map]`: an environment map instead (not with `sky_radiance`).
+    #[serde(default)]
+    pub sky_map: Option<SkyMapEntry>,
     /// `[camera]`, with its span for error lines.
     #[serde(default)]
     pub camera: Option<Spanned<CameraEntry>>,
@@ -551,6 +577,20 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
     if let Some(sky) = file.sky_radiance {
         scene.sky_radiance = sky;
     }
+    if let Some(entry) = &file.sky_map {
+        if file.sky_radiance.is_some() {
+            return Err(toml_err("give sky_radiance or [sky_map], not both".into()));
+        }
+        let map_path = resolve_file(&entry.path, base_dir)?;
+        let map = crate::environment_map::EnvironmentMap::load(&map_path)?;
+        let (intensity, rotation_deg) = (entry.intensity, entry.rotation_deg);
+        if !intensity.is_finite() || intensity < 0.0 || !rotation_deg.is_finite() {
+            return Err(toml_err(format!(
+                "[sky_map]: intensity ({intensity}) must be finite and ≥ 0, rotation_deg ({rotation_deg}) finite"
+            )));
+        }
+        scene.sky_map = Some(crate::environment_map::SkyMap { map: std::sync::Arc::new(map), intensity, rotation_deg });
+    }
     if let Some(entry) = &file.camera {
         let (camera, keys) = entry.get_ref().resolve(entry.span().start).map_err(|(at, message)| {
             SceneError::Parse { path: path.to_path_buf(), line: line_of(text, at), message }
@@ -661,13 +701,17 @@ fn load_sub_scene(spec: &str, base_dir: &Path) -> Result<Scene> {
     if spec.starts_with("builtin:") {
         return crate::load::load_scene(spec);
     }
-    let path: PathBuf = match spec.strip_prefix("shared:") {
+    crate::load::load_scene(&resolve_file(spec, base_dir)?.to_string_lossy())
+}
+
+/// A file named in a scene file: `shared:PATH` or a path relative to `base_dir`.
+fn resolve_file(spec: &str, base_dir: &Path) -> Result<PathBuf> {
+    Ok(match spec.strip_prefix("shared:") {
         Some(rel) => crate::file_lookup::shared_dir()
             .map(|d| d.join(rel))
             .map_err(|message| SceneError::Invalid { path: PathBuf::from(spec), message })?,
         None => base_dir.join(spec),
-    };
-    crate::load::load_scene(&path.to_string_lossy())
+    })
 }
 
 enum ObjectError {
@@ -805,6 +849,9 @@ fn merge_into(scene: &mut Scene, sub: Scene) {
     scene.textures.extend(sub.textures);
     scene.lights.extend(sub.lights);
     scene.sky_radiance = scene.sky_radiance.max(sub.sky_radiance);
+    if scene.sky_map.is_none() {
+        scene.sky_map = sub.sky_map;
+    }
     if scene.camera.is_none() {
         scene.camera = sub.camera;
         scene.camera_keyframes = sub.camera_keyframes;

@@ -101,8 +101,9 @@ fn pack_materials(scene: &Scene) -> Vec<[f32; 4]> {
 }
 
 /// `scene_textures`: the sRGB table, the counts, the texture headers, the GGX
-/// albedo table and the texels (the layout `scene.wgsl` documents).
-fn pack_textures(scene: &Scene, instance_records: u32) -> Vec<u32> {
+/// albedo table, the texels and the sky map's (the layout `scene.wgsl`
+/// documents); and where the sky map starts with its width, if there is one.
+fn pack_textures(scene: &Scene, instance_records: u32) -> (Vec<u32>, Option<SkyMapPlace>) {
     let lut = srgb8_to_linear_table();
     let table = specular_albedo_table();
     let mut words: Vec<u32> = lut.iter().map(|v| v.to_bits()).collect();
@@ -119,16 +120,29 @@ fn pack_textures(scene: &Scene, instance_records: u32) -> Vec<u32> {
     for t in &scene.textures {
         words.extend(t.texels.iter().map(|c| c[0] as u32 | (c[1] as u32) << 8 | (c[2] as u32) << 16));
     }
-    words
+    let sky_map = scene.sky_map.as_ref().map(|m| {
+        let place = SkyMapPlace { first_word: words.len() as u32, width: m.map.size().0 };
+        words.extend(m.map.texels().iter().flat_map(|t| t.to_array().map(f32::to_bits)));
+        place
+    });
+    (words, sky_map)
+}
+
+/// Where a scene's environment map lies in `scene_textures`: its first word
+/// and its width (three f32 words a texel, row-major from the top row).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct SkyMapPlace {
+    first_word: u32,
+    width: u32,
 }
 
 /// `scene_lights`: the punctual lights, then the emitters' power-weighted
 /// distribution (`Scene::emitter_powers`, as the CPU's AreaLights); and the
 /// emitter count.
-fn pack_lights(scene: &Scene) -> (Vec<[f32; 4]>, usize) {
+fn pack_lights(scene: &Scene, sky_map: Option<SkyMapPlace>) -> (Vec<[f32; 4]>, usize) {
     let (emitters, weights) = scene.emitter_powers();
     let distribution = Distribution1d::new(&weights);
-    let mut lights = pack_punctual_lights(scene);
+    let mut lights = pack_punctual_lights(scene, sky_map);
     lights[0][1] = f32::from_bits(emitters.len() as u32);
     let mut cdf = 0.0f32;
     for (i, &t) in emitters.iter().enumerate() {
@@ -163,12 +177,25 @@ pub struct GpuScene {
     moving: Vec<std::ops::Range<usize>>,
     /// An emitter moves: `pose_lights` rewrites the emitters' distribution too.
     emitter_moves: bool,
+    /// Where the sky map lies in `scene_textures`, if the scene has one.
+    sky_map: Option<SkyMapPlace>,
 }
 
 /// `scene_lights`' header, sky and punctual lights (emitters follow them).
-fn pack_punctual_lights(scene: &Scene) -> Vec<[f32; 4]> {
-    let mut lights: Vec<[f32; 4]> =
-        vec![[f32::from_bits(scene.lights.len() as u32), 0.0, 0.0, 0.0], scene.sky_radiance.extend(0.0).into()];
+/// With a sky map (`sky_map`: where it lies in `scene_textures`), the sky
+/// vec4 holds its intensity and the sine and cosine of minus its rotation
+/// (`SkyMap::radiance`'s turn into the map's frame).
+fn pack_punctual_lights(scene: &Scene, sky_map: Option<SkyMapPlace>) -> Vec<[f32; 4]> {
+    let (map_first, map_width) = sky_map.map_or((u32::MAX, 0), |p| (p.first_word, p.width));
+    let sky: [f32; 4] = match (&scene.sky_map, sky_map) {
+        (Some(m), Some(_)) => {
+            let (sin, cos) = (-m.rotation_deg.to_radians()).sin_cos();
+            [m.intensity, sin, cos, 0.0]
+        }
+        _ => scene.sky_radiance.extend(0.0).into(),
+    };
+    let header = [f32::from_bits(scene.lights.len() as u32), 0.0, f32::from_bits(map_first), f32::from_bits(map_width)];
+    let mut lights: Vec<[f32; 4]> = vec![header, sky];
     for l in &scene.lights {
         let kind = match l.kind {
             LightKind::Point => 0u32,
@@ -223,14 +250,15 @@ impl GpuScene {
     pub fn upload(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
         let (triangles, instance_records) = pack_scene_triangles(scene);
         let materials = pack_materials(scene);
-        let words = pack_textures(scene, instance_records);
+        let (words, sky_map) = pack_textures(scene, instance_records);
         // Lights: punctual lights, then the emitters' power-weighted distribution
         // (`Scene::emitter_powers`, as the CPU's AreaLights).
-        let (lights, emitters) = pack_lights(scene);
+        let (lights, emitters) = pack_lights(scene, sky_map);
+        let textures = if sky_map.is_some() { "its textures and sky map" } else { "its textures" };
         for (what, bytes) in [
             ("the scene's triangles", triangles.len() * 16),
             ("its materials", materials.len() * 16),
-            ("its textures", words.len() * 4),
+            (textures, words.len() * 4),
             ("its lights", lights.len() * 16),
         ] {
             ctx.check_buffer(bytes as u64, &format!("scene {}: {what}", scene.name))?;
@@ -263,6 +291,7 @@ impl GpuScene {
             triangle_buffer,
             moving,
             emitter_moves: emitter_moves(scene),
+            sky_map,
         })
     }
 
@@ -271,8 +300,19 @@ impl GpuScene {
     /// switched by their keyframes (the count stays); and, when an emitter is
     /// on a moving object, the emitters' distribution from their posed areas.
     pub fn pose_lights(&self, ctx: &GpuContext, scene: &Scene) -> Result<(), GpuError> {
+        let same_map = match (&scene.sky_map, self.sky_map) {
+            (Some(m), Some(p)) => m.map.size().0 == p.width,
+            (None, None) => true,
+            _ => false,
+        };
+        if !same_map {
+            return Err(GpuError::Input(format!(
+                "scene {}: its sky map is not the one it was uploaded with (a map's intensity and rotation may change, not the map)",
+                scene.name
+            )));
+        }
         let lights = if self.emitter_moves {
-            let (lights, emitters) = pack_lights(scene);
+            let (lights, emitters) = pack_lights(scene, self.sky_map);
             if emitters != self.emitters {
                 return Err(GpuError::Input(format!(
                     "scene {} has {emitters} emitting triangles at this frame, {} when uploaded",
@@ -281,7 +321,7 @@ impl GpuScene {
             }
             lights
         } else {
-            let mut lights = pack_punctual_lights(scene);
+            let mut lights = pack_punctual_lights(scene, self.sky_map);
             lights[0][1] = f32::from_bits(self.emitters as u32);
             lights
         };

@@ -83,7 +83,7 @@ pub(super) fn shade_camera(
             for (x, ((d, i), a)) in drow.iter_mut().zip(irow.iter_mut()).zip(arow.iter_mut()).enumerate() {
                 let texel = &gbuffer.texels[y * w + x];
                 let Some(sp) = &texel.surface else {
-                    *d = scene.sky_radiance;
+                    *d = scene.sky_toward(-texel.view_dir_world);
                     *i = Vec3::ZERO;
                     *a = Vec3::ZERO;
                     continue;
@@ -150,7 +150,7 @@ fn glossy_ray_radiance(
     let CameraPasses { scene, tracer, direct, direct_settings, second_order, .. } = *passes;
     let ray = Ray::new(sp.spawn_origin(wi), wi);
     match tracer.closest_hit(&ray) {
-        None => (scene.sky_radiance, 0),
+        None => (scene.sky_toward(wi), 0),
         Some(hit) => {
             shade_glossy_hit(scene, direct, direct_settings, field, &scene.surface_point(&hit), wi, second_order, rng)
         }

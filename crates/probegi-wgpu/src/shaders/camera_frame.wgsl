@@ -81,7 +81,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
         + camera.up.xyz * (ndc_y * camera.origin.w));
     let hit = bvh_trace(bvh_make_ray(camera.origin.xyz, dir, 0.0, SCENE_F32_MAX), false);
     if (hit.leaf == BVH_NO_HIT) {
-        camera_direct[3u * i] = vec4<f32>(camera.sky.xyz, 0.0);
+        camera_direct[3u * i] = vec4<f32>(camera_sky(dir), 0.0);
         camera_direct[3u * i + 1u] = vec4<f32>(0.0);
         camera_direct[3u * i + 2u] = vec4<f32>(0.0);
         camera_irradiance[i] = vec4<f32>(0.0);
@@ -108,7 +108,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
             let wi = frame_to_world(fr, s.xyz);
             if (scene_lambert_cos(sp, wi) > 0.0) {
                 let g = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, SCENE_F32_MAX), false);
-                var lr = camera.sky.xyz;
+                var lr = camera_sky(wi);
                 if (g.leaf != BVH_NO_HIT) {
                     // frame_loop::camera_pass::shade_glossy_hit
                     let sh = scene_surface_point(bvh_triangle_id(g.leaf), g.instance, g.bary, g.backface);
@@ -148,4 +148,14 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     camera_direct[3u * i + 1u] = vec4<f32>(albedo, oct.y);
     camera_direct[3u * i + 2u] = vec4<f32>(sp.position, 1.0);
     camera_irradiance[i] = vec4<f32>(e / SCENE_PI, flag);
+}
+
+// The sky a camera ray or a glossy reflection that leaves the scene sees: the
+// sky map's (scene.wgsl's scene_sky), else the frame's constant sky (which the
+// host may change between frames without posing the scene).
+fn camera_sky(dir: vec3<f32>) -> vec3<f32> {
+    if (bitcast<u32>(scene_lights[0].z) != SCENE_NONE) {
+        return scene_sky(dir);
+    }
+    return camera.sky.xyz;
 }

@@ -100,7 +100,7 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
         return;
     }
     if (h.triangle == BVH_NO_HIT) {
-        shade_radiance[i] = vec4<f32>(scene_lights[1].xyz, d);
+        shade_radiance[i] = vec4<f32>(scene_sky(r.dir), d);
         return;
     }
     let sp = scene_surface_point(h.triangle, h.instance, h.bary, false);

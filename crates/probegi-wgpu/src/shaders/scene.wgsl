@@ -29,8 +29,12 @@
 //                    records in scene_triangles, then per texture (width,
 //                    height, first texel word, sampler: wrap u (0 repeat, 1 mirrored, 2 clamp) | wrap v << 2
 //                    | nearest << 4), the (A, B) table (N × N × 2 f32 bits,
-//                    probegi_core::bsdf::specular_albedo_table), then RGB8 texels one per word
-//   scene_lights:    vec4 header (punctual count, emitter count bits, 0, 0), vec4 sky radiance,
+//                    probegi_core::bsdf::specular_albedo_table), then RGB8 texels one per word,
+//                    then the sky map's texels (`Scene::sky_map`), f32 bits r, g, b each, row-major
+//                    from the top row
+//   scene_lights:    vec4 header (punctual count, emitter count bits, the sky map's first word in
+//                    scene_textures bits (NONE: no map), its width bits), vec4 sky: the constant
+//                    sky's radiance, or with a map (intensity, sin, cos of minus its rotation, 0),
 //                    per punctual light 4 × vec4: (kind, range or −1, inner, outer), position, direction, colour × intensity;
 //                    per emitter vec4: (triangle bits, CDF, selection pdf / area, 0)
 
@@ -40,6 +44,7 @@
 @group(3) @binding(3) var<storage, read> scene_lights: array<vec4<f32>>;
 
 const SCENE_PI: f32 = 3.14159265358979;
+const SCENE_TAU: f32 = 6.28318530717959;
 const SCENE_NONE: u32 = 0xffffffffu;
 const SCENE_F32_MAX: f32 = 3.4028235e38;
 // probegi_core::bsdf::MIN_ALPHA
@@ -720,4 +725,46 @@ fn scene_emitter_sample(sp: SurfacePoint, fr: Frame, wo: vec3<f32>, bsdf: Bsdf, 
         return true;
     }
     return false;
+}
+
+// probegi_scene::Scene::sky_toward: the radiance seen looking along unit `dir`
+// from inside the scene: the sky map's (probegi_scene::environment_map: Mitsuba's
+// envmap convention, bilinear between texel centres, wrapping in u, clamped in v)
+// or the constant sky's.
+fn scene_sky(dir: vec3<f32>) -> vec3<f32> {
+    let header = scene_lights[0];
+    let sky = scene_lights[1];
+    let first = bitcast<u32>(header.z);
+    if (first == SCENE_NONE) {
+        return sky.xyz;
+    }
+    let w = bitcast<u32>(header.w);
+    let h = w / 2u;
+    // SkyMap::to_map, then environment_map::direction_to_uv.
+    let l = vec3<f32>(sky.z * dir.x + sky.y * dir.z, dir.y, -sky.y * dir.x + sky.z * dir.z);
+    var u = atan2(l.x, -l.z) / SCENE_TAU;
+    if (u < 0.0) {
+        u += 1.0;
+    }
+    let v = acos(clamp(l.y, -1.0, 1.0)) / SCENE_PI;
+    // EnvironmentMap::lookup_uv
+    let x = u * f32(w) - 0.5;
+    let y = v * f32(h) - 0.5;
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let fx = x - x0;
+    let fy = y - y0;
+    let i0 = u32((i32(x0) % i32(w) + i32(w)) % i32(w));
+    let i1 = (i0 + 1u) % w;
+    let j0 = u32(clamp(i32(y0), 0, i32(h) - 1));
+    let j1 = u32(clamp(i32(y0) + 1, 0, i32(h) - 1));
+    let top = scene_sky_texel(first, w, i0, j0) * (1.0 - fx) + scene_sky_texel(first, w, i1, j0) * fx;
+    let bottom = scene_sky_texel(first, w, i0, j1) * (1.0 - fx) + scene_sky_texel(first, w, i1, j1) * fx;
+    return (top * (1.0 - fy) + bottom * fy) * sky.x;
+}
+
+fn scene_sky_texel(first: u32, w: u32, i: u32, j: u32) -> vec3<f32> {
+    let k = first + 3u * (j * w + i);
+    return vec3<f32>(bitcast<f32>(scene_textures[k]), bitcast<f32>(scene_textures[k + 1u]),
+                     bitcast<f32>(scene_textures[k + 2u]));
 }
