@@ -138,3 +138,47 @@ fn ddgi_renders_are_identical_for_any_thread_count() {
     let b = three.install(|| render(&scene, 24, 4, ddgi(settings.clone())).image);
     assert_eq!(a, b);
 }
+
+/// A 100 m floor of albedo 0.5 facing up under a uniform sky map of radiance 2
+/// (turned 25°: a uniform map must not care), the camera looking straight
+/// down from 2 m, and probes on 5 × 3 × 5 points 1 m apart from 0.5 m above
+/// the floor: the sky's furnace, whose floor leaves ρ/π · π L = 1.
+pub fn sky_furnace() -> (Scene, DdgiVolumeSettings) {
+    use probegi_scene::Material;
+    let mut scene = Scene { materials: vec![Material::diffuse("floor", Vec3::splat(0.5))], ..Default::default() };
+    let s = 50.0;
+    probegi_scene::builtin::add_polygon(
+        &mut scene.mesh,
+        &[Vec3::new(-s, 0.0, s), Vec3::new(s, 0.0, s), Vec3::new(s, 0.0, -s), Vec3::new(-s, 0.0, -s)],
+        0,
+    );
+    let map = probegi_scene::EnvironmentMap::from_texels(std::path::Path::new("white"), 16, 8, vec![Vec3::ONE; 128])
+        .expect("map");
+    scene.sky_map = Some(probegi_scene::SkyMap { map: std::sync::Arc::new(map), intensity: 2.0, rotation_deg: 25.0 });
+    scene.camera = Some(probegi_core::camera::Camera {
+        position: Vec3::new(0.3, 2.0, 0.2),
+        target: Vec3::new(0.3, 0.0, 0.2),
+        up: Vec3::Z,
+        fov_y_deg: 40.0,
+    });
+    let settings = DdgiVolumeSettings {
+        probe_counts: UVec3::new(5, 3, 5),
+        probe_origin_m: Some(Vec3::new(-2.0, 0.5, -2.0)),
+        probe_spacing_m: Some(Vec3::ONE),
+        probe_rays_per_probe: 64,
+        ..Default::default()
+    };
+    (scene, settings)
+}
+
+#[test]
+fn a_uniform_sky_map_lights_the_open_floor_through_the_field_to_rho_l() {
+    // Every probe ray that leaves reads the map: each probe's irradiance toward
+    // +y is π L whatever its rays (all of that hemisphere sees the sky), so the
+    // floor is exactly 1 up to the irradiance encoding's rounding.
+    let (scene, settings) = sky_furnace();
+    let out = render(&scene, 16, 8, ddgi(settings));
+    let mean = out.image.mean();
+    assert!((mean - Vec3::ONE).abs().max_element() < 0.01, "floor under a white sky map: {mean}, want 1");
+    assert!(out.image.first_invalid_pixel().is_none());
+}

@@ -26,10 +26,12 @@
 //! row's centre (the solid angle of a texel row), chosen by a marginal CDF
 //! over rows and a conditional CDF over each row's texels; the density of a
 //! direction is `p(u, v) / (2π² sin θ)`. Deliberate deviation: a texel's
-//! luminance is the largest of its 3 × 3 neighbourhood's, so that the
-//! bilinear radiance a sample reads never far exceeds what its density
-//! expects (with a one-texel sun, the plain density underestimates by 5 % at
-//! 20 000 samples, the rest in rare huge samples). The density is of the texels, the
+//! luminance is the mean of the bilinear radiance over it (its 3 × 3
+//! neighbourhood under the tent's weights), not its own value, so that every
+//! direction the bilinear radiance lights has a density and the density
+//! follows the radiance a sample reads (with the texel's own value, a
+//! one-texel sun's bilinear skirt is found only by rare, huge samples: 5 %
+//! low at 20 000 samples). The density is of the texels, the
 //! radiance bilinear: MIS against BSDF sampling keeps the estimate unbiased
 //! where the two differ (a black texel beside a bright one).
 
@@ -276,16 +278,17 @@ impl MapSampling {
             let mut sum = 0.0f64;
             row_cdf.push(0.0);
             for i in 0..w {
-                // The brightest of the 3 × 3 texels around: every bilinear value
-                // inside this texel blends texels among them, so the radiance
-                // over the density stays bounded (no rare, huge samples beside a sun).
-                let mut peak = 0.0f32;
-                for jj in j.saturating_sub(1)..=(j + 1).min(h - 1) {
-                    for di in [w - 1, 0, 1] {
-                        peak = peak.max(lum((i + di) % w, jj));
+                // The mean of the bilinear luminance over this texel: its 3 × 3
+                // neighbourhood under the tent's weights, ¾ for the texel and ⅛
+                // for each side per axis (rows clamped, columns wrapped, as lookups).
+                let mut mean = 0.0f32;
+                for (dj, kj) in [(-1i64, 0.125f32), (0, 0.75), (1, 0.125)] {
+                    let jj = (j as i64 + dj).clamp(0, h as i64 - 1) as usize;
+                    for (di, ki) in [(w - 1, 0.125f32), (0, 0.75), (1, 0.125)] {
+                        mean += kj * ki * lum((i + di) % w, jj);
                     }
                 }
-                let weight = peak * sin_theta;
+                let weight = mean * sin_theta;
                 weights.push(weight);
                 sum += weight as f64;
                 row_cdf.push(sum);
