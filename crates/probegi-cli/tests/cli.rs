@@ -717,3 +717,72 @@ fn view_runs_scripted_without_a_window_and_names_bad_input() {
     };
     assert!(image.mean().max_element() > 0.01 && image.first_invalid_pixel().is_none());
 }
+
+#[test]
+fn sky_maps_light_the_render_and_bad_ones_are_refused_naming_the_file_and_the_place() {
+    use glam::Vec3;
+    let s = |p: &PathBuf| p.to_string_lossy().into_owned();
+    // Written with the exr crate itself: probegi's writer refuses what these test.
+    let write = |name: &str, w: u32, h: u32, f: &(dyn Fn(u32, u32) -> Vec3 + Sync)| {
+        let p = tmp(name);
+        exr::prelude::write_rgb_file(&p, w as usize, h as usize, |x, y| {
+            let c = f(x as u32, y as u32);
+            (c.x, c.y, c.z)
+        })
+        .expect("write map");
+        s(&p)
+    };
+    let out = s(&tmp("sky.exr"));
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", "--frames", "1", "--width", "8", "--height", "8", "--out", &out];
+        args.extend_from_slice(extra);
+        args.iter().map(|a| a.to_string()).collect::<Vec<_>>()
+    };
+    let fails = |extra: &[&str], needle: &str| {
+        let args = render(extra);
+        fails_with(&args.iter().map(String::as_str).collect::<Vec<_>>(), needle);
+    };
+    // A camera looking straight up sees only the map: its middle row is 3 (× intensity 2).
+    let good = write("good.exr", 16, 8, &|_, _| Vec3::splat(3.0));
+    let up = ["--camera-pos", "0,100,0", "--camera-target", "0,101,0", "--camera-up", "0,0,1"];
+    let mut args = render(&up);
+    args.extend(["--sky-map", &good, "--sky-intensity", "2"].map(String::from));
+    let o = probegi(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = match probegi_image::read_image(&tmp("sky.exr")).expect("render") {
+        probegi_image::LoadedImage::Hdr(img) => img,
+        probegi_image::LoadedImage::Srgb8 { .. } => panic!("an EXR"),
+    };
+    assert!((img.mean() - Vec3::splat(6.0)).abs().max_element() < 1e-4, "sky pixels {}", img.mean());
+
+    fails(&["--sky-map", "/nonexistent/dir/sky.exr"], "/nonexistent/dir/sky.exr");
+    let square = write("square.exr", 8, 8, &|_, _| Vec3::ONE);
+    fails(&["--sky-map", &square], "twice as wide as high; this one is 8×8");
+    let nan = write("nan.exr", 8, 4, &|x, y| if (x, y) == (5, 2) { Vec3::new(1.0, f32::NAN, 1.0) } else { Vec3::ONE });
+    fails(&["--sky-map", &nan], "texel (5, 2)");
+    let negative = write("negative.exr", 8, 4, &|x, y| if (x, y) == (1, 3) { Vec3::splat(-1.0) } else { Vec3::ONE });
+    fails(&["--sky-map", &negative], "texel (1, 3)");
+    let hdr = tmp("broken.hdr");
+    std::fs::write(&hdr, b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +Z 8\n\x01\x02").expect("write");
+    fails(&["--sky-map", &s(&hdr)], "broken.hdr");
+    fails(&["--sky-intensity", "2"], "need a sky map");
+    fails(&["--sky-map", &good, "--sky-intensity", "-1"], "--sky-intensity -1");
+    fails(&["--sky-map", &good, "--sky", "1,1,1"], "cannot be used with");
+
+    // A scene file's [sky_map], relative to the file, and not beside sky_radiance.
+    let dir = tmp("sky-scene");
+    std::fs::create_dir_all(&dir).expect("dir");
+    std::fs::copy(tmp("good.exr"), dir.join("map.exr")).expect("copy");
+    let floor = "[[objects]]\npolygon_m = [[-1.0, 0.0, -1.0], [-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0]]\n";
+    let toml = dir.join("s.toml");
+    std::fs::write(&toml, format!("{floor}[sky_map]\npath = \"map.exr\"\nintensity = 0.5\nrotation_deg = 10.0\n"))
+        .expect("write");
+    let mut args = render(&up);
+    args.extend(["--scene".to_string(), s(&toml)]);
+    let o = probegi(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::write(&toml, format!("sky_radiance = [1.0, 1.0, 1.0]\n{floor}[sky_map]\npath = \"map.exr\"\n")).expect("write");
+    fails(&["--scene", &s(&toml)], "not both");
+    std::fs::write(&toml, format!("{floor}[sky_map]\npath = \"gone.exr\"\n")).expect("write");
+    fails(&["--scene", &s(&toml)], "gone.exr");
+}

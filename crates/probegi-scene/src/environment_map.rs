@@ -9,8 +9,8 @@
 //!   along −z, a quarter across along +x, the centre along +z, three
 //!   quarters along −x;
 //! - `v = acos(d.y) / π`: the top row is straight up (+y), the bottom row
-//!   straight down.
-//! Straight up or down, `u` is whatever `atan2` gives (the row is one point).
+//!   straight down. Straight up or down, `u` is whatever `atan2` gives (the
+//!   row is one point).
 //!
 //! Texel `(i, j)` (row 0 at the top of the file) covers
 //! `u ∈ [i/W, (i+1)/W)`, `v ∈ [j/H, (j+1)/H)`; lookups are bilinear between
@@ -483,7 +483,7 @@ mod tests {
 
     #[test]
     fn bad_maps_are_refused_with_the_texel() {
-        let bad = |w: u32, h: u32, t: Vec<Vec3>| EnvironmentMap::from_texels(Path::new("m.exr"), w, h, t).unwrap_err();
+        let bad = |w: u32, h: u32, t: Vec<Vec3>| EnvironmentMap::from_texels(Path::new("m.exr"), w, h, t).expect_err("refused");
         assert!(bad(4, 4, vec![Vec3::ONE; 16]).contains("twice as wide"));
         let mut t = vec![Vec3::ONE; 8];
         t[5] = Vec3::new(0.0, f32::NAN, 0.0);
