@@ -132,7 +132,7 @@ fn render(args: &RenderArgs) -> Result<()> {
     });
     let (image, stats) = (out.image, out.stats);
     bar.finish_and_clear();
-    frame_outputs.finish(&stats, args.allow_black_frames)?;
+    frame_outputs.finish(&stats, args.allow_black_frames, args.gi == args::GiArg::Sh)?;
     if stats.nonfinite_pixels > 0 {
         eprintln!(
             "warning: {} camera pixel samples came out NaN or infinite and were written as 0; check the \

@@ -90,13 +90,13 @@ impl<'a> FrameOutputs<'a> {
     /// After the last frame: the first write error, else the render's failure
     /// (`render_failure`), removes this run's frames and fails; otherwise the
     /// GIF is completed.
-    pub fn finish(self, stats: &RenderStats, allow_black_frames: bool) -> Result<()> {
+    pub fn finish(self, stats: &RenderStats, allow_black_frames: bool, screen_space_gi: bool) -> Result<()> {
         let failure = match self.sequence_error {
             Some(e) => Some(anyhow::Error::new(e).context(
                 "writing the --sequence / --gif frames (this run's frames were removed); a non-finite pixel \
                  usually comes from a material, texture or light with huge or non-finite values",
             )),
-            None => render_failure(stats, allow_black_frames),
+            None => render_failure(stats, allow_black_frames, screen_space_gi),
         };
         if let Some(e) = failure {
             // No partial sequence that looks complete: this run's frames go too, and
@@ -116,12 +116,27 @@ impl<'a> FrameOutputs<'a> {
 /// Why a finished render must not be written: the frame loop stopped early,
 /// or frames came out all black though the scene has light sources and the
 /// camera sees surfaces with a diffuse albedo (`RenderStats::black_frames`).
-fn render_failure(stats: &RenderStats, allow_black_frames: bool) -> Option<anyhow::Error> {
+/// Under screen-space GI (`--gi sh`) such a frame is the method's known
+/// limit, not a bug: it gathers indirect light only from pixels the frame
+/// lights directly (seed 001 §7.3), and a black frame has none (a camera
+/// looking up at the Cornell box's ceiling, whose light faces away).
+fn render_failure(stats: &RenderStats, allow_black_frames: bool, screen_space_gi: bool) -> Option<anyhow::Error> {
     if let Some(e) = &stats.error {
         return Some(anyhow::anyhow!("render stopped: {e}; nothing was written"));
     }
     if stats.black_frames.is_empty() || allow_black_frames {
         return None;
+    }
+    let frames = if stats.black_frames.len() == 1 { "" } else { "s" };
+    if screen_space_gi {
+        return Some(anyhow::anyhow!(
+            "frame{frames} {:?} came out all black: no pixel of this view is lit directly, and --gi sh gathers \
+             indirect light only from directly lit pixels on the screen (seed 001 §7.3: off-screen surfaces do \
+             not contribute), so every surface it sees, lit only indirectly, stays black; nothing was written. \
+             --gi ddgi traces the whole scene; a view that sees a directly lit surface works with --gi sh; \
+             --allow-black-frames accepts such frames",
+            stats.black_frames
+        ));
     }
     Some(anyhow::anyhow!(
         "frame{} {:?} came out all black although the scene has light sources and the camera sees diffuse \

@@ -781,8 +781,26 @@ fn sky_maps_light_the_render_and_bad_ones_are_refused_naming_the_file_and_the_pl
     args.extend(["--scene".to_string(), s(&toml)]);
     let o = probegi(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(o.status.success(), "{}", stderr(&o));
-    std::fs::write(&toml, format!("sky_radiance = [1.0, 1.0, 1.0]\n{floor}[sky_map]\npath = \"map.exr\"\n")).expect("write");
+    std::fs::write(&toml, format!("sky_radiance = [1.0, 1.0, 1.0]\n{floor}[sky_map]\npath = \"map.exr\"\n"))
+        .expect("write");
     fails(&["--scene", &s(&toml)], "not both");
     std::fs::write(&toml, format!("{floor}[sky_map]\npath = \"gone.exr\"\n")).expect("write");
     fails(&["--scene", &s(&toml)], "gone.exr");
+}
+
+#[test]
+fn screen_space_gi_that_sees_no_directly_lit_pixel_says_why_it_is_black() {
+    // Looking up at the Cornell box's ceiling beside the light (which faces
+    // away): every visible surface is lit only indirectly, which screen-space
+    // GI cannot gather from the screen (seed 001 §7.3). DDGI lights the same view.
+    let out = tmp("sh-ceiling.png").to_string_lossy().into_owned();
+    let view = ["--camera-pos=-0.6,1.5,-0.6", "--camera-target=-0.6,1.99,-0.6", "--fov-y", "30"];
+    let mut args = vec!["render", "--frames", "2", "--width", "16", "--height", "16", "--out", &out];
+    args.extend(view);
+    let mut sh = args.clone();
+    sh.extend(["--gi", "sh"]);
+    fails_with(&sh, "no pixel of this view is lit directly");
+    args.extend(["--gi", "ddgi", "--probes", "4,4,4", "--rays-per-probe", "64"]);
+    let o = probegi(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
 }

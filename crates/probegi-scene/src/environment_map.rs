@@ -483,7 +483,9 @@ mod tests {
 
     #[test]
     fn bad_maps_are_refused_with_the_texel() {
-        let bad = |w: u32, h: u32, t: Vec<Vec3>| EnvironmentMap::from_texels(Path::new("m.exr"), w, h, t).expect_err("refused");
+        let bad = |w: u32, h: u32, t: Vec<Vec3>| {
+            EnvironmentMap::from_texels(Path::new("m.exr"), w, h, t).expect_err("refused")
+        };
         assert!(bad(4, 4, vec![Vec3::ONE; 16]).contains("twice as wide"));
         let mut t = vec![Vec3::ONE; 8];
         t[5] = Vec3::new(0.0, f32::NAN, 0.0);
