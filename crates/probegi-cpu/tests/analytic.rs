@@ -177,7 +177,7 @@ fn sky_map(texel: impl Fn(u32, u32) -> Vec3, intensity: f32, rotation_deg: f32) 
     let texels = (0..32u32).flat_map(|y| (0..64u32).map(move |x| (x, y))).map(|(x, y)| texel(x, y)).collect();
     let map = probegi_scene::EnvironmentMap::from_texels(std::path::Path::new("test-sky"), 64, 32, texels)
         .expect("a 2:1 map");
-    probegi_scene::SkyMap { map: std::sync::Arc::new(map), intensity, rotation_deg }
+    probegi_scene::SkyMap { intensity, rotation_deg, ..probegi_scene::SkyMap::new(std::sync::Arc::new(map)) }
 }
 
 /// E(+y) = ∫ L(ω) max(cos θ, 0) dω over a sky map's bilinear radiance, by the

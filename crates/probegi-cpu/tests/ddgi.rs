@@ -154,7 +154,11 @@ pub fn sky_furnace() -> (Scene, DdgiVolumeSettings) {
     );
     let map = probegi_scene::EnvironmentMap::from_texels(std::path::Path::new("white"), 16, 8, vec![Vec3::ONE; 128])
         .expect("map");
-    scene.sky_map = Some(probegi_scene::SkyMap { map: std::sync::Arc::new(map), intensity: 2.0, rotation_deg: 25.0 });
+    scene.sky_map = Some(probegi_scene::SkyMap {
+        intensity: 2.0,
+        rotation_deg: 25.0,
+        ..probegi_scene::SkyMap::new(std::sync::Arc::new(map))
+    });
     scene.camera = Some(probegi_core::camera::Camera {
         position: Vec3::new(0.3, 2.0, 0.2),
         target: Vec3::new(0.3, 0.0, 0.2),

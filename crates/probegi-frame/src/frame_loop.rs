@@ -409,7 +409,7 @@ impl<'a> FrameLoop<'a> {
             if let Some(edit) = &self.scene_edit {
                 // Posing does not carry the sky; an edit starts from the base's.
                 fs.sky_radiance = self.base_scene.sky_radiance;
-                fs.sky_map.clone_from(&self.base_scene.sky_map);
+                fs.sky_map = self.base_scene.sky_map.as_ref().map(|m| m.at_frame(f as f32));
                 edit(self.base_scene, fs);
             }
         }

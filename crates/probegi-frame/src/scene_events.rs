@@ -5,6 +5,10 @@
 //!
 //! - A punctual light switching on or off (intensity crossing zero) is a large
 //!   light change for every volume.
+//! - A sky map that turns or dims between frames (a moving sun, seed 004's
+//!   time of day) is a small light change for every volume, renewed each frame
+//!   it moves; a jump (more than [`SKY_JUMP_DEG`] of rotation, or an intensity
+//!   that halves, doubles or crosses zero, in one frame) is a large one.
 //! - Sleeping probes inside moving objects' boxes, grown by a cell, wake (jcgt).
 //! - An object whose centre jumps by more than a volume's smallest spacing in one
 //!   frame, within that volume grown by a cell, is a large object change for that
@@ -21,6 +25,9 @@ use probegi_field::ddgi_volume::SceneEvent;
 pub struct SceneChanges {
     /// A punctual light switched on or off since the last observation.
     pub light_toggled: bool,
+    /// The sky map turned or dimmed since the last observation: `Some(true)`
+    /// for a jump (a large light change), `Some(false)` for a gradual change.
+    pub sky_changed: Option<bool>,
     /// Volumes told of a large object change.
     pub object_jumps: Vec<usize>,
     /// Sleeping probes woken around moving objects.
@@ -32,7 +39,13 @@ pub struct SceneChanges {
 pub struct SceneChangeDetector {
     lights_on: Option<Vec<bool>>,
     object_bounds: Vec<(Vec3, Vec3)>,
+    /// The sky map's (intensity, rotation_deg) last observed.
+    sky: Option<(f32, f32)>,
 }
+
+/// A sky map turning by more than this in one frame is a large light change
+/// (seed 004 §4.3's abrupt time-of-day change); less is a small one.
+pub const SKY_JUMP_DEG: f32 = 10.0;
 
 impl SceneChangeDetector {
     /// A detector that has observed no frame yet.
@@ -49,6 +62,20 @@ impl SceneChangeDetector {
         }
     }
 
+    /// The sky map's change since the last observation, told to `set` (see the module docs).
+    fn observe_sky(&mut self, scene: &Scene, set: &mut DdgiFieldSet) -> Option<bool> {
+        let now = scene.sky_map.as_ref().map(|m| (m.intensity, m.rotation_deg));
+        let prev = std::mem::replace(&mut self.sky, now);
+        let ((i0, r0), (i1, r1)) = (prev?, now?);
+        if i0 == i1 && r0 == r1 {
+            return None;
+        }
+        let crossed = (i0 > 0.0) != (i1 > 0.0);
+        let jump = crossed || (r1 - r0).abs() > SKY_JUMP_DEG || i1 > 2.0 * i0 || i0 > 2.0 * i1;
+        set.notify_scene_event(if jump { SceneEvent::LargeLightChange } else { SceneEvent::SmallLightChange });
+        Some(jump)
+    }
+
     /// Compares `scene` (this frame) with the last observed frame and reports the
     /// changes to `set`.
     pub fn observe(&mut self, scene: &Scene, set: &mut DdgiFieldSet) -> SceneChanges {
@@ -62,6 +89,7 @@ impl SceneChangeDetector {
             set.notify_scene_event(SceneEvent::LargeLightChange);
         }
         self.lights_on = Some(on);
+        changes.sky_changed = self.observe_sky(scene, set);
         if scene.has_moving_geometry() {
             let bounds = scene.moving_object_bounds();
             changes.probes_woken = set.wake_probes_near(&bounds);
@@ -86,5 +114,42 @@ impl SceneChangeDetector {
             self.object_bounds = bounds;
         }
         changes
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use probegi_core::ddgi_settings::DdgiVolumeSettings;
+    use probegi_field::ddgi_volume::DdgiVolume;
+
+    #[test]
+    fn a_turning_sky_map_is_a_small_light_change_and_a_jump_a_large_one() {
+        let map = probegi_scene::EnvironmentMap::from_texels(std::path::Path::new("sky"), 4, 2, vec![Vec3::ONE; 8])
+            .expect("map");
+        let mut scene = probegi_scene::builtin::cornell_box();
+        scene.sky_map = Some(probegi_scene::SkyMap::new(std::sync::Arc::new(map)));
+        let settings = DdgiVolumeSettings { probe_counts: UVec3::splat(2), ..Default::default() };
+        let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, (Vec3::ZERO, Vec3::ONE)));
+        let mut detector = SceneChangeDetector::new();
+        let mut at = |scene: &Scene, set: &mut DdgiFieldSet| {
+            let c = detector.observe(scene, set);
+            (c.sky_changed, set.volumes()[0].irradiance_hysteresis_scale())
+        };
+        // The first observation only remembers the sky; a still sky changes nothing.
+        assert_eq!(at(&scene, &mut set), (None, 1.0));
+        assert_eq!(at(&scene, &mut set), (None, 1.0));
+        let turn = |scene: &mut Scene, deg: f32| scene.sky_map.as_mut().expect("map").rotation_deg = deg;
+        turn(&mut scene, 2.0);
+        let (changed, small) = at(&scene, &mut set);
+        assert_eq!(changed, Some(false));
+        assert!(small < 1.0, "a turning sky lowers the hysteresis: {small}");
+        turn(&mut scene, 2.0 + SKY_JUMP_DEG + 1.0);
+        let (changed, large) = at(&scene, &mut set);
+        assert_eq!(changed, Some(true));
+        assert!(large < small, "a jump lowers it further: {large} after {small}");
+        // Dimming to half is a jump too.
+        scene.sky_map.as_mut().expect("map").intensity = 0.4;
+        assert_eq!(at(&scene, &mut set).0, Some(true));
     }
 }

@@ -70,7 +70,8 @@ impl std::fmt::Debug for EnvironmentMap {
     }
 }
 
-/// A map placed in a scene: shared texels, a scale and a turn about +y.
+/// A map placed in a scene: shared texels, a scale and a turn about +y, each
+/// of which may follow keyframes (a moving sun: [`SkyMap::at_frame`]).
 #[derive(Clone, Debug)]
 pub struct SkyMap {
     /// The map.
@@ -79,6 +80,31 @@ pub struct SkyMap {
     pub intensity: f32,
     /// Rotation about the up axis, degrees (see the module docs).
     pub rotation_deg: f32,
+    /// Keys of `intensity` and `rotation_deg` over frames, in increasing frame
+    /// order (empty: a still sky). Between keys each channel interpolates
+    /// linearly; it holds before the first key and after the last.
+    pub keyframes: Vec<SkyMapKeyframe>,
+}
+
+/// One key of a sky map's animation; either channel may be absent.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SkyMapKeyframe {
+    /// Frame number (fractional frames allowed).
+    pub frame: f32,
+    /// The map's intensity from this key on.
+    #[serde(default)]
+    pub intensity: Option<f32>,
+    /// The map's rotation about +y from this key on, degrees (not wrapped:
+    /// 0 → 360 turns the sky once).
+    #[serde(default)]
+    pub rotation_deg: Option<f32>,
+}
+
+impl crate::animation::Keyed for SkyMapKeyframe {
+    fn frame(&self) -> f32 {
+        self.frame
+    }
 }
 
 /// The marginal and conditional CDFs of the texel density.
@@ -205,9 +231,37 @@ pub struct SkySample {
 }
 
 impl SkyMap {
-    /// `map` at intensity 1, unturned.
+    /// `map` at intensity 1, unturned, still.
     pub fn new(map: Arc<EnvironmentMap>) -> Self {
-        Self { map, intensity: 1.0, rotation_deg: 0.0 }
+        Self { map, intensity: 1.0, rotation_deg: 0.0, keyframes: Vec::new() }
+    }
+
+    /// This sky at `frame` with its keyframes applied (itself if it has none).
+    pub fn at_frame(&self, frame: f32) -> SkyMap {
+        let mut sky = self.clone();
+        let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+        if let Some(i) = crate::animation::channel(&self.keyframes, frame, |k| k.intensity, lerp) {
+            sky.intensity = i;
+        }
+        if let Some(r) = crate::animation::channel(&self.keyframes, frame, |k| k.rotation_deg, lerp) {
+            sky.rotation_deg = r;
+        }
+        sky
+    }
+
+    /// Why its settings are unusable, if they are: a non-finite or negative
+    /// intensity, a non-finite rotation, keys out of order.
+    pub fn validate(&self) -> Result<(), String> {
+        crate::animation::validate_key_frames(&self.keyframes)?;
+        let intensities = std::iter::once(Some(self.intensity)).chain(self.keyframes.iter().map(|k| k.intensity));
+        if let Some(i) = intensities.flatten().find(|i| !i.is_finite() || *i < 0.0) {
+            return Err(format!("sky map intensity {i} must be finite and non-negative"));
+        }
+        let rotations = std::iter::once(Some(self.rotation_deg)).chain(self.keyframes.iter().map(|k| k.rotation_deg));
+        if let Some(r) = rotations.flatten().find(|r| !r.is_finite()) {
+            return Err(format!("sky map rotation {r} must be finite"));
+        }
+        Ok(())
     }
 
     /// The direction in the map's frame of world direction `d`.

@@ -431,7 +431,9 @@ impl Scene {
 
     /// Whether anything in the scene changes from frame to frame.
     pub fn is_animated(&self) -> bool {
-        self.lights.iter().any(|l| !l.keyframes.is_empty()) || self.has_moving_geometry()
+        self.lights.iter().any(|l| !l.keyframes.is_empty())
+            || self.sky_map.as_ref().is_some_and(|s| !s.keyframes.is_empty())
+            || self.has_moving_geometry()
     }
 
     /// Re-derives shading normals of every triangle by `rule` (see
@@ -501,6 +503,9 @@ impl Scene {
     pub fn set_frame_from(&mut self, base: &Scene, frame: f32) {
         for (l, b) in self.lights.iter_mut().zip(&base.lights) {
             *l = b.at_frame(frame);
+        }
+        if let (Some(sky), Some(b)) = (self.sky_map.as_mut(), base.sky_map.as_ref()) {
+            *sky = b.at_frame(frame);
         }
         for o in base.objects.iter().filter(|o| o.is_animated()) {
             let xf = o.world_from_rest(frame);
@@ -763,12 +768,7 @@ impl Scene {
             return Err("sky_radiance must be finite and non-negative".into());
         }
         if let Some(map) = &self.sky_map {
-            if !map.intensity.is_finite() || map.intensity < 0.0 {
-                return Err(format!("sky map intensity {} must be finite and non-negative", map.intensity));
-            }
-            if !map.rotation_deg.is_finite() {
-                return Err(format!("sky map rotation {} must be finite", map.rotation_deg));
-            }
+            map.validate()?;
         }
         for (i, l) in self.lights.iter().enumerate() {
             l.validate().map_err(|e| format!("light {i}: {e}"))?;

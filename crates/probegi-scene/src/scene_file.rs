@@ -10,6 +10,7 @@
 //! # path = "sunset.exr"                           # .exr or Radiance .hdr, relative to this file
 //! # intensity = 1.0                               # radiance scale
 //! # rotation_deg = 0.0                            # about +y; +90° turns the map's centre from +z to +x
+//! # keyframes = [{ frame = 0, rotation_deg = 0.0 }, { frame = 120, rotation_deg = 90.0, intensity = 2.0 }]
 //! frames_per_second = 30.0                        # animation clock (glTF seconds)
 //!
 //! [[meshes]]
@@ -107,6 +108,9 @@ pub struct SkyMapEntry {
     /// Rotation about the up axis, degrees (+90°: the map's centre turns from +z to +x).
     #[serde(default)]
     pub rotation_deg: f32,
+    /// Keys of `intensity` and `rotation_deg` over frames (a moving sun).
+    #[serde(default)]
+    pub keyframes: Vec<crate::environment_map::SkyMapKeyframe>,
 }
 
 fn unit_intensity() -> f32 {
@@ -583,13 +587,14 @@ pub fn parse_scene_file(text: &str, name: &Path, base_dir: &Path) -> Result<Scen
         }
         let map_path = resolve_file(&entry.path, base_dir)?;
         let map = crate::environment_map::EnvironmentMap::load(&map_path)?;
-        let (intensity, rotation_deg) = (entry.intensity, entry.rotation_deg);
-        if !intensity.is_finite() || intensity < 0.0 || !rotation_deg.is_finite() {
-            return Err(toml_err(format!(
-                "[sky_map]: intensity ({intensity}) must be finite and ≥ 0, rotation_deg ({rotation_deg}) finite"
-            )));
-        }
-        scene.sky_map = Some(crate::environment_map::SkyMap { map: std::sync::Arc::new(map), intensity, rotation_deg });
+        let sky = crate::environment_map::SkyMap {
+            map: std::sync::Arc::new(map),
+            intensity: entry.intensity,
+            rotation_deg: entry.rotation_deg,
+            keyframes: entry.keyframes.clone(),
+        };
+        sky.validate().map_err(|e| toml_err(format!("[sky_map]: {e}")))?;
+        scene.sky_map = Some(sky);
     }
     if let Some(entry) = &file.camera {
         let (camera, keys) = entry.get_ref().resolve(entry.span().start).map_err(|(at, message)| {

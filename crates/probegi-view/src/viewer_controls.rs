@@ -204,8 +204,9 @@ impl ViewerControls {
                 l.intensity *= s;
             }
             posed.sky_radiance = base.sky_radiance * sky;
-            if let (Some(posed_map), Some(base_map)) = (posed.sky_map.as_mut(), base.sky_map.as_ref()) {
-                posed_map.intensity = base_map.intensity * sky;
+            // The posed map (its keyframes applied this frame) scaled alike.
+            if let Some(posed_map) = posed.sky_map.as_mut() {
+                posed_map.intensity *= sky;
             }
         })
     }
