@@ -133,6 +133,12 @@ pub struct DdgiVolumeSettings {
     /// Area-light next-event samples per probe-ray hit in the shade pass (stratified,
     /// rounded up to a square count).
     pub probe_area_light_samples: u32,
+    /// Under a sky map: next-event samples of the map per probe-ray hit in the
+    /// shade pass (drawn from its luminance density, stratified, rounded up to
+    /// a square count). A map's light reaches surfaces this way, not through
+    /// probe rays that miss (`Scene::sky_on_probe_miss`). 1, as
+    /// `probe_area_light_samples`: a probe's rays and frames average it.
+    pub probe_sky_light_samples: u32,
     /// The shadowing field (seed 003 ch. 5, `probegi_core::shadow_field`): the
     /// volume's probes also keep occlusion maps, fed by one shadow ray per light
     /// from each of the last frame's front-face hits, and cameras read punctual
@@ -247,6 +253,7 @@ impl Default for DdgiVolumeSettings {
             probe_screen_idle_interval_frames: 8,
             glossy_second_order: true,
             probe_area_light_samples: 1,
+            probe_sky_light_samples: 1,
             shadow_field: false,
             shadow_field_texels: 16,
             shadow_field_sharpness: 1.0,
@@ -402,6 +409,12 @@ impl DdgiVolumeSettings {
             return Err((
                 "probe_area_light_samples",
                 format!("{} must be at most 1024", self.probe_area_light_samples),
+            ));
+        }
+        if self.probe_sky_light_samples > 1024 {
+            return Err((
+                "probe_sky_light_samples",
+                format!("{} must be at most 1024", self.probe_sky_light_samples),
             ));
         }
         Ok(())

@@ -82,8 +82,9 @@ impl<'a> DirectLighting<'a> {
     /// of `settings`: punctual lights exactly (full BSDF), area lights by stratified
     /// NEE (full BSDF, or the diffuse lobe only when `specular_area` is false because
     /// the caller gathers specular reflections of emitters with reflected rays), and
-    /// the sky by stratified cosine visibility on the diffuse lobe (0 sky samples
-    /// leaves the sky out).
+    /// the sky on the diffuse lobe: a constant sky by stratified cosine visibility,
+    /// a sky map by samples of its density with shadow rays (0 sky samples leaves
+    /// the sky out).
     pub fn reflected(
         &self,
         sp: &SurfacePoint,
@@ -130,7 +131,11 @@ impl<'a> DirectLighting<'a> {
         }
         let albedo = ctx.bsdf.diffuse_albedo();
 
-        if scene.has_sky() && settings.direct_sky_samples > 0 {
+        if let (Some(map), true) = (&scene.sky_map, settings.direct_sky_samples > 0) {
+            let (sky, sky_rays) = self.sky_map_direct(map, sp, ctx, settings.direct_sky_samples, rng);
+            l += sky;
+            rays += sky_rays;
+        } else if scene.has_sky() && settings.direct_sky_samples > 0 {
             let k = (settings.direct_sky_samples as f32).sqrt().ceil() as u32;
             let n = k * k;
             let frame = Frame::from_normal(sp.facing_normal());
@@ -149,5 +154,34 @@ impl<'a> DirectLighting<'a> {
             l += albedo * seen / n as f32;
         }
         (l, rays)
+    }
+
+    /// A sky map's light reflected by the diffuse lobe at `sp`: `samples`
+    /// directions drawn from the map's luminance density (stratified on a
+    /// √n × √n grid), each with a shadow ray to infinity;
+    /// ∫ f_d L V cos dω ≈ mean(f_d L V cos / pdf). The density is positive
+    /// wherever the map's bilinear radiance is (`environment_map`), so this one
+    /// strategy is unbiased. Returns the radiance and the shadow rays traced.
+    fn sky_map_direct(
+        &self,
+        map: &probegi_scene::SkyMap,
+        sp: &SurfacePoint,
+        ctx: &ShadingContext,
+        samples: u32,
+        rng: &mut Pcg32,
+    ) -> (Vec3, u64) {
+        let k = (samples as f32).sqrt().ceil() as u32;
+        let n = k * k;
+        let (mut sum, mut rays) = (Vec3::ZERO, 0u64);
+        for i in 0..n {
+            let u = stratum(i, k, rng.next_vec2());
+            let Some(s) = map.sample(u) else { continue };
+            let Some(cos) = lambert_cos(sp, s.wi) else { continue };
+            rays += 1;
+            if !self.tracer.occluded(&shadow_ray_along(sp, s.wi, f32::INFINITY)) {
+                sum += ctx.eval_diffuse(s.wi) * s.radiance * (cos / s.pdf_solid_angle);
+            }
+        }
+        (sum / n as f32, rays)
     }
 }

@@ -86,7 +86,13 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
         .map(|(out, bp)| {
             let volume = &inputs.volumes[bp.volume as usize];
             let settings = &volume.settings;
-            let area = DirectSettings { direct_area_samples: settings.probe_area_light_samples, direct_sky_samples: 0 };
+            // A sky map lights the hits by NEE (the misses carry none of it); a
+            // constant sky reaches them through the field's misses.
+            let sky_samples = if inputs.scene.sky_map.is_some() { settings.probe_sky_light_samples } else { 0 };
+            let area = DirectSettings {
+                direct_area_samples: settings.probe_area_light_samples,
+                direct_sky_samples: sky_samples,
+            };
             let probe = bp.probe as u64;
             let seed = volume.stream_seed(inputs.seed);
             let mut rng = Pcg32::new(hash_combine(&[seed, inputs.frame as u64, probe, 0x5ade]), probe);
@@ -98,7 +104,7 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                 }
                 let dir = batch.directions[i];
                 *r = match (&inputs.hits[i], &points[i]) {
-                    (None, _) => inputs.scene.sky_toward(dir),
+                    (None, _) => inputs.scene.sky_on_probe_miss(dir),
                     (Some(_), None) => Vec3::ZERO,
                     (Some(_), Some(sp)) => {
                         let ctx = ShadingContext::new(inputs.scene, sp, -dir);

@@ -353,9 +353,12 @@ impl<'a> FrameLoop<'a> {
             }
             _ => None,
         };
-        // The field carries the sky under DDGI (see `probe_shade`); SH probes carry
-        // emitters and sky with light injection; direct-only renders sample both.
+        // The field carries a constant sky under DDGI (see `probe_shade`), and
+        // the camera samples a sky map (`Scene::sky_on_probe_miss`); SH probes
+        // carry emitters and sky with light injection; direct-only renders
+        // sample both.
         let camera_direct = match (&field, &sh) {
+            (Some(_), _) if base_scene.sky_map.is_some() => settings.direct,
             (Some(_), _) => DirectSettings { direct_sky_samples: 0, ..settings.direct },
             (_, Some(p)) => p.camera_direct_settings(settings.direct),
             _ => settings.direct,
