@@ -412,10 +412,7 @@ impl DdgiVolumeSettings {
             ));
         }
         if self.probe_sky_light_samples > 1024 {
-            return Err((
-                "probe_sky_light_samples",
-                format!("{} must be at most 1024", self.probe_sky_light_samples),
-            ));
+            return Err(("probe_sky_light_samples", format!("{} must be at most 1024", self.probe_sky_light_samples)));
         }
         Ok(())
     }

@@ -100,6 +100,8 @@ pub trait ProbeBatchTracer: Sync {
     /// diffuse albedo, those of them the field left unlit), or `None` to leave
     /// the camera to the CPU. With `field_on_device` the device's own atlases are
     /// the current ones (`field`'s are stale; its per-probe data is current).
+    /// `area_samples` and `sky_samples` are the CPU's camera `DirectSettings`
+    /// (the sky's are used under a sky map only).
     /// With `probe_requests` (the screen scheme), the device also fills it
     /// with the request bitset of the probes its pixels' queries read
     /// (`DdgiFieldSet::probe_request_layout` over `field`'s members; the
@@ -111,6 +113,7 @@ pub trait ProbeBatchTracer: Sync {
         _field: &DdgiFieldSetView<'_>,
         _field_on_device: bool,
         _area_samples: u32,
+        _sky_samples: u32,
         _second_order: bool,
         _frame: u32,
         _seed: u64,

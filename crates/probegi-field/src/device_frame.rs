@@ -55,6 +55,9 @@ pub struct DeviceFrameInput<'a> {
     pub field_on_device: bool,
     /// Area-light samples per pixel.
     pub area_samples: u32,
+    /// Sky-map samples per pixel (`DirectSettings::direct_sky_samples`; used
+    /// under a sky map only).
+    pub sky_samples: u32,
     /// Second-order glossy on glossy rays' hits.
     pub second_order: bool,
     /// The frame number.

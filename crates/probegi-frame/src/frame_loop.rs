@@ -509,6 +509,7 @@ impl<'a> FrameLoop<'a> {
             &view,
             set.field_on_device(),
             self.camera_direct.direct_area_samples,
+            self.camera_direct.direct_sky_samples,
             second_order,
             f,
             settings.seed,

@@ -198,6 +198,14 @@ impl EnvironmentMap {
         top * (1.0 - fy) + bottom * fy
     }
 
+    /// The sampling density's tables (module docs), for a device that samples
+    /// the map itself: the running sum of the rows' weights (`H + 1` entries,
+    /// from 0), then each row's running sum of its texels' weights (`W + 1`
+    /// entries a row, from 0).
+    pub fn sampling_cdfs(&self) -> (&[f64], &[f64]) {
+        (&self.sampling.marginal_cdf, &self.sampling.row_cdf)
+    }
+
     /// Whether any texel gives light.
     pub fn is_black(&self) -> bool {
         self.sampling.marginal_cdf.last().is_none_or(|&t| t <= 0.0)

@@ -58,6 +58,8 @@ pub struct CameraFrame<'a> {
     pub seed: u32,
     /// Area-light samples per pixel (stratified).
     pub area_samples: u32,
+    /// Sky-map samples per pixel (stratified; a constant sky takes none).
+    pub sky_samples: u32,
     /// Second-order glossy on glossy rays' hits.
     pub second_order: bool,
     /// Radiance of the sky for rays that miss.
@@ -134,7 +136,7 @@ impl GpuCameraPass {
                 f.area_samples,
                 f.second_order as u32 | (shadow_field as u32) << 1 | ((f.request_words > 0) as u32) << 2,
             ],
-            sky: f.sky_radiance.extend(0.0).into(),
+            sky: f.sky_radiance.extend(f32::from_bits(f.sky_samples)).into(),
         })
     }
 

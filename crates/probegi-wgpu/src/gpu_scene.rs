@@ -123,6 +123,9 @@ fn pack_textures(scene: &Scene, instance_records: u32) -> (Vec<u32>, Option<SkyM
     let sky_map = scene.sky_map.as_ref().map(|m| {
         let place = SkyMapPlace { first_word: words.len() as u32, width: m.map.size().0 };
         words.extend(m.map.texels().iter().flat_map(|t| t.to_array().map(f32::to_bits)));
+        // Its sampling density's CDFs, as f32: the rows' (H + 1), then each row's (W + 1).
+        let (marginal, rows) = m.map.sampling_cdfs();
+        words.extend(marginal.iter().chain(rows).map(|&c| (c as f32).to_bits()));
         place
     });
     (words, sky_map)

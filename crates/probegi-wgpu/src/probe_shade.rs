@@ -53,10 +53,14 @@ pub struct ShadeProbe {
 const _: () = assert!(std::mem::size_of::<ShadeProbe>() == 16);
 
 /// Shading flags of `probe_shade.wgsl`'s `ShadeProbe::info`: whether the
-/// probe's radiance is needed (bit 31), second-order glossy (bit 30) and the
-/// area-light samples (low 16 bits).
-pub fn shade_info(needs_radiance: bool, glossy_second_order: bool, area_samples: u32) -> u32 {
-    (needs_radiance as u32) << 31 | (glossy_second_order as u32) << 30 | area_samples.min(0xffff)
+/// probe's radiance is needed (bit 31), second-order glossy (bit 30), the
+/// sky-map samples (bits 16..27; `probe_sky_light_samples`, at most 1024) and
+/// the area-light samples (low 16 bits).
+pub fn shade_info(needs_radiance: bool, glossy_second_order: bool, area_samples: u32, sky_samples: u32) -> u32 {
+    (needs_radiance as u32) << 31
+        | (glossy_second_order as u32) << 30
+        | sky_samples.min(0xfff) << 16
+        | area_samples.min(0xffff)
 }
 
 /// [`shade_info`]'s flag (bit 29): punctual lights' visibility from the
@@ -80,7 +84,7 @@ pub fn batch_shade_probes(
             ShadeProbe {
                 first_ray: bp.first_ray,
                 ray_count: bp.ray_count,
-                info: shade_info(needed, s.glossy_second_order, s.probe_area_light_samples)
+                info: shade_info(needed, s.glossy_second_order, s.probe_area_light_samples, s.probe_sky_light_samples)
                     | if s.shadow_field && s.shadow_field_probe_shading { SHADE_SHADOW_FIELD } else { 0 },
                 _pad: 0,
             }

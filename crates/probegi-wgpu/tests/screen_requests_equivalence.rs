@@ -80,7 +80,7 @@ fn the_device_requests_the_probes_the_cpu_requests() {
         position_m: &mut position_m,
         normal: &mut normal,
     };
-    gpu.camera_frame(&camera, &view, false, 1, false, 0, 7, out, Some(&mut device))
+    gpu.camera_frame(&camera, &view, false, 1, 0, false, 0, 7, out, Some(&mut device))
         .expect("the device renders the camera")
         .expect("camera frame");
     // The albedo the device weighed its field term with, against the CPU's at the

@@ -55,6 +55,7 @@ impl FrameLoop<'_> {
             field: &view,
             field_on_device: set.field_on_device(),
             area_samples: self.camera_direct.direct_area_samples,
+            sky_samples: self.camera_direct.direct_sky_samples,
             second_order: set.volumes().iter().any(|v| v.settings.glossy_second_order),
             frame: f,
             seed: settings.seed,

@@ -28,7 +28,7 @@ struct CameraParams {
     up: vec4<f32>,       // xyz; w = height (pixels)
     info: vec4<u32>,     // frame, seed, area samples, flags (1: second-order glossy, 2: shadowing field,
                          // 4: probe requests)
-    sky: vec4<f32>,
+    sky: vec4<f32>,      // the constant sky's radiance; w: sky-map samples per pixel (u32 bits)
 };
 
 @group(0) @binding(0) var<uniform> camera: CameraParams;
@@ -93,6 +93,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     let glossy = max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0;
     let area = camera.info.z;
     var l = shadow_lit_direct(sp, to_viewer, area, !glossy, (camera.info.w & 2u) != 0u, &rng);
+    l += scene_sky_direct(sp, scene_shading(sp, to_viewer), bitcast<u32>(camera.sky.w), &rng);
     if (sp.front_face) {
         l += scene_emission(sp.material, sp.uv, sp.uv1);
     }

@@ -1,6 +1,6 @@
 // Shade pass of the probe rays (probegi_cpu::probe_shade::shade_probe_rays; seed 000
 // §3, seed 003 §4.4, seed 004 §4.1, §4.4): one thread per batch ray, over the
-// trace pass's hits. Misses take the sky; back faces give zero (the set's rule
+// trace pass's hits. Misses take the constant sky (none of a sky map's, which the hits sample); back faces give zero (the set's rule
 // turns their distance into −0.2·t); front faces get direct light (scene.wgsl)
 // plus diffuse albedo/π × the set's previous irradiance (ddgi_query.wgsl at group
 // 2), plus with second-order glossy the hit's specular reflection of the field.
@@ -48,7 +48,7 @@ struct ShadeHit {
 @group(0) @binding(2) var<storage, read> shade_hits: array<ShadeHit>;
 // Per probe, sorted by first_ray: its rays and its `info`: bit 31 the set wants
 // their radiance, bit 30 second-order glossy, bit 29 punctual lights through the
-// shadowing field (shadow_lighting.wgsl), bits 0..15 area samples.
+// shadowing field (shadow_lighting.wgsl), bits 16..27 sky-map samples, bits 0..15 area samples.
 // Output per ray: xyz radiance, w the blend's signed distance (probe_blend.wgsl's ray_results).
 @group(0) @binding(3) var<storage, read> shade_probes: array<ShadeProbe>;
 @group(0) @binding(4) var<storage, read_write> shade_radiance: array<vec4<f32>>;
@@ -100,7 +100,7 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
         return;
     }
     if (h.triangle == BVH_NO_HIT) {
-        shade_radiance[i] = vec4<f32>(scene_sky(r.dir), d);
+        shade_radiance[i] = vec4<f32>(scene_sky_on_probe_miss(r.dir), d);
         return;
     }
     let sp = scene_surface_point(h.triangle, h.instance, h.bary, false);
@@ -108,6 +108,7 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     let to_viewer = -r.dir;
     let n = scene_facing_normal(sp);
     var l = shadow_lit_direct(sp, to_viewer, info & 0xffffu, true, (info & 0x20000000u) != 0u, &rng);
+    l += scene_sky_direct(sp, scene_shading(sp, to_viewer), (info >> 16u) & 0xfffu, &rng);
     let bsdf = scene_bsdf(sp);
     l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * ddgi_irradiance(sp.position, n, to_viewer);
     if ((info & 0x40000000u) != 0u && max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0) {

@@ -31,7 +31,8 @@
 //                    | nearest << 4), the (A, B) table (N × N × 2 f32 bits,
 //                    probegi_core::bsdf::specular_albedo_table), then RGB8 texels one per word,
 //                    then the sky map's texels (`Scene::sky_map`), f32 bits r, g, b each, row-major
-//                    from the top row
+//                    from the top row, then its sampling CDFs (EnvironmentMap::sampling_cdfs, f32
+//                    bits): the rows' H + 1 running sums, then each row's W + 1
 //   scene_lights:    vec4 header (punctual count, emitter count bits, the sky map's first word in
 //                    scene_textures bits (NONE: no map), its width bits), vec4 sky: the constant
 //                    sky's radiance, or with a map (intensity, sin, cos of minus its rotation, 0),
@@ -767,4 +768,108 @@ fn scene_sky_texel(first: u32, w: u32, i: u32, j: u32) -> vec3<f32> {
     let k = first + 3u * (j * w + i);
     return vec3<f32>(bitcast<f32>(scene_textures[k]), bitcast<f32>(scene_textures[k + 1u]),
                      bitcast<f32>(scene_textures[k + 2u]));
+}
+
+fn scene_sky_cdf(k: u32) -> f32 {
+    return bitcast<f32>(scene_textures[k]);
+}
+
+// environment_map::pick: the interval of the running sum at `base` (n + 1
+// entries from 0) that holds x, never one of zero weight; (index, where in it).
+fn scene_sky_pick(base: u32, n: u32, x: f32) -> vec2<f32> {
+    // The last k in [0, n) with cdf[k] <= x.
+    var lo = 0u;
+    var hi = n;
+    while (hi - lo > 1u) {
+        let mid = (lo + hi) / 2u;
+        if (scene_sky_cdf(base + mid) <= x) { lo = mid; } else { hi = mid; }
+    }
+    var k = lo;
+    while (k > 0u && scene_sky_cdf(base + k + 1u) <= scene_sky_cdf(base + k)) {
+        k -= 1u;
+    }
+    while (k + 1u < n && scene_sky_cdf(base + k + 1u) <= scene_sky_cdf(base + k)) {
+        k += 1u;
+    }
+    let c0 = scene_sky_cdf(base + k);
+    let width = scene_sky_cdf(base + k + 1u) - c0;
+    return vec2<f32>(f32(k), clamp((x - c0) / max(width, 1e-30), 0.0, 1.0 - 1e-7));
+}
+
+// probegi_scene::environment_map::SkyMap::sample: a world direction drawn from
+// the sky map's density (xyz) and its density per steradian (w; 0: none).
+fn scene_sky_sample(u: vec2<f32>) -> vec4<f32> {
+    let header = scene_lights[0];
+    let sky = scene_lights[1];
+    let first = bitcast<u32>(header.z);
+    if (first == SCENE_NONE || !(sky.x > 0.0)) {
+        return vec4<f32>(0.0);
+    }
+    let w = bitcast<u32>(header.w);
+    let h = w / 2u;
+    let marginal = first + 3u * w * h;
+    let total = scene_sky_cdf(marginal + h);
+    if (!(total > 0.0)) {
+        return vec4<f32>(0.0);
+    }
+    let row_pick = scene_sky_pick(marginal, h, u.y * total);
+    let j = u32(row_pick.x);
+    let row = marginal + h + 1u + j * (w + 1u);
+    let col_pick = scene_sky_pick(row, w, u.x * scene_sky_cdf(row + w));
+    let i = u32(col_pick.x);
+    let uv = vec2<f32>((f32(i) + col_pick.y) / f32(w), (f32(j) + row_pick.y) / f32(h));
+    let pdf_uv = (scene_sky_cdf(row + i + 1u) - scene_sky_cdf(row + i)) / total * f32(w * h);
+    let sin_theta = sin(uv.y * SCENE_PI);
+    if (!(sin_theta > 0.0) || !(pdf_uv > 0.0)) {
+        return vec4<f32>(0.0);
+    }
+    // environment_map::uv_to_direction, then SkyMap::to_world (sky.y, sky.z:
+    // the sine and cosine of minus the rotation).
+    let phi = uv.x * SCENE_TAU;
+    let l = vec3<f32>(sin_theta * sin(phi), cos(uv.y * SCENE_PI), -sin_theta * cos(phi));
+    let wi = vec3<f32>(sky.z * l.x - sky.y * l.z, l.y, sky.y * l.x + sky.z * l.z);
+    return vec4<f32>(wi, pdf_uv / (2.0 * SCENE_PI * SCENE_PI * sin_theta));
+}
+
+// probegi_cpu::direct::DirectLighting::sky_map_direct: the sky map's light
+// reflected by the diffuse lobe, `samples` draws of its density (stratified,
+// rounded up to a square), each with a shadow ray; 0 without a map.
+fn scene_sky_direct(sp: SurfacePoint, s: SceneShading, samples: u32, rng: ptr<function, u32>) -> vec3<f32> {
+    if (bitcast<u32>(scene_lights[0].z) == SCENE_NONE || samples == 0u) {
+        return vec3<f32>(0.0);
+    }
+    let k = u32(ceil(sqrt(f32(samples))));
+    let n = k * k;
+    var sum = vec3<f32>(0.0);
+    for (var i = 0u; i < n; i++) {
+        let u = vec2<f32>((f32(i % k) + rng_next(rng)) / f32(k), (f32(i / k) + rng_next(rng)) / f32(k));
+        let d = scene_sky_sample(u);
+        if (!(d.w > 0.0)) {
+            continue;
+        }
+        let wi = d.xyz;
+        let cos = scene_lambert_cos(sp, wi);
+        if (cos <= 0.0) {
+            continue;
+        }
+        let shadow = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, SCENE_F32_MAX), true);
+        if (shadow.leaf != BVH_NO_HIT) {
+            continue;
+        }
+        let wl = frame_to_local(s.fr, wi);
+        if (wl.z <= 0.0) {
+            continue;
+        }
+        sum += bsdf_diffuse_albedo(s.bsdf) / SCENE_PI * scene_sky(wi) * (cos / d.w);
+    }
+    return sum / f32(n);
+}
+
+// probegi_scene::Scene::sky_on_probe_miss: the constant sky, nothing under a
+// map (whose light reaches surfaces by scene_sky_direct).
+fn scene_sky_on_probe_miss(dir: vec3<f32>) -> vec3<f32> {
+    if (bitcast<u32>(scene_lights[0].z) != SCENE_NONE) {
+        return vec3<f32>(0.0);
+    }
+    return scene_lights[1].xyz;
 }
