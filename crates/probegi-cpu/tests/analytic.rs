@@ -208,12 +208,14 @@ fn a_uniform_white_sky_map_lights_an_open_plane_to_rho_l() {
     scene.sky_map = Some(sky_map(|_, _| Vec3::ONE, 2.0, 40.0));
     let want = 0.5 * 2.0;
     let pt = reference(&scene, &camera, 8, PathTracerSettings { pt_spp: 128, seed: 5, ..Default::default() }).mean();
-    let dl = direct(&scene, &camera, 8, 4).mean();
+    let dl = direct(&scene, &camera, 8, 16).mean();
     // The reference's spread over seeds at 16 spp is 0.7 % of the mean: 0.25 %
-    // at 128, so 1 % is four of its σ. The open plane sees the whole sky from
-    // every point: the direct pass's estimate is exact.
+    // at 128, so 1 % is four of its σ. The direct pass draws 16 directions a
+    // pixel from the map's density (half of them below the horizon): over 20
+    // seeds its 4-frame mean spreads by 0.54 %, so 0.27 % at 16 frames, and
+    // 1 % is 3.7 of its σ.
     assert!(rel_err(pt.x, want) < 0.01, "reference {pt} want {want}");
-    assert!(rel_err(dl.x, want) < 1e-4, "direct {dl} want {want}");
+    assert!(rel_err(dl.x, want) < 0.01, "direct {dl} want {want}");
     // The BSDF-only estimator, which never draws from the map's density, agrees.
     let s = PathTracerSettings { pt_spp: 128, seed: 6, pt_light_sampling: false, ..Default::default() };
     let bsdf_only = reference(&scene, &camera, 8, s).mean();

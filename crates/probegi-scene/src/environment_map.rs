@@ -2,9 +2,9 @@
 //! of the radiance arriving from every direction, read from OpenEXR or
 //! Radiance `.hdr` files, looked up bilinearly and importance-sampled.
 //!
-//! **Convention** (Mitsuba 3's `envmap`, which Blender's World also follows
-//! for an equirectangular image; y up): a unit direction `d` in the map's own
-//! frame has
+//! **Convention** (Mitsuba 3's `envmap`, y up; checked against Mitsuba by
+//! `scripts/mitsuba-check.py --sky-map`): a unit direction `d` in the map's
+//! own frame has
 //! - `u = atan2(d.x, −d.z) / 2π`, wrapped to [0, 1): the left edge looks
 //!   along −z, a quarter across along +x, the centre along +z, three
 //!   quarters along −x;
