@@ -232,7 +232,8 @@ pub struct VolumeArgs {
     #[arg(long, value_parser = parse_uvec3)]
     pub probes: Option<[u32; 3]>,
     /// Camera-centred DDGI cascades (seed 003 §6.2): N nested tracking windows, each
-    /// --cascade-ratio times the spacing of the one inside it. The innermost spacing
+    /// --cascade-ratio times the spacing of the one inside it, each of --probes
+    /// counts (else the scene file's `[volume]`'s, else 16×8×16). The innermost spacing
     /// is `--set probe_spacing_m=S` (a scalar or X,Y,Z), else fitted so that the
     /// coarsest cascade is the scene's fitted grid (probes at cell centres). Every
     /// window stays half a cell inside the scene bounds where it is smaller than

@@ -120,7 +120,11 @@ pub fn ddgi_method(scene: &Scene, args: &VolumeArgs) -> Result<GiMethod> {
         // all-active probes render at a quarter of their rays, where seed
         // 003's jcgt states cost 0.016, and its cost follows the view, not
         // the world (docs/RESULTS.md, "Denser is better").
-        let mut file = scene.volume.clone().unwrap_or_default();
+        // Each cascade's counts: --probes, else the file's [volume], else 16×8×16.
+        let mut file = scene.volume.clone().unwrap_or_else(|| DdgiVolumeSettings {
+            probe_counts: probegi_core::ddgi_settings::DEFAULT_CASCADE_PROBE_COUNTS,
+            ..Default::default()
+        });
         if file.probe_states == ProbeStatesMode::Jcgt {
             file.probe_states = ProbeStatesMode::Screen;
         }

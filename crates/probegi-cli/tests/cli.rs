@@ -804,3 +804,34 @@ fn screen_space_gi_that_sees_no_directly_lit_pixel_says_why_it_is_black() {
     let o = probegi(&args);
     assert!(o.status.success(), "{}", stderr(&o));
 }
+
+#[test]
+fn cascades_without_probe_counts_are_three_16_by_8_by_16_grids() {
+    // `--cascades N` alone: each cascade 16×8×16 (DEFAULT_CASCADE_PROBE_COUNTS),
+    // not the single volume's 8×8×8.
+    let stats = tmp("cascades-default.json");
+    let (out, stats_s) = (tmp("cd.exr").to_string_lossy().into_owned(), stats.to_string_lossy().into_owned());
+    let o = probegi(&[
+        "render",
+        "--gi",
+        "ddgi",
+        "--cascades",
+        "3",
+        "--rays-per-probe",
+        "16",
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--frames",
+        "1",
+        "--out",
+        &out,
+        "--stats",
+        &stats_s,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    assert_eq!(json["volumes"], 3);
+    assert_eq!(json["probes"], 3 * 16 * 8 * 16);
+}

@@ -454,6 +454,14 @@ pub struct DdgiFieldSetSettings {
 /// from outside: 0.170 there against 0.134 at 1.5.
 pub const DEFAULT_CASCADE_SPACING_RATIO: f32 = 1.5;
 
+/// Probes of each cascade when `--cascades N` gets neither `--probes` nor a
+/// scene file's `[volume]`: 16×8×16, the counts every cascade measurement in
+/// docs/RESULTS.md used (three of them on Sponza: HDR-FLIP 0.126 at 300
+/// frames against 0.128 for the fitted 32×16×12 of the same 6 144 probes, and
+/// 0.157 against 0.194 at 100 frames). Before, a cascade took the single
+/// volume's default 8×8×8, and `--cascades 3` gave 1 536 probes scoring 0.180.
+pub const DEFAULT_CASCADE_PROBE_COUNTS: glam::UVec3 = glam::UVec3::new(16, 8, 16);
+
 impl DdgiFieldSetSettings {
     /// One volume: today's single grid.
     pub fn single(volume: DdgiVolumeSettings) -> Self {
