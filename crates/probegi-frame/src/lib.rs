@@ -12,7 +12,7 @@
 //! - [`field_update`]: one field update of a [`probegi_field::DdgiFieldSet`]
 //!   through its seam: traced and shaded by `probegi_cpu`, or by a
 //!   [`probegi_field::ProbeBatchTracer`], or kept whole on its device.
-//! - [`scene_events`]: scene changes (light toggles, moving objects) reported
+//! - [`scene_events`]: scene changes (light toggles, a turning sky map, moving objects) reported
 //!   to the field.
 
 #![warn(missing_docs)]

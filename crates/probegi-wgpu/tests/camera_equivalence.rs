@@ -424,32 +424,31 @@ fn test_sky_map(intensity: f32, rotation_deg: f32) -> probegi_scene::SkyMap {
     probegi_scene::SkyMap { intensity, rotation_deg, ..probegi_scene::SkyMap::new(Arc::new(map)) }
 }
 
+/// A scene of one grey (0.5) floor at y = 0, `half_m` to each side, facing up,
+/// and no light.
+fn floor_scene(half_m: f32) -> Scene {
+    let mut scene = probegi_scene::builtin::cornell_box();
+    scene.mesh = Default::default();
+    scene.lights.clear();
+    scene.materials = vec![probegi_scene::Material::diffuse("floor", glam::Vec3::splat(0.5))];
+    let corners = [(-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)];
+    let polygon = corners.map(|(x, z)| glam::Vec3::new(x * half_m, 0.0, z * half_m));
+    probegi_scene::builtin::add_polygon(&mut scene.mesh, &polygon, 0);
+    scene
+}
+
 /// A floor and two boxes under `test_sky_map` turned 30°, the camera seeing
 /// both sky and ground; probes on a grid that misses the boxes.
 fn sky_map_scene() -> (Scene, DdgiVolumeSettings) {
-    let mut scene = probegi_scene::builtin::cornell_box();
-    scene.mesh = Default::default();
-    scene.materials = vec![probegi_scene::Material::diffuse("ground", glam::Vec3::splat(0.5))];
     // Inside the probe grid's span: beyond it the cage's visibility test
     // would leave far ground unlit (a known limit of the field, not of the map).
-    let s = 4.0;
-    probegi_scene::builtin::add_polygon(
-        &mut scene.mesh,
-        &[
-            glam::Vec3::new(-s, 0.0, s),
-            glam::Vec3::new(s, 0.0, s),
-            glam::Vec3::new(s, 0.0, -s),
-            glam::Vec3::new(-s, 0.0, -s),
-        ],
-        0,
-    );
+    let mut scene = floor_scene(4.0);
     for (lo, hi) in [
         (glam::Vec3::new(-0.5, 0.0, 2.0), glam::Vec3::new(0.5, 2.0, 3.0)),
         (glam::Vec3::new(2.0, 0.0, -0.5), glam::Vec3::new(3.0, 1.0, 0.5)),
     ] {
         probegi_scene::shapes::add_box(&mut scene.mesh, lo, hi, 0);
     }
-    scene.lights.clear();
     scene.sky_map = Some(test_sky_map(1.0, 30.0));
     scene.camera = Some(probegi_core::camera::Camera {
         position: glam::Vec3::new(0.0, 1.5, -4.0),
@@ -523,21 +522,7 @@ fn a_turning_sky_map_turns_on_the_gpu_as_on_the_cpu() {
 fn a_uniform_sky_map_lights_the_open_floor_to_rho_l_on_the_gpu() {
     // The sky's furnace on the device (probegi-cpu's ddgi.rs has the CPU's):
     // ρ/π · π L = 0.5 · 2 = 1 on the floor.
-    let mut scene = probegi_scene::builtin::cornell_box();
-    scene.mesh = Default::default();
-    scene.lights.clear();
-    scene.materials = vec![probegi_scene::Material::diffuse("floor", glam::Vec3::splat(0.5))];
-    let s = 50.0;
-    probegi_scene::builtin::add_polygon(
-        &mut scene.mesh,
-        &[
-            glam::Vec3::new(-s, 0.0, s),
-            glam::Vec3::new(s, 0.0, s),
-            glam::Vec3::new(s, 0.0, -s),
-            glam::Vec3::new(-s, 0.0, -s),
-        ],
-        0,
-    );
+    let mut scene = floor_scene(50.0);
     let map =
         probegi_scene::EnvironmentMap::from_texels(std::path::Path::new("white"), 16, 8, vec![glam::Vec3::ONE; 128])
             .expect("map");
