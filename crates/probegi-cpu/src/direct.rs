@@ -139,7 +139,7 @@ impl<'a> DirectLighting<'a> {
             let k = (settings.direct_sky_samples as f32).sqrt().ceil() as u32;
             let n = k * k;
             let frame = Frame::from_normal(sp.facing_normal());
-            let mut seen = Vec3::ZERO;
+            let mut visible = 0u32;
             for i in 0..n {
                 let wi = frame.to_world(sample_cosine_hemisphere(stratum(i, k, rng.next_vec2())));
                 if lambert_cos(sp, wi).is_none() {
@@ -147,11 +147,11 @@ impl<'a> DirectLighting<'a> {
                 }
                 rays += 1;
                 if !self.tracer.occluded(&shadow_ray_along(sp, wi, f32::INFINITY)) {
-                    seen += scene.sky_toward(wi);
+                    visible += 1;
                 }
             }
-            // ∫ (ρ/π) L_sky V cos dω estimated with pdf cos/π: ρ · mean(L_sky V).
-            l += albedo * seen / n as f32;
+            // ∫ (ρ/π) L_sky V cos dω estimated with pdf cos/π: ρ · L_sky · mean(V).
+            l += albedo * scene.sky_radiance * (visible as f32 / n as f32);
         }
         (l, rays)
     }

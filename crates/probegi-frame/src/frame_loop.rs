@@ -410,9 +410,9 @@ impl<'a> FrameLoop<'a> {
         if let Some(fs) = frame_scene.as_mut() {
             fs.set_frame_from(self.base_scene, f as f32);
             if let Some(edit) = &self.scene_edit {
-                // Posing does not carry the sky; an edit starts from the base's.
+                // Posing does not carry the constant sky (a sky map it poses);
+                // an edit starts from the base's.
                 fs.sky_radiance = self.base_scene.sky_radiance;
-                fs.sky_map = self.base_scene.sky_map.as_ref().map(|m| m.at_frame(f as f32));
                 edit(self.base_scene, fs);
             }
         }

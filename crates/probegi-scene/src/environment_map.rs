@@ -399,13 +399,11 @@ impl MapSampling {
 /// where in it `x` lies (0..1); never an interval of zero weight.
 fn pick(cdf: &[f64], x: f64) -> Option<(usize, f32)> {
     let n = cdf.len().checked_sub(1)?;
-    // The last k with cdf[k] <= x, among intervals of non-zero weight.
+    // The last k with cdf[k] <= x: its interval holds x, unless x reached the
+    // total (u rounded to 1), where it is the last of non-zero weight.
     let mut k = cdf.partition_point(|&c| c <= x).saturating_sub(1).min(n - 1);
     while k > 0 && cdf[k + 1] <= cdf[k] {
         k -= 1;
-    }
-    while k + 1 < n && cdf[k + 1] <= cdf[k] {
-        k += 1;
     }
     let width = cdf[k + 1] - cdf[k];
     if width <= 0.0 {

@@ -93,7 +93,7 @@ fn shade_camera(@builtin(global_invocation_id) gid: vec3<u32>) {
     let glossy = max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0;
     let area = camera.info.z;
     var l = shadow_lit_direct(sp, to_viewer, area, !glossy, (camera.info.w & 2u) != 0u, &rng);
-    l += scene_sky_direct(sp, scene_shading(sp, to_viewer), bitcast<u32>(camera.sky.w), &rng);
+    l += scene_sky_direct(sp, bitcast<u32>(camera.sky.w), &rng);
     if (sp.front_face) {
         l += scene_emission(sp.material, sp.uv, sp.uv1);
     }

@@ -108,7 +108,7 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     let to_viewer = -r.dir;
     let n = scene_facing_normal(sp);
     var l = shadow_lit_direct(sp, to_viewer, info & 0xffffu, true, (info & 0x20000000u) != 0u, &rng);
-    l += scene_sky_direct(sp, scene_shading(sp, to_viewer), (info >> 16u) & 0xfffu, &rng);
+    l += scene_sky_direct(sp, (info >> 16u) & 0xfffu, &rng);
     let bsdf = scene_bsdf(sp);
     l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * ddgi_irradiance(sp.position, n, to_viewer);
     if ((info & 0x40000000u) != 0u && max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0) {

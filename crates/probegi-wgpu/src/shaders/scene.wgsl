@@ -784,12 +784,11 @@ fn scene_sky_pick(base: u32, n: u32, x: f32) -> vec2<f32> {
         let mid = (lo + hi) / 2u;
         if (scene_sky_cdf(base + mid) <= x) { lo = mid; } else { hi = mid; }
     }
+    // Interval k holds x unless x reached the total (u rounded to 1): then the
+    // last interval of non-zero weight.
     var k = lo;
     while (k > 0u && scene_sky_cdf(base + k + 1u) <= scene_sky_cdf(base + k)) {
         k -= 1u;
-    }
-    while (k + 1u < n && scene_sky_cdf(base + k + 1u) <= scene_sky_cdf(base + k)) {
-        k += 1u;
     }
     let c0 = scene_sky_cdf(base + k);
     let width = scene_sky_cdf(base + k + 1u) - c0;
@@ -833,11 +832,14 @@ fn scene_sky_sample(u: vec2<f32>) -> vec4<f32> {
 
 // probegi_cpu::direct::DirectLighting::sky_map_direct: the sky map's light
 // reflected by the diffuse lobe, `samples` draws of its density (stratified,
-// rounded up to a square), each with a shadow ray; 0 without a map.
-fn scene_sky_direct(sp: SurfacePoint, s: SceneShading, samples: u32, rng: ptr<function, u32>) -> vec3<f32> {
+// rounded up to a square), each with a shadow ray; 0 without a map (before
+// any material lookup).
+fn scene_sky_direct(sp: SurfacePoint, samples: u32, rng: ptr<function, u32>) -> vec3<f32> {
     if (bitcast<u32>(scene_lights[0].z) == SCENE_NONE || samples == 0u) {
         return vec3<f32>(0.0);
     }
+    let fr = frame_from_normal(scene_facing_normal(sp));
+    let f_diffuse = bsdf_diffuse_albedo(scene_bsdf(sp)) / SCENE_PI;
     let k = u32(ceil(sqrt(f32(samples))));
     let n = k * k;
     var sum = vec3<f32>(0.0);
@@ -856,11 +858,10 @@ fn scene_sky_direct(sp: SurfacePoint, s: SceneShading, samples: u32, rng: ptr<fu
         if (shadow.leaf != BVH_NO_HIT) {
             continue;
         }
-        let wl = frame_to_local(s.fr, wi);
-        if (wl.z <= 0.0) {
+        if (frame_to_local(fr, wi).z <= 0.0) {
             continue;
         }
-        sum += bsdf_diffuse_albedo(s.bsdf) / SCENE_PI * scene_sky(wi) * (cos / d.w);
+        sum += f_diffuse * scene_sky(wi) * (cos / d.w);
     }
     return sum / f32(n);
 }
