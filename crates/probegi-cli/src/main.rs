@@ -65,12 +65,17 @@ fn run(cli: Cli) -> Result<()> {
         Some(Command::Compare(a)) => {
             let mean = probegi_image::compare_files(&a.reference, &a.test, a.out.as_deref())?;
             print_line(&format!("mean_flip: {mean:.6}"))?;
-            // Two HDR images: also the share of lit pixels rendered dark.
+            // Two HDR images: also the share of lit pixels rendered dark and the
+            // mean radiance ratio, test over reference.
             if let (Ok(LoadedImage::Hdr(r)), Ok(LoadedImage::Hdr(t))) =
                 (probegi_image::read_image(&a.reference), probegi_image::read_image(&a.test))
-                && let Some(d) = probegi_image::compare::dark_fraction(&r, &t)
             {
-                print_line(&format!("dark_fraction: {d:.6}"))?;
+                if let Some(d) = probegi_image::compare::dark_fraction(&r, &t) {
+                    print_line(&format!("dark_fraction: {d:.6}"))?;
+                }
+                if let Some(m) = probegi_image::compare::mean_ratio(&r, &t) {
+                    print_line(&format!("mean_ratio: {:.6} {:.6} {:.6}", m.x, m.y, m.z))?;
+                }
             }
             if let Some(sheet) = &a.out {
                 eprintln!("wrote contact sheet {}", sheet.display());

@@ -140,7 +140,9 @@ fn reference_is_deterministic_for_a_seed() {
     }
     assert_eq!(std::fs::read(&a).expect("a"), std::fs::read(&b).expect("b"));
     let o = probegi(&["compare", &s(&a), &s(&b)]);
-    assert!(String::from_utf8_lossy(&o.stdout).contains("mean_flip: 0.000000"));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("mean_flip: 0.000000"), "{stdout}");
+    assert!(stdout.contains("mean_ratio: 1.000000 1.000000 1.000000"), "{stdout}");
 }
 
 #[test]

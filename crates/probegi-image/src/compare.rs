@@ -114,6 +114,21 @@ pub fn dark_fraction(reference: &probegi_core::image::Image, test: &probegi_core
     (lit > 0).then(|| dark as f32 / lit as f32)
 }
 
+/// The test's mean radiance over the reference's, per channel (R, G, B): an
+/// energy difference (a leak, missing light) that FLIP, which also counts noise,
+/// does not tell apart. A channel whose reference mean is zero gives NaN.
+/// `None` when the sizes differ.
+pub fn mean_ratio(reference: &probegi_core::image::Image, test: &probegi_core::image::Image) -> Option<glam::Vec3> {
+    if (reference.width, reference.height) != (test.width, test.height) {
+        return None;
+    }
+    // Summed in f64: a 1080p image's sum in f32 loses the last digits the ratio shows.
+    let sum = |img: &probegi_core::image::Image| img.pixels.iter().fold(glam::DVec3::ZERO, |s, p| s + p.as_dvec3());
+    let (r, t) = (sum(reference), sum(test));
+    let ratio = |t: f64, r: f64| if r > 0.0 { (t / r) as f32 } else { f32::NAN };
+    Some(glam::Vec3::new(ratio(t.x, r.x), ratio(t.y, r.y), ratio(t.z, r.z)))
+}
+
 /// The whole `compare` command: loads both files, computes FLIP, optionally
 /// writes the contact sheet. Returns the mean FLIP.
 pub fn compare_files(reference_path: &Path, test_path: &Path, sheet_path: Option<&Path>) -> Result<f32, ImageError> {
@@ -158,6 +173,19 @@ mod tests {
         test.pixels[1] = glam::Vec3::splat(0.3);
         assert_eq!(dark_fraction(&reference, &test), Some(1.0 / 3.0), "one of three lit pixels under a quarter");
         assert_eq!(dark_fraction(&Image::new(4, 1), &test), None, "nothing lit");
+    }
+
+    #[test]
+    fn mean_ratio_is_the_test_over_the_reference_per_channel() {
+        use probegi_core::image::Image;
+        let mut reference = Image::new(2, 1);
+        reference.pixels = vec![glam::Vec3::new(1.0, 2.0, 0.0), glam::Vec3::new(3.0, 2.0, 0.0)];
+        let mut test = reference.clone();
+        test.pixels[0] = glam::Vec3::new(2.0, 2.0, 1.0);
+        let r = mean_ratio(&reference, &test).unwrap();
+        assert_eq!((r.x, r.y), (1.25, 1.0), "(2 + 3) / (1 + 3) and equal greens");
+        assert!(r.z.is_nan(), "a black reference channel has no ratio");
+        assert!(mean_ratio(&Image::new(3, 1), &test).is_none(), "sizes differ");
     }
 
     #[test]
