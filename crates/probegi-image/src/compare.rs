@@ -182,7 +182,7 @@ mod tests {
         reference.pixels = vec![glam::Vec3::new(1.0, 2.0, 0.0), glam::Vec3::new(3.0, 2.0, 0.0)];
         let mut test = reference.clone();
         test.pixels[0] = glam::Vec3::new(2.0, 2.0, 1.0);
-        let r = mean_ratio(&reference, &test).unwrap();
+        let r = mean_ratio(&reference, &test).expect("equal sizes");
         assert_eq!((r.x, r.y), (1.25, 1.0), "(2 + 3) / (1 + 3) and equal greens");
         assert!(r.z.is_nan(), "a black reference channel has no ratio");
         assert!(mean_ratio(&Image::new(3, 1), &test).is_none(), "sizes differ");

@@ -214,12 +214,18 @@ impl DdgiVolume {
         lights: &[probegi_scene::PunctualLight],
         change: &[f32],
     ) {
-        let (base, irr_scale, _) = self.blend_plan(frame);
-        let frames = self.blend_frames(frame);
-        if let Some(plan) = self.device_shadow_blend(&shadow_base(&base, irr_scale, &frames), lights) {
-            self.accept_device_shadow_blend(&plan);
+        if self.shadow.is_some() {
+            // The shadowing field's bookkeeping needs the plan's hysteresis;
+            // without one, which probes blended is all (no second plan).
+            let (base, irr_scale, _) = self.blend_plan(frame);
+            let frames = self.blend_frames(frame);
+            if let Some(plan) = self.device_shadow_blend(&shadow_base(&base, irr_scale, &frames), lights) {
+                self.accept_device_shadow_blend(&plan);
+            }
         }
-        let updated: Vec<bool> = base.iter().map(|b| b.is_some()).collect();
+        // `blend_plan`'s rule for which probes blend.
+        let updated: Vec<bool> =
+            frame.active.iter().zip(&frame.first_ray).map(|(a, first)| *a && *first != u32::MAX).collect();
         if frame.measure_change {
             self.accept_device_change(&updated, change);
         }
