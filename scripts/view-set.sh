@@ -14,6 +14,7 @@
 #   EXTRA="--set probe_x=..."            appended to every DDGI render (a safeguard on/off)
 #   TAG=name                             names this run's renders apart (default: base)
 #   BACKEND=cpu|wgpu                     the DDGI backend (default cpu)
+#   BIN=path                             a built probegi to use (default: build this checkout)
 #
 # References: Mitsuba 3 (`scripts/mitsuba-check.py --skip-probegi`, two seeds,
 # llvm_ad_rgb where libLLVM is installed, else scalar_rgb), made once per view
@@ -34,10 +35,15 @@ W=${W:-320} H=${H:-240} SPP=${SPP:-1024}
 FRAMES_AT=${FRAMES_AT:-"30 100 300"} SERIES_STEP=${SERIES_STEP:-10}
 TAG=${TAG:-base} BACKEND=${BACKEND:-cpu} EXTRA=${EXTRA:-}
 mkdir -p "$out/ref" "$out/$TAG"
-cargo build --release -q
-# A copy, so a rebuild during the run's hour leaves its binary as it was.
-cp target/release/probegi "$out/$TAG/probegi"
-bin=$PWD/$out/$TAG/probegi
+# A copy, so a rebuild during the run's hour leaves its binary as it was
+# (BIN=path: that binary instead of this checkout's build).
+if [ -n "${BIN:-}" ]; then
+  cp "$BIN" "$out/$TAG/probegi"
+else
+  cargo build --release -q
+  cp target/release/probegi "$out/$TAG/probegi"
+fi
+bin=$(cd "$out/$TAG" && pwd)/probegi
 
 sponza=../shared/scenes/dabrovic-sponza/sponza.obj
 # The issue's Sponza: a constant sky of 3, no bump maps (as issue 32 ranked it).
@@ -51,7 +57,7 @@ sponza-east|$sponza|12,2,0|-10,4,0|60|$sponza_args
 sponza-gallery|$sponza|-6,6.5,-4.5|4,5,4|60|$sponza_args
 sponza-roof|$sponza|-1,1.5,0|0.5,14,0.5|70|$sponza_args
 sponza-arcade|$sponza|-9,2,-4.5|0,3,0|60|$sponza_args
-sponza-west-end|$sponza|-10,1.6,-4.5|-3,6,2|60|$sponza_args
+sponza-west|$sponza|-10,1.6,-4.5|-3,6,2|60|$sponza_args
 sibenik-nave|scenes/sibenik-lamp.toml|-17,-11,0|0,-9,0|60|
 sibenik-altar|scenes/sibenik-lamp.toml|14,-10.5,3|-8,-8,-1|60|
 forest-edge|builtin:forest|-19,2.5,-21|0,4.5,0|60|

@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+"""Convergence curves from `scripts/view-set.sh` runs: HDR-FLIP and the mean
+ratio (test / reference) against frames, one line per run and configuration,
+averaged over the views each has (issue "Converged in 100 frames…", goal 2).
+
+    python3 scripts/convergence-plot.py OUT.png RUN_DIR [RUN_DIR...]
+
+Each RUN_DIR is `OUT_DIR/TAG` of a view-set run; its `VIEW-CONFIG/series.tsv`
+files (frame, FLIP, dark fraction, mean ratio) are read. Needs matplotlib.
+Not part of CI.
+"""
+
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+
+# The view names, from view-set.sh's table (lines `name|scene|...`).
+VIEWS = [
+    line.split("|", 1)[0]
+    for line in (Path(__file__).parent / "view-set.sh").read_text().splitlines()
+    if "|" in line and not line.startswith(("#", " ")) and line.split("|", 1)[0].replace("-", "").isalnum()
+]
+
+
+def main() -> int:
+    if len(sys.argv) < 3:
+        print(__doc__, file=sys.stderr)
+        return 2
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(sys.argv[1])
+    fig, (ax_flip, ax_ratio) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for run in map(Path, sys.argv[2:]):
+        curves = defaultdict(lambda: defaultdict(list))  # config -> frame -> [(flip, ratio)]
+        for series in sorted(run.glob("*/series.tsv")):
+            # The directory is VIEW-CONFIG: the configuration follows the longest view name.
+            name = series.parent.name
+            view = max((v for v in VIEWS if name.startswith(v + "-")), key=len, default=None)
+            if view is None:
+                continue
+            config = name[len(view) + 1 :]
+            for line in series.read_text().splitlines():
+                f, rest = line.split("\t")
+                flip, _dark, ratio = (float(x) for x in rest.split())
+                curves[config][int(f)].append((flip, ratio))
+        for config, by_frame in sorted(curves.items()):
+            frames = sorted(by_frame)
+            views = len(by_frame[frames[0]])
+            label = f"{run.name}: {config} ({views} view{'s' if views != 1 else ''})"
+            mean = lambda i: [sum(x[i] for x in by_frame[f]) / len(by_frame[f]) for f in frames]  # noqa: E731
+            ax_flip.plot(frames, mean(0), label=label)
+            ax_ratio.plot(frames, mean(1), label=label)
+    for ax, title in ((ax_flip, "HDR-FLIP against Mitsuba (mean over views)"), (ax_ratio, "mean ratio, test / reference")):
+        ax.set_xlabel("frame")
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.axvline(100, color="grey", lw=0.8, ls=":")
+    ax_ratio.axhline(1.0, color="black", lw=0.8)
+    ax_flip.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    print(out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
