@@ -204,6 +204,19 @@ pub struct DdgiVolumeSettings {
     /// probe counts its seed as its first blend. Off by default; measured in
     /// docs/RESULTS.md.
     pub probe_hysteresis_ramp: bool,
+    /// The volume's first blends average its frames equally: blend n of the
+    /// volume (from 0, `DdgiVolume::frames_updated`) uses at most hysteresis
+    /// 1 − 1/(n + 1), until that reaches `probe_hysteresis` (33 blends at
+    /// 0.97). With α from a probe's second blend on, the field's bounces build
+    /// up at (1 − α)(1 − λ) a frame (λ the scene's bounce gain): an e-fold
+    /// every 70 frames on Sponza, where the 6 144-probe grid was 10 % dark at
+    /// frame 100. The start-up ramp runs those bounces at full speed while the
+    /// whole field is young. Unlike `probe_hysteresis_ramp` it ends with the
+    /// start-up: probes woken or scrolled in later blend as the papers do
+    /// (hysteresis 0, then α), so a dynamic object's passage is forgotten at
+    /// α. A deliberate deviation from seed 004's update; measured in
+    /// docs/RESULTS.md ("Convergence over the view set").
+    pub probe_hysteresis_startup_ramp: bool,
     /// Seed the probes a tracking window scrolls in from the next coarser
     /// cascade (or sparser volume) instead of starting them from nothing
     /// (Timberdoodle PGI, `../shared/PEERS.md`; `probegi_field::probe_seeding`):
@@ -267,6 +280,7 @@ impl Default for DdgiVolumeSettings {
             volume_edge_buffer_hysteresis: 0.8,
             probe_seeding: false,
             probe_hysteresis_ramp: false,
+            probe_hysteresis_startup_ramp: true,
         }
     }
 }

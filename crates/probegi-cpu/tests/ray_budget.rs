@@ -23,6 +23,10 @@ fn settings(budget: u64) -> DdgiVolumeSettings {
         shadow_field: true,
         probe_states: ProbeStatesMode::AllActive,
         ray_budget: budget,
+        // The papers' update from frame 0: with the start-up ramp the shadow
+        // box's bounces converge by frame 60, and switching a spot off then
+        // changes every probe's bounce light, not mainly those it lit.
+        probe_hysteresis_startup_ramp: false,
         ..Default::default()
     }
 }

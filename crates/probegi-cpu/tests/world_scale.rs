@@ -350,6 +350,10 @@ fn tracking_window() -> DdgiVolumeSettings {
         probe_spacing_m: Some(Vec3::ONE),
         probe_origin_m: Some(Vec3::new(0.0, 0.5, -1.0)),
         volume_tracks_camera: true,
+        // Edge buffers and seeding are measured against the papers' update
+        // from frame 0 (the start-up ramp would converge the baseline's
+        // field before the window moves, a separate effect).
+        probe_hysteresis_startup_ramp: false,
         ..Default::default()
     }
 }

@@ -22,6 +22,8 @@ fn screen_set() -> DdgiFieldSet {
         probe_screen_idle_interval_frames: IDLE_INTERVAL,
         probe_fast_convergence: false,
         probe_relocation: false,
+        // The α^f arithmetic below counts from frame 0: no start-up ramp.
+        probe_hysteresis_startup_ramp: false,
         ..Default::default()
     };
     DdgiFieldSet::single(DdgiVolume::new(s, (Vec3::ZERO, Vec3::new(6.0, 3.0, 5.0))))

@@ -5,6 +5,12 @@
 //! and the scene-event reductions) and fixes borders (`probegi_core::probe_border`)
 //! only for the probes that update this frame. `device_blend` /
 //! `accept_device_blend` are the same step when the device holds the atlases.
+//!
+//! Deliberate deviation: with `probe_hysteresis_startup_ramp` (on by default)
+//! the volume's first blends cap the hysteresis at 1 − 1/(n + 1), a running
+//! mean, before seed 004's α: from α on, the field's bounces build up at
+//! (1 − α)(1 − λ) a frame, and a field started from black took hundreds of
+//! frames (docs/RESULTS.md, "Convergence over the view set").
 
 use std::collections::BTreeMap;
 
@@ -169,7 +175,13 @@ impl DdgiVolume {
                     let h = if self.settings.probe_hysteresis_ramp {
                         // Blends so far, the seed counting as one: 0 for a fresh probe.
                         let n = if fresh { self.probe_seeded[p] as u32 } else { self.probe_blends[p] };
-                        h.min(1.0 - 1.0 / (n as f32 + 1.0))
+                        h.min(ramp_cap(n))
+                    } else {
+                        h
+                    };
+                    // The start-up ramp: the volume's blends so far.
+                    let h = if self.settings.probe_hysteresis_startup_ramp {
+                        h.min(ramp_cap(self.frames_updated))
                     } else {
                         h
                     };
@@ -261,6 +273,12 @@ impl DdgiVolume {
             events.retain(|e| e.frames_left > 0);
         }
     }
+}
+
+/// The hysteresis cap of a ramp's blend `n` (from 0): 1 − 1/(n + 1), the
+/// running mean of n + 1 samples.
+fn ramp_cap(n: u32) -> f32 {
+    1.0 - 1.0 / (n as f32 + 1.0)
 }
 
 /// The shadowing field's blend plan from the irradiance one: per probe its
