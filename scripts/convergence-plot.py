@@ -34,19 +34,28 @@ def main() -> int:
 
     out = Path(sys.argv[1])
     fig, (ax_flip, ax_ratio) = plt.subplots(1, 2, figsize=(11, 4.2))
+    # Per run and configuration, per view, its series; then only the views
+    # every curve has, so the means compare like with like.
+    series_by = {}
     for run in map(Path, sys.argv[2:]):
-        curves = defaultdict(lambda: defaultdict(list))  # config -> frame -> [(flip, ratio)]
         for series in sorted(run.glob("*/series.tsv")):
-            # The directory is VIEW-CONFIG: the configuration follows the longest view name.
             name = series.parent.name
             view = max((v for v in VIEWS if name.startswith(v + "-")), key=len, default=None)
-            if view is None:
+            if view is not None:
+                series_by.setdefault((run, name[len(view) + 1 :]), {})[view] = series
+    common = set.intersection(*(set(v) for v in series_by.values())) if series_by else set()
+    for run in map(Path, sys.argv[2:]):
+        curves = defaultdict(lambda: defaultdict(list))  # config -> frame -> [(flip, ratio)]
+        for (r, config), views in sorted(series_by.items()):
+            if r != run:
                 continue
-            config = name[len(view) + 1 :]
-            for line in series.read_text().splitlines():
-                f, rest = line.split("\t")
-                flip, _dark, ratio = (float(x) for x in rest.split())
-                curves[config][int(f)].append((flip, ratio))
+            for view, series in sorted(views.items()):
+                if view not in common:
+                    continue
+                for line in series.read_text().splitlines():
+                    f, rest = line.split("\t")
+                    flip, _dark, ratio = (float(x) for x in rest.split())
+                    curves[config][int(f)].append((flip, ratio))
         for config, by_frame in sorted(curves.items()):
             frames = sorted(by_frame)
             views = len(by_frame[frames[0]])
