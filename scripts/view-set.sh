@@ -10,7 +10,7 @@
 #   VIEWS="sponza-readme sibenik-nave"  a subset of the views below (default all)
 #   CONFIGS="fitted-16x8x16 cascades-3"  a subset of the configurations below
 #   FRAMES_AT="30 100 300"               the frames scored (the last is rendered)
-#   W=320 H=240 SPP=1024                 image size; Mitsuba samples a pixel
+#   W=320 H=240 SPP=512                  image size; Mitsuba samples a pixel
 #   EXTRA="--set probe_x=..."            appended to every DDGI render (a safeguard on/off)
 #   TAG=name                             names this run's renders apart (default: base)
 #   BACKEND=cpu|wgpu                     the DDGI backend (default cpu)
@@ -31,7 +31,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-out/view-set}
-W=${W:-320} H=${H:-240} SPP=${SPP:-1024}
+W=${W:-320} H=${H:-240} SPP=${SPP:-512}
 FRAMES_AT=${FRAMES_AT:-"30 100 300"} SERIES_STEP=${SERIES_STEP:-10}
 TAG=${TAG:-base} BACKEND=${BACKEND:-cpu} EXTRA=${EXTRA:-}
 mkdir -p "$out/ref" "$out/$TAG"
