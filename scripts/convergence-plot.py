@@ -15,12 +15,10 @@ from collections import defaultdict
 from pathlib import Path
 
 
-# The view names, from view-set.sh's table (lines `name|scene|...`).
-VIEWS = [
-    line.split("|", 1)[0]
-    for line in (Path(__file__).parent / "view-set.sh").read_text().splitlines()
-    if "|" in line and not line.startswith(("#", " ")) and line.split("|", 1)[0].replace("-", "").isalnum()
-]
+# The view names: the first field of view-set.sh's view_table lines.
+_SCRIPT = (Path(__file__).parent / "view-set.sh").read_text()
+_TABLE = _SCRIPT.split("view_table() {", 1)[1].split("EOF\n}", 1)[0]
+VIEWS = [line.split("|", 1)[0] for line in _TABLE.splitlines() if "|" in line]
 
 
 def main() -> int:

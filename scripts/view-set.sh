@@ -104,6 +104,10 @@ score() {
     END { printf "%.3f %.3f %.3f\n", f, d, r }'
 }
 
+# A render that fails stops the run (set -e): its frames go with it.
+seq_dir=""
+trap '[ -n "$seq_dir" ] && rm -rf "$seq_dir"' EXIT
+
 table="$out/$TAG/table.md"
 raw="$out/$TAG/scores.tsv"
 : >"$raw"
@@ -129,6 +133,7 @@ for v in $VIEWS; do
         printf '%s\t%s\n' "$f" "$(score "$ref" "$(printf '%s/frame-%04d.exr' "$seq_dir" $((f - 1)))")"
       done >"$dir/series.tsv"
       rm -rf "$seq_dir"
+      seq_dir=""
     fi
     for f in $FRAMES_AT; do
       sheet=""

@@ -858,7 +858,7 @@ impl DdgiFieldSet {
         self.expect(UpdateStep::ShadeRays, "submit_device_blend")?;
         let change = |i: usize| probe_change.get(i).map_or(&[][..], |c| c.as_slice());
         for (i, f) in self.frames.iter().enumerate().filter(|(_, f)| f.measure_change) {
-            let wanted = f.first_ray.iter().zip(&f.active).filter(|(r, a)| **r != u32::MAX && **a).count();
+            let wanted = (0..f.first_ray.len()).filter(|&p| f.blends(p)).count();
             if change(i).len() != wanted {
                 return Err(SeamError::WrongLength { what: "probe changes", expected: wanted, got: change(i).len() });
             }

@@ -163,7 +163,7 @@ impl DdgiVolume {
         let base = (0..self.grid.probe_count())
             .map(|p| {
                 let first = frame.first_ray[p];
-                (frame.active[p] && first != u32::MAX).then(|| {
+                frame.blends(p).then(|| {
                     let fresh = !self.probe_has_history[p] || self.probe_states[p].is_new();
                     let h = if fresh && !self.probe_seeded[p] {
                         0.0
@@ -235,9 +235,7 @@ impl DdgiVolume {
                 self.accept_device_shadow_blend(&plan);
             }
         }
-        // `blend_plan`'s rule for which probes blend.
-        let updated: Vec<bool> =
-            frame.active.iter().zip(&frame.first_ray).map(|(a, first)| *a && *first != u32::MAX).collect();
+        let updated: Vec<bool> = (0..self.grid.probe_count()).map(|p| frame.blends(p)).collect();
         if frame.measure_change {
             self.accept_device_change(&updated, change);
         }

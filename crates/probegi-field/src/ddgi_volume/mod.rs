@@ -168,6 +168,13 @@ pub struct VolumeFrame {
     pub(crate) screen_blend_frames: Vec<u32>,
 }
 
+impl VolumeFrame {
+    /// Whether probe `p` blends this frame: its state updates now and it traced.
+    pub(crate) fn blends(&self, p: usize) -> bool {
+        self.active.get(p).copied().unwrap_or(false) && self.first_ray.get(p).is_some_and(|f| *f != u32::MAX)
+    }
+}
+
 impl DdgiVolume {
     /// A volume over `scene_bounds` (used when the settings give neither an
     /// origin/spacing nor `volume_bounds_m`). A tracking volume starts centred on
