@@ -89,6 +89,16 @@ pub struct DdgiVolumeSettings {
     pub probe_significant_change_threshold: f32,
     /// Per-texel change above which hysteresis drops to 0 (a new distribution).
     pub probe_new_distribution_threshold: f32,
+    /// Timberdoodle PGI's firefly clamp (`../shared/PEERS.md`): a texel's new
+    /// irradiance estimate is limited to this many times its history
+    /// (`probegi_core::probe_blend::firefly_clamp`; PGI 32). 0 (the default):
+    /// off, as the papers blend; measured in docs/RESULTS.md.
+    pub probe_firefly_clamp_ratio: f32,
+    /// Timberdoodle PGI's adaptive per-texel hysteresis: each irradiance texel
+    /// keeps a state that rises 0.1 a blend and falls by its relative change,
+    /// and blends with at most that (`probegi_core::probe_blend::adaptive_texel_hysteresis`).
+    /// Off by default; measured in docs/RESULTS.md.
+    pub probe_adaptive_hysteresis: bool,
     /// Probe position optimizer at initialisation (seed 004 §5, Listing 4).
     pub probe_relocation: bool,
     /// Optimizer iterations (seed 004: five).
@@ -253,6 +263,8 @@ impl Default for DdgiVolumeSettings {
             probe_fast_convergence: true,
             probe_significant_change_threshold: 0.25,
             probe_new_distribution_threshold: 0.8,
+            probe_firefly_clamp_ratio: 0.0,
+            probe_adaptive_hysteresis: false,
             probe_relocation: true,
             probe_relocation_iterations: 5,
             probe_init_rays_per_probe: 32,
@@ -386,6 +398,10 @@ impl DdgiVolumeSettings {
         non_negative("probe_relocation_min_frontface_rel", self.probe_relocation_min_frontface_rel)?;
         non_negative("probe_significant_change_threshold", self.probe_significant_change_threshold)?;
         non_negative("probe_new_distribution_threshold", self.probe_new_distribution_threshold)?;
+        let r = self.probe_firefly_clamp_ratio;
+        if !(r.is_finite() && (r == 0.0 || r >= 1.0)) {
+            return Err(("probe_firefly_clamp_ratio", format!("{r} must be 0 (off) or a finite ratio ≥ 1")));
+        }
         if self.probe_relocation_iterations > 100 {
             return Err((
                 "probe_relocation_iterations",
@@ -544,6 +560,8 @@ mod tests {
         assert_eq!(bad(|s| s.probe_spacing_m = Some(Vec3::new(1.0, -1.0, 1.0))), "probe_spacing_m");
         assert_eq!(bad(|s| s.probe_hysteresis = 1.5), "probe_hysteresis");
         assert_eq!(bad(|s| s.probe_hysteresis = -0.1), "probe_hysteresis");
+        assert_eq!(bad(|s| s.probe_firefly_clamp_ratio = 0.5), "probe_firefly_clamp_ratio");
+        assert_eq!(bad(|s| s.probe_firefly_clamp_ratio = f32::NAN), "probe_firefly_clamp_ratio");
         assert_eq!(bad(|s| s.probe_distance_exponent = f32::NAN), "probe_distance_exponent");
     }
 }

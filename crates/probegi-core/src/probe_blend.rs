@@ -103,6 +103,71 @@ pub fn adjusted_hysteresis(hysteresis: f32, change: f32, thresholds: &TexelThres
     }
 }
 
+/// Timberdoodle PGI's firefly clamp (`../shared/PEERS.md`): a texel's new
+/// estimate is scaled down so that its largest linear component is at most
+/// `ratio` × its history's (PGI: 32). Works on encoded values
+/// (`mean^(1/γ)`): scaling the linear value by s scales the encoded one by
+/// s^(1/γ). A black history (no light yet) clamps nothing, so a light that
+/// turns on in a dark room is not held back.
+pub fn firefly_clamp(encoded: Vec3, history: Vec3, ratio: f32, gamma: f32) -> Vec3 {
+    let old = history.max_element();
+    let new = encoded.max_element();
+    if !(old > 0.0) {
+        return encoded;
+    }
+    let limit = old * ratio.powf(1.0 / gamma);
+    if new > limit { encoded * (limit / new) } else { encoded }
+}
+
+/// What the adaptive hysteresis adds per blend while the texel holds still
+/// (Timberdoodle PGI: 0.1 per update).
+pub const ADAPTIVE_HYSTERESIS_RISE: f32 = 0.1;
+
+/// Added to the history's largest encoded component before it divides the
+/// change (PGI adds 0.01 likewise), so that a nearly black texel's noise does
+/// not read as a 100 % change.
+pub const ADAPTIVE_HYSTERESIS_FLOOR: f32 = 0.01;
+
+/// Timberdoodle PGI's adaptive per-texel hysteresis (`../shared/PEERS.md`),
+/// in the perceptual (γ-encoded) space the blend works in: the texel's state
+/// rises by [`ADAPTIVE_HYSTERESIS_RISE`] a blend and falls by the relative
+/// change `max|new − old| / (max old + 0.01)`, within [0, 1]; the blend then
+/// uses at most that state. A blend whose planned hysteresis is 0 (the
+/// probe's history restarts) restarts the state at 0. In encoded space a
+/// γ = 5 field's per-frame noise of 10–20 % reads as 2–4 % and lets the state
+/// climb, while a light that doubles reads as 15 % a frame and one that goes
+/// to a tenth as 37 %, so the texel follows them within a few frames.
+pub fn adaptive_texel_hysteresis(state: f32, planned: f32, history: Vec3, encoded: Vec3) -> f32 {
+    if !(planned > 0.0) {
+        return 0.0;
+    }
+    let relative =
+        (encoded - history).abs().max_element() / (history.max_element().max(0.0) + ADAPTIVE_HYSTERESIS_FLOOR);
+    let next = state + ADAPTIVE_HYSTERESIS_RISE - relative;
+    if next.is_finite() { next.clamp(0.0, 1.0) } else { 0.0 }
+}
+
+/// How a texel's new estimate enters its history: the encoding, seed 004
+/// Listing 3's thresholds and Timberdoodle PGI's safeguards.
+#[derive(Clone, Copy, Debug)]
+pub struct IrradianceBlendRule {
+    /// Perceptual encoding exponent γ (seed 004 Listing 1).
+    pub gamma: f32,
+    /// Listing 3's per-texel thresholds (`probe_fast_convergence`).
+    pub thresholds: Option<TexelThresholds>,
+    /// [`firefly_clamp`]'s ratio; 0: off.
+    pub firefly_clamp_ratio: f32,
+    /// [`adaptive_texel_hysteresis`], with one state per texel.
+    pub adaptive_hysteresis: bool,
+}
+
+impl IrradianceBlendRule {
+    /// The rule with encoding `gamma` alone: no thresholds, no safeguards.
+    pub fn plain(gamma: f32) -> Self {
+        Self { gamma, thresholds: None, firefly_clamp_ratio: 0.0, adaptive_hysteresis: false }
+    }
+}
+
 /// `h` to the power `frames` by repeated multiplication (the WGSL twin's
 /// order): the hysteresis of a blend that stands for `frames` per-frame blends
 /// of the same estimate (a ray budget's probe that waited; `frames` ≤ 1: `h`).
@@ -114,9 +179,12 @@ pub fn hysteresis_over_frames(h: f32, frames: u32) -> f32 {
     hk
 }
 
-/// Blends one probe's ray radiances into its irradiance tile (encoded with `gamma`).
-/// `hysteresis` is the per-frame weight of the old value (0 replaces it); with
-/// `thresholds` each texel lowers it by Listing 3; then it is raised to
+/// Blends one probe's ray radiances into its irradiance tile (encoded with
+/// `rule.gamma`). `hysteresis` is the per-frame weight of the old value (0
+/// replaces it); with a history, `rule`'s firefly clamp limits the estimate;
+/// with `rule.thresholds` each texel lowers the hysteresis by Listing 3, with
+/// `rule.adaptive_hysteresis` to at most its state in `texel_hysteresis`
+/// (one per tile texel, updated; empty without it); then it is raised to
 /// `frames` ([`hysteresis_over_frames`]; 1 without a ray budget). Returns the probe's change: the mean over
 /// the interior of [`crate::probe_change::texel_change`] between each texel's
 /// history and this frame's estimate (0 for a texel no ray weighs).
@@ -126,8 +194,8 @@ pub fn blend_irradiance_tile(
     weights: &BlendWeights,
     ray_radiance: &[Vec3],
     (hysteresis, frames): (f32, u32),
-    gamma: f32,
-    thresholds: Option<&TexelThresholds>,
+    rule: &IrradianceBlendRule,
+    texel_hysteresis: &mut [f32],
 ) -> f32 {
     let mut change = 0.0f32;
     for t in 0..(interior * interior) as usize {
@@ -143,13 +211,21 @@ pub fn blend_irradiance_tile(
         if wsum <= 0.0 {
             continue;
         }
-        let encoded = encode_irradiance(sum / wsum, gamma);
-        let dst = &mut tile[interior_index(t, interior)];
+        let index = interior_index(t, interior);
+        let dst = &mut tile[index];
+        let mut encoded = encode_irradiance(sum / wsum, rule.gamma);
+        if hysteresis > 0.0 && rule.firefly_clamp_ratio > 0.0 {
+            encoded = firefly_clamp(encoded, *dst, rule.firefly_clamp_ratio, rule.gamma);
+        }
         change += crate::probe_change::texel_change(*dst, encoded);
-        let h = match thresholds {
+        let mut h = match &rule.thresholds {
             Some(th) => adjusted_hysteresis(hysteresis, (encoded - *dst).max_element(), th),
             None => hysteresis,
         };
+        if let Some(state) = texel_hysteresis.get_mut(index).filter(|_| rule.adaptive_hysteresis) {
+            *state = adaptive_texel_hysteresis(*state, hysteresis, *dst, encoded);
+            h = h.min(*state);
+        }
         let h = hysteresis_over_frames(h, frames);
         let blended = encoded * (1.0 - h) + *dst * h;
         if blended.is_finite() {
@@ -207,7 +283,15 @@ mod tests {
         let d = dirs(256);
         let w = BlendWeights::new(&d, 6, 1.0);
         let mut tile = vec![Vec3::ZERO; 64];
-        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::splat(2.0); 256], (0.0, 1), 5.0, None);
+        blend_irradiance_tile(
+            &mut tile,
+            6,
+            &w,
+            &vec![Vec3::splat(2.0); 256],
+            (0.0, 1),
+            &IrradianceBlendRule::plain(5.0),
+            &mut [],
+        );
         let want = 2.0f32.powf(0.2);
         for j in 1..7 {
             for i in 1..7 {
@@ -215,10 +299,26 @@ mod tests {
             }
         }
         // Hysteresis 0.75 keeps three quarters of the old value.
-        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ZERO; 256], (0.75, 1), 5.0, None);
+        blend_irradiance_tile(
+            &mut tile,
+            6,
+            &w,
+            &vec![Vec3::ZERO; 256],
+            (0.75, 1),
+            &IrradianceBlendRule::plain(5.0),
+            &mut [],
+        );
         assert!((tile[9].x - 0.75 * want).abs() < 1e-5);
         // Two frames' worth: 0.75² of the old value.
-        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ZERO; 256], (0.75, 2), 5.0, None);
+        blend_irradiance_tile(
+            &mut tile,
+            6,
+            &w,
+            &vec![Vec3::ZERO; 256],
+            (0.75, 2),
+            &IrradianceBlendRule::plain(5.0),
+            &mut [],
+        );
         assert!((tile[9].x - 0.75 * 0.5625 * want).abs() < 1e-5);
         assert_eq!(hysteresis_over_frames(0.5, 3), 0.125);
         assert_eq!(hysteresis_over_frames(0.97, 1), 0.97);
@@ -234,7 +334,7 @@ mod tests {
         let n = 14;
         let w = BlendWeights::new(&d, n, 1.0);
         let mut tile = vec![Vec3::ZERO; 16 * 16];
-        blend_irradiance_tile(&mut tile, n, &w, &l, (0.0, 1), 1.0, None);
+        blend_irradiance_tile(&mut tile, n, &w, &l, (0.0, 1), &IrradianceBlendRule::plain(1.0), &mut []);
         let value_at = |dir: Vec3| {
             let uv = crate::octahedral::oct_encode(dir);
             crate::probe_atlas::sample_tile_bilinear(&tile, n, uv * (1.0 - 1.0 / n as f32)).x
@@ -254,8 +354,54 @@ mod tests {
         let d = dirs(256);
         let w = BlendWeights::new(&d, 6, 1.0);
         let mut tile = vec![Vec3::ZERO; 64];
-        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ONE; 256], (0.97, 1), 5.0, Some(&th));
+        let rule = IrradianceBlendRule { thresholds: Some(th), ..IrradianceBlendRule::plain(5.0) };
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ONE; 256], (0.97, 1), &rule, &mut []);
         assert!((tile[9].x - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn the_firefly_clamp_limits_an_estimate_to_ratio_times_its_history() {
+        let d = dirs(256);
+        let w = BlendWeights::new(&d, 6, 1.0);
+        let rule = IrradianceBlendRule { firefly_clamp_ratio: 32.0, ..IrradianceBlendRule::plain(5.0) };
+        // History 1 (linear and encoded), estimate 1000: clamped to 32, encoded 32^0.2 = 2.
+        let mut tile = vec![Vec3::ONE; 64];
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::splat(1000.0); 256], (0.5, 1), &rule, &mut []);
+        assert!((tile[9].x - (0.5 * 2.0 + 0.5 * 1.0)).abs() < 1e-5, "{}", tile[9].x);
+        // The clamp scales all channels alike, keeping the estimate's hue.
+        let c = firefly_clamp(Vec3::new(4.0, 2.0, 0.0), Vec3::ONE, 32.0, 5.0);
+        assert!((c - Vec3::new(2.0, 1.0, 0.0)).length() < 1e-5, "{c}");
+        // Within the ratio, and without a history (hysteresis 0 or black), nothing is clamped.
+        assert_eq!(firefly_clamp(Vec3::splat(1.9), Vec3::ONE, 32.0, 5.0), Vec3::splat(1.9));
+        assert_eq!(firefly_clamp(Vec3::splat(9.0), Vec3::ZERO, 32.0, 5.0), Vec3::splat(9.0));
+        let mut fresh = vec![Vec3::ONE; 64];
+        blend_irradiance_tile(&mut fresh, 6, &w, &vec![Vec3::splat(1000.0); 256], (0.0, 1), &rule, &mut []);
+        assert!((fresh[9].x - 1000.0f32.powf(0.2)).abs() < 1e-4);
+    }
+
+    #[test]
+    fn adaptive_hysteresis_rises_while_still_and_drops_on_a_change() {
+        let d = dirs(256);
+        let w = BlendWeights::new(&d, 6, 1.0);
+        let rule = IrradianceBlendRule { adaptive_hysteresis: true, ..IrradianceBlendRule::plain(5.0) };
+        let mut tile = vec![Vec3::ZERO; 64];
+        let mut state = vec![0.5f32; 64];
+        // A restart (hysteresis 0) sets the state to 0 and takes the estimate.
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ONE; 256], (0.0, 1), &rule, &mut state);
+        assert_eq!((tile[9].x, state[9]), (1.0, 0.0));
+        // Still light: +0.1 a blend, and the blend uses min(planned, state).
+        for k in 1..=12 {
+            blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::ONE; 256], (0.97, 1), &rule, &mut state);
+            assert!((state[9] - (0.1 * k as f32).min(1.0)).abs() < 1e-5, "blend {k}: {}", state[9]);
+        }
+        // The light goes to 1/32 (encoded 0.5): relative change 0.5 / 1.01, so
+        // the state falls from 1 to 0.6 and the texel keeps 0.6, not 0.97, of its history.
+        blend_irradiance_tile(&mut tile, 6, &w, &vec![Vec3::splat(1.0 / 32.0); 256], (0.97, 1), &rule, &mut state);
+        let s = 1.0 + ADAPTIVE_HYSTERESIS_RISE - 0.5 / 1.01;
+        assert!((state[9] - s).abs() < 1e-5, "{}", state[9]);
+        assert!((tile[9].x - (0.5 * (1.0 - s) + s)).abs() < 1e-5, "{}", tile[9].x);
+        // Border texels carry no state of their own.
+        assert_eq!(state[0], 0.5);
     }
 
     #[test]
@@ -274,7 +420,15 @@ mod tests {
         }
         let mut irr = vec![Vec3::ONE; 36];
         let w1 = BlendWeights::new(&d, 4, 1.0);
-        blend_irradiance_tile(&mut irr, 4, &w1, &vec![Vec3::splat(f32::NAN); 256], (0.0, 1), 5.0, None);
+        blend_irradiance_tile(
+            &mut irr,
+            4,
+            &w1,
+            &vec![Vec3::splat(f32::NAN); 256],
+            (0.0, 1),
+            &IrradianceBlendRule::plain(5.0),
+            &mut [],
+        );
         assert!(irr.iter().all(|v| *v == Vec3::ONE), "all-NaN rays leave the old values");
     }
 }

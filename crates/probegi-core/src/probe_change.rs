@@ -85,12 +85,42 @@ mod tests {
         let gamma = 5.0;
         let mut atlas = ProbeAtlas::<Vec3>::new(1, 4);
         let still = vec![Vec3::ONE; 64];
-        assert_eq!(blend_irradiance_tile(atlas.tile_mut(0), 4, &w, &still, (0.0, 1), gamma, None), 1.0);
-        assert_eq!(blend_irradiance_tile(atlas.tile_mut(0), 4, &w, &still, (0.97, 1), gamma, None), 0.0);
+        assert_eq!(
+            blend_irradiance_tile(
+                atlas.tile_mut(0),
+                4,
+                &w,
+                &still,
+                (0.0, 1),
+                &crate::probe_blend::IrradianceBlendRule::plain(gamma),
+                &mut []
+            ),
+            1.0
+        );
+        assert_eq!(
+            blend_irradiance_tile(
+                atlas.tile_mut(0),
+                4,
+                &w,
+                &still,
+                (0.97, 1),
+                &crate::probe_blend::IrradianceBlendRule::plain(gamma),
+                &mut []
+            ),
+            0.0
+        );
         let brighter = vec![Vec3::splat(3.0); 64];
         let e = 3f32.powf(1.0 / gamma);
         let expected = (e - 1.0) / (e + 1.0);
-        let c = blend_irradiance_tile(atlas.tile_mut(0), 4, &w, &brighter, (0.97, 1), gamma, None);
+        let c = blend_irradiance_tile(
+            atlas.tile_mut(0),
+            4,
+            &w,
+            &brighter,
+            (0.97, 1),
+            &crate::probe_blend::IrradianceBlendRule::plain(gamma),
+            &mut [],
+        );
         assert!((c - expected).abs() < 1e-4, "change {c}, expected {expected}");
     }
 }

@@ -96,7 +96,21 @@ pub struct GpuDdgiField {
     occlusion: Vec<[u32; 4]>,
     /// Set, irradiance, distance, probes.
     buffers: [wgpu::Buffer; 4],
+    /// The blend's adaptive-hysteresis states, one `f32` per irradiance texel
+    /// where a member has `probe_adaptive_hysteresis` (16 bytes otherwise;
+    /// [`Self::refresh`] refuses a set that needs more, so it is uploaded anew).
+    texel_hysteresis: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
+}
+
+/// Bytes of a field's adaptive-hysteresis states: one `f32` per irradiance
+/// texel where a member of `set` blends with them, else a 16-byte stand-in.
+fn texel_hysteresis_bytes(set: &DdgiFieldSetView<'_>, irradiance_texels: usize) -> u64 {
+    if set.members.iter().any(|m| m.field.settings.probe_adaptive_hysteresis) {
+        (irradiance_texels as u64 * 4).max(16)
+    } else {
+        16
+    }
 }
 
 /// A set packed in the shader's layout; atlases left empty unless asked for.
@@ -293,14 +307,23 @@ impl GpuDdgiField {
             &Self::bind_group_layout(&ctx.device),
             &buffers,
         );
+        let hysteresis_bytes = texel_hysteresis_bytes(set, packed.irradiance_texels);
+        ctx.check_buffer(hysteresis_bytes, "the adaptive-hysteresis states")?;
+        let texel_hysteresis = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ddgi irradiance texel hysteresis"),
+            size: hysteresis_bytes,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
         Ok(Self {
             volumes: set.members.len(),
             shadow_field: set.members.iter().any(|m| m.occlusion.is_some()),
             probes: packed.probes.len(),
-            bytes: buffers.iter().map(|b| b.size()).sum(),
+            bytes: buffers.iter().map(|b| b.size()).sum::<u64>() + texel_hysteresis.size(),
             members: packed.members,
             occlusion: packed.occlusion,
             buffers,
+            texel_hysteresis,
             bind_group,
         })
     }
@@ -319,6 +342,7 @@ impl GpuDdgiField {
         ];
         if packed.members != self.members
             || packed.occlusion != self.occlusion
+            || texel_hysteresis_bytes(set, packed.irradiance_texels) > self.texel_hysteresis.size()
             || sizes.iter().zip(&self.buffers).any(|(s, b)| *s != b.size())
         {
             return Err(GpuError::Input("the field set changed shape since its upload".into()));
@@ -345,6 +369,7 @@ impl GpuDdgiField {
             distance_first: dist_first,
             irradiance: self.buffers[1].clone(),
             distance: self.buffers[2].clone(),
+            texel_hysteresis: self.texel_hysteresis.clone(),
         })
     }
 

@@ -56,9 +56,12 @@ pub(crate) struct BlendParams {
     pub(crate) distance_first: u32,
     /// Where the (ray, weight) entries start in the weights buffer.
     pub(crate) weight_entries_first: u32,
+    pub(crate) firefly_clamp_ratio: f32,
+    pub(crate) adaptive_hysteresis: u32,
+    pub(crate) _pad: [u32; 2],
 }
 
-const _: () = assert!(std::mem::size_of::<BlendParams>() == 64);
+const _: () = assert!(std::mem::size_of::<BlendParams>() == 80);
 
 /// Largest workgroup count per dispatch dimension (WebGPU's default limit).
 const MAX_GROUPS: u32 = 65_535;
@@ -79,6 +82,10 @@ pub struct GpuVolumeAtlases {
     pub distance_first: u32,
     pub(crate) irradiance: wgpu::Buffer,
     pub(crate) distance: wgpu::Buffer,
+    /// One adaptive-hysteresis state (`f32`) per texel of `irradiance`, at the
+    /// same index (`probe_adaptive_hysteresis`); a resident field that needs
+    /// none holds a 16-byte stand-in.
+    pub(crate) texel_hysteresis: wgpu::Buffer,
 }
 
 impl GpuVolumeAtlases {
@@ -100,6 +107,10 @@ impl GpuVolumeAtlases {
             distance_first: 0,
             irradiance: make("irradiance atlas", probe_count * tile_texel_count(irradiance_interior) * 16),
             distance: make("distance atlas", probe_count * tile_texel_count(distance_interior) * 8),
+            texel_hysteresis: make(
+                "irradiance texel hysteresis",
+                probe_count * tile_texel_count(irradiance_interior) * 4,
+            ),
         }
     }
 
@@ -192,7 +203,7 @@ pub struct GpuProbeBlend {
 impl GpuProbeBlend {
     /// The pipelines on `ctx`.
     pub fn new(ctx: &GpuContext) -> Self {
-        let layout = ctx.pass_layout("probe blend", &[true, true, true, false, false]);
+        let layout = ctx.pass_layout("probe blend", &[true, true, true, false, false, false]);
         let pipelines = ctx.compute_pipelines(&PROBE_BLEND, &[Some(&layout)], PASS_NAMES);
         Self { layout, pipelines }
     }
@@ -288,7 +299,15 @@ impl GpuProbeBlend {
         let weights = pack_weights(plan.irradiance_weights, plan.distance_weights);
         let weights = init("blend weights", bytemuck::cast_slice(&weights), storage);
         let per_probe = init("probe blend", bytemuck::cast_slice(&per_probe), storage);
-        let buffers = [&params, &weights, ray_results, &per_probe, &atlases.irradiance, &atlases.distance];
+        let buffers = [
+            &params,
+            &weights,
+            ray_results,
+            &per_probe,
+            &atlases.irradiance,
+            &atlases.distance,
+            &atlases.texel_hysteresis,
+        ];
         let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
             .iter()
             .enumerate()
@@ -394,6 +413,9 @@ fn blend_params(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, probes
         irradiance_first: atlases.irradiance_first,
         distance_first: atlases.distance_first,
         weight_entries_first: (plan.irradiance_weights.offsets.len() + plan.distance_weights.offsets.len()) as u32,
+        firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
+        adaptive_hysteresis: s.probe_adaptive_hysteresis as u32,
+        _pad: [0; 2],
     }
 }
 

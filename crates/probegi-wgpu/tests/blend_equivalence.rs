@@ -10,7 +10,9 @@ use glam::{Vec2, Vec3};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::fibonacci::{sample_uniform_rotation, spherical_fibonacci};
 use probegi_core::probe_atlas::ProbeAtlas;
-use probegi_core::probe_blend::{BlendWeights, TexelThresholds, blend_distance_tile, blend_irradiance_tile};
+use probegi_core::probe_blend::{
+    BlendWeights, IrradianceBlendRule, TexelThresholds, blend_distance_tile, blend_irradiance_tile,
+};
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::rng::Pcg32;
 use probegi_wgpu::probe_blend::{BlendFrame, GpuProbeBlend, GpuVolumeAtlases};
@@ -29,11 +31,19 @@ fn frame(rng: &mut Pcg32, probes: usize, rays: u32, f: u32) -> Frame {
     let rot = sample_uniform_rotation(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()));
     let dirs: Vec<Vec3> = (0..rays).map(|i| (rot * spherical_fibonacci(i, rays)).normalize()).collect();
     let n = probes * rays as usize;
+    // Every tenth frame another third of the probes see a 1000× flash (the firefly clamp's case).
+    let flash = |k: usize| if f % 10 == 5 && (k / rays as usize) % 3 == 0 { 1000.0 } else { 1.0 };
     let radiance = (0..n)
         .map(|k| match k % 97 {
             13 => Vec3::NAN,
             41 => Vec3::new(f32::INFINITY, 1.0, 0.0),
-            _ => Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 10f32.powf(3.0 * rng.next_f32() - 2.0),
+            // A third of the probes see still light (the adaptive states rise there).
+            _ if (k / rays as usize) % 3 == 1 => Vec3::new(0.5, 0.25, 1.0),
+            _ => {
+                Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32())
+                    * 10f32.powf(3.0 * rng.next_f32() - 2.0)
+                    * flash(k)
+            }
         })
         .collect();
     let distance = (0..n)
@@ -52,19 +62,34 @@ fn frame(rng: &mut Pcg32, probes: usize, rays: u32, f: u32) -> Frame {
     Frame { dirs, radiance, distance, hysteresis }
 }
 
-fn cpu_blend(s: &DdgiVolumeSettings, fr: &Frame, irr: &mut ProbeAtlas<Vec3>, dist: &mut ProbeAtlas<Vec2>, clamp: f32) {
+/// The CPU's atlases and, with `probe_adaptive_hysteresis`, its per-texel states.
+struct CpuField {
+    irradiance: ProbeAtlas<Vec3>,
+    distance: ProbeAtlas<Vec2>,
+    texel_hysteresis: Vec<f32>,
+}
+
+fn cpu_blend(s: &DdgiVolumeSettings, fr: &Frame, cpu: &mut CpuField, clamp: f32) {
     let rays = fr.dirs.len();
+    let (irr, dist) = (&mut cpu.irradiance, &mut cpu.distance);
     let wi = BlendWeights::new(&fr.dirs, irr.interior, 1.0);
     let wd = BlendWeights::new(&fr.dirs, dist.interior, s.probe_distance_exponent);
-    let th = TexelThresholds {
-        significant: s.probe_significant_change_threshold,
-        new_distribution: s.probe_new_distribution_threshold,
+    let rule = IrradianceBlendRule {
+        gamma: s.probe_irradiance_gamma,
+        thresholds: Some(TexelThresholds {
+            significant: s.probe_significant_change_threshold,
+            new_distribution: s.probe_new_distribution_threshold,
+        }),
+        firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
+        adaptive_hysteresis: s.probe_adaptive_hysteresis,
     };
     let (ni, nd) = (irr.interior, dist.interior);
+    let tile = irr.tile_len();
     for (p, h) in fr.hysteresis.iter().enumerate() {
         let Some(h) = *h else { continue };
         let r = p * rays..(p + 1) * rays;
-        blend_irradiance_tile(irr.tile_mut(p), ni, &wi, &fr.radiance[r.clone()], (h * 0.85, 1), 5.0, Some(&th));
+        let state = cpu.texel_hysteresis.get_mut(p * tile..(p + 1) * tile).unwrap_or_default();
+        blend_irradiance_tile(irr.tile_mut(p), ni, &wi, &fr.radiance[r.clone()], (h * 0.85, 1), &rule, state);
         blend_distance_tile(dist.tile_mut(p), nd, &wd, &fr.distance[r], h * 0.5, clamp);
         update_tile_border(irr.tile_mut(p), ni);
         update_tile_border(dist.tile_mut(p), nd);
@@ -93,39 +118,65 @@ fn max_error(a: &(ProbeAtlas<Vec3>, ProbeAtlas<Vec2>), b: &(ProbeAtlas<Vec3>, Pr
 
 #[test]
 fn gpu_blend_and_border_match_the_cpu_after_1_and_100_frames_and_repeat_bit_for_bit() {
-    blend_matches_the_cpu(96, 100);
+    blend_matches_the_cpu(96, 100, DdgiVolumeSettings::default());
 }
 
 #[test]
 fn a_probe_with_more_rays_than_workgroup_memory_holds_blends_from_the_batch() {
     // `blend_probe` stages up to 512 rays a probe in workgroup memory; a volume
     // with more reads them from the batch (the other branch), to the same bound.
-    blend_matches_the_cpu(600, 10);
+    blend_matches_the_cpu(600, 10, DdgiVolumeSettings::default());
+}
+
+#[test]
+fn pgi_safeguards_blend_as_on_the_cpu() {
+    // Timberdoodle PGI's firefly clamp and adaptive per-texel hysteresis: the
+    // frames' radiance spans three decades, so the clamp cuts and the states
+    // rise and fall every frame.
+    let s = DdgiVolumeSettings {
+        probe_firefly_clamp_ratio: 32.0,
+        probe_adaptive_hysteresis: true,
+        ..DdgiVolumeSettings::default()
+    };
+    let safeguarded = blend_matches_the_cpu(96, 100, s);
+    // They act: against the papers' blend of the same frames, texels differ.
+    let Some(plain) = blend_matches_the_cpu(96, 100, DdgiVolumeSettings::default()) else { return };
+    let safeguarded = safeguarded.expect("an adapter");
+    let differ = plain.irradiance.texels.iter().zip(&safeguarded.irradiance.texels);
+    let differ = differ.filter(|(a, b)| (**a - **b).abs().max_element() > 0.01 * a.max_element()).count();
+    assert!(differ * 4 > plain.irradiance.texels.len(), "{differ} of {} texels changed", plain.irradiance.texels.len());
+    let hs = &safeguarded.texel_hysteresis;
+    // Still probes' states climb between their restarts (every 7th frame); noisy ones stay low.
+    assert!(hs.iter().any(|h| *h > 0.4) && hs.iter().any(|h| *h > 0.0 && *h < 0.2), "{hs:?}");
 }
 
 /// The GPU blend of `rays` rays a probe against the CPU's over `frames` frames
 /// (checked after the first and the last), and two runs bit for bit.
-fn blend_matches_the_cpu(rays: u32, frames: u32) {
-    let Some(ctx) = context() else { return };
-    let s = DdgiVolumeSettings::default();
+fn blend_matches_the_cpu(rays: u32, frames: u32, s: DdgiVolumeSettings) -> Option<CpuField> {
+    let ctx = context()?;
     let (probes, clamp) = (37usize, 12.0f32);
-    let mut cpu =
-        (ProbeAtlas::new(probes, s.probe_irradiance_texels), ProbeAtlas::new(probes, s.probe_distance_texels));
+    let irradiance = ProbeAtlas::new(probes, s.probe_irradiance_texels);
+    let states = if s.probe_adaptive_hysteresis { irradiance.texels.len() } else { 0 };
+    let mut cpu = CpuField {
+        irradiance,
+        distance: ProbeAtlas::new(probes, s.probe_distance_texels),
+        texel_hysteresis: vec![0.0; states],
+    };
     let blend = GpuProbeBlend::new(&ctx);
     let gpu = GpuVolumeAtlases::new(&ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
     let again = GpuVolumeAtlases::new(&ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
-    gpu.upload(&ctx, &cpu.0, &cpu.1);
-    again.upload(&ctx, &cpu.0, &cpu.1);
+    gpu.upload(&ctx, &cpu.irradiance, &cpu.distance);
+    again.upload(&ctx, &cpu.irradiance, &cpu.distance);
     let mut rng = Pcg32::new(7, 1);
     let mut worst = (0.0f32, 0.0f32);
     for f in 0..frames {
         let fr = frame(&mut rng, probes, rays, f);
-        cpu_blend(&s, &fr, &mut cpu.0, &mut cpu.1, clamp);
+        cpu_blend(&s, &fr, &mut cpu, clamp);
         blend.run(&ctx, &gpu, &gpu_frame(&s, &fr, clamp)).expect("blend");
         blend.run(&ctx, &again, &gpu_frame(&s, &fr, clamp)).expect("blend");
         if f == 0 || f == frames - 1 {
             let got = gpu.download(&ctx).expect("download");
-            let (ei, ed) = max_error(&cpu, &got);
+            let (ei, ed) = max_error(&(cpu.irradiance.clone(), cpu.distance.clone()), &got);
             eprintln!("after {} frame(s): irradiance {ei:.2e}, distance {ed:.2e} (relative, max over texels)", f + 1);
             worst = (worst.0.max(ei), worst.1.max(ed));
             assert!(got.0.texels.iter().all(|t| t.is_finite()) && got.1.texels.iter().all(|t| t.is_finite()));
@@ -139,6 +190,7 @@ fn blend_matches_the_cpu(rays: u32, frames: u32) {
     // between the CPU's libm and the shader compiler's, and 100 frames of
     // hysteresis carry that forward without growing it.
     assert!(worst.0 < 1e-4 && worst.1 < 1e-4, "GPU vs CPU: {worst:?}");
+    Some(cpu)
 }
 
 #[test]

@@ -135,6 +135,20 @@ fn a_field_kept_on_the_gpu_matches_the_host_blend_after_1_and_100_frames() {
 }
 
 #[test]
+fn a_field_kept_on_the_gpu_with_pgi_safeguards_matches_the_host_blend() {
+    // Timberdoodle PGI's firefly clamp and adaptive per-texel hysteresis: the
+    // device keeps its own per-texel states, the host its own; same bound.
+    let settings = DdgiVolumeSettings {
+        probe_counts: UVec3::splat(6),
+        probe_rays_per_probe: 128,
+        probe_firefly_clamp_ratio: 32.0,
+        probe_adaptive_hysteresis: true,
+        ..Default::default()
+    };
+    run_pair(settings, 100, &[0, 99], false, (1e-5, 1e-5));
+}
+
+#[test]
 fn a_field_kept_on_the_gpu_with_its_own_rays_stays_within_the_ray_directions_rounding() {
     // The device generates the update rays (probe_ray_gen.wgsl): directions within
     // 2.4e-5 of the host's, so a ray grazing an edge may hit the other surface and

@@ -16,7 +16,8 @@ use std::collections::BTreeMap;
 
 use glam::Vec3;
 use probegi_core::probe_blend::{
-    BACKFACE_DISTANCE_SCALE, TexelThresholds, blend_distance_tile, blend_irradiance_tile, hysteresis_over_frames,
+    BACKFACE_DISTANCE_SCALE, IrradianceBlendRule, TexelThresholds, blend_distance_tile, blend_irradiance_tile,
+    hysteresis_over_frames,
 };
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::probe_classification::ProbeState;
@@ -72,22 +73,28 @@ impl DdgiVolume {
         let n = frame.ray_count;
         let (base, irr_scale, vis_scale) = self.blend_plan(frame);
         let frames = self.blend_frames(frame);
-        let thresholds = self.settings.probe_fast_convergence.then_some(TexelThresholds {
-            significant: self.settings.probe_significant_change_threshold,
-            new_distribution: self.settings.probe_new_distribution_threshold,
-        });
+        let rule = self.irradiance_blend_rule();
         let (irr_n, dist_n) = (self.irradiance.interior, self.distance.interior);
-        let gamma = self.settings.probe_irradiance_gamma;
         let clamp = self.distance_clamp_m();
         let irr_len = self.irradiance.tile_len();
         let dist_len = self.distance.tile_len();
         let weights = &frame.rays;
+        if rule.adaptive_hysteresis {
+            self.irradiance_texel_hysteresis.resize(self.irradiance.texels.len(), 0.0);
+        }
+        // Per tile its adaptive-hysteresis states, or none.
+        let states: Vec<&mut [f32]> = if rule.adaptive_hysteresis {
+            self.irradiance_texel_hysteresis.chunks_mut(irr_len).collect()
+        } else {
+            base.iter().map(|_| &mut [][..]).collect()
+        };
         let irradiance_change: Vec<Option<f32>> = self
             .irradiance
             .texels
             .par_chunks_mut(irr_len)
+            .zip(states)
             .zip(base.par_iter().zip(&frames))
-            .map(|(tile, (b, k))| {
+            .map(|((tile, state), (b, k))| {
                 b.map(|(first, h)| {
                     blend_irradiance_tile(
                         tile,
@@ -95,8 +102,8 @@ impl DdgiVolume {
                         &weights.irradiance_weights,
                         &ray_radiance[first..first + n],
                         (h * irr_scale, *k),
-                        gamma,
-                        thresholds.as_ref(),
+                        &rule,
+                        state,
                     )
                 })
             })
@@ -131,6 +138,21 @@ impl DdgiVolume {
         self.after_update(&updated);
         #[cfg(debug_assertions)]
         self.validate();
+    }
+
+    /// How this volume's irradiance texels take their estimates: γ, Listing 3's
+    /// thresholds with `probe_fast_convergence`, and PGI's safeguards.
+    pub(crate) fn irradiance_blend_rule(&self) -> IrradianceBlendRule {
+        let s = &self.settings;
+        IrradianceBlendRule {
+            gamma: s.probe_irradiance_gamma,
+            thresholds: s.probe_fast_convergence.then_some(TexelThresholds {
+                significant: s.probe_significant_change_threshold,
+                new_distribution: s.probe_new_distribution_threshold,
+            }),
+            firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
+            adaptive_hysteresis: s.probe_adaptive_hysteresis,
+        }
     }
 
     /// The border pass over the tiles that blended (seed 004 §2.3), timed under `border`.

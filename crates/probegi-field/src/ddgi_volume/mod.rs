@@ -135,6 +135,10 @@ pub struct DdgiVolume {
     probe_requested: Vec<bool>,
     /// Blends since the probe's history last restarted (`probe_hysteresis_ramp`).
     probe_blends: Vec<u32>,
+    /// One adaptive-hysteresis state per irradiance texel, laid out as the
+    /// atlas (`probe_adaptive_hysteresis`; empty without it, sized at the
+    /// first blend with it, from 0).
+    irradiance_texel_hysteresis: Vec<f32>,
 }
 
 /// One volume's per-frame scratch.
@@ -240,6 +244,7 @@ impl DdgiVolume {
             probe_request_countdown: vec![0; probes],
             probe_requested: vec![false; probes],
             probe_blends: vec![0; probes],
+            irradiance_texel_hysteresis: Vec::new(),
             settings,
         }
     }

@@ -1,5 +1,5 @@
 // Blend and border passes of a DDGI volume (seed 003 §4.5, seed 004 §2.3, §4.2–4.3).
-// Must match `probegi_wgpu::probe_blend::BlendParams` (#[repr(C)], 64 bytes) and the
+// Must match `probegi_wgpu::probe_blend::BlendParams` (#[repr(C)], 80 bytes) and the
 // tile-major atlas layout of `probegi_core::probe_atlas` (tile side = interior + 2,
 // row-major inside a tile, interior texel (i, j) at tile texel (i + 1, j + 1)).
 // An irradiance texel's w holds its change in its last blend (the ray budget's
@@ -23,6 +23,10 @@ struct BlendParams {
     irradiance_first: u32,     // the volume's first texel in the irradiance buffer
     distance_first: u32,       // the volume's first texel in the distance buffer
     weight_entries_first: u32, // where blend_weights' (ray, weight) entries start
+    firefly_clamp_ratio: f32,  // Timberdoodle PGI's firefly clamp; 0: off
+    adaptive_hysteresis: u32,  // Timberdoodle PGI's adaptive per-texel hysteresis
+    _pad0: u32,
+    _pad1: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: BlendParams;
@@ -39,6 +43,10 @@ struct BlendParams {
 @group(0) @binding(3) var<storage, read> probe_blend: array<vec4<u32>>;
 @group(0) @binding(4) var<storage, read_write> irradiance: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> distance: array<vec2<f32>>;
+// One adaptive-hysteresis state per irradiance texel, indexed as `irradiance`
+// (probegi_core::probe_blend::adaptive_texel_hysteresis; read and written only
+// with params.adaptive_hysteresis).
+@group(0) @binding(6) var<storage, read_write> texel_hysteresis: array<f32>;
 
 // probegi_core::probe_atlas::interior_texel_index
 fn interior_texel_index(interior: u32, i: u32, j: u32) -> u32 {
@@ -129,9 +137,13 @@ fn blend_irradiance_texel(probe: u32, first: u32, h0: f32, frames: u32, texel: u
         irradiance[idx].w = 0.0;
         return;
     }
-    let encoded = encode_irradiance(sum / wsum, params.gamma);
     let old = irradiance[idx].xyz;
-    var h = h0 * params.irradiance_scale;
+    let planned = h0 * params.irradiance_scale;
+    var encoded = encode_irradiance(sum / wsum, params.gamma);
+    if (planned > 0.0 && params.firefly_clamp_ratio > 0.0) {
+        encoded = firefly_clamp(encoded, old);
+    }
+    var h = planned;
     if (params.use_thresholds != 0u) {
         // probegi_core::probe_blend::adjusted_hysteresis (seed 004 Listing 3)
         let e = encoded - old;
@@ -142,6 +154,11 @@ fn blend_irradiance_texel(probe: u32, first: u32, h0: f32, frames: u32, texel: u
             h = max(h - 0.15, 0.0);
         }
     }
+    if (params.adaptive_hysteresis != 0u) {
+        let state = adaptive_texel_hysteresis(texel_hysteresis[idx], planned, old, encoded);
+        texel_hysteresis[idx] = state;
+        h = min(h, state);
+    }
     h = hysteresis_over_frames(h, frames);
     let blended = encoded * (1.0 - h) + old * h;
     let change = texel_change(old, encoded);
@@ -150,6 +167,31 @@ fn blend_irradiance_texel(probe: u32, first: u32, h0: f32, frames: u32, texel: u
     } else {
         irradiance[idx].w = change;
     }
+}
+
+fn max3(v: vec3<f32>) -> f32 {
+    return max(max(v.x, v.y), v.z);
+}
+
+// probegi_core::probe_blend::firefly_clamp: the estimate scaled so that its largest
+// linear component is at most firefly_clamp_ratio × the history's (encoded values).
+fn firefly_clamp(encoded: vec3<f32>, history: vec3<f32>) -> vec3<f32> {
+    let old = max3(history);
+    let new_max = max3(encoded);
+    if (!(old > 0.0)) { return encoded; }
+    let limit = old * pow(params.firefly_clamp_ratio, 1.0 / params.gamma);
+    if (new_max > limit) { return encoded * (limit / new_max); }
+    return encoded;
+}
+
+// probegi_core::probe_blend::adaptive_texel_hysteresis: + ADAPTIVE_HYSTERESIS_RISE a
+// blend, − the relative change, within [0, 1]; 0 where the history restarts.
+fn adaptive_texel_hysteresis(state: f32, planned: f32, history: vec3<f32>, encoded: vec3<f32>) -> f32 {
+    if (!(planned > 0.0)) { return 0.0; }
+    let relative = max3(abs(encoded - history)) / (max(max3(history), 0.0) + ADAPTIVE_HYSTERESIS_FLOOR);
+    let next = state + ADAPTIVE_HYSTERESIS_RISE - relative;
+    if (!(abs(next) <= 3.4028235e38)) { return 0.0; }
+    return clamp(next, 0.0, 1.0);
 }
 
 // probegi_core::probe_blend::hysteresis_over_frames: h^frames by repeated multiplication.
