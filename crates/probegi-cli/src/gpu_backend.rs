@@ -135,7 +135,7 @@ pub fn time_gpu_passes(
             first_ray: p.first_ray,
             ray_count: p.ray_count,
             info,
-            _pad: 0,
+            hit_ao_radius_bits: probegi_wgpu::probe_shade::hit_ao_radius_m(volume).to_bits(),
         })
         .collect();
     let mut best: Option<Vec<f64>> = None;

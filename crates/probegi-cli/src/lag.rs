@@ -182,7 +182,10 @@ pub fn run(args: &LagArgs) -> Result<()> {
 
 fn write_outputs(args: &LagArgs, runs: &[Run]) -> Result<()> {
     let stem = args.out.with_extension("");
-    let csv_path = stem.with_extension("csv");
+    let name = stem.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    // Beside the plot, named after it (`with_extension` would cut a stem
+    // such as `lag-0.1` at its dot).
+    let csv_path = stem.with_file_name(format!("{name}.csv"));
     let mut csv = String::from("step,hysteresis,heuristics,lag_frames,flip_after_1,flip_after_10,flip_last\n");
     for r in runs {
         let at = |k: usize| r.flip[k.min(r.flip.len() - 1)];
@@ -228,7 +231,6 @@ fn write_outputs(args: &LagArgs, runs: &[Run]) -> Result<()> {
     }
     lag_plot.write_png(&args.out)?;
 
-    let name = stem.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let curves_path = stem.with_file_name(format!("{name}-curves.png"));
     write_curves(args, runs, Step::LightOn, &curves_path)?;
     let occluder_path = stem.with_file_name(format!("{name}-occluder-curves.png"));

@@ -326,7 +326,8 @@ fn sequence_writes_every_frame_and_reference_renders_any_frame() {
 
 #[test]
 fn lag_writes_the_plot_the_curves_and_the_numbers() {
-    let out = tmp("lag").join("lag.png");
+    // A dot in the name (as `lag-0.97.png`): every output keeps the whole stem.
+    let out = tmp("lag").join("lag-0.5.png");
     let o = probegi(&[
         "lag",
         "--out",
@@ -345,8 +346,8 @@ fn lag_writes_the_plot_the_curves_and_the_numbers() {
         "12",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(out.is_file() && out.with_file_name("lag-curves.png").is_file());
-    let csv = std::fs::read_to_string(out.with_extension("csv")).expect("csv");
+    assert!(out.is_file() && out.with_file_name("lag-0.5-curves.png").is_file());
+    let csv = std::fs::read_to_string(out.with_file_name("lag-0.5.csv")).expect("csv");
     // Header + 2 steps × 2 hysteresis × heuristics on/off.
     assert_eq!(csv.lines().count(), 1 + 8, "{csv}");
     assert!(csv.lines().nth(1).is_some_and(|l| l.starts_with("light on,0.5,true,")), "{csv}");

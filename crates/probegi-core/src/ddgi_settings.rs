@@ -99,6 +99,19 @@ pub struct DdgiVolumeSettings {
     /// and blends with at most that (`probegi_core::probe_blend::adaptive_texel_hysteresis`).
     /// Off by default; measured in docs/RESULTS.md.
     pub probe_adaptive_hysteresis: bool,
+    /// The relative change (in the γ-encoded space) an adaptive-hysteresis
+    /// state tolerates before it falls: noise below it lets the state climb
+    /// (0: PGI's rule, every change counts). Measured in docs/RESULTS.md.
+    pub probe_adaptive_hysteresis_tolerance: f32,
+    /// Timberdoodle PGI's short-range AO on hit radiance (`../shared/PEERS.md`),
+    /// against light stuck in corners: at each front probe-ray hit one
+    /// cosine-distributed any-hit ray of this many times the volume's smallest
+    /// spacing leaves the surface, and the field's term of the hit's radiance
+    /// (diffuse albedo/π × the field's irradiance there) counts only when it
+    /// escapes. The blend averages the binary samples over a texel's rays and
+    /// frames. PEERS names the idea, not PGI's estimator; this is ours. 0 (the
+    /// default): off; measured in docs/RESULTS.md.
+    pub probe_hit_ao_radius_rel: f32,
     /// Probe position optimizer at initialisation (seed 004 §5, Listing 4).
     pub probe_relocation: bool,
     /// Optimizer iterations (seed 004: five).
@@ -265,6 +278,8 @@ impl Default for DdgiVolumeSettings {
             probe_new_distribution_threshold: 0.8,
             probe_firefly_clamp_ratio: 0.0,
             probe_adaptive_hysteresis: false,
+            probe_adaptive_hysteresis_tolerance: 0.0,
+            probe_hit_ao_radius_rel: 0.0,
             probe_relocation: true,
             probe_relocation_iterations: 5,
             probe_init_rays_per_probe: 32,
@@ -364,6 +379,7 @@ impl DdgiVolumeSettings {
             if (0.0..=1.0).contains(&v) { Ok(()) } else { Err((name, format!("{v} must be in [0, 1]"))) }
         };
         unit("probe_hysteresis", self.probe_hysteresis)?;
+        unit("probe_adaptive_hysteresis_tolerance", self.probe_adaptive_hysteresis_tolerance)?;
         unit("probe_energy_conservation", self.probe_energy_conservation)?;
         unit("probe_crush_threshold", self.probe_crush_threshold)?;
         unit("probe_classification_reach_rel", self.probe_classification_reach_rel)?;
@@ -388,6 +404,7 @@ impl DdgiVolumeSettings {
             if v.is_finite() && v >= 0.0 { Ok(()) } else { Err((name, format!("{v} must be finite and >= 0"))) }
         };
         non_negative("probe_self_shadow_bias", self.probe_self_shadow_bias)?;
+        non_negative("probe_hit_ao_radius_rel", self.probe_hit_ao_radius_rel)?;
         non_negative("probe_normal_bias_m", self.probe_normal_bias_m)?;
         if !(0.0..0.5).contains(&self.probe_relocation_offset_limit_rel) {
             return Err((

@@ -112,7 +112,7 @@ pub fn adjusted_hysteresis(hysteresis: f32, change: f32, thresholds: &TexelThres
 pub fn firefly_clamp(encoded: Vec3, history: Vec3, ratio: f32, gamma: f32) -> Vec3 {
     let old = history.max_element();
     let new = encoded.max_element();
-    if !(old > 0.0) {
+    if old.is_nan() || old <= 0.0 {
         return encoded;
     }
     let limit = old * ratio.powf(1.0 / gamma);
@@ -131,19 +131,20 @@ pub const ADAPTIVE_HYSTERESIS_FLOOR: f32 = 0.01;
 /// Timberdoodle PGI's adaptive per-texel hysteresis (`../shared/PEERS.md`),
 /// in the perceptual (γ-encoded) space the blend works in: the texel's state
 /// rises by [`ADAPTIVE_HYSTERESIS_RISE`] a blend and falls by the relative
-/// change `max|new − old| / (max old + 0.01)`, within [0, 1]; the blend then
+/// change `max|new − old| / (max old + 0.01)` beyond `tolerance` (0: PGI's
+/// rule), within [0, 1]; the blend then
 /// uses at most that state. A blend whose planned hysteresis is 0 (the
 /// probe's history restarts) restarts the state at 0. In encoded space a
 /// γ = 5 field's per-frame noise of 10–20 % reads as 2–4 % and lets the state
 /// climb, while a light that doubles reads as 15 % a frame and one that goes
 /// to a tenth as 37 %, so the texel follows them within a few frames.
-pub fn adaptive_texel_hysteresis(state: f32, planned: f32, history: Vec3, encoded: Vec3) -> f32 {
-    if !(planned > 0.0) {
+pub fn adaptive_texel_hysteresis(state: f32, planned: f32, (history, encoded): (Vec3, Vec3), tolerance: f32) -> f32 {
+    if planned.is_nan() || planned <= 0.0 {
         return 0.0;
     }
     let relative =
         (encoded - history).abs().max_element() / (history.max_element().max(0.0) + ADAPTIVE_HYSTERESIS_FLOOR);
-    let next = state + ADAPTIVE_HYSTERESIS_RISE - relative;
+    let next = state + ADAPTIVE_HYSTERESIS_RISE - (relative - tolerance).max(0.0);
     if next.is_finite() { next.clamp(0.0, 1.0) } else { 0.0 }
 }
 
@@ -159,12 +160,14 @@ pub struct IrradianceBlendRule {
     pub firefly_clamp_ratio: f32,
     /// [`adaptive_texel_hysteresis`], with one state per texel.
     pub adaptive_hysteresis: bool,
+    /// The relative change the adaptive states tolerate before they fall.
+    pub adaptive_tolerance: f32,
 }
 
 impl IrradianceBlendRule {
     /// The rule with encoding `gamma` alone: no thresholds, no safeguards.
     pub fn plain(gamma: f32) -> Self {
-        Self { gamma, thresholds: None, firefly_clamp_ratio: 0.0, adaptive_hysteresis: false }
+        Self { gamma, thresholds: None, firefly_clamp_ratio: 0.0, adaptive_hysteresis: false, adaptive_tolerance: 0.0 }
     }
 }
 
@@ -223,7 +226,7 @@ pub fn blend_irradiance_tile(
             None => hysteresis,
         };
         if let Some(state) = texel_hysteresis.get_mut(index).filter(|_| rule.adaptive_hysteresis) {
-            *state = adaptive_texel_hysteresis(*state, hysteresis, *dst, encoded);
+            *state = adaptive_texel_hysteresis(*state, hysteresis, (*dst, encoded), rule.adaptive_tolerance);
             h = h.min(*state);
         }
         let h = hysteresis_over_frames(h, frames);

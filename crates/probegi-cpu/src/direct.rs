@@ -47,6 +47,11 @@ pub struct DirectLighting<'a> {
 }
 
 impl<'a> DirectLighting<'a> {
+    /// Whether `ray` hits anything, with this lighting's tracer.
+    pub fn occluded(&self, ray: &probegi_scene::Ray) -> bool {
+        self.tracer.occluded(ray)
+    }
+
     /// Lighting of `scene` with shadow rays traced by `tracer`; builds the
     /// power-weighted emitter distribution once.
     pub fn new(scene: &'a Scene, tracer: &'a dyn RayTracer, settings: DirectSettings) -> Self {

@@ -93,6 +93,7 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                 direct_area_samples: settings.probe_area_light_samples,
                 direct_sky_samples: sky_samples,
             };
+            let ao_radius_m = settings.probe_hit_ao_radius_rel * volume.grid.min_spacing_m();
             let probe = bp.probe as u64;
             let seed = volume.stream_seed(inputs.seed);
             let mut rng = Pcg32::new(hash_combine(&[seed, inputs.frame as u64, probe, 0x5ade]), probe);
@@ -118,7 +119,13 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                             .then_some(&from_field as &crate::shading::PunctualVisibility<'_>);
                         let (direct, k) = inputs.direct.reflected_with(sp, &ctx, area, true, visibility, &mut rng);
                         rays += k;
-                        let mut l = direct + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * field_e[i];
+                        let ao = if ao_radius_m > 0.0 {
+                            rays += 1;
+                            hit_ao(inputs.direct, sp, ao_radius_m, &mut rng)
+                        } else {
+                            1.0
+                        };
+                        let mut l = direct + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * field_e[i] * ao;
                         if settings.glossy_second_order {
                             l += crate::glossy::second_order_specular(inputs.field, sp, &ctx, dir);
                         }
@@ -129,6 +136,18 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
             rays
         })
         .sum()
+}
+
+/// `probe_hit_ao_radius_rel`'s sample at a front hit (Timberdoodle PGI's
+/// short-range AO on hit radiance): 1 when one cosine-distributed ray around
+/// the facing normal leaves `sp` unoccluded for `radius_m`, else 0 (two
+/// draws from `rng`, after the direct light's). `probe_shade.wgsl`'s
+/// `probe_hit_ao` is its twin.
+pub fn hit_ao(direct: &DirectLighting<'_>, sp: &SurfacePoint, radius_m: f32, rng: &mut Pcg32) -> f32 {
+    let u = glam::Vec2::new(rng.next_f32(), rng.next_f32());
+    let frame = probegi_core::sampling::Frame::from_normal(sp.facing_normal());
+    let wi = frame.to_world(probegi_core::sampling::sample_cosine_hemisphere(u));
+    if direct.occluded(&crate::shading::shadow_ray_along(sp, wi, radius_m)) { 0.0 } else { 1.0 }
 }
 
 /// Rays per parallel work item of the per-ray steps.

@@ -236,3 +236,36 @@ fn a_sun_in_the_sky_map_lights_the_plane_by_its_cosine_integral() {
     let pt = reference(&scene, &camera, 8, PathTracerSettings { pt_spp: 256, seed: 7, ..Default::default() }).mean();
     assert!(rel_err(pt.x, want as f32) < 0.03, "sampled map {pt} want {want}");
 }
+
+#[test]
+fn hit_ao_under_a_parallel_ceiling_escapes_with_probability_d_over_r_squared() {
+    // `probe_hit_ao_radius_rel`'s sample: a cosine-distributed ray from a floor
+    // point under a ceiling at height d escapes a radius R > d when
+    // d / cos θ > R, i.e. cos² θ < (d / R)²; cos² θ is uniform for cosine
+    // sampling, so the mean is (d / R)²; for R < d it always escapes.
+    use probegi_core::rng::Pcg32;
+    use probegi_cpu::{DirectLighting, DirectSettings};
+    use probegi_scene::{Ray, RayTracer};
+    let mut scene = Scene { materials: vec![Material::diffuse("grey", Vec3::splat(0.5))], ..Default::default() };
+    let s = 1000.0;
+    let floor = [Vec3::new(-s, 0.0, s), Vec3::new(s, 0.0, s), Vec3::new(s, 0.0, -s), Vec3::new(-s, 0.0, -s)];
+    add_polygon(&mut scene.mesh, &floor, 0);
+    let ceiling: Vec<Vec3> = floor.iter().rev().map(|p| *p + Vec3::Y).collect();
+    add_polygon(&mut scene.mesh, &ceiling, 0);
+    let bvh = BvhTracer::build(&scene.mesh, BvhSettings::default());
+    let hit = bvh.closest_hit(&Ray::new(Vec3::new(0.3, 0.5, -0.2), Vec3::NEG_Y)).expect("the floor");
+    let sp = scene.surface_point(&hit);
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let mut rng = Pcg32::new(11, 3);
+    let n = 40_000;
+    let mean = |r: f32, rng: &mut Pcg32| {
+        (0..n).map(|_| probegi_cpu::probe_shade::hit_ao(&direct, &sp, r, rng)).sum::<f32>() / n as f32
+    };
+    assert_eq!(mean(0.9, &mut rng), 1.0);
+    for (r, want) in [(2.0f32, 0.25f32), (4.0, 1.0 / 16.0)] {
+        let got = mean(r, &mut rng);
+        // 4 standard deviations of a mean of n Bernoulli samples.
+        let sigma = (want * (1.0 - want) / n as f32).sqrt();
+        assert!((got - want).abs() < 4.0 * sigma, "R = {r}: {got}, want {want} ± {}", 4.0 * sigma);
+    }
+}

@@ -58,7 +58,8 @@ pub(crate) struct BlendParams {
     pub(crate) weight_entries_first: u32,
     pub(crate) firefly_clamp_ratio: f32,
     pub(crate) adaptive_hysteresis: u32,
-    pub(crate) _pad: [u32; 2],
+    pub(crate) adaptive_tolerance: f32,
+    pub(crate) _pad: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<BlendParams>() == 80);
@@ -415,7 +416,8 @@ fn blend_params(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, probes
         weight_entries_first: (plan.irradiance_weights.offsets.len() + plan.distance_weights.offsets.len()) as u32,
         firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
         adaptive_hysteresis: s.probe_adaptive_hysteresis as u32,
-        _pad: [0; 2],
+        adaptive_tolerance: s.probe_adaptive_hysteresis_tolerance,
+        _pad: 0,
     }
 }
 

@@ -47,8 +47,9 @@ pub struct ShadeProbe {
     pub ray_count: u32,
     /// The rays' shading flags ([`shade_info`]).
     pub info: u32,
-    /// Padding to 16 bytes.
-    pub _pad: u32,
+    /// The bits of the `f32` length (m) of `probe_hit_ao_radius_rel`'s ray at
+    /// each front hit (`probegi_cpu::probe_shade::hit_ao`); 0: no AO.
+    pub hit_ao_radius_bits: u32,
 }
 const _: () = assert!(std::mem::size_of::<ShadeProbe>() == 16);
 
@@ -86,10 +87,16 @@ pub fn batch_shade_probes(
                 ray_count: bp.ray_count,
                 info: shade_info(needed, s.glossy_second_order, s.probe_area_light_samples, s.probe_sky_light_samples)
                     | if s.shadow_field && s.shadow_field_probe_shading { SHADE_SHADOW_FIELD } else { 0 },
-                _pad: 0,
+                hit_ao_radius_bits: hit_ao_radius_m(&volumes[bp.volume as usize]).to_bits(),
             }
         })
         .collect()
+}
+
+/// The length of `volume`'s hit-AO rays (`probe_hit_ao_radius_rel` × its
+/// smallest spacing; 0: off), as `probegi_cpu::probe_shade` takes it.
+pub fn hit_ao_radius_m(volume: &probegi_field::ddgi_volume::DdgiVolume) -> f32 {
+    volume.settings.probe_hit_ao_radius_rel * volume.grid.min_spacing_m()
 }
 
 /// The shade pass's pipeline (`probe_shade.wgsl` with the BVH, the field and

@@ -32,7 +32,7 @@ fn frame(rng: &mut Pcg32, probes: usize, rays: u32, f: u32) -> Frame {
     let dirs: Vec<Vec3> = (0..rays).map(|i| (rot * spherical_fibonacci(i, rays)).normalize()).collect();
     let n = probes * rays as usize;
     // Every tenth frame another third of the probes see a 1000× flash (the firefly clamp's case).
-    let flash = |k: usize| if f % 10 == 5 && (k / rays as usize) % 3 == 0 { 1000.0 } else { 1.0 };
+    let flash = |k: usize| if f % 10 == 5 && (k / rays as usize).is_multiple_of(3) { 1000.0 } else { 1.0 };
     let radiance = (0..n)
         .map(|k| match k % 97 {
             13 => Vec3::NAN,
@@ -82,6 +82,7 @@ fn cpu_blend(s: &DdgiVolumeSettings, fr: &Frame, cpu: &mut CpuField, clamp: f32)
         }),
         firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
         adaptive_hysteresis: s.probe_adaptive_hysteresis,
+        adaptive_tolerance: s.probe_adaptive_hysteresis_tolerance,
     };
     let (ni, nd) = (irr.interior, dist.interior);
     let tile = irr.tile_len();

@@ -152,6 +152,7 @@ impl DdgiVolume {
             }),
             firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
             adaptive_hysteresis: s.probe_adaptive_hysteresis,
+            adaptive_tolerance: s.probe_adaptive_hysteresis_tolerance,
         }
     }
 

@@ -25,8 +25,8 @@ struct BlendParams {
     weight_entries_first: u32, // where blend_weights' (ray, weight) entries start
     firefly_clamp_ratio: f32,  // Timberdoodle PGI's firefly clamp; 0: off
     adaptive_hysteresis: u32,  // Timberdoodle PGI's adaptive per-texel hysteresis
+    adaptive_tolerance: f32,   // the relative change its states tolerate
     _pad0: u32,
-    _pad1: u32,
 };
 
 @group(0) @binding(0) var<uniform> params: BlendParams;
@@ -185,11 +185,12 @@ fn firefly_clamp(encoded: vec3<f32>, history: vec3<f32>) -> vec3<f32> {
 }
 
 // probegi_core::probe_blend::adaptive_texel_hysteresis: + ADAPTIVE_HYSTERESIS_RISE a
-// blend, − the relative change, within [0, 1]; 0 where the history restarts.
+// blend, − the relative change beyond the tolerance, within [0, 1]; 0 where the
+// history restarts.
 fn adaptive_texel_hysteresis(state: f32, planned: f32, history: vec3<f32>, encoded: vec3<f32>) -> f32 {
     if (!(planned > 0.0)) { return 0.0; }
     let relative = max3(abs(encoded - history)) / (max(max3(history), 0.0) + ADAPTIVE_HYSTERESIS_FLOOR);
-    let next = state + ADAPTIVE_HYSTERESIS_RISE - relative;
+    let next = state + ADAPTIVE_HYSTERESIS_RISE - max(relative - params.adaptive_tolerance, 0.0);
     if (!(abs(next) <= 3.4028235e38)) { return 0.0; }
     return clamp(next, 0.0, 1.0);
 }

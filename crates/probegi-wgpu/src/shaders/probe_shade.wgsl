@@ -25,7 +25,7 @@ struct ShadeProbe {
     first_ray: u32,
     ray_count: u32,
     info: u32,
-    _pad: u32,
+    hit_ao_radius_m: f32, // probe_hit_ao's ray length; 0: off
 };
 
 struct ShadeRay {
@@ -53,9 +53,9 @@ struct ShadeHit {
 @group(0) @binding(3) var<storage, read> shade_probes: array<ShadeProbe>;
 @group(0) @binding(4) var<storage, read_write> shade_radiance: array<vec4<f32>>;
 
-// The shading flags of ray i: its probe's (a binary search over the probes'
-// first rays), 0 for a ray no probe holds.
-fn ray_shade_info(i: u32) -> u32 {
+// The shading record of ray i: its probe's (a binary search over the probes'
+// first rays), all 0 for a ray no probe holds.
+fn ray_shade_probe(i: u32) -> ShadeProbe {
     var lo = 0u;
     var hi = shade_params.probe_count;
     // The last probe whose first ray is at or before i lies in [lo, hi).
@@ -67,14 +67,29 @@ fn ray_shade_info(i: u32) -> u32 {
             hi = mid;
         }
     }
+    let none = ShadeProbe(0u, 0u, 0u, 0.0);
     if (shade_params.probe_count == 0u) {
-        return 0u;
+        return none;
     }
     let p = shade_probes[lo];
     if (i < p.first_ray || i - p.first_ray >= p.ray_count) {
-        return 0u;
+        return none;
     }
-    return p.info;
+    return p;
+}
+
+// probegi_cpu::probe_shade::hit_ao: 1 when one cosine-distributed ray around the
+// facing normal leaves the hit unoccluded for radius_m, else 0 (two draws after
+// the direct light's).
+fn probe_hit_ao(sp: SurfacePoint, radius_m: f32, rng: ptr<function, u32>) -> f32 {
+    let u = vec2<f32>(rng_next(rng), rng_next(rng));
+    let r = sqrt(u.x);
+    let phi = 2.0 * SCENE_PI * u.y;
+    let local = vec3<f32>(r * cos(phi), r * sin(phi), sqrt(max(1.0 - u.x, 0.0)));
+    let wi = frame_to_world(frame_from_normal(scene_facing_normal(sp)), local);
+    let t_max = radius_m * (1.0 - 1e-4);
+    let hit = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, t_max), true);
+    return select(0.0, 1.0, hit.leaf == BVH_NO_HIT);
 }
 
 @compute @workgroup_size(64)
@@ -83,7 +98,8 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     if (i >= shade_params.ray_count) {
         return;
     }
-    let info = ray_shade_info(i);
+    let probe = ray_shade_probe(i);
+    let info = probe.info;
     let h = shade_hits[i];
     let r = shade_rays[i];
     let back = (h.triangle & 0x80000000u) != 0u && h.triangle != BVH_NO_HIT;
@@ -109,8 +125,12 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     let n = scene_facing_normal(sp);
     var l = shadow_lit_direct(sp, to_viewer, info & 0xffffu, true, (info & 0x20000000u) != 0u, &rng);
     l += scene_sky_direct(sp, (info >> 16u) & 0xfffu, &rng);
+    var ao = 1.0;
+    if (probe.hit_ao_radius_m > 0.0) {
+        ao = probe_hit_ao(sp, probe.hit_ao_radius_m, &rng);
+    }
     let bsdf = scene_bsdf(sp);
-    l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * ddgi_irradiance(sp.position, n, to_viewer);
+    l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * ddgi_irradiance(sp.position, n, to_viewer) * ao;
     if ((info & 0x40000000u) != 0u && max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0) {
         // probegi_cpu::glossy::second_order_specular
         let mirror = r.dir - n * (2.0 * dot(r.dir, n));
