@@ -405,6 +405,12 @@ mod tests {
         assert!((tile[9].x - (0.5 * (1.0 - s) + s)).abs() < 1e-5, "{}", tile[9].x);
         // Border texels carry no state of their own.
         assert_eq!(state[0], 0.5);
+        // A tolerance above the change: the state climbs on.
+        let change = (0.5, 1.01);
+        let (history, estimate) = (Vec3::splat(change.1 - ADAPTIVE_HYSTERESIS_FLOOR), Vec3::splat(0.5));
+        assert!((adaptive_texel_hysteresis(0.3, 0.97, (history, estimate), 0.6) - 0.4).abs() < 1e-6);
+        let fallen = adaptive_texel_hysteresis(0.3, 0.97, (history, estimate), 0.25);
+        assert!((fallen - (0.3 + 0.1 - (change.0 / change.1 - 0.25))).abs() < 1e-5, "{fallen}");
     }
 
     #[test]

@@ -98,9 +98,20 @@ pub struct GpuDdgiField {
     buffers: [wgpu::Buffer; 4],
     /// The blend's adaptive-hysteresis states, one `f32` per irradiance texel
     /// where a member has `probe_adaptive_hysteresis` (16 bytes otherwise;
-    /// [`Self::refresh`] refuses a set that needs more, so it is uploaded anew).
-    texel_hysteresis: wgpu::Buffer,
+    /// [`Self::refresh`] allocates them, zeroed, when a member turns it on).
+    texel_hysteresis: std::sync::Mutex<wgpu::Buffer>,
     bind_group: wgpu::BindGroup,
+}
+
+/// A zeroed buffer of adaptive-hysteresis states (`texel_hysteresis_bytes`).
+fn texel_hysteresis_buffer(ctx: &GpuContext, bytes: u64) -> Result<wgpu::Buffer, GpuError> {
+    ctx.check_buffer(bytes, "the adaptive-hysteresis states")?;
+    Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("ddgi irradiance texel hysteresis"),
+        size: bytes,
+        usage: wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    }))
 }
 
 /// Bytes of a field's adaptive-hysteresis states: one `f32` per irradiance
@@ -307,23 +318,16 @@ impl GpuDdgiField {
             &Self::bind_group_layout(&ctx.device),
             &buffers,
         );
-        let hysteresis_bytes = texel_hysteresis_bytes(set, packed.irradiance_texels);
-        ctx.check_buffer(hysteresis_bytes, "the adaptive-hysteresis states")?;
-        let texel_hysteresis = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("ddgi irradiance texel hysteresis"),
-            size: hysteresis_bytes,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
+        let texel_hysteresis = texel_hysteresis_buffer(ctx, texel_hysteresis_bytes(set, packed.irradiance_texels))?;
         Ok(Self {
             volumes: set.members.len(),
             shadow_field: set.members.iter().any(|m| m.occlusion.is_some()),
             probes: packed.probes.len(),
-            bytes: buffers.iter().map(|b| b.size()).sum::<u64>() + texel_hysteresis.size(),
+            bytes: buffers.iter().map(|b| b.size()).sum::<u64>(),
             members: packed.members,
             occlusion: packed.occlusion,
             buffers,
-            texel_hysteresis,
+            texel_hysteresis: std::sync::Mutex::new(texel_hysteresis),
             bind_group,
         })
     }
@@ -342,10 +346,15 @@ impl GpuDdgiField {
         ];
         if packed.members != self.members
             || packed.occlusion != self.occlusion
-            || texel_hysteresis_bytes(set, packed.irradiance_texels) > self.texel_hysteresis.size()
             || sizes.iter().zip(&self.buffers).any(|(s, b)| *s != b.size())
         {
             return Err(GpuError::Input("the field set changed shape since its upload".into()));
+        }
+        let hysteresis_bytes = texel_hysteresis_bytes(set, packed.irradiance_texels);
+        let mut states = self.texel_hysteresis.lock().map_err(|_| GpuError::Input("a GPU pass panicked".into()))?;
+        if hysteresis_bytes > states.size() {
+            // A member turned the adaptive hysteresis on: its states start at 0.
+            *states = texel_hysteresis_buffer(ctx, hysteresis_bytes)?;
         }
         ctx.write_buffer(&self.buffers[0], 0, &packed.set);
         ctx.write_buffer(&self.buffers[3], 0, bytemuck::cast_slice(&packed.probes));
@@ -369,7 +378,7 @@ impl GpuDdgiField {
             distance_first: dist_first,
             irradiance: self.buffers[1].clone(),
             distance: self.buffers[2].clone(),
-            texel_hysteresis: self.texel_hysteresis.clone(),
+            texel_hysteresis: self.texel_hysteresis.lock().ok()?.clone(),
         })
     }
 
@@ -409,7 +418,7 @@ impl GpuDdgiField {
 
     /// Device memory of the field's buffers.
     pub fn bytes(&self) -> u64 {
-        self.bytes
+        self.bytes + self.texel_hysteresis.lock().map_or(0, |b| b.size())
     }
 }
 

@@ -137,6 +137,7 @@ fn pgi_safeguards_blend_as_on_the_cpu() {
     let s = DdgiVolumeSettings {
         probe_firefly_clamp_ratio: 32.0,
         probe_adaptive_hysteresis: true,
+        probe_adaptive_hysteresis_tolerance: 0.05,
         ..DdgiVolumeSettings::default()
     };
     let safeguarded = blend_matches_the_cpu(96, 100, s);

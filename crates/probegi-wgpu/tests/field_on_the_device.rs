@@ -149,6 +149,33 @@ fn a_field_kept_on_the_gpu_with_pgi_safeguards_matches_the_host_blend() {
 }
 
 #[test]
+fn the_adaptive_hysteresis_turned_on_while_the_device_holds_the_field_starts_its_states() {
+    // The resident field holds no per-texel states until a member asks for
+    // them; turning `probe_adaptive_hysteresis` on mid-run allocates them
+    // (zeroed) instead of failing the frame, on both paths alike.
+    let scene = probegi_scene::builtin::cornell_box();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let (Some(host), Some(device)) = (gpu(&scene, &bvh, false), gpu(&scene, &bvh, true)) else { return };
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let settings = DdgiVolumeSettings { probe_counts: UVec3::splat(4), probe_rays_per_probe: 64, ..Default::default() };
+    let new_set = || DdgiFieldSet::single(DdgiVolume::new(settings.clone(), scene.bounds().expect("geometry")));
+    let (mut on_host, mut on_device) = (new_set(), new_set());
+    let mut ms = BTreeMap::new();
+    for f in 0..12 {
+        if f == 6 {
+            on_host.volumes_mut()[0].settings.probe_adaptive_hysteresis = true;
+            on_device.volumes_mut()[0].settings.probe_adaptive_hysteresis = true;
+        }
+        on_host.update_traced_by(&scene, &bvh, Some(&host), &direct, 5, f, &mut ms).expect("host blend");
+        on_device.update_traced_by(&scene, &bvh, Some(&device), &direct, 5, f, &mut ms).expect("device blend");
+        assert!(on_device.field_on_device(), "frame {f}");
+    }
+    on_device.sync_host_atlases(Some(&device)).expect("read back");
+    let (di, dd) = max_difference(&on_host.volumes()[0], &on_device.volumes()[0]);
+    assert!(di < 1e-5 && dd < 1e-5, "{di:e} {dd:e}");
+}
+
+#[test]
 fn a_field_kept_on_the_gpu_with_its_own_rays_stays_within_the_ray_directions_rounding() {
     // The device generates the update rays (probe_ray_gen.wgsl): directions within
     // 2.4e-5 of the host's, so a ray grazing an edge may hit the other surface and
