@@ -11,6 +11,11 @@
 //!   power-cosine weights (the thesis's eq. 4.15 reuses the cosine sum w_sum).
 //! - A texel whose weights sum to zero, or whose new value is not finite, keeps its
 //!   old value: NaN and Inf never enter an atlas.
+//! - Deliberate additions from Timberdoodle PGI (`../shared/PEERS.md`), off by
+//!   default ([`IrradianceBlendRule`]): a firefly clamp of the estimate against
+//!   the history ([`firefly_clamp`]) and an adaptive per-texel hysteresis
+//!   ([`adaptive_texel_hysteresis`]). PEERS names the ideas; the formulas are
+//!   ours, measured in docs/RESULTS.md ("PGI's safeguards").
 //!
 //! All probes share one frame's ray directions (one random rotation per frame), so
 //! the texel-to-ray weights are computed once per frame ([`BlendWeights`]) and each
@@ -165,6 +170,21 @@ pub struct IrradianceBlendRule {
 }
 
 impl IrradianceBlendRule {
+    /// A volume's rule: γ, Listing 3's thresholds with `probe_fast_convergence`,
+    /// and the PGI safeguards its settings turn on.
+    pub fn from_settings(s: &crate::ddgi_settings::DdgiVolumeSettings) -> Self {
+        Self {
+            gamma: s.probe_irradiance_gamma,
+            thresholds: s.probe_fast_convergence.then_some(TexelThresholds {
+                significant: s.probe_significant_change_threshold,
+                new_distribution: s.probe_new_distribution_threshold,
+            }),
+            firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
+            adaptive_hysteresis: s.probe_adaptive_hysteresis,
+            adaptive_tolerance: s.probe_adaptive_hysteresis_tolerance,
+        }
+    }
+
     /// The rule with encoding `gamma` alone: no thresholds, no safeguards.
     pub fn plain(gamma: f32) -> Self {
         Self { gamma, thresholds: None, firefly_clamp_ratio: 0.0, adaptive_hysteresis: false, adaptive_tolerance: 0.0 }

@@ -10,9 +10,7 @@ use glam::{Vec2, Vec3};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::fibonacci::{sample_uniform_rotation, spherical_fibonacci};
 use probegi_core::probe_atlas::ProbeAtlas;
-use probegi_core::probe_blend::{
-    BlendWeights, IrradianceBlendRule, TexelThresholds, blend_distance_tile, blend_irradiance_tile,
-};
+use probegi_core::probe_blend::{BlendWeights, IrradianceBlendRule, blend_distance_tile, blend_irradiance_tile};
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::rng::Pcg32;
 use probegi_wgpu::probe_blend::{BlendFrame, GpuProbeBlend, GpuVolumeAtlases};
@@ -74,16 +72,7 @@ fn cpu_blend(s: &DdgiVolumeSettings, fr: &Frame, cpu: &mut CpuField, clamp: f32)
     let (irr, dist) = (&mut cpu.irradiance, &mut cpu.distance);
     let wi = BlendWeights::new(&fr.dirs, irr.interior, 1.0);
     let wd = BlendWeights::new(&fr.dirs, dist.interior, s.probe_distance_exponent);
-    let rule = IrradianceBlendRule {
-        gamma: s.probe_irradiance_gamma,
-        thresholds: Some(TexelThresholds {
-            significant: s.probe_significant_change_threshold,
-            new_distribution: s.probe_new_distribution_threshold,
-        }),
-        firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
-        adaptive_hysteresis: s.probe_adaptive_hysteresis,
-        adaptive_tolerance: s.probe_adaptive_hysteresis_tolerance,
-    };
+    let rule = IrradianceBlendRule::from_settings(s);
     let (ni, nd) = (irr.interior, dist.interior);
     let tile = irr.tile_len();
     for (p, h) in fr.hysteresis.iter().enumerate() {

@@ -16,8 +16,7 @@ use std::collections::BTreeMap;
 
 use glam::Vec3;
 use probegi_core::probe_blend::{
-    BACKFACE_DISTANCE_SCALE, IrradianceBlendRule, TexelThresholds, blend_distance_tile, blend_irradiance_tile,
-    hysteresis_over_frames,
+    BACKFACE_DISTANCE_SCALE, IrradianceBlendRule, blend_distance_tile, blend_irradiance_tile, hysteresis_over_frames,
 };
 use probegi_core::probe_border::update_tile_border;
 use probegi_core::probe_classification::ProbeState;
@@ -143,17 +142,7 @@ impl DdgiVolume {
     /// How this volume's irradiance texels take their estimates: γ, Listing 3's
     /// thresholds with `probe_fast_convergence`, and PGI's safeguards.
     pub(crate) fn irradiance_blend_rule(&self) -> IrradianceBlendRule {
-        let s = &self.settings;
-        IrradianceBlendRule {
-            gamma: s.probe_irradiance_gamma,
-            thresholds: s.probe_fast_convergence.then_some(TexelThresholds {
-                significant: s.probe_significant_change_threshold,
-                new_distribution: s.probe_new_distribution_threshold,
-            }),
-            firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
-            adaptive_hysteresis: s.probe_adaptive_hysteresis,
-            adaptive_tolerance: s.probe_adaptive_hysteresis_tolerance,
-        }
+        IrradianceBlendRule::from_settings(&self.settings)
     }
 
     /// The border pass over the tiles that blended (seed 004 §2.3), timed under `border`.

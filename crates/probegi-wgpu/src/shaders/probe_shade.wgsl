@@ -83,10 +83,7 @@ fn ray_shade_probe(i: u32) -> ShadeProbe {
 // the direct light's).
 fn probe_hit_ao(sp: SurfacePoint, radius_m: f32, rng: ptr<function, u32>) -> f32 {
     let u = vec2<f32>(rng_next(rng), rng_next(rng));
-    let r = sqrt(u.x);
-    let phi = 2.0 * SCENE_PI * u.y;
-    let local = vec3<f32>(r * cos(phi), r * sin(phi), sqrt(max(1.0 - u.x, 0.0)));
-    let wi = frame_to_world(frame_from_normal(scene_facing_normal(sp)), local);
+    let wi = frame_to_world(frame_from_normal(scene_facing_normal(sp)), sample_cosine_hemisphere(u));
     let t_max = radius_m * (1.0 - 1e-4);
     let hit = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, t_max), true);
     return select(0.0, 1.0, hit.leaf == BVH_NO_HIT);

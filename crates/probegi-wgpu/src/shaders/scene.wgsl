@@ -506,6 +506,13 @@ fn bsdf_sample_specular(b: Bsdf, wo: vec3<f32>, u: vec2<f32>, weight: ptr<functi
     return vec4<f32>(wi, 1.0);
 }
 
+// probegi_core::sampling::sample_cosine_hemisphere: cosine-weighted around +z.
+fn sample_cosine_hemisphere(u: vec2<f32>) -> vec3<f32> {
+    let r = sqrt(u.x);
+    let phi = 2.0 * SCENE_PI * u.y;
+    return vec3<f32>(r * cos(phi), r * sin(phi), sqrt(max(1.0 - u.x, 0.0)));
+}
+
 fn frame_to_world(f: Frame, v: vec3<f32>) -> vec3<f32> {
     return f.t * v.x + f.b * v.y + f.n * v.z;
 }
