@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # Runs probegi-wgpu's GPU test binaries on a GPU machine that has no toolchain.
 #
-#   bash scripts/gpu-tests.sh pack [TEST...]   (here, from the project root)
-#     Builds the release test binaries of probegi-wgpu (all of them, or the
-#     integration tests named, e.g. trace_equivalence), takes their paths from
-#     cargo's JSON messages, strips them and packs them into
+#   bash scripts/gpu-tests.sh pack [MODULE...]   (here, from the project root)
+#     Builds the release test binaries of probegi-wgpu (its unit tests and `it`,
+#     the integration tests, one module per former test file), takes their
+#     paths from cargo's JSON messages, strips them and packs them into
 #     .device/tests/probegi-wgpu-tests.tar.xz, printing its size and the size of
 #     .device/ (all that travels must stay under 64 MiB). Run
 #     ../shared/device/prepare.sh first: it empties .device/.
@@ -13,8 +13,9 @@
 #       bash .device/on-device.sh 'bash scripts/gpu-tests.sh run'
 #     unpacks the binaries and runs each with PROBEGI_REQUIRE_GPU=1 (no adapter
 #     is a failure, not a skip) and PROBEGI_SHARED_DIR=<absolute ../shared>,
-#     prints a Markdown table (test binary | passed | failed | seconds), keeps
-#     each binary's output under .device/tests/logs (and, where the device tool
+#     prints a Markdown table (test binary or `it` module | passed | failed |
+#     seconds; only the MODULEs given to pack, when any were), keeps each
+#     one's output under .device/tests/logs (and, where the device tool
 #     sets $OUT, which brings back at most 8 files: the table and all outputs in
 #     one file each there) and exits non-zero when any binary failed.
 # GPU_TESTS_DIR moves .device/tests elsewhere (a folder git ignores, to travel).
@@ -30,8 +31,6 @@ tarball=$pack_dir/probegi-wgpu-tests.tar.xz
 
 pack() {
     local args=(test --release -p probegi-wgpu --no-run --locked --message-format=json)
-    local t
-    for t in "$@"; do args+=(--test "$t"); done
     local json stage
     json=$(mktemp)
     stage=$(mktemp -d)
@@ -61,6 +60,8 @@ if not found:
     sys.exit("gpu-tests: cargo reported no test executables of probegi-wgpu")
 PY
     strip "$stage"/*
+    # The modules of `it` to run on the device (none named: all of them).
+    printf '%s\n' "$@" | grep . >"$stage/modules" || : >"$stage/modules"
     # .device/ stays out of git, as prepare.sh keeps it.
     if [ -d .git ]; then
         grep -qx '/.device/' .git/info/exclude 2>/dev/null || echo '/.device/' >>.git/info/exclude
@@ -105,31 +106,47 @@ run() {
     fi
 }
 
-# Runs every unpacked binary; the table on stdout and in $logs/table.md.
+# Runs every unpacked binary, `it` one module at a time (each module is a
+# former test binary); the table on stdout and in $logs/table.md.
 table() {
-    local b name start end status passed failed
+    local b m
     echo ok >"$logs/status"
     {
         echo "| test binary | passed | failed | seconds |"
         echo "|---|---:|---:|---:|"
     } | tee "$logs/table.md"
     for b in "$bin"/*; do
-        name=$(basename "$b")
-        start=$(date +%s.%N)
-        status=0
-        PROBEGI_REQUIRE_GPU=1 PROBEGI_SHARED_DIR=$shared "$b" >"$logs/$name.log" 2>&1 || status=$?
-        end=$(date +%s.%N)
-        # libtest's summary: "test result: ok. 3 passed; 0 failed; ...".
-        passed=$(grep '^test result:' "$logs/$name.log" | grep -o '[0-9][0-9]* passed' | awk '{s += $1} END {print s + 0}')
-        failed=$(grep '^test result:' "$logs/$name.log" | grep -o '[0-9][0-9]* failed' | awk '{s += $1} END {print s + 0}')
-        if [ "$status" -ne 0 ]; then
-            echo FAILED >"$logs/status"
-            # A binary that died before its summary still counts as a failure.
-            [ "$failed" -gt 0 ] || failed="exit $status"
+        [ -x "$b" ] || continue
+        if [ "$(basename "$b")" != it ]; then
+            run_one "$b" "$(basename "$b")"
+            continue
         fi
-        printf '| %s | %s | %s | %s |\n' "$name" "$passed" "$failed" \
-            "$(awk -v a="$start" -v b="$end" 'BEGIN {printf "%.1f", b - a}')" | tee -a "$logs/table.md"
+        local modules
+        modules=$(cat "$bin/modules" 2>/dev/null)
+        # libtest's list: "module::test: test", one a line.
+        [ -n "$modules" ] || modules=$("$b" --list --format terse | sed -n 's/::.*: test$//p' | sort -u)
+        for m in $modules; do run_one "$b" "$m" "$m::"; done
     done
+}
+
+# One row of the table: binary, row name, then libtest's arguments.
+run_one() {
+    local b=$1 name=$2 start end status passed failed
+    shift 2
+    start=$(date +%s.%N)
+    status=0
+    PROBEGI_REQUIRE_GPU=1 PROBEGI_SHARED_DIR=$shared "$b" "$@" >"$logs/$name.log" 2>&1 || status=$?
+    end=$(date +%s.%N)
+    # libtest's summary: "test result: ok. 3 passed; 0 failed; ...".
+    passed=$(grep '^test result:' "$logs/$name.log" | grep -o '[0-9][0-9]* passed' | awk '{s += $1} END {print s + 0}')
+    failed=$(grep '^test result:' "$logs/$name.log" | grep -o '[0-9][0-9]* failed' | awk '{s += $1} END {print s + 0}')
+    if [ "$status" -ne 0 ]; then
+        echo FAILED >"$logs/status"
+        # A binary that died before its summary still counts as a failure.
+        [ "$failed" -gt 0 ] || failed="exit $status"
+    fi
+    printf '| %s | %s | %s | %s |\n' "$name" "$passed" "$failed" \
+        "$(awk -v a="$start" -v b="$end" 'BEGIN {printf "%.1f", b - a}')" | tee -a "$logs/table.md"
 }
 
 [ $# -ge 1 ] || usage

@@ -17,15 +17,16 @@ if [ -z "${XDG_RUNTIME_DIR:-}" ] || [ ! -d "${XDG_RUNTIME_DIR}" ]; then
   export XDG_RUNTIME_DIR
 fi
 export PROBEGI_FUZZ_SEED="$seed"
-long() { # crate, test target, then VAR=value settings
-  local crate=$1 target=$2; shift 2
-  echo "== $crate --test $target ($*)" >&2
-  env "$@" cargo test --release --locked -p "$crate" --test "$target" -- --nocapture
+long() { # crate, test target, test-name filter, then VAR=value settings
+  local crate=$1 target=$2 filter=$3; shift 3
+  echo "== $crate --test $target $filter ($*)" >&2
+  env "$@" cargo test --release --locked -p "$crate" --test "$target" -- --nocapture "$filter"
 }
-long probegi-scene fuzz_loaders PROBEGI_FUZZ_SECONDS=$((2 * secs))
-long probegi-scene fuzz_cameras_and_rays PROBEGI_FUZZ_CAMERA_SECONDS="$secs"
-long probegi-image fuzz_images PROBEGI_FUZZ_IMAGE_SECONDS="$secs"
-long probegi-cli fuzz_args PROBEGI_FUZZ_ARGS_SECONDS="$secs"
-long probegi-wgpu fuzz_seam_rays PROBEGI_FUZZ_SEAM_SECONDS="$secs"
-long probegi-cpu soak PROBEGI_SOAK_FRAMES=50000
+# Most crates' integration tests are one binary, `it`, a module per former file.
+long probegi-scene it fuzz_loaders:: PROBEGI_FUZZ_SECONDS=$((2 * secs))
+long probegi-scene it fuzz_cameras_and_rays:: PROBEGI_FUZZ_CAMERA_SECONDS="$secs"
+long probegi-image fuzz_images "" PROBEGI_FUZZ_IMAGE_SECONDS="$secs"
+long probegi-cli it fuzz_args:: PROBEGI_FUZZ_ARGS_SECONDS="$secs"
+long probegi-wgpu it fuzz_seam_rays:: PROBEGI_FUZZ_SEAM_SECONDS="$secs"
+long probegi-cpu it soak:: PROBEGI_SOAK_FRAMES=50000
 echo "long checks passed (seed ${seed})" >&2

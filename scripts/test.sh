@@ -39,7 +39,7 @@ if have_vulkan; then
 else
   echo "warning: no Vulkan driver and none could be installed: the GPU tests will SKIP (install mesa-vulkan-drivers)" >&2
 fi
-# The glTF corpus test (crates/probegi-scene/tests/assimp_gltf2.rs) loads every
+# The glTF corpus test (crates/probegi-scene/tests/it/assimp_gltf2.rs) loads every
 # glTF 2.0 file of Debian's assimp-testmodels (importer-breaking files and valid
 # ones): installed like mesa-vulkan-drivers, else that test skips with a warning.
 ASSIMP_GLTF2=/usr/share/assimp/models/glTF2
@@ -53,7 +53,7 @@ fi
 if [ ! -d "$ASSIMP_GLTF2" ]; then
   echo "warning: assimp-testmodels is not installed: the glTF corpus test will SKIP" >&2
 fi
-# The viewer's real-window test (crates/probegi-cli/tests/view_window.rs) runs
+# The viewer's real-window test (crates/probegi-cli/tests/it/view_window.rs) runs
 # `probegi view` under Xvfb: install it (and the X libraries winit opens at run
 # time) like mesa-vulkan-drivers, then require the test; without it, it skips.
 if ! command -v xvfb-run >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1; then
@@ -73,7 +73,7 @@ fi
 # Khronos glTF samples (WaterBottle, TextureSettingsTest, TextureTransformTest,
 # AlphaBlendModeTest) as the scena crate 1.5.0 ships them in its tests, fetched
 # once into a cache outside the repository for
-# crates/probegi-scene/tests/khronos_gltf_samples.rs (which skips without them).
+# crates/probegi-scene/tests/it/khronos_gltf_samples.rs (which skips without them).
 PROBEGI_SCENA_DIR="${XDG_CACHE_HOME:-$HOME/.cache}/probegi/scena-1.5.0"
 if [ ! -d "$PROBEGI_SCENA_DIR/tests/assets/gltf/khronos" ]; then
   scena_tmp=$(mktemp -d)

@@ -9,7 +9,7 @@
 //! middle of the floor and exits with an error if it is more than 3 % off.
 //!
 //! Run: `cargo run -p probegi-cpu --example embed_ddgi`. CI runs it as the test
-//! `probegi-cpu/tests/embed_example.rs`, which includes this file.
+//! `probegi-cpu/tests/it/embed_example.rs`, which includes this file.
 
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};

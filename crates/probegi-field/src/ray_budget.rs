@@ -22,7 +22,7 @@
 //! longer, then to the lower (volume, probe). Seed 000's rule, "probes with low
 //! error … have their budget gradually reduced to a set minimum": the probes
 //! that keep changing trace every frame, the still ones at the floor.
-//! *Measured* (`tests/ray_budget.rs`, shadow box, a quarter of the rays):
+//! *Measured* (`tests/it/ray_budget.rs`, shadow box, a quarter of the rays):
 //! after a spotlight switches off, the eighth of the probes that changed most
 //! trace on 99 % of the next frames, the still half on 1 %; `change × age`
 //! (rate proportional to change) gave 40 % and 17 %.

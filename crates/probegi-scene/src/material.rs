@@ -68,7 +68,7 @@ impl VertexAttributes {
 /// which is column-major; read that way it would turn the other way, and its
 /// own example, "only the lower left quadrant of the source image", would
 /// fall outside the image. We follow the example; Khronos' TextureTransformTest
-/// sample checks the direction, see `tests/khronos_gltf_samples.rs`.)
+/// sample checks the direction, see `tests/it/khronos_gltf_samples.rs`.)
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UvMapping {
     /// 0 or 1: which of [`VertexAttributes::uv`] it reads.

@@ -2,7 +2,7 @@
 //! clock, the reference, stats with a live plot of each pass's time, and the
 //! key bindings. They read and write a [`PanelState`] and return what the
 //! worker must be told, so tests drive them without a window
-//! (`tests/panels.rs`, `egui_kittest`).
+//! (`tests/it/panels.rs`, `egui_kittest`).
 
 use std::collections::VecDeque;
 

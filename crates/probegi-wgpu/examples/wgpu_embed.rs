@@ -23,7 +23,7 @@
 //! near the green one). It fails otherwise.
 //!
 //! Run: `cargo run -p probegi-wgpu --example wgpu_embed [out.png]` (needs a GPU
-//! or Mesa's lavapipe). CI runs it as `probegi-wgpu/tests/wgpu_embed_example.rs`.
+//! or Mesa's lavapipe). CI runs it as `probegi-wgpu/tests/it/wgpu_embed_example.rs`.
 
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};

@@ -6,7 +6,7 @@
 //! any-hit queries, both faces, alpha cutouts tested inside the traversal as on
 //! the CPU (`probegi_scene::bvh`). The same tree, the same node order, the same
 //! Möller–Trumbore test: hits agree with the CPU's up to float rounding
-//! (`tests/trace_equivalence.rs`).
+//! (`tests/it/trace_equivalence.rs`).
 //!
 //! Moving objects and instanced meshes are traced through the CPU's two
 //! levels: every bottom level is uploaded once, and the top level (a CWBVH over

@@ -4,7 +4,7 @@
 //! (`probegi_core::ddgi_volume_blend::DdgiFieldSetView`). The shader mirrors
 //! `probegi_core::ddgi_query::irradiance` and
 //! `probegi_core::ddgi_volume_blend::field_set_irradiance` function by function
-//! (each cites its original); `tests/query_equivalence.rs` holds them together.
+//! (each cites its original); `tests/it/query_equivalence.rs` holds them together.
 //!
 //! Bind-group layout ([`GpuDdgiField::bind_group_layout`], visible to compute and
 //! fragment stages; group 2 in the crate's own passes, `shader_registry`), all

@@ -4,7 +4,7 @@
 //! frame's rotation is drawn on the CPU from (seed, frame) exactly as
 //! `probegi_field::probe_ray_gen::probe_ray_directions` draws it; the directions
 //! agree with the CPU's to the rounding of sin and cos, 2.4e-5 on lavapipe
-//! (`tests/ray_gen_equivalence.rs`).
+//! (`tests/it/ray_gen_equivalence.rs`).
 //!
 //! The seam's update batches are planned on the CPU (which probes trace, their
 //! relocated origins), and record how their rays were made

@@ -8,7 +8,7 @@
 //!
 //! *Deviation:* random numbers come from a PCG hash per ray, not the CPU's PCG32
 //! stream per probe, so area-light estimates agree with the CPU's in
-//! distribution, not bit for bit (`probegi-wgpu/tests/field_equivalence.rs`).
+//! distribution, not bit for bit (`probegi-wgpu/tests/it/field_equivalence.rs`).
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;

@@ -10,7 +10,7 @@
 //!
 //! Surfels are found here as on the host (`origin + dir·t`, the facing shading
 //! normal of `scene.wgsl`), so on an adapter whose hits equal the CPU's the
-//! maps agree with the CPU's to float rounding (`tests/shadow_field_equivalence.rs`).
+//! maps agree with the CPU's to float rounding (`tests/it/shadow_field_equivalence.rs`).
 
 use bytemuck::{Pod, Zeroable};
 use probegi_core::octahedral::{oct_decode, texel_center_uv};

@@ -5,7 +5,7 @@
 //! window that is neither black nor the clear colour. Without `xvfb-run` the
 //! test skips with a warning, unless `PROBEGI_REQUIRE_DISPLAY=1`.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

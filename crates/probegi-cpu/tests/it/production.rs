@@ -1,7 +1,7 @@
 //! Seed 004's production extensions and seed 003's usage culling: relocation,
 //! probe states, fast convergence.
 
-mod common;
+use crate::common;
 
 use common::field_energy;
 use glam::{UVec3, Vec3};

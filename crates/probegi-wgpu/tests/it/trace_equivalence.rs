@@ -17,7 +17,7 @@
 //! tie within it. A wrong triangle away from any tie fails. The number of such
 //! disagreements is held to what the tolerances predict (`allowed`).
 //! Hostile rays (NaN, ±∞, zero, denormal, huge) finish under the same rule on both.
-mod common;
+use crate::common;
 
 use common::trace_error::{self, HitTolerance};
 use glam::Vec3;

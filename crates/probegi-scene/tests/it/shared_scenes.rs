@@ -2,7 +2,7 @@
 //! Archive). CI has them beside the repository; a missing folder is a failure,
 //! not a skip.
 
-mod common;
+use crate::common;
 
 use common::shared;
 

@@ -4,7 +4,7 @@
 //! suite. It fails when its shader's field term differs from the CPU query, a
 //! pixel is non-finite, or the walls bleed no colour onto the floor.
 
-#[path = "../examples/wgpu_embed.rs"]
+#[path = "../../examples/wgpu_embed.rs"]
 #[allow(dead_code)]
 mod wgpu_embed;
 

@@ -7,7 +7,7 @@ use probegi_core::camera::Camera;
 use probegi_scene::{CameraKeyframe, Scene, load_scene};
 
 fn tmp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("probegi-scene-{}-{name}", std::process::id()));
+    let d = std::env::temp_dir().join(format!("probegi-keyframes-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&d).expect("mkdir");
     d
 }

@@ -5,7 +5,7 @@
 //! inputs that caused it. The suite runs it for `PROBEGI_FUZZ_SECONDS` (default 10 in
 //! all); `scripts/long-checks.sh` runs it in release for 10 minutes, and any
 //! budget and seed can be given, e.g. `PROBEGI_FUZZ_SECONDS=1800
-//! PROBEGI_FUZZ_SEED=7 cargo test --release -p probegi-scene --test fuzz_loaders`.
+//! PROBEGI_FUZZ_SEED=7 cargo test --release -p probegi-scene --test it fuzz_loaders::`.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -193,7 +193,15 @@ fn loaders_survive_mutated_inputs_without_panicking() {
             panic!("seed {} does not load: {e}", t.file);
         }
     }
-    std::panic::set_hook(Box::new(|_| {}));
+    // Silence the panics this thread catches, not those of the binary's other
+    // tests running beside it (their failures must still print).
+    let fuzz_thread = std::thread::current().id();
+    let others = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if std::thread::current().id() != fuzz_thread {
+            others(info)
+        }
+    }));
     let mut rng = Pcg32::new(seed, 0xf022);
     let (mut runs, mut panics) = (vec![0u64; targets.len()], Vec::new());
     let per_target = Duration::from_secs_f64(budget / targets.len() as f64);

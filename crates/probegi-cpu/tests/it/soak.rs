@@ -5,7 +5,7 @@
 //! 32 rays) so thousands of frames take seconds; the atlas invariants (finite,
 //! non-negative, borders equal to their source texels) are checked as it runs.
 
-mod common;
+use crate::common;
 
 use common::field_energy;
 use glam::{UVec3, Vec3};

@@ -3,7 +3,7 @@
 //! keyframe paths validated at load; moving geometry bounded before a render;
 //! outputs checked before a render and nothing left behind when one fails.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

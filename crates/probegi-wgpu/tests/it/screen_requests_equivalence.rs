@@ -10,6 +10,7 @@
 
 use std::sync::Arc;
 
+use crate::common;
 use glam::{UVec3, Vec3};
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode, VolumeBlending};
@@ -20,7 +21,6 @@ use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::{CameraFrameOut, ProbeBatchTracer, ProbeTracerHandle};
 use probegi_frame::frame_loop::{GiMethod, RenderSettings, render_frames};
 use probegi_scene::{BvhSettings, BvhTracer, Scene, load_scene};
-mod common;
 
 const W: u32 = 96;
 const H: u32 = 72;

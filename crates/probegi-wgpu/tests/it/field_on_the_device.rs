@@ -1,6 +1,6 @@
 //! The device-resident update (`WgpuProbeTracer::keeping_field`): trace, shade,
 //! blend and border on the GPU with the atlases living there, against the same
-//! GPU trace and shade blended on the host (`tests/field_equivalence.rs` holds
+//! GPU trace and shade blended on the host (`tests/it/field_equivalence.rs` holds
 //! that path to the CPU backend).
 //!
 //! Both paths see the same hits and the same shaded radiance (the shade's random
@@ -14,7 +14,7 @@
 //! the device computes from the initialisation rounds' hits (to 1e-6 m); reruns
 //! bit-identical.
 
-mod common;
+use crate::common;
 
 use probegi_frame::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;

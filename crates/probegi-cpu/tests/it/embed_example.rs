@@ -2,7 +2,7 @@
 //! its own triangles, ray caster and shading) as part of the suite: it fails when
 //! the white furnace misses E = π·Le/(1−ρ) by more than 3 %.
 
-#[path = "../examples/embed_ddgi.rs"]
+#[path = "../../examples/embed_ddgi.rs"]
 mod embed_ddgi;
 
 #[test]

@@ -14,7 +14,7 @@
 //!   after 1 frame and after 100; the furnace converges to its analytic answer;
 //!   images agree within HDR-FLIP 0.02.
 
-mod common;
+use crate::common;
 
 use probegi_frame::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;
@@ -36,7 +36,7 @@ use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 
 fn gpu(scene: &Scene, shade: bool) -> Option<WgpuProbeTracer> {
     let ctx = GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set")?;
-    // The field on the GPU, the camera on the CPU (tests/camera_equivalence.rs has the GPU camera).
+    // The field on the GPU, the camera on the CPU (tests/it/camera_equivalence.rs has the GPU camera).
     let bvh = BvhTracer::for_scene(scene, BvhSettings::default());
     let t = WgpuProbeTracer::with_camera(ctx, scene, &bvh, shade, false).expect("upload");
     assert_eq!(t.shades(), shade, "{:?}", t.shading_note);

@@ -18,7 +18,7 @@
 //! error of the boundary may land on either side). A wrong texel, weight, cage
 //! or probe away from such a boundary still fails.
 
-mod common;
+use crate::common;
 
 use probegi_frame::field_update::FieldSetUpdate;
 use std::collections::BTreeMap;

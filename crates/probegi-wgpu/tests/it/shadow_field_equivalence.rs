@@ -10,6 +10,7 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use crate::common;
 use glam::UVec3;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::image::Image;
@@ -19,7 +20,6 @@ use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_frame::field_update::FieldSetUpdate;
 use probegi_scene::{BvhSettings, BvhTracer, load_scene};
-mod common;
 
 fn settings() -> DdgiVolumeSettings {
     DdgiVolumeSettings {

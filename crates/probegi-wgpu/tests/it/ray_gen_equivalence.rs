@@ -7,7 +7,7 @@
 //! generated batch traces exactly like the same rays uploaded, in batch order
 //! or direction-major (`TraceSegment`).
 
-mod common;
+use crate::common;
 
 use glam::Vec3;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;

@@ -10,7 +10,7 @@
 //! through the instanced forest's top level.
 //! `PROBEGI_FUZZ_SEAM_SECONDS` (default 4 in all; `scripts/long-checks.sh`: 5 minutes) and `PROBEGI_FUZZ_SEED`.
 
-mod common;
+use crate::common;
 
 use common::{shared, trace_error};
 

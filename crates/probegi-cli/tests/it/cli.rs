@@ -1,6 +1,6 @@
 //! The command-line contract: outputs, JSON keys, and clear non-zero exits on bad input.
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 use std::process::{Command, Output};

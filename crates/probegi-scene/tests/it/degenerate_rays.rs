@@ -6,7 +6,7 @@
 //! at a frame. Rays the rule refuses are misses and are counted; the others
 //! hit or miss as they may, but never hang.
 
-mod common;
+use crate::common;
 
 use common::shared;
 

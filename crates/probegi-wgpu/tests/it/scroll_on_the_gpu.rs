@@ -1,6 +1,6 @@
 //! A tracking window scrolling over `builtin::half_roofed_ground` with its probe
 //! rays traced and shaded on the GPU (the CPU test of the same name in
-//! `probegi-cpu/tests/world_scale.rs`, on the other backend): after every scroll
+//! `probegi-cpu/tests/it/world_scale.rs`, on the other backend): after every scroll
 //! each probe of the window matches a converged fixed volume's probe at the same
 //! world position, so no probe from under the roof survives into the open (a
 //! stale one would be off by the roof's contrast, 0.77 in the CPU test's broken

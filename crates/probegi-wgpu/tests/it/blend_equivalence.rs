@@ -3,7 +3,7 @@
 //! Mesa's lavapipe. Without an adapter the tests say so and pass, unless
 //! `PROBEGI_REQUIRE_GPU=1` (which `scripts/test.sh` sets once lavapipe is installed).
 
-mod common;
+use crate::common;
 
 use common::context;
 use glam::{Vec2, Vec3};

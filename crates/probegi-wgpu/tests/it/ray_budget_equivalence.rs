@@ -9,6 +9,7 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use crate::common;
 use glam::UVec3;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::image::Image;
@@ -18,7 +19,6 @@ use probegi_field::ddgi_field_set::DdgiFieldSet;
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_frame::field_update::FieldSetUpdate;
 use probegi_scene::{BvhSettings, BvhTracer, load_scene};
-mod common;
 
 const PROBES: u64 = 8 * 3 * 8;
 const RAYS: u32 = 64;

@@ -13,7 +13,7 @@
 //! floor (plus 0.005) where it is not, and the image means must agree within 2 %.
 //! The GPU keeps the field on the device (`keeping_field`), as `--backend wgpu` does.
 
-mod common;
+use crate::common;
 
 use common::shared;
 

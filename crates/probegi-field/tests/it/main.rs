@@ -1,0 +1,7 @@
+//! probegi-field's integration tests, one binary (each former test file a
+//! module): one link instead of one per file. Run one file's tests with
+//! `cargo test -p probegi-field --test it MODULE::`.
+
+mod hysteresis_ramp;
+mod screen_requests;
+mod tracking_bounds;
