@@ -254,7 +254,7 @@ impl DdgiSweep<'_> {
             .map_err(anyhow::Error::msg)?;
         let init_ms = warmup.get("probe_init").copied().unwrap_or(0.0);
         let mut pass_ms: BTreeMap<&'static str, f64> = BTreeMap::new();
-        let bus_before = gpu.map(|g| g.ctx.bytes_transferred());
+        let bus_before = gpu.map(|g| g.ctx.counters());
         let counters_before = gpu.map(|g| g.ctx.counters());
         let t = Instant::now();
         for f in 1..=args.frames {
@@ -336,21 +336,24 @@ impl DdgiSweep<'_> {
 }
 
 /// The bytes that crossed the bus per timed update frame on the GPU backend
-/// (`GpuContext::bytes_transferred` since `before`), each way, and per probe
-/// and per ray of the last batch: O(probes) when nothing per ray crosses.
+/// (`GpuContext::counters` since `before`), each way, and per probe and per
+/// ray of the last batch: O(probes) when nothing per ray crosses. `kept`: the
+/// bytes the passes found already on the device (per-probe records that
+/// repeated the last frame's) and did not upload.
 fn bus_json(
     gpu: Option<&WgpuProbeTracer>,
-    before: Option<(u64, u64)>,
+    before: Option<probegi_wgpu::GpuCounters>,
     frames: u32,
     batch: &probegi_field::seam::ProbeRayBatch,
 ) -> serde_json::Value {
-    let (Some(g), Some((up0, down0))) = (gpu, before) else { return json!(null) };
-    let (up, down) = g.ctx.bytes_transferred();
+    let (Some(g), Some(before)) = (gpu, before) else { return json!(null) };
+    let d = g.ctx.counters() - before;
     let per_frame = |b: u64| b as f64 / frames as f64;
-    let (up, down) = (per_frame(up - up0), per_frame(down - down0));
+    let (up, down) = (per_frame(d.bytes_up), per_frame(d.bytes_down));
     json!({
         "host_to_device": up,
         "device_to_host": down,
+        "kept": per_frame(d.bytes_kept),
         "per_batch_probe": (up + down) / batch.probes.len().max(1) as f64,
         "per_batch_ray": (up + down) / batch.len().max(1) as f64,
         "batch_probes": batch.probes.len(),

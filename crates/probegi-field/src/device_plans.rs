@@ -21,8 +21,14 @@ pub struct DeviceVolumeBlend<'a> {
     /// Texel-to-ray weights of the distance tiles.
     pub distance_weights: &'a probegi_core::probe_blend::BlendWeights,
     /// Per probe: its first ray in the batch and its blend hysteresis (before the
-    /// scene-event scales), or `None` when it does not blend this frame.
+    /// start-up cap and the scene-event scales), or `None` when it does not
+    /// blend this frame.
     pub probe_blend: Vec<Option<(u32, f32)>>,
+    /// The start-up ramp's cap on every probe's hysteresis this frame
+    /// (`probe_hysteresis_startup_ramp`; 1: none). The device blends with the
+    /// smaller of it and the probe's own, so `probe_blend`'s entries repeat
+    /// from frame to frame while the ramp runs (a device may keep them).
+    pub hysteresis_cap: f32,
     /// The scene-event reduction of the irradiance hysteresis (`probe_fast_convergence`; 1 otherwise).
     pub irradiance_scale: f32,
     /// The scene-event reduction of the distance (visibility) hysteresis.

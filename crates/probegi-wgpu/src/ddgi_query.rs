@@ -101,6 +101,10 @@ pub struct GpuDdgiField {
     /// [`Self::refresh`] allocates them, zeroed, when a member turns it on).
     texel_hysteresis: std::sync::Mutex<wgpu::Buffer>,
     bind_group: wgpu::BindGroup,
+    /// What the set and probes buffers hold (only `upload` and `refresh` write
+    /// them; the query binds them read-only): `refresh` writes them only when
+    /// the host's differ.
+    written: std::sync::Mutex<[Vec<u8>; 2]>,
 }
 
 /// A zeroed buffer of adaptive-hysteresis states (`texel_hysteresis_bytes`).
@@ -329,6 +333,7 @@ impl GpuDdgiField {
             buffers,
             texel_hysteresis: std::sync::Mutex::new(texel_hysteresis),
             bind_group,
+            written: std::sync::Mutex::new([packed.set, bytemuck::cast_slice(&packed.probes).to_vec()]),
         })
     }
 
@@ -356,8 +361,20 @@ impl GpuDdgiField {
             // A member turned the adaptive hysteresis on: its states start at 0.
             *states = texel_hysteresis_buffer(ctx, hysteresis_bytes)?;
         }
-        ctx.write_buffer(&self.buffers[0], 0, &packed.set);
-        ctx.write_buffer(&self.buffers[3], 0, bytemuck::cast_slice(&packed.probes));
+        // A still field's per-probe data repeats: written only where it changed.
+        let mut written = self.written.lock().map_err(|_| GpuError::Input("a GPU pass panicked".into()))?;
+        for (held, (buffer, now)) in written
+            .iter_mut()
+            .zip([(&self.buffers[0], &packed.set[..]), (&self.buffers[3], bytemuck::cast_slice(&packed.probes))])
+        {
+            if held.as_slice() == now {
+                ctx.count_kept(now.len() as u64);
+            } else {
+                ctx.write_buffer(buffer, 0, now);
+                held.clear();
+                held.extend_from_slice(now);
+            }
+        }
         if atlases {
             ctx.write_buffer(&self.buffers[1], 0, bytemuck::cast_slice(&packed.irradiance));
             ctx.write_buffer(&self.buffers[2], 0, bytemuck::cast_slice(&packed.distance));

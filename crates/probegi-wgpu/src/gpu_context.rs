@@ -54,6 +54,17 @@ pub struct GpuContext {
     pending: std::sync::Mutex<Option<Vec<wgpu::CommandBuffer>>>,
     /// The last submission made to the queue.
     last_submission: std::sync::Mutex<Option<wgpu::SubmissionIndex>>,
+    /// [`GpuContext::buffer_kept`]'s buffers: per (label, key), the contents
+    /// the device holds and the buffer holding them.
+    kept: std::sync::Mutex<std::collections::HashMap<(&'static str, u64), KeptBuffer>>,
+}
+
+/// A buffer [`GpuContext::buffer_kept`] made, with a host copy of its contents
+/// and its usage, to hand it out again while a pass's inputs repeat.
+struct KeptBuffer {
+    contents: Vec<u8>,
+    usage: wgpu::BufferUsages,
+    buffer: wgpu::Buffer,
 }
 
 /// Bytes uploaded (buffers made from host data, queue writes) and read back,
@@ -68,6 +79,7 @@ struct TransferCounts {
     submissions: std::sync::atomic::AtomicU64,
     waits: std::sync::atomic::AtomicU64,
     wait_ns: std::sync::atomic::AtomicU64,
+    kept: std::sync::atomic::AtomicU64,
 }
 
 /// What a [`GpuContext`] has done so far (differences between two readings
@@ -84,6 +96,9 @@ pub struct GpuCounters {
     pub bytes_up: u64,
     /// Bytes read back to the host.
     pub bytes_down: u64,
+    /// Bytes a pass would have uploaded but the device already held
+    /// ([`GpuContext::buffer_kept`]: its inputs repeated the last frame's).
+    pub bytes_kept: u64,
     /// Wall milliseconds the host spent blocked in those waits and inside submissions.
     pub wait_ms: f64,
 }
@@ -96,6 +111,7 @@ impl std::ops::Sub for GpuCounters {
             blocking_waits: self.blocking_waits - o.blocking_waits,
             bytes_up: self.bytes_up - o.bytes_up,
             bytes_down: self.bytes_down - o.bytes_down,
+            bytes_kept: self.bytes_kept - o.bytes_kept,
             wait_ms: self.wait_ms - o.wait_ms,
         }
     }
@@ -144,6 +160,7 @@ impl GpuContext {
             transfers: TransferCounts::default(),
             pending: Default::default(),
             last_submission: Default::default(),
+            kept: Default::default(),
         })
     }
 
@@ -176,6 +193,7 @@ impl GpuContext {
             transfers: TransferCounts::default(),
             pending: Default::default(),
             last_submission: Default::default(),
+            kept: Default::default(),
         }
     }
 
@@ -265,6 +283,7 @@ impl GpuContext {
             blocking_waits: t.waits.load(Relaxed),
             bytes_up: t.up.load(Relaxed),
             bytes_down: t.down.load(Relaxed),
+            bytes_kept: t.kept.load(Relaxed),
             wait_ms: t.wait_ns.load(Relaxed) as f64 * 1e-6,
         }
     }
@@ -347,10 +366,41 @@ impl GpuContext {
         self.transfers.down.fetch_add(bytes, std::sync::atomic::Ordering::Relaxed);
     }
 
+    /// Counts `bytes` as kept: a pass found them already on the device and
+    /// uploaded nothing ([`GpuCounters::bytes_kept`]).
+    pub(crate) fn count_kept(&self, bytes: u64) {
+        self.transfers.kept.fetch_add(bytes, std::sync::atomic::Ordering::Relaxed);
+    }
+
     /// A buffer holding `contents` (counted as uploaded).
     pub(crate) fn buffer_with(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
         self.transfers.up.fetch_add(contents.len() as u64, std::sync::atomic::Ordering::Relaxed);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+    }
+
+    /// A buffer holding `contents`, for a pass whose inputs mostly repeat from
+    /// frame to frame (the per-probe records of a field in a still scene): the
+    /// buffer made for `(label, key)` last time when it holds these very bytes
+    /// with this usage (nothing uploaded; counted as kept), else a new one
+    /// (counted as uploaded) that replaces it. A buffer is never written after
+    /// it is made, so a pass recorded earlier keeps the contents it was given.
+    /// `key` tells apart the calls one pass makes in a frame (a volume's
+    /// index), so their number stays bounded.
+    pub(crate) fn buffer_kept(
+        &self,
+        label: &'static str,
+        key: u64,
+        contents: &[u8],
+        usage: wgpu::BufferUsages,
+    ) -> wgpu::Buffer {
+        let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(k) = kept.get(&(label, key)).filter(|k| k.usage == usage && k.contents == contents) {
+            self.count_kept(contents.len() as u64);
+            return k.buffer.clone();
+        }
+        let buffer = self.buffer_with(label, contents, usage);
+        kept.insert((label, key), KeptBuffer { contents: contents.to_vec(), usage, buffer: buffer.clone() });
+        buffer
     }
 
     /// Writes `data` into `buffer` at `offset` (counted as uploaded): through

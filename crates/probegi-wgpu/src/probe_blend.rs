@@ -59,7 +59,8 @@ pub(crate) struct BlendParams {
     pub(crate) firefly_clamp_ratio: f32,
     pub(crate) adaptive_hysteresis: u32,
     pub(crate) adaptive_tolerance: f32,
-    pub(crate) _pad: u32,
+    /// `DeviceVolumeBlend::hysteresis_cap`.
+    pub(crate) hysteresis_cap: f32,
 }
 
 const _: () = assert!(std::mem::size_of::<BlendParams>() == 80);
@@ -252,6 +253,7 @@ impl GpuProbeBlend {
             irradiance_weights: &irradiance_weights,
             distance_weights: &distance_weights,
             probe_blend: (0..probes).map(|p| frame.probe_hysteresis[p].map(|h| ((p * rays) as u32, h))).collect(),
+            hysteresis_cap: 1.0,
             irradiance_scale: frame.irradiance_scale,
             visibility_scale: frame.visibility_scale,
             distance_clamp_m: frame.distance_clamp_m,
@@ -298,8 +300,12 @@ impl GpuProbeBlend {
         let storage = wgpu::BufferUsages::STORAGE;
         let params = init("blend params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let weights = pack_weights(plan.irradiance_weights, plan.distance_weights);
+        // The weights turn with the frame's rays; the per-probe entries repeat
+        // from frame to frame for a still volume: kept per volume, by where
+        // its atlas starts.
         let weights = init("blend weights", bytemuck::cast_slice(&weights), storage);
-        let per_probe = init("probe blend", bytemuck::cast_slice(&per_probe), storage);
+        let key = atlases.irradiance_first as u64;
+        let per_probe = ctx.buffer_kept("probe blend", key, bytemuck::cast_slice(&per_probe), storage);
         let buffers = [
             &params,
             &weights,
@@ -417,7 +423,7 @@ fn blend_params(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, probes
         firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
         adaptive_hysteresis: s.probe_adaptive_hysteresis as u32,
         adaptive_tolerance: s.probe_adaptive_hysteresis_tolerance,
-        _pad: 0,
+        hysteresis_cap: plan.hysteresis_cap,
     }
 }
 

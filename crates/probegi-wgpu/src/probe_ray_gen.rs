@@ -33,6 +33,17 @@ pub(crate) struct RayGenParams {
 }
 const _: () = assert!(std::mem::size_of::<RayGenParams>() == 32);
 
+/// One volume's rays for [`GpuProbeRayGen::generate_kept`]: from ray
+/// `first_ray` on, `rays_per_probe` for each of `origins`, turned by `rotation`.
+#[derive(Clone, Copy)]
+pub(crate) struct RayGenRays<'a> {
+    pub first_ray: u32,
+    pub origins: &'a [Vec3],
+    pub max_distance_m: f32,
+    pub rotation: Quat,
+    pub rays_per_probe: u32,
+}
+
 /// The ray generation pipeline.
 pub struct GpuProbeRayGen {
     layout: wgpu::BindGroupLayout,
@@ -88,6 +99,22 @@ impl GpuProbeRayGen {
         rays_per_probe: u32,
         timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
     ) -> Result<(), GpuError> {
+        let rays = RayGenRays { first_ray, origins, max_distance_m, rotation, rays_per_probe };
+        self.generate_kept(ctx, batch, rays, None, timer)
+    }
+
+    /// As [`Self::generate_into`]; with `kept` (a volume's index), the probe
+    /// records are [`GpuContext::buffer_kept`]'s under that key: a still
+    /// volume's update uploads none of them after its first frame.
+    pub(crate) fn generate_kept(
+        &self,
+        ctx: &GpuContext,
+        batch: &GpuRayBatch,
+        rays: RayGenRays<'_>,
+        kept: Option<u64>,
+        timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
+    ) -> Result<(), GpuError> {
+        let RayGenRays { first_ray, origins, max_distance_m, rotation, rays_per_probe } = rays;
         let n = origins.len() as u64 * rays_per_probe as u64;
         if first_ray as u64 + n > batch.ray_count as u64 {
             return Err(GpuError::Input(format!(
@@ -111,7 +138,11 @@ impl GpuProbeRayGen {
         let probes: Vec<[f32; 4]> = origins.iter().map(|o| [o.x, o.y, o.z, t_max]).collect();
         let device = &ctx.device;
         let params = ctx.buffer_with("ray gen params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        let probes = ctx.buffer_with("ray gen probes", bytemuck::cast_slice(&probes), wgpu::BufferUsages::STORAGE);
+        let (probes, usage) = (bytemuck::cast_slice(&probes), wgpu::BufferUsages::STORAGE);
+        let probes = match kept {
+            Some(key) => ctx.buffer_kept("ray gen probes", key, probes, usage),
+            None => ctx.buffer_with("ray gen probes", probes, usage),
+        };
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("probe ray gen"),
             layout: &self.layout,

@@ -174,8 +174,10 @@ impl GpuProbeShade {
             ShadeParams { ray_count: n, groups_x: gx, seed, frame, probe_count: probes.len() as u32, _pad: [0; 3] };
         let params = ctx.buffer_with("shade params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let empty = [ShadeProbe::default()];
-        let info = ctx.buffer_with(
+        // One shade a batch; its probe records repeat while the probes do.
+        let info = ctx.buffer_kept(
             "shade probes",
+            0,
             bytemuck::cast_slice(if probes.is_empty() { &empty[..] } else { probes }),
             wgpu::BufferUsages::STORAGE,
         );

@@ -383,16 +383,17 @@ impl WgpuProbeTracer {
             }
             let range = g.first_probe as usize..(g.first_probe + g.probe_count) as usize;
             let Some(origins) = batch.probe_origins_m.get(range) else { return Ok(None) };
-            ray_gen.generate_into(
-                &self.ctx,
-                &out,
-                first.first_ray,
+            let rays = crate::probe_ray_gen::RayGenRays {
+                first_ray: first.first_ray,
                 origins,
-                g.max_distance_m,
-                g.rotation,
-                g.rays_per_probe,
-                None,
-            )?;
+                max_distance_m: g.max_distance_m,
+                rotation: g.rotation,
+                rays_per_probe: g.rays_per_probe,
+            };
+            // Kept per volume and batch kind: an update's records repeat while
+            // the volume's probes and states stay as they are.
+            let key = (g.volume as u64) << 1 | (batch.kind == probegi_field::seam::ProbeRayBatchKind::Update) as u64;
+            ray_gen.generate_kept(&self.ctx, &out, rays, Some(key), None)?;
         }
         Ok(Some(out))
     }

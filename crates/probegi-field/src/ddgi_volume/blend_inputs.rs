@@ -166,6 +166,19 @@ impl DdgiVolume {
     /// Per probe, its first ray and the hysteresis of its blend this frame (`None`:
     /// no blend), and the scene events' irradiance and visibility scales.
     fn blend_plan(&self, frame: &VolumeFrame) -> (Vec<Option<(usize, f32)>>, f32, f32) {
+        self.blend_plan_with(frame, true)
+    }
+
+    /// The start-up ramp's cap on every probe's hysteresis this frame: the
+    /// volume's blends so far as a running mean (1: no ramp).
+    fn startup_hysteresis_cap(&self) -> f32 {
+        if self.settings.probe_hysteresis_startup_ramp { ramp_cap(self.frames_updated) } else { 1.0 }
+    }
+
+    /// [`Self::blend_plan`], its hysteresis capped by the start-up ramp or
+    /// (`startup_cap` false) not yet.
+    fn blend_plan_with(&self, frame: &VolumeFrame, startup_cap: bool) -> (Vec<Option<(usize, f32)>>, f32, f32) {
+        let cap = if startup_cap { self.startup_hysteresis_cap() } else { 1.0 };
         let event_scale = |events: &[HysteresisReduction]| events.iter().map(|e| e.scale).product::<f32>();
         let (irr_scale, vis_scale) = if self.settings.probe_fast_convergence {
             (event_scale(&self.irradiance_events), event_scale(&self.visibility_events))
@@ -192,12 +205,7 @@ impl DdgiVolume {
                         h
                     };
                     // The start-up ramp: the volume's blends so far.
-                    let h = if self.settings.probe_hysteresis_startup_ramp {
-                        h.min(ramp_cap(self.frames_updated))
-                    } else {
-                        h
-                    };
-                    (first as usize, h)
+                    (first as usize, h.min(cap))
                 })
             })
             .collect();
@@ -210,9 +218,13 @@ impl DdgiVolume {
         frame: &'a VolumeFrame,
         lights: &[probegi_scene::PunctualLight],
     ) -> DeviceVolumeBlend<'a> {
-        let (base, irradiance_scale, visibility_scale) = self.blend_plan(frame);
+        // The start-up cap goes apart (`DeviceVolumeBlend::hysteresis_cap`);
+        // the shadowing field's plan takes it in.
+        let (base, irradiance_scale, visibility_scale) = self.blend_plan_with(frame, false);
+        let hysteresis_cap = self.startup_hysteresis_cap();
+        let capped: Vec<_> = base.iter().map(|b| b.map(|(first, h)| (first, h.min(hysteresis_cap)))).collect();
         let frames = self.blend_frames(frame);
-        let shadow = self.device_shadow_blend(&shadow_base(&base, irradiance_scale, &frames), lights);
+        let shadow = self.device_shadow_blend(&shadow_base(&capped, irradiance_scale, &frames), lights);
         DeviceVolumeBlend {
             shadow,
             settings: &self.settings,
@@ -220,6 +232,7 @@ impl DdgiVolume {
             irradiance_weights: &frame.rays.irradiance_weights,
             distance_weights: &frame.rays.distance_weights,
             probe_blend: base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect(),
+            hysteresis_cap,
             irradiance_scale,
             visibility_scale,
             distance_clamp_m: self.distance_clamp_m(),

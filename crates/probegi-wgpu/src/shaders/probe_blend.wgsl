@@ -26,7 +26,7 @@ struct BlendParams {
     firefly_clamp_ratio: f32,  // Timberdoodle PGI's firefly clamp; 0: off
     adaptive_hysteresis: u32,  // Timberdoodle PGI's adaptive per-texel hysteresis
     adaptive_tolerance: f32,   // the relative change its states tolerate
-    _pad0: u32,
+    hysteresis_cap: f32,       // the start-up ramp's cap on every probe's hysteresis
 };
 
 @group(0) @binding(0) var<uniform> params: BlendParams;
@@ -96,8 +96,9 @@ fn blend_probe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
     }
     // x its first ray, y its hysteresis bits (< 0: not updated), z its frames.
     let pb = workgroupUniformLoad(&staged_probe);
-    let h0 = bitcast<f32>(pb.y);
-    if (h0 < 0.0) { return; }
+    let planned = bitcast<f32>(pb.y);
+    if (planned < 0.0) { return; }
+    let h0 = min(planned, params.hysteresis_cap);
     if (params.rays_per_probe <= MAX_STAGED_RAYS) {
         for (var r = lid; r < params.rays_per_probe; r += 64u) {
             staged_rays[r] = ray_results[pb.x + r];

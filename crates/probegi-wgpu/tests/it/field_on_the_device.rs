@@ -436,3 +436,46 @@ fn initialisation_rounds_on_a_device_that_makes_its_rays_upload_no_ray() {
     let besides = up - device.field_bytes();
     assert!(besides < one_round, "frame 0 uploaded {besides} bytes besides the field: a round's rays are {one_round}");
 }
+
+#[test]
+fn a_still_field_on_the_device_uploads_no_per_probe_record_again() {
+    // The render path (the device keeps the field and makes the rays) in a
+    // still scene: once the probes' states have settled, each update's
+    // per-probe records (ray generation, shading, blend plan, the query's
+    // offsets and flags) repeat the last frame's, and the device keeps them
+    // (`GpuContext::buffer_kept`): what goes up is the passes' parameter
+    // blocks and the blend's texel-to-ray weights, which turn with the
+    // frame's rays (7 KB at 16 rays), where it was 16 bytes a probe for each
+    // record (110 KB a frame here). The start-up ramp's cap is a parameter, so this holds from the
+    // second frame on, ramp or not.
+    let scene = probegi_scene::builtin::cornell_box();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let Some(device) = gpu_generating(&scene, &bvh, true, true) else { return };
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let settings =
+        DdgiVolumeSettings { probe_counts: UVec3::new(12, 12, 12), probe_rays_per_probe: 16, ..Default::default() };
+    assert!(settings.probe_hysteresis_startup_ramp, "the default: the ramp runs through the frames below");
+    let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, scene.bounds().expect("geometry")));
+    let update = |set: &mut DdgiFieldSet, f: u32| {
+        set.update_traced_by(&scene, &bvh, Some(&device), &direct, 5, f, &mut BTreeMap::new()).expect("update");
+    };
+    for f in 0..3 {
+        update(&mut set, f);
+    }
+    let (frames, before) = (8, device.ctx.counters());
+    for f in 3..3 + frames {
+        update(&mut set, f);
+    }
+    device.ctx.wait().expect("wait");
+    let d = device.ctx.counters() - before;
+    let (up, kept) = (d.bytes_up / frames as u64, d.bytes_kept / frames as u64);
+    let probes = set.probe_count() as u64;
+    let tracing = set.ray_batch().probes.len() as u64;
+    eprintln!("{probes} probes, {tracing} tracing: {up} bytes up a frame, {kept} kept");
+    assert!(tracing > probes / 4, "most probes of the box trace: {tracing} of {probes}");
+    // Kept: the blend plan (16 bytes a probe), ray generation and shading (16
+    // a tracing probe each).
+    assert!(kept >= 16 * (probes + 2 * tracing), "kept {kept} bytes a frame");
+    // Up: parameter blocks and weights, below half of one record of 16 bytes a probe.
+    assert!(up < 16 * probes / 2, "{up} bytes up a frame");
+}
