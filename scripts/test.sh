@@ -113,3 +113,33 @@ if [ ! -x "$CLIPPY_DRIVER" ]; then
 fi
 RUSTC_WORKSPACE_WRAPPER="$CLIPPY_DRIVER" CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__" \
   cargo test --workspace --locked
+
+# The Bevy plugin (crates/probegi-bevy): a workspace of its own on Bevy 0.20's
+# toolchain (rust-version 1.97.1, crates/probegi-bevy/README.md says why). The
+# newest toolchain present builds it: stable once it is 1.97.1 or newer, else
+# an installed nightly of 1.97 with --ignore-rust-version. Formatting, lints
+# with warnings denied and its tests, as above.
+rust_version() { rustc "+$1" --version 2>/dev/null | awk '{ print $2 }' | cut -d- -f1; }
+at_least() { [ -n "$1" ] && printf '%s\n%s\n' "$2" "$1" | sort -V -C; }
+bevy_flags=()
+if at_least "$(rust_version stable)" 1.97.1; then
+  bevy_toolchain=stable
+elif at_least "$(rust_version nightly)" 1.97.0; then
+  bevy_toolchain=nightly
+  bevy_flags=(--ignore-rust-version)
+else
+  bevy_toolchain=""
+fi
+if [ -z "$bevy_toolchain" ]; then
+  echo "warning: no Rust 1.97.1 (stable) or 1.97 nightly: the Bevy plugin's tests will SKIP (rustup toolchain install nightly)" >&2
+else
+  echo "probegi-bevy: building with $(rustc "+$bevy_toolchain" --version) ($bevy_toolchain${bevy_flags[*]:+, ${bevy_flags[*]}})" >&2
+  (
+    cd crates/probegi-bevy
+    cargo "+$bevy_toolchain" fmt -- --check
+    BEVY_CLIPPY="$(rustc "+$bevy_toolchain" --print sysroot)/bin/clippy-driver"
+    RUSTUP_TOOLCHAIN="$bevy_toolchain" RUSTC_WORKSPACE_WRAPPER="$BEVY_CLIPPY" \
+      CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__" \
+      cargo "+$bevy_toolchain" test --locked "${bevy_flags[@]}"
+  )
+fi

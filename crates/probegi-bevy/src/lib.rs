@@ -1,0 +1,219 @@
+//! probegi's dynamic diffuse global illumination (DDGI, seed 000) for Bevy
+//! 0.20, on any wgpu adapter: no ray-tracing hardware needed.
+//!
+//! This first version of the plugin turns Bevy's world into probegi's: every
+//! frame where something changed, [`ProbegiPlugin`] rebuilds a probegi
+//! [`Scene`] from the ECS ([`scene_extract`]: meshes, `StandardMaterial`s,
+//! textures, point, spot and directional lights, in Bevy's own units:
+//! [`light_units`]) and keeps it in the [`ProbegiScene`] resource, with the
+//! DDGI volumes that [`ProbegiVolume`] entities place. Extraction errors (a
+//! mesh Bevy no longer holds in the main world, a texture format the field
+//! cannot read) name the entity and are kept in [`ProbegiScene::error`], and
+//! logged once each.
+//!
+//! Not in this version (crates/probegi-bevy/README.md tracks it): the field
+//! update on Bevy's render device and Bevy's PBR lit by the field. Until then
+//! the plugin changes nothing Bevy draws.
+
+pub mod light_units;
+pub mod scene_extract;
+
+use std::sync::Arc;
+
+use bevy::asset::AssetEvent;
+use bevy::prelude::*;
+use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_scene::{LightKind, PunctualLight, Scene};
+
+pub use scene_extract::{ExtractError, MeshEntity, SceneBuilder};
+
+/// probegi's DDGI for Bevy: add it to an `App` beside Bevy's PBR plugins.
+#[derive(Default)]
+pub struct ProbegiPlugin {
+    /// The constant sky radiance rays that leave the scene read, in Bevy's
+    /// luminance units (cd·m⁻²), linear RGB.
+    pub sky_radiance: Vec3,
+}
+
+impl Plugin for ProbegiPlugin {
+    fn build(&self, app: &mut App) {
+        app.insert_resource(ProbegiScene { sky_radiance: self.sky_radiance, ..default() })
+            .add_systems(PostUpdate, extract_scene.after(bevy::transform::TransformSystems::Propagate));
+    }
+}
+
+/// A DDGI volume: probes over the entity's box, the unit cube centred on its
+/// `GlobalTransform`'s translation and scaled by its scale (its rotation is
+/// not used: probe grids are axis-aligned), with `settings` (the papers'
+/// defaults unless changed; `probe_counts` sets the grid). Changing the
+/// component or the entity's transform restarts the volume.
+#[derive(Component, Clone, Debug, Default)]
+#[require(Transform)]
+pub struct ProbegiVolume {
+    /// The volume's settings (`DdgiVolumeSettings::default()`: the papers').
+    pub settings: DdgiVolumeSettings,
+}
+
+/// The probegi world the plugin keeps from the ECS.
+#[derive(Resource, Default)]
+pub struct ProbegiScene {
+    /// The scene: world-space static geometry, materials, textures and lights.
+    pub scene: Arc<Scene>,
+    /// The volumes' settings, each with `volume_bounds_m` from its entity's box.
+    pub volumes: Vec<DdgiVolumeSettings>,
+    /// Rebuilds so far: it changes when the scene or the volumes change.
+    pub generation: u64,
+    /// Why the last rebuild failed, if it did (the scene is then the last good one).
+    pub error: Option<ExtractError>,
+    /// The sky radiance ([`ProbegiPlugin::sky_radiance`]).
+    pub sky_radiance: Vec3,
+}
+
+type MeshQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        Entity,
+        Option<&'static Name>,
+        &'static Mesh3d,
+        &'static GlobalTransform,
+        Option<&'static MeshMaterial3d<StandardMaterial>>,
+    ),
+>;
+
+/// A component the probegi scene reads changed on the entity.
+type SceneComponentChanged = Or<(
+    Changed<GlobalTransform>,
+    Changed<Mesh3d>,
+    Changed<MeshMaterial3d<StandardMaterial>>,
+    Changed<PointLight>,
+    Changed<SpotLight>,
+    Changed<DirectionalLight>,
+    Changed<ProbegiVolume>,
+)>;
+
+/// Whether anything the probegi scene holds changed since the last run.
+#[derive(bevy::ecs::system::SystemParam)]
+struct SceneChanges<'w, 's> {
+    moved: Query<'w, 's, (), SceneComponentChanged>,
+    removed_meshes: RemovedComponents<'w, 's, Mesh3d>,
+    removed_lights: RemovedComponents<'w, 's, PointLight>,
+    removed_spots: RemovedComponents<'w, 's, SpotLight>,
+    removed_suns: RemovedComponents<'w, 's, DirectionalLight>,
+    removed_volumes: RemovedComponents<'w, 's, ProbegiVolume>,
+    mesh_events: MessageReader<'w, 's, AssetEvent<Mesh>>,
+    material_events: MessageReader<'w, 's, AssetEvent<StandardMaterial>>,
+    image_events: MessageReader<'w, 's, AssetEvent<Image>>,
+}
+
+impl SceneChanges<'_, '_> {
+    fn any(&mut self) -> bool {
+        // Every reader is drained, so each change counts once.
+        let removed = [
+            self.removed_meshes.read().count(),
+            self.removed_lights.read().count(),
+            self.removed_spots.read().count(),
+            self.removed_suns.read().count(),
+            self.removed_volumes.read().count(),
+        ];
+        let assets =
+            [self.mesh_events.read().count(), self.material_events.read().count(), self.image_events.read().count()];
+        !self.moved.is_empty() || removed.iter().chain(&assets).any(|n| *n > 0)
+    }
+}
+
+/// Lights of the three kinds Bevy has, with their transforms.
+#[derive(bevy::ecs::system::SystemParam)]
+struct Lights<'w, 's> {
+    points: Query<'w, 's, (&'static GlobalTransform, &'static PointLight)>,
+    spots: Query<'w, 's, (&'static GlobalTransform, &'static SpotLight)>,
+    suns: Query<'w, 's, (&'static GlobalTransform, &'static DirectionalLight)>,
+}
+
+/// Rebuilds [`ProbegiScene`] when something it holds changed.
+#[allow(clippy::too_many_arguments)]
+fn extract_scene(
+    mut changes: SceneChanges,
+    meshes_q: MeshQuery,
+    lights: Lights,
+    volumes: Query<(&GlobalTransform, &ProbegiVolume)>,
+    meshes: Res<Assets<Mesh>>,
+    materials: Res<Assets<StandardMaterial>>,
+    images: Res<Assets<Image>>,
+    mut out: ResMut<ProbegiScene>,
+) {
+    if !changes.any() && out.generation > 0 {
+        return;
+    }
+    let mut builder = SceneBuilder::new("bevy world", vec3(out.sky_radiance));
+    let result = meshes_q.iter().try_for_each(|(entity, name, mesh, transform, material)| {
+        let name = name.map_or_else(|| format!("{entity}"), |n| n.as_str().to_owned());
+        let Some(mesh) = meshes.get(&mesh.0) else { return Ok(()) }; // still loading
+        let material = material.and_then(|m| materials.get(&m.0).map(|mat| (m.0.id(), mat)));
+        let world_from_local = glam::Mat4::from_cols_array(&transform.to_matrix().to_cols_array());
+        builder.add_mesh(&MeshEntity { name, mesh, world_from_local, material }, &images)
+    });
+    match result {
+        Err(e) => {
+            if out.error.as_ref() != Some(&e) {
+                error!("{e}");
+            }
+            out.error = Some(e);
+        }
+        Ok(()) => {
+            for light in punctual_lights(&lights) {
+                builder.add_light(light);
+            }
+            out.scene = Arc::new(builder.finish());
+            out.volumes = volumes.iter().map(|(t, v)| volume_settings(t, v)).collect();
+            out.error = None;
+        }
+    }
+    out.generation += 1;
+}
+
+/// A volume's settings with its entity's box as `volume_bounds_m`.
+fn volume_settings(transform: &GlobalTransform, volume: &ProbegiVolume) -> DdgiVolumeSettings {
+    let (scale, _, centre) = transform.to_scale_rotation_translation();
+    let (c, half) = (vec3(centre), vec3(scale.abs()) * 0.5);
+    DdgiVolumeSettings { volume_bounds_m: Some([c - half, c + half]), ..volume.settings.clone() }
+}
+
+/// Bevy's vector as probegi's (Bevy 0.20 is on another glam).
+fn vec3(v: bevy::math::Vec3) -> glam::Vec3 {
+    glam::Vec3::from_array(v.to_array())
+}
+
+fn linear_rgb(c: Color) -> glam::Vec3 {
+    let l = c.to_linear();
+    glam::Vec3::new(l.red, l.green, l.blue)
+}
+
+/// The ECS's lights as probegi's (units: [`light_units`]).
+fn punctual_lights(lights: &Lights) -> Vec<PunctualLight> {
+    let light = |kind, t: &GlobalTransform, color: Color, intensity: f32| PunctualLight {
+        kind,
+        position: vec3(t.translation()),
+        direction: vec3(t.forward().as_vec3()),
+        color: linear_rgb(color),
+        intensity,
+        range: None,
+        inner_cone_angle: 0.0,
+        outer_cone_angle: std::f32::consts::FRAC_PI_4,
+        keyframes: Vec::new(),
+    };
+    let points = lights.points.iter().map(|(t, p)| PunctualLight {
+        range: Some(p.range),
+        ..light(LightKind::Point, t, p.color, light_units::point_intensity_from_lumens(p.intensity))
+    });
+    let spots = lights.spots.iter().map(|(t, s)| PunctualLight {
+        range: Some(s.range),
+        inner_cone_angle: s.inner_angle,
+        outer_cone_angle: s.outer_angle,
+        ..light(LightKind::Spot, t, s.color, light_units::spot_intensity_from_lumens(s.intensity))
+    });
+    let suns = lights.suns.iter().map(|(t, d)| {
+        light(LightKind::Directional, t, d.color, light_units::directional_irradiance_from_lux(d.illuminance))
+    });
+    points.chain(spots).chain(suns).collect()
+}

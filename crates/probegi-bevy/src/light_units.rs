@@ -1,0 +1,58 @@
+//! Bevy's photometric light units in probegi's (glTF KHR_lights_punctual's).
+//!
+//! probegi's `PunctualLight::intensity` is glTF's: radiant intensity for point
+//! and spot lights (glTF's candela, read as W·sr⁻¹) and irradiance at normal
+//! incidence for directional lights (glTF's lux, read as W·m⁻²), and its
+//! emissive radiance and sky radiance are per steradian and square metre. The
+//! plugin keeps Bevy's photometric numbers as they are in those slots (1 cd
+//! becomes 1 W·sr⁻¹): the field's irradiance is then in Bevy's own units
+//! (lux), and the camera's `Exposure` applies to the field's light as it does
+//! to Bevy's direct light. Only the quantities differ:
+//!
+//! - `PointLight::intensity` is luminous power (lm) emitted over the whole
+//!   sphere; a point light's intensity is Φ / 4π cd. Bevy's renderer divides
+//!   the same way (`bevy_pbr` 0.20 `render/light.rs`, extraction of point lights).
+//! - `SpotLight::intensity` is also in lumens, and Bevy treats a spot as the
+//!   point light of that power masked by its cone (Φ / 4π cd, the same
+//!   division in the same file), not as Φ spread over the cone: so does this.
+//! - `DirectionalLight::illuminance` is in lux: glTF's unit, unchanged.
+//! - `StandardMaterial::emissive` is luminance (cd·m⁻², "nits"): unchanged.
+//! - A spot's cone: Bevy's `inner_angle` / `outer_angle` are half-angles from
+//!   the axis with the falloff `clamp((cos θ − cos outer) / (cos inner − cos outer))²`,
+//!   glTF's `innerConeAngle` / `outerConeAngle` and falloff.
+//! - Bevy's `range` cuts a light off with glTF's window `(1 − (d/range)⁴)²`.
+
+use std::f32::consts::PI;
+
+/// A point light's radiant intensity (W·sr⁻¹, glTF's cd) from Bevy's
+/// `PointLight::intensity` in lumens.
+pub fn point_intensity_from_lumens(lumens: f32) -> f32 {
+    lumens / (4.0 * PI)
+}
+
+/// A spot light's radiant intensity along its axis from Bevy's
+/// `SpotLight::intensity` in lumens: Bevy's point-light division (see the
+/// module docs).
+pub fn spot_intensity_from_lumens(lumens: f32) -> f32 {
+    lumens / (4.0 * PI)
+}
+
+/// A directional light's irradiance at normal incidence (W·m⁻², glTF's lux)
+/// from Bevy's `DirectionalLight::illuminance` in lux.
+pub fn directional_irradiance_from_lux(lux: f32) -> f32 {
+    lux
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_point_light_of_4_pi_lumens_is_one_candela_in_every_direction() {
+        assert!((point_intensity_from_lumens(4.0 * PI) - 1.0).abs() < 1e-6);
+        // Bevy's own example figure: a 1 000 000 lm light gives 79 577 cd.
+        assert!((point_intensity_from_lumens(1.0e6) - 79_577.47).abs() < 0.1);
+        assert_eq!(spot_intensity_from_lumens(800.0), point_intensity_from_lumens(800.0));
+        assert_eq!(directional_irradiance_from_lux(10_000.0), 10_000.0);
+    }
+}

@@ -1,0 +1,281 @@
+//! The probegi scene from Bevy's ECS: every entity with `Mesh3d` and a
+//! `GlobalTransform` becomes world-space triangles, its
+//! `MeshMaterial3d<StandardMaterial>` a probegi material, and Bevy's
+//! `PointLight`, `SpotLight` and `DirectionalLight` probegi's punctual lights
+//! (units: [`crate::light_units`]).
+//!
+//! What is read, and how:
+//! - Meshes: `TriangleList` topology, `ATTRIBUTE_POSITION` (required),
+//!   `ATTRIBUTE_NORMAL` (else smooth, area-weighted face normals), `ATTRIBUTE_UV_0`, indices (else
+//!   one triangle per three vertices). Positions go through the entity's
+//!   `GlobalTransform`, normals through its inverse transpose; a mirroring
+//!   transform reverses the winding so the front face stays the front face.
+//!   A mesh whose data Bevy has moved to the render world
+//!   (`RenderAssetUsages::RENDER_WORLD` only) cannot be read: an error names it.
+//! - `StandardMaterial`: `base_color` (to linear) and `base_color_texture`,
+//!   `emissive` and `emissive_texture`, `perceptual_roughness`, `metallic`,
+//!   `alpha_mode`. `AlphaMode::Mask(c)` cuts out below `c`; the blended modes
+//!   cut out below 0.5, as probegi's glTF loader reads glTF `BLEND` (the field
+//!   has no partial coverage). `unlit` materials keep their base colour as
+//!   albedo (they reflect the field's light in probegi, not in Bevy). An entity
+//!   without a `StandardMaterial` gets probegi's default grey 0.5.
+//! - Textures: `Rgba8UnormSrgb` and `Rgba8Unorm` images with their data in the
+//!   main world; others are an error that names the entity and the format.
+//!
+//! Deliberate limits of this first version: every mesh is static geometry of
+//! the scene (one BVH, rebuilt when anything it holds changes), not probegi's
+//! moving top-level instances; normal maps and the metallic-roughness texture
+//! are not read (the field's surfaces are diffuse); the sky is a constant.
+
+use std::collections::HashMap;
+
+use bevy::asset::{AssetId, Assets};
+use bevy::image::Image;
+use bevy::mesh::{Indices, Mesh, PrimitiveTopology, VertexAttributeValues};
+use bevy::pbr::StandardMaterial;
+use bevy::render::render_resource::TextureFormat;
+use glam::{Mat3, Mat4, Vec2, Vec3};
+use probegi_scene::material::{AlphaMode, SpecularModel};
+use probegi_scene::texture::{Sampler, Texture};
+use probegi_scene::{Material, Scene};
+
+/// Why part of the ECS could not become probegi geometry: the entity (its
+/// `Name`, else its id) and what was wrong.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExtractError {
+    /// The entity's `Name`, or its id.
+    pub entity: String,
+    /// What was wrong with it.
+    pub what: String,
+}
+
+impl std::fmt::Display for ExtractError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "probegi-bevy: entity {}: {}", self.entity, self.what)
+    }
+}
+
+impl std::error::Error for ExtractError {}
+
+/// One mesh entity as the extraction reads it.
+pub struct MeshEntity<'a> {
+    /// The entity's `Name`, or its id (for messages).
+    pub name: String,
+    /// Its mesh asset.
+    pub mesh: &'a Mesh,
+    /// Its `GlobalTransform` as a matrix.
+    pub world_from_local: Mat4,
+    /// Its `StandardMaterial`, if it has one.
+    pub material: Option<(AssetId<StandardMaterial>, &'a StandardMaterial)>,
+}
+
+/// Builds a probegi scene up from mesh entities, sharing materials and
+/// textures between the entities that use the same assets.
+#[derive(Default)]
+pub struct SceneBuilder {
+    scene: Scene,
+    materials: HashMap<Option<AssetId<StandardMaterial>>, u32>,
+    textures: HashMap<AssetId<Image>, usize>,
+}
+
+impl SceneBuilder {
+    /// An empty scene named `name`, its sky the constant `sky_radiance`.
+    pub fn new(name: &str, sky_radiance: Vec3) -> Self {
+        let scene = Scene { name: name.to_owned(), sky_radiance, ..Scene::default() };
+        Self { scene, ..Default::default() }
+    }
+
+    /// Adds `entity`'s triangles in world space, with its material.
+    pub fn add_mesh(&mut self, entity: &MeshEntity<'_>, images: &Assets<Image>) -> Result<(), ExtractError> {
+        let error = |what: String| ExtractError { entity: entity.name.clone(), what };
+        let material = self.material_index(entity, images).map_err(error)?;
+        let mesh = entity.mesh;
+        if mesh.primitive_topology() != PrimitiveTopology::TriangleList {
+            return Err(error(format!(
+                "its mesh is {:?}; the field traces TriangleList meshes only",
+                mesh.primitive_topology()
+            )));
+        }
+        let positions = float3(mesh, Mesh::ATTRIBUTE_POSITION)
+            .map_err(error)?
+            .ok_or_else(|| error("its mesh has no ATTRIBUTE_POSITION".to_owned()))?;
+        let normals = float3(mesh, Mesh::ATTRIBUTE_NORMAL).map_err(error)?;
+        let uvs = float2(mesh, Mesh::ATTRIBUTE_UV_0).map_err(error)?;
+        let triangles = triangle_indices(mesh, positions.len()).map_err(error)?;
+        let m = entity.world_from_local;
+        if !m.is_finite() || m.determinant() == 0.0 {
+            return Err(error("its GlobalTransform is singular or not finite".to_owned()));
+        }
+        let normal_matrix = Mat3::from_mat4(m).inverse().transpose();
+        let mirrored = m.determinant() < 0.0;
+        let out = &mut self.scene.mesh;
+        let base = out.positions.len() as u32;
+        out.positions.extend(positions.iter().map(|p| m.transform_point3(Vec3::from(*p))));
+        match &normals {
+            Some(n) => out.normals.extend(n.iter().map(|n| (normal_matrix * Vec3::from(*n)).normalize_or_zero())),
+            None => out.normals.extend(std::iter::repeat_n(Vec3::ZERO, positions.len())),
+        }
+        match &uvs {
+            Some(uv) => out.uvs.extend(uv.iter().map(|t| Vec2::from(*t))),
+            None => out.uvs.extend(std::iter::repeat_n(Vec2::ZERO, positions.len())),
+        }
+        for t in &triangles {
+            let [a, b, c] = t.map(|i| base + i);
+            let corners = if mirrored { [a, c, b] } else { [a, b, c] };
+            if normals.is_none() {
+                add_face_normal(out, corners);
+            }
+            out.triangles.push(corners);
+            out.triangle_materials.push(material);
+        }
+        if normals.is_none() {
+            for n in &mut out.normals[base as usize..] {
+                *n = n.normalize_or_zero();
+            }
+        }
+        Ok(())
+    }
+
+    /// The scene built so far.
+    pub fn finish(self) -> Scene {
+        self.scene
+    }
+
+    /// Adds a punctual light.
+    pub fn add_light(&mut self, light: probegi_scene::PunctualLight) {
+        self.scene.lights.push(light);
+    }
+
+    fn material_index(&mut self, entity: &MeshEntity<'_>, images: &Assets<Image>) -> Result<u32, String> {
+        let key = entity.material.map(|(id, _)| id);
+        if let Some(i) = self.materials.get(&key) {
+            return Ok(*i);
+        }
+        let material = match entity.material {
+            Some((id, m)) => self.material(&format!("{id:?}"), m, images)?,
+            None => Material::default_grey("default grey"),
+        };
+        let i = self.scene.materials.len() as u32;
+        self.scene.materials.push(material);
+        self.materials.insert(key, i);
+        Ok(i)
+    }
+
+    /// A probegi material from a `StandardMaterial` (see the module docs).
+    fn material(&mut self, name: &str, m: &StandardMaterial, images: &Assets<Image>) -> Result<Material, String> {
+        let base = m.base_color.to_linear();
+        let cutoff = match m.alpha_mode {
+            bevy::prelude::AlphaMode::Opaque => None,
+            bevy::prelude::AlphaMode::Mask(c) => Some(c),
+            _ => Some(0.5),
+        };
+        let mut out = Material {
+            base_color_factor: Vec3::new(base.red, base.green, base.blue),
+            alpha_factor: base.alpha,
+            emissive_factor: Vec3::new(m.emissive.red, m.emissive.green, m.emissive.blue),
+            roughness: m.perceptual_roughness,
+            metallic: m.metallic,
+            specular_model: SpecularModel::MetallicRoughness,
+            alpha_mode: cutoff.map_or(AlphaMode::Opaque, |cutoff| AlphaMode::Mask { cutoff }),
+            ..Material::default_grey(name)
+        };
+        if let Some(h) = &m.base_color_texture {
+            let t = self.texture(h.id(), images)?;
+            out.base_color_texture = Some(t);
+            out.alpha_texture = cutoff.is_some().then_some(t);
+        }
+        if let Some(h) = &m.emissive_texture {
+            out.emissive_texture = Some(self.texture(h.id(), images)?);
+        }
+        Ok(out)
+    }
+
+    fn texture(&mut self, id: AssetId<Image>, images: &Assets<Image>) -> Result<usize, String> {
+        if let Some(i) = self.textures.get(&id) {
+            return Ok(*i);
+        }
+        let image = images.get(id).ok_or_else(|| format!("its material's texture {id:?} is not loaded"))?;
+        let texture = texture_from_image(image, &format!("{id:?}"))?;
+        let i = self.scene.textures.len();
+        self.scene.textures.push(texture);
+        self.textures.insert(id, i);
+        Ok(i)
+    }
+}
+
+/// A probegi texture (sRGB RGB8 and alpha) from an RGBA8 Bevy image.
+fn texture_from_image(image: &Image, source: &str) -> Result<Texture, String> {
+    let format = image.texture_descriptor.format;
+    let srgb = match format {
+        TextureFormat::Rgba8UnormSrgb => true,
+        TextureFormat::Rgba8Unorm => false,
+        other => {
+            return Err(format!("its texture {source} is {other:?}; the field reads Rgba8UnormSrgb and Rgba8Unorm"));
+        }
+    };
+    let data = image.data.as_ref().ok_or_else(|| {
+        format!("its texture {source} has no data in the main world (RenderAssetUsages::RENDER_WORLD only)")
+    })?;
+    let (width, height) = (image.width(), image.height());
+    if data.len() < width as usize * height as usize * 4 {
+        return Err(format!("its texture {source} holds {} bytes for {width}×{height} RGBA8", data.len()));
+    }
+    let pixels = data.chunks_exact(4).take(width as usize * height as usize);
+    // probegi keeps sRGB-encoded texels: a linear (Unorm) image is encoded.
+    let encode = |v: u8| if srgb { v } else { linear_to_srgb8(v) };
+    let texels = pixels.clone().map(|p| [encode(p[0]), encode(p[1]), encode(p[2])]).collect();
+    let alpha: Vec<u8> = pixels.map(|p| p[3]).collect();
+    let alpha = alpha.iter().any(|a| *a < 255).then_some(alpha);
+    Ok(Texture { width, height, texels, alpha, source: source.to_owned(), sampler: Sampler::default() })
+}
+
+fn linear_to_srgb8(v: u8) -> u8 {
+    let l = v as f32 / 255.0;
+    let s = if l <= 0.003_130_8 { 12.92 * l } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 };
+    (s * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+fn float3(mesh: &Mesh, id: bevy::mesh::MeshVertexAttribute) -> Result<Option<Vec<[f32; 3]>>, String> {
+    match mesh.try_attribute_option(id) {
+        Err(e) => Err(format!("its mesh cannot be read in the main world ({e}); keep RenderAssetUsages::MAIN_WORLD")),
+        Ok(None) => Ok(None),
+        Ok(Some(VertexAttributeValues::Float32x3(v))) => Ok(Some(v.clone())),
+        Ok(Some(_)) => Err(format!("its mesh's {} is not Float32x3", id.name)),
+    }
+}
+
+fn float2(mesh: &Mesh, id: bevy::mesh::MeshVertexAttribute) -> Result<Option<Vec<[f32; 2]>>, String> {
+    match mesh.try_attribute_option(id) {
+        Err(e) => Err(format!("its mesh cannot be read in the main world ({e}); keep RenderAssetUsages::MAIN_WORLD")),
+        Ok(None) => Ok(None),
+        Ok(Some(VertexAttributeValues::Float32x2(v))) => Ok(Some(v.clone())),
+        Ok(Some(_)) => Err(format!("its mesh's {} is not Float32x2", id.name)),
+    }
+}
+
+/// The mesh's triangles as local vertex indices, checked against its vertex count.
+fn triangle_indices(mesh: &Mesh, vertices: usize) -> Result<Vec<[u32; 3]>, String> {
+    let indices: Vec<u32> = match mesh.try_indices_option() {
+        Err(e) => return Err(format!("its mesh's indices cannot be read in the main world ({e})")),
+        Ok(Some(Indices::U16(v))) => v.iter().map(|i| *i as u32).collect(),
+        Ok(Some(Indices::U32(v))) => v.clone(),
+        Ok(None) => (0..vertices as u32).collect(),
+    };
+    if !indices.len().is_multiple_of(3) {
+        return Err(format!("its mesh has {} indices, not a multiple of 3", indices.len()));
+    }
+    if let Some(bad) = indices.iter().find(|i| **i as usize >= vertices) {
+        return Err(format!("its mesh indexes vertex {bad} of {vertices}"));
+    }
+    Ok(indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect())
+}
+
+/// Adds the triangle's area-weighted face normal to its corners' (a mesh
+/// without normals: smooth normals, normalised once every face is in).
+fn add_face_normal(mesh: &mut probegi_scene::mesh::Mesh, [a, b, c]: [u32; 3]) {
+    let p = |i: u32| mesh.positions[i as usize];
+    let n = (p(b) - p(a)).cross(p(c) - p(a));
+    for i in [a, b, c] {
+        mesh.normals[i as usize] += n;
+    }
+}

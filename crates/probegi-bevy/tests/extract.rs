@@ -1,0 +1,188 @@
+//! The ECS as probegi sees it: a headless Bevy app (no renderer) with a few
+//! meshes, materials, a texture, lights and a volume; after an update the
+//! plugin's `ProbegiScene` must hold exactly those, in world space and in
+//! probegi's units.
+
+use std::f32::consts::PI;
+
+use bevy::asset::{AssetPlugin, RenderAssetUsages};
+use bevy::image::Image;
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::prelude::*;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+use probegi_bevy::{ProbegiPlugin, ProbegiScene, ProbegiVolume};
+use probegi_scene::LightKind;
+use probegi_scene::material::AlphaMode as ProbegiAlpha;
+
+fn app() -> App {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, AssetPlugin::default(), bevy::transform::TransformPlugin))
+        .init_asset::<Mesh>()
+        .init_asset::<Image>()
+        .init_asset::<StandardMaterial>()
+        .add_plugins(ProbegiPlugin { sky_radiance: Vec3::new(0.5, 0.6, 0.7) });
+    app
+}
+
+fn scene(app: &App) -> &ProbegiScene {
+    app.world().resource::<ProbegiScene>()
+}
+
+/// A red box (2 × 1 × 1 m, scaled ×2 in y), a textured, cut-out floor, a
+/// 100 cd point light, a sun of 1 000 lx pointing down and a 10 m volume.
+fn spawn_world(app: &mut App) {
+    let world = app.world_mut();
+    let cuboid = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(2.0, 1.0, 1.0));
+    let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().size(4.0, 4.0));
+    let texels = [255u8, 128, 0, 100];
+    let image = Image::new_fill(
+        Extent3d { width: 2, height: 2, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        &texels,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::default(),
+    );
+    let image = world.resource_mut::<Assets<Image>>().add(image);
+    let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+    let red = materials.add(StandardMaterial {
+        base_color: Color::srgb(1.0, 0.0, 0.0),
+        emissive: LinearRgba::rgb(2.0, 3.0, 4.0),
+        perceptual_roughness: 0.3,
+        metallic: 0.25,
+        ..default()
+    });
+    let textured = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.5, 0.5, 0.5),
+        base_color_texture: Some(image),
+        alpha_mode: AlphaMode::Mask(0.3),
+        ..default()
+    });
+    world.spawn((
+        Name::new("box"),
+        Mesh3d(cuboid),
+        MeshMaterial3d(red),
+        Transform::from_xyz(1.0, 2.0, 3.0).with_scale(Vec3::new(1.0, 2.0, 1.0)),
+    ));
+    world.spawn((Name::new("floor"), Mesh3d(floor), MeshMaterial3d(textured), Transform::default()));
+    world.spawn((
+        PointLight { intensity: 4.0 * PI * 100.0, range: 12.0, ..default() },
+        Transform::from_xyz(0.0, 5.0, 0.0),
+    ));
+    world.spawn((
+        DirectionalLight { illuminance: 1000.0, ..default() },
+        Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z),
+    ));
+    world.spawn((ProbegiVolume::default(), Transform::from_xyz(0.0, 1.0, 0.0).with_scale(Vec3::splat(10.0))));
+}
+
+#[test]
+fn meshes_materials_lights_and_volumes_come_from_the_ecs() {
+    let mut app = app();
+    spawn_world(&mut app);
+    app.update();
+    let s = scene(&app);
+    assert!(s.error.is_none(), "{:?}", s.error);
+    let sc = &s.scene;
+    assert_eq!(sc.mesh.triangles.len(), 12 + 2, "a cuboid's 12 triangles and a plane's 2");
+    assert_eq!(sc.mesh.triangle_materials.len(), 14);
+    // The box in world space: centre (1, 2, 3), half extents (1, 0.5 × 2, 0.5).
+    let boxed: Vec<glam::Vec3> = sc
+        .mesh
+        .triangles
+        .iter()
+        .zip(&sc.mesh.triangle_materials)
+        .filter(|(_, m)| sc.materials[**m as usize].texture_free())
+        .flat_map(|(t, _)| t.map(|i| sc.mesh.positions[i as usize]))
+        .collect();
+    let lo = boxed.iter().fold(glam::Vec3::INFINITY, |a, p| a.min(*p));
+    let hi = boxed.iter().fold(glam::Vec3::NEG_INFINITY, |a, p| a.max(*p));
+    assert!(
+        lo.abs_diff_eq(glam::Vec3::new(0.0, 1.0, 2.5), 1e-5) && hi.abs_diff_eq(glam::Vec3::new(2.0, 3.0, 3.5), 1e-5)
+    );
+    // Materials: linear base colour, emission in nits, roughness, metalness, cut-outs.
+    let red = sc.materials.iter().find(|m| m.base_color_texture.is_none()).expect("the box's material");
+    assert_eq!(red.base_color_factor, glam::Vec3::new(1.0, 0.0, 0.0));
+    assert_eq!(red.emissive_factor, glam::Vec3::new(2.0, 3.0, 4.0));
+    assert_eq!((red.roughness, red.metallic, red.alpha_mode), (0.3, 0.25, ProbegiAlpha::Opaque));
+    let floor = sc.materials.iter().find(|m| m.base_color_texture.is_some()).expect("the floor's material");
+    assert!((floor.base_color_factor.x - 0.214).abs() < 1e-3, "sRGB 0.5 is linear 0.214");
+    assert_eq!(floor.alpha_mode, ProbegiAlpha::Mask { cutoff: 0.3 });
+    let tex = &sc.textures[floor.base_color_texture.expect("texture")];
+    assert_eq!((tex.width, tex.height, tex.texels[3]), (2, 2, [255, 128, 0]));
+    assert_eq!(tex.alpha.as_deref(), Some(&[100u8; 4][..]));
+    // Lights in probegi's (glTF's) units: 4π·100 lm is 100 cd; lux stays lux.
+    let point = sc.lights.iter().find(|l| l.kind == LightKind::Point).expect("point light");
+    assert!((point.intensity - 100.0).abs() < 1e-3 && point.range == Some(12.0));
+    assert_eq!(point.position, glam::Vec3::new(0.0, 5.0, 0.0));
+    let sun = sc.lights.iter().find(|l| l.kind == LightKind::Directional).expect("sun");
+    assert_eq!(sun.intensity, 1000.0);
+    assert!(sun.direction.abs_diff_eq(glam::Vec3::NEG_Y, 1e-6), "the sun shines along its forward axis");
+    assert_eq!(sc.sky_radiance, glam::Vec3::new(0.5, 0.6, 0.7));
+    // The volume: the entity's unit cube.
+    assert_eq!(s.volumes.len(), 1);
+    let [lo, hi] = s.volumes[0].volume_bounds_m.expect("bounds");
+    assert_eq!((lo, hi), (glam::Vec3::new(-5.0, -4.0, -5.0), glam::Vec3::new(5.0, 6.0, 5.0)));
+}
+
+trait TextureFree {
+    fn texture_free(&self) -> bool;
+}
+impl TextureFree for probegi_scene::Material {
+    fn texture_free(&self) -> bool {
+        self.base_color_texture.is_none()
+    }
+}
+
+#[test]
+fn a_still_world_is_extracted_once_and_a_moved_entity_again() {
+    let mut app = app();
+    spawn_world(&mut app);
+    app.update();
+    let g = scene(&app).generation;
+    app.update();
+    app.update();
+    assert_eq!(scene(&app).generation, g, "nothing changed: no rebuild");
+    let mut q = app.world_mut().query::<(&Name, &mut Transform)>();
+    for (name, mut t) in q.iter_mut(app.world_mut()) {
+        if name.as_str() == "box" {
+            t.translation.x += 10.0;
+        }
+    }
+    app.update();
+    assert_eq!(scene(&app).generation, g + 1);
+    let max_x = scene(&app).scene.mesh.positions.iter().map(|p| p.x).fold(f32::MIN, f32::max);
+    assert!((max_x - 12.0).abs() < 1e-5, "the box moved with its entity: {max_x}");
+}
+
+#[test]
+fn a_mirroring_transform_keeps_front_faces_in_front() {
+    let mut app = app();
+    let cuboid = app.world_mut().resource_mut::<Assets<Mesh>>().add(Cuboid::new(1.0, 1.0, 1.0));
+    app.world_mut().spawn((Mesh3d(cuboid), Transform::from_scale(Vec3::new(-1.0, 1.0, 1.0))));
+    app.update();
+    let m = &scene(&app).scene.mesh;
+    for t in &m.triangles {
+        let [a, b, c] = t.map(|i| m.positions[i as usize]);
+        let winding = (b - a).cross(c - a);
+        let shading = m.normals[t[0] as usize];
+        assert!(winding.dot(shading) > 0.0, "winding {winding} against normal {shading}");
+    }
+}
+
+#[test]
+fn a_mesh_the_field_cannot_trace_is_an_error_that_names_its_entity() {
+    let mut app = app();
+    spawn_world(&mut app);
+    app.update();
+    let good = scene(&app).scene.mesh.triangles.len();
+    let mut lines = Mesh::new(PrimitiveTopology::LineList, RenderAssetUsages::default());
+    lines.insert_attribute(Mesh::ATTRIBUTE_POSITION, vec![[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0]]);
+    lines.insert_indices(Indices::U32(vec![0, 1]));
+    let lines = app.world_mut().resource_mut::<Assets<Mesh>>().add(lines);
+    app.world_mut().spawn((Name::new("wire"), Mesh3d(lines)));
+    app.update();
+    let e = scene(&app).error.clone().expect("an error");
+    assert_eq!(e.entity, "wire");
+    assert!(e.to_string().contains("LineList"), "{e}");
+    assert_eq!(scene(&app).scene.mesh.triangles.len(), good, "the last good scene stays");
+}
