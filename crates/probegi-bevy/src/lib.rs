@@ -1,20 +1,25 @@
 //! probegi's dynamic diffuse global illumination (DDGI, seed 000) for Bevy
 //! 0.20, on any wgpu adapter: no ray-tracing hardware needed.
 //!
-//! This first version of the plugin turns Bevy's world into probegi's: every
-//! frame where something changed, [`ProbegiPlugin`] rebuilds a probegi
-//! [`Scene`] from the ECS ([`scene_extract`]: meshes, `StandardMaterial`s,
-//! textures, point, spot and directional lights, in Bevy's own units:
-//! [`light_units`]) and keeps it in the [`ProbegiScene`] resource, with the
-//! DDGI volumes that [`ProbegiVolume`] entities place. Extraction errors (a
-//! mesh Bevy no longer holds in the main world, a texture format the field
-//! cannot read) name the entity and are kept in [`ProbegiScene::error`], and
-//! logged once each.
+//! This first version of the plugin builds the field from Bevy's world and
+//! updates it on Bevy's own device:
+//! - every frame where something changed, [`ProbegiPlugin`] rebuilds a probegi
+//!   [`Scene`] from the ECS ([`scene_extract`]: meshes, `StandardMaterial`s,
+//!   textures, point, spot and directional lights, in Bevy's own units:
+//!   [`light_units`]) and keeps it in the [`ProbegiScene`] resource, with the
+//!   DDGI volumes that [`ProbegiVolume`] entities place. Extraction errors (a
+//!   mesh Bevy no longer holds in the main world, a texture format the field
+//!   cannot read) name the entity, are kept in [`ProbegiScene::error`] and are
+//!   logged once each;
+//! - with Bevy's renderer, the render world updates the field every frame on
+//!   Bevy's `RenderDevice` and `RenderQueue` ([`field_on_bevy_device`]): one
+//!   submission a frame, no wait after the start-up, the atlases kept there
+//!   ([`field_on_bevy_device::ProbegiRenderField`]).
 //!
-//! Not in this version (crates/probegi-bevy/README.md tracks it): the field
-//! update on Bevy's render device and Bevy's PBR lit by the field. Until then
-//! the plugin changes nothing Bevy draws.
+//! Not in this version (crates/probegi-bevy/README.md tracks it): Bevy's PBR
+//! lit by the field. Until then the plugin changes nothing Bevy draws.
 
+pub mod field_on_bevy_device;
 pub mod light_units;
 pub mod scene_extract;
 
@@ -33,12 +38,20 @@ pub struct ProbegiPlugin {
     /// The constant sky radiance rays that leave the scene read, in Bevy's
     /// luminance units (cd·m⁻²), linear RGB.
     pub sky_radiance: Vec3,
+    /// The seed of the field's random streams (ray rotations, shading).
+    pub seed: u64,
 }
 
 impl Plugin for ProbegiPlugin {
     fn build(&self, app: &mut App) {
-        app.insert_resource(ProbegiScene { sky_radiance: self.sky_radiance, ..default() })
+        app.insert_resource(ProbegiScene { sky_radiance: self.sky_radiance, seed: self.seed, ..default() })
             .add_systems(PostUpdate, extract_scene.after(bevy::transform::TransformSystems::Propagate));
+    }
+
+    /// The render world's part, once every plugin is in (`RenderPlugin`
+    /// makes the render app; without it only the main-world scene is kept).
+    fn finish(&self, app: &mut App) {
+        field_on_bevy_device::build(app);
     }
 }
 
@@ -67,6 +80,8 @@ pub struct ProbegiScene {
     pub error: Option<ExtractError>,
     /// The sky radiance ([`ProbegiPlugin::sky_radiance`]).
     pub sky_radiance: Vec3,
+    /// The field's seed ([`ProbegiPlugin::seed`]).
+    pub seed: u64,
 }
 
 type MeshQuery<'w, 's> = Query<

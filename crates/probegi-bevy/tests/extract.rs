@@ -20,7 +20,7 @@ fn app() -> App {
         .init_asset::<Mesh>()
         .init_asset::<Image>()
         .init_asset::<StandardMaterial>()
-        .add_plugins(ProbegiPlugin { sky_radiance: Vec3::new(0.5, 0.6, 0.7) });
+        .add_plugins(ProbegiPlugin { sky_radiance: Vec3::new(0.5, 0.6, 0.7), ..default() });
     app
 }
 

@@ -1,0 +1,124 @@
+//! The field on Bevy's own device: a headless Bevy app with its renderer (on
+//! lavapipe in CI) updates the DDGI field in its render world; after the same
+//! frames with the same seed, its atlases equal those of probegi's own GPU
+//! backend run on a device of its own over the scene the plugin extracted.
+//! Both run the same passes on the same kind of adapter, so the bound is the
+//! GPU suite's for device-resident fields (1e-5 of the largest texel,
+//! `probegi-wgpu/tests/it/field_on_the_device.rs`).
+
+use std::collections::BTreeMap;
+
+use bevy::app::PluginsState;
+use bevy::prelude::*;
+use bevy::render::RenderApp;
+use probegi_bevy::field_on_bevy_device::ProbegiRenderField;
+use probegi_bevy::{ProbegiPlugin, ProbegiScene, ProbegiVolume};
+use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
+use probegi_field::DdgiFieldSet;
+use probegi_frame::field_update::FieldSetUpdate;
+use probegi_scene::{BvhSettings, BvhTracer};
+use probegi_wgpu::GpuContext;
+use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
+
+const FRAMES: u32 = 6;
+const SEED: u64 = 11;
+
+/// A closed box of coloured walls around a lamp, and a 6×5×6 volume over it.
+fn spawn_room(app: &mut App) {
+    let world = app.world_mut();
+    let mut meshes = world.resource_mut::<Assets<Mesh>>();
+    let (wall, floor) = (meshes.add(Cuboid::new(0.2, 4.0, 6.0)), meshes.add(Cuboid::new(6.0, 0.2, 6.0)));
+    let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+    let mut colour = |r, g, b| materials.add(StandardMaterial { base_color: Color::srgb(r, g, b), ..default() });
+    let (red, green, white) = (colour(0.8, 0.1, 0.1), colour(0.1, 0.8, 0.1), colour(0.8, 0.8, 0.8));
+    let mut spawn = |mesh: &Handle<Mesh>, m: &Handle<StandardMaterial>, t: Transform| {
+        world.spawn((Mesh3d(mesh.clone()), MeshMaterial3d(m.clone()), t));
+    };
+    spawn(&wall, &red, Transform::from_xyz(-3.0, 2.0, 0.0));
+    spawn(&wall, &green, Transform::from_xyz(3.0, 2.0, 0.0));
+    spawn(&floor, &white, Transform::from_xyz(0.0, 0.0, 0.0));
+    spawn(&floor, &white, Transform::from_xyz(0.0, 4.0, 0.0));
+    let back = Transform::from_xyz(0.0, 2.0, -3.0).with_rotation(Quat::from_rotation_y(std::f32::consts::FRAC_PI_2));
+    spawn(&wall, &white, back);
+    world.spawn((PointLight { intensity: 20_000.0, range: 20.0, ..default() }, Transform::from_xyz(0.0, 3.0, 0.0)));
+    let settings = DdgiVolumeSettings { probe_counts: UVec3::new(6, 5, 6).to_array().into(), ..default() };
+    world.spawn((ProbegiVolume { settings }, Transform::from_xyz(0.0, 2.0, 0.0).with_scale(Vec3::new(5.6, 3.6, 5.6))));
+}
+
+/// A Bevy app with its renderer, headless; `None` without a GPU adapter
+/// (unless PROBEGI_REQUIRE_GPU is set, which makes that a failure).
+fn render_app() -> Option<App> {
+    GpuContext::headless_unless_absent().expect("PROBEGI_REQUIRE_GPU is set")?;
+    let mut app = App::new();
+    app.add_plugins(DefaultPlugins.build().disable::<bevy::log::LogPlugin>())
+        .add_plugins(ProbegiPlugin { sky_radiance: Vec3::splat(0.2), seed: SEED });
+    while app.plugins_state() == PluginsState::Adding {
+        bevy::tasks::tick_global_task_pools_on_main_thread();
+    }
+    app.finish();
+    app.cleanup();
+    Some(app)
+}
+
+#[test]
+fn the_field_on_bevys_device_equals_probegis_own() {
+    let Some(mut app) = render_app() else { return };
+    spawn_room(&mut app);
+    for _ in 0..FRAMES {
+        app.update();
+    }
+    let scene = app.world().resource::<ProbegiScene>().scene.clone();
+    let volumes = app.world().resource::<ProbegiScene>().volumes.clone();
+    assert_eq!(scene.mesh.triangles.len(), 5 * 12);
+    // Past the start-up (whose initialisation rounds read back once), a Bevy
+    // frame's field update never waits for the device.
+    let counters = |app: &App| {
+        let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
+        assert!(rf.error.is_none(), "{:?}", rf.error);
+        rf.field.as_ref().expect("a field on Bevy's device").tracer.ctx.counters()
+    };
+    let before = counters(&app);
+    for _ in 0..3 {
+        app.update();
+    }
+    let d = counters(&app) - before;
+    assert_eq!(d.blocking_waits, 0, "the field waited for Bevy's device {} times in 3 frames", d.blocking_waits);
+    assert_eq!(d.submissions, 3, "one submission a frame");
+    let render_world = app.sub_app_mut(RenderApp).world_mut();
+    let mut rf = render_world.resource_mut::<ProbegiRenderField>();
+    let field = rf.field.as_mut().expect("a field on Bevy's device");
+    // One update a Bevy frame from the frame after the scene first reached the
+    // render world (its resource is inserted by that frame's extraction).
+    let frames = field.frame;
+    assert_eq!(frames, FRAMES + 3 - 1, "one update a Bevy frame");
+    field.set.sync_host_atlases(Some(&field.tracer)).expect("read the atlases back");
+    let bevy_volume = &field.set.volumes()[0];
+
+    // probegi's own GPU backend on its own device, the same scene and frames.
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let ctx = GpuContext::headless().expect("a GPU adapter");
+    let own = WgpuProbeTracer::with_camera(ctx, &scene, &bvh, true, false)
+        .expect("upload")
+        .keeping_field(true)
+        .generating_rays(true);
+    let settings = DdgiFieldSetSettings { volumes, ..Default::default() };
+    let mut set = DdgiFieldSet::new(&settings, scene.bounds().expect("geometry"), None);
+    for f in 0..frames {
+        set.update_on_device(&scene, &bvh, &own, SEED, f, &mut BTreeMap::new()).expect("update");
+    }
+    set.sync_host_atlases(Some(&own)).expect("read the atlases back");
+    let own_volume = &set.volumes()[0];
+
+    assert_eq!(bevy_volume.probe_states, own_volume.probe_states);
+    let flat =
+        |v: &probegi_field::DdgiVolume| v.irradiance.texels.iter().flat_map(|t| t.to_array()).collect::<Vec<f32>>();
+    let (a, b) = (flat(bevy_volume), flat(own_volume));
+    let largest = b.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+    assert!(largest > 0.0, "the field holds light");
+    let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    eprintln!(
+        "{frames} frames: irradiance differs by at most {worst} of {largest}; {} submissions in 3 frames",
+        d.submissions
+    );
+    assert!(worst <= 1e-5 * largest, "irradiance differs by {worst} of {largest}");
+}
