@@ -3,14 +3,21 @@
 //! device (`GpuContext::from_device`). No second device is made.
 //!
 //! Each frame the main world's [`ProbegiScene`] is extracted (an `Arc` of the
-//! scene, no copy) and, in `RenderSystems::PrepareResources`, the field set is
-//! updated on the device (`FieldSetUpdate::update_on_device`: the trace,
-//! shade, blend and borders run as compute passes, the atlases stay on the
-//! device and no CPU lighting is built). When the scene or the volumes change
-//! (a new [`ProbegiScene::generation`]) the BVH, the device's scene and the
-//! field are made again, as `probegi render` makes them for a scene: the
-//! field starts over (seed 004's initialisation rounds, then the start-up
-//! ramp).
+//! geometry, no copy; the lights and the volumes' settings) and, in
+//! `RenderSystems::PrepareResources`, the field set is updated on the device
+//! (`FieldSetUpdate::update_on_device`: the trace, shade, blend and borders
+//! run as compute passes, the atlases stay on the device and no CPU lighting
+//! is built). What a change costs:
+//! - the geometry (a mesh, a material, a texture, a mesh entity's transform),
+//!   a volume's box or a setting that sizes the field, or the number of
+//!   lights: the BVH, the device's scene and the field are made again, as
+//!   `probegi render` makes them for a scene; the field starts over (seed
+//!   004's initialisation rounds, then the start-up ramp);
+//! - a light that moves, turns, dims or changes colour: posed on the device
+//!   (`ProbeBatchTracer::pose_scene`), the field keeps running, and
+//!   `probegi_frame`'s `SceneChangeDetector` reports what seed 004 §4.3
+//!   calls a light change (a light switched on or off);
+//! - the [`LIVE_SETTINGS`] of a volume: written into the running field.
 //!
 //! An update's passes go to Bevy's queue as one submission. The field's
 //! first frame runs the initialisation rounds, which read their results back
@@ -26,19 +33,50 @@ use bevy::render::renderer::{RenderAdapterInfo, RenderDevice, RenderQueue};
 use bevy::render::{Render, RenderApp, RenderSystems};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_field::DdgiFieldSet;
+use probegi_field::ProbeBatchTracer;
 use probegi_frame::field_update::FieldSetUpdate;
+use probegi_frame::scene_events::SceneChangeDetector;
 use probegi_scene::{BvhSettings, BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
 use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 
 use crate::ProbegiScene;
 
+/// The volume settings a running field takes as they change: the blend's
+/// and the shade's, read every frame (the viewer's live settings, and PGI's
+/// blend safeguards, which the device allocates for when turned on). Any
+/// other setting makes the field again.
+pub const LIVE_SETTINGS: [&str; 7] = [
+    "probe_hysteresis",
+    "probe_fast_convergence",
+    "glossy_second_order",
+    "ray_budget",
+    "probe_firefly_clamp_ratio",
+    "probe_adaptive_hysteresis",
+    "probe_adaptive_hysteresis_tolerance",
+];
+
+/// `to` with [`LIVE_SETTINGS`] from `from`.
+fn with_live_settings(to: &DdgiVolumeSettings, from: &DdgiVolumeSettings) -> DdgiVolumeSettings {
+    DdgiVolumeSettings {
+        probe_hysteresis: from.probe_hysteresis,
+        probe_fast_convergence: from.probe_fast_convergence,
+        glossy_second_order: from.glossy_second_order,
+        ray_budget: from.ray_budget,
+        probe_firefly_clamp_ratio: from.probe_firefly_clamp_ratio,
+        probe_adaptive_hysteresis: from.probe_adaptive_hysteresis,
+        probe_adaptive_hysteresis_tolerance: from.probe_adaptive_hysteresis_tolerance,
+        ..to.clone()
+    }
+}
+
 /// What the render world takes from [`ProbegiScene`] each frame.
 #[derive(Resource, Clone)]
 pub struct ExtractedProbegiScene {
-    scene: Arc<Scene>,
+    geometry: Arc<Scene>,
+    lights: Vec<probegi_scene::PunctualLight>,
     volumes: Vec<DdgiVolumeSettings>,
-    generation: u64,
+    geometry_generation: u64,
     seed: u64,
 }
 
@@ -47,9 +85,10 @@ impl ExtractResource<RenderApp> for ExtractedProbegiScene {
 
     fn extract_resource(source: &ProbegiScene) -> Self {
         Self {
-            scene: source.scene.clone(),
+            geometry: source.scene.clone(),
+            lights: source.lights.clone(),
             volumes: source.volumes.clone(),
-            generation: source.generation,
+            geometry_generation: source.geometry_generation,
             seed: source.seed,
         }
     }
@@ -62,11 +101,16 @@ pub struct ProbegiField {
     pub set: DdgiFieldSet,
     /// The passes on Bevy's device, holding the field's atlases.
     pub tracer: WgpuProbeTracer,
-    /// The scene the field was made for.
-    pub scene: Arc<Scene>,
+    /// The scene as the field sees it: the geometry it was made for and
+    /// this frame's lights.
+    pub scene: Scene,
+    /// The volumes' settings as extracted (the structure the field was made
+    /// with, the live settings as last applied).
+    pub volumes: Vec<DdgiVolumeSettings>,
     bvh: BvhTracer,
-    generation: u64,
+    geometry_generation: u64,
     seed: u64,
+    detector: SceneChangeDetector,
     /// Updates run since the field was made.
     pub frame: u32,
 }
@@ -93,7 +137,8 @@ pub(crate) fn build(app: &mut App) {
         .add_systems(Render, update_field.in_set(RenderSystems::PrepareResources));
 }
 
-/// Makes the field again when the extracted scene changed, then updates it.
+/// Makes the field again when the extracted scene changed in structure,
+/// takes its lights and live settings, then updates it.
 fn update_field(
     extracted: Option<Res<ExtractedProbegiScene>>,
     device: Res<RenderDevice>,
@@ -102,10 +147,9 @@ fn update_field(
     mut out: ResMut<ProbegiRenderField>,
 ) {
     let Some(x) = extracted else { return };
-    let stale = out.field.as_ref().is_none_or(|f| f.generation != x.generation);
-    if stale {
+    if out.field.as_ref().is_none_or(|f| needs_rebuild(f, &x)) {
         out.field = None;
-        if x.volumes.is_empty() || x.scene.mesh.triangles.is_empty() {
+        if x.volumes.is_empty() || x.geometry.mesh.triangles.is_empty() {
             return;
         }
         let ctx = GpuContext::from_device(device.wgpu_device().clone(), (**queue).clone(), adapter.name.clone());
@@ -115,6 +159,9 @@ fn update_field(
         }
     }
     let Some(f) = out.field.as_mut() else { return };
+    if let Err(e) = take_changes(f, &x) {
+        return report(&mut out, e);
+    }
     let mut pass_ms = BTreeMap::new();
     // The update's passes go to Bevy's queue together: one submission.
     f.tracer.ctx.defer_submissions(true);
@@ -129,6 +176,31 @@ fn update_field(
     }
 }
 
+/// Whether `x` differs from what `f` was made with in more than its lights'
+/// poses and the volumes' [`LIVE_SETTINGS`].
+fn needs_rebuild(f: &ProbegiField, x: &ExtractedProbegiScene) -> bool {
+    f.geometry_generation != x.geometry_generation
+        || f.scene.lights.len() != x.lights.len()
+        || f.volumes.len() != x.volumes.len()
+        || f.volumes.iter().zip(&x.volumes).any(|(old, new)| with_live_settings(new, old) != *old)
+}
+
+/// This frame's lights (posed on the device, the detector told) and live settings.
+fn take_changes(f: &mut ProbegiField, x: &ExtractedProbegiScene) -> Result<(), String> {
+    if f.scene.lights != x.lights {
+        f.scene.lights = x.lights.clone();
+        f.tracer.pose_scene(&f.scene, f.frame as f32).map_err(|e| format!("the lights could not be posed: {e}"))?;
+    }
+    f.detector.observe(&f.scene, &mut f.set);
+    if f.volumes != x.volumes {
+        for (v, new) in f.set.volumes_mut().iter_mut().zip(&x.volumes) {
+            v.settings = with_live_settings(&v.settings, new);
+        }
+        f.volumes = x.volumes.clone();
+    }
+    Ok(())
+}
+
 fn report(out: &mut ProbegiRenderField, e: String) {
     if out.error.as_deref() != Some(e.as_str()) {
         error!("probegi-bevy: {e}");
@@ -138,7 +210,7 @@ fn report(out: &mut ProbegiRenderField, e: String) {
 
 /// The BVH, the scene on the device and a fresh field set for `x`.
 fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField, String> {
-    let scene = x.scene.clone();
+    let scene = Scene { lights: x.lights.clone(), ..(*x.geometry).clone() };
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let tracer = WgpuProbeTracer::with_camera(ctx, &scene, &bvh, true, false)
         .map_err(|e| format!("the scene does not fit Bevy's device: {e}"))?
@@ -148,5 +220,17 @@ fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField
     let settings = DdgiFieldSetSettings { volumes: x.volumes.clone(), ..Default::default() };
     settings.validate().map_err(|(v, key, why)| format!("volume {v}: {key}: {why}"))?;
     let set = DdgiFieldSet::new(&settings, bounds, None);
-    Ok(ProbegiField { set, tracer, scene, bvh, generation: x.generation, seed: x.seed, frame: 0 })
+    let mut detector = SceneChangeDetector::new();
+    detector.remember_lights(&scene);
+    Ok(ProbegiField {
+        set,
+        tracer,
+        scene,
+        volumes: x.volumes.clone(),
+        bvh,
+        geometry_generation: x.geometry_generation,
+        seed: x.seed,
+        detector,
+        frame: 0,
+    })
 }

@@ -14,7 +14,9 @@
 //! - with Bevy's renderer, the render world updates the field every frame on
 //!   Bevy's `RenderDevice` and `RenderQueue` ([`field_on_bevy_device`]): one
 //!   submission a frame, no wait after the start-up, the atlases kept there
-//!   ([`field_on_bevy_device::ProbegiRenderField`]).
+//!   ([`field_on_bevy_device::ProbegiRenderField`]). Moving lights and a
+//!   volume's live settings change the running field; other changes make it
+//!   again.
 //!
 //! Not in this version (crates/probegi-bevy/README.md tracks it): Bevy's PBR
 //! lit by the field. Until then the plugin changes nothing Bevy draws.
@@ -70,12 +72,17 @@ pub struct ProbegiVolume {
 /// The probegi world the plugin keeps from the ECS.
 #[derive(Resource, Default)]
 pub struct ProbegiScene {
-    /// The scene: world-space static geometry, materials, textures and lights.
+    /// The scene's geometry: world-space static triangles, materials and
+    /// textures (its `lights` are empty: see [`Self::lights`]).
     pub scene: Arc<Scene>,
+    /// The punctual lights, read again whenever a light changes.
+    pub lights: Vec<PunctualLight>,
     /// The volumes' settings, each with `volume_bounds_m` from its entity's box.
     pub volumes: Vec<DdgiVolumeSettings>,
-    /// Rebuilds so far: it changes when the scene or the volumes change.
+    /// Updates so far: it changes when anything here changes.
     pub generation: u64,
+    /// Geometry rebuilds so far: it changes when `scene` does.
+    pub geometry_generation: u64,
     /// Why the last rebuild failed, if it did (the scene is then the last good one).
     pub error: Option<ExtractError>,
     /// The sky radiance ([`ProbegiPlugin::sky_radiance`]).
@@ -96,21 +103,28 @@ type MeshQuery<'w, 's> = Query<
     ),
 >;
 
-/// A component the probegi scene reads changed on the entity.
-type SceneComponentChanged = Or<(
-    Changed<GlobalTransform>,
-    Changed<Mesh3d>,
-    Changed<MeshMaterial3d<StandardMaterial>>,
-    Changed<PointLight>,
-    Changed<SpotLight>,
-    Changed<DirectionalLight>,
-    Changed<ProbegiVolume>,
-)>;
+/// A mesh entity's geometry or material changed.
+type GeometryChanged =
+    (With<Mesh3d>, Or<(Changed<GlobalTransform>, Changed<Mesh3d>, Changed<MeshMaterial3d<StandardMaterial>>)>);
 
-/// Whether anything the probegi scene holds changed since the last run.
+/// A light or a volume changed (or moved).
+type LightOrVolumeChanged = (
+    Or<(With<PointLight>, With<SpotLight>, With<DirectionalLight>, With<ProbegiVolume>)>,
+    Or<(
+        Changed<GlobalTransform>,
+        Changed<PointLight>,
+        Changed<SpotLight>,
+        Changed<DirectionalLight>,
+        Changed<ProbegiVolume>,
+    )>,
+);
+
+/// What changed since the last run: the geometry (meshes, materials,
+/// textures), or only lights and volumes.
 #[derive(bevy::ecs::system::SystemParam)]
 struct SceneChanges<'w, 's> {
-    moved: Query<'w, 's, (), SceneComponentChanged>,
+    geometry: Query<'w, 's, (), GeometryChanged>,
+    lights_or_volumes: Query<'w, 's, (), LightOrVolumeChanged>,
     removed_meshes: RemovedComponents<'w, 's, Mesh3d>,
     removed_lights: RemovedComponents<'w, 's, PointLight>,
     removed_spots: RemovedComponents<'w, 's, SpotLight>,
@@ -122,18 +136,25 @@ struct SceneChanges<'w, 's> {
 }
 
 impl SceneChanges<'_, '_> {
-    fn any(&mut self) -> bool {
-        // Every reader is drained, so each change counts once.
-        let removed = [
+    /// (the geometry changed, a light or volume changed). Every reader is
+    /// drained, so each change counts once.
+    fn read(&mut self) -> (bool, bool) {
+        let geometry = [
             self.removed_meshes.read().count(),
+            self.mesh_events.read().count(),
+            self.material_events.read().count(),
+            self.image_events.read().count(),
+        ];
+        let others = [
             self.removed_lights.read().count(),
             self.removed_spots.read().count(),
             self.removed_suns.read().count(),
             self.removed_volumes.read().count(),
         ];
-        let assets =
-            [self.mesh_events.read().count(), self.material_events.read().count(), self.image_events.read().count()];
-        !self.moved.is_empty() || removed.iter().chain(&assets).any(|n| *n > 0)
+        (
+            !self.geometry.is_empty() || geometry.iter().any(|n| *n > 0),
+            !self.lights_or_volumes.is_empty() || others.iter().any(|n| *n > 0),
+        )
     }
 }
 
@@ -145,46 +166,60 @@ struct Lights<'w, 's> {
     suns: Query<'w, 's, (&'static GlobalTransform, &'static DirectionalLight)>,
 }
 
-/// Rebuilds [`ProbegiScene`] when something it holds changed.
-#[allow(clippy::too_many_arguments)]
+/// The mesh assets a rebuild reads.
+#[derive(bevy::ecs::system::SystemParam)]
+struct MeshAssets<'w> {
+    meshes: Res<'w, Assets<Mesh>>,
+    materials: Res<'w, Assets<StandardMaterial>>,
+    images: Res<'w, Assets<Image>>,
+}
+
+/// Keeps [`ProbegiScene`] up to date: the geometry rebuilt when it changed,
+/// the lights and volumes read again when they did.
 fn extract_scene(
     mut changes: SceneChanges,
     meshes_q: MeshQuery,
     lights: Lights,
     volumes: Query<(&GlobalTransform, &ProbegiVolume)>,
-    meshes: Res<Assets<Mesh>>,
-    materials: Res<Assets<StandardMaterial>>,
-    images: Res<Assets<Image>>,
+    assets: MeshAssets,
     mut out: ResMut<ProbegiScene>,
 ) {
-    if !changes.any() && out.generation > 0 {
+    let first = out.generation == 0;
+    let (geometry, others) = changes.read();
+    if !(first || geometry || others) {
         return;
     }
-    let mut builder = SceneBuilder::new("bevy world", vec3(out.sky_radiance));
-    let result = meshes_q.iter().try_for_each(|(entity, name, mesh, transform, material)| {
-        let name = name.map_or_else(|| format!("{entity}"), |n| n.as_str().to_owned());
-        let Some(mesh) = meshes.get(&mesh.0) else { return Ok(()) }; // still loading
-        let material = material.and_then(|m| materials.get(&m.0).map(|mat| (m.0.id(), mat)));
-        let world_from_local = glam::Mat4::from_cols_array(&transform.to_matrix().to_cols_array());
-        builder.add_mesh(&MeshEntity { name, mesh, world_from_local, material }, &images)
-    });
-    match result {
-        Err(e) => {
-            if out.error.as_ref() != Some(&e) {
-                error!("{e}");
+    if first || geometry {
+        match build_geometry(&meshes_q, &assets, vec3(out.sky_radiance)) {
+            Ok(scene) => {
+                out.scene = Arc::new(scene);
+                out.geometry_generation += 1;
+                out.error = None;
             }
-            out.error = Some(e);
-        }
-        Ok(()) => {
-            for light in punctual_lights(&lights) {
-                builder.add_light(light);
+            Err(e) => {
+                if out.error.as_ref() != Some(&e) {
+                    error!("{e}");
+                }
+                out.error = Some(e);
             }
-            out.scene = Arc::new(builder.finish());
-            out.volumes = volumes.iter().map(|(t, v)| volume_settings(t, v)).collect();
-            out.error = None;
         }
     }
+    out.lights = punctual_lights(&lights);
+    out.volumes = volumes.iter().map(|(t, v)| volume_settings(t, v)).collect();
     out.generation += 1;
+}
+
+/// Every mesh entity's triangles and materials (no lights).
+fn build_geometry(meshes_q: &MeshQuery, assets: &MeshAssets, sky: glam::Vec3) -> Result<Scene, ExtractError> {
+    let mut builder = SceneBuilder::new("bevy world", sky);
+    for (entity, name, mesh, transform, material) in meshes_q.iter() {
+        let name = name.map_or_else(|| format!("{entity}"), |n| n.as_str().to_owned());
+        let Some(mesh) = assets.meshes.get(&mesh.0) else { continue }; // still loading
+        let material = material.and_then(|m| assets.materials.get(&m.0).map(|mat| (m.0.id(), mat)));
+        let world_from_local = glam::Mat4::from_cols_array(&transform.to_matrix().to_cols_array());
+        builder.add_mesh(&MeshEntity { name, mesh, world_from_local, material }, &assets.images)?;
+    }
+    Ok(builder.finish())
 }
 
 /// A volume's settings with its entity's box as `volume_bounds_m`.

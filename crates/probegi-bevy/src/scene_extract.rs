@@ -141,11 +141,6 @@ impl SceneBuilder {
         self.scene
     }
 
-    /// Adds a punctual light.
-    pub fn add_light(&mut self, light: probegi_scene::PunctualLight) {
-        self.scene.lights.push(light);
-    }
-
     fn material_index(&mut self, entity: &MeshEntity<'_>, images: &Assets<Image>) -> Result<u32, String> {
         let key = entity.material.map(|(id, _)| id);
         if let Some(i) = self.materials.get(&key) {

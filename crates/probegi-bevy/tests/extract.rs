@@ -111,10 +111,11 @@ fn meshes_materials_lights_and_volumes_come_from_the_ecs() {
     assert_eq!((tex.width, tex.height, tex.texels[3]), (2, 2, [255, 128, 0]));
     assert_eq!(tex.alpha.as_deref(), Some(&[100u8; 4][..]));
     // Lights in probegi's (glTF's) units: 4π·100 lm is 100 cd; lux stays lux.
-    let point = sc.lights.iter().find(|l| l.kind == LightKind::Point).expect("point light");
+    assert!(sc.lights.is_empty(), "the lights are kept apart from the geometry");
+    let point = s.lights.iter().find(|l| l.kind == LightKind::Point).expect("point light");
     assert!((point.intensity - 100.0).abs() < 1e-3 && point.range == Some(12.0));
     assert_eq!(point.position, glam::Vec3::new(0.0, 5.0, 0.0));
-    let sun = sc.lights.iter().find(|l| l.kind == LightKind::Directional).expect("sun");
+    let sun = s.lights.iter().find(|l| l.kind == LightKind::Directional).expect("sun");
     assert_eq!(sun.intensity, 1000.0);
     assert!(sun.direction.abs_diff_eq(glam::Vec3::NEG_Y, 1e-6), "the sun shines along its forward axis");
     assert_eq!(sc.sky_radiance, glam::Vec3::new(0.5, 0.6, 0.7));
@@ -150,8 +151,18 @@ fn a_still_world_is_extracted_once_and_a_moved_entity_again() {
     }
     app.update();
     assert_eq!(scene(&app).generation, g + 1);
+    assert_eq!(scene(&app).geometry_generation, 2, "a mesh moved: the geometry is built again");
     let max_x = scene(&app).scene.mesh.positions.iter().map(|p| p.x).fold(f32::MIN, f32::max);
     assert!((max_x - 12.0).abs() < 1e-5, "the box moved with its entity: {max_x}");
+    // A light that moves changes the lights only.
+    let mut lights = app.world_mut().query_filtered::<&mut Transform, With<PointLight>>();
+    for mut t in lights.iter_mut(app.world_mut()) {
+        t.translation.y = 4.0;
+    }
+    app.update();
+    let s = scene(&app);
+    assert_eq!((s.generation, s.geometry_generation), (g + 2, 2), "the geometry stays");
+    assert!(s.lights.iter().any(|l| l.kind == LightKind::Point && l.position.y == 4.0));
 }
 
 #[test]

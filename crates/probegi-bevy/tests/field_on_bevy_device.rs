@@ -67,8 +67,9 @@ fn the_field_on_bevys_device_equals_probegis_own() {
     for _ in 0..FRAMES {
         app.update();
     }
-    let scene = app.world().resource::<ProbegiScene>().scene.clone();
-    let volumes = app.world().resource::<ProbegiScene>().volumes.clone();
+    let ps = app.world().resource::<ProbegiScene>();
+    let scene = probegi_scene::Scene { lights: ps.lights.clone(), ..(*ps.scene).clone() };
+    let volumes = ps.volumes.clone();
     assert_eq!(scene.mesh.triangles.len(), 5 * 12);
     // Past the start-up (whose initialisation rounds read back once), a Bevy
     // frame's field update never waits for the device.
@@ -121,4 +122,46 @@ fn the_field_on_bevys_device_equals_probegis_own() {
         d.submissions
     );
     assert!(worst <= 1e-5 * largest, "irradiance differs by {worst} of {largest}");
+}
+
+/// The render world's field: (updates since it was made, its volume's hysteresis).
+fn field_state(app: &App) -> (u32, f32) {
+    let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
+    assert!(rf.error.is_none(), "{:?}", rf.error);
+    let f = rf.field.as_ref().expect("a field");
+    (f.frame, f.set.volumes()[0].settings.probe_hysteresis)
+}
+
+#[test]
+fn lights_and_live_settings_change_the_running_field_and_the_rest_makes_it_again() {
+    let Some(mut app) = render_app() else { return };
+    spawn_room(&mut app);
+    for _ in 0..3 {
+        app.update();
+    }
+    assert_eq!(field_state(&app), (2, 0.97));
+    // The lamp moves: posed on the device, the field keeps its history.
+    let mut lamp = app.world_mut().query_filtered::<&mut Transform, With<PointLight>>();
+    for mut t in lamp.iter_mut(app.world_mut()) {
+        t.translation.x = 1.5;
+    }
+    app.update();
+    assert_eq!(field_state(&app).0, 3, "a moved light does not restart the field");
+    let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
+    assert_eq!(rf.field.as_ref().expect("field").scene.lights[0].position.x, 1.5);
+    // A live setting: written into the running field.
+    let mut volume = app.world_mut().query::<&mut ProbegiVolume>();
+    for mut v in volume.iter_mut(app.world_mut()) {
+        v.settings.probe_hysteresis = 0.9;
+    }
+    app.update();
+    assert_eq!(field_state(&app), (4, 0.9), "the hysteresis changes the running field");
+    // A setting that sizes the field: made again.
+    for mut v in volume.iter_mut(app.world_mut()) {
+        v.settings.probe_counts = glam::UVec3::new(4, 4, 4);
+    }
+    app.update();
+    assert_eq!(field_state(&app), (1, 0.9), "new probe counts make the field again");
+    let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
+    assert_eq!(rf.field.as_ref().expect("field").set.probe_count(), 64);
 }
