@@ -76,6 +76,8 @@ pub struct ExtractedProbegiScene {
     geometry: Arc<Scene>,
     lights: Vec<probegi_scene::PunctualLight>,
     volumes: Vec<DdgiVolumeSettings>,
+    blending: probegi_core::ddgi_settings::VolumeBlending,
+    tracking_target: Option<glam::Vec3>,
     geometry_generation: u64,
     seed: u64,
 }
@@ -88,6 +90,8 @@ impl ExtractResource<RenderApp> for ExtractedProbegiScene {
             geometry: source.scene.clone(),
             lights: source.lights.clone(),
             volumes: source.volumes.clone(),
+            blending: source.blending,
+            tracking_target: source.tracking_target,
             geometry_generation: source.geometry_generation,
             seed: source.seed,
         }
@@ -107,6 +111,7 @@ pub struct ProbegiField {
     /// The volumes' settings as extracted (the structure the field was made
     /// with, the live settings as last applied).
     pub volumes: Vec<DdgiVolumeSettings>,
+    set_blending: probegi_core::ddgi_settings::VolumeBlending,
     bvh: BvhTracer,
     geometry_generation: u64,
     seed: u64,
@@ -182,6 +187,7 @@ fn needs_rebuild(f: &ProbegiField, x: &ExtractedProbegiScene) -> bool {
     f.geometry_generation != x.geometry_generation
         || f.scene.lights.len() != x.lights.len()
         || f.volumes.len() != x.volumes.len()
+        || f.set_blending != x.blending
         || f.volumes.iter().zip(&x.volumes).any(|(old, new)| with_live_settings(new, old) != *old)
 }
 
@@ -190,6 +196,10 @@ fn take_changes(f: &mut ProbegiField, x: &ExtractedProbegiScene) -> Result<(), S
     if f.scene.lights != x.lights {
         f.scene.lights = x.lights.clone();
         f.tracer.pose_scene(&f.scene, f.frame as f32).map_err(|e| format!("the lights could not be posed: {e}"))?;
+    }
+    if let Some(t) = x.tracking_target {
+        // The cascades follow their entity (whole cells: seed 004 §7.3).
+        f.set.set_tracking_target(t);
     }
     f.detector.observe(&f.scene, &mut f.set);
     if f.volumes != x.volumes {
@@ -217,9 +227,9 @@ fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField
         .keeping_field(true)
         .generating_rays(true);
     let bounds = scene.bounds().ok_or("the scene has no geometry")?;
-    let settings = DdgiFieldSetSettings { volumes: x.volumes.clone(), ..Default::default() };
+    let settings = DdgiFieldSetSettings { volumes: x.volumes.clone(), blending: x.blending };
     settings.validate().map_err(|(v, key, why)| format!("volume {v}: {key}: {why}"))?;
-    let set = DdgiFieldSet::new(&settings, bounds, None);
+    let set = DdgiFieldSet::new(&settings, bounds, x.tracking_target);
     let mut detector = SceneChangeDetector::new();
     detector.remember_lights(&scene);
     Ok(ProbegiField {
@@ -227,6 +237,7 @@ fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField
         tracer,
         scene,
         volumes: x.volumes.clone(),
+        set_blending: x.blending,
         bvh,
         geometry_generation: x.geometry_generation,
         seed: x.seed,

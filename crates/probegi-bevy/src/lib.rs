@@ -7,7 +7,8 @@
 //!   [`Scene`] from the ECS ([`scene_extract`]: meshes, `StandardMaterial`s,
 //!   textures, point, spot and directional lights, in Bevy's own units:
 //!   [`light_units`]) and keeps it in the [`ProbegiScene`] resource, with the
-//!   DDGI volumes that [`ProbegiVolume`] entities place. Extraction errors (a
+//!   DDGI volumes that [`ProbegiVolume`] entities place, or the camera-centred
+//!   cascades of a [`ProbegiCascades`] entity. Extraction errors (a
 //!   mesh Bevy no longer holds in the main world, a texture format the field
 //!   cannot read) name the entity, are kept in [`ProbegiScene::error`] and are
 //!   logged once each;
@@ -29,7 +30,7 @@ use std::sync::Arc;
 
 use bevy::asset::AssetEvent;
 use bevy::prelude::*;
-use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, VolumeBlending};
 use probegi_scene::{LightKind, PunctualLight, Scene};
 
 pub use scene_extract::{ExtractError, MeshEntity, SceneBuilder};
@@ -69,6 +70,56 @@ pub struct ProbegiVolume {
     pub settings: DdgiVolumeSettings,
 }
 
+/// Camera-centred DDGI cascades (seed 003 §6.2): on the camera (or any entity
+/// whose `GlobalTransform` the cascades should follow), `count` nested
+/// tracking windows, each `settings.probe_counts` probes, the innermost
+/// spaced so that the outermost is the scene bounds' fitted grid and each
+/// next one `ratio` × coarser, every window held inside the scene bounds; as
+/// `probegi render --cascades N` makes them. Moving the entity scrolls the
+/// windows (the field keeps running). Where an entity has this, it is the
+/// field, and [`ProbegiVolume`]s are not used. The cascades keep seed 004's
+/// (jcgt) probe states: the screen scheme that `probegi render` gives
+/// cascades needs its camera frame's probe requests, which a Bevy frame does
+/// not make yet.
+#[derive(Component, Clone, Debug)]
+#[require(Transform)]
+pub struct ProbegiCascades {
+    /// Cascades (1 to 16; `probegi render --cascades`).
+    pub count: u32,
+    /// Spacing ratio between neighbouring cascades (`--cascade-ratio`).
+    pub ratio: f32,
+    /// Every cascade's settings (`probe_counts`: 16×8×16 by default).
+    pub settings: DdgiVolumeSettings,
+}
+
+impl Default for ProbegiCascades {
+    fn default() -> Self {
+        Self {
+            count: 3,
+            ratio: probegi_core::ddgi_settings::DEFAULT_CASCADE_SPACING_RATIO,
+            settings: DdgiVolumeSettings {
+                probe_counts: probegi_core::ddgi_settings::DEFAULT_CASCADE_PROBE_COUNTS,
+                ..default()
+            },
+        }
+    }
+}
+
+impl ProbegiCascades {
+    /// The cascades' volume settings over a scene of `bounds` (`probegi
+    /// render --cascades`'s construction).
+    pub fn volumes(&self, (lo, hi): (glam::Vec3, glam::Vec3)) -> DdgiFieldSetSettings {
+        let mut base = self.settings.clone();
+        base.volume_tracking_bounds_m.get_or_insert([lo, hi]);
+        let n = self.count.max(1);
+        let spacing = base.probe_spacing_m.unwrap_or_else(|| {
+            let cells = base.probe_counts.as_vec3().max(glam::Vec3::ONE);
+            ((hi - lo) / cells / self.ratio.powi(n as i32 - 1)).max(glam::Vec3::splat(1e-3))
+        });
+        DdgiFieldSetSettings::cascades(n, &base, spacing, self.ratio)
+    }
+}
+
 /// The probegi world the plugin keeps from the ECS.
 #[derive(Resource, Default)]
 pub struct ProbegiScene {
@@ -77,8 +128,14 @@ pub struct ProbegiScene {
     pub scene: Arc<Scene>,
     /// The punctual lights, read again whenever a light changes.
     pub lights: Vec<PunctualLight>,
-    /// The volumes' settings, each with `volume_bounds_m` from its entity's box.
+    /// The volumes' settings, each with `volume_bounds_m` from its entity's
+    /// box, or the [`ProbegiCascades`]' windows.
     pub volumes: Vec<DdgiVolumeSettings>,
+    /// How the volumes are sampled (cascades or the density rule).
+    pub blending: VolumeBlending,
+    /// Where the tracking windows (the cascades) are centred now: the
+    /// [`ProbegiCascades`] entity's position.
+    pub tracking_target: Option<glam::Vec3>,
     /// Updates so far: it changes when anything here changes.
     pub generation: u64,
     /// Geometry rebuilds so far: it changes when `scene` does.
@@ -109,13 +166,14 @@ type GeometryChanged =
 
 /// A light or a volume changed (or moved).
 type LightOrVolumeChanged = (
-    Or<(With<PointLight>, With<SpotLight>, With<DirectionalLight>, With<ProbegiVolume>)>,
+    Or<(With<PointLight>, With<SpotLight>, With<DirectionalLight>, With<ProbegiVolume>, With<ProbegiCascades>)>,
     Or<(
         Changed<GlobalTransform>,
         Changed<PointLight>,
         Changed<SpotLight>,
         Changed<DirectionalLight>,
         Changed<ProbegiVolume>,
+        Changed<ProbegiCascades>,
     )>,
 );
 
@@ -130,6 +188,7 @@ struct SceneChanges<'w, 's> {
     removed_spots: RemovedComponents<'w, 's, SpotLight>,
     removed_suns: RemovedComponents<'w, 's, DirectionalLight>,
     removed_volumes: RemovedComponents<'w, 's, ProbegiVolume>,
+    removed_cascades: RemovedComponents<'w, 's, ProbegiCascades>,
     mesh_events: MessageReader<'w, 's, AssetEvent<Mesh>>,
     material_events: MessageReader<'w, 's, AssetEvent<StandardMaterial>>,
     image_events: MessageReader<'w, 's, AssetEvent<Image>>,
@@ -150,6 +209,7 @@ impl SceneChanges<'_, '_> {
             self.removed_spots.read().count(),
             self.removed_suns.read().count(),
             self.removed_volumes.read().count(),
+            self.removed_cascades.read().count(),
         ];
         (
             !self.geometry.is_empty() || geometry.iter().any(|n| *n > 0),
@@ -180,7 +240,7 @@ fn extract_scene(
     mut changes: SceneChanges,
     meshes_q: MeshQuery,
     lights: Lights,
-    volumes: Query<(&GlobalTransform, &ProbegiVolume)>,
+    volumes: Volumes,
     assets: MeshAssets,
     mut out: ResMut<ProbegiScene>,
 ) {
@@ -205,8 +265,34 @@ fn extract_scene(
         }
     }
     out.lights = punctual_lights(&lights);
-    out.volumes = volumes.iter().map(|(t, v)| volume_settings(t, v)).collect();
+    let bounds = out.scene.bounds();
+    (out.volumes, out.blending, out.tracking_target) = volumes.settings(bounds);
     out.generation += 1;
+}
+
+/// The entities that place the field's volumes.
+#[derive(bevy::ecs::system::SystemParam)]
+struct Volumes<'w, 's> {
+    boxes: Query<'w, 's, (&'static GlobalTransform, &'static ProbegiVolume)>,
+    cascades: Query<'w, 's, (&'static GlobalTransform, &'static ProbegiCascades)>,
+}
+
+impl Volumes<'_, '_> {
+    /// The volumes' settings, their blending and the tracking target: the
+    /// first [`ProbegiCascades`]' (once the scene has bounds), else every
+    /// [`ProbegiVolume`]'s.
+    fn settings(
+        &self,
+        bounds: Option<(glam::Vec3, glam::Vec3)>,
+    ) -> (Vec<DdgiVolumeSettings>, VolumeBlending, Option<glam::Vec3>) {
+        if let Some((t, c)) = self.cascades.iter().next() {
+            let Some(bounds) = bounds else { return (Vec::new(), VolumeBlending::Cascades, None) };
+            let set = c.volumes(bounds);
+            return (set.volumes, set.blending, Some(vec3(t.translation())));
+        }
+        let boxes = self.boxes.iter().map(|(t, v)| volume_settings(t, v)).collect();
+        (boxes, VolumeBlending::Density, None)
+    }
 }
 
 /// Every mesh entity's triangles and materials (no lights).

@@ -12,7 +12,7 @@ use bevy::app::PluginsState;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use probegi_bevy::field_on_bevy_device::ProbegiRenderField;
-use probegi_bevy::{ProbegiPlugin, ProbegiScene, ProbegiVolume};
+use probegi_bevy::{ProbegiCascades, ProbegiPlugin, ProbegiScene, ProbegiVolume};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_field::DdgiFieldSet;
 use probegi_frame::field_update::FieldSetUpdate;
@@ -164,4 +164,32 @@ fn lights_and_live_settings_change_the_running_field_and_the_rest_makes_it_again
     assert_eq!(field_state(&app), (1, 0.9), "new probe counts make the field again");
     let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
     assert_eq!(rf.field.as_ref().expect("field").set.probe_count(), 64);
+}
+
+#[test]
+fn cascades_follow_their_entity_without_starting_over() {
+    let Some(mut app) = render_app() else { return };
+    spawn_room(&mut app);
+    let settings = DdgiVolumeSettings { probe_counts: glam::UVec3::new(4, 4, 4), ..default() };
+    let eye = app
+        .world_mut()
+        .spawn((ProbegiCascades { count: 2, settings, ..default() }, Transform::from_xyz(-1.5, 2.0, 0.0)))
+        .id();
+    for _ in 0..3 {
+        app.update();
+    }
+    let window = |app: &App| {
+        let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
+        assert!(rf.error.is_none(), "{:?}", rf.error);
+        let f = rf.field.as_ref().expect("a field");
+        assert_eq!(f.set.volumes().len(), 2, "the cascades, not the room's ProbegiVolume");
+        (f.frame, f.set.volumes()[0].grid.origin_m)
+    };
+    let (frame, before) = window(&app);
+    assert_eq!(frame, 2);
+    app.world_mut().entity_mut(eye).get_mut::<Transform>().expect("transform").translation.x = 1.5;
+    app.update();
+    let (frame, after) = window(&app);
+    assert_eq!(frame, 3, "a moved camera scrolls the cascades; the field keeps running");
+    assert!(after.x > before.x + 1.0, "the innermost window moved with its entity: {before} -> {after}");
 }
