@@ -78,6 +78,7 @@ pub struct ExtractedProbegiScene {
     volumes: Vec<DdgiVolumeSettings>,
     blending: probegi_core::ddgi_settings::VolumeBlending,
     tracking_target: Option<glam::Vec3>,
+    sky_radiance: glam::Vec3,
     geometry_generation: u64,
     seed: u64,
 }
@@ -92,6 +93,7 @@ impl ExtractResource<RenderApp> for ExtractedProbegiScene {
             volumes: source.volumes.clone(),
             blending: source.blending,
             tracking_target: source.tracking_target,
+            sky_radiance: glam::Vec3::from_array(source.sky_radiance.to_array()),
             geometry_generation: source.geometry_generation,
             seed: source.seed,
         }
@@ -127,6 +129,9 @@ pub struct ProbegiRenderField {
     pub field: Option<ProbegiField>,
     /// Why the last update or rebuild failed, if it did.
     pub error: Option<String>,
+    /// What the last failed rebuild was made from: not tried again until the
+    /// extracted scene changes.
+    failed: Option<(u64, Vec<DdgiVolumeSettings>, usize)>,
 }
 
 /// Adds the extraction and the update to the render app, where there is one
@@ -154,13 +159,17 @@ fn update_field(
     let Some(x) = extracted else { return };
     if out.field.as_ref().is_none_or(|f| needs_rebuild(f, &x)) {
         out.field = None;
-        if x.volumes.is_empty() || x.geometry.mesh.triangles.is_empty() {
+        let key = (x.geometry_generation, x.volumes.clone(), x.lights.len());
+        if x.volumes.is_empty() || x.geometry.mesh.triangles.is_empty() || out.failed.as_ref() == Some(&key) {
             return;
         }
         let ctx = GpuContext::from_device(device.wgpu_device().clone(), (**queue).clone(), adapter.name.clone());
         match make_field(ctx, &x) {
-            Ok(f) => out.field = Some(f),
-            Err(e) => return report(&mut out, e),
+            Ok(f) => (out.field, out.failed) = (Some(f), None),
+            Err(e) => {
+                out.failed = Some(key);
+                return report(&mut out, e);
+            }
         }
     }
     let Some(f) = out.field.as_mut() else { return };
@@ -191,11 +200,17 @@ fn needs_rebuild(f: &ProbegiField, x: &ExtractedProbegiScene) -> bool {
         || f.volumes.iter().zip(&x.volumes).any(|(old, new)| with_live_settings(new, old) != *old)
 }
 
-/// This frame's lights (posed on the device, the detector told) and live settings.
+/// This frame's lights and sky (posed on the device, the detector told) and
+/// live settings (validated as the field's are).
 fn take_changes(f: &mut ProbegiField, x: &ExtractedProbegiScene) -> Result<(), String> {
-    if f.scene.lights != x.lights {
-        f.scene.lights = x.lights.clone();
-        f.tracer.pose_scene(&f.scene, f.frame as f32).map_err(|e| format!("the lights could not be posed: {e}"))?;
+    if f.scene.lights != x.lights || f.scene.sky_radiance != x.sky_radiance {
+        let lights = std::mem::replace(&mut f.scene.lights, x.lights.clone());
+        let sky = std::mem::replace(&mut f.scene.sky_radiance, x.sky_radiance);
+        if let Err(e) = f.tracer.pose_scene(&f.scene, f.frame as f32) {
+            // Kept as they were, so the next frame tries again.
+            (f.scene.lights, f.scene.sky_radiance) = (lights, sky);
+            return Err(format!("the lights could not be posed: {e}"));
+        }
     }
     if let Some(t) = x.tracking_target {
         // The cascades follow their entity (whole cells: seed 004 §7.3).
@@ -203,8 +218,12 @@ fn take_changes(f: &mut ProbegiField, x: &ExtractedProbegiScene) -> Result<(), S
     }
     f.detector.observe(&f.scene, &mut f.set);
     if f.volumes != x.volumes {
-        for (v, new) in f.set.volumes_mut().iter_mut().zip(&x.volumes) {
-            v.settings = with_live_settings(&v.settings, new);
+        let live: Vec<DdgiVolumeSettings> =
+            f.set.volumes().iter().zip(&x.volumes).map(|(v, new)| with_live_settings(&v.settings, new)).collect();
+        let settings = DdgiFieldSetSettings { volumes: live, blending: f.set_blending };
+        settings.validate().map_err(|(v, key, why)| format!("volume {v}: {key}: {why}"))?;
+        for (v, s) in f.set.volumes_mut().iter_mut().zip(settings.volumes) {
+            v.settings = s;
         }
         f.volumes = x.volumes.clone();
     }
@@ -220,15 +239,15 @@ fn report(out: &mut ProbegiRenderField, e: String) {
 
 /// The BVH, the scene on the device and a fresh field set for `x`.
 fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField, String> {
-    let scene = Scene { lights: x.lights.clone(), ..(*x.geometry).clone() };
+    let settings = DdgiFieldSetSettings { volumes: x.volumes.clone(), blending: x.blending };
+    settings.validate().map_err(|(v, key, why)| format!("volume {v}: {key}: {why}"))?;
+    let scene = Scene { lights: x.lights.clone(), sky_radiance: x.sky_radiance, ..(*x.geometry).clone() };
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let tracer = WgpuProbeTracer::with_camera(ctx, &scene, &bvh, true, false)
         .map_err(|e| format!("the scene does not fit Bevy's device: {e}"))?
         .keeping_field(true)
         .generating_rays(true);
     let bounds = scene.bounds().ok_or("the scene has no geometry")?;
-    let settings = DdgiFieldSetSettings { volumes: x.volumes.clone(), blending: x.blending };
-    settings.validate().map_err(|(v, key, why)| format!("volume {v}: {key}: {why}"))?;
     let set = DdgiFieldSet::new(&settings, bounds, x.tracking_target);
     let mut detector = SceneChangeDetector::new();
     detector.remember_lights(&scene);

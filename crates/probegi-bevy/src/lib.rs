@@ -3,10 +3,11 @@
 //!
 //! This first version of the plugin builds the field from Bevy's world and
 //! updates it on Bevy's own device:
-//! - every frame where something changed, [`ProbegiPlugin`] rebuilds a probegi
-//!   [`Scene`] from the ECS ([`scene_extract`]: meshes, `StandardMaterial`s,
+//! - [`ProbegiPlugin`] keeps a probegi [`Scene`] from the ECS in the
+//!   [`ProbegiScene`] resource ([`scene_extract`]: meshes, `StandardMaterial`s,
 //!   textures, point, spot and directional lights, in Bevy's own units:
-//!   [`light_units`]) and keeps it in the [`ProbegiScene`] resource, with the
+//!   [`light_units`]): the geometry rebuilt in a frame where a mesh, material
+//!   or texture changed, the lights read again where a light did, with the
 //!   DDGI volumes that [`ProbegiVolume`] entities place, or the camera-centred
 //!   cascades of a [`ProbegiCascades`] entity. Extraction errors (a
 //!   mesh Bevy no longer holds in the main world, a texture format the field
@@ -28,7 +29,7 @@ pub mod scene_extract;
 
 use std::sync::Arc;
 
-use bevy::asset::AssetEvent;
+use bevy::asset::{Asset, AssetEvent, AssetId};
 use bevy::prelude::*;
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, VolumeBlending};
 use probegi_scene::{LightKind, PunctualLight, Scene};
@@ -39,7 +40,8 @@ pub use scene_extract::{ExtractError, MeshEntity, SceneBuilder};
 #[derive(Default)]
 pub struct ProbegiPlugin {
     /// The constant sky radiance rays that leave the scene read, in Bevy's
-    /// luminance units (cd·m⁻²), linear RGB.
+    /// luminance units (cd·m⁻²), linear RGB ([`ProbegiScene::sky_radiance`]
+    /// changes it as the field runs).
     pub sky_radiance: Vec3,
     /// The seed of the field's random streams (ray rotations, shading).
     pub seed: u64,
@@ -61,8 +63,9 @@ impl Plugin for ProbegiPlugin {
 /// A DDGI volume: probes over the entity's box, the unit cube centred on its
 /// `GlobalTransform`'s translation and scaled by its scale (its rotation is
 /// not used: probe grids are axis-aligned), with `settings` (the papers'
-/// defaults unless changed; `probe_counts` sets the grid). Changing the
-/// component or the entity's transform restarts the volume.
+/// defaults unless changed; `probe_counts` sets the grid). Moving the entity,
+/// or changing a setting that sizes the field, makes the field again; the
+/// live settings ([`field_on_bevy_device::LIVE_SETTINGS`]) change it as it runs.
 #[derive(Component, Clone, Debug, Default)]
 #[require(Transform)]
 pub struct ProbegiVolume {
@@ -84,9 +87,9 @@ pub struct ProbegiVolume {
 #[derive(Component, Clone, Debug)]
 #[require(Transform)]
 pub struct ProbegiCascades {
-    /// Cascades (1 to 16; `probegi render --cascades`).
+    /// Cascades (`probegi render --cascades`), held to 1 to 16.
     pub count: u32,
-    /// Spacing ratio between neighbouring cascades (`--cascade-ratio`).
+    /// Spacing ratio between neighbouring cascades (`--cascade-ratio`), held to 1 to 16.
     pub ratio: f32,
     /// Every cascade's settings (`probe_counts`: 16×8×16 by default).
     pub settings: DdgiVolumeSettings,
@@ -111,12 +114,20 @@ impl ProbegiCascades {
     pub fn volumes(&self, (lo, hi): (glam::Vec3, glam::Vec3)) -> DdgiFieldSetSettings {
         let mut base = self.settings.clone();
         base.volume_tracking_bounds_m.get_or_insert([lo, hi]);
-        let n = self.count.max(1);
+        // `probegi render` refuses other values; a component is held to them.
+        let (n, ratio) = (
+            self.count.clamp(1, 16),
+            if self.ratio.is_finite() {
+                self.ratio.clamp(1.0, 16.0)
+            } else {
+                probegi_core::ddgi_settings::DEFAULT_CASCADE_SPACING_RATIO
+            },
+        );
         let spacing = base.probe_spacing_m.unwrap_or_else(|| {
             let cells = base.probe_counts.as_vec3().max(glam::Vec3::ONE);
-            ((hi - lo) / cells / self.ratio.powi(n as i32 - 1)).max(glam::Vec3::splat(1e-3))
+            ((hi - lo) / cells / ratio.powi(n as i32 - 1)).max(glam::Vec3::splat(1e-3))
         });
-        DdgiFieldSetSettings::cascades(n, &base, spacing, self.ratio)
+        DdgiFieldSetSettings::cascades(n, &base, spacing, ratio)
     }
 }
 
@@ -142,7 +153,8 @@ pub struct ProbegiScene {
     pub geometry_generation: u64,
     /// Why the last rebuild failed, if it did (the scene is then the last good one).
     pub error: Option<ExtractError>,
-    /// The sky radiance ([`ProbegiPlugin::sky_radiance`]).
+    /// The sky radiance ([`ProbegiPlugin::sky_radiance`]); a change is
+    /// posed on the device, as a light's is.
     pub sky_radiance: Vec3,
     /// The field's seed ([`ProbegiPlugin::seed`]).
     pub seed: u64,
@@ -184,6 +196,7 @@ struct SceneChanges<'w, 's> {
     geometry: Query<'w, 's, (), GeometryChanged>,
     lights_or_volumes: Query<'w, 's, (), LightOrVolumeChanged>,
     removed_meshes: RemovedComponents<'w, 's, Mesh3d>,
+    removed_materials: RemovedComponents<'w, 's, MeshMaterial3d<StandardMaterial>>,
     removed_lights: RemovedComponents<'w, 's, PointLight>,
     removed_spots: RemovedComponents<'w, 's, SpotLight>,
     removed_suns: RemovedComponents<'w, 's, DirectionalLight>,
@@ -194,16 +207,40 @@ struct SceneChanges<'w, 's> {
     image_events: MessageReader<'w, 's, AssetEvent<Image>>,
 }
 
+/// The asset an event is about, unless it only says the asset went unused.
+fn event_asset<A: Asset>(e: &AssetEvent<A>) -> Option<AssetId<A>> {
+    match *e {
+        AssetEvent::Added { id }
+        | AssetEvent::Modified { id }
+        | AssetEvent::Removed { id }
+        | AssetEvent::LoadedWithDependencies { id } => Some(id),
+        AssetEvent::Unused { .. } => None,
+    }
+}
+
 impl SceneChanges<'_, '_> {
     /// (the geometry changed, a light or volume changed). Every reader is
-    /// drained, so each change counts once.
-    fn read(&mut self) -> (bool, bool) {
-        let geometry = [
-            self.removed_meshes.read().count(),
-            self.mesh_events.read().count(),
-            self.material_events.read().count(),
-            self.image_events.read().count(),
-        ];
+    /// drained, so each change counts once. Asset events count only for the
+    /// meshes, materials and textures that mesh entities use: a UI texture
+    /// or a material nobody draws does not make the field again.
+    fn read(&mut self, meshes_q: &MeshQuery, assets: &MeshAssets) -> (bool, bool) {
+        let meshes: Vec<AssetId<Mesh>> = self.mesh_events.read().filter_map(event_asset).collect();
+        let materials: Vec<AssetId<StandardMaterial>> = self.material_events.read().filter_map(event_asset).collect();
+        let images: Vec<AssetId<Image>> = self.image_events.read().filter_map(event_asset).collect();
+        let used = |(m, mat): (&Mesh3d, Option<&MeshMaterial3d<StandardMaterial>>)| {
+            let material = mat.map(|h| h.0.id());
+            let textures = material
+                .and_then(|id| assets.materials.get(id))
+                .into_iter()
+                .flat_map(|m| [&m.base_color_texture, &m.emissive_texture].into_iter().flatten().map(|h| h.id()));
+            meshes.contains(&m.0.id())
+                || material.is_some_and(|id| materials.contains(&id))
+                || textures.into_iter().any(|t| images.contains(&t))
+        };
+        let asset_changed = !(meshes.is_empty() && materials.is_empty() && images.is_empty())
+            && meshes_q.iter().any(|(_, _, m, _, mat)| used((m, mat)));
+        let geometry =
+            [self.removed_meshes.read().count(), self.removed_materials.read().count(), asset_changed as usize];
         let others = [
             self.removed_lights.read().count(),
             self.removed_spots.read().count(),
@@ -221,9 +258,9 @@ impl SceneChanges<'_, '_> {
 /// Lights of the three kinds Bevy has, with their transforms.
 #[derive(bevy::ecs::system::SystemParam)]
 struct Lights<'w, 's> {
-    points: Query<'w, 's, (&'static GlobalTransform, &'static PointLight)>,
-    spots: Query<'w, 's, (&'static GlobalTransform, &'static SpotLight)>,
-    suns: Query<'w, 's, (&'static GlobalTransform, &'static DirectionalLight)>,
+    points: Query<'w, 's, (Entity, &'static GlobalTransform, &'static PointLight)>,
+    spots: Query<'w, 's, (Entity, &'static GlobalTransform, &'static SpotLight)>,
+    suns: Query<'w, 's, (Entity, &'static GlobalTransform, &'static DirectionalLight)>,
 }
 
 /// The mesh assets a rebuild reads.
@@ -245,7 +282,7 @@ fn extract_scene(
     mut out: ResMut<ProbegiScene>,
 ) {
     let first = out.generation == 0;
-    let (geometry, others) = changes.read();
+    let (geometry, others) = changes.read(&meshes_q, &assets);
     if !(first || geometry || others) {
         return;
     }
@@ -325,7 +362,9 @@ fn linear_rgb(c: Color) -> glam::Vec3 {
     glam::Vec3::new(l.red, l.green, l.blue)
 }
 
-/// The ECS's lights as probegi's (units: [`light_units`]).
+/// The ECS's lights as probegi's (units: [`light_units`]), in entity order:
+/// the order stays when an entity changes archetype, so the field's scene
+/// change detector, which pairs lights by index, sees the same light.
 fn punctual_lights(lights: &Lights) -> Vec<PunctualLight> {
     let light = |kind, t: &GlobalTransform, color: Color, intensity: f32| PunctualLight {
         kind,
@@ -338,18 +377,19 @@ fn punctual_lights(lights: &Lights) -> Vec<PunctualLight> {
         outer_cone_angle: std::f32::consts::FRAC_PI_4,
         keyframes: Vec::new(),
     };
-    let points = lights.points.iter().map(|(t, p)| PunctualLight {
-        range: Some(p.range),
-        ..light(LightKind::Point, t, p.color, light_units::point_intensity_from_lumens(p.intensity))
+    let points = lights.points.iter().map(|(e, t, p)| {
+        let l = light(LightKind::Point, t, p.color, light_units::point_intensity_from_lumens(p.intensity));
+        (e, PunctualLight { range: Some(p.range), ..l })
     });
-    let spots = lights.spots.iter().map(|(t, s)| PunctualLight {
-        range: Some(s.range),
-        inner_cone_angle: s.inner_angle,
-        outer_cone_angle: s.outer_angle,
-        ..light(LightKind::Spot, t, s.color, light_units::spot_intensity_from_lumens(s.intensity))
+    let spots = lights.spots.iter().map(|(e, t, s)| {
+        let l = light(LightKind::Spot, t, s.color, light_units::spot_intensity_from_lumens(s.intensity));
+        let (inner_cone_angle, outer_cone_angle) = light_units::spot_cone(s.inner_angle, s.outer_angle);
+        (e, PunctualLight { range: Some(s.range), inner_cone_angle, outer_cone_angle, ..l })
     });
-    let suns = lights.suns.iter().map(|(t, d)| {
-        light(LightKind::Directional, t, d.color, light_units::directional_irradiance_from_lux(d.illuminance))
+    let suns = lights.suns.iter().map(|(e, t, d)| {
+        (e, light(LightKind::Directional, t, d.color, light_units::directional_irradiance_from_lux(d.illuminance)))
     });
-    points.chain(spots).chain(suns).collect()
+    let mut all: Vec<(Entity, PunctualLight)> = points.chain(spots).chain(suns).collect();
+    all.sort_by_key(|(e, _)| *e);
+    all.into_iter().map(|(_, l)| l).collect()
 }

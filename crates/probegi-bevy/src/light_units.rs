@@ -16,7 +16,12 @@
 //!   point light of that power masked by its cone (Φ / 4π cd, the same
 //!   division in the same file), not as Φ spread over the cone: so does this.
 //! - `DirectionalLight::illuminance` is in lux: glTF's unit, unchanged.
-//! - `StandardMaterial::emissive` is luminance (cd·m⁻², "nits"): unchanged.
+//! - `StandardMaterial::emissive` is read as luminance (cd·m⁻², "nits"),
+//!   unchanged: Bevy's own lighting treats it so when the material's
+//!   `emissive_exposure_weight` is 1. At Bevy's default weight 0 the emissive
+//!   is a display value that Bevy adds after exposure; the field then
+//!   under-weights that light by the camera's exposure (about 1/1000 at
+//!   Bevy's default EV100 of 9.7). Not converted yet.
 //! - A spot's cone: Bevy's `inner_angle` / `outer_angle` are half-angles from
 //!   the axis with the falloff `clamp((cos θ − cos outer) / (cos inner − cos outer))²`,
 //!   glTF's `innerConeAngle` / `outerConeAngle` and falloff.
@@ -37,6 +42,15 @@ pub fn spot_intensity_from_lumens(lumens: f32) -> f32 {
     lumens / (4.0 * PI)
 }
 
+/// A spot's (inner, outer) cone half-angles as Bevy draws them: the outer
+/// held below π/2 − 10⁻⁴, the inner to [0, outer] (`bevy_pbr` 0.20
+/// `render/light.rs`, extraction of spot lights). probegi's falloff would
+/// light the half-space behind a spot whose outer angle reached π/2.
+pub fn spot_cone(inner: f32, outer: f32) -> (f32, f32) {
+    let outer = outer.clamp(0.0, std::f32::consts::FRAC_PI_2 - 1.0e-4);
+    (inner.clamp(0.0, outer), outer)
+}
+
 /// A directional light's irradiance at normal incidence (W·m⁻², glTF's lux)
 /// from Bevy's `DirectionalLight::illuminance` in lux.
 pub fn directional_irradiance_from_lux(lux: f32) -> f32 {
@@ -54,5 +68,9 @@ mod tests {
         assert!((point_intensity_from_lumens(1.0e6) - 79_577.47).abs() < 0.1);
         assert_eq!(spot_intensity_from_lumens(800.0), point_intensity_from_lumens(800.0));
         assert_eq!(directional_irradiance_from_lux(10_000.0), 10_000.0);
+        // Bevy's clamps: an outer angle of π/2 or more, an inner past the outer.
+        let (inner, outer) = spot_cone(2.0, 2.0);
+        assert!(outer < std::f32::consts::FRAC_PI_2 && inner == outer);
+        assert_eq!(spot_cone(0.2, 0.5), (0.2, 0.5));
     }
 }

@@ -174,27 +174,27 @@ impl SceneBuilder {
             alpha_mode: cutoff.map_or(AlphaMode::Opaque, |cutoff| AlphaMode::Mask { cutoff }),
             ..Material::default_grey(name)
         };
-        if let Some(h) = &m.base_color_texture {
-            let t = self.texture(h.id(), images)?;
+        // A texture still loading is left out until it arrives (its asset
+        // event rebuilds the geometry then), as a loading mesh is.
+        if let Some(t) = m.base_color_texture.as_ref().map(|h| self.texture(h.id(), images)).transpose()?.flatten() {
             out.base_color_texture = Some(t);
             out.alpha_texture = cutoff.is_some().then_some(t);
         }
-        if let Some(h) = &m.emissive_texture {
-            out.emissive_texture = Some(self.texture(h.id(), images)?);
-        }
+        out.emissive_texture = m.emissive_texture.as_ref().map(|h| self.texture(h.id(), images)).transpose()?.flatten();
         Ok(out)
     }
 
-    fn texture(&mut self, id: AssetId<Image>, images: &Assets<Image>) -> Result<usize, String> {
+    /// The image's index in the scene's textures; `None` while it loads.
+    fn texture(&mut self, id: AssetId<Image>, images: &Assets<Image>) -> Result<Option<usize>, String> {
         if let Some(i) = self.textures.get(&id) {
-            return Ok(*i);
+            return Ok(Some(*i));
         }
-        let image = images.get(id).ok_or_else(|| format!("its material's texture {id:?} is not loaded"))?;
+        let Some(image) = images.get(id) else { return Ok(None) };
         let texture = texture_from_image(image, &format!("{id:?}"))?;
         let i = self.scene.textures.len();
         self.scene.textures.push(texture);
         self.textures.insert(id, i);
-        Ok(i)
+        Ok(Some(i))
     }
 }
 

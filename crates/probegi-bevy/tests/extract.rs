@@ -197,3 +197,52 @@ fn a_mesh_the_field_cannot_trace_is_an_error_that_names_its_entity() {
     assert!(e.to_string().contains("LineList"), "{e}");
     assert_eq!(scene(&app).scene.mesh.triangles.len(), good, "the last good scene stays");
 }
+
+#[test]
+fn cascades_are_probegi_renders_and_held_to_its_ranges() {
+    use probegi_bevy::ProbegiCascades;
+    let bounds = (glam::Vec3::new(-8.0, 0.0, -4.0), glam::Vec3::new(8.0, 8.0, 4.0));
+    let set = ProbegiCascades::default().volumes(bounds);
+    assert_eq!(set.volumes.len(), 3);
+    // The outermost is the bounds' fitted grid: 16×8×16 cells of 1 × 1 × 0.5 m.
+    let outer = set.volumes[2].probe_spacing_m.expect("spacing");
+    assert!(outer.abs_diff_eq(glam::Vec3::new(1.0, 1.0, 0.5), 1e-5), "{outer}");
+    let inner = set.volumes[0].probe_spacing_m.expect("spacing");
+    assert!((outer / inner).abs_diff_eq(glam::Vec3::splat(1.5 * 1.5), 1e-4), "ratio 1.5 twice");
+    assert!(
+        set.volumes.iter().all(|v| v.volume_tracks_camera && v.volume_tracking_bounds_m == Some([bounds.0, bounds.1]))
+    );
+    assert!(set.validate().is_ok());
+    let held = |count, ratio| ProbegiCascades { count, ratio, ..Default::default() }.volumes(bounds);
+    assert_eq!(held(0, 2.0).volumes.len(), 1);
+    assert_eq!(held(40, 2.0).volumes.len(), 16);
+    let nan = held(2, f32::NAN);
+    let r = nan.volumes[1].probe_spacing_m.expect("s") / nan.volumes[0].probe_spacing_m.expect("s");
+    assert!(r.abs_diff_eq(glam::Vec3::splat(1.5), 1e-5), "a NaN ratio takes the default: {r}");
+}
+
+#[test]
+fn only_the_assets_mesh_entities_use_make_the_geometry_again() {
+    let mut app = app();
+    spawn_world(&mut app);
+    app.update();
+    app.update();
+    let g = scene(&app).geometry_generation;
+    // A material no entity draws, made and changed: nothing to rebuild.
+    let unused = app.world_mut().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
+    app.update();
+    let _ = app.world_mut().resource_mut::<Assets<StandardMaterial>>().get_mut(&unused);
+    app.update();
+    assert_eq!(scene(&app).geometry_generation, g, "an unused material changes nothing");
+    // The box's material, changed: rebuilt, with its new colour.
+    let mut q = app.world_mut().query::<(&Name, &MeshMaterial3d<StandardMaterial>)>();
+    let used = q.iter(app.world()).find(|(n, _)| n.as_str() == "box").map(|(_, m)| m.0.clone()).expect("box");
+    if let Some(mut m) = app.world_mut().resource_mut::<Assets<StandardMaterial>>().get_mut(&used) {
+        m.base_color = Color::srgb(0.0, 1.0, 0.0);
+    }
+    app.update();
+    app.update();
+    let s = scene(&app);
+    assert_eq!(s.geometry_generation, g + 1, "the box's material changed");
+    assert!(s.scene.materials.iter().any(|m| m.base_color_factor == glam::Vec3::new(0.0, 1.0, 0.0)));
+}
