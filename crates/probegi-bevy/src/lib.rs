@@ -109,25 +109,17 @@ impl Default for ProbegiCascades {
 }
 
 impl ProbegiCascades {
-    /// The cascades' volume settings over a scene of `bounds` (`probegi
-    /// render --cascades`'s construction).
-    pub fn volumes(&self, (lo, hi): (glam::Vec3, glam::Vec3)) -> DdgiFieldSetSettings {
-        let mut base = self.settings.clone();
-        base.volume_tracking_bounds_m.get_or_insert([lo, hi]);
+    /// The cascades' volume settings over a scene of `bounds`, as `probegi
+    /// render --cascades` makes them (`DdgiFieldSetSettings::cascades_over_bounds`).
+    pub fn volumes(&self, bounds: (glam::Vec3, glam::Vec3)) -> DdgiFieldSetSettings {
         // `probegi render` refuses other values; a component is held to them.
-        let (n, ratio) = (
-            self.count.clamp(1, 16),
-            if self.ratio.is_finite() {
-                self.ratio.clamp(1.0, 16.0)
-            } else {
-                probegi_core::ddgi_settings::DEFAULT_CASCADE_SPACING_RATIO
-            },
-        );
-        let spacing = base.probe_spacing_m.unwrap_or_else(|| {
-            let cells = base.probe_counts.as_vec3().max(glam::Vec3::ONE);
-            ((hi - lo) / cells / ratio.powi(n as i32 - 1)).max(glam::Vec3::splat(1e-3))
-        });
-        DdgiFieldSetSettings::cascades(n, &base, spacing, ratio)
+        let n = self.count.clamp(1, 16);
+        let ratio = if self.ratio.is_finite() {
+            self.ratio.clamp(1.0, 16.0)
+        } else {
+            probegi_core::ddgi_settings::DEFAULT_CASCADE_SPACING_RATIO
+        };
+        DdgiFieldSetSettings::cascades_over_bounds(n, &self.settings, bounds, ratio)
     }
 }
 

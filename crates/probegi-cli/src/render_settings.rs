@@ -128,28 +128,17 @@ pub fn ddgi_method(scene: &Scene, args: &VolumeArgs) -> Result<GiMethod> {
         if file.probe_states == ProbeStatesMode::Jcgt {
             file.probe_states = ProbeStatesMode::Screen;
         }
-        let mut base = apply_volume_args(file, args)?;
-        let (lo, hi) = scene.bounds().unwrap_or((glam::Vec3::splat(-1.0), glam::Vec3::ONE));
+        let base = apply_volume_args(file, args)?;
+        let bounds = scene.bounds().unwrap_or((glam::Vec3::splat(-1.0), glam::Vec3::ONE));
         // Every window stays inside the scene bounds (where it is smaller than
-        // them), so no cascade spends probes outside the scene.
-        base.volume_tracking_bounds_m.get_or_insert([lo, hi]);
-        let spacing = match base.probe_spacing_m {
-            Some(s) => s,
-            None => {
-                // The coarsest cascade is the fitted grid of the scene bounds:
-                // probes at the centres of `counts` equal cells
-                // (`ProbeGrid::fit_to_bounds`), half a cell off the outermost
-                // walls; it covers the whole scene from any camera. (A window
-                // that followed the camera freely needed twice the bounds to
-                // cover Sponza from one end of the atrium, and left its far
-                // arches to 4.6 m probes: HDR-FLIP 0.120 at 300 frames. Probes
-                // on the bounds' faces instead: 0.104; at the cell centres
-                // 0.089. docs/RESULTS.md, "Denser is better".)
-                let cells = base.probe_counts.as_vec3().max(glam::Vec3::ONE);
-                ((hi - lo) / cells / r.powi(n as i32 - 1)).max(glam::Vec3::splat(1e-3))
-            }
-        };
-        let set = DdgiFieldSetSettings::cascades(n, &base, spacing, r);
+        // them), so no cascade spends probes outside the scene; the coarsest
+        // is the fitted grid of the bounds, half a cell off the outermost
+        // walls. (A window that followed the camera freely needed twice the
+        // bounds to cover Sponza from one end of the atrium, and left its far
+        // arches to 4.6 m probes: HDR-FLIP 0.120 at 300 frames. Probes on the
+        // bounds' faces instead: 0.104; at the cell centres 0.089.
+        // docs/RESULTS.md, "Denser is better".)
+        let set = DdgiFieldSetSettings::cascades_over_bounds(n, &base, bounds, r);
         set.validate().map_err(|(i, f, why)| anyhow::anyhow!("cascade {i}: volume setting {f}: {why}"))?;
         check_memory(set.volumes.iter().map(ddgi_volume_bytes).sum(), "the DDGI cascades")?;
         return Ok(GiMethod::DdgiSet(Box::new(set)));

@@ -531,6 +531,22 @@ impl DdgiFieldSetSettings {
         Self { volumes, blending: VolumeBlending::Cascades }
     }
 
+    /// [`Self::cascades`] over a scene of `bounds` (`probegi render
+    /// --cascades`): every window held inside the bounds (unless `base`
+    /// names its own tracking bounds), and, unless `base` fixes a spacing,
+    /// the coarsest cascade the fitted grid of the bounds (probes at the
+    /// centres of `probe_counts` equal cells, as `ProbeGrid::fit_to_bounds`
+    /// places them), which covers the whole scene from any camera.
+    pub fn cascades_over_bounds(count: u32, base: &DdgiVolumeSettings, (lo, hi): (Vec3, Vec3), ratio: f32) -> Self {
+        let mut base = base.clone();
+        base.volume_tracking_bounds_m.get_or_insert([lo, hi]);
+        let spacing = base.probe_spacing_m.unwrap_or_else(|| {
+            let cells = base.probe_counts.as_vec3().max(Vec3::ONE);
+            ((hi - lo) / cells / ratio.powi(count as i32 - 1)).max(Vec3::splat(1e-3))
+        });
+        Self::cascades(count, &base, spacing, ratio)
+    }
+
     /// The first volume setting that makes no sense, as `(volume index, field, reason)`.
     pub fn validate(&self) -> Result<(), (usize, &'static str, String)> {
         if self.volumes.is_empty() {
@@ -580,5 +596,27 @@ mod tests {
         assert_eq!(bad(|s| s.probe_firefly_clamp_ratio = 0.5), "probe_firefly_clamp_ratio");
         assert_eq!(bad(|s| s.probe_firefly_clamp_ratio = f32::NAN), "probe_firefly_clamp_ratio");
         assert_eq!(bad(|s| s.probe_distance_exponent = f32::NAN), "probe_distance_exponent");
+    }
+
+    #[test]
+    fn cascades_over_bounds_make_the_coarsest_the_fitted_grid_held_inside() {
+        let bounds = (Vec3::new(-8.0, 0.0, -4.0), Vec3::new(8.0, 8.0, 4.0));
+        let base = DdgiVolumeSettings { probe_counts: glam::UVec3::new(16, 8, 16), ..Default::default() };
+        let set = DdgiFieldSetSettings::cascades_over_bounds(3, &base, bounds, 2.0);
+        let spacing = |i: usize| set.volumes[i].probe_spacing_m.expect("spacing");
+        // 16 × 8 × 8 m in 16 × 8 × 16 cells: 1 × 1 × 0.5 m at the coarsest, halved twice inward.
+        assert!(spacing(2).abs_diff_eq(Vec3::new(1.0, 1.0, 0.5), 1e-6));
+        assert!(spacing(0).abs_diff_eq(Vec3::new(0.25, 0.25, 0.125), 1e-6));
+        assert!(set.volumes.iter().all(|v| v.volume_tracking_bounds_m == Some([bounds.0, bounds.1])));
+        assert_eq!(set.blending, VolumeBlending::Cascades);
+        // A base that names its spacing and tracking bounds keeps them.
+        let own = DdgiVolumeSettings {
+            probe_spacing_m: Some(Vec3::splat(0.5)),
+            volume_tracking_bounds_m: Some([Vec3::ZERO, Vec3::ONE]),
+            ..base
+        };
+        let set = DdgiFieldSetSettings::cascades_over_bounds(2, &own, bounds, 2.0);
+        assert_eq!(set.volumes[1].probe_spacing_m, Some(Vec3::splat(1.0)));
+        assert_eq!(set.volumes[0].volume_tracking_bounds_m, Some([Vec3::ZERO, Vec3::ONE]));
     }
 }
