@@ -431,6 +431,7 @@ impl DdgiFieldSet {
             // A device that makes the update rays makes these too (no per-ray
             // arrays; a host trace fills them first).
             self.batch.clear(ProbeRayBatchKind::Initialization, !self.update_rays_on_device);
+            self.frames.iter_mut().for_each(|f| f.init_reuses_hits = false);
             for &i in &pending {
                 let has_round = self.volumes[i].plan_init_round(
                     &mut self.frames[i],
@@ -448,7 +449,12 @@ impl DdgiFieldSet {
                 return UpdateStep::TraceRays;
             }
             // No probe traces in this round (every pending probe has settled):
-            // on to the next.
+            // on to the next, after a classification that reads kept hits alone.
+            for &i in &pending {
+                if self.frames[i].init_reuses_hits {
+                    self.volumes[i].accept_init_round(&self.frames[i], self.init_round, &[], &[]);
+                }
+            }
             self.init_round += 1;
         }
         // Shadow rays are made on the host: a batch with them keeps per-ray arrays.
@@ -544,7 +550,6 @@ impl DdgiFieldSet {
                         self.volumes[i].accept_init_round(
                             &self.frames[i],
                             self.init_round,
-                            &self.batch,
                             &self.hits,
                             &self.distances,
                         );
@@ -611,6 +616,9 @@ impl DdgiFieldSet {
             let pending = || self.volumes.iter().filter(|v| v.needs_init());
             if pending().all(|v| v.init_round_is_relocation(round)) {
                 HostHits::Relocation
+            } else if self.frames.iter().any(|f| f.init_reuses_hits) {
+                // Some probe's hits are kept on the host, not traced again.
+                HostHits::All
             } else if pending().all(|v| v.init_round_is_classification(round)) {
                 HostHits::Classification
             } else {
@@ -637,7 +645,12 @@ impl DdgiFieldSet {
     /// and skip building the surface point of every hit.
     pub fn hit_normals_needed(&self) -> bool {
         match self.batch.kind {
-            ProbeRayBatchKind::Initialization => self.hits_needed_on_host() != HostHits::Relocation,
+            // A relocation round's hits are the classification's for the
+            // probes it leaves in place, where the host keeps them.
+            ProbeRayBatchKind::Initialization => {
+                self.hits_needed_on_host() != HostHits::Relocation
+                    || self.volumes.iter().any(|v| v.needs_init() && v.keeps_init_hits())
+            }
             // The shadow field keeps front hits as surfels, with their normals.
             ProbeRayBatchKind::Update => self.has_host_shadow_rays(),
         }

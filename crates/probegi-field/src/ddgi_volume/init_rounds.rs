@@ -13,7 +13,14 @@
 //! would trace the same rays from the same point in the next round and stay put
 //! again, so it skips the rounds after: the result is that of every round run
 //! in full, for a fraction of the rays (most probes in open space never move).
-//! The classification round turns the set by its own rotation.
+//! The classification round traces the same directions from the probes'
+//! final positions, as RTXGI's `ProbeClassificationCS` reads the same fixed
+//! rays as its relocation. So a probe whose last relocation round left it in
+//! place has traced the classification's rays already: where the host read
+//! those hits it keeps them (`probe_init_hits`), and the classification round
+//! traces only the probes that moved in their last round (every probe without
+//! relocation). The states are those of a classification round traced in
+//! full; start-up traces most probes once instead of twice.
 //!
 //! `plan_init_round` / `accept_init_round` are the host path;
 //! `device_relocation` / `device_classification` and their `accept_*` twins the
@@ -105,6 +112,8 @@ impl DdgiVolume {
             let p = p as usize;
             if p < self.probe_offsets.len() && self.probe_pending_init[p] {
                 self.probe_relocation_settled[p] = o == self.probe_offsets[p];
+                // The hits stayed on the device: the classification round traces it.
+                self.probe_init_hits_current[p] = false;
                 self.probe_offsets[p] = o;
                 self.probe_positions[p] = self.grid.probe_position(self.grid.probe_coords(p)) + o;
             }
@@ -130,15 +139,23 @@ impl DdgiVolume {
         let Some(&kind) = self.init_rounds().get(round) else {
             return false;
         };
-        let rotation = probe_ray_rotation(self.stream_seed(seed), init_frame(kind));
+        let rotation = probe_ray_rotation(self.stream_seed(seed), INIT_ROUNDS_FRAME);
         frame.init_dirs = rotated_fibonacci(rotation, self.settings.probe_init_rays_per_probe);
         frame.ray_count = frame.init_dirs.len();
         frame.first_ray = vec![u32::MAX; self.grid.probe_count()];
         let first_probe = batch.probes.len() as u32;
-        // After the first relocation round only the probes that moved trace.
-        let settled = |p: usize| matches!(kind, InitRound::Relocation(i) if i > 0) && self.probe_relocation_settled[p];
+        // After the first relocation round only the probes that moved trace;
+        // the classification round only those whose hits from where they are
+        // the host does not hold.
+        let skips = |p: usize| match kind {
+            InitRound::Relocation(i) => i > 0 && self.probe_relocation_settled[p],
+            InitRound::Classification => self.probe_init_hits_current[p],
+        };
+        frame.init_reuses_hits = false;
         for p in 0..self.grid.probe_count() {
-            if self.probe_pending_init[p] && !settled(p) {
+            if self.probe_pending_init[p] && skips(p) {
+                frame.init_reuses_hits |= kind == InitRound::Classification;
+            } else if self.probe_pending_init[p] {
                 frame.first_ray[p] = batch.push_probe(
                     volume,
                     p as u32,
@@ -167,7 +184,6 @@ impl DdgiVolume {
         &mut self,
         frame: &VolumeFrame,
         round: usize,
-        batch: &ProbeRayBatch,
         hits: &[ProbeRayHit],
         distances: &[f32],
     ) {
@@ -200,52 +216,83 @@ impl DdgiVolume {
                     self.probe_positions[p] =
                         self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
                 }
+                if self.keeps_init_hits() {
+                    // A settled probe traced from where it stays: its hits are the classification's.
+                    let settled = self.probe_relocation_settled.clone();
+                    self.keep_init_hits(frame, hits, &settled);
+                }
             }
-            InitRound::Classification => self.classify_jcgt_pending(frame, batch, hits, distances),
+            InitRound::Classification => {
+                let all = vec![true; self.grid.probe_count()];
+                self.keep_init_hits(frame, hits, &all);
+                self.classify_jcgt_pending(frame);
+            }
+        }
+    }
+
+    /// Whether the host keeps the relocation rounds' hits for the
+    /// classification round (jcgt states after relocation).
+    pub(crate) fn keeps_init_hits(&self) -> bool {
+        self.settings.probe_states == ProbeStatesMode::Jcgt
+            && self.settings.probe_relocation
+            && self.settings.probe_relocation_iterations > 0
+    }
+
+    /// Copies the hits of every probe that traced in this round into
+    /// `probe_init_hits`; `current(p)` says whether they were traced from
+    /// where the probe now is.
+    fn keep_init_hits(&mut self, frame: &VolumeFrame, hits: &[ProbeRayHit], current: &[bool]) {
+        let n = frame.ray_count;
+        let probes = self.grid.probe_count();
+        if self.probe_init_hits.len() != probes * n {
+            self.probe_init_hits = vec![ProbeRayHit::MISS; probes * n];
+        }
+        for (p, &first) in frame.first_ray.iter().enumerate() {
+            if first != u32::MAX && self.probe_pending_init[p] {
+                let first = first as usize;
+                self.probe_init_hits[p * n..(p + 1) * n].copy_from_slice(&hits[first..first + n]);
+                self.probe_init_hits_current[p] = current[p];
+            }
         }
     }
 
     /// Seed 004 Listing 5's classification of the pending probes from one
-    /// distance round (see `probegi_core::probe_classification`): a first pass per
+    /// distance round (see `probegi_core::probe_classification`), each probe's
+    /// hits read from `probe_init_hits` (traced from where it is, with the
+    /// round's directions): a first pass per
     /// probe (inside geometry → Off; watching a front face → kept), then a covering
     /// pass in probe and ray order (sequential, so deterministic and greedy) that
     /// keeps a front-side cage probe for every surface point a pending probe saw.
     /// Probes that are not pending keep their states and count as covering when
     /// they are kept already (they trace: not Off or Sleeping).
-    fn classify_jcgt_pending(
-        &mut self,
-        frame: &VolumeFrame,
-        batch: &ProbeRayBatch,
-        hits: &[ProbeRayHit],
-        distances: &[f32],
-    ) {
+    fn classify_jcgt_pending(&mut self, frame: &VolumeFrame) {
         let n = frame.ray_count;
         let bias = max_surface_bias_m(&self.settings, &self.grid);
         let reach = self.settings.probe_classification_reach_rel;
         let (grid, pending) = (&self.grid, &self.probe_pending_init);
         let dirs = &frame.init_dirs;
-        // Front-face hits of probe p as (batch ray, position, facing normal).
+        let (hits, positions) = (&self.probe_init_hits, &self.probe_positions);
+        let classified = |p: usize| pending[p] && self.probe_init_hits_current[p];
+        // Front-face hits of probe p as (ray in probe order, position, facing normal).
         let front_hits = |p: usize| {
-            let first = frame.first_ray[p] as usize;
-            (first..first + n).filter_map(move |r| {
-                let h = hits[r];
+            (0..n).filter_map(move |i| {
+                let h = hits[p * n + i];
                 (h.distance_m > 0.0 && h.distance_m.is_finite())
-                    .then(|| (r as u32, batch.origins_m[r] + batch.directions[r] * h.distance_m, h.normal))
+                    .then(|| ((p * n + i) as u32, positions[p] + dirs[i] * h.distance_m, h.normal))
             })
         };
         let first: Vec<(bool, bool)> = (0..grid.probe_count())
             .into_par_iter()
             .map(|p| {
-                if !pending[p] || frame.first_ray[p] == u32::MAX {
+                if !classified(p) {
                     return (false, false);
                 }
-                let f = frame.first_ray[p] as usize;
-                let d = &distances[f..f + n];
+                let d: Vec<f32> = hits[p * n..(p + 1) * n].iter().map(|h| h.distance_m).collect();
                 let coords = grid.probe_coords(p);
                 let grid_point = grid.probe_position(coords);
                 let watches =
                     front_hits(p).any(|(_, pos, _)| probe_watches(grid, coords, pos - grid_point, reach, bias));
-                (is_inside_geometry(&probe_ray_stats(dirs, d)), watches)
+                (is_inside_geometry(&probe_ray_stats(dirs, &d)), watches)
             })
             .collect();
         let eligible: Vec<bool> = (0..grid.probe_count()).map(|p| pending[p] && !first[p].0).collect();
@@ -254,11 +301,10 @@ impl DdgiVolume {
             .collect();
         // The covering pass, order-free (`cover_proposals`): what each point the
         // first pass left uncovered would keep, then the greedy rounds over them.
-        let positions = &self.probe_positions;
         let (kept_first, eligible) = (&kept, &eligible);
         let proposals: Vec<CoverProposal> = (0..grid.probe_count())
             .into_par_iter()
-            .filter(|&p| pending[p] && frame.first_ray[p] != u32::MAX)
+            .filter(|&p| classified(p))
             .flat_map_iter(|p| {
                 front_hits(p).filter_map(move |(ray, pos, normal)| {
                     let q = uncovered_point_probe(grid, positions, kept_first, eligible, pos, normal)?;
@@ -292,7 +338,9 @@ impl DdgiVolume {
                 ProbeStatesMode::Jcgt => {}
             }
             self.probe_pending_init[p] = false;
+            self.probe_init_hits_current[p] = false;
         }
+        self.probe_init_hits = Vec::new();
         self.initialized = true;
         self.refresh_usable();
     }
@@ -305,12 +353,7 @@ pub(super) enum InitRound {
     Classification,
 }
 
-/// Pseudo-frames for initialisation rounds, far from real ones, so their
-/// directions differ from frame 0's: every relocation round the same (RTXGI's
-/// fixed rays), classification its own.
-pub(super) fn init_frame(round: InitRound) -> u32 {
-    match round {
-        InitRound::Relocation(_) => u32::MAX,
-        InitRound::Classification => u32::MAX - 1000,
-    }
-}
+/// The pseudo-frame of every initialisation round's directions, far from real
+/// ones, so they differ from frame 0's: every round the same (RTXGI's fixed
+/// rays, which its relocation and classification both read).
+const INIT_ROUNDS_FRAME: u32 = u32::MAX;

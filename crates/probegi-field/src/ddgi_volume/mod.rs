@@ -99,6 +99,12 @@ pub struct DdgiVolume {
     /// Initialisation: the probe's last relocation round left its offset as it
     /// was, so later rounds (same rays, same origin) would too (`init_rounds`).
     probe_relocation_settled: Vec<bool>,
+    /// Initialisation: each pending probe's hits of the last round it traced
+    /// on the host, probe-major (`probe_init_rays_per_probe` a probe; empty
+    /// outside initialisation), and whether they were traced from where the
+    /// probe is now (`init_rounds`: the classification round reads them).
+    probe_init_hits: Vec<crate::seam::ProbeRayHit>,
+    probe_init_hits_current: Vec<bool>,
     initialized: bool,
     irradiance_events: Vec<HysteresisReduction>,
     visibility_events: Vec<HysteresisReduction>,
@@ -148,6 +154,9 @@ pub struct VolumeFrame {
     pub rays: ProbeRayDirections,
     /// The current initialisation round's directions.
     pub init_dirs: Vec<Vec3>,
+    /// The current classification round reads hits kept from a relocation
+    /// round for some pending probe (which did not trace in it).
+    pub init_reuses_hits: bool,
     /// Probes that trace this frame.
     pub tracing: Vec<bool>,
     /// Probes that are shaded and blended this frame.
@@ -226,6 +235,8 @@ impl DdgiVolume {
             probe_alive_frames: vec![0; probes],
             probe_pending_init: vec![true; probes],
             probe_relocation_settled: vec![false; probes],
+            probe_init_hits: Vec::new(),
+            probe_init_hits_current: vec![false; probes],
             initialized: false,
             irradiance_events: Vec::new(),
             visibility_events: Vec::new(),

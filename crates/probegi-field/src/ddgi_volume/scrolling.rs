@@ -88,6 +88,7 @@ impl DdgiVolume {
         self.probe_has_history[p] = false;
         self.probe_alive_frames[p] = 0;
         self.probe_pending_init[p] = true;
+        self.probe_init_hits_current[p] = false;
         self.probe_change[p] = 1.0;
         self.probe_untraced_frames[p] = 0;
         self.probe_occlusion_change[p] = 0.0;

@@ -3,5 +3,6 @@
 //! `cargo test -p probegi-field --test it MODULE::`.
 
 mod hysteresis_ramp;
+mod init_rounds;
 mod screen_requests;
 mod tracking_bounds;
