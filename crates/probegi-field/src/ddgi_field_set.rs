@@ -452,7 +452,7 @@ impl DdgiFieldSet {
             // on to the next, after a classification that reads kept hits alone.
             for &i in &pending {
                 if self.frames[i].init_reuses_hits {
-                    self.volumes[i].accept_init_round(&self.frames[i], self.init_round, &[], &[]);
+                    self.volumes[i].accept_init_round(&self.frames[i], self.init_round, &[], &[], None);
                 }
             }
             self.init_round += 1;
@@ -527,6 +527,28 @@ impl DdgiFieldSet {
     /// the rays in `ray_batch().needs_radiance` must be shaded. Non-finite
     /// distances other than `+∞`, and NaN normals, count as misses.
     pub fn submit_hits(&mut self, hits: &[ProbeRayHit]) -> Result<UpdateStep, SeamError> {
+        self.submit_hits_inner(hits, None)
+    }
+
+    /// As [`Self::submit_hits`], where the caller can give a hit's facing
+    /// normal on request (`normal_of(batch ray)`) instead of with every hit: a
+    /// relocation round's hits then need none (as [`Self::hit_normals_needed`]
+    /// says), and the set asks for the normals of the front hits it keeps for
+    /// the classification round (those of the probes the round left in place),
+    /// which then need not trace again. Plain `submit_hits` keeps none.
+    pub fn submit_init_hits(
+        &mut self,
+        hits: &[ProbeRayHit],
+        normal_of: &crate::ddgi_volume::HitNormals<'_>,
+    ) -> Result<UpdateStep, SeamError> {
+        self.submit_hits_inner(hits, Some(normal_of))
+    }
+
+    fn submit_hits_inner(
+        &mut self,
+        hits: &[ProbeRayHit],
+        normal_of: Option<&crate::ddgi_volume::HitNormals<'_>>,
+    ) -> Result<UpdateStep, SeamError> {
         self.expect(UpdateStep::TraceRays, "submit_hits")?;
         if hits.len() != self.batch.len() {
             return Err(SeamError::WrongLength { what: "hits", expected: self.batch.len(), got: hits.len() });
@@ -552,6 +574,7 @@ impl DdgiFieldSet {
                             self.init_round,
                             &self.hits,
                             &self.distances,
+                            normal_of,
                         );
                     }
                 }
@@ -645,12 +668,7 @@ impl DdgiFieldSet {
     /// and skip building the surface point of every hit.
     pub fn hit_normals_needed(&self) -> bool {
         match self.batch.kind {
-            // A relocation round's hits are the classification's for the
-            // probes it leaves in place, where the host keeps them.
-            ProbeRayBatchKind::Initialization => {
-                self.hits_needed_on_host() != HostHits::Relocation
-                    || self.volumes.iter().any(|v| v.needs_init() && v.keeps_init_hits())
-            }
+            ProbeRayBatchKind::Initialization => self.hits_needed_on_host() != HostHits::Relocation,
             // The shadow field keeps front hits as surfels, with their normals.
             ProbeRayBatchKind::Update => self.has_host_shadow_rays(),
         }

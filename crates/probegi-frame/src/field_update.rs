@@ -276,7 +276,16 @@ impl<'u> SeamDriver<'u> {
             None => trace_probe_batch(tr, set.ray_batch(), &mut self.batch_hits),
         };
         probe_ray_hits(self.scene, &self.batch_hits, set.hit_normals_needed(), &mut self.hits);
-        let step = set.submit_hits(&self.hits).unwrap_or_else(seam_bug);
+        let step = if init {
+            // The normals of the hits the set keeps for its classification round.
+            let (scene, batch_hits) = (self.scene, &self.batch_hits);
+            let normal_of =
+                |r: usize| batch_hits[r].as_ref().map_or(Vec3::ZERO, |h| scene.surface_point(h).facing_normal());
+            set.submit_init_hits(&self.hits, &normal_of)
+        } else {
+            set.submit_hits(&self.hits)
+        };
+        let step = step.unwrap_or_else(seam_bug);
         time(if init { "probe_init" } else { "trace" }, t, &mut self.own_ms);
         Ok(step)
     }

@@ -186,6 +186,7 @@ impl DdgiVolume {
         round: usize,
         hits: &[ProbeRayHit],
         distances: &[f32],
+        normal_of: Option<&HitNormals<'_>>,
     ) {
         let Some(&kind) = self.init_rounds().get(round) else {
             return;
@@ -216,15 +217,16 @@ impl DdgiVolume {
                     self.probe_positions[p] =
                         self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
                 }
-                if self.keeps_init_hits() {
-                    // A settled probe traced from where it stays: its hits are the classification's.
+                // A settled probe traced from where it stays: its hits are the
+                // classification's, kept where the caller gives their normals.
+                if let (true, Some(normal_of)) = (self.keeps_init_hits(), normal_of) {
                     let settled = self.probe_relocation_settled.clone();
-                    self.keep_init_hits(frame, hits, &settled);
+                    self.keep_init_hits(frame, hits, &settled, Some(normal_of));
                 }
             }
             InitRound::Classification => {
                 let all = vec![true; self.grid.probe_count()];
-                self.keep_init_hits(frame, hits, &all);
+                self.keep_init_hits(frame, hits, &all, None);
                 self.classify_jcgt_pending(frame);
             }
         }
@@ -238,22 +240,41 @@ impl DdgiVolume {
             && self.settings.probe_relocation_iterations > 0
     }
 
-    /// Copies the hits of every probe that traced in this round into
-    /// `probe_init_hits`; `current(p)` says whether they were traced from
-    /// where the probe now is.
-    fn keep_init_hits(&mut self, frame: &VolumeFrame, hits: &[ProbeRayHit], current: &[bool]) {
+    /// Keeps the hits of every probe that traced in this round from where it
+    /// now is (`current`) in `probe_init_hits`, with their normals from
+    /// `normal_of` (a batch ray's facing normal) where given, else as the hits
+    /// carry them. Only front hits' normals are read (by the classification).
+    fn keep_init_hits(
+        &mut self,
+        frame: &VolumeFrame,
+        hits: &[ProbeRayHit],
+        current: &[bool],
+        normal_of: Option<&HitNormals<'_>>,
+    ) {
         let n = frame.ray_count;
         let probes = self.grid.probe_count();
         if self.probe_init_hits.len() != probes * n {
             self.probe_init_hits = vec![ProbeRayHit::MISS; probes * n];
         }
-        for (p, &first) in frame.first_ray.iter().enumerate() {
-            if first != u32::MAX && self.probe_pending_init[p] {
-                let first = first as usize;
-                self.probe_init_hits[p * n..(p + 1) * n].copy_from_slice(&hits[first..first + n]);
-                self.probe_init_hits_current[p] = current[p];
+        let pending = &self.probe_pending_init;
+        let kept = self.probe_init_hits.par_chunks_mut(n).zip(self.probe_init_hits_current.par_iter_mut());
+        kept.enumerate().for_each(|(p, (out, is_current))| {
+            let first = frame.first_ray[p];
+            if first == u32::MAX || !pending[p] {
+                return;
             }
-        }
+            *is_current = current[p];
+            if !current[p] {
+                return;
+            }
+            for (i, o) in out.iter_mut().enumerate() {
+                let r = first as usize + i;
+                *o = hits[r];
+                if let (Some(normal_of), true) = (normal_of, o.distance_m > 0.0 && o.distance_m.is_finite()) {
+                    o.normal = normal_of(r);
+                }
+            }
+        });
     }
 
     /// Seed 004 Listing 5's classification of the pending probes from one
@@ -345,6 +366,10 @@ impl DdgiVolume {
         self.refresh_usable();
     }
 }
+
+/// A batch ray's facing normal at its hit, computed where a round's hits are
+/// kept (`DdgiFieldSet::submit_init_hits`).
+pub type HitNormals<'a> = dyn Fn(usize) -> Vec3 + Sync + 'a;
 
 /// What an initialisation round of a volume does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -39,6 +39,7 @@ mod update_plan;
 mod usage_states;
 
 pub(crate) use blend_inputs::blend_inputs;
+pub use init_rounds::HitNormals;
 pub use shadow_rays::ShadowField;
 
 /// Scene changes the application reports so the field reacts faster (seed 004 §4.3).

@@ -114,7 +114,11 @@ fn start_up(set: &mut DdgiFieldSet, device_relocation: bool) -> Vec<usize> {
                 .collect();
             set.submit_device_relocation(&offsets).expect("relocation round");
         } else {
-            set.submit_hits(&hits).expect("init round");
+            // Relocation rounds without normals: the set asks for those it keeps.
+            let relocation = set.hits_needed_on_host() == HostHits::Relocation;
+            let bare: Vec<ProbeRayHit> =
+                hits.iter().map(|h| if relocation { ProbeRayHit { normal: Vec3::ZERO, ..*h } } else { *h }).collect();
+            set.submit_init_hits(&bare, &|r| hits[r].normal).expect("init round");
         }
     }
     rounds
@@ -143,7 +147,7 @@ fn compare_paths(relocation_rounds: u32) -> (usize, usize) {
     assert!(moved > 0 && moved < probes / 4, "the scene moves some probes, not most: {moved} of {probes}");
     // Kept hits: only the probes that moved in the last relocation round trace again.
     let kept_classification = kept_rounds.get(full_relocation.len()).copied().unwrap_or(0);
-    let moved_last = full_relocation.last().unwrap() / rays;
+    let moved_last = full_relocation.last().expect("a relocation round") / rays;
     assert!(kept_classification <= moved_last * rays, "{kept_classification} rays, {moved_last} moved last");
 
     assert_eq!(k.probe_offsets, f.probe_offsets);
