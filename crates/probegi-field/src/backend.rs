@@ -18,9 +18,7 @@ use probegi_core::probe_classification::ProbeUsageCounts;
 use probegi_scene::{RayHit, Scene};
 
 use crate::ddgi_volume::DdgiVolume;
-use crate::device_plans::{
-    DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
-};
+use crate::device_plans::{DeviceInitChain, DeviceInitResult, DeviceVolumeBlend};
 use crate::seam::{ProbeRayBatch, SeamError};
 
 /// Why a backend could not do what the field asked of it.
@@ -179,23 +177,14 @@ pub trait DeviceField: Sync {
         usage_cage_diagonals_m: Option<&[f32]>,
     ) -> Option<Result<Vec<ProbeUsageCounts>, BackendError>>;
 
-    /// Traces an initialisation batch that is a relocation round
-    /// (`HostHits::Relocation`) and runs the iteration on the device: per entry
-    /// of `batch.probes` (inputs in `probes`, same order) the new offset.
-    fn relocate(
+    /// Runs every initialisation round of `plan` (per volume, `None`: none
+    /// pending) chained on the device, with one submission and no result
+    /// read back between rounds: per volume of the plan, its offsets and
+    /// states.
+    fn initialise(
         &self,
-        batch: &ProbeRayBatch,
-        probes: &[DeviceRelocationProbe],
-    ) -> Option<Result<Vec<Vec3>, BackendError>>;
-
-    /// Traces an initialisation batch that is the classification round
-    /// (`HostHits::Classification`) and runs it on the device: per volume of
-    /// `plan` (`None`: not classified this round), per probe (inside geometry, kept).
-    fn classify(
-        &self,
-        batch: &ProbeRayBatch,
-        plan: &[Option<DeviceClassification<'_>>],
-    ) -> Option<Result<DeviceClassificationResults, BackendError>>;
+        plan: &[Option<DeviceInitChain<'_>>],
+    ) -> Option<Result<Vec<Option<DeviceInitResult>>, BackendError>>;
 
     /// Shades the batch [`Self::trace_resident`] traced and blends and borders
     /// it by `plan` into the atlases the device holds. `field` is the set as

@@ -49,11 +49,10 @@
 //!
 //! **A device that keeps the field.** A caller whose hits, shading and atlases live
 //! on another device (a GPU) reads back only what the set's bookkeeping needs,
-//! which [`DdgiFieldSet::hits_needed_on_host`] names per batch: for a relocation
-//! round the new offsets ([`DdgiFieldSet::device_relocation_plan`] →
-//! [`DdgiFieldSet::submit_device_relocation`]), for the jcgt classification round
-//! (inside, kept) per probe ([`DdgiFieldSet::device_classification_plan`] →
-//! [`DdgiFieldSet::submit_device_classification`]), for an update batch the usage
+//! which [`DdgiFieldSet::hits_needed_on_host`] names per batch: for the
+//! initialisation rounds, run back to back there, each probe's offset and
+//! (inside, kept) once they all ran ([`DdgiFieldSet::device_init_plan`] →
+//! [`DdgiFieldSet::submit_device_init`]), for an update batch the usage
 //! counts under the usage scheme or nothing ([`DdgiFieldSet::submit_device_hits`]);
 //! then it blends there by [`DdgiFieldSet::device_blend_plan`] and reports with
 //! [`DdgiFieldSet::submit_device_blend`]. The volumes' own atlases are then stale
@@ -71,7 +70,7 @@ use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, SetMember, VolumeBlendin
 
 use crate::backend::{BackendError, ProbeBatchTracer};
 use crate::ddgi_volume::{DdgiVolume, SceneEvent, VolumeFrame};
-use crate::device_plans::{DeviceClassification, DeviceRelocationProbe, DeviceVolumeBlend};
+use crate::device_plans::{DeviceInitChain, DeviceInitResult, DeviceVolumeBlend};
 pub use crate::seam::{
     BatchProbe, GeneratedProbeRays, HostHits, ProbeRayBatch, ProbeRayBatchKind, ProbeRayHit, SeamError, UpdateStep,
 };
@@ -637,16 +636,7 @@ impl DdgiFieldSet {
         if self.batch.kind == ProbeRayBatchKind::Initialization {
             let round = self.init_round;
             let pending = || self.volumes.iter().filter(|v| v.needs_init());
-            if pending().all(|v| v.init_round_is_relocation(round)) {
-                HostHits::Relocation
-            } else if self.frames.iter().any(|f| f.init_reuses_hits) {
-                // Some probe's hits are kept on the host, not traced again.
-                HostHits::All
-            } else if pending().all(|v| v.init_round_is_classification(round)) {
-                HostHits::Classification
-            } else {
-                HostHits::All
-            }
+            if pending().all(|v| v.init_round_is_relocation(round)) { HostHits::Relocation } else { HostHits::All }
         } else if self.has_host_shadow_rays() {
             // The shadow field's shadow rays and surfels are read on the host.
             HostHits::All
@@ -725,113 +715,50 @@ impl DdgiFieldSet {
         self.shadow_cage(position, normal, view_dir).map(|c| c.visibility(dir_to_light))
     }
 
-    /// Seed 004 Listing 4's inputs per entry of `ray_batch().probes`, for a
-    /// relocation round run on another device ([`HostHits::Relocation`]).
-    pub fn device_relocation_plan(&self) -> Result<Vec<DeviceRelocationProbe>, SeamError> {
-        self.expect(UpdateStep::TraceRays, "device_relocation_plan")?;
-        if self.hits_needed_on_host() != HostHits::Relocation {
-            return Err(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "device_relocation_plan" });
+    /// Every initialisation round of this frame as one chain per volume still
+    /// initialising (`None` for the others), for a device that keeps the field
+    /// and runs them back to back ([`DeviceInitChain`]: the host path's rounds,
+    /// skips and kept hits); then [`Self::submit_device_init`]. An error
+    /// unless the set waits for its first initialisation round's hits.
+    pub fn device_init_plan(&self) -> Result<Vec<Option<DeviceInitChain<'_>>>, SeamError> {
+        self.expect(UpdateStep::TraceRays, "device_init_plan")?;
+        if self.batch.kind != ProbeRayBatchKind::Initialization || self.init_round != 0 {
+            return Err(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "device_init_plan" });
         }
-        self.batch
-            .probes
-            .iter()
-            .map(|bp| {
-                let v = bp.volume as usize;
-                self.volumes[v]
-                    .device_relocation(&self.frames[v], bp.probe as usize)
-                    .ok_or(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "device_relocation_plan" })
-            })
-            .collect()
+        Ok(self.volumes.iter().map(|v| v.needs_init().then(|| v.device_init_chain(self.seed))).collect())
     }
 
-    /// In place of [`Self::submit_hits`] for a relocation round run on another
-    /// device: one new offset per entry of `ray_batch().probes`. Plans the next
-    /// batch as `submit_hits` does.
-    pub fn submit_device_relocation(&mut self, offsets: &[Vec3]) -> Result<UpdateStep, SeamError> {
-        self.expect(UpdateStep::TraceRays, "submit_device_relocation")?;
-        if self.hits_needed_on_host() != HostHits::Relocation {
-            return Err(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "submit_device_relocation" });
-        }
-        if offsets.len() != self.batch.probes.len() {
-            return Err(SeamError::WrongLength {
-                what: "relocation offsets",
-                expected: self.batch.probes.len(),
-                got: offsets.len(),
-            });
-        }
-        let t = std::time::Instant::now();
-        self.last_init_rays += self.batch.len() as u64;
-        let mut per_volume: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); self.volumes.len()];
-        for (bp, o) in self.batch.probes.iter().zip(offsets) {
-            // A non-finite offset from a device keeps the probe where it was.
-            if o.is_finite() {
-                per_volume[bp.volume as usize].push((bp.probe, *o));
-            }
-        }
-        for (v, offsets) in self.volumes.iter_mut().zip(&per_volume) {
-            if v.needs_init() {
-                v.accept_device_relocation(offsets);
-            }
-        }
-        self.init_round += 1;
-        let step = self.plan_init_or_update();
-        self.time("probe_init", t);
-        Ok(step)
-    }
-
-    /// Per volume, the classification round's inputs (`None` for a volume with no
-    /// probe pending), for a round run on another device ([`HostHits::Classification`]).
-    pub fn device_classification_plan(&self) -> Result<Vec<Option<DeviceClassification<'_>>>, SeamError> {
-        self.expect(UpdateStep::TraceRays, "device_classification_plan")?;
-        if self.hits_needed_on_host() != HostHits::Classification {
-            return Err(SeamError::OutOfOrder {
-                expected: UpdateStep::TraceRays,
-                called: "device_classification_plan",
-            });
-        }
-        Ok(self
-            .volumes
-            .iter()
-            .zip(&self.frames)
-            .map(|(v, f)| v.needs_init().then(|| v.device_classification(f)))
-            .collect())
-    }
-
-    /// In place of [`Self::submit_hits`] for a classification round run on
-    /// another device: per volume of the plan, per probe (inside geometry, kept).
-    pub fn submit_device_classification(
-        &mut self,
-        results: &[Option<Vec<(bool, bool)>>],
-    ) -> Result<UpdateStep, SeamError> {
-        self.expect(UpdateStep::TraceRays, "submit_device_classification")?;
-        if self.hits_needed_on_host() != HostHits::Classification {
-            return Err(SeamError::OutOfOrder {
-                expected: UpdateStep::TraceRays,
-                called: "submit_device_classification",
-            });
+    /// In place of [`Self::submit_hits`] for every initialisation round, run
+    /// on another device from [`Self::device_init_plan`]: per volume of the
+    /// plan, its result. Ends the initialisation and plans the update batch.
+    pub fn submit_device_init(&mut self, results: &[Option<DeviceInitResult>]) -> Result<UpdateStep, SeamError> {
+        self.expect(UpdateStep::TraceRays, "submit_device_init")?;
+        if self.batch.kind != ProbeRayBatchKind::Initialization || self.init_round != 0 {
+            return Err(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "submit_device_init" });
         }
         if results.len() != self.volumes.len() {
             return Err(SeamError::WrongLength {
-                what: "classification results",
+                what: "init results",
                 expected: self.volumes.len(),
                 got: results.len(),
             });
         }
-        let t = std::time::Instant::now();
-        self.last_init_rays += self.batch.len() as u64;
-        for (v, r) in self.volumes.iter_mut().zip(results) {
-            if let (true, Some(r)) = (v.needs_init(), r) {
-                if r.len() != v.grid.probe_count() {
-                    return Err(SeamError::WrongLength {
-                        what: "classification results",
-                        expected: v.grid.probe_count(),
-                        got: r.len(),
-                    });
-                }
-                v.accept_device_classification(r);
+        for (v, r) in self.volumes.iter().zip(results) {
+            let probes = v.grid.probe_count();
+            let Some(r) = r.as_ref().filter(|_| v.needs_init()) else { continue };
+            let states = r.classification.as_ref().map_or(probes, |c| c.len());
+            if r.offsets_m.len() != probes || states != probes {
+                let got = if r.offsets_m.len() != probes { r.offsets_m.len() } else { states };
+                return Err(SeamError::WrongLength { what: "init results", expected: probes, got });
             }
         }
-        self.init_round += 1;
+        let t = std::time::Instant::now();
+        for (v, r) in self.volumes.iter_mut().zip(results) {
+            if let (true, Some(r)) = (v.needs_init(), r) {
+                self.last_init_rays += r.rays_traced;
+                v.accept_device_init(r);
+            }
+        }
         let step = self.plan_init_or_update();
         self.time("probe_init", t);
         Ok(step)

@@ -88,35 +88,46 @@ pub struct DeviceShadowBlend {
     pub probes: Vec<(u32, u32, u32, f32)>,
 }
 
-/// One probe of an initialisation batch whose relocation iteration runs on another
-/// device (`DdgiFieldSet::device_relocation_plan`): seed 004 Listing 4's inputs,
-/// as `probegi_core::probe_relocation::relocation_step` takes them.
-///
-/// `#[repr(C)]` + `Pod`, 40 bytes with no padding, so a device uploads a plan as
-/// it is: must match `RelocationProbe` in probegi-wgpu's `probe_relocation.wgsl`
-/// (whose vectors are `array<f32, 3>` for that reason; its unit tests compare the
-/// sizes).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct DeviceRelocationProbe {
-    /// The probe's current offset from its grid point (m).
-    pub offset_m: Vec3,
-    /// The probe's first ray in the batch.
-    pub first_ray: u32,
-    /// The grid spacing (m): offsets and limits are relative to it.
-    pub spacing_m: Vec3,
-    /// The probe's rays in the batch.
-    pub ray_count: u32,
-    /// The largest offset per axis, as a fraction of the spacing (`probe_relocation_offset_limit_rel`).
-    pub offset_limit_rel: f32,
-    /// A front face closer than this × the minimum spacing pushes the probe away
-    /// (`probe_relocation_min_frontface_rel`).
-    pub min_frontface_rel: f32,
+/// One volume's initialisation rounds chained on another device
+/// (`DdgiFieldSet::device_init_plan`; `ddgi_volume::init_rounds` on the host):
+/// `relocation_rounds` iterations of seed 004 Listing 4 for the pending probes
+/// (a probe whose iteration left it in place traces no more, its hits kept),
+/// then, with `classification`, one trace of the probes that moved in the last
+/// round and the classification over every pending probe's kept hits. Every
+/// round traces `dirs` from each probe's position at that round; the device
+/// runs them back to back, with no result crossing to the host between them.
+#[derive(Clone, Debug)]
+pub struct DeviceInitChain<'a> {
+    /// The volume's settings (relocation limits, max ray distance).
+    pub settings: &'a DdgiVolumeSettings,
+    /// The volume's probe lattice.
+    pub grid: &'a ProbeGrid,
+    /// Per probe: waiting for initialisation (the rounds move and classify it).
+    pub pending: &'a [bool],
+    /// Per probe: its offset from its grid point now (m).
+    pub offsets_m: &'a [Vec3],
+    /// Relocation iterations to run (0: none).
+    pub relocation_rounds: u32,
+    /// The fixed unit directions every round traces (RTXGI's fixed rays).
+    pub dirs: Vec<Vec3>,
+    /// The classification after the relocation, with jcgt states: each pending
+    /// probe's rays at `probe × dirs.len()` of the kept hits.
+    pub classification: Option<DeviceClassification<'a>>,
 }
-const _: () = assert!(std::mem::size_of::<DeviceRelocationProbe>() == 40);
 
-/// One volume's classification round run on another device
-/// (`DdgiFieldSet::device_classification_plan`): the grid, the watch box
+/// What a device returns for one volume's [`DeviceInitChain`].
+#[derive(Clone, Debug, Default)]
+pub struct DeviceInitResult {
+    /// Per probe: its offset after the relocation rounds (m).
+    pub offsets_m: Vec<Vec3>,
+    /// Per probe (inside geometry, kept), where the chain classified.
+    pub classification: Option<Vec<(bool, bool)>>,
+    /// Rays the chain traced with a length (settled probes' rounds skipped).
+    pub rays_traced: u64,
+}
+
+/// One volume's classification round run on another device (the end of a
+/// [`DeviceInitChain`]): the grid, the watch box
 /// (`probe_classification_reach_rel`, the query's largest surface bias) and
 /// every probe of the volume.
 #[derive(Clone, Debug)]
@@ -133,7 +144,3 @@ pub struct DeviceClassification<'a> {
     /// Every probe of the volume: its ray range, init and trace state, and position.
     pub probes: Vec<ClassificationProbe>,
 }
-
-/// Per volume of a [`DeviceClassification`] plan (`None`: not classified), per
-/// probe (inside geometry, kept): what a device returns for the round.
-pub type DeviceClassificationResults = Vec<Option<Vec<(bool, bool)>>>;

@@ -10,18 +10,14 @@ use glam::Vec3;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum HostHits {
     /// Every hit, through [`DdgiFieldSet::submit_hits`](crate::DdgiFieldSet::submit_hits) (the classification
-    /// round of initialisation reads the hit points).
+    /// round of initialisation reads the hit points). A device that keeps the
+    /// field runs every initialisation round itself instead
+    /// ([`DdgiFieldSet::device_init_plan`](crate::DdgiFieldSet::device_init_plan)).
     All,
     /// An initialisation round that is a relocation iteration for every volume
-    /// in it: per probe of the batch, its new offset, through
-    /// [`DdgiFieldSet::submit_device_relocation`](crate::DdgiFieldSet::submit_device_relocation) (inputs from
-    /// [`DdgiFieldSet::device_relocation_plan`](crate::DdgiFieldSet::device_relocation_plan)).
+    /// in it: the hits' distances, with normals only where the set asks for
+    /// them ([`DdgiFieldSet::submit_init_hits`](crate::DdgiFieldSet::submit_init_hits)).
     Relocation,
-    /// An initialisation round that is the jcgt classification round for every
-    /// volume in it: per probe, (inside geometry, kept), through
-    /// [`DdgiFieldSet::submit_device_classification`](crate::DdgiFieldSet::submit_device_classification) (inputs from
-    /// [`DdgiFieldSet::device_classification_plan`](crate::DdgiFieldSet::device_classification_plan)).
-    Classification,
     /// Per probe of the batch, seed 003's usage counts, through
     /// [`DdgiFieldSet::submit_device_hits`](crate::DdgiFieldSet::submit_device_hits) (a volume under the usage scheme).
     ProbeUsage,

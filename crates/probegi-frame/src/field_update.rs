@@ -290,8 +290,8 @@ impl<'u> SeamDriver<'u> {
         Ok(step)
     }
 
-    /// The rounds a device that keeps the field runs itself: relocation,
-    /// classification and the update batch. `None` when this round is not one
+    /// The rounds a device that keeps the field runs itself: the
+    /// initialisation rounds, chained, and the update batch. `None` when this round is not one
     /// of them (or the device leaves it to the host).
     fn trace_on_device(
         &mut self,
@@ -299,26 +299,18 @@ impl<'u> SeamDriver<'u> {
         init: bool,
         t: Instant,
     ) -> Result<Option<UpdateStep>, BackendError> {
-        // A relocation round on a device that runs it: only offsets come back.
-        if let (Some(bt), HostHits::Relocation) = (self.device, set.hits_needed_on_host()) {
-            let plan = set.device_relocation_plan()?;
-            if let Some(offsets) = bt.relocate(set.ray_batch(), &plan) {
-                self.traced += set.ray_batch().len() as u64;
-                let step = set.submit_device_relocation(&offsets?).unwrap_or_else(seam_bug);
-                time("probe_init", t, &mut self.own_ms);
-                return Ok(Some(step));
-            }
-        }
-        // A classification round on a device that runs it: 16 bytes a probe come back.
-        if let (Some(bt), HostHits::Classification) = (self.device, set.hits_needed_on_host()) {
-            let plan = set.device_classification_plan()?;
-            if let Some(results) = bt.classify(set.ray_batch(), &plan) {
-                drop(plan);
-                self.traced += set.ray_batch().len() as u64;
-                let step = set.submit_device_classification(&results?).unwrap_or_else(seam_bug);
-                time("probe_init", t, &mut self.own_ms);
-                return Ok(Some(step));
-            }
+        // Every initialisation round on a device that chains them: each
+        // probe's offset and (inside, kept) come back once, after all of them.
+        if let (Some(bt), true) = (self.device, init)
+            && let Ok(plan) = set.device_init_plan()
+            && let Some(results) = bt.initialise(&plan)
+        {
+            drop(plan);
+            let (results, before) = (results?, set.last_init_rays);
+            let step = set.submit_device_init(&results).unwrap_or_else(seam_bug);
+            self.traced += set.last_init_rays - before;
+            time("probe_init", t, &mut self.own_ms);
+            return Ok(Some(step));
         }
         // The update batch on a device that keeps the field: the hits stay there.
         if let (Some(bt), false, false) = (self.device, init, set.hits_needed_on_host() == HostHits::All) {

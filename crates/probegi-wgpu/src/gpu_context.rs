@@ -306,6 +306,11 @@ impl GpuContext {
         }
     }
 
+    /// Whether submissions are being deferred ([`Self::defer_submissions`]).
+    pub(crate) fn deferring(&self) -> bool {
+        self.pending.lock().unwrap_or_else(|e| e.into_inner()).is_some()
+    }
+
     /// Submits one command buffer, or records it while deferring (counted when
     /// it reaches the queue). The time the driver holds the host inside a
     /// submission (a queue still busy with earlier work: lavapipe runs the work
@@ -506,6 +511,47 @@ impl GpuContext {
     }
 
     /// Copies `buffer` (a `MAP_READ | COPY_DST` staging buffer already filled) into a vector.
+    /// Reads `buffers` back whole with one copy, in the same submission as
+    /// whatever deferring recorded, and one wait.
+    pub(crate) fn read_back_all(&self, buffers: &[&wgpu::Buffer]) -> Result<Vec<Vec<u8>>, GpuError> {
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        let staging: Vec<wgpu::Buffer> = buffers
+            .iter()
+            .map(|b| {
+                let s = self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("readback"),
+                    size: b.size(),
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                encoder.copy_buffer_to_buffer(b, 0, &s, 0, b.size());
+                s
+            })
+            .collect();
+        self.submit(encoder.finish());
+        self.flush();
+        let (tx, rx) = std::sync::mpsc::channel();
+        for s in &staging {
+            let tx = tx.clone();
+            s.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send(r);
+            });
+        }
+        self.blocking_poll().map_err(GpuError::Readback)?;
+        for _ in &staging {
+            rx.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
+        }
+        staging
+            .iter()
+            .map(|s| {
+                let bytes = s.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?.to_vec();
+                s.unmap();
+                self.count_read_back(bytes.len() as u64);
+                Ok(bytes)
+            })
+            .collect()
+    }
+
     pub(crate) fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
         // The copy into `buffer` may be among the recorded commands: they go first.
         self.flush();

@@ -10,13 +10,15 @@
 //! indirectly over the list), the keepers marked, a fix-up; every step an
 //! atomic minimum or an idempotent flag, so both backends keep the same probes. (It
 //! replaced one invocation walking every ray in order, the likely cause of an
-//! 11.5 s start-up at 32³ probes on an H200.) The rays and hits stay where the trace left them; the
-//! host reads back 16 bytes a probe.
+//! 11.5 s start-up at 32³ probes on an H200.) It is the last step of the
+//! initialisation chain (`probe_relocation`): the rays and hits are the
+//! chain's kept ones, the positions where its relocation left the probes, and
+//! the host reads back 16 bytes a probe with the chain's offsets.
 //!
 //! The round is the field's own plan (`probegi_field::device_plans::DeviceClassification`).
-//! Its probes are packed into two rows each, not uploaded as they are:
+//! Its probes are packed into a row each, not uploaded as they are:
 //! `probegi_core::probe_classification::ClassificationProbe` holds an
-//! `Option<u32>`, two `bool`s and a `Vec3`, which have no GPU layout.
+//! `Option<u32>` and two `bool`s, which have no GPU layout.
 
 use bytemuck::{Pod, Zeroable};
 use probegi_core::probe_classification::COVER_ITERATIONS;
@@ -92,28 +94,28 @@ impl GpuProbeClassification {
         Ok(Self { layout, first, propose, args, clear, round, mark, fixup })
     }
 
-    /// Per probe of `round` (the field's plan for one volume): (inside
-    /// geometry, kept), from `batch`'s rays and hits.
-    pub fn classify(
+    /// Records the classification of `round` (the field's plan for one
+    /// volume) from `batch`'s rays and hits, with each probe's position read
+    /// from `positions` (xyz per probe: where the chain's relocation left it),
+    /// into `ctx`'s submission. Returns the buffer to read back with
+    /// [`classification_results`] (16 bytes a probe).
+    pub(crate) fn record(
         &self,
         ctx: &GpuContext,
-        bvh: &GpuBvh,
-        scene: &GpuScene,
+        (bvh, scene): (&GpuBvh, &GpuScene),
         batch: &GpuRayBatch,
         round: &DeviceClassification<'_>,
-    ) -> Result<Vec<(bool, bool)>, GpuError> {
+        positions: &wgpu::Buffer,
+    ) -> Result<wgpu::Buffer, GpuError> {
         let n = round.probes.len();
         if n != round.grid.probe_count() {
             return Err(GpuError::Input(format!("{n} probes for a grid of {}", round.grid.probe_count())));
-        }
-        if n == 0 {
-            return Ok(vec![]);
         }
         for first in round.probes.iter().filter_map(|p| p.first_ray) {
             batch.check_rays(first, round.rays_per_probe)?;
         }
         let params = classify_params(round)?;
-        let b = ClassifyBuffers::new(ctx, round);
+        let b = ClassifyBuffers::new(ctx, round, positions.clone());
         let bind = |p: &ClassifyParams| {
             let params = ctx.buffer_with("classify params", bytemuck::bytes_of(p), wgpu::BufferUsages::UNIFORM);
             let buffers = [params, batch.rays_buffer().clone(), batch.hits_buffer().clone()];
@@ -150,10 +152,15 @@ impl GpuProbeClassification {
             })
             .collect();
         ctx.run_dispatches("probe classification", &steps);
-        let bytes = ctx.read_back(&b.out)?;
-        let v: &[[u32; 4]] = bytemuck::cast_slice(&bytes);
-        Ok(v.iter().take(n).map(|o| (o[0] != 0, o[1] != 0 || o[3] != 0)).collect())
+        Ok(b.out)
     }
+}
+
+/// Per probe (inside geometry, kept) from the bytes of the buffer
+/// [`GpuProbeClassification::record`] returned.
+pub(crate) fn classification_results(bytes: &[u8], probes: usize) -> Vec<(bool, bool)> {
+    let v: &[[u32; 4]] = bytemuck::cast_slice(bytes);
+    v.iter().take(probes).map(|o| (o[0] != 0, o[1] != 0 || o[3] != 0)).collect()
 }
 
 /// The round's uniform block (the covering rounds differ only in `cover_round`);
@@ -181,8 +188,8 @@ fn classify_params(round: &DeviceClassification<'_>) -> Result<ClassifyParams, G
     })
 }
 
-/// The round's own buffers: its probes packed in two rows (first ray, pending,
-/// traces; position), the per-probe output, the proposal list with its
+/// The round's own buffers: its probes packed in a row (first ray, pending,
+/// traces), their positions (the chain's), the per-probe output, the proposal list with its
 /// indirect workgroups, and the two keeper arrays.
 struct ClassifyBuffers {
     rows: wgpu::Buffer,
@@ -194,14 +201,13 @@ struct ClassifyBuffers {
 }
 
 impl ClassifyBuffers {
-    fn new(ctx: &GpuContext, round: &DeviceClassification<'_>) -> Self {
+    fn new(ctx: &GpuContext, round: &DeviceClassification<'_>, positions: wgpu::Buffer) -> Self {
         let n = round.probes.len() as u64;
         let rows: Vec<[u32; 4]> = round
             .probes
             .iter()
             .map(|p| [p.first_ray.unwrap_or(u32::MAX), p.pending as u32, p.traces as u32, 0])
             .collect();
-        let positions: Vec<[f32; 4]> = round.probes.iter().map(|p| p.position_m.extend(0.0).into()).collect();
         // At most one proposal a traced ray: sized by the rays the round traced.
         let traced_rays =
             round.probes.iter().filter(|p| p.first_ray.is_some()).count() as u64 * round.rays_per_probe as u64;
@@ -216,7 +222,7 @@ impl ClassifyBuffers {
         };
         Self {
             rows: ctx.buffer_with("classify probes", bytemuck::cast_slice(&rows), storage),
-            positions: ctx.buffer_with("classify positions", bytemuck::cast_slice(&positions), storage),
+            positions,
             out: ctx.output_buffer("classify out", n * 16),
             // Indirect workgroups, count, then (ray, probe) per proposal.
             list: buffer("classify proposals", (4 + 2 * traced_rays) * 4, storage | wgpu::BufferUsages::COPY_SRC),

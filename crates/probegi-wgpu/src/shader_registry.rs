@@ -249,14 +249,13 @@ mod tests {
         use crate::probe_blend::BlendParams;
         use crate::probe_classification::ClassifyParams;
         use crate::probe_ray_gen::RayGenParams;
-        use crate::probe_relocation::RelocationParams;
+        use crate::probe_relocation::ChainParams;
         use crate::probe_shade::{ShadeParams, ShadeProbe};
         use crate::probe_usage::UsageParams;
         use crate::shadow_field::{ShadowParams, ShadowProbe};
-        use probegi_field::device_plans::DeviceRelocationProbe;
         use probegi_field::seam::BatchProbe;
         let (ray, hit) = (size_of::<GpuRay>(), size_of::<GpuRayHit>());
-        let cases: [(&PassShader, &str, usize); 30] = [
+        let cases: [(&PassShader, &str, usize); 29] = [
             (&SHADOW_FIELD, "ShadowParams", size_of::<ShadowParams>()),
             (&SHADOW_FIELD, "ShadowProbe", size_of::<ShadowProbe>()),
             (&SHADOW_FIELD, "ShadowRay", ray),
@@ -272,8 +271,7 @@ mod tests {
             (&PROBE_SHADE, "ShadeHit", hit),
             (&PROBE_SHADE, "DdgiVolume", size_of::<GpuDdgiVolume>()),
             (&PROBE_BLEND, "BlendParams", size_of::<BlendParams>()),
-            (&PROBE_RELOCATION, "RelocationParams", size_of::<RelocationParams>()),
-            (&PROBE_RELOCATION, "RelocationProbe", size_of::<DeviceRelocationProbe>()),
+            (&PROBE_RELOCATION, "ChainParams", size_of::<ChainParams>()),
             (&PROBE_RELOCATION, "RelocationRay", ray),
             (&PROBE_RELOCATION, "RelocationHit", hit),
             (&PROBE_CLASSIFICATION, "ClassifyParams", size_of::<ClassifyParams>()),

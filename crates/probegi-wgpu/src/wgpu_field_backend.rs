@@ -16,11 +16,13 @@
 //!   blends on the CPU and the field is uploaded for the next frame's queries.
 //!
 //! Either way the host plans the batches and keeps the set's bookkeeping (probe
-//! states, hysteresis ramps). Relocation and classification run on the device
-//! with the field kept there (`probe_relocation`, `probe_classification`), on
-//! the host from the hits read back otherwise, and also when the volumes of a
-//! set are at different kinds of initialisation round, or the adapter binds too
-//! few storage buffers for the classification pass ([`WgpuProbeTracer::classification_note`]).
+//! states, hysteresis ramps). With the field kept there the initialisation
+//! rounds run on the device, every relocation round and the classification
+//! chained in one submission with one read-back of 32 bytes a probe
+//! (`probe_relocation`, `probe_classification`; [`DeviceField::initialise`]);
+//! on the host from the hits read back otherwise, and also where a volume's
+//! rounds exceed a batch the device holds, or the adapter binds too few
+//! storage buffers for the classification pass ([`WgpuProbeTracer::classification_note`]).
 //!
 //! The CPU backend is this backend's peer: both implement `probegi-field`'s
 //! traits, neither depends on the other.
@@ -34,9 +36,7 @@ use probegi_core::probe_classification::ProbeUsageCounts;
 use probegi_field::backend::{BackendError, CameraFrameOut, DeviceField, ProbeBatchTracer};
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::device_frame::{DeviceFrame, DeviceFrameInput, DeviceFrameReadout, FrameLayer};
-use probegi_field::device_plans::{
-    DeviceBlendOutput, DeviceClassification, DeviceClassificationResults, DeviceRelocationProbe, DeviceVolumeBlend,
-};
+use probegi_field::device_plans::{DeviceBlendOutput, DeviceInitChain, DeviceInitResult, DeviceVolumeBlend};
 use probegi_field::seam::ProbeRayBatch;
 use probegi_scene::{BvhTracer, RayHit, Scene, TlasLayout};
 
@@ -47,7 +47,7 @@ use crate::device_frame::{GpuFrame, GpuFrameInput};
 use crate::gpu_scene::GpuScene;
 use crate::gpu_timer::GpuTimer;
 use crate::probe_blend::GpuProbeBlend;
-use crate::probe_classification::GpuProbeClassification;
+use crate::probe_classification::{GpuProbeClassification, classification_results};
 use crate::probe_ray_gen::GpuProbeRayGen;
 use crate::probe_relocation::GpuProbeRelocation;
 use crate::probe_shade::{GpuProbeShade, batch_shade_probes};
@@ -415,6 +415,50 @@ impl WgpuProbeTracer {
         Ok(resident)
     }
 
+    /// [`DeviceField::initialise`]: every volume's chain recorded, then its
+    /// offsets and states read back together (one submission, one wait).
+    fn run_init_chains(
+        &self,
+        relocation: &GpuProbeRelocation,
+        plan: &[Option<DeviceInitChain<'_>>],
+    ) -> Result<Vec<Option<DeviceInitResult>>, GpuError> {
+        let mut recorded = Vec::new();
+        for chain in plan.iter().flatten() {
+            let r = relocation.record_chain(&self.ctx, &self.trace, &self.bvh, chain)?;
+            let states = match (&chain.classification, &self.classification, &self.shading) {
+                (Some(round), Some(c), Some((_, scene))) => {
+                    Some(c.record(&self.ctx, (&self.bvh, scene), &r.kept, round, &r.positions)?)
+                }
+                _ => None,
+            };
+            recorded.push((r, states));
+        }
+        let buffers: Vec<&wgpu::Buffer> =
+            recorded.iter().flat_map(|(r, states)| std::iter::once(&r.offsets).chain(states.as_ref())).collect();
+        let mut bytes = self.ctx.read_back_all(&buffers)?.into_iter();
+        let mut results = recorded.into_iter().map(|(r, states)| -> Result<DeviceInitResult, GpuError> {
+            let missing = || GpuError::Readback("an initialisation result".into());
+            let offsets = bytes.next().ok_or_else(missing)?;
+            let offsets: &[[f32; 4]] = bytemuck::cast_slice(&offsets);
+            let n = r.rays_per_probe as u64;
+            let classification = match states {
+                Some(_) => Some(classification_results(&bytes.next().ok_or_else(missing)?, offsets.len())),
+                None => None,
+            };
+            use std::sync::atomic::Ordering::Relaxed;
+            self.rounds_on_device[0].fetch_add(r.relocation_rounds, Relaxed);
+            self.rounds_on_device[1].fetch_add(classification.is_some() as u32, Relaxed);
+            Ok(DeviceInitResult {
+                offsets_m: offsets.iter().map(|o| Vec3::new(o[0], o[1], o[2])).collect(),
+                classification,
+                rays_traced: offsets.iter().map(|o| o[3] as u64).sum::<u64>() * n,
+            })
+        });
+        plan.iter()
+            .map(|c| c.as_ref().map(|_| results.next().ok_or_else(|| GpuError::Input("chain".into()))?).transpose())
+            .collect()
+    }
+
     /// The resident field for an update's shade and blend: uploaded whole when
     /// the host's atlases are current (`upload_atlases`), else only its
     /// per-probe data (the device's blend wrote the atlases last frame), and
@@ -737,47 +781,26 @@ impl DeviceField for WgpuProbeTracer {
         };
         Some(run())
     }
-    fn relocate(
+    fn initialise(
         &self,
-        batch: &ProbeRayBatch,
-        probes: &[DeviceRelocationProbe],
-    ) -> Option<Result<Vec<Vec3>, BackendError>> {
+        plan: &[Option<DeviceInitChain<'_>>],
+    ) -> Option<Result<Vec<Option<DeviceInitResult>>, BackendError>> {
         let (_, _, relocation) = self.resident_passes.as_ref()?;
-        if batch.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
+        let max = GpuRayTrace::max_batch_rays(&self.ctx) as u64;
+        let too_large = |c: &DeviceInitChain<'_>| c.grid.probe_count() as u64 * c.dirs.len() as u64 > max;
+        let classifies = plan.iter().flatten().any(|c| c.classification.is_some());
+        if plan.iter().flatten().any(too_large)
+            || (classifies && (self.classification.is_none() || self.shading.is_none()))
+        {
             return None;
         }
-        let run = || -> Result<Vec<Vec3>, GpuError> {
-            let resident = self.trace_resident(batch, true)?;
-            let offsets = relocation.relocate(&self.ctx, &resident, probes)?;
-            self.rounds_on_device[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            Ok(offsets)
-        };
-        Some(run().map_err(BackendError::from))
-    }
-    fn classify(
-        &self,
-        batch: &ProbeRayBatch,
-        plan: &[Option<DeviceClassification<'_>>],
-    ) -> Option<Result<DeviceClassificationResults, BackendError>> {
-        let classification = self.classification.as_ref()?;
-        let (_, scene) = self.shading.as_ref()?;
-        if batch.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
-            return None;
+        let deferring = self.ctx.deferring();
+        self.ctx.defer_submissions(true);
+        let result = self.run_init_chains(relocation, plan);
+        if !deferring {
+            self.ctx.defer_submissions(false);
         }
-        let run = || -> Result<DeviceClassificationResults, GpuError> {
-            let resident = self.trace_resident(batch, true)?;
-            plan.iter()
-                .map(|v| {
-                    v.as_ref()
-                        .map(|round| classification.classify(&self.ctx, &self.bvh, scene, &resident, round))
-                        .transpose()
-                })
-                .collect::<Result<DeviceClassificationResults, GpuError>>()
-                .inspect(|_| {
-                    self.rounds_on_device[1].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                })
-        };
-        Some(run().map_err(BackendError::from))
+        Some(result.map_err(BackendError::from))
     }
     fn shade_and_blend(
         &self,

@@ -22,9 +22,9 @@
 //! relocation). The states are those of a classification round traced in
 //! full; start-up traces most probes once instead of twice.
 //!
-//! `plan_init_round` / `accept_init_round` are the host path;
-//! `device_relocation` / `device_classification` and their `accept_*` twins the
-//! field-resident device path.
+//! `plan_init_round` / `accept_init_round` are the host path, one round at a
+//! time; `device_init_chain` / `accept_device_init` the field-resident device
+//! path, every round chained there (the same rounds, skips and kept hits).
 
 use glam::Vec3;
 use probegi_core::ddgi_query::max_surface_bias_m;
@@ -36,7 +36,7 @@ use probegi_core::probe_classification::{
 use probegi_core::probe_relocation::{is_inside_geometry, probe_ray_stats, relocation_step};
 use rayon::prelude::*;
 
-use crate::device_plans::{DeviceClassification, DeviceRelocationProbe};
+use crate::device_plans::{DeviceClassification, DeviceInitChain, DeviceInitResult};
 use crate::probe_ray_gen::{probe_ray_rotation, rotated_fibonacci};
 use crate::seam::{ProbeRayBatch, ProbeRayHit};
 
@@ -55,69 +55,63 @@ impl DdgiVolume {
         rounds
     }
 
-    /// Whether this volume's initialisation round `round` is its classification round.
-    pub(crate) fn init_round_is_classification(&self, round: usize) -> bool {
-        matches!(self.init_rounds().get(round), Some(InitRound::Classification))
-    }
-
-    /// The classification round's inputs, for a device that runs it.
-    pub(crate) fn device_classification<'a>(&'a self, frame: &VolumeFrame) -> DeviceClassification<'a> {
-        DeviceClassification {
+    /// Every initialisation round of this volume's pending probes as one chain
+    /// for a device that runs them back to back (`DeviceInitChain`): the
+    /// rounds the host would run, on the same directions.
+    pub(crate) fn device_init_chain(&self, seed: u64) -> DeviceInitChain<'_> {
+        let rounds = self.init_rounds();
+        let relocation_rounds = rounds.iter().filter(|r| matches!(r, InitRound::Relocation(_))).count() as u32;
+        let rotation = probe_ray_rotation(self.stream_seed(seed), INIT_ROUNDS_FRAME);
+        let dirs = rotated_fibonacci(rotation, self.settings.probe_init_rays_per_probe);
+        let n = dirs.len() as u32;
+        let classification = rounds.contains(&InitRound::Classification).then(|| DeviceClassification {
             grid: &self.grid,
-            rays_per_probe: frame.ray_count as u32,
+            rays_per_probe: n,
             reach_rel: self.settings.probe_classification_reach_rel,
             bias_m: max_surface_bias_m(&self.settings, &self.grid),
             probes: (0..self.grid.probe_count())
                 .map(|p| ClassificationProbe {
-                    first_ray: frame.first_ray.get(p).copied().filter(|f| *f != u32::MAX),
+                    first_ray: self.probe_pending_init[p].then_some(p as u32 * n),
                     pending: self.probe_pending_init[p],
                     traces: self.probe_states[p].traces(),
                     position_m: self.probe_positions[p],
                 })
                 .collect(),
+        });
+        DeviceInitChain {
+            settings: &self.settings,
+            grid: &self.grid,
+            pending: &self.probe_pending_init,
+            offsets_m: &self.probe_offsets,
+            relocation_rounds,
+            dirs,
+            classification,
         }
     }
 
-    /// Applies a classification round a device ran: per probe (inside geometry, kept).
-    pub(crate) fn accept_device_classification(&mut self, results: &[(bool, bool)]) {
-        for (p, &(inside, kept)) in results.iter().enumerate().take(self.grid.probe_count()) {
-            if self.probe_pending_init[p] {
-                self.probe_states[p] = classify_jcgt(inside, kept);
+    /// Applies a [`Self::device_init_chain`] another device ran and ends the
+    /// initialisation. A non-finite offset keeps the probe where it was.
+    pub(crate) fn accept_device_init(&mut self, result: &DeviceInitResult) {
+        let probes = self.grid.probe_count();
+        for (p, &o) in result.offsets_m.iter().enumerate().take(probes) {
+            if self.probe_pending_init[p] && o.is_finite() {
+                self.probe_offsets[p] = o;
+                self.probe_positions[p] = self.grid.probe_position(self.grid.probe_coords(p)) + o;
             }
         }
+        if let Some(states) = &result.classification {
+            for (p, &(inside, kept)) in states.iter().enumerate().take(probes) {
+                if self.probe_pending_init[p] {
+                    self.probe_states[p] = classify_jcgt(inside, kept);
+                }
+            }
+        }
+        self.finish_init();
     }
 
     /// Whether this volume's initialisation round `round` is a relocation iteration.
     pub(crate) fn init_round_is_relocation(&self, round: usize) -> bool {
         matches!(self.init_rounds().get(round), Some(InitRound::Relocation(_)))
-    }
-
-    /// The device's inputs for probe `p`'s relocation iteration in the current
-    /// initialisation batch (`None` when it has no rays there).
-    pub(crate) fn device_relocation(&self, frame: &VolumeFrame, p: usize) -> Option<DeviceRelocationProbe> {
-        let first = *frame.first_ray.get(p)?;
-        (first != u32::MAX && self.probe_pending_init[p]).then(|| DeviceRelocationProbe {
-            first_ray: first,
-            ray_count: frame.ray_count as u32,
-            offset_m: self.probe_offsets[p],
-            spacing_m: self.grid.spacing_m,
-            offset_limit_rel: self.settings.probe_relocation_offset_limit_rel,
-            min_frontface_rel: self.settings.probe_relocation_min_frontface_rel,
-        })
-    }
-
-    /// Applies a relocation iteration another device ran: `offsets` are (probe, new offset).
-    pub(crate) fn accept_device_relocation(&mut self, offsets: &[(u32, Vec3)]) {
-        for &(p, o) in offsets {
-            let p = p as usize;
-            if p < self.probe_offsets.len() && self.probe_pending_init[p] {
-                self.probe_relocation_settled[p] = o == self.probe_offsets[p];
-                // The hits stayed on the device: the classification round traces it.
-                self.probe_init_hits_current[p] = false;
-                self.probe_offsets[p] = o;
-                self.probe_positions[p] = self.grid.probe_position(self.grid.probe_coords(p)) + o;
-            }
-        }
     }
 
     /// Whether the volume has probes waiting for initialisation.

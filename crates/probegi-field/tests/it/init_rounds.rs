@@ -2,8 +2,8 @@
 //! round reads the relocation rounds' hits of the probes that settled, which
 //! the host keeps, and traces only the probes that moved in their last
 //! round. Its states and offsets equal those of a classification round
-//! traced for every probe (the path of a device that keeps the hits, driven
-//! here through `submit_device_relocation`), for fewer rays.
+//! traced for every probe (the path of a caller that gives no normals on
+//! request, `submit_hits`), for fewer rays.
 //!
 //! The scene is analytic, so every hit is exact on both paths: a closed room
 //! (inward faces), a solid block standing on its floor (outward faces: a probe
@@ -12,7 +12,6 @@
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::probe_classification::ProbeState;
-use probegi_core::probe_relocation::{probe_ray_stats, relocation_step};
 use probegi_field::ddgi_field_set::HostHits;
 use probegi_field::ddgi_field_set::ProbeRayBatchKind;
 use probegi_field::{DdgiFieldSet, DdgiVolume, ProbeRayHit};
@@ -90,35 +89,23 @@ fn batch_hits(set: &mut DdgiFieldSet) -> Vec<ProbeRayHit> {
     (0..b.len()).map(|r| trace(b.origins_m[r], b.directions[r], b.max_distances_m[r])).collect()
 }
 
-/// Runs frame 0's initialisation rounds; with `device_relocation` the
-/// relocation rounds go through `submit_device_relocation` (offsets computed
-/// here, the hits never given to the set). Returns the rays each round traced.
-fn start_up(set: &mut DdgiFieldSet, device_relocation: bool) -> Vec<usize> {
+/// Runs frame 0's initialisation rounds. With `keep_hits` the hits go
+/// through `submit_init_hits` (relocation rounds without normals; the set asks
+/// for those it keeps), otherwise through `submit_hits`, which keeps none, so
+/// the classification round traces every probe. Returns the rays each round traced.
+fn start_up(set: &mut DdgiFieldSet, keep_hits: bool) -> Vec<usize> {
     let mut rounds = Vec::new();
     set.begin_update(3, 0);
     while set.ray_batch().kind == ProbeRayBatchKind::Initialization {
         rounds.push(set.ray_batch().len());
         let hits = batch_hits(set);
-        if device_relocation && set.hits_needed_on_host() == HostHits::Relocation {
-            let plan = set.device_relocation_plan().expect("relocation plan");
-            let volume = &set.volumes()[0];
-            let dirs = &set.ray_batch().directions;
-            let offsets: Vec<Vec3> = plan
-                .iter()
-                .map(|p| {
-                    let rays = p.first_ray as usize..(p.first_ray + p.ray_count) as usize;
-                    let d: Vec<f32> = hits[rays.clone()].iter().map(|h| h.distance_m).collect();
-                    let stats = probe_ray_stats(&dirs[rays], &d);
-                    relocation_step(p.offset_m, &stats, volume.grid.spacing_m, &volume.settings)
-                })
-                .collect();
-            set.submit_device_relocation(&offsets).expect("relocation round");
-        } else {
-            // Relocation rounds without normals: the set asks for those it keeps.
+        if keep_hits {
             let relocation = set.hits_needed_on_host() == HostHits::Relocation;
             let bare: Vec<ProbeRayHit> =
                 hits.iter().map(|h| if relocation { ProbeRayHit { normal: Vec3::ZERO, ..*h } } else { *h }).collect();
             set.submit_init_hits(&bare, &|r| hits[r].normal).expect("init round");
+        } else {
+            set.submit_hits(&hits).expect("init round");
         }
     }
     rounds
@@ -130,8 +117,8 @@ fn start_up(set: &mut DdgiFieldSet, device_relocation: bool) -> Vec<usize> {
 fn compare_paths(relocation_rounds: u32) -> (usize, usize) {
     let set = || DdgiFieldSet::single(DdgiVolume::new(settings(relocation_rounds), (Vec3::ZERO, ROOM_M)));
     let (mut kept, mut full) = (set(), set());
-    let kept_rounds = start_up(&mut kept, false);
-    let full_rounds = start_up(&mut full, true);
+    let kept_rounds = start_up(&mut kept, true);
+    let full_rounds = start_up(&mut full, false);
     let (k, f) = (&kept.volumes()[0], &full.volumes()[0]);
     let probes = k.grid.probe_count();
     let rays = k.settings.probe_init_rays_per_probe as usize;

@@ -479,3 +479,44 @@ fn a_still_field_on_the_device_uploads_no_per_probe_record_again() {
     // Up: parameter blocks and weights, below half of one record of 16 bytes a probe.
     assert!(up < 16 * probes / 2, "{up} bytes up a frame");
 }
+
+#[test]
+fn the_initialisation_rounds_run_chained_in_one_submission_with_one_read_back() {
+    // Issue "The field update at the seeds' GPU rates…", goal 3: every
+    // relocation round and the classification for every probe, recorded back
+    // to back; the host reads back each probe's offset and (inside, kept)
+    // once, 32 bytes a probe, and the states equal the host's rounds.
+    let scene = probegi_scene::load_scene(&common::shared("dabrovic-sponza/sponza.obj")).expect("the shared Sponza");
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let (Some(host), Some(device)) = (gpu(&scene, &bvh, false), gpu(&scene, &bvh, true)) else { return };
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let settings = DdgiVolumeSettings { probe_counts: UVec3::new(16, 8, 16), ..Default::default() };
+    let bounds = scene.bounds().expect("geometry");
+    let mut chained = DdgiFieldSet::single(DdgiVolume::new(settings.clone(), bounds));
+    chained.begin_update(7, 0);
+    let plan = chained.device_init_plan().expect("the first initialisation round");
+    let dev: &dyn probegi_field::DeviceField = &device;
+    let before = device.ctx.counters();
+    let results = dev.initialise(&plan).expect("the device chains the rounds").expect("chain");
+    let d = device.ctx.counters() - before;
+    drop(plan);
+    let probes = settings.probe_count();
+    eprintln!("chained start-up: {d:?}");
+    assert_eq!((d.submissions, d.blocking_waits), (1, 1), "one submission, one wait");
+    assert_eq!(d.bytes_down, probes * 32, "an offset and a state a probe");
+    assert_eq!(chained.submit_device_init(&results).expect("results"), UpdateStep::TraceRays);
+    assert_eq!(chained.ray_batch().kind, probegi_field::ddgi_field_set::ProbeRayBatchKind::Update);
+
+    // The host's rounds (the GPU traces each, the host relocates and classifies).
+    let mut by_rounds = DdgiFieldSet::single(DdgiVolume::new(settings, bounds));
+    by_rounds.update_traced_by(&scene, &bvh, Some(&host), &direct, 7, 0, &mut BTreeMap::new()).expect("frame 0");
+    let (c, h) = (&chained.volumes()[0], &by_rounds.volumes()[0]);
+    let moved = h.probe_offsets.iter().filter(|o| **o != glam::Vec3::ZERO).count();
+    let worst =
+        h.probe_offsets.iter().zip(&c.probe_offsets).map(|(a, b)| (*a - *b).abs().max_element()).fold(0.0, f32::max);
+    assert!(moved > 0 && worst <= 1e-6, "{moved} probes moved; offsets differ by {worst} m");
+    // The host's field has blended frame 0 since: its Newly * probes moved on.
+    let differ = c.probe_states.iter().zip(&h.probe_states).filter(|(a, b)| a.after_update() != **b).count();
+    assert_eq!(differ, 0, "probe states");
+    assert_eq!(chained.last_init_rays, by_rounds.last_init_rays, "the same rounds skipped and kept");
+}
