@@ -17,7 +17,7 @@
 use bytemuck::{Pod, Zeroable};
 use probegi_field::device_plans::DeviceInitChain;
 
-use crate::bvh_trace::{GpuBvh, GpuRayBatch, GpuRayTrace, TraceSegment, dispatch_2d};
+use crate::bvh_trace::{GpuBvh, GpuRayBatch, GpuRayTrace, dispatch_2d};
 use crate::gpu_context::{GpuContext, GpuError};
 use crate::shader_registry::PROBE_RELOCATION;
 
@@ -87,7 +87,10 @@ impl GpuProbeRelocation {
         let rays = rays.ok_or_else(|| GpuError::Input(format!("{probes} probes × {n} rays: not a batch here")))?;
         let keep = chain.classification.is_some();
         let round = trace.empty_batch(ctx, rays, false)?;
-        round.configure(ctx, true, &[TraceSegment { first_ray: 0, probe_count: probes, rays_per_probe: n }]);
+        // Threads in batch order, a probe's rays together: a workgroup of probes out
+        // of the round ends at once (the probe-interleaved order would spread the
+        // few probes still moving over every workgroup).
+        round.configure(ctx, true, &[]);
         let kept = trace.empty_batch(ctx, if keep { rays } else { 1 }, false)?;
         let buffers = ChainBuffers::new(ctx, chain, &round, &kept, keep);
         let bind = crate::gpu_context::buffers_bind_group(&ctx.device, "init rounds", &self.layout, &buffers.all);
