@@ -54,21 +54,18 @@ impl BlendWeights {
         let mut offsets = Vec::with_capacity((interior * interior + 1) as usize);
         let mut entries = Vec::new();
         offsets.push(0);
-        for j in 0..interior {
-            for i in 0..interior {
-                let texel_dir = oct_decode(texel_center_uv(i, j, interior));
-                for (r, d) in ray_dirs.iter().enumerate() {
-                    let c = texel_dir.dot(*d);
-                    if c <= 0.0 {
-                        continue;
-                    }
-                    let w = if exponent == 1.0 { c } else { c.powf(exponent) };
-                    if w >= BLEND_WEIGHT_EPSILON {
-                        entries.push((r as u32, w));
-                    }
+        for texel_dir in texel_directions(interior) {
+            for (r, d) in ray_dirs.iter().enumerate() {
+                let c = texel_dir.dot(*d);
+                if c <= 0.0 {
+                    continue;
                 }
-                offsets.push(entries.len() as u32);
+                let w = if exponent == 1.0 { c } else { c.powf(exponent) };
+                if w >= BLEND_WEIGHT_EPSILON {
+                    entries.push((r as u32, w));
+                }
             }
+            offsets.push(entries.len() as u32);
         }
         Self { offsets, entries }
     }
@@ -76,6 +73,13 @@ impl BlendWeights {
     fn texel(&self, t: usize) -> &[(u32, f32)] {
         &self.entries[self.offsets[t] as usize..self.offsets[t + 1] as usize]
     }
+}
+
+/// The unit direction of every interior texel of an `interior × interior`
+/// octahedral tile, row-major (its centre, decoded): what the blend weighs
+/// each ray against.
+pub fn texel_directions(interior: u32) -> Vec<Vec3> {
+    (0..interior).flat_map(|j| (0..interior).map(move |i| oct_decode(texel_center_uv(i, j, interior)))).collect()
 }
 
 /// Tile index of interior texel number `t` (row-major over the interior).

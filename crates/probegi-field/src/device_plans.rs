@@ -13,13 +13,10 @@ use probegi_core::probe_grid::ProbeGrid;
 pub struct DeviceVolumeBlend<'a> {
     /// The volume's settings (atlas sizes, encoding, thresholds).
     pub settings: &'a DdgiVolumeSettings,
-    /// The frame's unit ray directions (every probe's, in ray order) and the
-    /// blend's texel-to-ray weights for them.
+    /// The frame's unit ray directions (every probe's, in ray order): the
+    /// device weighs them against each texel's direction itself
+    /// (`max(0, ω·r)^k` as `probegi_core::probe_blend::BlendWeights` does).
     pub ray_dirs: &'a [Vec3],
-    /// Texel-to-ray weights of the irradiance tiles.
-    pub irradiance_weights: &'a probegi_core::probe_blend::BlendWeights,
-    /// Texel-to-ray weights of the distance tiles.
-    pub distance_weights: &'a probegi_core::probe_blend::BlendWeights,
     /// Per probe: its first ray in the batch and its blend hysteresis (before the
     /// start-up cap and the scene-event scales), or `None` when it does not
     /// blend this frame.

@@ -3,7 +3,9 @@
 //! 4.2–4.3), rotated by one uniformly random rotation per frame so that over
 //! frames the probes see the whole sphere. The rotation is reproducible from
 //! `(seed, frame)`. All probes share the frame's directions, so the texel-to-ray
-//! blend weights are built here once per frame.
+//! blend weights are built once per frame, on the first host blend that reads
+//! them (a device that blends computes its own: `probegi-wgpu`'s
+//! `blend_weights_table`).
 
 use glam::Vec3;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
@@ -16,10 +18,34 @@ use probegi_core::rng::{Pcg32, hash_combine};
 pub struct ProbeRayDirections {
     /// Unit world directions, shared by every probe this frame.
     pub dirs: Vec<Vec3>,
+    /// Interior texels per side of the irradiance and distance tiles, and the
+    /// distance exponent k_s, which the weights are for.
+    irradiance_interior: u32,
+    distance_interior: u32,
+    distance_exponent: f32,
+    /// The weight tables, built on first use.
+    weights: std::sync::OnceLock<(BlendWeights, BlendWeights)>,
+}
+
+impl ProbeRayDirections {
     /// `max(0, ω·r)` per irradiance texel (seed 003 eq. 4.12–4.13).
-    pub irradiance_weights: BlendWeights,
+    pub fn irradiance_weights(&self) -> &BlendWeights {
+        &self.weights().0
+    }
+
     /// `max(0, ω·r)^k_s` per distance texel (seed 003 eq. 4.14).
-    pub distance_weights: BlendWeights,
+    pub fn distance_weights(&self) -> &BlendWeights {
+        &self.weights().1
+    }
+
+    fn weights(&self) -> &(BlendWeights, BlendWeights) {
+        self.weights.get_or_init(|| {
+            (
+                BlendWeights::new(&self.dirs, self.irradiance_interior, 1.0),
+                BlendWeights::new(&self.dirs, self.distance_interior, self.distance_exponent),
+            )
+        })
+    }
 }
 
 /// The frame's rotated spherical Fibonacci directions alone (distance-only traces
@@ -46,9 +72,11 @@ pub fn probe_ray_rotation(seed: u64, frame: u32) -> glam::Quat {
 pub fn generate_probe_rays(settings: &DdgiVolumeSettings, seed: u64, frame: u32) -> ProbeRayDirections {
     let dirs = probe_ray_directions(settings, seed, frame);
     ProbeRayDirections {
-        irradiance_weights: BlendWeights::new(&dirs, settings.probe_irradiance_texels, 1.0),
-        distance_weights: BlendWeights::new(&dirs, settings.probe_distance_texels, settings.probe_distance_exponent),
         dirs,
+        irradiance_interior: settings.probe_irradiance_texels,
+        distance_interior: settings.probe_distance_texels,
+        distance_exponent: settings.probe_distance_exponent,
+        weights: std::sync::OnceLock::new(),
     }
 }
 

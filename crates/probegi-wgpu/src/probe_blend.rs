@@ -5,10 +5,18 @@
 //! the probe's rays in workgroup memory (RTXGI's `ProbeBlendingCS` with
 //! `RTXGI_DDGI_BLEND_SHARED_MEMORY`; up to 512 rays, more are read from the
 //! batch), then blends every interior texel of both atlases, over the frame's
-//! sparse texel-to-ray weight tables as
-//! `probegi_core::probe_blend::BlendWeights` builds them, uploaded (one owner of
-//! the weights: the same entries summed in the same order as on the CPU, and no
-//! `pow(cos, k)` per texel and ray on the device).
+//! sparse texel-to-ray weight tables. The device builds them once a frame per
+//! volume (`blend_weights_table`, one thread per texel: the entries
+//! `max(0, ω·r)^k ≥ ε` in ray order, as `probegi_core::probe_blend::BlendWeights`
+//! builds them, from the frame's ray directions and the texels' directions,
+//! `probegi_core::probe_blend::texel_directions`), as RTXGI's
+//! `ProbeBlendingCS` weighs its rays on the device; each texel sums its
+//! table's entries in ray order, as the CPU sums its own. The host builds no
+//! table and uploads the ray directions only: 4 KB a frame at 256 rays,
+//! against the 330 KB of tables it built (a `powf` per texel and ray) and
+//! uploaded before. (A dense table, every ray read by every texel, made the
+//! blend 2.5 to 3 times slower on lavapipe: the distance lobe `cos⁵⁰` leaves
+//! a few tens of a texel's 256 rays.)
 //!
 //! Atlases stay on the device ([`GpuVolumeAtlases`]) in the CPU's tile-major
 //! layout (`probegi_core::probe_atlas`); irradiance texels are `vec4<f32>` there
@@ -27,7 +35,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::probe_atlas::{ProbeAtlas, tile_texel_count};
-use probegi_core::probe_blend::BlendWeights;
+use probegi_core::probe_blend::texel_directions;
 
 use probegi_field::device_plans::DeviceVolumeBlend;
 
@@ -54,8 +62,8 @@ pub(crate) struct BlendParams {
     /// The volume's first texel in the irradiance / distance buffer.
     pub(crate) irradiance_first: u32,
     pub(crate) distance_first: u32,
-    /// Where the (ray, weight) entries start in the weights buffer.
-    pub(crate) weight_entries_first: u32,
+    /// `u32`s of the weights buffer: texels × (1 + 2 × rays), texels both tiles' interiors.
+    pub(crate) weight_count: u32,
     pub(crate) firefly_clamp_ratio: f32,
     pub(crate) adaptive_hysteresis: u32,
     pub(crate) adaptive_tolerance: f32,
@@ -196,18 +204,20 @@ pub struct BlendFrame<'a> {
     pub distance_clamp_m: f32,
 }
 
-/// The three compute pipelines ([`PASS_NAMES`]).
+/// The weights pass and the three compute pipelines of [`PASS_NAMES`].
 pub struct GpuProbeBlend {
     layout: wgpu::BindGroupLayout,
+    weights: wgpu::ComputePipeline,
     pipelines: [wgpu::ComputePipeline; 3],
 }
 
 impl GpuProbeBlend {
     /// The pipelines on `ctx`.
     pub fn new(ctx: &GpuContext) -> Self {
-        let layout = ctx.pass_layout("probe blend", &[true, true, true, false, false, false]);
+        let layout = ctx.pass_layout("probe blend", &[false, true, true, false, false, false, true, true]);
         let pipelines = ctx.compute_pipelines(&PROBE_BLEND, &[Some(&layout)], PASS_NAMES);
-        Self { layout, pipelines }
+        let [weights] = ctx.compute_pipelines(&PROBE_BLEND, &[Some(&layout)], ["blend_weights_table"]);
+        Self { layout, weights, pipelines }
     }
 
     /// Blends `frame` into `atlases` and refreshes the borders of the probes that updated.
@@ -244,14 +254,9 @@ impl GpuProbeBlend {
         let results: Vec<[f32; 4]> =
             frame.ray_radiance.iter().zip(frame.ray_distance).map(|(l, d)| [l.x, l.y, l.z, *d]).collect();
         let results = ctx.buffer_with("ray results", bytemuck::cast_slice(&results), wgpu::BufferUsages::STORAGE);
-        let irradiance_weights = BlendWeights::new(frame.ray_dirs, atlases.irradiance_interior, 1.0);
-        let distance_weights =
-            BlendWeights::new(frame.ray_dirs, atlases.distance_interior, frame.settings.probe_distance_exponent);
         let plan = DeviceVolumeBlend {
             settings: frame.settings,
             ray_dirs: frame.ray_dirs,
-            irradiance_weights: &irradiance_weights,
-            distance_weights: &distance_weights,
             probe_blend: (0..probes).map(|p| frame.probe_hysteresis[p].map(|h| ((p * rays) as u32, h))).collect(),
             hysteresis_cap: 1.0,
             irradiance_scale: frame.irradiance_scale,
@@ -286,6 +291,7 @@ impl GpuProbeBlend {
         let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
         let per_row = (probes as u32).min(MAX_GROUPS);
         let params = blend_params(atlases, plan, per_row);
+        let weight_count = params.weight_count;
         let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| ctx.buffer_with(label, contents, usage);
         let frames = |p: usize| plan.probe_blend_frames.get(p).copied().unwrap_or(1).max(1);
         let per_probe: Vec<[u32; 4]> = plan
@@ -299,13 +305,23 @@ impl GpuProbeBlend {
             .collect();
         let storage = wgpu::BufferUsages::STORAGE;
         let params = init("blend params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        let weights = pack_weights(plan.irradiance_weights, plan.distance_weights);
-        // The weights turn with the frame's rays; the per-probe entries repeat
-        // from frame to frame for a still volume: kept per volume, by where
-        // its atlas starts.
-        let weights = init("blend weights", bytemuck::cast_slice(&weights), storage);
+        // The weights turn with the frame's rays (the device computes them
+        // from the directions); the per-probe entries and the texels'
+        // directions repeat from frame to frame for a still volume: kept per
+        // volume, by where its atlas starts.
+        let weights = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("blend weights"),
+            size: weight_count.max(4) as u64 * 4,
+            usage: storage,
+            mapped_at_creation: false,
+        });
         let key = atlases.irradiance_first as u64;
         let per_probe = ctx.buffer_kept("probe blend", key, bytemuck::cast_slice(&per_probe), storage);
+        let texel_dirs: Vec<[f32; 4]> =
+            texel_directions(ni).into_iter().chain(texel_directions(nd)).map(|d| d.extend(0.0).into()).collect();
+        let texel_dirs = ctx.buffer_kept("blend texel directions", key, bytemuck::cast_slice(&texel_dirs), storage);
+        let ray_dirs: Vec<[f32; 4]> = plan.ray_dirs.iter().map(|d| d.extend(0.0).into()).collect();
+        let ray_dirs = init("blend ray directions", bytemuck::cast_slice(&ray_dirs), storage);
         let buffers = [
             &params,
             &weights,
@@ -314,6 +330,8 @@ impl GpuProbeBlend {
             &atlases.irradiance,
             &atlases.distance,
             &atlases.texel_hysteresis,
+            &texel_dirs,
+            &ray_dirs,
         ];
         let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
             .iter()
@@ -329,7 +347,8 @@ impl GpuProbeBlend {
         let groups = |texels: u32| texels.div_ceil(WORKGROUP);
         // The blend: one workgroup per probe; the borders: one thread per tile texel.
         let dispatches = [1, groups((ni + 2) * (ni + 2)), groups((nd + 2) * (nd + 2))];
-        Ok(BlendBindings { bind_group, dispatches, per_row, rows })
+        let weight_groups = crate::bvh_trace::dispatch_2d(ni * ni + nd * nd);
+        Ok(BlendBindings { bind_group, dispatches, per_row, rows, weight_groups })
     }
 
     /// Records the three passes ([`PASS_NAMES`]: blend, border irradiance,
@@ -341,6 +360,14 @@ impl GpuProbeBlend {
         bindings: &BlendBindings,
         timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
     ) {
+        {
+            // The frame's weight tables, before the blend reads them (untimed:
+            // one thread per texel of one tile, against every probe's blend).
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.weights);
+            pass.set_bind_group(0, &bindings.bind_group, &[]);
+            pass.dispatch_workgroups(bindings.weight_groups.0, bindings.weight_groups.1, 1);
+        }
         for (k, (pipeline, x)) in self.pipelines.iter().zip(bindings.dispatches).enumerate() {
             // One pass per dispatch: the borders read what the blends wrote.
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -365,24 +392,18 @@ pub struct BlendBindings {
     dispatches: [u32; 3],
     per_row: u32,
     rows: u32,
+    /// The weights pass's workgroups (x, y).
+    weight_groups: (u32, u32),
 }
 
 /// An error unless `plan` fits `atlases` and a batch of `batch_rays` rays: its
-/// weight tables the interiors, its rays the batch, one entry per probe.
+/// weights a buffer, its rays the batch, one entry per probe.
 fn check_resident(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, batch_rays: u64) -> Result<(), GpuError> {
     let probes = atlases.probe_count;
     let rays = plan.ray_dirs.len();
-    let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
-    let (iw, dw) = (plan.irradiance_weights, plan.distance_weights);
-    if iw.offsets.len() != (ni * ni + 1) as usize || dw.offsets.len() != (nd * nd + 1) as usize {
-        return Err(GpuError::Input(format!(
-            "weight tables of {} and {} texels for {ni}² and {nd}² interiors",
-            iw.offsets.len().saturating_sub(1),
-            dw.offsets.len().saturating_sub(1)
-        )));
-    }
-    if let Some((r, _)) = iw.entries.iter().chain(&dw.entries).find(|(r, _)| *r as usize >= rays) {
-        return Err(GpuError::Input(format!("a weight names ray {r} of {rays}")));
+    let (ni, nd) = (atlases.irradiance_interior as u64, atlases.distance_interior as u64);
+    if (1 + 2 * rays as u64) * (ni * ni + nd * nd) > u32::MAX as u64 / 4 {
+        return Err(GpuError::Input(format!("{rays} rays × {ni}² + {nd}² texels of weights")));
     }
     if plan.probe_blend.len() != probes || probes == 0 || rays == 0 {
         return Err(GpuError::Input(format!(
@@ -419,22 +440,12 @@ fn blend_params(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, probes
         probes_per_row,
         irradiance_first: atlases.irradiance_first,
         distance_first: atlases.distance_first,
-        weight_entries_first: (plan.irradiance_weights.offsets.len() + plan.distance_weights.offsets.len()) as u32,
+        weight_count: (atlases.irradiance_interior * atlases.irradiance_interior
+            + atlases.distance_interior * atlases.distance_interior)
+            * (1 + 2 * plan.ray_dirs.len() as u32),
         firefly_clamp_ratio: s.probe_firefly_clamp_ratio,
         adaptive_hysteresis: s.probe_adaptive_hysteresis as u32,
         adaptive_tolerance: s.probe_adaptive_hysteresis_tolerance,
         hysteresis_cap: plan.hysteresis_cap,
     }
-}
-
-/// `blend_weights` of `probe_blend.wgsl`: both tables' offsets (the distance
-/// entries after the irradiance ones), then the (ray, weight bits) entries.
-fn pack_weights(iw: &BlendWeights, dw: &BlendWeights) -> Vec<u32> {
-    let shift = iw.entries.len() as u32;
-    let mut weights: Vec<u32> = iw.offsets.clone();
-    weights.extend(dw.offsets.iter().map(|o| o + shift));
-    for (r, w) in iw.entries.iter().chain(&dw.entries) {
-        weights.extend([*r, w.to_bits()]);
-    }
-    weights
 }

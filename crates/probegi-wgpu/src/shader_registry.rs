@@ -159,7 +159,7 @@ pub(crate) const BVH_INSTANCE_IDENTITY: u32 = 1;
 pub(crate) const BVH_INSTANCE_MOVING: u32 = 2;
 
 /// The `f32` constants of the prelude: WGSL name (the Rust one) and value.
-const F32_CONSTANTS: [(&str, f32); 10] = [
+const F32_CONSTANTS: [(&str, f32); 11] = [
     ("BACKFACE_WEIGHT_FLOOR", ddgi_query::BACKFACE_WEIGHT_FLOOR),
     ("CHEBYSHEV_WEIGHT_FLOOR", ddgi_query::CHEBYSHEV_WEIGHT_FLOOR),
     ("MIN_PROBE_WEIGHT", ddgi_query::MIN_PROBE_WEIGHT),
@@ -169,6 +169,7 @@ const F32_CONSTANTS: [(&str, f32); 10] = [
     ("BACKFACE_DISTANCE_SCALE", probe_blend::BACKFACE_DISTANCE_SCALE),
     ("ADAPTIVE_HYSTERESIS_RISE", probe_blend::ADAPTIVE_HYSTERESIS_RISE),
     ("ADAPTIVE_HYSTERESIS_FLOOR", probe_blend::ADAPTIVE_HYSTERESIS_FLOOR),
+    ("BLEND_WEIGHT_EPSILON", probe_blend::BLEND_WEIGHT_EPSILON),
     ("SEED_VISIBLE_WEIGHT_MIN", probegi_field::probe_seeding::SEED_VISIBLE_WEIGHT_MIN),
 ];
 

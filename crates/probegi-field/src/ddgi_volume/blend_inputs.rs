@@ -98,7 +98,7 @@ impl DdgiVolume {
                     blend_irradiance_tile(
                         tile,
                         irr_n,
-                        &weights.irradiance_weights,
+                        weights.irradiance_weights(),
                         &ray_radiance[first..first + n],
                         (h * irr_scale, *k),
                         &rule,
@@ -112,7 +112,7 @@ impl DdgiVolume {
                 blend_distance_tile(
                     tile,
                     dist_n,
-                    &weights.distance_weights,
+                    weights.distance_weights(),
                     &ray_distance[first..first + n],
                     hysteresis_over_frames(h * vis_scale, *k),
                     clamp,
@@ -229,8 +229,6 @@ impl DdgiVolume {
             shadow,
             settings: &self.settings,
             ray_dirs: &frame.rays.dirs,
-            irradiance_weights: &frame.rays.irradiance_weights,
-            distance_weights: &frame.rays.distance_weights,
             probe_blend: base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect(),
             hysteresis_cap,
             irradiance_scale,

@@ -22,7 +22,7 @@ struct BlendParams {
     probes_per_row: u32,       // dispatch: probe = wid.y + wid.z * probes_per_row
     irradiance_first: u32,     // the volume's first texel in the irradiance buffer
     distance_first: u32,       // the volume's first texel in the distance buffer
-    weight_entries_first: u32, // where blend_weights' (ray, weight) entries start
+    weight_count: u32,         // u32s of blend_weights: texels × (1 + 2 × rays), texels = irradiance_interior² + distance_interior²
     firefly_clamp_ratio: f32,  // Timberdoodle PGI's firefly clamp; 0: off
     adaptive_hysteresis: u32,  // Timberdoodle PGI's adaptive per-texel hysteresis
     adaptive_tolerance: f32,   // the relative change its states tolerate
@@ -30,11 +30,13 @@ struct BlendParams {
 };
 
 @group(0) @binding(0) var<uniform> params: BlendParams;
-// The frame's sparse texel-to-ray weight tables, as probegi_core::probe_blend::BlendWeights
-// builds them (one owner of the weights, the same ray order as the CPU's sums):
-// irradiance offsets (irradiance_interior² + 1), distance offsets (distance_interior² + 1),
-// then from weight_entries_first (ray, weight bits) pairs, irradiance entries first.
-@group(0) @binding(1) var<storage, read> blend_weights: array<u32>;
+// The frame's sparse texel-to-ray weight tables, written by `blend_weights_table`
+// from the frame's ray directions: per texel (the irradiance tile's, then the
+// distance tile's; T in all) the entries of probegi_core::probe_blend::BlendWeights,
+// max(0, ω·r)^k ≥ BLEND_WEIGHT_EPSILON in ray order. First the T entry counts,
+// then from T the (ray, weight bits) pairs, entry e of texel t at pair e × T + t
+// (neighbouring texel threads read neighbouring pairs).
+@group(0) @binding(1) var<storage, read_write> blend_weights: array<u32>;
 // Per batch ray: xyz radiance, w the signed blend distance (backfaces −0.2·t,
 // misses the ray's max distance), as probe_shade.wgsl writes them.
 @group(0) @binding(2) var<storage, read> ray_results: array<vec4<f32>>;
@@ -47,6 +49,37 @@ struct BlendParams {
 // (probegi_core::probe_blend::adaptive_texel_hysteresis; read and written only
 // with params.adaptive_hysteresis).
 @group(0) @binding(6) var<storage, read_write> texel_hysteresis: array<f32>;
+// Every interior texel's unit direction (probegi_core::probe_blend::texel_directions):
+// the irradiance tile's, then the distance tile's.
+@group(0) @binding(7) var<storage, read> blend_texel_dirs: array<vec4<f32>>;
+// The frame's unit ray directions, shared by every probe.
+@group(0) @binding(8) var<storage, read> blend_ray_dirs: array<vec4<f32>>;
+
+// One thread per texel: probegi_core::probe_blend::BlendWeights::new's entries
+// for it, once a frame for every probe of the volume.
+@compute @workgroup_size(64)
+fn blend_weights_table(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let t = gid.x + gid.y * groups.x * 64u;
+    let ni2 = params.irradiance_interior * params.irradiance_interior;
+    let texels = ni2 + params.distance_interior * params.distance_interior;
+    if (t >= texels) { return; }
+    let exponent = select(params.distance_exponent, 1.0, t < ni2);
+    let d = blend_texel_dirs[t].xyz;
+    var count = 0u;
+    for (var r = 0u; r < params.rays_per_probe; r++) {
+        let dir = blend_ray_dirs[r].xyz;
+        // glam's Vec3::dot, in its order.
+        let c = d.x * dir.x + d.y * dir.y + d.z * dir.z;
+        if (c <= 0.0) { continue; }
+        let w = select(pow(c, exponent), c, exponent == 1.0);
+        if (w < BLEND_WEIGHT_EPSILON) { continue; }
+        let k = texels + 2u * (count * texels + t);
+        blend_weights[k] = r;
+        blend_weights[k + 1u] = bitcast<u32>(w);
+        count++;
+    }
+    blend_weights[t] = count;
+}
 
 // probegi_core::probe_atlas::interior_texel_index
 fn interior_texel_index(interior: u32, i: u32, j: u32) -> u32 {
@@ -86,7 +119,7 @@ fn probe_ray(first: u32, r: u32) -> vec4<f32> {
 
 // One workgroup per probe: its rays staged once, then every interior texel of
 // both atlases (irradiance first), 64 at a time. Each texel sums its weight
-// table's rays in the CPU's order, as one thread per texel did before.
+// table's entries in ray order, as the CPU sums its own table's.
 @compute @workgroup_size(64)
 fn blend_probe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let probe = probe_of(wid);
@@ -122,10 +155,9 @@ fn blend_irradiance_texel(probe: u32, first: u32, h0: f32, frames: u32, texel: u
     let n = params.irradiance_interior;
     var sum = vec3<f32>(0.0);
     var wsum = 0.0;
-    let e0 = blend_weights[texel];
-    let e1 = blend_weights[texel + 1u];
-    for (var e = e0; e < e1; e++) {
-        let k = params.weight_entries_first + 2u * e;
+    let texels = n * n + params.distance_interior * params.distance_interior;
+    for (var e = 0u; e < blend_weights[texel]; e++) {
+        let k = texels + 2u * (e * texels + texel);
         let w = bitcast<f32>(blend_weights[k + 1u]);
         let l = probe_ray(first, blend_weights[k]).xyz;
         if (is_finite3(l)) {
@@ -227,11 +259,11 @@ fn blend_distance_texel(probe: u32, first: u32, h0: f32, frames: u32, texel: u32
     let n = params.distance_interior;
     var sum = vec2<f32>(0.0);
     var wsum = 0.0;
-    let offsets = params.irradiance_interior * params.irradiance_interior + 1u;
-    let e0 = blend_weights[offsets + texel];
-    let e1 = blend_weights[offsets + texel + 1u];
-    for (var e = e0; e < e1; e++) {
-        let k = params.weight_entries_first + 2u * e;
+    let ni2 = params.irradiance_interior * params.irradiance_interior;
+    let texels = ni2 + n * n;
+    let t = ni2 + texel;
+    for (var e = 0u; e < blend_weights[t]; e++) {
+        let k = texels + 2u * (e * texels + t);
         let w = bitcast<f32>(blend_weights[k + 1u]);
         let signed = probe_ray(first, blend_weights[k]).w;
         if (signed != signed) { continue; } // NaN before min, which may drop it
