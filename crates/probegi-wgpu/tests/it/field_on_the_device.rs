@@ -135,6 +135,19 @@ fn a_field_kept_on_the_gpu_matches_the_host_blend_after_1_and_100_frames() {
 }
 
 #[test]
+fn jcgt_states_without_relocation_are_classified_on_the_gpu_as_on_the_host() {
+    // The chain with no relocation round: the classification traces every
+    // probe once and reads its own kept hits (`DeviceField::initialise`).
+    let settings = DdgiVolumeSettings {
+        probe_counts: UVec3::splat(8),
+        probe_rays_per_probe: 64,
+        probe_relocation: false,
+        ..Default::default()
+    };
+    run_pair(settings, 2, &[1], false, (1e-5, 1e-5));
+}
+
+#[test]
 fn a_field_kept_on_the_gpu_with_pgi_safeguards_matches_the_host_blend() {
     // Timberdoodle PGI's firefly clamp and adaptive per-texel hysteresis: the
     // device keeps its own per-texel states, the host its own; same bound.
