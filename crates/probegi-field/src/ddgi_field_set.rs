@@ -409,6 +409,7 @@ impl DdgiFieldSet {
         };
         self.last_pass_ms.clear();
         self.last_init_rays = 0;
+        self.volumes.iter_mut().for_each(|v| v.forget_init_hits());
         let t = std::time::Instant::now();
         let step = self.plan_init_or_update();
         self.time("ray_gen", t);
@@ -746,6 +747,13 @@ impl DdgiFieldSet {
         for (v, r) in self.volumes.iter().zip(results) {
             let probes = v.grid.probe_count();
             let Some(r) = r.as_ref().filter(|_| v.needs_init()) else { continue };
+            if r.classification.is_some() != v.init_classifies() {
+                return Err(SeamError::WrongLength {
+                    what: "init classifications",
+                    expected: v.init_classifies() as usize,
+                    got: r.classification.is_some() as usize,
+                });
+            }
             let states = r.classification.as_ref().map_or(probes, |c| c.len());
             if r.offsets_m.len() != probes || states != probes {
                 let got = if r.offsets_m.len() != probes { r.offsets_m.len() } else { states };

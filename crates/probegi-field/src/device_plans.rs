@@ -108,7 +108,9 @@ pub struct DeviceInitChain<'a> {
     /// The fixed unit directions every round traces (RTXGI's fixed rays).
     pub dirs: Vec<Vec3>,
     /// The classification after the relocation, with jcgt states: each pending
-    /// probe's rays at `probe × dirs.len()` of the kept hits.
+    /// probe's rays at `probe × dirs.len()` of the kept hits. Its probes'
+    /// `position_m` are where they start: the device classifies at the
+    /// positions its relocation rounds leave.
     pub classification: Option<DeviceClassification<'a>>,
 }
 

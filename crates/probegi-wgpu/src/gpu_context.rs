@@ -510,7 +510,6 @@ impl GpuContext {
         Ok(out)
     }
 
-    /// Copies `buffer` (a `MAP_READ | COPY_DST` staging buffer already filled) into a vector.
     /// Reads `buffers` back whole with one copy, in the same submission as
     /// whatever deferring recorded, and one wait.
     pub(crate) fn read_back_all(&self, buffers: &[&wgpu::Buffer]) -> Result<Vec<Vec<u8>>, GpuError> {
@@ -552,6 +551,7 @@ impl GpuContext {
             .collect()
     }
 
+    /// Copies `buffer` (a `MAP_READ | COPY_DST` staging buffer already filled) into a vector.
     pub(crate) fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
         // The copy into `buffer` may be among the recorded commands: they go first.
         self.flush();

@@ -278,8 +278,9 @@ impl WgpuProbeTracer {
         self
     }
 
-    /// Initialisation rounds this tracer ran on the device so far: (relocation
-    /// iterations, classification rounds).
+    /// Initialisation rounds this tracer ran on the device so far, summed over
+    /// the volumes of each chain: (relocation iterations recorded, every one
+    /// of the plan's even where all its probes had settled; classifications).
     pub fn init_rounds_on_device(&self) -> (u32, u32) {
         use std::sync::atomic::Ordering::Relaxed;
         (self.rounds_on_device[0].load(Relaxed), self.rounds_on_device[1].load(Relaxed))

@@ -109,6 +109,20 @@ impl DdgiVolume {
         self.finish_init();
     }
 
+    /// Forgets the hits an earlier exchange kept and did not finish with (a
+    /// new `begin_update`): they need not be where their probes are now.
+    pub(crate) fn forget_init_hits(&mut self) {
+        if !self.probe_init_hits.is_empty() {
+            self.probe_init_hits = Vec::new();
+            self.probe_init_hits_current.fill(false);
+        }
+    }
+
+    /// Whether this volume's initialisation ends with the jcgt classification.
+    pub(crate) fn init_classifies(&self) -> bool {
+        self.init_rounds().contains(&InitRound::Classification)
+    }
+
     /// Whether this volume's initialisation round `round` is a relocation iteration.
     pub(crate) fn init_round_is_relocation(&self, round: usize) -> bool {
         matches!(self.init_rounds().get(round), Some(InitRound::Relocation(_)))
@@ -249,6 +263,7 @@ impl DdgiVolume {
         let probes = self.grid.probe_count();
         if self.probe_init_hits.len() != probes * n {
             self.probe_init_hits = vec![ProbeRayHit::MISS; probes * n];
+            self.probe_init_hits_current.fill(false);
         }
         let pending = &self.probe_pending_init;
         let kept = self.probe_init_hits.par_chunks_mut(n).zip(self.probe_init_hits_current.par_iter_mut());
@@ -265,7 +280,9 @@ impl DdgiVolume {
                 let r = first as usize + i;
                 *o = hits[r];
                 if let (Some(normal_of), true) = (normal_of, o.distance_m > 0.0 && o.distance_m.is_finite()) {
-                    o.normal = normal_of(r);
+                    // As `submit_hits` reads a hit with a non-finite normal: a miss.
+                    let n = normal_of(r);
+                    *o = if n.is_finite() { ProbeRayHit { normal: n, ..*o } } else { ProbeRayHit::MISS };
                 }
             }
         });

@@ -153,3 +153,25 @@ fn the_classification_round_reads_settled_probes_hits_and_classifies_as_a_full_r
     let (traced, moved_last) = compare_paths(2);
     assert!(traced > 0 && traced <= moved_last, "{traced} probes traced, {moved_last} moved last");
 }
+
+#[test]
+fn a_device_init_result_must_carry_the_classification_its_plan_asked_for() {
+    let mut set = DdgiFieldSet::single(DdgiVolume::new(settings(5), (Vec3::ZERO, ROOM_M)));
+    set.begin_update(3, 0);
+    let plan = set.device_init_plan().expect("the first round");
+    let chain = plan[0].as_ref().expect("a pending volume");
+    assert_eq!((chain.relocation_rounds, chain.classification.is_some()), (5, true));
+    let probes = chain.grid.probe_count();
+    let result = |classification: Option<Vec<(bool, bool)>>| probegi_field::device_plans::DeviceInitResult {
+        offsets_m: vec![Vec3::ZERO; probes],
+        classification,
+        rays_traced: 0,
+    };
+    drop(plan);
+    assert!(set.submit_device_init(&[Some(result(None))]).is_err(), "jcgt states without their classification");
+    assert!(set.submit_device_init(&[Some(result(Some(vec![(false, true); probes - 1])))]).is_err(), "one short");
+    let step = set.submit_device_init(&[Some(result(Some(vec![(false, true); probes])))]).expect("a whole result");
+    assert_eq!(step, probegi_field::UpdateStep::TraceRays);
+    assert_eq!(set.ray_batch().kind, ProbeRayBatchKind::Update);
+    assert!(set.volumes()[0].probe_states.iter().all(|s| *s == ProbeState::NewlyVigilant));
+}
