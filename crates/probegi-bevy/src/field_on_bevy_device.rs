@@ -149,7 +149,7 @@ pub(crate) fn build(app: &mut App) {
 
 /// Makes the field again when the extracted scene changed in structure,
 /// takes its lights and live settings, then updates it.
-fn update_field(
+pub(crate) fn update_field(
     extracted: Option<Res<ExtractedProbegiScene>>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,

@@ -23,17 +23,19 @@
 //! Not in this version (crates/probegi-bevy/README.md tracks it): Bevy's PBR
 //! lit by the field. Until then the plugin changes nothing Bevy draws.
 
+pub mod field_lighting;
 pub mod field_on_bevy_device;
 pub mod light_units;
 pub mod scene_extract;
 
 use std::sync::Arc;
 
-use bevy::asset::{Asset, AssetEvent, AssetId};
+use bevy::asset::{Asset, AssetEvent, AssetId, UntypedAssetId};
 use bevy::prelude::*;
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, VolumeBlending};
 use probegi_scene::{LightKind, PunctualLight, Scene};
 
+pub use field_lighting::{ProbegiLit, ProbegiMaterial};
 pub use scene_extract::{ExtractError, MeshEntity, SceneBuilder};
 
 /// probegi's DDGI for Bevy: add it to an `App` beside Bevy's PBR plugins.
@@ -51,6 +53,7 @@ impl Plugin for ProbegiPlugin {
     fn build(&self, app: &mut App) {
         app.insert_resource(ProbegiScene { sky_radiance: self.sky_radiance, seed: self.seed, ..default() })
             .add_systems(PostUpdate, extract_scene.after(bevy::transform::TransformSystems::Propagate));
+        field_lighting::build(app);
     }
 
     /// The render world's part, once every plugin is in (`RenderPlugin`
@@ -161,12 +164,20 @@ type MeshQuery<'w, 's> = Query<
         &'static Mesh3d,
         &'static GlobalTransform,
         Option<&'static MeshMaterial3d<StandardMaterial>>,
+        Option<&'static MeshMaterial3d<ProbegiMaterial>>,
     ),
 >;
 
 /// A mesh entity's geometry or material changed.
-type GeometryChanged =
-    (With<Mesh3d>, Or<(Changed<GlobalTransform>, Changed<Mesh3d>, Changed<MeshMaterial3d<StandardMaterial>>)>);
+type GeometryChanged = (
+    With<Mesh3d>,
+    Or<(
+        Changed<GlobalTransform>,
+        Changed<Mesh3d>,
+        Changed<MeshMaterial3d<StandardMaterial>>,
+        Changed<MeshMaterial3d<ProbegiMaterial>>,
+    )>,
+);
 
 /// A light or a volume changed (or moved).
 type LightOrVolumeChanged = (
@@ -189,6 +200,7 @@ struct SceneChanges<'w, 's> {
     lights_or_volumes: Query<'w, 's, (), LightOrVolumeChanged>,
     removed_meshes: RemovedComponents<'w, 's, Mesh3d>,
     removed_materials: RemovedComponents<'w, 's, MeshMaterial3d<StandardMaterial>>,
+    removed_lit_materials: RemovedComponents<'w, 's, MeshMaterial3d<ProbegiMaterial>>,
     removed_lights: RemovedComponents<'w, 's, PointLight>,
     removed_spots: RemovedComponents<'w, 's, SpotLight>,
     removed_suns: RemovedComponents<'w, 's, DirectionalLight>,
@@ -196,6 +208,7 @@ struct SceneChanges<'w, 's> {
     removed_cascades: RemovedComponents<'w, 's, ProbegiCascades>,
     mesh_events: MessageReader<'w, 's, AssetEvent<Mesh>>,
     material_events: MessageReader<'w, 's, AssetEvent<StandardMaterial>>,
+    lit_material_events: MessageReader<'w, 's, AssetEvent<ProbegiMaterial>>,
     image_events: MessageReader<'w, 's, AssetEvent<Image>>,
 }
 
@@ -217,22 +230,24 @@ impl SceneChanges<'_, '_> {
     /// or a material nobody draws does not make the field again.
     fn read(&mut self, meshes_q: &MeshQuery, assets: &MeshAssets) -> (bool, bool) {
         let meshes: Vec<AssetId<Mesh>> = self.mesh_events.read().filter_map(event_asset).collect();
-        let materials: Vec<AssetId<StandardMaterial>> = self.material_events.read().filter_map(event_asset).collect();
+        let mut materials: Vec<UntypedAssetId> =
+            self.material_events.read().filter_map(event_asset).map(Into::into).collect();
+        materials.extend(self.lit_material_events.read().filter_map(event_asset).map(UntypedAssetId::from));
         let images: Vec<AssetId<Image>> = self.image_events.read().filter_map(event_asset).collect();
-        let used = |(m, mat): (&Mesh3d, Option<&MeshMaterial3d<StandardMaterial>>)| {
-            let material = mat.map(|h| h.0.id());
+        let used = |(_, _, m, _, plain, lit): MeshItem| {
+            let material = standard_material(plain, lit, assets);
             let textures = material
-                .and_then(|id| assets.materials.get(id))
+                .map(|(_, m)| m)
                 .into_iter()
                 .flat_map(|m| [&m.base_color_texture, &m.emissive_texture].into_iter().flatten().map(|h| h.id()));
             meshes.contains(&m.0.id())
-                || material.is_some_and(|id| materials.contains(&id))
+                || material.is_some_and(|(id, _)| materials.contains(&id))
                 || textures.into_iter().any(|t| images.contains(&t))
         };
-        let asset_changed = !(meshes.is_empty() && materials.is_empty() && images.is_empty())
-            && meshes_q.iter().any(|(_, _, m, _, mat)| used((m, mat)));
-        let geometry =
-            [self.removed_meshes.read().count(), self.removed_materials.read().count(), asset_changed as usize];
+        let asset_changed =
+            !(meshes.is_empty() && materials.is_empty() && images.is_empty()) && meshes_q.iter().any(used);
+        let removed_materials = self.removed_materials.read().count() + self.removed_lit_materials.read().count();
+        let geometry = [self.removed_meshes.read().count(), removed_materials, asset_changed as usize];
         let others = [
             self.removed_lights.read().count(),
             self.removed_spots.read().count(),
@@ -260,7 +275,31 @@ struct Lights<'w, 's> {
 struct MeshAssets<'w> {
     meshes: Res<'w, Assets<Mesh>>,
     materials: Res<'w, Assets<StandardMaterial>>,
+    lit_materials: Res<'w, Assets<ProbegiMaterial>>,
     images: Res<'w, Assets<Image>>,
+}
+
+type MeshItem<'a> = (
+    Entity,
+    Option<&'a Name>,
+    &'a Mesh3d,
+    &'a GlobalTransform,
+    Option<&'a MeshMaterial3d<StandardMaterial>>,
+    Option<&'a MeshMaterial3d<ProbegiMaterial>>,
+);
+
+/// A mesh entity's `StandardMaterial` with its asset's id: its own, else
+/// its [`ProbegiMaterial`]'s base (`None` while the asset is loading).
+fn standard_material<'a>(
+    plain: Option<&MeshMaterial3d<StandardMaterial>>,
+    lit: Option<&MeshMaterial3d<ProbegiMaterial>>,
+    assets: &'a MeshAssets,
+) -> Option<(UntypedAssetId, &'a StandardMaterial)> {
+    match (plain, lit) {
+        (Some(h), _) => assets.materials.get(&h.0).map(|m| (h.0.id().untyped(), m)),
+        (None, Some(h)) => assets.lit_materials.get(&h.0).map(|m| (h.0.id().untyped(), &m.base)),
+        (None, None) => None,
+    }
 }
 
 /// Keeps [`ProbegiScene`] up to date: the geometry rebuilt when it changed,
@@ -327,10 +366,10 @@ impl Volumes<'_, '_> {
 /// Every mesh entity's triangles and materials (no lights).
 fn build_geometry(meshes_q: &MeshQuery, assets: &MeshAssets, sky: glam::Vec3) -> Result<Scene, ExtractError> {
     let mut builder = SceneBuilder::new("bevy world", sky);
-    for (entity, name, mesh, transform, material) in meshes_q.iter() {
+    for (entity, name, mesh, transform, plain, lit) in meshes_q.iter() {
         let name = name.map_or_else(|| format!("{entity}"), |n| n.as_str().to_owned());
         let Some(mesh) = assets.meshes.get(&mesh.0) else { continue }; // still loading
-        let material = material.and_then(|m| assets.materials.get(&m.0).map(|mat| (m.0.id(), mat)));
+        let material = standard_material(plain, lit, assets);
         let world_from_local = glam::Mat4::from_cols_array(&transform.to_matrix().to_cols_array());
         builder.add_mesh(&MeshEntity { name, mesh, world_from_local, material }, &assets.images)?;
     }

@@ -29,7 +29,7 @@
 
 use std::collections::HashMap;
 
-use bevy::asset::{AssetId, Assets};
+use bevy::asset::{AssetId, Assets, UntypedAssetId};
 use bevy::image::Image;
 use bevy::mesh::{Indices, Mesh, PrimitiveTopology, VertexAttributeValues};
 use bevy::pbr::StandardMaterial;
@@ -65,8 +65,9 @@ pub struct MeshEntity<'a> {
     pub mesh: &'a Mesh,
     /// Its `GlobalTransform` as a matrix.
     pub world_from_local: Mat4,
-    /// Its `StandardMaterial`, if it has one.
-    pub material: Option<(AssetId<StandardMaterial>, &'a StandardMaterial)>,
+    /// Its `StandardMaterial` (a `ProbegiMaterial`'s base), if it has one,
+    /// with its asset's id.
+    pub material: Option<(UntypedAssetId, &'a StandardMaterial)>,
 }
 
 /// Builds a probegi scene up from mesh entities, sharing materials and
@@ -74,7 +75,7 @@ pub struct MeshEntity<'a> {
 #[derive(Default)]
 pub struct SceneBuilder {
     scene: Scene,
-    materials: HashMap<Option<AssetId<StandardMaterial>>, u32>,
+    materials: HashMap<Option<UntypedAssetId>, u32>,
     textures: HashMap<AssetId<Image>, usize>,
 }
 

@@ -36,7 +36,16 @@ use crate::shader_registry::{FIELD_GROUP, FIELD_QUERY, FIELD_STORAGE_BUFFERS, PA
 /// an engine to put before its own shader. The prelude's `const` names are
 /// taken.
 pub fn query_wgsl(group: u32) -> String {
-    crate::shader_registry::query_library(group)
+    crate::shader_registry::query_library(group, 0)
+}
+
+/// [`query_wgsl`] with its four bindings numbered from `first_binding`
+/// instead of 0, in the same order, for a group an engine shares with its
+/// own bindings (a Bevy material's group keeps 0–99 for the material:
+/// `probegi-bevy` puts the query at 100). Bind it with
+/// [`GpuDdgiField::layout_entries`] and [`GpuDdgiField::query_buffers`].
+pub fn query_wgsl_at(group: u32, first_binding: u32) -> String {
+    crate::shader_registry::query_library(group, first_binding)
 }
 
 /// One member volume; must match `DdgiVolume` in `ddgi_query.wgsl` (128 bytes).
@@ -277,8 +286,17 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
 impl GpuDdgiField {
     /// The layout of `ddgi_query.wgsl`'s group (compute and fragment stages).
     pub fn bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-        let entry = |binding: u32| wgpu::BindGroupLayoutEntry {
-            binding,
+        let entries = Self::layout_entries(0);
+        device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("ddgi query"), entries: &entries })
+    }
+
+    /// The query's layout entries, numbered from `first_binding` as
+    /// [`query_wgsl_at`] numbers them: read-only storage buffers seen by the
+    /// compute and fragment stages, in [`Self::query_buffers`]' order.
+    pub fn layout_entries(first_binding: u32) -> Vec<wgpu::BindGroupLayoutEntry> {
+        let entry = |b: u32| wgpu::BindGroupLayoutEntry {
+            binding: first_binding + b,
             visibility: wgpu::ShaderStages::COMPUTE | wgpu::ShaderStages::FRAGMENT,
             ty: wgpu::BindingType::Buffer {
                 ty: wgpu::BufferBindingType::Storage { read_only: true },
@@ -287,9 +305,14 @@ impl GpuDdgiField {
             },
             count: None,
         };
-        let entries: Vec<_> = (0..FIELD_STORAGE_BUFFERS).map(entry).collect();
-        device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("ddgi query"), entries: &entries })
+        (0..FIELD_STORAGE_BUFFERS).map(entry).collect()
+    }
+
+    /// The query's buffers (set, irradiance, distance, probes), for an
+    /// engine's own bind group ([`Self::layout_entries`]). They stay this
+    /// field's for its life: a field made again has new ones.
+    pub fn query_buffers(&self) -> [wgpu::Buffer; 4] {
+        self.buffers.clone()
     }
 
     /// Uploads every member of `set` (grids, settings, atlases, relocation offsets,

@@ -69,4 +69,7 @@ pub mod shadow_field;
 pub mod wgpu_field_backend;
 
 pub use gpu_context::{GpuContext, GpuCounters, GpuError};
+/// The wgpu this crate is built on: an engine that shares its device
+/// (`GpuContext::from_device`) or binds its buffers names the same types.
+pub use wgpu;
 pub use wgpu_field_backend::WgpuProbeTracer;

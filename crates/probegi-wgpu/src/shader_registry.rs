@@ -194,25 +194,36 @@ pub(crate) fn constants_prelude() -> String {
     out
 }
 
-/// One file's text, the query's group placeholder filled with `field_group`.
-fn file_text(file: &WgslFile, field_group: u32) -> String {
-    let text = file.source.replace("DDGI_GROUP", &field_group.to_string());
-    format!("// ---- {} ----\n{text}\n", file.name)
+/// One file's text (`name`, `source`), the query's group placeholder filled
+/// with `field_group`.
+fn file_text(name: &str, source: &str, field_group: u32) -> String {
+    let text = source.replace("DDGI_GROUP", &field_group.to_string());
+    format!("// ---- {name} ----\n{text}\n")
 }
 
 /// `pass`'s module source: the prelude, then its files in order.
 pub(crate) fn compose(pass: &PassShader) -> String {
     let mut out = constants_prelude();
     for file in pass.files {
-        out.push_str(&file_text(file, FIELD_GROUP));
+        out.push_str(&file_text(file.name, file.source, FIELD_GROUP));
     }
     out
 }
 
 /// The query library for an engine's shader: the prelude and `ddgi_query.wgsl`
-/// with its bindings in `group`.
-pub(crate) fn query_library(group: u32) -> String {
-    constants_prelude() + &file_text(&DDGI_QUERY, group)
+/// with its bindings in `group`, numbered from `first_binding` (their order
+/// kept: set, irradiance, distance, probes).
+pub(crate) fn query_library(group: u32, first_binding: u32) -> String {
+    let mut source = DDGI_QUERY.source.to_owned();
+    for b in 0..FIELD_STORAGE_BUFFERS {
+        // Each replacement drops the placeholder, so a later binding number
+        // never matches an earlier one's result.
+        source = source.replace(
+            &format!("@group(DDGI_GROUP) @binding({b})"),
+            &format!("@group({group}) @binding({})", first_binding + b),
+        );
+    }
+    constants_prelude() + &file_text(DDGI_QUERY.name, &source, group)
 }
 
 #[cfg(test)]
@@ -350,6 +361,24 @@ mod tests {
                 let used = storage[group as usize];
                 assert!(used == 0 || used == count, "{}: group {group} binds {used} storage buffers", pass.label);
             }
+        }
+    }
+
+    #[test]
+    fn the_engine_query_library_binds_where_it_is_asked_to() {
+        for (group, first) in [(0, 0), (3, 100), (1, 2)] {
+            let source = query_library(group, first);
+            let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{group}/{first}: {e}"));
+            let mut bound: Vec<(String, u32, u32)> = module
+                .global_variables
+                .iter()
+                .filter_map(|(_, g)| Some((g.name.clone()?, g.binding.as_ref()?.group, g.binding.as_ref()?.binding)))
+                .collect();
+            bound.sort_by_key(|b| b.2);
+            let names = ["ddgi_set", "ddgi_irradiance_atlas", "ddgi_distance_atlas", "ddgi_probes"];
+            let want: Vec<(String, u32, u32)> =
+                names.iter().zip(first..).map(|(n, b)| (n.to_string(), group, b)).collect();
+            assert_eq!(bound, want, "group {group}, first binding {first}");
         }
     }
 }

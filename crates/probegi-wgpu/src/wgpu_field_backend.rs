@@ -332,6 +332,14 @@ impl WgpuProbeTracer {
         self.field.lock().ok().and_then(|f| f.as_ref().map(|f| f.bytes())).unwrap_or(0)
     }
 
+    /// The resident field's query buffers (`GpuDdgiField::query_buffers`),
+    /// for an engine's shaders that read the field where the update writes
+    /// it (`ddgi_query::query_wgsl_at`); `None` before the first update on
+    /// the device. They change only when the field is uploaded again.
+    pub fn resident_query_buffers(&self) -> Option<[wgpu::Buffer; 4]> {
+        self.field.lock().ok().and_then(|f| f.as_ref().map(GpuDdgiField::query_buffers))
+    }
+
     /// Records and submits the blend and border passes of every member of
     /// `plan` that blends this frame, over the shade pass's `results` in the
     /// resident field `f` (with `timer`, member i's passes at slots from

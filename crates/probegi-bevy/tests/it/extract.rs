@@ -10,7 +10,7 @@ use bevy::image::Image;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
-use probegi_bevy::{ProbegiPlugin, ProbegiScene, ProbegiVolume};
+use probegi_bevy::{ProbegiLit, ProbegiMaterial, ProbegiPlugin, ProbegiScene, ProbegiVolume};
 use probegi_scene::LightKind;
 use probegi_scene::material::AlphaMode as ProbegiAlpha;
 
@@ -245,4 +245,30 @@ fn only_the_assets_mesh_entities_use_make_the_geometry_again() {
     let s = scene(&app);
     assert_eq!(s.geometry_generation, g + 1, "the box's material changed");
     assert!(s.scene.materials.iter().any(|m| m.base_color_factor == glam::Vec3::new(0.0, 1.0, 0.0)));
+}
+
+#[test]
+fn a_probegi_material_is_traced_as_its_base_and_its_changes_count() {
+    let mut app = app();
+    let world = app.world_mut();
+    let cube = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(1.0, 1.0, 1.0));
+    let base = StandardMaterial { base_color: Color::srgb(1.0, 0.0, 0.0), perceptual_roughness: 0.4, ..default() };
+    let lit = world.resource_mut::<Assets<ProbegiMaterial>>().add(ProbegiMaterial { base, extension: ProbegiLit });
+    world.spawn((Mesh3d(cube), MeshMaterial3d(lit.clone()), Transform::default()));
+    app.update();
+    let s = scene(&app);
+    assert!(s.error.is_none(), "{:?}", s.error);
+    assert_eq!(s.scene.mesh.triangles.len(), 12);
+    assert_eq!(s.scene.materials.len(), 1, "the cube's material, not the default");
+    let m = &s.scene.materials[0];
+    assert_eq!((m.base_color_factor, m.roughness), (glam::Vec3::new(1.0, 0.0, 0.0), 0.4));
+    let g = s.geometry_generation;
+    // Its base changed: the geometry is made again with the new colour.
+    if let Some(mut m) = app.world_mut().resource_mut::<Assets<ProbegiMaterial>>().get_mut(&lit) {
+        m.base.base_color = Color::srgb(0.0, 0.0, 1.0);
+    }
+    app.update();
+    let s = scene(&app);
+    assert_eq!(s.geometry_generation, g + 1);
+    assert_eq!(s.scene.materials[0].base_color_factor, glam::Vec3::new(0.0, 0.0, 1.0));
 }

@@ -1,0 +1,5 @@
+//! probegi-bevy's tests, one binary (Bevy's test binaries are large to link).
+
+mod extract;
+mod field_lighting;
+mod field_on_bevy_device;
