@@ -81,6 +81,7 @@ pub struct ExtractedProbegiScene {
     sky_radiance: glam::Vec3,
     geometry_generation: u64,
     seed: u64,
+    object_poses: Vec<glam::Mat4>,
 }
 
 impl ExtractResource<RenderApp> for ExtractedProbegiScene {
@@ -96,6 +97,7 @@ impl ExtractResource<RenderApp> for ExtractedProbegiScene {
             sky_radiance: glam::Vec3::from_array(source.sky_radiance.to_array()),
             geometry_generation: source.geometry_generation,
             seed: source.seed,
+            object_poses: source.object_poses.clone(),
         }
     }
 }
@@ -118,6 +120,8 @@ pub struct ProbegiField {
     geometry_generation: u64,
     seed: u64,
     detector: SceneChangeDetector,
+    /// The moving objects' poses as last placed (`ProbegiScene::object_poses`).
+    object_poses: Vec<glam::Mat4>,
     /// Updates run since the field was made.
     pub frame: u32,
 }
@@ -200,17 +204,22 @@ fn needs_rebuild(f: &ProbegiField, x: &ExtractedProbegiScene) -> bool {
         || f.volumes.iter().zip(&x.volumes).any(|(old, new)| with_live_settings(new, old) != *old)
 }
 
-/// This frame's lights and sky (posed on the device, the detector told) and
-/// live settings (validated as the field's are).
+/// This frame's lights, sky and moving objects (posed on the device, the
+/// detector told) and live settings (validated as the field's are).
 fn take_changes(f: &mut ProbegiField, x: &ExtractedProbegiScene) -> Result<(), String> {
-    if f.scene.lights != x.lights || f.scene.sky_radiance != x.sky_radiance {
+    let objects_moved = f.object_poses != x.object_poses;
+    if f.scene.lights != x.lights || f.scene.sky_radiance != x.sky_radiance || objects_moved {
         let lights = std::mem::replace(&mut f.scene.lights, x.lights.clone());
         let sky = std::mem::replace(&mut f.scene.sky_radiance, x.sky_radiance);
+        if objects_moved {
+            place_objects(&mut f.scene, x)?;
+        }
         if let Err(e) = f.tracer.pose_scene(&f.scene, f.frame as f32) {
             // Kept as they were, so the next frame tries again.
             (f.scene.lights, f.scene.sky_radiance) = (lights, sky);
-            return Err(format!("the lights could not be posed: {e}"));
+            return Err(format!("the lights and moving objects could not be posed: {e}"));
         }
+        f.object_poses.clone_from(&x.object_poses);
     }
     if let Some(t) = x.tracking_target {
         // The cascades follow their entity (whole cells: seed 004 §7.3).
@@ -227,6 +236,20 @@ fn take_changes(f: &mut ProbegiField, x: &ExtractedProbegiScene) -> Result<(), S
         }
         f.volumes = x.volumes.clone();
     }
+    Ok(())
+}
+
+/// Sets each moving object's key to its pose and poses its vertices from the
+/// rest geometry (the device's TLAS and vertices follow in `pose_scene`).
+fn place_objects(scene: &mut Scene, x: &ExtractedProbegiScene) -> Result<(), String> {
+    if scene.objects.len() != x.object_poses.len() {
+        return Err(format!("{} moving objects, {} poses", scene.objects.len(), x.object_poses.len()));
+    }
+    for (o, pose) in scene.objects.iter_mut().zip(&x.object_poses) {
+        let key = crate::scene_extract::moving_key(*pose).ok_or_else(|| format!("{}: a pose no key gives", o.name))?;
+        o.animation.keyframes = vec![key];
+    }
+    scene.pose_objects_from(&x.geometry, 0.0);
     Ok(())
 }
 
@@ -261,6 +284,7 @@ fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField
         geometry_generation: x.geometry_generation,
         seed: x.seed,
         detector,
+        object_poses: vec![glam::Mat4::IDENTITY; x.object_poses.len()],
         frame: 0,
     })
 }

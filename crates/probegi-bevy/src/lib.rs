@@ -20,14 +20,21 @@
 //!   volume's live settings change the running field; other changes make it
 //!   again.
 //!
-//! Not in this version (crates/probegi-bevy/README.md tracks it): Bevy's PBR
-//! lit by the field. Until then the plugin changes nothing Bevy draws.
+//! - [`ProbegiMaterial`] (`StandardMaterial` extended by [`ProbegiLit`]) is
+//!   Bevy's PBR with its diffuse indirect light taken from the field
+//!   ([`field_lighting`]);
+//! - meshes that move are moving objects, posed on the device each frame
+//!   ([`ProbegiDynamic`]).
+//!
+//! Add the plugin after `DefaultPlugins` (its material needs Bevy's render
+//! app). crates/probegi-bevy/README.md lists what is not built yet.
 
 pub mod field_lighting;
 pub mod field_on_bevy_device;
 pub mod light_units;
 pub mod scene_extract;
 
+use std::collections::HashSet;
 use std::sync::Arc;
 
 use bevy::asset::{Asset, AssetEvent, AssetId, UntypedAssetId};
@@ -126,6 +133,14 @@ impl ProbegiCascades {
     }
 }
 
+/// A mesh that moves: traced from its first frame as a moving object
+/// (probegi's top level: its own BLAS, placed every frame by a TLAS
+/// instance), so moving it never makes the geometry again. Without it, a
+/// mesh that moves is made a moving object at its first move, which makes
+/// the geometry (and the field) again once.
+#[derive(Component, Clone, Copy, Debug, Default)]
+pub struct ProbegiDynamic;
+
 /// The probegi world the plugin keeps from the ECS.
 #[derive(Resource, Default)]
 pub struct ProbegiScene {
@@ -153,6 +168,20 @@ pub struct ProbegiScene {
     pub sky_radiance: Vec3,
     /// The field's seed ([`ProbegiPlugin::seed`]).
     pub seed: u64,
+    /// The moving objects' entities, in `scene.objects` order: the
+    /// [`ProbegiDynamic`] meshes, and each mesh that moved after the geometry
+    /// was built with it (made again once, with it as an object).
+    pub moving: Vec<Entity>,
+    /// Each moving object's transform from its rest pose (as `scene` holds
+    /// it) to where its entity is now; posed on the device each frame
+    /// without making the geometry again.
+    pub object_poses: Vec<glam::Mat4>,
+    /// The moving objects' transforms when the geometry was built.
+    rest: Vec<glam::Mat4>,
+    /// The mesh entities in the geometry.
+    known: HashSet<Entity>,
+    /// Meshes that moved after they were built still: moving from then on.
+    promoted: HashSet<Entity>,
 }
 
 type MeshQuery<'w, 's> = Query<
@@ -165,14 +194,17 @@ type MeshQuery<'w, 's> = Query<
         &'static GlobalTransform,
         Option<&'static MeshMaterial3d<StandardMaterial>>,
         Option<&'static MeshMaterial3d<ProbegiMaterial>>,
+        Has<ProbegiDynamic>,
     ),
 >;
 
 /// A mesh entity's geometry or material changed.
+/// (A moved mesh is sorted out apart: a moving object is posed, a still one
+/// makes the geometry again and moves as an object from then on.)
 type GeometryChanged = (
     With<Mesh3d>,
     Or<(
-        Changed<GlobalTransform>,
+        Added<ProbegiDynamic>,
         Changed<Mesh3d>,
         Changed<MeshMaterial3d<StandardMaterial>>,
         Changed<MeshMaterial3d<ProbegiMaterial>>,
@@ -197,6 +229,7 @@ type LightOrVolumeChanged = (
 #[derive(bevy::ecs::system::SystemParam)]
 struct SceneChanges<'w, 's> {
     geometry: Query<'w, 's, (), GeometryChanged>,
+    moved: Query<'w, 's, Entity, (With<Mesh3d>, Changed<GlobalTransform>)>,
     lights_or_volumes: Query<'w, 's, (), LightOrVolumeChanged>,
     removed_meshes: RemovedComponents<'w, 's, Mesh3d>,
     removed_materials: RemovedComponents<'w, 's, MeshMaterial3d<StandardMaterial>>,
@@ -234,7 +267,7 @@ impl SceneChanges<'_, '_> {
             self.material_events.read().filter_map(event_asset).map(Into::into).collect();
         materials.extend(self.lit_material_events.read().filter_map(event_asset).map(UntypedAssetId::from));
         let images: Vec<AssetId<Image>> = self.image_events.read().filter_map(event_asset).collect();
-        let used = |(_, _, m, _, plain, lit): MeshItem| {
+        let used = |(_, _, m, _, plain, lit, _): MeshItem| {
             let material = standard_material(plain, lit, assets);
             let textures = material
                 .map(|(_, m)| m)
@@ -286,6 +319,7 @@ type MeshItem<'a> = (
     &'a GlobalTransform,
     Option<&'a MeshMaterial3d<StandardMaterial>>,
     Option<&'a MeshMaterial3d<ProbegiMaterial>>,
+    bool,
 );
 
 /// A mesh entity's `StandardMaterial` with its asset's id: its own, else
@@ -303,7 +337,8 @@ fn standard_material<'a>(
 }
 
 /// Keeps [`ProbegiScene`] up to date: the geometry rebuilt when it changed,
-/// the lights and volumes read again when they did.
+/// the moving objects' poses and the lights and volumes read again when
+/// they did.
 fn extract_scene(
     mut changes: SceneChanges,
     meshes_q: MeshQuery,
@@ -313,29 +348,112 @@ fn extract_scene(
     mut out: ResMut<ProbegiScene>,
 ) {
     let first = out.generation == 0;
-    let (geometry, others) = changes.read(&meshes_q, &assets);
-    if !(first || geometry || others) {
-        return;
-    }
-    if first || geometry {
-        match build_geometry(&meshes_q, &assets, vec3(out.sky_radiance)) {
-            Ok(scene) => {
-                out.scene = Arc::new(scene);
-                out.geometry_generation += 1;
-                out.error = None;
-            }
-            Err(e) => {
-                if out.error.as_ref() != Some(&e) {
-                    error!("{e}");
-                }
-                out.error = Some(e);
+    let (mut geometry, others) = changes.read(&meshes_q, &assets);
+    let mut moved = false;
+    for e in changes.moved.iter() {
+        if out.moving.contains(&e) {
+            moved = true;
+        } else {
+            // A new mesh, or a still one that moved: a moving object from now on.
+            geometry = true;
+            if out.known.contains(&e) {
+                out.promoted.insert(e);
             }
         }
+    }
+    if !(first || geometry || others || moved) {
+        return;
+    }
+    if moved && !(first || geometry) {
+        match object_poses(&out, &meshes_q) {
+            Some(poses) => out.object_poses = poses,
+            None => geometry = true,
+        }
+    }
+    if first || geometry {
+        rebuild_geometry(&meshes_q, &assets, &mut out);
     }
     out.lights = punctual_lights(&lights);
     let bounds = out.scene.bounds();
     (out.volumes, out.blending, out.tracking_target) = volumes.settings(bounds);
     out.generation += 1;
+}
+
+/// Builds the geometry again into `out` (the last good one stays on an error).
+fn rebuild_geometry(meshes_q: &MeshQuery, assets: &MeshAssets, out: &mut ProbegiScene) {
+    match build_geometry(meshes_q, assets, vec3(out.sky_radiance), &out.promoted) {
+        Ok(built) => {
+            out.object_poses = vec![glam::Mat4::IDENTITY; built.moving.len()];
+            out.scene = Arc::new(built.scene);
+            (out.moving, out.rest, out.known) = (built.moving, built.rest, built.known);
+            out.geometry_generation += 1;
+            out.error = None;
+        }
+        Err(e) => {
+            if out.error.as_ref() != Some(&e) {
+                error!("{e}");
+            }
+            out.error = Some(e);
+        }
+    }
+}
+
+/// Each moving object's transform from its rest pose to now; `None` where
+/// one is gone or cannot be a key (`scene_extract::moving_key`).
+fn object_poses(out: &ProbegiScene, meshes_q: &MeshQuery) -> Option<Vec<glam::Mat4>> {
+    out.moving
+        .iter()
+        .zip(&out.rest)
+        .map(|(e, rest)| {
+            let (_, _, _, t, ..) = meshes_q.get(*e).ok()?;
+            let pose = world_from_local(t) * rest.inverse();
+            scene_extract::moving_key(pose).map(|_| pose)
+        })
+        .collect()
+}
+
+/// A `GlobalTransform` as probegi's matrix.
+fn world_from_local(t: &GlobalTransform) -> glam::Mat4 {
+    glam::Mat4::from_cols_array(&t.to_matrix().to_cols_array())
+}
+
+/// The geometry and what the moving objects were built from.
+struct BuiltGeometry {
+    scene: Scene,
+    /// The moving objects' entities, in `scene.objects` order.
+    moving: Vec<Entity>,
+    /// Their transforms as built (their rest poses).
+    rest: Vec<glam::Mat4>,
+    /// Every mesh entity in it.
+    known: HashSet<Entity>,
+}
+
+/// Every mesh entity's triangles and materials (no lights): the
+/// [`ProbegiDynamic`] ones and those in `promoted` as moving objects.
+fn build_geometry(
+    meshes_q: &MeshQuery,
+    assets: &MeshAssets,
+    sky: glam::Vec3,
+    promoted: &HashSet<Entity>,
+) -> Result<BuiltGeometry, ExtractError> {
+    let mut builder = SceneBuilder::new("bevy world", sky);
+    let (mut moving, mut rest, mut known) = (vec![], vec![], HashSet::new());
+    for (entity, name, mesh, transform, plain, lit, dynamic) in meshes_q.iter() {
+        let name = name.map_or_else(|| format!("{entity}"), |n| n.as_str().to_owned());
+        let Some(mesh) = assets.meshes.get(&mesh.0) else { continue }; // still loading
+        let material = standard_material(plain, lit, assets);
+        let world_from_local = world_from_local(transform);
+        let entity_mesh = MeshEntity { name, mesh, world_from_local, material };
+        if dynamic || promoted.contains(&entity) {
+            builder.add_moving_mesh(&entity_mesh, &assets.images)?;
+            moving.push(entity);
+            rest.push(world_from_local);
+        } else {
+            builder.add_mesh(&entity_mesh, &assets.images)?;
+        }
+        known.insert(entity);
+    }
+    Ok(BuiltGeometry { scene: builder.finish(), moving, rest, known })
 }
 
 /// The entities that place the field's volumes.
@@ -361,19 +479,6 @@ impl Volumes<'_, '_> {
         let boxes = self.boxes.iter().map(|(t, v)| volume_settings(t, v)).collect();
         (boxes, VolumeBlending::Density, None)
     }
-}
-
-/// Every mesh entity's triangles and materials (no lights).
-fn build_geometry(meshes_q: &MeshQuery, assets: &MeshAssets, sky: glam::Vec3) -> Result<Scene, ExtractError> {
-    let mut builder = SceneBuilder::new("bevy world", sky);
-    for (entity, name, mesh, transform, plain, lit) in meshes_q.iter() {
-        let name = name.map_or_else(|| format!("{entity}"), |n| n.as_str().to_owned());
-        let Some(mesh) = assets.meshes.get(&mesh.0) else { continue }; // still loading
-        let material = standard_material(plain, lit, assets);
-        let world_from_local = glam::Mat4::from_cols_array(&transform.to_matrix().to_cols_array());
-        builder.add_mesh(&MeshEntity { name, mesh, world_from_local, material }, &assets.images)?;
-    }
-    Ok(builder.finish())
 }
 
 /// A volume's settings with its entity's box as `volume_bounds_m`.

@@ -38,6 +38,7 @@ use glam::{Mat3, Mat4, Vec2, Vec3};
 use probegi_scene::material::{AlphaMode, SpecularModel};
 use probegi_scene::texture::{Sampler, Texture};
 use probegi_scene::{Material, Scene};
+use probegi_scene::{ObjectAnimation, SceneObject, TransformKeyframe};
 
 /// Why part of the ECS could not become probegi geometry: the entity (its
 /// `Name`, else its id) and what was wrong.
@@ -135,6 +136,28 @@ impl SceneBuilder {
             }
         }
         Ok(())
+    }
+
+    /// Adds `entity` as a moving object (probegi's top level: its own BLAS,
+    /// placed every frame by a TLAS instance): its triangles in world space
+    /// as they are now, its rest pose, and an animation of one key that
+    /// [`moving_key`] sets to each frame's pose. Returns the object's index.
+    pub fn add_moving_mesh(&mut self, entity: &MeshEntity<'_>, images: &Assets<Image>) -> Result<usize, ExtractError> {
+        let (first_triangle, first_vertex) = (self.scene.mesh.triangles.len(), self.scene.mesh.positions.len());
+        self.add_mesh(entity, images)?;
+        let mesh = &self.scene.mesh;
+        let rest_key = TransformKeyframe { frame: 0.0, translation: Some(Vec3::ZERO), rotation: None, scale: None };
+        self.scene.objects.push(SceneObject {
+            name: entity.name.clone(),
+            first_triangle: first_triangle as u32,
+            triangle_count: (mesh.triangles.len() - first_triangle) as u32,
+            first_vertex: first_vertex as u32,
+            vertex_count: (mesh.positions.len() - first_vertex) as u32,
+            pivot_m: Vec3::ZERO,
+            animation: ObjectAnimation { keyframes: vec![rest_key], ..Default::default() },
+            placement: Mat4::IDENTITY,
+        });
+        Ok(self.scene.objects.len() - 1)
     }
 
     /// The scene built so far.
@@ -274,4 +297,23 @@ fn add_face_normal(mesh: &mut probegi_scene::mesh::Mesh, [a, b, c]: [u32; 3]) {
     for i in [a, b, c] {
         mesh.normals[i as usize] += n;
     }
+}
+
+/// The one key of a moving object (about the origin, as
+/// [`SceneBuilder::add_moving_mesh`] sets its pivot) that places it by
+/// `world_from_rest`: the entity's transform now times the inverse of its
+/// transform when the geometry was built. `None` where that is not a
+/// translation, rotation and positive scale (not finite, mirroring, or
+/// sheared by a parent's non-uniform scale): the geometry is then made again.
+pub fn moving_key(world_from_rest: Mat4) -> Option<TransformKeyframe> {
+    let (scale, rotation, translation) = world_from_rest.to_scale_rotation_translation();
+    let rebuilt = Mat4::from_scale_rotation_translation(scale, rotation, translation);
+    let exact = rebuilt
+        .abs_diff_eq(world_from_rest, 1e-4 * world_from_rest.abs().to_cols_array().iter().fold(1.0, |m, x| x.max(m)));
+    (world_from_rest.is_finite() && scale.cmpgt(Vec3::ZERO).all() && exact).then_some(TransformKeyframe {
+        frame: 0.0,
+        translation: Some(translation),
+        rotation: Some(rotation),
+        scale: Some(scale),
+    })
 }

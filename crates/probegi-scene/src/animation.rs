@@ -434,4 +434,35 @@ mod tests {
                 .contains("after the previous")
         );
     }
+
+    #[test]
+    fn a_scene_poses_its_own_objects_keys_from_the_rest_pose() {
+        use crate::Scene;
+        let mut rest = Scene::default();
+        rest.mesh.positions = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(5.0, 5.0, 5.0)];
+        rest.mesh.normals = vec![Vec3::Z; 4];
+        rest.mesh.triangles = vec![[0, 1, 2]];
+        let still = SceneObject { first_vertex: 0, vertex_count: 3, triangle_count: 1, ..object(Default::default()) };
+        rest.objects = vec![still];
+        let mut posed = rest.clone();
+        // The engine's key for this frame: a quarter turn about z, then 2 m up.
+        let key = TransformKeyframe {
+            frame: 0.0,
+            translation: Some(Vec3::new(0.0, 0.0, 2.0)),
+            rotation: Some(Quat::from_rotation_z(std::f32::consts::FRAC_PI_2)),
+            scale: None,
+        };
+        posed.objects[0].animation = ObjectAnimation { keyframes: vec![key], ..Default::default() };
+        posed.objects[0].pivot_m = Vec3::ZERO;
+        posed.pose_objects_from(&rest, 7.0);
+        let want = [Vec3::new(0.0, 0.0, 2.0), Vec3::new(0.0, 1.0, 2.0), Vec3::new(-1.0, 0.0, 2.0)];
+        for (p, w) in posed.mesh.positions.iter().zip(want) {
+            assert!(p.abs_diff_eq(w, 1e-6), "{p} against {w}");
+        }
+        assert_eq!(posed.mesh.positions[3], Vec3::new(5.0, 5.0, 5.0), "a vertex outside the object stays");
+        assert!(posed.mesh.normals[0].abs_diff_eq(Vec3::Z, 1e-6));
+        // Posed again with the same key, from the rest pose: not compounded.
+        posed.pose_objects_from(&rest, 8.0);
+        assert!(posed.mesh.positions[1].abs_diff_eq(want[1], 1e-6));
+    }
 }

@@ -508,18 +508,36 @@ impl Scene {
             *sky = b.at_frame(frame);
         }
         for o in base.objects.iter().filter(|o| o.is_animated()) {
-            let xf = o.world_from_rest(frame);
-            let normal_matrix = glam::Mat3::from(xf.matrix3).inverse().transpose();
-            for v in o.vertices() {
-                self.mesh.positions[v] = xf.transform_point3(base.mesh.positions[v]);
-                self.mesh.normals[v] = (normal_matrix * base.mesh.normals[v]).normalize_or(Vec3::Y);
+            self.pose_object(o, base, frame);
+        }
+    }
+
+    /// Poses this scene's own moving objects at `frame` by their animations
+    /// (which may differ from `rest`'s: an engine that sets each object's
+    /// pose as its key), their vertices, normals and tangents from `rest`'s
+    /// rest pose. `rest` must hold the same mesh.
+    pub fn pose_objects_from(&mut self, rest: &Scene, frame: f32) {
+        for i in 0..self.objects.len() {
+            if self.objects[i].is_animated() {
+                let o = self.objects[i].clone();
+                self.pose_object(&o, rest, frame);
             }
-            if !base.mesh.tangents.is_empty() {
-                let xf = glam::Mat4::from(xf);
-                let mirror = if xf.determinant() < 0.0 { -1.0 } else { 1.0 };
-                for v in o.vertices() {
-                    self.mesh.tangents[v] = crate::mesh::transformed_tangent(xf, base.mesh.tangents[v], mirror);
-                }
+        }
+    }
+
+    /// `o`'s vertices, normals and tangents at `frame`, from `rest`'s.
+    fn pose_object(&mut self, o: &crate::animation::SceneObject, rest: &Scene, frame: f32) {
+        let xf = o.world_from_rest(frame);
+        let normal_matrix = glam::Mat3::from(xf.matrix3).inverse().transpose();
+        for v in o.vertices() {
+            self.mesh.positions[v] = xf.transform_point3(rest.mesh.positions[v]);
+            self.mesh.normals[v] = (normal_matrix * rest.mesh.normals[v]).normalize_or(Vec3::Y);
+        }
+        if !rest.mesh.tangents.is_empty() {
+            let xf = glam::Mat4::from(xf);
+            let mirror = if xf.determinant() < 0.0 { -1.0 } else { 1.0 };
+            for v in o.vertices() {
+                self.mesh.tangents[v] = crate::mesh::transformed_tangent(xf, rest.mesh.tangents[v], mirror);
             }
         }
     }

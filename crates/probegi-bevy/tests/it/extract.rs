@@ -10,7 +10,7 @@ use bevy::image::Image;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
-use probegi_bevy::{ProbegiLit, ProbegiMaterial, ProbegiPlugin, ProbegiScene, ProbegiVolume};
+use probegi_bevy::{ProbegiDynamic, ProbegiLit, ProbegiMaterial, ProbegiPlugin, ProbegiScene, ProbegiVolume};
 use probegi_scene::LightKind;
 use probegi_scene::material::AlphaMode as ProbegiAlpha;
 
@@ -271,4 +271,45 @@ fn a_probegi_material_is_traced_as_its_base_and_its_changes_count() {
     let s = scene(&app);
     assert_eq!(s.geometry_generation, g + 1);
     assert_eq!(s.scene.materials[0].base_color_factor, glam::Vec3::new(0.0, 0.0, 1.0));
+}
+
+#[test]
+fn moving_meshes_are_posed_without_making_the_geometry_again() {
+    let mut app = app();
+    spawn_world(&mut app);
+    let world = app.world_mut();
+    let cube = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(0.5, 0.5, 0.5));
+    let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
+    let start = Transform::from_xyz(0.0, 1.0, 0.0);
+    let ball = world.spawn((Mesh3d(cube), MeshMaterial3d(white), start, ProbegiDynamic)).id();
+    app.update();
+    let s = scene(&app);
+    assert_eq!(s.moving, vec![ball], "the ProbegiDynamic mesh is a moving object from the start");
+    assert_eq!(s.scene.objects.len(), 1);
+    assert_eq!(s.scene.objects[0].triangle_count, 12);
+    assert_eq!(s.object_poses, vec![glam::Mat4::IDENTITY]);
+    let g = s.geometry_generation;
+    // It moves and turns: posed, the geometry kept.
+    let to = Transform::from_xyz(2.0, 1.0, -1.0).with_rotation(Quat::from_rotation_y(0.5));
+    *app.world_mut().get_mut::<Transform>(ball).expect("transform") = to;
+    app.update();
+    let s = scene(&app);
+    assert_eq!(s.geometry_generation, g, "a moving object's move keeps the geometry");
+    let m = |t: Transform| glam::Mat4::from_cols_array(&t.to_matrix().to_cols_array());
+    let want = m(to) * m(start).inverse();
+    assert!(s.object_poses[0].abs_diff_eq(want, 1e-5), "{} against {want}", s.object_poses[0]);
+    // A still mesh that moves: the geometry made again once, with it as a
+    // moving object; its later moves are poses.
+    let mut q = app.world_mut().query::<(Entity, &Name)>();
+    let boxed = q.iter(app.world()).find(|(_, n)| n.as_str() == "box").map(|(e, _)| e).expect("box");
+    app.world_mut().get_mut::<Transform>(boxed).expect("transform").translation.x += 1.0;
+    app.update();
+    let s = scene(&app);
+    assert_eq!((s.geometry_generation, s.moving.len()), (g + 1, 2), "made again once");
+    app.world_mut().get_mut::<Transform>(boxed).expect("transform").translation.x += 1.0;
+    app.update();
+    let s = scene(&app);
+    assert_eq!(s.geometry_generation, g + 1, "then posed");
+    let i = s.moving.iter().position(|e| *e == boxed).expect("the box moves");
+    assert!(s.object_poses[i].abs_diff_eq(glam::Mat4::from_translation(glam::Vec3::X), 1e-5));
 }

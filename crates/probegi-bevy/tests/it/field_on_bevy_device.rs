@@ -12,9 +12,9 @@ use bevy::app::PluginsState;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use probegi_bevy::field_on_bevy_device::ProbegiRenderField;
-use probegi_bevy::{ProbegiCascades, ProbegiPlugin, ProbegiScene, ProbegiVolume};
+use probegi_bevy::{ProbegiCascades, ProbegiDynamic, ProbegiPlugin, ProbegiScene, ProbegiVolume};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
-use probegi_field::DdgiFieldSet;
+use probegi_field::{DdgiFieldSet, ProbeBatchTracer};
 use probegi_frame::field_update::FieldSetUpdate;
 use probegi_scene::{BvhSettings, BvhTracer};
 use probegi_wgpu::GpuContext;
@@ -204,4 +204,88 @@ fn cascades_follow_their_entity_without_starting_over() {
     let (frame, after) = window(&app);
     assert_eq!(frame, start + 1, "a moved camera scrolls the cascades; the field keeps running");
     assert!(after.x > before.x + 1.0, "the innermost window moved with its entity: {before} -> {after}");
+}
+
+#[test]
+fn a_moving_mesh_is_placed_on_the_device_and_the_field_keeps_running() {
+    let Some(mut app) = render_app() else { return };
+    spawn_room(&mut app);
+    let world = app.world_mut();
+    let cube = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(0.6, 0.6, 0.6));
+    let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
+    let ball =
+        world.spawn((Mesh3d(cube), MeshMaterial3d(white), Transform::from_xyz(-1.0, 0.5, 0.0), ProbegiDynamic)).id();
+    for _ in 0..3 {
+        app.update();
+    }
+    let placed = |app: &App| {
+        let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
+        assert!(rf.error.is_none(), "{:?}", rf.error);
+        let f = rf.field.as_ref().expect("a field");
+        let (lo, hi) = f.scene.moving_object_bounds()[0];
+        (f.frame, (lo + hi) * 0.5)
+    };
+    let (start, centre) = placed(&app);
+    assert!(centre.abs_diff_eq(glam::Vec3::new(-1.0, 0.5, 0.0), 1e-5), "{centre}");
+    for step in 1..=3 {
+        app.world_mut().get_mut::<Transform>(ball).expect("transform").translation.x += 0.5;
+        app.update();
+        let (frame, centre) = placed(&app);
+        assert_eq!(frame, start + step, "a moving mesh does not restart the field");
+        let want = glam::Vec3::new(-1.0 + 0.5 * step as f32, 0.5, 0.0);
+        assert!(centre.abs_diff_eq(want, 1e-5), "step {step}: placed at {centre}, the entity at {want}");
+    }
+    let s = app.world().resource::<ProbegiScene>();
+    assert_eq!(s.geometry_generation, 1, "the geometry was built once");
+
+    // probegi's own GPU backend, the box placed by the same keys before the
+    // same updates: the Bevy field must trace the box where it is, as this one.
+    let render_world = app.sub_app_mut(RenderApp).world_mut();
+    let mut rf = render_world.resource_mut::<ProbegiRenderField>();
+    let field = rf.field.as_mut().expect("a field on Bevy's device");
+    field.set.sync_host_atlases(Some(&field.tracer)).expect("read the atlases back");
+    let own = own_field_with_moves(app.world().resource::<ProbegiScene>(), start, start + 3);
+    let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
+    let bevy_volume = &rf.field.as_ref().expect("field").set.volumes()[0];
+    let own_volume = &own.volumes()[0];
+    assert_eq!(bevy_volume.probe_states, own_volume.probe_states);
+    let flat =
+        |v: &probegi_field::DdgiVolume| v.irradiance.texels.iter().flat_map(|t| t.to_array()).collect::<Vec<f32>>();
+    let (a, b) = (flat(bevy_volume), flat(own_volume));
+    let largest = b.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+    let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    assert!(largest > 0.0 && worst <= 1e-5 * largest, "irradiance differs by {worst} of {largest}");
+}
+
+/// probegi's own GPU backend over `ps`'s geometry for `frames` updates, its
+/// one moving object 0.5 m further along x before each update from `first_move`
+/// on (three moves at most), as the test above moves its entity.
+fn own_field_with_moves(ps: &ProbegiScene, first_move: u32, frames: u32) -> DdgiFieldSet {
+    let rest = probegi_scene::Scene { lights: ps.lights.clone(), ..(*ps.scene).clone() };
+    let mut scene = rest.clone();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let ctx = GpuContext::headless().expect("a GPU adapter");
+    let own = WgpuProbeTracer::with_camera(ctx, &scene, &bvh, true, false)
+        .expect("upload")
+        .keeping_field(true)
+        .generating_rays(true);
+    let settings = DdgiFieldSetSettings { volumes: ps.volumes.clone(), ..Default::default() };
+    let mut set = DdgiFieldSet::new(&settings, scene.bounds().expect("geometry"), None);
+    let mut detector = probegi_frame::scene_events::SceneChangeDetector::new();
+    detector.remember_lights(&scene);
+    let mut placed = 0;
+    for f in 0..frames {
+        let moves = (f + 1).saturating_sub(first_move).min(3);
+        if moves != placed {
+            let pose = glam::Mat4::from_translation(glam::Vec3::new(0.5 * moves as f32, 0.0, 0.0));
+            scene.objects[0].animation.keyframes = vec![probegi_bevy::scene_extract::moving_key(pose).expect("a key")];
+            scene.pose_objects_from(&rest, 0.0);
+            own.pose_scene(&scene, f as f32).expect("pose");
+            placed = moves;
+        }
+        detector.observe(&scene, &mut set);
+        set.update_on_device(&scene, &bvh, &own, SEED, f, &mut BTreeMap::new()).expect("update");
+    }
+    set.sync_host_atlases(Some(&own)).expect("read the atlases back");
+    set
 }
