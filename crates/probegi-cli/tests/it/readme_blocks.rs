@@ -3,13 +3,16 @@
 //! example's `use` lines, a blank line, and the example's region between
 //! `// README: <name> begin` and `// README: <name> end` (dedented). The examples
 //! themselves are compiled and run by their crates' tests (`embed_example.rs`,
-//! `wgpu_embed_example.rs`), so the README's code compiles and converges too.
+//! `wgpu_embed_example.rs`, probegi-bevy's `examples.rs`), so the README's code
+//! compiles and converges too.
 
 use std::path::Path;
 
 /// (README heading, example file under the repository root, region name).
-const QUICK_STARTS: &[(&str, &str, &str)] =
-    &[("### CPU field", "crates/probegi-cpu/examples/embed_ddgi.rs", "cpu-field")];
+const QUICK_STARTS: &[(&str, &str, &str)] = &[
+    ("### CPU field", "crates/probegi-cpu/examples/embed_ddgi.rs", "cpu-field"),
+    ("### Bevy", "crates/probegi-bevy/examples/bevy_cornell.rs", "bevy-plugin"),
+];
 
 fn repo_file(path: &str) -> String {
     let full = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(path);

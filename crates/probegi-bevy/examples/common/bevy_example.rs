@@ -1,0 +1,222 @@
+//! What the Bevy examples share: their arguments, the app in a window (with a
+//! fly camera) or headless (a number of frames rendered into a PNG, read back
+//! from Bevy's device), and the camera.
+
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+use bevy::app::PluginsState;
+use bevy::camera::{Exposure, RenderTarget};
+use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::prelude::*;
+use bevy::render::gpu_readback::{Readback, ReadbackComplete};
+use bevy::render::render_resource::{TextureFormat, TextureUsages};
+use probegi_bevy::ProbegiVolume;
+
+/// The examples' arguments.
+pub struct Args {
+    /// Frames to render headless before the picture is taken.
+    pub frames: u32,
+    /// Where the headless picture goes; `None`: a window (with the `window`
+    /// feature), else `<example>.png`.
+    pub out: Option<PathBuf>,
+    /// No DDGI volume: Bevy's own lighting, to compare with.
+    pub no_field: bool,
+    /// The headless picture's size (its width a multiple of 64: read-back
+    /// rows are whole 256-byte blocks).
+    pub size: UVec2,
+}
+
+impl Args {
+    /// `--frames N`, `--out PATH`, `--no-field`, `--size WxH`.
+    pub fn parse(mut args: impl Iterator<Item = String>) -> Result<Self, String> {
+        let mut out = Self { frames: 60, out: None, no_field: false, size: UVec2::new(640, 480) };
+        while let Some(a) = args.next() {
+            let mut value = || args.next().ok_or_else(|| format!("{a} needs a value"));
+            match a.as_str() {
+                "--frames" => {
+                    let v = value()?;
+                    out.frames = v.parse().ok().filter(|n| *n > 0).ok_or(format!("--frames {v}: not a count"))?;
+                }
+                "--out" => out.out = Some(PathBuf::from(value()?)),
+                "--no-field" => out.no_field = true,
+                "--size" => {
+                    let v = value()?;
+                    let parsed =
+                        v.split_once('x').and_then(|(w, h)| Some(UVec2::new(w.parse().ok()?, h.parse().ok()?)));
+                    out.size = parsed
+                        .filter(|s| s.x > 0 && s.y > 0 && s.x % 64 == 0 && s.x <= 4096 && s.y <= 4096)
+                        .ok_or(format!("--size {v}: WxH, W a multiple of 64, both at most 4096"))?;
+                }
+                other => {
+                    return Err(format!("unknown argument {other:?} (--frames N, --out PATH, --no-field, --size WxH)"));
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Whether the example runs headless.
+    pub fn headless(&self) -> bool {
+        self.out.is_some() || !cfg!(feature = "window")
+    }
+}
+
+/// The headless picture's target image.
+#[derive(Resource, Clone)]
+pub struct Target(pub Handle<Image>);
+
+/// Bevy's default plugins: with a window, or (headless) without one and with
+/// the [`Target`] image made.
+pub fn add_default_plugins(app: &mut App, args: &Args) {
+    let plugins = DefaultPlugins.build();
+    #[cfg(feature = "window")]
+    let plugins = if args.headless() {
+        plugins.disable::<bevy::winit::WinitPlugin>().set(WindowPlugin {
+            primary_window: None,
+            exit_condition: bevy::window::ExitCondition::DontExit,
+            ..default()
+        })
+    } else {
+        plugins.set(WindowPlugin {
+            primary_window: Some(Window { title: "probegi-bevy".into(), ..default() }),
+            ..default()
+        })
+    };
+    app.add_plugins(plugins);
+    if args.headless() {
+        let mut target = Image::new_target_texture(args.size.x, args.size.y, TextureFormat::Rgba8UnormSrgb, None);
+        target.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+        let handle = app.world_mut().resource_mut::<Assets<Image>>().add(target);
+        app.insert_resource(Target(handle));
+    } else {
+        #[cfg(feature = "window")]
+        app.add_systems(Update, fly_camera);
+    }
+}
+
+/// The camera at `at`: into the [`Target`] headless, else a fly camera.
+/// ACES tone mapping (it needs no lookup table).
+pub fn spawn_camera(commands: &mut Commands, at: Transform, exposure: Exposure, target: Option<&Target>) -> Entity {
+    let mut camera = commands.spawn((Camera3d::default(), Tonemapping::AcesFitted, exposure, at));
+    match target {
+        // Shadow levels of detail from this camera (it renders to no window).
+        Some(t) => camera.insert((RenderTarget::Image(t.0.clone().into()), bevy::camera::ShadowLodOrigin)),
+        None => camera.insert(FlyCamera),
+    };
+    camera.id()
+}
+
+/// Despawns every volume (`--no-field`): the materials draw Bevy's lighting.
+pub fn remove_volumes(mut commands: Commands, volumes: Query<Entity, With<ProbegiVolume>>) {
+    for v in &volumes {
+        commands.entity(v).despawn();
+    }
+}
+
+/// Runs the app: headless, `args.frames` frames and the last one written as a
+/// PNG, its sRGB RGBA8 pixels returned; else in its window until it closes.
+pub fn run(mut app: App, args: &Args) -> Result<Option<Vec<u8>>, String> {
+    if !args.headless() {
+        app.run();
+        return Ok(None);
+    }
+    while app.plugins_state() == PluginsState::Adding {
+        bevy::tasks::tick_global_task_pools_on_main_thread();
+    }
+    app.finish();
+    app.cleanup();
+    for _ in 1..args.frames {
+        app.update();
+    }
+    let target = app.world().resource::<Target>().0.clone();
+    let rgba = last_frame(&mut app, &target)?;
+    let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+    if rgb.len() != (args.size.x * args.size.y * 3) as usize {
+        return Err(format!("read back {} bytes for {}×{} pixels", rgba.len(), args.size.x, args.size.y));
+    }
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", example_name())));
+    probegi_image::io::write_png(&out, args.size.x, args.size.y, rgb).map_err(|e| e.to_string())?;
+    if let Some(e) = app
+        .sub_app(bevy::render::RenderApp)
+        .world()
+        .resource::<probegi_bevy::field_on_bevy_device::ProbegiRenderField>()
+        .error
+        .clone()
+    {
+        return Err(format!("the field: {e}"));
+    }
+    eprintln!("wrote {} ({} frames)", out.display(), args.frames);
+    Ok(Some(rgba))
+}
+
+/// The running example's name (its binary's), for the default picture.
+fn example_name() -> String {
+    std::env::args()
+        .next()
+        .and_then(|a| std::path::Path::new(&a).file_stem().map(|s| s.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "bevy_example".into())
+}
+
+/// Renders one more frame and reads `target` back (sRGB RGBA8 rows).
+fn last_frame(app: &mut App, target: &Handle<Image>) -> Result<Vec<u8>, String> {
+    let pixels: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
+    let sink = pixels.clone();
+    let reader = app
+        .world_mut()
+        .spawn(Readback::texture(target.clone()))
+        .observe(move |done: On<ReadbackComplete>| {
+            if let Ok(mut p) = sink.lock() {
+                *p = Some(done.data.clone());
+            }
+        })
+        .id();
+    app.update();
+    app.world_mut().entity_mut(reader).remove::<Readback>();
+    for _ in 0..10 {
+        if let Some(p) = pixels.lock().map_err(|_| "the read-back panicked")?.take() {
+            return Ok(p);
+        }
+        app.update();
+    }
+    Err("the frame was not read back in 10 frames".into())
+}
+
+/// The window's camera: WASD to move, Q/E down and up, the right mouse
+/// button held to look.
+#[derive(Component)]
+pub struct FlyCamera;
+
+#[cfg(feature = "window")]
+fn fly_camera(
+    time: Res<Time>,
+    keys: Res<ButtonInput<KeyCode>>,
+    buttons: Res<ButtonInput<MouseButton>>,
+    motion: Res<bevy::input::mouse::AccumulatedMouseMotion>,
+    mut cameras: Query<&mut Transform, With<FlyCamera>>,
+) {
+    const SPEED_M_PER_S: f32 = 2.0;
+    const RADIANS_PER_PIXEL: f32 = 0.003;
+    for mut t in &mut cameras {
+        if buttons.pressed(MouseButton::Right) {
+            let (yaw, pitch, _) = t.rotation.to_euler(EulerRot::YXZ);
+            let yaw = yaw - motion.delta.x * RADIANS_PER_PIXEL;
+            let pitch = (pitch - motion.delta.y * RADIANS_PER_PIXEL).clamp(-1.5, 1.5);
+            t.rotation = Quat::from_euler(EulerRot::YXZ, yaw, pitch, 0.0);
+        }
+        let mut step = Vec3::ZERO;
+        for (key, dir) in [
+            (KeyCode::KeyW, *t.forward()),
+            (KeyCode::KeyS, -*t.forward()),
+            (KeyCode::KeyD, *t.right()),
+            (KeyCode::KeyA, -*t.right()),
+            (KeyCode::KeyE, Vec3::Y),
+            (KeyCode::KeyQ, -Vec3::Y),
+        ] {
+            if keys.pressed(key) {
+                step += dir;
+            }
+        }
+        t.translation += step.normalize_or_zero() * SPEED_M_PER_S * time.delta_secs();
+    }
+}
