@@ -162,6 +162,14 @@ pub struct DdgiVolumeSettings {
     /// probe rays that miss (`Scene::sky_on_probe_miss`). 1, as
     /// `probe_area_light_samples`: a probe's rays and frames average it.
     pub probe_sky_light_samples: u32,
+    /// Under a sky map: probe rays that miss read the map's radiance (as
+    /// RTXGI's miss shader reads its sky), and hits take no next-event samples
+    /// of it (`probe_sky_light_samples` unused). The field then carries the
+    /// map's light, direct and bounced, for a renderer that does not sample
+    /// the map at its pixels (an engine's: the Bevy plugin's). Off: probegi's
+    /// own renderers sample the map at hits and pixels (`Scene::sky_on_probe_miss`
+    /// says why), and a camera under this mode takes no sky samples either.
+    pub probe_sky_map_on_miss: bool,
     /// The shadowing field (seed 003 ch. 5, `probegi_core::shadow_field`): the
     /// volume's probes also keep occlusion maps, fed by one shadow ray per light
     /// from each of the last frame's front-face hits, and cameras read punctual
@@ -294,6 +302,7 @@ impl Default for DdgiVolumeSettings {
             glossy_second_order: true,
             probe_area_light_samples: 1,
             probe_sky_light_samples: 1,
+            probe_sky_map_on_miss: false,
             shadow_field: false,
             shadow_field_texels: 16,
             shadow_field_sharpness: 1.0,

@@ -86,9 +86,12 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
         .map(|(out, bp)| {
             let volume = &inputs.volumes[bp.volume as usize];
             let settings = &volume.settings;
-            // A sky map lights the hits by NEE (the misses carry none of it); a
-            // constant sky reaches them through the field's misses.
-            let sky_samples = if inputs.scene.sky_map.is_some() { settings.probe_sky_light_samples } else { 0 };
+            // A sky map lights the hits by NEE (the misses carry none of it),
+            // unless the volume's misses read it; a constant sky reaches them
+            // through the field's misses.
+            let on_miss = settings.probe_sky_map_on_miss;
+            let sky_samples =
+                if inputs.scene.sky_map.is_some() && !on_miss { settings.probe_sky_light_samples } else { 0 };
             let area = DirectSettings {
                 direct_area_samples: settings.probe_area_light_samples,
                 direct_sky_samples: sky_samples,
@@ -105,6 +108,7 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                 }
                 let dir = batch.directions[i];
                 *r = match (&inputs.hits[i], &points[i]) {
+                    (None, _) if on_miss => inputs.scene.sky_toward(dir),
                     (None, _) => inputs.scene.sky_on_probe_miss(dir),
                     (Some(_), None) => Vec3::ZERO,
                     (Some(_), Some(sp)) => {

@@ -354,11 +354,15 @@ impl<'a> FrameLoop<'a> {
             _ => None,
         };
         // The field carries a constant sky under DDGI (see `probe_shade`), and
-        // the camera samples a sky map (`Scene::sky_on_probe_miss`); SH probes
+        // the camera samples a sky map (`Scene::sky_on_probe_miss`) unless the
+        // field carries that too; SH probes
         // carry emitters and sky with light injection; direct-only renders
         // sample both.
+        // A field whose misses read the map (`probe_sky_map_on_miss`) carries
+        // its light: the camera then takes no sky samples either.
+        let map_in_field = |f: &DdgiFieldSet| f.volumes().iter().any(|v| v.settings.probe_sky_map_on_miss);
         let camera_direct = match (&field, &sh) {
-            (Some(_), _) if base_scene.sky_map.is_some() => settings.direct,
+            (Some(f), _) if base_scene.sky_map.is_some() && !map_in_field(f) => settings.direct,
             (Some(_), _) => DirectSettings { direct_sky_samples: 0, ..settings.direct },
             (_, Some(p)) => p.camera_direct_settings(settings.direct),
             _ => settings.direct,

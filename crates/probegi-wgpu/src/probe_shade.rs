@@ -68,6 +68,10 @@ pub fn shade_info(needs_radiance: bool, glossy_second_order: bool, area_samples:
 /// shadowing field (`shadow_field_probe_shading`) instead of shadow rays.
 pub const SHADE_SHADOW_FIELD: u32 = 1 << 29;
 
+/// [`shade_info`]'s flag (bit 28): misses read the sky map
+/// (`probe_sky_map_on_miss`; the hits then take no sky samples).
+pub const SHADE_SKY_MAP_ON_MISS: u32 = 1 << 28;
+
 /// The [`ShadeProbe`] records of a seam batch: each probe's rays, flagged as
 /// needing radiance where `batch.probe_needs_radiance` says so, with its
 /// volume's glossy and area-light settings.
@@ -85,12 +89,19 @@ pub fn batch_shade_probes(
             ShadeProbe {
                 first_ray: bp.first_ray,
                 ray_count: bp.ray_count,
-                info: shade_info(needed, s.glossy_second_order, s.probe_area_light_samples, s.probe_sky_light_samples)
-                    | if s.shadow_field && s.shadow_field_probe_shading { SHADE_SHADOW_FIELD } else { 0 },
+                info: shade_info(needed, s.glossy_second_order, s.probe_area_light_samples, sky_samples(s))
+                    | if s.shadow_field && s.shadow_field_probe_shading { SHADE_SHADOW_FIELD } else { 0 }
+                    | if s.probe_sky_map_on_miss { SHADE_SKY_MAP_ON_MISS } else { 0 },
                 hit_ao_radius_bits: hit_ao_radius_m(&volumes[bp.volume as usize]).to_bits(),
             }
         })
         .collect()
+}
+
+/// A hit's sky-map samples under `s` (none where the misses read the map;
+/// the shader takes none without a map).
+fn sky_samples(s: &probegi_core::ddgi_settings::DdgiVolumeSettings) -> u32 {
+    if s.probe_sky_map_on_miss { 0 } else { s.probe_sky_light_samples }
 }
 
 /// The length of `volume`'s hit-AO rays (`probe_hit_ao_radius_rel` × its

@@ -174,7 +174,8 @@ const F32_CONSTANTS: [(&str, f32); 11] = [
 ];
 
 /// The `u32` constants of the prelude.
-const U32_CONSTANTS: [(&str, u32); 3] = [
+const U32_CONSTANTS: [(&str, u32); 4] = [
+    ("SHADE_SKY_MAP_ON_MISS", crate::probe_shade::SHADE_SKY_MAP_ON_MISS),
     ("BVH_INSTANCE_IDENTITY", BVH_INSTANCE_IDENTITY),
     ("BVH_INSTANCE_MOVING", BVH_INSTANCE_MOVING),
     ("TRACE_MAX_SEGMENTS", crate::bvh_trace::TRACE_MAX_SEGMENTS as u32),

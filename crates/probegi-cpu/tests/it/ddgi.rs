@@ -177,12 +177,36 @@ pub fn sky_furnace() -> (Scene, DdgiVolumeSettings) {
 
 #[test]
 fn a_uniform_sky_map_lights_the_open_floor_through_the_field_to_rho_l() {
-    // Every probe ray that leaves reads the map: each probe's irradiance toward
-    // +y is π L whatever its rays (all of that hemisphere sees the sky), so the
-    // floor is exactly 1 up to the irradiance encoding's rounding.
+    // The camera samples the map at every pixel (the field's misses carry none
+    // of it: `Scene::sky_on_probe_miss`): ρ/π · π L is 1 up to those samples.
     let (scene, settings) = sky_furnace();
     let out = render(&scene, 16, 8, ddgi(settings));
     let mean = out.image.mean();
     assert!((mean - Vec3::ONE).abs().max_element() < 0.01, "floor under a white sky map: {mean}, want 1");
     assert!(out.image.first_invalid_pixel().is_none());
+}
+
+#[test]
+fn a_uniform_sky_map_the_misses_read_lights_the_floor_through_the_field_alone() {
+    // `probe_sky_map_on_miss`: the probes' misses read the map and the camera
+    // takes no sky samples, so the floor's light is the field's irradiance.
+    // Each probe's irradiance toward +y is π L whatever its rays (all of that
+    // hemisphere sees the sky): the floor is 1 once the blend has converged,
+    // up to the irradiance encoding's rounding; without the misses it would be 0.
+    let (scene, settings) = sky_furnace();
+    let on_miss = DdgiVolumeSettings { probe_sky_map_on_miss: true, ..settings.clone() };
+    let out = render(&scene, 16, 40, ddgi(on_miss));
+    let mean = out.image.mean();
+    assert!((mean - Vec3::ONE).abs().max_element() < 0.01, "floor lit by the field alone: {mean}, want 1");
+    assert!(out.image.first_invalid_pixel().is_none());
+    // The field itself holds the sky's π L = 2π on the floor; without the
+    // mode it holds none of it (the camera's samples light that floor).
+    let floor_irradiance = |out: &probegi_frame::frame_loop::RenderOutput| {
+        out.ddgi.as_ref().expect("a field").irradiance(Vec3::new(0.3, 0.0, 0.2), Vec3::Y, Vec3::Y)
+    };
+    let e = floor_irradiance(&out);
+    assert!((e - Vec3::splat(std::f32::consts::TAU)).abs().max_element() < 0.01 * std::f32::consts::TAU, "{e}");
+    let without = floor_irradiance(&render(&scene, 16, 4, ddgi(settings)));
+    // (Rays near the horizon reach the far floor: a trace of light remains.)
+    assert!(without.max_element() < 0.01 * e.x, "the misses read no map by default: {without}");
 }

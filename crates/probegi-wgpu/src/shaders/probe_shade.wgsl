@@ -113,7 +113,11 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
         return;
     }
     if (h.triangle == BVH_NO_HIT) {
-        shade_radiance[i] = vec4<f32>(scene_sky_on_probe_miss(r.dir), d);
+        var sky = scene_sky_on_probe_miss(r.dir);
+        if ((info & SHADE_SKY_MAP_ON_MISS) != 0u) {
+            sky = scene_sky(r.dir);
+        }
+        shade_radiance[i] = vec4<f32>(sky, d);
         return;
     }
     let sp = scene_surface_point(h.triangle, h.instance, h.bary, false);

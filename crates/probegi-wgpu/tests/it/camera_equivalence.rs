@@ -474,6 +474,14 @@ fn a_sky_map_lights_the_field_and_fills_the_sky_pixels_on_the_gpu_as_on_the_cpu(
 }
 
 #[test]
+fn a_sky_map_the_misses_read_lights_the_field_on_the_gpu_as_on_the_cpu() {
+    // `probe_sky_map_on_miss` (the Bevy plugin's): the probes' misses read the
+    // map, the hits and the camera sample none of it.
+    let (scene, settings) = sky_map_scene();
+    check("sky map on miss", scene, DdgiVolumeSettings { probe_sky_map_on_miss: true, ..settings }, 64, 32);
+}
+
+#[test]
 fn a_turning_sky_map_turns_on_the_gpu_as_on_the_cpu() {
     // The map's keyframes turn it 180° over 12 frames (a moving sun): the device
     // poses it each frame (`GpuScene::pose_lights`), and each frame's mean
