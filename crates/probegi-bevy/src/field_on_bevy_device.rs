@@ -82,6 +82,8 @@ pub struct ExtractedProbegiScene {
     geometry_generation: u64,
     seed: u64,
     object_poses: Vec<glam::Mat4>,
+    sky_map: Option<probegi_scene::SkyMap>,
+    sky_generation: u64,
 }
 
 impl ExtractResource<RenderApp> for ExtractedProbegiScene {
@@ -98,6 +100,8 @@ impl ExtractResource<RenderApp> for ExtractedProbegiScene {
             geometry_generation: source.geometry_generation,
             seed: source.seed,
             object_poses: source.object_poses.clone(),
+            sky_map: source.sky_map.clone(),
+            sky_generation: source.sky_generation,
         }
     }
 }
@@ -122,6 +126,8 @@ pub struct ProbegiField {
     detector: SceneChangeDetector,
     /// The moving objects' poses as last placed (`ProbegiScene::object_poses`).
     object_poses: Vec<glam::Mat4>,
+    /// The sky map it was made with (`ProbegiScene::sky_generation`).
+    sky_generation: u64,
     /// Updates run since the field was made.
     pub frame: u32,
 }
@@ -198,6 +204,7 @@ pub(crate) fn update_field(
 /// poses and the volumes' [`LIVE_SETTINGS`].
 fn needs_rebuild(f: &ProbegiField, x: &ExtractedProbegiScene) -> bool {
     f.geometry_generation != x.geometry_generation
+        || f.sky_generation != x.sky_generation
         || f.scene.lights.len() != x.lights.len()
         || f.volumes.len() != x.volumes.len()
         || f.set_blending != x.blending
@@ -208,9 +215,14 @@ fn needs_rebuild(f: &ProbegiField, x: &ExtractedProbegiScene) -> bool {
 /// detector told) and live settings (validated as the field's are).
 fn take_changes(f: &mut ProbegiField, x: &ExtractedProbegiScene) -> Result<(), String> {
     let objects_moved = f.object_poses != x.object_poses;
-    if f.scene.lights != x.lights || f.scene.sky_radiance != x.sky_radiance || objects_moved {
+    let intensity = |m: &Option<probegi_scene::SkyMap>| m.as_ref().map(|m| m.intensity);
+    let map_dimmed = intensity(&f.scene.sky_map) != intensity(&x.sky_map);
+    if f.scene.lights != x.lights || f.scene.sky_radiance != x.sky_radiance || objects_moved || map_dimmed {
         let lights = std::mem::replace(&mut f.scene.lights, x.lights.clone());
         let sky = std::mem::replace(&mut f.scene.sky_radiance, x.sky_radiance);
+        if let (Some(map), Some(i)) = (f.scene.sky_map.as_mut(), intensity(&x.sky_map)) {
+            map.intensity = i;
+        }
         if objects_moved {
             place_objects(&mut f.scene, x)?;
         }
@@ -264,7 +276,12 @@ fn report(out: &mut ProbegiRenderField, e: String) {
 fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField, String> {
     let settings = DdgiFieldSetSettings { volumes: x.volumes.clone(), blending: x.blending };
     settings.validate().map_err(|(v, key, why)| format!("volume {v}: {key}: {why}"))?;
-    let scene = Scene { lights: x.lights.clone(), sky_radiance: x.sky_radiance, ..(*x.geometry).clone() };
+    let scene = Scene {
+        lights: x.lights.clone(),
+        sky_radiance: x.sky_radiance,
+        sky_map: x.sky_map.clone(),
+        ..(*x.geometry).clone()
+    };
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let tracer = WgpuProbeTracer::with_camera(ctx, &scene, &bvh, true, false)
         .map_err(|e| format!("the scene does not fit Bevy's device: {e}"))?
@@ -285,6 +302,7 @@ fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField
         seed: x.seed,
         detector,
         object_poses: vec![glam::Mat4::IDENTITY; x.object_poses.len()],
+        sky_generation: x.sky_generation,
         frame: 0,
     })
 }

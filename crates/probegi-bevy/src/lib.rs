@@ -24,11 +24,14 @@
 //!   Bevy's PBR with its diffuse indirect light taken from the field
 //!   ([`field_lighting`]);
 //! - meshes that move are moving objects, posed on the device each frame
-//!   ([`ProbegiDynamic`]).
+//!   ([`ProbegiDynamic`]);
+//! - the camera's `Skybox` or `EnvironmentMapLight` is the field's sky
+//!   ([`environment_sky`]).
 //!
 //! Add the plugin after `DefaultPlugins` (its material needs Bevy's render
 //! app). crates/probegi-bevy/README.md lists what is not built yet.
 
+pub mod environment_sky;
 pub mod field_lighting;
 pub mod field_on_bevy_device;
 pub mod light_units;
@@ -182,6 +185,14 @@ pub struct ProbegiScene {
     known: HashSet<Entity>,
     /// Meshes that moved after they were built still: moving from then on.
     promoted: HashSet<Entity>,
+    /// The camera's sky as the field's ([`environment_sky`]): its `Skybox`,
+    /// else its `EnvironmentMapLight`; `None`: the constant `sky_radiance`.
+    pub sky_map: Option<probegi_scene::SkyMap>,
+    /// Sky maps made so far: it changes when `sky_map` is made again (a new
+    /// cubemap or rotation; a new brightness only sets its intensity).
+    pub sky_generation: u64,
+    /// The cubemap and rotation `sky_map` was made from.
+    sky_key: Option<(AssetId<Image>, [f32; 4])>,
 }
 
 type MeshQuery<'w, 's> = Query<
@@ -257,11 +268,11 @@ fn event_asset<A: Asset>(e: &AssetEvent<A>) -> Option<AssetId<A>> {
 }
 
 impl SceneChanges<'_, '_> {
-    /// (the geometry changed, a light or volume changed). Every reader is
-    /// drained, so each change counts once. Asset events count only for the
+    /// (the geometry changed, a light or volume changed, the images that
+    /// changed). Every reader is drained, so each change counts once. Asset events count only for the
     /// meshes, materials and textures that mesh entities use: a UI texture
     /// or a material nobody draws does not make the field again.
-    fn read(&mut self, meshes_q: &MeshQuery, assets: &MeshAssets) -> (bool, bool) {
+    fn read(&mut self, meshes_q: &MeshQuery, assets: &MeshAssets) -> (bool, bool, Vec<AssetId<Image>>) {
         let meshes: Vec<AssetId<Mesh>> = self.mesh_events.read().filter_map(event_asset).collect();
         let mut materials: Vec<UntypedAssetId> =
             self.material_events.read().filter_map(event_asset).map(Into::into).collect();
@@ -291,6 +302,7 @@ impl SceneChanges<'_, '_> {
         (
             !self.geometry.is_empty() || geometry.iter().any(|n| *n > 0),
             !self.lights_or_volumes.is_empty() || others.iter().any(|n| *n > 0),
+            images,
         )
     }
 }
@@ -345,10 +357,12 @@ fn extract_scene(
     lights: Lights,
     volumes: Volumes,
     assets: MeshAssets,
+    mut skies: Skies,
     mut out: ResMut<ProbegiScene>,
 ) {
     let first = out.generation == 0;
-    let (mut geometry, others) = changes.read(&meshes_q, &assets);
+    let (mut geometry, others, images_changed) = changes.read(&meshes_q, &assets);
+    let sky_changed = skies.changed(&images_changed);
     let mut moved = false;
     for e in changes.moved.iter() {
         if out.moving.contains(&e) {
@@ -361,7 +375,7 @@ fn extract_scene(
             }
         }
     }
-    if !(first || geometry || others || moved) {
+    if !(first || geometry || others || moved || sky_changed) {
         return;
     }
     if moved && !(first || geometry) {
@@ -372,6 +386,9 @@ fn extract_scene(
     }
     if first || geometry {
         rebuild_geometry(&meshes_q, &assets, &mut out);
+    }
+    if first || sky_changed {
+        skies.update(&assets.images, &mut out);
     }
     out.lights = punctual_lights(&lights);
     let bounds = out.scene.bounds();
@@ -456,6 +473,81 @@ fn build_geometry(
     Ok(BuiltGeometry { scene: builder.finish(), moving, rest, known })
 }
 
+/// A camera and the sky components it may carry.
+type CameraSky = (Entity, Option<&'static bevy::light::Skybox>, Option<&'static bevy::light::EnvironmentMapLight>);
+
+/// A camera's sky component changed.
+type SkyChanged = Or<(Changed<bevy::light::Skybox>, Changed<bevy::light::EnvironmentMapLight>)>;
+
+/// The cameras whose sky the field takes ([`environment_sky`]).
+#[derive(bevy::ecs::system::SystemParam)]
+struct Skies<'w, 's> {
+    cameras: Query<'w, 's, CameraSky, With<Camera>>,
+    changed: Query<'w, 's, (), (With<Camera>, SkyChanged)>,
+    removed_skyboxes: RemovedComponents<'w, 's, bevy::light::Skybox>,
+    removed_maps: RemovedComponents<'w, 's, bevy::light::EnvironmentMapLight>,
+}
+
+/// Where the field's sky comes from: a camera, its cubemap, rotation and
+/// brightness (cd·m⁻² per unit texel).
+type SkySource = (Entity, Handle<Image>, Quat, f32);
+
+impl Skies<'_, '_> {
+    /// The first camera's (in entity order) `Skybox` with an image, else its
+    /// `EnvironmentMapLight`.
+    fn source(&self) -> Option<SkySource> {
+        let mut cameras: Vec<_> = self.cameras.iter().collect();
+        cameras.sort_by_key(|(e, ..)| *e);
+        cameras.into_iter().find_map(|(e, skybox, map)| match (skybox.and_then(|s| s.image.clone()), map) {
+            (Some(image), _) => skybox.map(|s| (e, image, s.rotation, s.brightness)),
+            (None, Some(m)) => Some((e, m.specular_map.clone(), m.rotation, m.intensity)),
+            (None, None) => None,
+        })
+    }
+
+    /// Whether the sky may have changed: a camera's sky component, or the
+    /// image of the sky there is (`images`: those that changed).
+    fn changed(&mut self, images: &[AssetId<Image>]) -> bool {
+        let removed = self.removed_skyboxes.read().count() + self.removed_maps.read().count();
+        let image = self.source().is_some_and(|(_, h, ..)| images.contains(&h.id()));
+        !self.changed.is_empty() || removed > 0 || image
+    }
+
+    /// The sky map made again where its cubemap or rotation changed (an
+    /// error names the camera; the constant sky then stands in), else its
+    /// intensity set.
+    fn update(&self, images: &Assets<Image>, out: &mut ProbegiScene) {
+        let source = self.source();
+        let key = source.as_ref().map(|(_, h, r, _)| (h.id(), r.to_array()));
+        if key.is_some() && key == out.sky_key {
+            if let (Some(map), Some((.., brightness))) = (out.sky_map.as_mut(), source) {
+                map.intensity = brightness;
+            }
+            return;
+        }
+        let made = source.and_then(|(e, handle, rotation, brightness)| {
+            let image = images.get(&handle)?; // still loading: the constant sky meanwhile
+            let name = format!("{e}'s sky");
+            match environment_sky::equirect_from_cubemap(image, rotation, &name) {
+                Ok(map) => {
+                    Some(probegi_scene::SkyMap { intensity: brightness, ..probegi_scene::SkyMap::new(Arc::new(map)) })
+                }
+                Err(what) => {
+                    let e = ExtractError { entity: format!("{e}"), what };
+                    error!("{e}");
+                    out.error = Some(e);
+                    None
+                }
+            }
+        });
+        out.sky_key = made.as_ref().and(key);
+        if made.is_some() || out.sky_map.is_some() {
+            out.sky_generation += 1;
+        }
+        out.sky_map = made;
+    }
+}
+
 /// The entities that place the field's volumes.
 #[derive(bevy::ecs::system::SystemParam)]
 struct Volumes<'w, 's> {
@@ -471,12 +563,15 @@ impl Volumes<'_, '_> {
         &self,
         bounds: Option<(glam::Vec3, glam::Vec3)>,
     ) -> (Vec<DdgiVolumeSettings>, VolumeBlending, Option<glam::Vec3>) {
+        // Bevy samples no sky map at its pixels: the field carries the map's
+        // light (`probe_sky_map_on_miss`; a constant sky it carries anyway).
+        let on_miss = |v: DdgiVolumeSettings| DdgiVolumeSettings { probe_sky_map_on_miss: true, ..v };
         if let Some((t, c)) = self.cascades.iter().next() {
             let Some(bounds) = bounds else { return (Vec::new(), VolumeBlending::Cascades, None) };
             let set = c.volumes(bounds);
-            return (set.volumes, set.blending, Some(vec3(t.translation())));
+            return (set.volumes.into_iter().map(on_miss).collect(), set.blending, Some(vec3(t.translation())));
         }
-        let boxes = self.boxes.iter().map(|(t, v)| volume_settings(t, v)).collect();
+        let boxes = self.boxes.iter().map(|(t, v)| on_miss(volume_settings(t, v))).collect();
         (boxes, VolumeBlending::Density, None)
     }
 }

@@ -313,3 +313,59 @@ fn moving_meshes_are_posed_without_making_the_geometry_again() {
     let i = s.moving.iter().position(|e| *e == boxed).expect("the box moves");
     assert!(s.object_poses[i].abs_diff_eq(glam::Mat4::from_translation(glam::Vec3::X), 1e-5));
 }
+
+/// A cubemap of `size`² faces, each one colour (+X, −X, +Y, −Y, +Z, −Z), RGBA32F.
+pub(crate) fn cubemap(faces: [[f32; 3]; 6], size: u32) -> Image {
+    let texel = |c: [f32; 3]| [c[0], c[1], c[2], 1.0].into_iter().flat_map(f32::to_le_bytes).collect::<Vec<u8>>();
+    let data: Vec<u8> = faces.iter().flat_map(|c| (0..size * size).flat_map(move |_| texel(*c))).collect();
+    let size = Extent3d { width: size, height: size, depth_or_array_layers: 6 };
+    let mut image =
+        Image::new(size, TextureDimension::D2, data, TextureFormat::Rgba32Float, RenderAssetUsages::default());
+    image.texture_view_descriptor = Some(bevy::render::render_resource::TextureViewDescriptor {
+        dimension: Some(bevy::render::render_resource::TextureViewDimension::Cube),
+        ..default()
+    });
+    image
+}
+
+#[test]
+fn the_cameras_skybox_is_the_fields_sky_map_looked_up_as_bevy_looks_it_up() {
+    let mut app = app();
+    spawn_world(&mut app);
+    let faces = [[1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 4.0, 0.0], [0.0, 0.0, 5.0], [0.0, 0.0, 6.0]];
+    let image = app.world_mut().resource_mut::<Assets<Image>>().add(cubemap(faces, 8));
+    let skybox = bevy::light::Skybox { image: Some(image), brightness: 100.0, rotation: Quat::IDENTITY };
+    let camera = app.world_mut().spawn((Camera::default(), skybox)).id();
+    app.update();
+    let s = scene(&app);
+    assert!(s.error.is_none(), "{:?}", s.error);
+    assert!(s.volumes.iter().all(|v| v.probe_sky_map_on_miss), "the field carries the map's light");
+    let map = s.sky_map.as_ref().expect("a sky map");
+    // Bevy reads a cubemap along (x, y, −z): world +z sees the −Z face.
+    let want = |face: usize| glam::Vec3::from_array(faces[face]) * 100.0;
+    for (d, face) in [(glam::Vec3::X, 0), (glam::Vec3::NEG_X, 1), (glam::Vec3::Y, 2), (glam::Vec3::NEG_Y, 3)]
+        .into_iter()
+        .chain([(glam::Vec3::Z, 5), (glam::Vec3::NEG_Z, 4)])
+    {
+        assert!(map.radiance(d).abs_diff_eq(want(face), 1e-3), "{d}: {} against face {face}", map.radiance(d));
+    }
+    let generation = s.sky_generation;
+    // Brighter: the same map, its intensity.
+    app.world_mut().get_mut::<bevy::light::Skybox>(camera).expect("skybox").brightness = 50.0;
+    app.update();
+    let s = scene(&app);
+    assert_eq!((s.sky_generation, s.sky_map.as_ref().map(|m| m.intensity)), (generation, Some(50.0)));
+    // Turned a quarter about +y: world +x now sees what +z saw... Bevy's
+    // lookup turns the direction back, R⁻¹·(+x) = +z, which reads the −Z face.
+    app.world_mut().get_mut::<bevy::light::Skybox>(camera).expect("skybox").rotation =
+        Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+    app.update();
+    let s = scene(&app);
+    assert_eq!(s.sky_generation, generation + 1, "a turn makes the map again");
+    let map = s.sky_map.as_ref().expect("a sky map");
+    assert!(map.radiance(glam::Vec3::X).abs_diff_eq(want(5) * 0.5, 1e-3), "{}", map.radiance(glam::Vec3::X));
+    // No skybox: the constant sky again.
+    app.world_mut().entity_mut(camera).remove::<bevy::light::Skybox>();
+    app.update();
+    assert!(scene(&app).sky_map.is_none());
+}

@@ -289,3 +289,39 @@ fn own_field_with_moves(ps: &ProbegiScene, first_move: u32, frames: u32) -> Ddgi
     set.sync_host_atlases(Some(&own)).expect("read the atlases back");
     set
 }
+
+#[test]
+fn a_uniform_skybox_lights_an_open_floor_through_the_field_to_pi_l() {
+    // The sky's furnace on Bevy's device: a skybox of radiance 1 × brightness
+    // 2 over a 40 m floor. The probes' misses read the map
+    // (`probe_sky_map_on_miss`), so each probe's irradiance toward +y is π L
+    // whatever its rays: the floor's E is 2π once the blend has converged
+    // (the CPU backend's furnace is within 1 % by frame 40), up to the
+    // irradiance encoding's rounding.
+    let Some(mut app) = render_app_with(ProbegiPlugin { sky_radiance: Vec3::ZERO, seed: SEED }) else { return };
+    let world = app.world_mut();
+    let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(20.0)));
+    let grey = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
+    world.spawn((Mesh3d(floor), MeshMaterial3d(grey)));
+    let image = world.resource_mut::<Assets<Image>>().add(crate::extract::cubemap([[1.0; 3]; 6], 4));
+    let skybox = bevy::light::Skybox { image: Some(image), brightness: 2.0, rotation: Quat::from_rotation_y(0.4) };
+    world.spawn((Camera3d::default(), skybox, Transform::from_xyz(0.0, 2.0, 0.0)));
+    let settings = DdgiVolumeSettings { probe_counts: glam::UVec3::new(4, 3, 4), ..default() };
+    // Probe rows at y = −0.25 (under the floor: switched off), 1.25 and 2.75.
+    let around = Transform::from_xyz(0.0, 1.25, 0.0).with_scale(Vec3::new(4.0, 3.0, 4.0));
+    world.spawn((ProbegiVolume { settings }, around));
+    for _ in 0..40 {
+        app.update();
+    }
+    let render_world = app.sub_app_mut(RenderApp).world_mut();
+    let mut rf = render_world.resource_mut::<ProbegiRenderField>();
+    assert!(rf.error.is_none(), "{:?}", rf.error);
+    let field = rf.field.as_mut().expect("a field on Bevy's device");
+    assert!(field.scene.sky_map.is_some(), "the skybox is the field's sky");
+    field.set.sync_host_atlases(Some(&field.tracer)).expect("read the atlases back");
+    let want = 2.0 * std::f32::consts::PI;
+    for p in [glam::Vec3::ZERO, glam::Vec3::new(1.0, 0.0, -0.7)] {
+        let e = field.set.irradiance(p, glam::Vec3::Y, glam::Vec3::Y);
+        assert!((e - glam::Vec3::splat(want)).abs().max_element() < 0.01 * want, "E at {p}: {e}, want {want}");
+    }
+}
