@@ -62,7 +62,12 @@ pub struct ProbegiPlugin {
 impl Plugin for ProbegiPlugin {
     fn build(&self, app: &mut App) {
         app.insert_resource(ProbegiScene { sky_radiance: self.sky_radiance, seed: self.seed, ..default() })
-            .add_systems(PostUpdate, extract_scene.after(bevy::transform::TransformSystems::Propagate));
+            .add_systems(
+                PostUpdate,
+                extract_scene
+                    .after(bevy::transform::TransformSystems::Propagate)
+                    .after(bevy::camera::visibility::VisibilitySystems::VisibilityPropagate),
+            );
         field_lighting::build(app);
     }
 
@@ -206,6 +211,7 @@ type MeshQuery<'w, 's> = Query<
         Option<&'static MeshMaterial3d<StandardMaterial>>,
         Option<&'static MeshMaterial3d<ProbegiMaterial>>,
         Has<ProbegiDynamic>,
+        Option<&'static InheritedVisibility>,
     ),
 >;
 
@@ -216,6 +222,7 @@ type GeometryChanged = (
     With<Mesh3d>,
     Or<(
         Added<ProbegiDynamic>,
+        Changed<InheritedVisibility>,
         Changed<Mesh3d>,
         Changed<MeshMaterial3d<StandardMaterial>>,
         Changed<MeshMaterial3d<ProbegiMaterial>>,
@@ -278,7 +285,7 @@ impl SceneChanges<'_, '_> {
             self.material_events.read().filter_map(event_asset).map(Into::into).collect();
         materials.extend(self.lit_material_events.read().filter_map(event_asset).map(UntypedAssetId::from));
         let images: Vec<AssetId<Image>> = self.image_events.read().filter_map(event_asset).collect();
-        let used = |(_, _, m, _, plain, lit, _): MeshItem| {
+        let used = |(_, _, m, _, plain, lit, ..): MeshItem| {
             let material = standard_material(plain, lit, assets);
             let textures = material
                 .map(|(_, m)| m)
@@ -332,6 +339,7 @@ type MeshItem<'a> = (
     Option<&'a MeshMaterial3d<StandardMaterial>>,
     Option<&'a MeshMaterial3d<ProbegiMaterial>>,
     bool,
+    Option<&'a InheritedVisibility>,
 );
 
 /// A mesh entity's `StandardMaterial` with its asset's id: its own, else
@@ -455,7 +463,10 @@ fn build_geometry(
 ) -> Result<BuiltGeometry, ExtractError> {
     let mut builder = SceneBuilder::new("bevy world", sky);
     let (mut moving, mut rest, mut known) = (vec![], vec![], HashSet::new());
-    for (entity, name, mesh, transform, plain, lit, dynamic) in meshes_q.iter() {
+    for (entity, name, mesh, transform, plain, lit, dynamic, visible) in meshes_q.iter() {
+        if visible.is_some_and(|v| !v.get()) {
+            continue; // hidden: Bevy does not draw it, the field does not see it
+        }
         let name = name.map_or_else(|| format!("{entity}"), |n| n.as_str().to_owned());
         let Some(mesh) = assets.meshes.get(&mesh.0) else { continue }; // still loading
         let material = standard_material(plain, lit, assets);

@@ -325,3 +325,21 @@ fn a_uniform_skybox_lights_an_open_floor_through_the_field_to_pi_l() {
         assert!((e - glam::Vec3::splat(want)).abs().max_element() < 0.01 * want, "E at {p}: {e}, want {want}");
     }
 }
+
+#[test]
+fn a_hidden_mesh_leaves_the_fields_scene_and_comes_back_when_shown() {
+    // Bevy's visibility (propagated by its VisibilityPlugin, in DefaultPlugins).
+    let Some(mut app) = render_app() else { return };
+    spawn_room(&mut app);
+    app.update();
+    let triangles = |app: &App| app.world().resource::<ProbegiScene>().scene.mesh.triangles.len();
+    assert_eq!(triangles(&app), 5 * 12);
+    let mut walls = app.world_mut().query_filtered::<Entity, With<Mesh3d>>();
+    let wall = walls.iter(app.world()).next().expect("a wall");
+    *app.world_mut().get_mut::<Visibility>(wall).expect("visibility") = Visibility::Hidden;
+    app.update();
+    assert_eq!(triangles(&app), 4 * 12, "a hidden mesh is not traced");
+    *app.world_mut().get_mut::<Visibility>(wall).expect("visibility") = Visibility::Inherited;
+    app.update();
+    assert_eq!(triangles(&app), 5 * 12, "shown again");
+}
