@@ -26,7 +26,8 @@
 //! - meshes that move are moving objects, posed on the device each frame
 //!   ([`ProbegiDynamic`]);
 //! - the camera's `Skybox` or `EnvironmentMapLight` is the field's sky
-//!   ([`environment_sky`]).
+//!   ([`environment_sky`]);
+//! - [`ProbegiProbeView`] draws the probes coloured by state ([`probe_debug`]).
 //!
 //! Add the plugin after `DefaultPlugins` (its material needs Bevy's render
 //! app). crates/probegi-bevy/README.md lists what is not built yet.
@@ -35,6 +36,7 @@ pub mod environment_sky;
 pub mod field_lighting;
 pub mod field_on_bevy_device;
 pub mod light_units;
+pub mod probe_debug;
 pub mod scene_extract;
 
 use std::collections::HashSet;
@@ -46,6 +48,7 @@ use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings, Volu
 use probegi_scene::{LightKind, PunctualLight, Scene};
 
 pub use field_lighting::{ProbegiLit, ProbegiMaterial};
+pub use probe_debug::ProbegiProbeView;
 pub use scene_extract::{ExtractError, MeshEntity, SceneBuilder};
 
 /// probegi's DDGI for Bevy: add it to an `App` beside Bevy's PBR plugins.
@@ -69,6 +72,7 @@ impl Plugin for ProbegiPlugin {
                     .after(bevy::camera::visibility::VisibilitySystems::VisibilityPropagate),
             );
         field_lighting::build(app);
+        probe_debug::build(app);
     }
 
     /// The render world's part, once every plugin is in (`RenderPlugin`
@@ -213,6 +217,7 @@ type MeshQuery<'w, 's> = Query<
         Has<ProbegiDynamic>,
         Option<&'static InheritedVisibility>,
     ),
+    Without<probe_debug::ProbeMarker>,
 >;
 
 /// A mesh entity's geometry or material changed.
@@ -220,6 +225,7 @@ type MeshQuery<'w, 's> = Query<
 /// makes the geometry again and moves as an object from then on.)
 type GeometryChanged = (
     With<Mesh3d>,
+    Without<probe_debug::ProbeMarker>,
     Or<(
         Added<ProbegiDynamic>,
         Changed<InheritedVisibility>,
@@ -247,7 +253,7 @@ type LightOrVolumeChanged = (
 #[derive(bevy::ecs::system::SystemParam)]
 struct SceneChanges<'w, 's> {
     geometry: Query<'w, 's, (), GeometryChanged>,
-    moved: Query<'w, 's, Entity, (With<Mesh3d>, Changed<GlobalTransform>)>,
+    moved: Query<'w, 's, Entity, (With<Mesh3d>, Without<probe_debug::ProbeMarker>, Changed<GlobalTransform>)>,
     lights_or_volumes: Query<'w, 's, (), LightOrVolumeChanged>,
     removed_meshes: RemovedComponents<'w, 's, Mesh3d>,
     removed_materials: RemovedComponents<'w, 's, MeshMaterial3d<StandardMaterial>>,
@@ -279,7 +285,12 @@ impl SceneChanges<'_, '_> {
     /// changed). Every reader is drained, so each change counts once. Asset events count only for the
     /// meshes, materials and textures that mesh entities use: a UI texture
     /// or a material nobody draws does not make the field again.
-    fn read(&mut self, meshes_q: &MeshQuery, assets: &MeshAssets) -> (bool, bool, Vec<AssetId<Image>>) {
+    fn read(
+        &mut self,
+        meshes_q: &MeshQuery,
+        assets: &MeshAssets,
+        known: &HashSet<Entity>,
+    ) -> (bool, bool, Vec<AssetId<Image>>) {
         let meshes: Vec<AssetId<Mesh>> = self.mesh_events.read().filter_map(event_asset).collect();
         let mut materials: Vec<UntypedAssetId> =
             self.material_events.read().filter_map(event_asset).map(Into::into).collect();
@@ -297,8 +308,11 @@ impl SceneChanges<'_, '_> {
         };
         let asset_changed =
             !(meshes.is_empty() && materials.is_empty() && images.is_empty()) && meshes_q.iter().any(used);
-        let removed_materials = self.removed_materials.read().count() + self.removed_lit_materials.read().count();
-        let geometry = [self.removed_meshes.read().count(), removed_materials, asset_changed as usize];
+        // Only what the geometry holds (the probe view's spheres come and go).
+        let removed_materials = self.removed_materials.read().filter(|e| known.contains(e)).count()
+            + self.removed_lit_materials.read().filter(|e| known.contains(e)).count();
+        let removed_meshes = self.removed_meshes.read().filter(|e| known.contains(e)).count();
+        let geometry = [removed_meshes, removed_materials, asset_changed as usize];
         let others = [
             self.removed_lights.read().count(),
             self.removed_spots.read().count(),
@@ -369,7 +383,7 @@ fn extract_scene(
     mut out: ResMut<ProbegiScene>,
 ) {
     let first = out.generation == 0;
-    let (mut geometry, others, images_changed) = changes.read(&meshes_q, &assets);
+    let (mut geometry, others, images_changed) = changes.read(&meshes_q, &assets, &out.known);
     let sky_changed = skies.changed(&images_changed);
     let mut moved = false;
     for e in changes.moved.iter() {

@@ -22,6 +22,8 @@ pub struct Args {
     pub out: Option<PathBuf>,
     /// No DDGI volume: Bevy's own lighting, to compare with.
     pub no_field: bool,
+    /// Draw the probes (`ProbegiProbeView`; P toggles it in a window).
+    pub probes: bool,
     /// The headless picture's size (its width a multiple of 64: read-back
     /// rows are whole 256-byte blocks).
     pub size: UVec2,
@@ -30,7 +32,7 @@ pub struct Args {
 impl Args {
     /// `--frames N`, `--out PATH`, `--no-field`, `--size WxH`.
     pub fn parse(mut args: impl Iterator<Item = String>) -> Result<Self, String> {
-        let mut out = Self { frames: 60, out: None, no_field: false, size: UVec2::new(640, 480) };
+        let mut out = Self { frames: 60, out: None, no_field: false, probes: false, size: UVec2::new(640, 480) };
         while let Some(a) = args.next() {
             let mut value = || args.next().ok_or_else(|| format!("{a} needs a value"));
             match a.as_str() {
@@ -40,6 +42,7 @@ impl Args {
                 }
                 "--out" => out.out = Some(PathBuf::from(value()?)),
                 "--no-field" => out.no_field = true,
+                "--probes" => out.probes = true,
                 "--size" => {
                     let v = value()?;
                     let parsed =
@@ -49,7 +52,9 @@ impl Args {
                         .ok_or(format!("--size {v}: WxH, W a multiple of 64, both at most 4096"))?;
                 }
                 other => {
-                    return Err(format!("unknown argument {other:?} (--frames N, --out PATH, --no-field, --size WxH)"));
+                    return Err(format!(
+                        "unknown argument {other:?} (--frames N, --out PATH, --no-field, --probes, --size WxH)"
+                    ));
                 }
             }
         }
@@ -84,6 +89,7 @@ pub fn add_default_plugins(app: &mut App, args: &Args) {
         })
     };
     app.add_plugins(plugins);
+    app.insert_resource(probegi_bevy::ProbegiProbeView { enabled: args.probes, ..default() });
     if args.headless() {
         let mut target = Image::new_target_texture(args.size.x, args.size.y, TextureFormat::Rgba8UnormSrgb, None);
         target.texture_descriptor.usage |= TextureUsages::COPY_SRC;
@@ -91,7 +97,7 @@ pub fn add_default_plugins(app: &mut App, args: &Args) {
         app.insert_resource(Target(handle));
     } else {
         #[cfg(feature = "window")]
-        app.add_systems(Update, fly_camera);
+        app.add_systems(Update, (fly_camera, toggle_probes));
     }
 }
 
@@ -186,6 +192,14 @@ fn last_frame(app: &mut App, target: &Handle<Image>) -> Result<Vec<u8>, String> 
 /// button held to look.
 #[derive(Component)]
 pub struct FlyCamera;
+
+/// P shows or hides the probes.
+#[cfg(feature = "window")]
+fn toggle_probes(keys: Res<ButtonInput<KeyCode>>, mut view: ResMut<probegi_bevy::ProbegiProbeView>) {
+    if keys.just_pressed(KeyCode::KeyP) {
+        view.enabled = !view.enabled;
+    }
+}
 
 #[cfg(feature = "window")]
 fn fly_camera(

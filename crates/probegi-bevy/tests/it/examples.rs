@@ -37,6 +37,7 @@ fn the_cornell_example_bleeds_the_walls_colours_where_bevys_ambient_cannot() {
             frames: 40,
             out: Some(out.clone()),
             no_field,
+            probes: false,
             size: UVec2::new(320, 240),
         };
         let rgba = bevy_cornell::run(&args).expect("the example ran").expect("headless pixels");

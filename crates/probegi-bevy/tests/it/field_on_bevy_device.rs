@@ -343,3 +343,37 @@ fn a_hidden_mesh_leaves_the_fields_scene_and_comes_back_when_shown() {
     app.update();
     assert_eq!(triangles(&app), 5 * 12, "shown again");
 }
+
+#[test]
+fn the_probe_view_draws_every_probe_where_it_is_and_the_field_never_sees_it() {
+    use probegi_bevy::ProbegiProbeView;
+    use probegi_bevy::probe_debug::ProbeMarker;
+    let Some(mut app) = render_app() else { return };
+    spawn_room(&mut app);
+    for _ in 0..3 {
+        app.update();
+    }
+    let generation = app.world().resource::<ProbegiScene>().geometry_generation;
+    app.world_mut().resource_mut::<ProbegiProbeView>().enabled = true;
+    for _ in 0..3 {
+        app.update();
+    }
+    let mut markers = app.world_mut().query_filtered::<&Transform, With<ProbeMarker>>();
+    let mut placed: Vec<[f32; 3]> = markers.iter(app.world()).map(|t| t.translation.to_array()).collect();
+    let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
+    let volume = &rf.field.as_ref().expect("a field").set.volumes()[0];
+    let mut probes: Vec<[f32; 3]> = volume.probe_positions.iter().map(|p| p.to_array()).collect();
+    assert_eq!(placed.len(), 6 * 5 * 6, "a sphere a probe");
+    let order = |a: &[f32; 3], b: &[f32; 3]| a.partial_cmp(b).expect("finite");
+    placed.sort_by(order);
+    probes.sort_by(order);
+    assert_eq!(placed, probes, "each sphere where relocation put its probe");
+    let s = app.world().resource::<ProbegiScene>();
+    assert_eq!((s.geometry_generation, s.scene.mesh.triangles.len()), (generation, 5 * 12), "not traced");
+    // Off: the spheres go, and the field's geometry stays.
+    app.world_mut().resource_mut::<ProbegiProbeView>().enabled = false;
+    app.update();
+    app.update();
+    assert_eq!(app.world_mut().query_filtered::<(), With<ProbeMarker>>().iter(app.world()).count(), 0);
+    assert_eq!(app.world().resource::<ProbegiScene>().geometry_generation, generation);
+}
