@@ -235,6 +235,9 @@ type GeometryChanged = (
     )>,
 );
 
+/// A mesh entity (not a probe view's sphere) moved.
+type MeshMoved = (With<Mesh3d>, Without<probe_debug::ProbeMarker>, Changed<GlobalTransform>);
+
 /// A light or a volume changed (or moved).
 type LightOrVolumeChanged = (
     Or<(With<PointLight>, With<SpotLight>, With<DirectionalLight>, With<ProbegiVolume>, With<ProbegiCascades>)>,
@@ -253,7 +256,7 @@ type LightOrVolumeChanged = (
 #[derive(bevy::ecs::system::SystemParam)]
 struct SceneChanges<'w, 's> {
     geometry: Query<'w, 's, (), GeometryChanged>,
-    moved: Query<'w, 's, Entity, (With<Mesh3d>, Without<probe_debug::ProbeMarker>, Changed<GlobalTransform>)>,
+    moved: Query<'w, 's, Entity, MeshMoved>,
     lights_or_volumes: Query<'w, 's, (), LightOrVolumeChanged>,
     removed_meshes: RemovedComponents<'w, 's, Mesh3d>,
     removed_materials: RemovedComponents<'w, 's, MeshMaterial3d<StandardMaterial>>,
