@@ -202,6 +202,9 @@ pub struct ProbegiScene {
     pub sky_generation: u64,
     /// The cubemap and rotation `sky_map` was made from.
     sky_key: Option<(AssetId<Image>, [f32; 4])>,
+    /// The camera exposure the emissives were read through
+    /// (`light_units::emissive_luminance`).
+    camera_exposure: f32,
 }
 
 type MeshQuery<'w, 's> = Query<
@@ -388,6 +391,11 @@ fn extract_scene(
     let first = out.generation == 0;
     let (mut geometry, others, images_changed) = changes.read(&meshes_q, &assets, &out.known);
     let sky_changed = skies.changed(&images_changed);
+    // Display-weighted emissives read through the camera's exposure.
+    let exposure = skies.camera_exposure();
+    if exposure != out.camera_exposure && out.scene.materials.iter().any(|m| m.emissive_factor != glam::Vec3::ZERO) {
+        geometry = true;
+    }
     let mut moved = false;
     for e in changes.moved.iter() {
         if out.moving.contains(&e) {
@@ -410,6 +418,7 @@ fn extract_scene(
         }
     }
     if first || geometry {
+        out.camera_exposure = exposure;
         rebuild_geometry(&meshes_q, &assets, &mut out);
     }
     if first || sky_changed {
@@ -423,7 +432,7 @@ fn extract_scene(
 
 /// Builds the geometry again into `out` (the last good one stays on an error).
 fn rebuild_geometry(meshes_q: &MeshQuery, assets: &MeshAssets, out: &mut ProbegiScene) {
-    match build_geometry(meshes_q, assets, vec3(out.sky_radiance), &out.promoted) {
+    match build_geometry(meshes_q, assets, vec3(out.sky_radiance), out.camera_exposure, &out.promoted) {
         Ok(built) => {
             out.object_poses = vec![glam::Mat4::IDENTITY; built.moving.len()];
             out.scene = Arc::new(built.scene);
@@ -476,9 +485,10 @@ fn build_geometry(
     meshes_q: &MeshQuery,
     assets: &MeshAssets,
     sky: glam::Vec3,
+    camera_exposure: f32,
     promoted: &HashSet<Entity>,
 ) -> Result<BuiltGeometry, ExtractError> {
-    let mut builder = SceneBuilder::new("bevy world", sky);
+    let mut builder = SceneBuilder::new("bevy world", sky).with_camera_exposure(camera_exposure);
     let (mut moving, mut rest, mut known) = (vec![], vec![], HashSet::new());
     for (entity, name, mesh, transform, plain, lit, dynamic, visible) in meshes_q.iter() {
         if visible.is_some_and(|v| !v.get()) {
@@ -512,6 +522,7 @@ type SkyChanged = Or<(Changed<bevy::light::Skybox>, Changed<bevy::light::Environ
 struct Skies<'w, 's> {
     cameras: Query<'w, 's, CameraSky, With<Camera>>,
     changed: Query<'w, 's, (), (With<Camera>, SkyChanged)>,
+    exposures: Query<'w, 's, (Entity, Option<&'static bevy::camera::Exposure>), With<Camera>>,
     removed_skyboxes: RemovedComponents<'w, 's, bevy::light::Skybox>,
     removed_maps: RemovedComponents<'w, 's, bevy::light::EnvironmentMapLight>,
 }
@@ -521,6 +532,13 @@ struct Skies<'w, 's> {
 type SkySource = (Entity, Handle<Image>, Quat, f32);
 
 impl Skies<'_, '_> {
+    /// The first camera's (in entity order) exposure, Bevy's default without
+    /// one: what display-weighted emissives are read through.
+    fn camera_exposure(&self) -> f32 {
+        let first = self.exposures.iter().min_by_key(|(e, _)| *e);
+        first.and_then(|(_, x)| x.copied()).unwrap_or_default().exposure()
+    }
+
     /// The first camera's (in entity order) `Skybox` with an image, else its
     /// `EnvironmentMapLight`.
     fn source(&self) -> Option<SkySource> {

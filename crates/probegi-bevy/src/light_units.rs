@@ -16,12 +16,14 @@
 //!   point light of that power masked by its cone (Φ / 4π cd, the same
 //!   division in the same file), not as Φ spread over the cone: so does this.
 //! - `DirectionalLight::illuminance` is in lux: glTF's unit, unchanged.
-//! - `StandardMaterial::emissive` is read as luminance (cd·m⁻², "nits"),
-//!   unchanged: Bevy's own lighting treats it so when the material's
-//!   `emissive_exposure_weight` is 1. At Bevy's default weight 0 the emissive
-//!   is a display value that Bevy adds after exposure; the field then
-//!   under-weights that light by the camera's exposure (about 1/1000 at
-//!   Bevy's default EV100 of 9.7). Not converted yet.
+//! - `StandardMaterial::emissive` with `emissive_exposure_weight` w: Bevy
+//!   draws `emissive × mix(1, exposure, w)` (`pbr_functions.wesl`), so the
+//!   luminance that the camera's exposure would draw so is
+//!   `emissive × ((1 − w) / exposure + w)` cd·m⁻² ([`emissive_luminance`]).
+//!   At w = 1 the emissive is luminance as it is; at Bevy's default w = 0 it
+//!   is a display value, which the field reads as the light it shows (1 000×
+//!   at Bevy's default EV100 of 9.7). The camera is the first one (in entity
+//!   order), its `Exposure` or Bevy's default.
 //! - A spot's cone: Bevy's `inner_angle` / `outer_angle` are half-angles from
 //!   the axis with the falloff `clamp((cos θ − cos outer) / (cos inner − cos outer))²`,
 //!   glTF's `innerConeAngle` / `outerConeAngle` and falloff.
@@ -55,6 +57,14 @@ pub fn spot_cone(inner: f32, outer: f32) -> (f32, f32) {
 /// from Bevy's `DirectionalLight::illuminance` in lux.
 pub fn directional_irradiance_from_lux(lux: f32) -> f32 {
     lux
+}
+
+/// The luminance (cd·m⁻²) of Bevy's `emissive` at `exposure_weight` seen
+/// through a camera of `exposure` (Bevy's `Exposure::exposure()`): see the
+/// module docs.
+pub fn emissive_luminance(emissive: glam::Vec3, exposure_weight: f32, exposure: f32) -> glam::Vec3 {
+    let w = exposure_weight.clamp(0.0, 1.0);
+    emissive * ((1.0 - w) / exposure.max(f32::MIN_POSITIVE) + w)
 }
 
 #[cfg(test)]

@@ -73,18 +73,28 @@ pub struct MeshEntity<'a> {
 
 /// Builds a probegi scene up from mesh entities, sharing materials and
 /// textures between the entities that use the same assets.
-#[derive(Default)]
 pub struct SceneBuilder {
     scene: Scene,
     materials: HashMap<Option<UntypedAssetId>, u32>,
     textures: HashMap<AssetId<Image>, usize>,
+    /// The camera's exposure, for display-weighted emissives
+    /// (`light_units::emissive_luminance`).
+    camera_exposure: f32,
 }
 
 impl SceneBuilder {
     /// An empty scene named `name`, its sky the constant `sky_radiance`.
     pub fn new(name: &str, sky_radiance: Vec3) -> Self {
         let scene = Scene { name: name.to_owned(), sky_radiance, ..Scene::default() };
-        Self { scene, ..Default::default() }
+        let camera_exposure = bevy::camera::Exposure::default().exposure();
+        Self { scene, materials: HashMap::new(), textures: HashMap::new(), camera_exposure }
+    }
+
+    /// Reads display-weighted emissives through a camera of `exposure`
+    /// (Bevy's `Exposure::exposure()`; Bevy's default camera's without it).
+    pub fn with_camera_exposure(mut self, exposure: f32) -> Self {
+        self.camera_exposure = exposure;
+        self
     }
 
     /// Adds `entity`'s triangles in world space, with its material.
@@ -191,7 +201,11 @@ impl SceneBuilder {
         let mut out = Material {
             base_color_factor: Vec3::new(base.red, base.green, base.blue),
             alpha_factor: base.alpha,
-            emissive_factor: Vec3::new(m.emissive.red, m.emissive.green, m.emissive.blue),
+            emissive_factor: crate::light_units::emissive_luminance(
+                Vec3::new(m.emissive.red, m.emissive.green, m.emissive.blue),
+                m.emissive_exposure_weight,
+                self.camera_exposure,
+            ),
             roughness: m.perceptual_roughness,
             metallic: m.metallic,
             specular_model: SpecularModel::MetallicRoughness,

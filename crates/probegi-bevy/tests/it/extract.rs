@@ -102,7 +102,10 @@ fn meshes_materials_lights_and_volumes_come_from_the_ecs() {
     // Materials: linear base colour, emission in nits, roughness, metalness, cut-outs.
     let red = sc.materials.iter().find(|m| m.base_color_texture.is_none()).expect("the box's material");
     assert_eq!(red.base_color_factor, glam::Vec3::new(1.0, 0.0, 0.0));
-    assert_eq!(red.emissive_factor, glam::Vec3::new(2.0, 3.0, 4.0));
+    // At Bevy's default exposure weight 0 the emissive is a display value:
+    // the luminance Bevy's default camera (no camera here) would show so.
+    let display = 1.0 / bevy::camera::Exposure::default().exposure();
+    assert!(red.emissive_factor.abs_diff_eq(glam::Vec3::new(2.0, 3.0, 4.0) * display, 1e-2), "{}", red.emissive_factor);
     assert_eq!((red.roughness, red.metallic, red.alpha_mode), (0.3, 0.25, ProbegiAlpha::Opaque));
     let floor = sc.materials.iter().find(|m| m.base_color_texture.is_some()).expect("the floor's material");
     assert!((floor.base_color_factor.x - 0.214).abs() < 1e-3, "sRGB 0.5 is linear 0.214");
@@ -368,4 +371,38 @@ fn the_cameras_skybox_is_the_fields_sky_map_looked_up_as_bevy_looks_it_up() {
     app.world_mut().entity_mut(camera).remove::<bevy::light::Skybox>();
     app.update();
     assert!(scene(&app).sky_map.is_none());
+}
+
+#[test]
+fn emissives_are_the_luminance_the_camera_shows() {
+    // Bevy draws emissive × mix(1, exposure, w): luminance emissive × ((1 − w)/exposure + w).
+    let mut app = app();
+    let world = app.world_mut();
+    let quad = world.resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().size(1.0, 1.0));
+    let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+    let glow = |w: f32| StandardMaterial {
+        emissive: LinearRgba::rgb(1.0, 2.0, 3.0),
+        emissive_exposure_weight: w,
+        ..default()
+    };
+    let (display, luminance) = (materials.add(glow(0.0)), materials.add(glow(1.0)));
+    world.spawn((Mesh3d(quad.clone()), MeshMaterial3d(display), Transform::default()));
+    world.spawn((Mesh3d(quad), MeshMaterial3d(luminance), Transform::from_xyz(2.0, 0.0, 0.0)));
+    let camera = world.spawn((Camera::default(), bevy::camera::Exposure { ev100: 0.0 })).id();
+    app.update();
+    let emissive = |app: &App| {
+        let mut e: Vec<glam::Vec3> = scene(&app).scene.materials.iter().map(|m| m.emissive_factor).collect();
+        e.sort_by(|a, b| a.x.total_cmp(&b.x));
+        e
+    };
+    // EV100 0: exposure 1/1.2.
+    let want = [glam::Vec3::new(1.0, 2.0, 3.0), glam::Vec3::new(1.2, 2.4, 3.6)];
+    assert!(emissive(&app).iter().zip(want).all(|(a, b)| a.abs_diff_eq(b, 1e-5)), "{:?}", emissive(&app));
+    // Two stops brighter exposure: the display value is a quarter of the light.
+    let g = scene(&app).geometry_generation;
+    app.world_mut().get_mut::<bevy::camera::Exposure>(camera).expect("exposure").ev100 = -2.0;
+    app.update();
+    assert_eq!(scene(&app).geometry_generation, g + 1, "a new exposure reads the emissives again");
+    let want = [glam::Vec3::new(0.3, 0.6, 0.9), glam::Vec3::new(1.0, 2.0, 3.0)];
+    assert!(emissive(&app).iter().zip(want).all(|(a, b)| a.abs_diff_eq(b, 1e-5)), "{:?}", emissive(&app));
 }
