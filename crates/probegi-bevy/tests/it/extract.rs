@@ -391,7 +391,7 @@ fn emissives_are_the_luminance_the_camera_shows() {
     let camera = world.spawn((Camera::default(), bevy::camera::Exposure { ev100: 0.0 })).id();
     app.update();
     let emissive = |app: &App| {
-        let mut e: Vec<glam::Vec3> = scene(&app).scene.materials.iter().map(|m| m.emissive_factor).collect();
+        let mut e: Vec<glam::Vec3> = scene(app).scene.materials.iter().map(|m| m.emissive_factor).collect();
         e.sort_by(|a, b| a.x.total_cmp(&b.x));
         e
     };
