@@ -48,14 +48,15 @@ fn main() -> Result<(), String> {
     bevy_example::add_default_plugins(&mut app, &args);
     app.add_plugins(ProbegiPlugin { sky_radiance: SKY_NITS, ..default() })
         .insert_resource(ClearColor(Color::linear_rgb(0.45, 0.55, 0.75)))
-        .insert_resource(Loaded(loaded))
+        .insert_resource(Loaded(loaded, args.no_field))
         .add_systems(Startup, setup);
     bevy_example::run(app, &args).map(|_| ())
 }
 
-/// The scene probegi's loader read.
+/// The scene probegi's loader read, and whether to leave the field out
+/// (`--no-field`: no cascades, Bevy's own lighting).
 #[derive(Resource)]
-struct Loaded(Scene);
+struct Loaded(Scene, bool);
 
 /// The model as Bevy meshes, the sun, and the camera with its cascades.
 fn setup(
@@ -81,7 +82,9 @@ fn setup(
     let at = Transform::from_xyz(-12.0, 2.5, -1.0).looking_at(Vec3::new(4.0, 4.5, 0.5), Vec3::Y);
     let exposure = bevy::camera::Exposure { ev100: 13.0 };
     let camera = bevy_example::spawn_camera(&mut commands, at, exposure, target.as_deref());
-    commands.entity(camera).insert(ProbegiCascades::default());
+    if !loaded.1 {
+        commands.entity(camera).insert(ProbegiCascades::default());
+    }
 }
 
 /// Material `m`'s triangles as one Bevy mesh, `None` where it has none.

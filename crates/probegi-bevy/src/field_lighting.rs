@@ -14,8 +14,9 @@
 //! which the shader zeroes for Bevy's part; the ambient light's small
 //! specular term goes with it). Everything else is Bevy's: direct lights and
 //! their shadows, the environment map's specular, emissive, fog, tone
-//! mapping. Where the field has no volume yet (or no field runs), Bevy's own
-//! lighting is drawn unchanged. Not handled: lightmaps (Bevy adds them
+//! mapping. Where the field has no volume yet (or no field runs), and outside
+//! every volume, Bevy's own lighting is drawn unchanged; across a volume's
+//! edge the two fade into each other (`probegi_field_coverage`). Not handled: lightmaps (Bevy adds them
 //! without that scale, so a lightmapped mesh would count its indirect light
 //! twice), the deferred renderer (its lighting pass is Bevy's) and
 //! order-independent transparency.

@@ -220,6 +220,7 @@ fn take_changes(f: &mut ProbegiField, x: &ExtractedProbegiScene) -> Result<(), S
     if f.scene.lights != x.lights || f.scene.sky_radiance != x.sky_radiance || objects_moved || map_dimmed {
         let lights = std::mem::replace(&mut f.scene.lights, x.lights.clone());
         let sky = std::mem::replace(&mut f.scene.sky_radiance, x.sky_radiance);
+        let map_intensity = intensity(&f.scene.sky_map);
         if let (Some(map), Some(i)) = (f.scene.sky_map.as_mut(), intensity(&x.sky_map)) {
             map.intensity = i;
         }
@@ -229,6 +230,9 @@ fn take_changes(f: &mut ProbegiField, x: &ExtractedProbegiScene) -> Result<(), S
         if let Err(e) = f.tracer.pose_scene(&f.scene, f.frame as f32) {
             // Kept as they were, so the next frame tries again.
             (f.scene.lights, f.scene.sky_radiance) = (lights, sky);
+            if let (Some(map), Some(i)) = (f.scene.sky_map.as_mut(), map_intensity) {
+                map.intensity = i;
+            }
             return Err(format!("the lights and moving objects could not be posed: {e}"));
         }
         f.object_poses.clone_from(&x.object_poses);

@@ -205,6 +205,11 @@ pub struct ProbegiScene {
     /// The camera exposure the emissives were read through
     /// (`light_units::emissive_luminance`).
     camera_exposure: f32,
+    /// Why the camera's sky could not be the field's, if it could not (the
+    /// constant sky stands in).
+    pub sky_error: Option<ExtractError>,
+    /// Moving objects whose pose could not be a key (warned about once).
+    unkeyed: HashSet<Entity>,
 }
 
 type MeshQuery<'w, 's> = Query<
@@ -390,7 +395,7 @@ fn extract_scene(
 ) {
     let first = out.generation == 0;
     let (mut geometry, others, images_changed) = changes.read(&meshes_q, &assets, &out.known);
-    let sky_changed = skies.changed(&images_changed);
+    let (sky_changed, sky_image_changed) = skies.changed(&images_changed);
     // Display-weighted emissives read through the camera's exposure.
     let exposure = skies.camera_exposure();
     if exposure != out.camera_exposure && out.scene.materials.iter().any(|m| m.emissive_factor != glam::Vec3::ZERO) {
@@ -400,19 +405,19 @@ fn extract_scene(
     for e in changes.moved.iter() {
         if out.moving.contains(&e) {
             moved = true;
-        } else {
-            // A new mesh, or a still one that moved: a moving object from now on.
+        } else if out.known.contains(&e) {
+            // A still mesh that moved: a moving object from now on.
             geometry = true;
-            if out.known.contains(&e) {
-                out.promoted.insert(e);
-            }
+            out.promoted.insert(e);
         }
+        // Otherwise the geometry does not hold it (new, hidden, or its mesh
+        // still loading): its arrival, showing or loading makes it again.
     }
     if !(first || geometry || others || moved || sky_changed) {
         return;
     }
     if moved && !(first || geometry) {
-        match object_poses(&out, &meshes_q) {
+        match object_poses(&mut out, &meshes_q) {
             Some(poses) => out.object_poses = poses,
             None => geometry = true,
         }
@@ -422,7 +427,7 @@ fn extract_scene(
         rebuild_geometry(&meshes_q, &assets, &mut out);
     }
     if first || sky_changed {
-        skies.update(&assets.images, &mut out);
+        skies.update(&assets.images, sky_image_changed, &mut out);
     }
     out.lights = punctual_lights(&lights);
     let bounds = out.scene.bounds();
@@ -451,16 +456,24 @@ fn rebuild_geometry(meshes_q: &MeshQuery, assets: &MeshAssets, out: &mut Probegi
 
 /// Each moving object's transform from its rest pose to now; `None` where
 /// one is gone or cannot be a key (`scene_extract::moving_key`).
-fn object_poses(out: &ProbegiScene, meshes_q: &MeshQuery) -> Option<Vec<glam::Mat4>> {
-    out.moving
-        .iter()
-        .zip(&out.rest)
-        .map(|(e, rest)| {
-            let (_, _, _, t, ..) = meshes_q.get(*e).ok()?;
-            let pose = world_from_local(t) * rest.inverse();
-            scene_extract::moving_key(pose).map(|_| pose)
-        })
-        .collect()
+fn object_poses(out: &mut ProbegiScene, meshes_q: &MeshQuery) -> Option<Vec<glam::Mat4>> {
+    let mut poses = Vec::with_capacity(out.moving.len());
+    for (e, rest) in out.moving.iter().zip(&out.rest) {
+        let (_, _, _, t, ..) = meshes_q.get(*e).ok()?;
+        let pose = world_from_local(t) * rest.inverse();
+        if scene_extract::moving_key(pose).is_none() {
+            if out.unkeyed.insert(*e) {
+                warn!(
+                    "probegi-bevy: {e} moved by more than a translation, rotation and positive scale from \
+                     where the geometry was built (a changing non-uniform scale, a shear, a zero scale): \
+                     the geometry, and the field, are made again each such frame"
+                );
+            }
+            return None;
+        }
+        poses.push(pose);
+    }
+    Some(poses)
 }
 
 /// A `GlobalTransform` as probegi's matrix.
@@ -522,7 +535,7 @@ type SkyChanged = Or<(Changed<bevy::light::Skybox>, Changed<bevy::light::Environ
 struct Skies<'w, 's> {
     cameras: Query<'w, 's, CameraSky, With<Camera>>,
     changed: Query<'w, 's, (), (With<Camera>, SkyChanged)>,
-    exposures: Query<'w, 's, (Entity, Option<&'static bevy::camera::Exposure>), With<Camera>>,
+    exposures: Query<'w, 's, (Entity, &'static Camera, Option<&'static bevy::camera::Exposure>), With<Camera3d>>,
     removed_skyboxes: RemovedComponents<'w, 's, bevy::light::Skybox>,
     removed_maps: RemovedComponents<'w, 's, bevy::light::EnvironmentMapLight>,
 }
@@ -532,11 +545,12 @@ struct Skies<'w, 's> {
 type SkySource = (Entity, Handle<Image>, Quat, f32);
 
 impl Skies<'_, '_> {
-    /// The first camera's (in entity order) exposure, Bevy's default without
-    /// one: what display-weighted emissives are read through.
+    /// The exposure of the first active 3D camera (by `Camera::order`, then
+    /// entity), Bevy's default without one: what display-weighted emissives
+    /// are read through.
     fn camera_exposure(&self) -> f32 {
-        let first = self.exposures.iter().min_by_key(|(e, _)| *e);
-        first.and_then(|(_, x)| x.copied()).unwrap_or_default().exposure()
+        let first = self.exposures.iter().filter(|(_, c, _)| c.is_active).min_by_key(|(e, c, _)| (c.order, *e));
+        first.and_then(|(.., x)| x.copied()).unwrap_or_default().exposure()
     }
 
     /// The first camera's (in entity order) `Skybox` with an image, else its
@@ -551,21 +565,23 @@ impl Skies<'_, '_> {
         })
     }
 
-    /// Whether the sky may have changed: a camera's sky component, or the
-    /// image of the sky there is (`images`: those that changed).
-    fn changed(&mut self, images: &[AssetId<Image>]) -> bool {
+    /// (whether the sky may have changed: a camera's sky component or the
+    /// sky's image; whether that image did), `images` those that changed.
+    fn changed(&mut self, images: &[AssetId<Image>]) -> (bool, bool) {
         let removed = self.removed_skyboxes.read().count() + self.removed_maps.read().count();
         let image = self.source().is_some_and(|(_, h, ..)| images.contains(&h.id()));
-        !self.changed.is_empty() || removed > 0 || image
+        (!self.changed.is_empty() || removed > 0 || image, image)
     }
 
-    /// The sky map made again where its cubemap or rotation changed (an
-    /// error names the camera; the constant sky then stands in), else its
-    /// intensity set.
-    fn update(&self, images: &Assets<Image>, out: &mut ProbegiScene) {
+    /// The sky map made again where its cubemap (another, or its texels,
+    /// `image_changed`) or rotation changed (an error names the camera, is
+    /// logged once and kept in `sky_error`; the constant sky then stands in),
+    /// else its intensity set.
+    fn update(&self, images: &Assets<Image>, image_changed: bool, out: &mut ProbegiScene) {
         let source = self.source();
+        let has_source = source.is_some();
         let key = source.as_ref().map(|(_, h, r, _)| (h.id(), r.to_array()));
-        if key.is_some() && key == out.sky_key {
+        if key.is_some() && key == out.sky_key && !image_changed {
             if let (Some(map), Some((.., brightness))) = (out.sky_map.as_mut(), source) {
                 map.intensity = brightness;
             }
@@ -580,12 +596,17 @@ impl Skies<'_, '_> {
                 }
                 Err(what) => {
                     let e = ExtractError { entity: format!("{e}"), what };
-                    error!("{e}");
-                    out.error = Some(e);
+                    if out.sky_error.as_ref() != Some(&e) {
+                        error!("{e}");
+                    }
+                    out.sky_error = Some(e);
                     None
                 }
             }
         });
+        if made.is_some() || !has_source {
+            out.sky_error = None;
+        }
         out.sky_key = made.as_ref().and(key);
         if made.is_some() || out.sky_map.is_some() {
             out.sky_generation += 1;

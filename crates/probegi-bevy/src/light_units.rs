@@ -63,7 +63,8 @@ pub fn directional_irradiance_from_lux(lux: f32) -> f32 {
 /// through a camera of `exposure` (Bevy's `Exposure::exposure()`): see the
 /// module docs.
 pub fn emissive_luminance(emissive: glam::Vec3, exposure_weight: f32, exposure: f32) -> glam::Vec3 {
-    let w = exposure_weight.clamp(0.0, 1.0);
+    // Not clamped: Bevy's `mix` is not either.
+    let w = exposure_weight;
     emissive * ((1.0 - w) / exposure.max(f32::MIN_POSITIVE) + w)
 }
 

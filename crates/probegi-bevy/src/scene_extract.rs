@@ -322,8 +322,11 @@ fn add_face_normal(mesh: &mut probegi_scene::mesh::Mesh, [a, b, c]: [u32; 3]) {
 pub fn moving_key(world_from_rest: Mat4) -> Option<TransformKeyframe> {
     let (scale, rotation, translation) = world_from_rest.to_scale_rotation_translation();
     let rebuilt = Mat4::from_scale_rotation_translation(scale, rotation, translation);
-    let exact = rebuilt
-        .abs_diff_eq(world_from_rest, 1e-4 * world_from_rest.abs().to_cols_array().iter().fold(1.0, |m, x| x.max(m)));
+    // The linear part must come back (its own size sets the tolerance; the
+    // translation comes back as it is).
+    let linear = |m: Mat4| Mat3::from_mat4(m);
+    let size = linear(world_from_rest).to_cols_array().iter().fold(1.0f32, |m, x| m.max(x.abs()));
+    let exact = linear(rebuilt).abs_diff_eq(linear(world_from_rest), 1e-4 * size);
     (world_from_rest.is_finite() && scale.cmpgt(Vec3::ZERO).all() && exact).then_some(TransformKeyframe {
         frame: 0.0,
         translation: Some(translation),

@@ -122,12 +122,7 @@ pub fn time_gpu_passes(
     ctx.wait()?;
     // The shade pass over every ray of the batch, with the set's field on the device.
     let field = probegi_wgpu::ddgi_query::GpuDdgiField::upload(ctx, &set.view())?;
-    let info = probegi_wgpu::probe_shade::shade_info(
-        true,
-        s.glossy_second_order,
-        s.probe_area_light_samples,
-        s.probe_sky_light_samples,
-    );
+    let info = probegi_wgpu::probe_shade::volume_shade_info(true, s);
     let shade_probes: Vec<probegi_wgpu::probe_shade::ShadeProbe> = batch
         .probes
         .iter()

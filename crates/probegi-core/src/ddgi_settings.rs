@@ -567,6 +567,13 @@ impl DdgiFieldSetSettings {
         for (i, v) in self.volumes.iter().enumerate() {
             v.validate().map_err(|(f, why)| (i, f, why))?;
         }
+        // Where the field carries a sky map the camera samples none of it, so
+        // every member must carry it or none.
+        let on_miss = self.volumes[0].probe_sky_map_on_miss;
+        if let Some(i) = self.volumes.iter().position(|v| v.probe_sky_map_on_miss != on_miss) {
+            let why = format!("{} here but {on_miss} on volume 0: every volume or none", !on_miss);
+            return Err((i, "probe_sky_map_on_miss", why));
+        }
         Ok(())
     }
 }
@@ -574,6 +581,16 @@ impl DdgiFieldSetSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_set_carries_a_sky_map_on_every_volume_or_none() {
+        let on = DdgiVolumeSettings { probe_sky_map_on_miss: true, ..Default::default() };
+        let mixed =
+            DdgiFieldSetSettings { volumes: vec![on.clone(), DdgiVolumeSettings::default()], ..Default::default() };
+        assert_eq!(mixed.validate().map_err(|e| (e.0, e.1)), Err((1, "probe_sky_map_on_miss")));
+        let all = DdgiFieldSetSettings { volumes: vec![on.clone(), on], ..Default::default() };
+        assert!(all.validate().is_ok());
+    }
 
     #[test]
     fn defaults_are_the_papers_values_and_valid() {

@@ -89,19 +89,21 @@ pub fn batch_shade_probes(
             ShadeProbe {
                 first_ray: bp.first_ray,
                 ray_count: bp.ray_count,
-                info: shade_info(needed, s.glossy_second_order, s.probe_area_light_samples, sky_samples(s))
-                    | if s.shadow_field && s.shadow_field_probe_shading { SHADE_SHADOW_FIELD } else { 0 }
-                    | if s.probe_sky_map_on_miss { SHADE_SKY_MAP_ON_MISS } else { 0 },
+                info: volume_shade_info(needed, s),
                 hit_ao_radius_bits: hit_ao_radius_m(&volumes[bp.volume as usize]).to_bits(),
             }
         })
         .collect()
 }
 
-/// A hit's sky-map samples under `s` (none where the misses read the map;
-/// the shader takes none without a map).
-fn sky_samples(s: &probegi_core::ddgi_settings::DdgiVolumeSettings) -> u32 {
-    if s.probe_sky_map_on_miss { 0 } else { s.probe_sky_light_samples }
+/// [`shade_info`] and its flags for a probe of a volume of settings `s`:
+/// glossy, area and sky-map samples (none where the misses read the map; the
+/// shader takes none without a map), the shadowing field, the misses' map.
+pub fn volume_shade_info(needs_radiance: bool, s: &probegi_core::ddgi_settings::DdgiVolumeSettings) -> u32 {
+    let sky_samples = if s.probe_sky_map_on_miss { 0 } else { s.probe_sky_light_samples };
+    shade_info(needs_radiance, s.glossy_second_order, s.probe_area_light_samples, sky_samples)
+        | if s.shadow_field && s.shadow_field_probe_shading { SHADE_SHADOW_FIELD } else { 0 }
+        | if s.probe_sky_map_on_miss { SHADE_SKY_MAP_ON_MISS } else { 0 }
 }
 
 /// The length of `volume`'s hit-AO rays (`probe_hit_ao_radius_rel` × its

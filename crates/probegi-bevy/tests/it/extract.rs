@@ -367,6 +367,16 @@ fn the_cameras_skybox_is_the_fields_sky_map_looked_up_as_bevy_looks_it_up() {
     assert_eq!(s.sky_generation, generation + 1, "a turn makes the map again");
     let map = s.sky_map.as_ref().expect("a sky map");
     assert!(map.radiance(glam::Vec3::X).abs_diff_eq(want(5) * 0.5, 1e-3), "{}", map.radiance(glam::Vec3::X));
+    // The cubemap's texels changed in place (a hot reload): the map is made again.
+    let handle = app.world().get::<bevy::light::Skybox>(camera).and_then(|s| s.image.clone()).expect("image");
+    if let Some(mut image) = app.world_mut().resource_mut::<Assets<Image>>().get_mut(&handle) {
+        *image = cubemap([[7.0, 7.0, 7.0]; 6], 8);
+    }
+    app.update();
+    let s = scene(&app);
+    assert_eq!(s.sky_generation, generation + 2, "new texels make the map again");
+    let map = s.sky_map.as_ref().expect("a sky map");
+    assert!(map.radiance(glam::Vec3::Y).abs_diff_eq(glam::Vec3::splat(7.0 * 50.0), 1e-3));
     // No skybox: the constant sky again.
     app.world_mut().entity_mut(camera).remove::<bevy::light::Skybox>();
     app.update();
@@ -388,7 +398,7 @@ fn emissives_are_the_luminance_the_camera_shows() {
     let (display, luminance) = (materials.add(glow(0.0)), materials.add(glow(1.0)));
     world.spawn((Mesh3d(quad.clone()), MeshMaterial3d(display), Transform::default()));
     world.spawn((Mesh3d(quad), MeshMaterial3d(luminance), Transform::from_xyz(2.0, 0.0, 0.0)));
-    let camera = world.spawn((Camera::default(), bevy::camera::Exposure { ev100: 0.0 })).id();
+    let camera = world.spawn((Camera3d::default(), bevy::camera::Exposure { ev100: 0.0 })).id();
     app.update();
     let emissive = |app: &App| {
         let mut e: Vec<glam::Vec3> = scene(app).scene.materials.iter().map(|m| m.emissive_factor).collect();
@@ -405,4 +415,22 @@ fn emissives_are_the_luminance_the_camera_shows() {
     assert_eq!(scene(&app).geometry_generation, g + 1, "a new exposure reads the emissives again");
     let want = [glam::Vec3::new(0.3, 0.6, 0.9), glam::Vec3::new(1.0, 2.0, 3.0)];
     assert!(emissive(&app).iter().zip(want).all(|(a, b)| a.abs_diff_eq(b, 1e-5)), "{:?}", emissive(&app));
+}
+
+#[test]
+fn a_moving_mesh_the_geometry_does_not_hold_makes_nothing_again() {
+    // A mesh whose asset has not arrived is not in the geometry: its moves
+    // must not make the geometry again (its arrival will).
+    let mut app = app();
+    spawn_world(&mut app);
+    app.update();
+    let g = scene(&app).geometry_generation;
+    let pending = app.world_mut().resource_mut::<Assets<Mesh>>().reserve_handle();
+    let ghost = app.world_mut().spawn((Mesh3d(pending), Transform::default(), ProbegiDynamic)).id();
+    app.update();
+    for step in 0..3 {
+        app.world_mut().get_mut::<Transform>(ghost).expect("transform").translation.x = step as f32;
+        app.update();
+    }
+    assert!(scene(&app).geometry_generation <= g + 1, "at most its arrival's rebuild, not one a move");
 }

@@ -160,8 +160,10 @@ fn the_field_replaces_bevys_indirect_diffuse_and_without_a_field_bevys_image_sta
 
     // A volume over the floor: the right half takes the field's light.
     let settings = DdgiVolumeSettings { probe_counts: [4, 3, 4].into(), ..default() };
-    app.world_mut()
-        .spawn((ProbegiVolume { settings }, Transform::from_xyz(0.0, 1.5, 0.0).with_scale(Vec3::new(10.0, 3.0, 10.0))));
+    let volume = app
+        .world_mut()
+        .spawn((ProbegiVolume { settings }, Transform::from_xyz(0.0, 1.5, 0.0).with_scale(Vec3::new(10.0, 3.0, 10.0))))
+        .id();
     for _ in 0..6 {
         app.update();
     }
@@ -202,4 +204,25 @@ fn the_field_replaces_bevys_indirect_diffuse_and_without_a_field_bevys_image_sta
         expected[0],
         at(&before, samples[0].0, samples[0].1)
     );
+
+    // The volume over x < 0 only (its probes 1.25 m apart in x, the last at
+    // x = −0.625): half a spacing beyond its box (x > 0.625) the field covers
+    // nothing, and the right half is Bevy's own image again.
+    *app.world_mut().get_mut::<Transform>(volume).expect("transform") =
+        Transform::from_xyz(-2.5, 1.5, 0.0).with_scale(Vec3::new(5.0, 3.0, 10.0));
+    for _ in 0..4 {
+        app.update();
+    }
+    let outside = render_frame(&mut app, &image, |_| {});
+    let mut compared = 0;
+    for y in (0..H).step_by(5) {
+        for x in W / 2..W {
+            if floor_point(&mut app, x, y).0.x > 0.7 {
+                let (got, bevy) = (at(&outside, x, y), at(&before, x, y));
+                assert!((0..3).all(|c| close(got[c], bevy[c])), "({x}, {y}) outside the field: {got:?}, Bevy {bevy:?}");
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared >= 10, "{compared} pixels beyond the field's reach");
 }
