@@ -442,6 +442,10 @@ fn rebuild_geometry(meshes_q: &MeshQuery, assets: &MeshAssets, out: &mut Probegi
             out.object_poses = vec![glam::Mat4::IDENTITY; built.moving.len()];
             out.scene = Arc::new(built.scene);
             (out.moving, out.rest, out.known) = (built.moving, built.rest, built.known);
+            // Despawned (or no longer drawn) entities leave the moving set.
+            let known = &out.known;
+            out.promoted.retain(|e| known.contains(e));
+            out.unkeyed.retain(|e| known.contains(e));
             out.geometry_generation += 1;
             out.error = None;
         }

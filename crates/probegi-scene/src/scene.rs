@@ -508,7 +508,7 @@ impl Scene {
             *sky = b.at_frame(frame);
         }
         for o in base.objects.iter().filter(|o| o.is_animated()) {
-            self.pose_object(o, base, frame);
+            self.pose_vertices(o.world_from_rest(frame), o.vertices(), base);
         }
     }
 
@@ -518,25 +518,30 @@ impl Scene {
     /// rest pose. `rest` must hold the same mesh.
     pub fn pose_objects_from(&mut self, rest: &Scene, frame: f32) {
         for i in 0..self.objects.len() {
-            if self.objects[i].is_animated() {
-                let o = self.objects[i].clone();
-                self.pose_object(&o, rest, frame);
+            let o = &self.objects[i];
+            if o.is_animated() {
+                let (xf, vertices) = (o.world_from_rest(frame), o.vertices());
+                self.pose_vertices(xf, vertices, rest);
             }
         }
     }
 
-    /// `o`'s vertices, normals and tangents at `frame`, from `rest`'s.
-    fn pose_object(&mut self, o: &crate::animation::SceneObject, rest: &Scene, frame: f32) {
-        let xf = o.world_from_rest(frame);
+    /// The vertices, normals and tangents `vertices` placed by `xf` from
+    /// `rest`'s (a range that either mesh lacks is left as it is).
+    fn pose_vertices(&mut self, xf: glam::Affine3A, vertices: std::ops::Range<usize>, rest: &Scene) {
+        let held = self.mesh.positions.len().min(rest.mesh.positions.len()).min(rest.mesh.normals.len());
+        if vertices.end > held || vertices.end > self.mesh.normals.len() {
+            return;
+        }
         let normal_matrix = glam::Mat3::from(xf.matrix3).inverse().transpose();
-        for v in o.vertices() {
+        for v in vertices.clone() {
             self.mesh.positions[v] = xf.transform_point3(rest.mesh.positions[v]);
             self.mesh.normals[v] = (normal_matrix * rest.mesh.normals[v]).normalize_or(Vec3::Y);
         }
-        if !rest.mesh.tangents.is_empty() {
+        if rest.mesh.tangents.len() >= vertices.end && self.mesh.tangents.len() >= vertices.end {
             let xf = glam::Mat4::from(xf);
             let mirror = if xf.determinant() < 0.0 { -1.0 } else { 1.0 };
-            for v in o.vertices() {
+            for v in vertices {
                 self.mesh.tangents[v] = crate::mesh::transformed_tangent(xf, rest.mesh.tangents[v], mirror);
             }
         }
