@@ -121,18 +121,24 @@ fn the_field_on_bevys_device_equals_probegis_own() {
     set.sync_host_atlases(Some(&own)).expect("read the atlases back");
     let own_volume = &set.volumes()[0];
 
-    assert_eq!(bevy_volume.probe_states, own_volume.probe_states);
-    let flat =
-        |v: &probegi_field::DdgiVolume| v.irradiance.texels.iter().flat_map(|t| t.to_array()).collect::<Vec<f32>>();
-    let (a, b) = (flat(bevy_volume), flat(own_volume));
-    let largest = b.iter().fold(0.0f32, |m, x| m.max(x.abs()));
-    assert!(largest > 0.0, "the field holds light");
-    let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    let (worst, largest) = irradiance_difference(bevy_volume, own_volume);
     eprintln!(
         "{frames} frames: irradiance differs by at most {worst} of {largest}; {} submissions in 3 frames",
         d.submissions
     );
     assert!(worst <= 1e-5 * largest, "irradiance differs by {worst} of {largest}");
+}
+
+/// (the largest irradiance difference, the largest texel) between two
+/// volumes whose probe states must be equal; the field must hold light.
+fn irradiance_difference(a: &probegi_field::DdgiVolume, b: &probegi_field::DdgiVolume) -> (f32, f32) {
+    assert_eq!(a.probe_states, b.probe_states);
+    let flat =
+        |v: &probegi_field::DdgiVolume| v.irradiance.texels.iter().flat_map(|t| t.to_array()).collect::<Vec<_>>();
+    let (a, b) = (flat(a), flat(b));
+    let largest = b.iter().fold(0.0f32, |m, x| m.max(x.abs()));
+    assert!(largest > 0.0, "the field holds light");
+    (a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max), largest)
 }
 
 /// The render world's field: (updates since it was made, its volume's hysteresis).
@@ -248,13 +254,8 @@ fn a_moving_mesh_is_placed_on_the_device_and_the_field_keeps_running() {
     let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
     let bevy_volume = &rf.field.as_ref().expect("field").set.volumes()[0];
     let own_volume = &own.volumes()[0];
-    assert_eq!(bevy_volume.probe_states, own_volume.probe_states);
-    let flat =
-        |v: &probegi_field::DdgiVolume| v.irradiance.texels.iter().flat_map(|t| t.to_array()).collect::<Vec<f32>>();
-    let (a, b) = (flat(bevy_volume), flat(own_volume));
-    let largest = b.iter().fold(0.0f32, |m, x| m.max(x.abs()));
-    let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
-    assert!(largest > 0.0 && worst <= 1e-5 * largest, "irradiance differs by {worst} of {largest}");
+    let (worst, largest) = irradiance_difference(bevy_volume, own_volume);
+    assert!(worst <= 1e-5 * largest, "irradiance differs by {worst} of {largest}");
 }
 
 /// probegi's own GPU backend over `ps`'s geometry for `frames` updates, its
