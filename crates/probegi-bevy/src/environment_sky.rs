@@ -25,11 +25,17 @@ use bevy::image::{Image, TextureFormatPixelInfo};
 use bevy::math::Quat;
 use bevy::render::render_resource::{TextureDataOrder, TextureFormat};
 use glam::{Vec2, Vec3};
+use probegi_core::color::srgb_to_linear;
 use probegi_scene::EnvironmentMap;
 use probegi_scene::environment_map::uv_to_direction;
 
 /// The widest equirectangular map made from a cubemap.
 pub const MAX_SKY_WIDTH: u32 = 1024;
+
+/// An sRGB-encoded byte as linear (the core's transfer function).
+fn srgb(c: u8) -> f32 {
+    srgb_to_linear(c as f32 / 255.0)
+}
 
 /// Linear RGB of one texel of `format`, `None` for a format not read here.
 fn decode(format: TextureFormat, b: &[u8]) -> Option<Vec3> {
@@ -48,11 +54,6 @@ fn decode(format: TextureFormat, b: &[u8]) -> Option<Vec3> {
         TextureFormat::Rgba8UnormSrgb => Vec3::new(srgb(b[0]), srgb(b[1]), srgb(b[2])),
         _ => return None,
     })
-}
-
-fn srgb(c: u8) -> f32 {
-    let c = c as f32 / 255.0;
-    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
 }
 
 /// IEEE 754 binary16.

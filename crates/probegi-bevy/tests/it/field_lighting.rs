@@ -35,24 +35,14 @@ use probegi_bevy::field_on_bevy_device::ProbegiRenderField;
 use probegi_bevy::{ProbegiLit, ProbegiMaterial, ProbegiPlugin, ProbegiVolume};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 
+use probegi_bevy::environment_sky::half_to_f32;
+
 use crate::field_on_bevy_device::render_app_with;
 
 const W: u32 = 64;
 const H: u32 = 48;
 const ALBEDO: f32 = 0.7;
 const CAMERA_HEIGHT_M: f32 = 4.0;
-
-/// A half float's value (IEEE 754 binary16).
-fn half_to_f32(h: u16) -> f32 {
-    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
-    let exponent = ((h >> 10) & 0x1f) as i32;
-    let mantissa = (h & 0x3ff) as f32;
-    match exponent {
-        0 => sign * mantissa * 2f32.powi(-24),
-        31 => f32::NAN,
-        e => sign * (1.0 + mantissa / 1024.0) * 2f32.powi(e - 15),
-    }
-}
 
 /// The floor's two halves (left `StandardMaterial`, right `ProbegiMaterial`)
 /// and the camera looking straight down at them; returns the target image.
@@ -137,6 +127,67 @@ fn close(a: f32, b: f32) -> bool {
     (a - b).abs() <= 1e-3 * a.abs().max(b.abs()) + 1e-6
 }
 
+/// Pixel (x, y) of a read-back frame.
+fn pixel(px: &[[f32; 3]], x: u32, y: u32) -> [f32; 3] {
+    px[(y * W + x) as usize]
+}
+
+/// Without a field: Bevy's lighting on both halves, mirror for mirror.
+fn check_mirror_image(before: &[[f32; 3]]) {
+    let mut checked = 0;
+    for y in (0..H).step_by(7) {
+        for x in 0..W / 2 {
+            let (left, right) = (pixel(before, x, y), pixel(before, W - 1 - x, y));
+            assert!(left[0] > 0.05, "Bevy's ambient lights the floor: {left:?} at ({x}, {y})");
+            assert!((0..3).all(|c| close(left[c], right[c])), "({x}, {y}): {left:?} against {right:?}");
+            checked += 1;
+        }
+    }
+    assert!(checked >= 7 * 32);
+}
+
+/// The field's Lambertian term (exposure × albedo/π × the CPU query) at
+/// each sample pixel's floor point, over the atlases the frame just rendered
+/// read (read back before the next update changes them).
+fn field_terms(app: &mut App, samples: &[(u32, u32)]) -> Vec<[f32; 3]> {
+    let exposure = Exposure { ev100: 0.0 }.exposure();
+    let points: Vec<(Vec3, Vec3)> = samples.iter().map(|&(x, y)| floor_point(app, x, y)).collect();
+    let render_world = app.sub_app_mut(RenderApp).world_mut();
+    let mut rf = render_world.resource_mut::<ProbegiRenderField>();
+    assert!(rf.error.is_none(), "{:?}", rf.error);
+    let field = rf.field.as_mut().expect("a field on Bevy's device");
+    field.set.sync_host_atlases(Some(&field.tracer)).expect("read the atlases back");
+    let g = |v: Vec3| glam::Vec3::from_array(v.to_array());
+    points
+        .into_iter()
+        .map(|(p, v)| field.set.irradiance(g(p), glam::Vec3::Y, g(v)) * exposure * ALBEDO / std::f32::consts::PI)
+        .map(|e| e.to_array())
+        .collect()
+}
+
+/// With the volume moved to x < 0 only (its probes 1.25 m apart in x, the
+/// last at x = −0.625): half a spacing beyond its box (x > 0.625) the field
+/// covers nothing, and the right half is Bevy's own image (`before`) again.
+fn check_bevys_image_outside(app: &mut App, image: &Handle<Image>, volume: Entity, before: &[[f32; 3]]) {
+    *app.world_mut().get_mut::<Transform>(volume).expect("transform") =
+        Transform::from_xyz(-2.5, 1.5, 0.0).with_scale(Vec3::new(5.0, 3.0, 10.0));
+    for _ in 0..4 {
+        app.update();
+    }
+    let outside = render_frame(app, image, |_| {});
+    let mut compared = 0;
+    for y in (0..H).step_by(5) {
+        for x in W / 2..W {
+            if floor_point(app, x, y).0.x > 0.7 {
+                let (got, bevy) = (pixel(&outside, x, y), pixel(before, x, y));
+                assert!((0..3).all(|c| close(got[c], bevy[c])), "({x}, {y}) outside the field: {got:?}, Bevy {bevy:?}");
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared >= 10, "{compared} pixels beyond the field's reach");
+}
+
 #[test]
 fn the_field_replaces_bevys_indirect_diffuse_and_without_a_field_bevys_image_stays() {
     let Some(mut app) = render_app_with(ProbegiPlugin { sky_radiance: Vec3::ONE, seed: 5 }) else { return };
@@ -144,19 +195,8 @@ fn the_field_replaces_bevys_indirect_diffuse_and_without_a_field_bevys_image_sta
     for _ in 0..3 {
         app.update();
     }
-    // No volume: Bevy's lighting on both halves, mirror for mirror.
     let before = render_frame(&mut app, &image, |_| {});
-    let at = |px: &[[f32; 3]], x: u32, y: u32| px[(y * W + x) as usize];
-    let mut checked = 0;
-    for y in (0..H).step_by(7) {
-        for x in 0..W / 2 {
-            let (left, right) = (at(&before, x, y), at(&before, W - 1 - x, y));
-            assert!(left[0] > 0.05, "Bevy's ambient lights the floor: {left:?} at ({x}, {y})");
-            assert!((0..3).all(|c| close(left[c], right[c])), "({x}, {y}): {left:?} against {right:?}");
-            checked += 1;
-        }
-    }
-    assert!(checked >= 7 * 32);
+    check_mirror_image(&before);
 
     // A volume over the floor: the right half takes the field's light.
     let settings = DdgiVolumeSettings { probe_counts: [4, 3, 4].into(), ..default() };
@@ -170,59 +210,26 @@ fn the_field_replaces_bevys_indirect_diffuse_and_without_a_field_bevys_image_sta
     let samples: Vec<(u32, u32)> =
         (0..H).step_by(5).flat_map(|y| (W / 2 + 1..W).step_by(3).map(move |x| (x, y))).collect();
     let mut expected = vec![];
-    let after = render_frame(&mut app, &image, |app| {
-        // The atlases this frame read, before the next update changes them.
-        let exposure = Exposure { ev100: 0.0 }.exposure();
-        let points: Vec<(Vec3, Vec3)> = samples.iter().map(|&(x, y)| floor_point(app, x, y)).collect();
-        let render_world = app.sub_app_mut(RenderApp).world_mut();
-        let mut rf = render_world.resource_mut::<ProbegiRenderField>();
-        assert!(rf.error.is_none(), "{:?}", rf.error);
-        let field = rf.field.as_mut().expect("a field on Bevy's device");
-        field.set.sync_host_atlases(Some(&field.tracer)).expect("read the atlases back");
-        for (p, v) in points {
-            let g = |v: Vec3| glam::Vec3::from_array(v.to_array());
-            let e = field.set.irradiance(g(p), glam::Vec3::Y, g(v));
-            expected.push((e * exposure * ALBEDO / std::f32::consts::PI).to_array());
-        }
-    });
+    let after = render_frame(&mut app, &image, |app| expected = field_terms(app, &samples));
     let bindings = app.sub_app(RenderApp).world().resource::<ProbegiQueryBindings>();
     assert!(bindings.binds_field(), "the materials bind the running field");
     assert!(bindings.rebinds >= 1, "the empty set's buffers were swapped for the field's");
+    assert_eq!(expected.len(), samples.len());
     for (&(x, y), want) in samples.iter().zip(&expected) {
-        let got = at(&after, x, y);
+        let got = pixel(&after, x, y);
         assert!(want[0] > 0.05, "the field lights the floor: {want:?} at ({x}, {y})");
         assert!((0..3).all(|c| close(got[c], want[c])), "({x}, {y}): drawn {got:?}, the field's term {want:?}");
         // Bevy's ambient would have been far brighter: the test can tell.
-        let ambient = at(&before, x, y);
+        let ambient = pixel(&before, x, y);
         assert!(ambient[0] > 2.0 * want[0], "({x}, {y}): ambient {ambient:?} against the field's {want:?}");
-        let (left, left_before) = (at(&after, W - 1 - x, y), at(&before, W - 1 - x, y));
+        let (left, left_before) = (pixel(&after, W - 1 - x, y), pixel(&before, W - 1 - x, y));
         assert!(close(left[0], left_before[0]), "({x}, {y}): the plain half keeps Bevy's ambient");
     }
     eprintln!(
-        "{} pixels: the field's term {:?} … ; Bevy's ambient {:?}",
+        "{} pixels: the field's term {:?} …; Bevy's ambient {:?}",
         samples.len(),
         expected[0],
-        at(&before, samples[0].0, samples[0].1)
+        pixel(&before, samples[0].0, samples[0].1)
     );
-
-    // The volume over x < 0 only (its probes 1.25 m apart in x, the last at
-    // x = −0.625): half a spacing beyond its box (x > 0.625) the field covers
-    // nothing, and the right half is Bevy's own image again.
-    *app.world_mut().get_mut::<Transform>(volume).expect("transform") =
-        Transform::from_xyz(-2.5, 1.5, 0.0).with_scale(Vec3::new(5.0, 3.0, 10.0));
-    for _ in 0..4 {
-        app.update();
-    }
-    let outside = render_frame(&mut app, &image, |_| {});
-    let mut compared = 0;
-    for y in (0..H).step_by(5) {
-        for x in W / 2..W {
-            if floor_point(&mut app, x, y).0.x > 0.7 {
-                let (got, bevy) = (at(&outside, x, y), at(&before, x, y));
-                assert!((0..3).all(|c| close(got[c], bevy[c])), "({x}, {y}) outside the field: {got:?}, Bevy {bevy:?}");
-                compared += 1;
-            }
-        }
-    }
-    assert!(compared >= 10, "{compared} pixels beyond the field's reach");
+    check_bevys_image_outside(&mut app, &image, volume, &before);
 }

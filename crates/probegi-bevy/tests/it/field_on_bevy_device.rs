@@ -107,18 +107,7 @@ fn the_field_on_bevys_device_equals_probegis_own() {
     let bevy_volume = &field.set.volumes()[0];
 
     // probegi's own GPU backend on its own device, the same scene and frames.
-    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
-    let ctx = GpuContext::headless().expect("a GPU adapter");
-    let own = WgpuProbeTracer::with_camera(ctx, &scene, &bvh, true, false)
-        .expect("upload")
-        .keeping_field(true)
-        .generating_rays(true);
-    let settings = DdgiFieldSetSettings { volumes, ..Default::default() };
-    let mut set = DdgiFieldSet::new(&settings, scene.bounds().expect("geometry"), None);
-    for f in 0..frames {
-        set.update_on_device(&scene, &bvh, &own, SEED, f, &mut BTreeMap::new()).expect("update");
-    }
-    set.sync_host_atlases(Some(&own)).expect("read the atlases back");
+    let set = own_field(&scene, &volumes, None, frames);
     let own_volume = &set.volumes()[0];
 
     let (worst, largest) = irradiance_difference(bevy_volume, own_volume);
@@ -250,7 +239,9 @@ fn a_moving_mesh_is_placed_on_the_device_and_the_field_keeps_running() {
     let mut rf = render_world.resource_mut::<ProbegiRenderField>();
     let field = rf.field.as_mut().expect("a field on Bevy's device");
     field.set.sync_host_atlases(Some(&field.tracer)).expect("read the atlases back");
-    let own = own_field_with_moves(app.world().resource::<ProbegiScene>(), start, start + 3);
+    let ps = app.world().resource::<ProbegiScene>();
+    let rest = probegi_scene::Scene { lights: ps.lights.clone(), ..(*ps.scene).clone() };
+    let own = own_field(&rest, &ps.volumes, Some(start), start + 3);
     let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
     let bevy_volume = &rf.field.as_ref().expect("field").set.volumes()[0];
     let own_volume = &own.volumes()[0];
@@ -258,11 +249,17 @@ fn a_moving_mesh_is_placed_on_the_device_and_the_field_keeps_running() {
     assert!(worst <= 1e-5 * largest, "irradiance differs by {worst} of {largest}");
 }
 
-/// probegi's own GPU backend over `ps`'s geometry for `frames` updates, its
-/// one moving object 0.5 m further along x before each update from `first_move`
-/// on (three moves at most), as the test above moves its entity.
-fn own_field_with_moves(ps: &ProbegiScene, first_move: u32, frames: u32) -> DdgiFieldSet {
-    let rest = probegi_scene::Scene { lights: ps.lights.clone(), ..(*ps.scene).clone() };
+/// probegi's own GPU backend on a device of its own over `rest` with
+/// `volumes` for `frames` updates, the scene change detector told each frame
+/// as the plugin tells it; with `first_move`, its one moving object 0.5 m
+/// further along x before each update from then on (three moves at most), as
+/// the moving-mesh test moves its entity.
+fn own_field(
+    rest: &probegi_scene::Scene,
+    volumes: &[DdgiVolumeSettings],
+    first_move: Option<u32>,
+    frames: u32,
+) -> DdgiFieldSet {
     let mut scene = rest.clone();
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let ctx = GpuContext::headless().expect("a GPU adapter");
@@ -270,17 +267,17 @@ fn own_field_with_moves(ps: &ProbegiScene, first_move: u32, frames: u32) -> Ddgi
         .expect("upload")
         .keeping_field(true)
         .generating_rays(true);
-    let settings = DdgiFieldSetSettings { volumes: ps.volumes.clone(), ..Default::default() };
+    let settings = DdgiFieldSetSettings { volumes: volumes.to_vec(), ..Default::default() };
     let mut set = DdgiFieldSet::new(&settings, scene.bounds().expect("geometry"), None);
     let mut detector = probegi_frame::scene_events::SceneChangeDetector::new();
     detector.remember_lights(&scene);
     let mut placed = 0;
     for f in 0..frames {
-        let moves = (f + 1).saturating_sub(first_move).min(3);
+        let moves = first_move.map_or(0, |m| (f + 1).saturating_sub(m).min(3));
         if moves != placed {
             let pose = glam::Mat4::from_translation(glam::Vec3::new(0.5 * moves as f32, 0.0, 0.0));
             scene.objects[0].animation.keyframes = vec![probegi_bevy::scene_extract::moving_key(pose).expect("a key")];
-            scene.pose_objects_from(&rest, 0.0);
+            scene.pose_objects_from(rest, 0.0);
             own.pose_scene(&scene, f as f32).expect("pose");
             placed = moves;
         }
