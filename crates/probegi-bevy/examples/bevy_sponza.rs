@@ -32,6 +32,9 @@ pub mod bevy_example;
 /// The sky's luminance, cd·m⁻² (a clear sky's blue, about 1 500 nits).
 const SKY_NITS: Vec3 = Vec3::new(1250.0, 1500.0, 2080.0);
 
+/// The camera's exposure: a sunny day's EV100.
+const EXPOSURE: bevy::camera::Exposure = bevy::camera::Exposure { ev100: 13.0 };
+
 fn main() -> Result<(), String> {
     let mut rest = vec![];
     let mut scene = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/scenes/dabrovic-sponza/sponza.obj");
@@ -46,8 +49,11 @@ fn main() -> Result<(), String> {
     let loaded = probegi_scene::load_scene(&scene.to_string_lossy()).map_err(|e| e.to_string())?;
     let mut app = App::new();
     bevy_example::add_default_plugins(&mut app, &args);
-    app.add_plugins(ProbegiPlugin { sky_radiance: SKY_NITS, ..default() })
-        .insert_resource(ClearColor(Color::linear_rgb(0.45, 0.55, 0.75)))
+    // The clear colour is the field's sky (`ProbegiSky::ClearColor`, the
+    // default): the colour this camera's exposure draws a sky of SKY_NITS as.
+    let clear = SKY_NITS * EXPOSURE.exposure();
+    app.add_plugins(ProbegiPlugin::default())
+        .insert_resource(ClearColor(Color::linear_rgb(clear.x, clear.y, clear.z)))
         .insert_resource(Loaded(loaded, args.no_field))
         .add_systems(Startup, setup);
     bevy_example::run(app, &args).map(|_| ())
@@ -80,8 +86,7 @@ fn setup(
     commands.spawn((sun, Transform::default().looking_to(Vec3::new(0.6, -1.0, 0.15), Vec3::Y)));
     // The camera at the atrium's west end, carrying the field's cascades.
     let at = Transform::from_xyz(-12.0, 2.5, -1.0).looking_at(Vec3::new(4.0, 4.5, 0.5), Vec3::Y);
-    let exposure = bevy::camera::Exposure { ev100: 13.0 };
-    let camera = bevy_example::spawn_camera(&mut commands, at, exposure, target.as_deref());
+    let camera = bevy_example::spawn_camera(&mut commands, at, EXPOSURE, target.as_deref());
     if !loaded.1 {
         commands.entity(camera).insert(ProbegiCascades::default());
     }

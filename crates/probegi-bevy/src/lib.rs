@@ -26,7 +26,7 @@
 //! - meshes that move are moving objects, posed on the device each frame
 //!   ([`ProbegiDynamic`]);
 //! - the camera's `Skybox` or `EnvironmentMapLight` is the field's sky
-//!   ([`environment_sky`]);
+//!   ([`environment_sky`]), else its clear colour ([`ProbegiSky`]);
 //! - [`ProbegiProbeView`] draws the probes coloured by state ([`probe_debug`]).
 //!
 //! Add the plugin after `DefaultPlugins` (its material needs Bevy's render
@@ -54,23 +54,39 @@ pub use scene_extract::{ExtractError, MeshEntity, SceneBuilder};
 /// probegi's DDGI for Bevy: add it to an `App` beside Bevy's PBR plugins.
 #[derive(Default)]
 pub struct ProbegiPlugin {
-    /// The constant sky radiance rays that leave the scene read, in Bevy's
-    /// luminance units (cd·m⁻²), linear RGB ([`ProbegiScene::sky_radiance`]
-    /// changes it as the field runs).
-    pub sky_radiance: Vec3,
+    /// The constant sky that rays leaving the scene read where the camera
+    /// has no `Skybox` or `EnvironmentMapLight` ([`ProbegiScene::sky`]
+    /// changes it as the field runs). By default the camera's clear colour.
+    pub sky: ProbegiSky,
     /// The seed of the field's random streams (ray rotations, shading).
     pub seed: u64,
 }
 
+/// Where the field's constant sky comes from (a camera's `Skybox` or
+/// `EnvironmentMapLight`, where it has one, is the sky instead: see
+/// [`environment_sky`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum ProbegiSky {
+    /// The clear colour of the first active 3D camera (by `Camera::order`,
+    /// then entity): its `ClearColorConfig::Custom`, else the `ClearColor`
+    /// resource (Bevy's default where there is none), read as the luminance
+    /// its exposure would draw so ([`light_units::clear_color_luminance`]);
+    /// black for a camera that clears to nothing. Without a 3D camera, the
+    /// `ClearColor` resource through Bevy's default exposure.
+    #[default]
+    ClearColor,
+    /// This radiance, in Bevy's luminance units (cd·m⁻²), linear RGB.
+    Radiance(Vec3),
+}
+
 impl Plugin for ProbegiPlugin {
     fn build(&self, app: &mut App) {
-        app.insert_resource(ProbegiScene { sky_radiance: self.sky_radiance, seed: self.seed, ..default() })
-            .add_systems(
-                PostUpdate,
-                extract_scene
-                    .after(bevy::transform::TransformSystems::Propagate)
-                    .after(bevy::camera::visibility::VisibilitySystems::VisibilityPropagate),
-            );
+        app.insert_resource(ProbegiScene { sky: self.sky, seed: self.seed, ..default() }).add_systems(
+            PostUpdate,
+            extract_scene
+                .after(bevy::transform::TransformSystems::Propagate)
+                .after(bevy::camera::visibility::VisibilitySystems::VisibilityPropagate),
+        );
         field_lighting::build(app);
         probe_debug::build(app);
     }
@@ -175,8 +191,11 @@ pub struct ProbegiScene {
     pub geometry_generation: u64,
     /// Why the last rebuild failed, if it did (the scene is then the last good one).
     pub error: Option<ExtractError>,
-    /// The sky radiance ([`ProbegiPlugin::sky_radiance`]); a change is
-    /// posed on the device, as a light's is.
+    /// Where the constant sky comes from ([`ProbegiPlugin::sky`]): change it
+    /// here as the field runs.
+    pub sky: ProbegiSky,
+    /// The constant sky radiance the field reads now (cd·m⁻², linear RGB),
+    /// from [`Self::sky`]; a change is posed on the device, as a light's is.
     pub sky_radiance: Vec3,
     /// The field's seed ([`ProbegiPlugin::seed`]).
     pub seed: u64,
@@ -396,8 +415,14 @@ fn extract_scene(
     let first = out.generation == 0;
     let (mut geometry, others, images_changed) = changes.read(&meshes_q, &assets, &out.known);
     let (sky_changed, sky_image_changed) = skies.changed(&images_changed);
-    // Display-weighted emissives read through the camera's exposure.
+    // Display-weighted emissives (and the clear colour) read through the camera's exposure.
     let exposure = skies.camera_exposure();
+    let sky_radiance = match out.sky {
+        ProbegiSky::Radiance(l) => l,
+        ProbegiSky::ClearColor => skies.clear_color_radiance(),
+    };
+    let constant_sky_changed = sky_radiance != out.sky_radiance;
+    out.sky_radiance = sky_radiance;
     if exposure != out.camera_exposure && out.scene.materials.iter().any(|m| m.emissive_factor != glam::Vec3::ZERO) {
         geometry = true;
     }
@@ -413,7 +438,7 @@ fn extract_scene(
         // Otherwise the geometry does not hold it (new, hidden, or its mesh
         // still loading): its arrival, showing or loading makes it again.
     }
-    if !(first || geometry || others || moved || sky_changed) {
+    if !(first || geometry || others || moved || sky_changed || constant_sky_changed) {
         return;
     }
     if moved && !(first || geometry) {
@@ -540,6 +565,7 @@ struct Skies<'w, 's> {
     cameras: Query<'w, 's, CameraSky, With<Camera>>,
     changed: Query<'w, 's, (), (With<Camera>, SkyChanged)>,
     exposures: Query<'w, 's, (Entity, &'static Camera, Option<&'static bevy::camera::Exposure>), With<Camera3d>>,
+    clear_color: Option<Res<'w, ClearColor>>,
     removed_skyboxes: RemovedComponents<'w, 's, bevy::light::Skybox>,
     removed_maps: RemovedComponents<'w, 's, bevy::light::EnvironmentMapLight>,
 }
@@ -553,8 +579,25 @@ impl Skies<'_, '_> {
     /// entity), Bevy's default without one: what display-weighted emissives
     /// are read through.
     fn camera_exposure(&self) -> f32 {
-        let first = self.exposures.iter().filter(|(_, c, _)| c.is_active).min_by_key(|(e, c, _)| (c.order, *e));
-        first.and_then(|(.., x)| x.copied()).unwrap_or_default().exposure()
+        self.first_camera().and_then(|(.., x)| x.copied()).unwrap_or_default().exposure()
+    }
+
+    /// The first active 3D camera by `Camera::order`, then entity.
+    fn first_camera(&self) -> Option<(Entity, &Camera, Option<&bevy::camera::Exposure>)> {
+        self.exposures.iter().filter(|(_, c, _)| c.is_active).min_by_key(|(e, c, _)| (c.order, *e))
+    }
+
+    /// [`ProbegiSky::ClearColor`]'s radiance: the first camera's clear
+    /// colour through its exposure (`light_units::clear_color_luminance`).
+    fn clear_color_radiance(&self) -> Vec3 {
+        let resource = self.clear_color.as_deref().cloned().unwrap_or_default().0;
+        let clear = match self.first_camera().map(|(_, c, _)| &c.clear_color) {
+            Some(bevy::camera::ClearColorConfig::Custom(c)) => *c,
+            Some(bevy::camera::ClearColorConfig::None) => return Vec3::ZERO,
+            Some(bevy::camera::ClearColorConfig::Default) | None => resource,
+        };
+        let luminance = light_units::clear_color_luminance(linear_rgb(clear), self.camera_exposure());
+        Vec3::from_array(luminance.to_array())
     }
 
     /// The first camera's (in entity order) `Skybox` with an image, else its

@@ -22,8 +22,14 @@
 //!   `emissive × ((1 − w) / exposure + w)` cd·m⁻² ([`emissive_luminance`]).
 //!   At w = 1 the emissive is luminance as it is; at Bevy's default w = 0 it
 //!   is a display value, which the field reads as the light it shows (1 000×
-//!   at Bevy's default EV100 of 9.7). The camera is the first one (in entity
-//!   order), its `Exposure` or Bevy's default.
+//!   at Bevy's default EV100 of 9.7). The camera is the first active 3D
+//!   camera (by `Camera::order`, then entity), its `Exposure` or Bevy's default.
+//! - The clear colour (the camera's `ClearColorConfig::Custom`, else the
+//!   `ClearColor` resource): Bevy writes it into the view target as it is,
+//!   where a surface's light arrives × exposure, so the sky that would draw
+//!   it has luminance `clear / exposure` cd·m⁻² ([`clear_color_luminance`]),
+//!   the same reading as a w = 0 emissive. A camera that clears to nothing
+//!   (`ClearColorConfig::None`) has no sky: black.
 //! - A spot's cone: Bevy's `inner_angle` / `outer_angle` are half-angles from
 //!   the axis with the falloff `clamp((cos θ − cos outer) / (cos inner − cos outer))²`,
 //!   glTF's `innerConeAngle` / `outerConeAngle` and falloff.
@@ -66,6 +72,12 @@ pub fn emissive_luminance(emissive: glam::Vec3, exposure_weight: f32, exposure: 
     // Not clamped: Bevy's `mix` is not either.
     let w = exposure_weight;
     emissive * ((1.0 - w) / exposure.max(f32::MIN_POSITIVE) + w)
+}
+
+/// The sky luminance (cd·m⁻²) that a camera of `exposure` would draw as its
+/// linear clear colour `clear`: see the module docs.
+pub fn clear_color_luminance(clear: glam::Vec3, exposure: f32) -> glam::Vec3 {
+    clear / exposure.max(f32::MIN_POSITIVE)
 }
 
 #[cfg(test)]

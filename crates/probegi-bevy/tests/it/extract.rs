@@ -10,7 +10,9 @@ use bevy::image::Image;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
-use probegi_bevy::{ProbegiDynamic, ProbegiLit, ProbegiMaterial, ProbegiPlugin, ProbegiScene, ProbegiVolume};
+use probegi_bevy::{
+    ProbegiDynamic, ProbegiLit, ProbegiMaterial, ProbegiPlugin, ProbegiScene, ProbegiSky, ProbegiVolume,
+};
 use probegi_scene::LightKind;
 use probegi_scene::material::AlphaMode as ProbegiAlpha;
 
@@ -20,7 +22,7 @@ fn app() -> App {
         .init_asset::<Mesh>()
         .init_asset::<Image>()
         .init_asset::<StandardMaterial>()
-        .add_plugins(ProbegiPlugin { sky_radiance: Vec3::new(0.5, 0.6, 0.7), ..default() });
+        .add_plugins(ProbegiPlugin { sky: ProbegiSky::Radiance(Vec3::new(0.5, 0.6, 0.7)), ..default() });
     app
 }
 
@@ -433,4 +435,46 @@ fn a_moving_mesh_the_geometry_does_not_hold_makes_nothing_again() {
         app.update();
     }
     assert!(scene(&app).geometry_generation <= g + 1, "at most its arrival's rebuild, not one a move");
+}
+
+#[test]
+fn the_clear_colour_is_the_sky_its_camera_draws() {
+    // Bevy writes the clear colour into the view target as it is, where light
+    // arrives × exposure: the sky that draws it has luminance clear / exposure.
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, AssetPlugin::default(), bevy::transform::TransformPlugin))
+        .init_asset::<Mesh>()
+        .init_asset::<Image>()
+        .init_asset::<StandardMaterial>()
+        .add_plugins(ProbegiPlugin::default())
+        .insert_resource(ClearColor(Color::linear_rgb(0.1, 0.2, 0.3)));
+    spawn_world(&mut app);
+    // EV100 0: exposure 1/1.2.
+    let camera = app.world_mut().spawn((Camera3d::default(), bevy::camera::Exposure { ev100: 0.0 })).id();
+    app.update();
+    let sky = |app: &App| glam::Vec3::from_array(scene(app).sky_radiance.to_array());
+    assert!(sky(&app).abs_diff_eq(glam::Vec3::new(0.12, 0.24, 0.36), 1e-5), "{}", sky(&app));
+    assert_eq!(scene(&app).scene.sky_radiance, sky(&app), "the geometry is built under it");
+    let (generation, geometry) = (scene(&app).generation, scene(&app).geometry_generation);
+    app.update();
+    assert_eq!(scene(&app).generation, generation, "an unchanged clear colour changes nothing");
+    // A new clear colour: the field's sky follows, the geometry stays.
+    app.world_mut().resource_mut::<ClearColor>().0 = Color::linear_rgb(0.5, 0.5, 0.5);
+    app.update();
+    assert!(sky(&app).abs_diff_eq(glam::Vec3::splat(0.6), 1e-5), "{}", sky(&app));
+    assert_eq!((scene(&app).generation, scene(&app).geometry_generation), (generation + 1, geometry));
+    // The camera's own clear colour wins over the resource, through its exposure.
+    let mut cam = app.world_mut().get_mut::<Camera>(camera).expect("camera");
+    cam.clear_color = ClearColorConfig::Custom(Color::linear_rgb(1.0, 0.0, 0.25));
+    app.world_mut().get_mut::<bevy::camera::Exposure>(camera).expect("exposure").ev100 = -2.0;
+    app.update();
+    assert!(sky(&app).abs_diff_eq(glam::Vec3::new(0.3, 0.0, 0.075), 1e-5), "{}", sky(&app));
+    // A camera that clears to nothing draws no sky.
+    app.world_mut().get_mut::<Camera>(camera).expect("camera").clear_color = ClearColorConfig::None;
+    app.update();
+    assert_eq!(sky(&app), glam::Vec3::ZERO);
+    // A radiance the application states wins over the clear colour.
+    app.world_mut().resource_mut::<ProbegiScene>().sky = ProbegiSky::Radiance(Vec3::new(4.0, 5.0, 6.0));
+    app.update();
+    assert_eq!(sky(&app), glam::Vec3::new(4.0, 5.0, 6.0));
 }

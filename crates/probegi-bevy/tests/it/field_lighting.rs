@@ -32,7 +32,7 @@ use bevy::render::render_resource::{TextureFormat, TextureUsages};
 use bevy::render::view::Msaa;
 use probegi_bevy::field_lighting::ProbegiQueryBindings;
 use probegi_bevy::field_on_bevy_device::ProbegiRenderField;
-use probegi_bevy::{ProbegiLit, ProbegiMaterial, ProbegiPlugin, ProbegiVolume};
+use probegi_bevy::{ProbegiLit, ProbegiMaterial, ProbegiPlugin, ProbegiSky, ProbegiVolume};
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 
 use probegi_bevy::environment_sky::half_to_f32;
@@ -190,7 +190,9 @@ fn check_bevys_image_outside(app: &mut App, image: &Handle<Image>, volume: Entit
 
 #[test]
 fn the_field_replaces_bevys_indirect_diffuse_and_without_a_field_bevys_image_stays() {
-    let Some(mut app) = render_app_with(ProbegiPlugin { sky_radiance: Vec3::ONE, seed: 5 }) else { return };
+    let Some(mut app) = render_app_with(ProbegiPlugin { sky: ProbegiSky::Radiance(Vec3::ONE), seed: 5 }) else {
+        return;
+    };
     let image = spawn_floor_and_camera(&mut app);
     for _ in 0..3 {
         app.update();

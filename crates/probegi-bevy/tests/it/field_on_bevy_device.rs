@@ -12,7 +12,7 @@ use bevy::app::PluginsState;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use probegi_bevy::field_on_bevy_device::ProbegiRenderField;
-use probegi_bevy::{ProbegiCascades, ProbegiDynamic, ProbegiPlugin, ProbegiScene, ProbegiVolume};
+use probegi_bevy::{ProbegiCascades, ProbegiDynamic, ProbegiPlugin, ProbegiScene, ProbegiSky, ProbegiVolume};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_field::{DdgiFieldSet, ProbeBatchTracer};
 use probegi_frame::field_update::FieldSetUpdate;
@@ -48,7 +48,7 @@ fn spawn_room(app: &mut App) {
 /// A Bevy app with its renderer, headless; `None` without a GPU adapter
 /// (unless PROBEGI_REQUIRE_GPU is set, which makes that a failure).
 fn render_app() -> Option<App> {
-    render_app_with(ProbegiPlugin { sky_radiance: Vec3::splat(0.2), seed: SEED })
+    render_app_with(ProbegiPlugin { sky: ProbegiSky::Radiance(Vec3::splat(0.2)), seed: SEED })
 }
 
 /// [`render_app`] with `plugin`.
@@ -296,7 +296,9 @@ fn a_uniform_skybox_lights_an_open_floor_through_the_field_to_pi_l() {
     // whatever its rays: the floor's E is 2π once the blend has converged
     // (the CPU backend's furnace is within 1 % by frame 40), up to the
     // irradiance encoding's rounding.
-    let Some(mut app) = render_app_with(ProbegiPlugin { sky_radiance: Vec3::ZERO, seed: SEED }) else { return };
+    let Some(mut app) = render_app_with(ProbegiPlugin { sky: ProbegiSky::Radiance(Vec3::ZERO), seed: SEED }) else {
+        return;
+    };
     let world = app.world_mut();
     let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(20.0)));
     let grey = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
