@@ -118,7 +118,8 @@ RUSTC_WORKSPACE_WRAPPER="$CLIPPY_DRIVER" CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnin
 # toolchain (rust-version 1.97.1, crates/probegi-bevy/README.md says why). The
 # newest toolchain present builds it: stable once it is 1.97.1 or newer, else
 # an installed nightly of 1.97 with --ignore-rust-version. Formatting, lints
-# with warnings denied and its tests, as above.
+# with warnings denied and its tests, as above, with the `window` feature (one
+# build: the examples in a window too, which a test runs under Xvfb).
 rust_version() { rustc "+$1" --version 2>/dev/null | awk '{ print $2 }' | cut -d- -f1; }
 at_least() { [ -n "$1" ] && printf '%s\n%s\n' "$2" "$1" | sort -V -C; }
 bevy_flags=()
@@ -140,6 +141,6 @@ else
     BEVY_CLIPPY="$(rustc "+$bevy_toolchain" --print sysroot)/bin/clippy-driver"
     RUSTUP_TOOLCHAIN="$bevy_toolchain" RUSTC_WORKSPACE_WRAPPER="$BEVY_CLIPPY" \
       CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__" \
-      cargo "+$bevy_toolchain" test --locked "${bevy_flags[@]}"
+      cargo "+$bevy_toolchain" test --locked --features window "${bevy_flags[@]}"
   )
 fi

@@ -25,14 +25,22 @@ pub struct Args {
     /// Draw the probes (`ProbegiProbeView`; P toggles it in a window).
     pub probes: bool,
     /// The headless picture's size (its width a multiple of 64: read-back
-    /// rows are whole 256-byte blocks).
+    /// rows are whole 256-byte blocks), and the window's.
     pub size: UVec2,
+    /// In a window (the `window` feature): after `frames` frames, the
+    /// window's picture written here as a PNG, and the app ends.
+    pub screenshot: Option<PathBuf>,
+    /// Headless: each frame's wall time, reported as JSON on stdout after
+    /// the picture (the GPU timing of `scripts/bevy-gpu-timing.sh`).
+    pub bench: bool,
 }
 
 impl Args {
-    /// `--frames N`, `--out PATH`, `--no-field`, `--size WxH`.
+    /// `--frames N`, `--out PATH`, `--no-field`, `--probes`, `--size WxH`, `--screenshot PATH`.
     pub fn parse(mut args: impl Iterator<Item = String>) -> Result<Self, String> {
-        let mut out = Self { frames: 60, out: None, no_field: false, probes: false, size: UVec2::new(640, 480) };
+        let size = UVec2::new(640, 480);
+        let mut out =
+            Self { frames: 60, out: None, no_field: false, probes: false, size, screenshot: None, bench: false };
         while let Some(a) = args.next() {
             let mut value = || args.next().ok_or_else(|| format!("{a} needs a value"));
             match a.as_str() {
@@ -41,7 +49,9 @@ impl Args {
                     out.frames = v.parse().ok().filter(|n| *n > 0).ok_or(format!("--frames {v}: not a count"))?;
                 }
                 "--out" => out.out = Some(PathBuf::from(value()?)),
+                "--screenshot" => out.screenshot = Some(PathBuf::from(value()?)),
                 "--no-field" => out.no_field = true,
+                "--bench" => out.bench = true,
                 "--probes" => out.probes = true,
                 "--size" => {
                     let v = value()?;
@@ -53,12 +63,20 @@ impl Args {
                 }
                 other => {
                     return Err(format!(
-                        "unknown argument {other:?} (--frames N, --out PATH, --no-field, --probes, --size WxH)"
+                        "unknown argument {other:?} (--frames N, --out PATH, --no-field, --probes, --size WxH, \
+                         --screenshot PATH, --bench)"
                     ));
                 }
             }
         }
-        Ok(out)
+        match (&out.screenshot, &out.out) {
+            (Some(_), Some(_)) => Err("--screenshot is the window's picture, --out the headless one: not both".into()),
+            (Some(_), _) if out.bench => Err("--bench times a headless run: not with --screenshot".into()),
+            (Some(_), None) if !cfg!(feature = "window") => {
+                Err("--screenshot needs a window: build the example with --features window".into())
+            }
+            _ => Ok(out),
+        }
     }
 
     /// Whether the example runs headless.
@@ -83,8 +101,9 @@ pub fn add_default_plugins(app: &mut App, args: &Args) {
             ..default()
         })
     } else {
+        let resolution = (args.size.x, args.size.y).into();
         plugins.set(WindowPlugin {
-            primary_window: Some(Window { title: "probegi-bevy".into(), ..default() }),
+            primary_window: Some(Window { title: "probegi-bevy".into(), resolution, ..default() }),
             ..default()
         })
     };
@@ -98,7 +117,60 @@ pub fn add_default_plugins(app: &mut App, args: &Args) {
     } else {
         #[cfg(feature = "window")]
         app.add_systems(Update, (fly_camera, toggle_probes));
+        #[cfg(feature = "window")]
+        if let Some(path) = args.screenshot.clone() {
+            let frames = args.frames;
+            app.add_systems(Update, move |mut commands: Commands, mut seen: Local<u32>| {
+                *seen += 1;
+                if *seen == frames {
+                    commands
+                        .spawn(bevy::render::view::screenshot::Screenshot::primary_window())
+                        .observe(window_picture_to(path.clone()));
+                }
+            });
+        }
     }
+}
+
+/// Writes the window's picture to `path` as a PNG and ends the app
+/// (`AppExit::Success`, or an error with the reason on stderr).
+#[cfg(feature = "window")]
+fn window_picture_to(
+    path: PathBuf,
+) -> impl FnMut(On<bevy::render::view::screenshot::ScreenshotCaptured>, MessageWriter<AppExit>) {
+    move |shot, mut exit| {
+        let written = window_rgb(&shot.image).and_then(|(w, h, rgb)| {
+            probegi_image::io::write_png(&path, w, h, rgb).map_err(|e| format!("{}: {e}", path.display()))
+        });
+        match written {
+            Ok(()) => {
+                eprintln!("wrote {} (the window after its frames)", path.display());
+                exit.write(AppExit::Success);
+            }
+            Err(e) => {
+                eprintln!("error: the window's picture: {e}");
+                exit.write(AppExit::error());
+            }
+        }
+    }
+}
+
+/// A window picture's size and sRGB RGB8 pixels: the swap chain's RGBA8 or
+/// BGRA8, either encoding (the bytes are display values either way).
+#[cfg(feature = "window")]
+fn window_rgb(image: &Image) -> Result<(u32, u32, Vec<u8>), String> {
+    let (w, h) = (image.width(), image.height());
+    let data = image.data.as_deref().ok_or("the picture has no pixels on the host")?;
+    let bgra = match image.texture_descriptor.format {
+        TextureFormat::Rgba8UnormSrgb | TextureFormat::Rgba8Unorm => false,
+        TextureFormat::Bgra8UnormSrgb | TextureFormat::Bgra8Unorm => true,
+        other => return Err(format!("the window's format {other:?} is not RGBA8 or BGRA8")),
+    };
+    if data.len() != (w * h * 4) as usize {
+        return Err(format!("{} bytes for {w}×{h} pixels", data.len()));
+    }
+    let rgb = data.chunks_exact(4).flat_map(|p| if bgra { [p[2], p[1], p[0]] } else { [p[0], p[1], p[2]] }).collect();
+    Ok((w, h, rgb))
 }
 
 /// The camera at `at`: into the [`Target`] headless, else a fly camera.
@@ -132,8 +204,11 @@ pub fn run(mut app: App, args: &Args) -> Result<Option<Vec<u8>>, String> {
     }
     app.finish();
     app.cleanup();
+    let mut frame_ms = Vec::with_capacity(args.frames as usize);
     for _ in 1..args.frames {
+        let t = std::time::Instant::now();
         app.update();
+        frame_ms.push(t.elapsed().as_secs_f64() * 1e3);
     }
     let target = app.world().resource::<Target>().0.clone();
     let rgba = last_frame(&mut app, &target)?;
@@ -153,7 +228,32 @@ pub fn run(mut app: App, args: &Args) -> Result<Option<Vec<u8>>, String> {
         return Err(format!("the field: {e}"));
     }
     eprintln!("wrote {} ({} frames)", out.display(), args.frames);
+    if args.bench {
+        println!("{}", bench_json(args, &frame_ms));
+    }
     Ok(Some(rgba))
+}
+
+/// `--bench`'s report: the frames' wall milliseconds (`App::update`: with
+/// Bevy's pipelined rendering, a frame's main-world systems while the last
+/// one renders) after the first quarter (pipeline compiles, the field's
+/// start-up), as mean, median and 95th percentile.
+fn bench_json(args: &Args, frame_ms: &[f64]) -> String {
+    let mut timed = frame_ms[frame_ms.len() / 4..].to_vec();
+    timed.sort_by(f64::total_cmp);
+    let at = |q: f64| timed.get(((timed.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(f64::NAN);
+    let mean = timed.iter().sum::<f64>() / timed.len().max(1) as f64;
+    format!(
+        "{{\"example\": \"{}\", \"field\": {}, \"size\": [{}, {}], \"frames_timed\": {}, \
+         \"frame_ms\": {{\"mean\": {mean:.3}, \"median\": {:.3}, \"p95\": {:.3}}}}}",
+        example_name(),
+        !args.no_field,
+        args.size.x,
+        args.size.y,
+        timed.len(),
+        at(0.5),
+        at(0.95)
+    )
 }
 
 /// The running example's name (its binary's), for the default picture.

@@ -62,6 +62,14 @@ pub(crate) fn render_app_with(plugin: ProbegiPlugin) -> Option<App> {
     } else {
         plugins.disable::<bevy::log::LogPlugin>()
     };
+    // Built with the examples' `window` feature: still no window here (the
+    // test threads are not the main thread an event loop needs).
+    #[cfg(feature = "window")]
+    let plugins = plugins.disable::<bevy::winit::WinitPlugin>().set(bevy::window::WindowPlugin {
+        primary_window: None,
+        exit_condition: bevy::window::ExitCondition::DontExit,
+        ..default()
+    });
     app.add_plugins(plugins).add_plugins(plugin);
     while app.plugins_state() == PluginsState::Adding {
         bevy::tasks::tick_global_task_pools_on_main_thread();
