@@ -14,10 +14,13 @@
 //! nearest texel: the map has 4 × the face's width across (at most 1 024), so
 //! it resolves what the cube does.
 //!
-//! Readable formats: `Rgba32Float`, `Rgba16Float`, `Rgb9e5Ufloat`,
-//! `Rg11b10Ufloat`, `Rgba8Unorm` and `Rgba8UnormSrgb`. A block-compressed
-//! cubemap (KTX2 with BC6H or ASTC, as Bevy's own sample skies ship) is an
-//! error that says so: decompressing it is not done here.
+//! The host reads `Rgba32Float`, `Rgba16Float`, `Rgb9e5Ufloat`,
+//! `Rg11b10Ufloat`, `Rgba8Unorm` and `Rgba8UnormSrgb` ([`host_reads`]). Any
+//! other cubemap (block-compressed KTX2: BC6H, ASTC; or one whose texels live
+//! only on the device, as a render target's do) is made into the map on the
+//! device instead, by the same lookup (`probegi_wgpu::sky_from_cubemap`): the
+//! scene then carries a map of the same size, black ([`device_sky_placeholder`]),
+//! whose texels the render world writes from Bevy's `GpuImage` each frame.
 
 use std::path::Path;
 
@@ -101,20 +104,57 @@ pub fn cube_face(s: Vec3) -> (usize, Vec2) {
     (face, Vec2::new(sc / ma + 1.0, tc / ma + 1.0) * 0.5)
 }
 
-/// The radiance map of cubemap `image` turned by `rotation` (as Bevy turns
-/// a skybox or environment map), its texels scaled by nothing: the caller's
-/// `SkyMap::intensity` carries the brightness. `name` names it in messages.
-pub fn equirect_from_cubemap(image: &Image, rotation: Quat, name: &str) -> Result<EnvironmentMap, String> {
+/// The linear map from a world direction to the direction Bevy reads a
+/// cubemap turned by `rotation` along: `rotation⁻¹`, then z negated (the one
+/// owner of the lookup, on the host and in `probegi_wgpu::sky_from_cubemap`).
+pub fn to_cube(rotation: Quat) -> glam::Mat3 {
+    let flip_z = glam::Mat3::from_diagonal(Vec3::new(1.0, 1.0, -1.0));
+    flip_z * glam::Mat3::from_quat(glam::Quat::from_array(rotation.inverse().to_array()))
+}
+
+/// Whether the host reads `image`'s texels: they are in the main world, in a
+/// format [`decode`] knows.
+pub fn host_reads(image: &Image) -> bool {
+    let format = image.texture_descriptor.format;
+    let bpp = format.pixel_size().ok();
+    let data = image.data.as_deref();
+    matches!((bpp, data), (Some(n), Some(d)) if d.len() >= n && decode(format, &d[..n]).is_some())
+}
+
+/// The width of the equirectangular map made from a cube of `face` texels a side.
+fn map_width(face: u32) -> u32 {
+    (4 * face).clamp(4, MAX_SKY_WIDTH)
+}
+
+/// Checks that `image` is a cubemap (6 square layers); returns its face width.
+fn cube_width(image: &Image, name: &str) -> Result<u32, String> {
     let d = &image.texture_descriptor;
     let (w, h, layers) = (d.size.width, d.size.height, d.size.depth_or_array_layers);
     if layers != 6 || w != h || w == 0 {
         return Err(format!("{name}: a cubemap has 6 square layers; this image is {w}×{h}×{layers}"));
     }
+    Ok(w)
+}
+
+/// The black map, of the size [`equirect_from_cubemap`] would make, that a
+/// cubemap the host cannot read stands for until the device writes it.
+pub fn device_sky_placeholder(image: &Image, name: &str) -> Result<EnvironmentMap, String> {
+    let width = map_width(cube_width(image, name)?);
+    let texels = vec![Vec3::ZERO; (width * width / 2) as usize];
+    EnvironmentMap::from_texels(Path::new(name), width, width / 2, texels).map_err(|e| format!("{name}: {e}"))
+}
+
+/// The radiance map of cubemap `image` turned by `rotation` (as Bevy turns
+/// a skybox or environment map), its texels scaled by nothing: the caller's
+/// `SkyMap::intensity` carries the brightness. `name` names it in messages.
+pub fn equirect_from_cubemap(image: &Image, rotation: Quat, name: &str) -> Result<EnvironmentMap, String> {
+    let d = &image.texture_descriptor;
+    let w = cube_width(image, name)?;
     let bpp = d.format.pixel_size().map_err(|_| {
-        format!("{name}: its format {:?} is block-compressed; give the sky an uncompressed cubemap", d.format)
+        format!("{name}: its format {:?} is block-compressed: the device makes its map (module docs)", d.format)
     })?;
     let data = image.data.as_deref().ok_or(format!("{name}: its texels are not in the main world"))?;
-    let face_bytes = (w * h) as usize * bpp;
+    let face_bytes = (w * w) as usize * bpp;
     // Bytes from one layer's first level to the next layer's.
     let layer_stride = match image.data_order {
         TextureDataOrder::LayerMajor => (0..d.mip_level_count).map(|m| ((w >> m).max(1) as usize).pow(2) * bpp).sum(),
@@ -126,16 +166,14 @@ pub fn equirect_from_cubemap(image: &Image, rotation: Quat, name: &str) -> Resul
     if decode(d.format, &data[..bpp]).is_none() {
         return Err(format!("{name}: its format {:?} is not one the field reads (module docs)", d.format));
     }
-    let to_map = rotation.inverse();
-    let width = (4 * w).clamp(4, MAX_SKY_WIDTH);
+    let to_cube = to_cube(rotation);
+    let width = map_width(w);
     let height = width / 2;
     let texels = (0..height)
         .flat_map(|j| (0..width).map(move |i| (i, j)))
         .map(|(i, j)| {
             let uv = Vec2::new((i as f32 + 0.5) / width as f32, (j as f32 + 0.5) / height as f32);
-            let world = uv_to_direction(uv);
-            let turned = to_map * bevy::math::Vec3::from_array(world.to_array());
-            let (face, st) = cube_face(Vec3::new(turned.x, turned.y, -turned.z));
+            let (face, st) = cube_face(to_cube * uv_to_direction(uv));
             let texel = |t: f32| ((t * w as f32) as u32).min(w - 1);
             let (x, y) = (texel(st.x), texel(st.y));
             let at = face * layer_stride + (y * w + x) as usize * bpp;

@@ -29,7 +29,9 @@ use std::sync::Arc;
 
 use bevy::prelude::*;
 use bevy::render::extract_resource::{ExtractResource, ExtractResourcePlugin};
+use bevy::render::render_asset::RenderAssets;
 use bevy::render::renderer::{RenderAdapterInfo, RenderDevice, RenderQueue};
+use bevy::render::texture::GpuImage;
 use bevy::render::{Render, RenderApp, RenderSystems};
 use probegi_core::ddgi_settings::{DdgiFieldSetSettings, DdgiVolumeSettings};
 use probegi_field::DdgiFieldSet;
@@ -38,6 +40,7 @@ use probegi_frame::field_update::FieldSetUpdate;
 use probegi_frame::scene_events::SceneChangeDetector;
 use probegi_scene::{BvhSettings, BvhTracer, Scene};
 use probegi_wgpu::GpuContext;
+use probegi_wgpu::sky_from_cubemap::GpuSkyFromCubemap;
 use probegi_wgpu::wgpu_field_backend::WgpuProbeTracer;
 
 use crate::ProbegiScene;
@@ -84,6 +87,9 @@ pub struct ExtractedProbegiScene {
     object_poses: Vec<glam::Mat4>,
     sky_map: Option<probegi_scene::SkyMap>,
     sky_generation: u64,
+    /// The cubemap whose texels the device writes into `sky_map` each frame,
+    /// and its lookup (`ProbegiScene::sky_on_device`, `environment_sky::to_cube`).
+    sky_on_device: Option<(AssetId<Image>, glam::Mat3)>,
 }
 
 impl ExtractResource<RenderApp> for ExtractedProbegiScene {
@@ -102,6 +108,7 @@ impl ExtractResource<RenderApp> for ExtractedProbegiScene {
             object_poses: source.object_poses.clone(),
             sky_map: source.sky_map.clone(),
             sky_generation: source.sky_generation,
+            sky_on_device: source.sky_on_device.map(|(id, r)| (id, crate::environment_sky::to_cube(r))),
         }
     }
 }
@@ -128,6 +135,9 @@ pub struct ProbegiField {
     object_poses: Vec<glam::Mat4>,
     /// The sky map it was made with (`ProbegiScene::sky_generation`).
     sky_generation: u64,
+    /// The pass that writes the sky map from a cubemap on the device, where
+    /// the host could not read it.
+    sky_pass: Option<GpuSkyFromCubemap>,
     /// Updates run since the field was made.
     pub frame: u32,
 }
@@ -164,6 +174,7 @@ pub(crate) fn update_field(
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
     adapter: Res<RenderAdapterInfo>,
+    gpu_images: Res<RenderAssets<GpuImage>>,
     mut out: ResMut<ProbegiRenderField>,
 ) {
     let Some(x) = extracted else { return };
@@ -189,8 +200,13 @@ pub(crate) fn update_field(
     let mut pass_ms = BTreeMap::new();
     // The update's passes go to Bevy's queue together: one submission.
     f.tracer.ctx.defer_submissions(true);
+    let sky = write_sky_on_device(f, &x, &gpu_images);
     let result = f.set.update_on_device(&f.scene, &f.bvh, &f.tracer, f.seed, f.frame, &mut pass_ms);
     f.tracer.ctx.defer_submissions(false);
+    if let Err(e) = sky {
+        report(&mut out, e);
+        return;
+    }
     match result {
         Ok(_) => {
             f.frame += 1;
@@ -198,6 +214,23 @@ pub(crate) fn update_field(
         }
         Err(e) => report(&mut out, format!("the field update failed: {e}")),
     }
+}
+
+/// Records the pass that writes the sky map from the cubemap Bevy holds on
+/// the device ([`ExtractedProbegiScene::sky_on_device`]), where there is one
+/// and Bevy has prepared it (until then the map stays black).
+fn write_sky_on_device(
+    f: &ProbegiField,
+    x: &ExtractedProbegiScene,
+    gpu_images: &RenderAssets<GpuImage>,
+) -> Result<(), String> {
+    let (Some((id, to_cube)), Some(pass)) = (x.sky_on_device, f.sky_pass.as_ref()) else { return Ok(()) };
+    let (Some(image), Some((_, scene))) = (gpu_images.get(id), f.tracer.shading()) else { return Ok(()) };
+    let mut encoder = f.tracer.ctx.device.create_command_encoder(&Default::default());
+    pass.record(&f.tracer.ctx, &mut encoder, &image.texture, to_cube, scene)
+        .map_err(|e| format!("the sky cubemap on the device: {e}"))?;
+    f.tracer.ctx.submit(encoder.finish());
+    Ok(())
 }
 
 /// Whether `x` differs from what `f` was made with in more than its lights'
@@ -295,6 +328,7 @@ fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField
     let set = DdgiFieldSet::new(&settings, bounds, x.tracking_target);
     let mut detector = SceneChangeDetector::new();
     detector.remember_lights(&scene);
+    let sky_pass = x.sky_on_device.map(|_| GpuSkyFromCubemap::new(&tracer.ctx));
     Ok(ProbegiField {
         set,
         tracer,
@@ -307,6 +341,7 @@ fn make_field(ctx: GpuContext, x: &ExtractedProbegiScene) -> Result<ProbegiField
         detector,
         object_poses: vec![glam::Mat4::IDENTITY; x.object_poses.len()],
         sky_generation: x.sky_generation,
+        sky_pass,
         frame: 0,
     })
 }

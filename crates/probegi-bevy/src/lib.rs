@@ -221,6 +221,10 @@ pub struct ProbegiScene {
     pub sky_generation: u64,
     /// The cubemap and rotation `sky_map` was made from.
     sky_key: Option<(AssetId<Image>, [f32; 4])>,
+    /// Where `sky_map` is a placeholder the device fills
+    /// ([`environment_sky::device_sky_placeholder`]): the cubemap the render
+    /// world reads each frame and its rotation.
+    pub sky_on_device: Option<(AssetId<Image>, Quat)>,
     /// The camera exposure the emissives were read through
     /// (`light_units::emissive_luminance`).
     camera_exposure: f32,
@@ -634,10 +638,21 @@ impl Skies<'_, '_> {
             }
             return;
         }
+        out.sky_on_device = None;
         let made = source.and_then(|(e, handle, rotation, brightness)| {
             let image = images.get(&handle)?; // still loading: the constant sky meanwhile
             let name = format!("{e}'s sky");
-            match environment_sky::equirect_from_cubemap(image, rotation, &name) {
+            // A cubemap the host cannot read is made into the map on the device.
+            let map = if environment_sky::host_reads(image) {
+                environment_sky::equirect_from_cubemap(image, rotation, &name)
+            } else {
+                let placeholder = environment_sky::device_sky_placeholder(image, &name);
+                if placeholder.is_ok() {
+                    out.sky_on_device = Some((handle.id(), rotation));
+                }
+                placeholder
+            };
+            match map {
                 Ok(map) => {
                     Some(probegi_scene::SkyMap { intensity: brightness, ..probegi_scene::SkyMap::new(Arc::new(map)) })
                 }

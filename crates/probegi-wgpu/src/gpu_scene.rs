@@ -182,6 +182,8 @@ pub struct GpuScene {
     emitter_moves: bool,
     /// Where the sky map lies in `scene_textures`, if the scene has one.
     sky_map: Option<SkyMapPlace>,
+    /// `scene_textures`, which `sky_from_cubemap` writes a sky map into.
+    textures: wgpu::Buffer,
 }
 
 /// `scene_lights`' header, sky and punctual lights (emitters follow them).
@@ -273,7 +275,12 @@ impl GpuScene {
         let buffers = [
             init_rw("scene triangles", bytemuck::cast_slice(&triangles)),
             init("scene materials", bytemuck::cast_slice(&materials)),
-            init("scene textures", bytemuck::cast_slice(&words)),
+            // Read back where a sky map is written on the device (`sky_map_texels`).
+            ctx.buffer_with(
+                "scene textures",
+                bytemuck::cast_slice(&words),
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            ),
             init_rw("scene lights", bytemuck::cast_slice(&lights)),
         ];
         let bind_group = crate::gpu_context::buffers_bind_group(
@@ -284,7 +291,7 @@ impl GpuScene {
         );
         let bytes = buffers.iter().map(|b| b.size()).sum();
         let moving = scene.objects.iter().filter(|o| o.is_animated()).map(|o| o.triangles()).collect();
-        let [triangle_buffer, _, _, lights] = buffers;
+        let [triangle_buffer, _, textures, lights] = buffers;
         Ok(Self {
             triangles: scene.mesh.triangle_count(),
             emitters,
@@ -295,6 +302,7 @@ impl GpuScene {
             moving,
             emitter_moves: emitter_moves(scene),
             sky_map,
+            textures,
         })
     }
 
@@ -367,6 +375,23 @@ impl GpuScene {
     /// Whether the scene has moving objects whose triangles `pose_geometry` rewrites.
     pub fn has_moving_geometry(&self) -> bool {
         !self.moving.is_empty()
+    }
+
+    /// Where the sky map's texels lie, if the scene has one: `scene_textures`,
+    /// the map's first word there and its width (three f32 words a texel,
+    /// row-major, half as many rows; `sky_from_cubemap` writes them).
+    pub fn sky_map_words(&self) -> Option<(&wgpu::Buffer, u32, u32)> {
+        self.sky_map.map(|p| (&self.textures, p.first_word, p.width))
+    }
+
+    /// The sky map's texels as the device holds them (a read-back and a
+    /// wait: for checks, not for a frame), `None` without a map.
+    pub fn sky_map_texels(&self, ctx: &GpuContext) -> Result<Option<Vec<glam::Vec3>>, GpuError> {
+        let Some((buffer, first, width)) = self.sky_map_words() else { return Ok(None) };
+        let texels = width as u64 * (width / 2) as u64;
+        let bytes = ctx.read_back_range(buffer, first as u64 * 4, texels * 12)?;
+        let words: &[f32] = bytemuck::cast_slice(&bytes);
+        Ok(Some(words.chunks_exact(3).map(|c| glam::Vec3::new(c[0], c[1], c[2])).collect()))
     }
 
     /// Device memory of the scene's buffers.

@@ -66,6 +66,7 @@ pub mod probe_shade;
 pub mod probe_usage;
 pub(crate) mod shader_registry;
 pub mod shadow_field;
+pub mod sky_from_cubemap;
 pub mod wgpu_field_backend;
 
 pub use gpu_context::{GpuContext, GpuCounters, GpuError};

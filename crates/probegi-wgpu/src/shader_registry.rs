@@ -21,6 +21,7 @@
 //! | [`SHADOW_FIELD`]        | `bvh.wgsl`, `scene.wgsl`, `probe_border.wgsl`, `shadow_field.wgsl` |
 //! | [`FIELD_QUERY`]         | `ddgi_query.wgsl`, `field_query.wgsl`                           |
 //! | [`DEVICE_FRAME`]        | `device_frame.wgsl`                                             |
+//! | [`SKY_FROM_CUBEMAP`]    | `sky_from_cubemap.wgsl`                                         |
 //!
 //! The one substitution: `ddgi_query.wgsl` names its group `DDGI_GROUP`, which
 //! [`compose`] fills with [`FIELD_GROUP`] and `ddgi_query::query_wgsl` with
@@ -112,14 +113,18 @@ pub(crate) const SHADOW_FIELD: PassShader =
 /// `device_frame::GpuFrame`.
 pub(crate) const DEVICE_FRAME: PassShader =
     PassShader { label: "device_frame.wgsl", files: &[wgsl_file!("device_frame.wgsl")] };
+/// `sky_from_cubemap::GpuSkyFromCubemap`.
+pub(crate) const SKY_FROM_CUBEMAP: PassShader =
+    PassShader { label: "sky_from_cubemap.wgsl", files: &[wgsl_file!("sky_from_cubemap.wgsl")] };
 /// `ddgi_query::GpuFieldQuery`.
 pub(crate) const FIELD_QUERY: PassShader =
     PassShader { label: "field_query.wgsl", files: &[DDGI_QUERY, wgsl_file!("field_query.wgsl")] };
 
 /// Every pass of the crate (the unit tests compile each).
 #[cfg(test)]
-pub(crate) const PASSES: [&PassShader; 13] = [
+pub(crate) const PASSES: [&PassShader; 14] = [
     &DEVICE_FRAME,
+    &SKY_FROM_CUBEMAP,
     &SHADOW_FIELD,
     &PROBE_CHANGE,
     &PROBE_SEEDING,
@@ -266,9 +271,11 @@ mod tests {
         use crate::probe_shade::{ShadeParams, ShadeProbe};
         use crate::probe_usage::UsageParams;
         use crate::shadow_field::{ShadowParams, ShadowProbe};
+        use crate::sky_from_cubemap::SkyFromCubemapParams;
         use probegi_field::seam::BatchProbe;
         let (ray, hit) = (size_of::<GpuRay>(), size_of::<GpuRayHit>());
-        let cases: [(&PassShader, &str, usize); 29] = [
+        let cases: [(&PassShader, &str, usize); 30] = [
+            (&SKY_FROM_CUBEMAP, "SkyFromCubemapParams", size_of::<SkyFromCubemapParams>()),
             (&SHADOW_FIELD, "ShadowParams", size_of::<ShadowParams>()),
             (&SHADOW_FIELD, "ShadowProbe", size_of::<ShadowProbe>()),
             (&SHADOW_FIELD, "ShadowRay", ray),

@@ -18,7 +18,8 @@ pub struct Args {
     /// Frames to render headless before the picture is taken.
     pub frames: u32,
     /// Where the headless picture goes; `None`: a window (with the `window`
-    /// feature), else `<example>.png`.
+    /// feature), else `<example>.png`. A `.exr` is the frame's radiance:
+    /// an HDR camera without tone mapping, its pixels over its exposure.
     pub out: Option<PathBuf>,
     /// No DDGI volume: Bevy's own lighting, to compare with.
     pub no_field: bool,
@@ -83,11 +84,17 @@ impl Args {
     pub fn headless(&self) -> bool {
         self.out.is_some() || !cfg!(feature = "window")
     }
+
+    /// Whether the headless picture is radiance (`--out *.exr`).
+    pub fn radiance(&self) -> bool {
+        self.out.as_ref().and_then(|p| p.extension()).is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+    }
 }
 
-/// The headless picture's target image.
+/// The headless picture's target image, and whether it holds radiance
+/// (`Rgba16Float` drawn by an HDR camera without tone mapping) or sRGB RGBA8.
 #[derive(Resource, Clone)]
-pub struct Target(pub Handle<Image>);
+pub struct Target(pub Handle<Image>, pub bool);
 
 /// Bevy's default plugins: with a window, or (headless) without one and with
 /// the [`Target`] image made.
@@ -110,10 +117,11 @@ pub fn add_default_plugins(app: &mut App, args: &Args) {
     app.add_plugins(plugins);
     app.insert_resource(probegi_bevy::ProbegiProbeView { enabled: args.probes, ..default() });
     if args.headless() {
-        let mut target = Image::new_target_texture(args.size.x, args.size.y, TextureFormat::Rgba8UnormSrgb, None);
+        let format = if args.radiance() { TextureFormat::Rgba16Float } else { TextureFormat::Rgba8UnormSrgb };
+        let mut target = Image::new_target_texture(args.size.x, args.size.y, format, None);
         target.texture_descriptor.usage |= TextureUsages::COPY_SRC;
         let handle = app.world_mut().resource_mut::<Assets<Image>>().add(target);
-        app.insert_resource(Target(handle));
+        app.insert_resource(Target(handle, args.radiance()));
     } else {
         #[cfg(feature = "window")]
         app.add_systems(Update, (fly_camera, toggle_probes));
@@ -174,7 +182,7 @@ fn window_rgb(image: &Image) -> Result<(u32, u32, Vec<u8>), String> {
 }
 
 /// The camera at `at`: into the [`Target`] headless, else a fly camera.
-/// ACES tone mapping (it needs no lookup table).
+/// ACES tone mapping (it needs no lookup table), none for a radiance target.
 pub fn spawn_camera(commands: &mut Commands, at: Transform, exposure: Exposure, target: Option<&Target>) -> Entity {
     let mut camera = commands.spawn((Camera3d::default(), Tonemapping::AcesFitted, exposure, at));
     match target {
@@ -182,6 +190,9 @@ pub fn spawn_camera(commands: &mut Commands, at: Transform, exposure: Exposure, 
         Some(t) => camera.insert((RenderTarget::Image(t.0.clone().into()), bevy::camera::ShadowLodOrigin)),
         None => camera.insert(FlyCamera),
     };
+    if target.is_some_and(|t| t.1) {
+        camera.insert((bevy::camera::Hdr, Tonemapping::None));
+    }
     camera.id()
 }
 
@@ -212,12 +223,16 @@ pub fn run(mut app: App, args: &Args) -> Result<Option<Vec<u8>>, String> {
     }
     let target = app.world().resource::<Target>().0.clone();
     let rgba = last_frame(&mut app, &target)?;
-    let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
-    if rgb.len() != (args.size.x * args.size.y * 3) as usize {
-        return Err(format!("read back {} bytes for {}×{} pixels", rgba.len(), args.size.x, args.size.y));
-    }
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", example_name())));
-    probegi_image::io::write_png(&out, args.size.x, args.size.y, rgb).map_err(|e| e.to_string())?;
+    if args.radiance() {
+        write_radiance(&mut app, &out, args.size, &rgba)?;
+    } else {
+        let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
+        if rgb.len() != (args.size.x * args.size.y * 3) as usize {
+            return Err(format!("read back {} bytes for {}×{} pixels", rgba.len(), args.size.x, args.size.y));
+        }
+        probegi_image::io::write_png(&out, args.size.x, args.size.y, rgb).map_err(|e| e.to_string())?;
+    }
     if let Some(e) = app
         .sub_app(bevy::render::RenderApp)
         .world()
@@ -254,6 +269,27 @@ fn bench_json(args: &Args, frame_ms: &[f64]) -> String {
         at(0.5),
         at(0.95)
     )
+}
+
+/// Writes an HDR camera's `Rgba16Float` frame `texels` as radiance to the
+/// EXR `out`: each pixel over the camera's exposure (Bevy draws light ×
+/// exposure), so that it compares with `probegi reference` of the same view.
+fn write_radiance(app: &mut App, out: &std::path::Path, size: UVec2, texels: &[u8]) -> Result<(), String> {
+    if texels.len() != (size.x * size.y * 8) as usize {
+        return Err(format!("read back {} bytes for {}×{} half-float pixels", texels.len(), size.x, size.y));
+    }
+    let mut cameras = app.world_mut().query_filtered::<Option<&Exposure>, With<Camera3d>>();
+    let exposure = cameras.iter(app.world()).next().flatten().copied().unwrap_or_default().exposure();
+    let half = |b: &[u8]| probegi_bevy::environment_sky::half_to_f32(u16::from_le_bytes([b[0], b[1]]));
+    let pixels = texels
+        .chunks_exact(8)
+        .map(|p| {
+            let c = glam::Vec3::new(half(&p[0..2]), half(&p[2..4]), half(&p[4..6])) / exposure;
+            if c.is_finite() { c.max(glam::Vec3::ZERO) } else { glam::Vec3::ZERO }
+        })
+        .collect();
+    let image = probegi_core::image::Image { width: size.x, height: size.y, pixels };
+    probegi_image::io::write_image(out, &image).map_err(|e| e.to_string())
 }
 
 /// The running example's name (its binary's), for the default picture.

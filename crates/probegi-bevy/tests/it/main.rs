@@ -4,3 +4,4 @@ mod examples;
 mod extract;
 mod field_lighting;
 mod field_on_bevy_device;
+mod sky_on_device;
