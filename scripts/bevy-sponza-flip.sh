@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # Issue "`probegi-bevy`…", "a visible difference": the Sponza example
-# (crates/probegi-bevy/examples/bevy_sponza.rs) as radiance (`--out *.exr`: an
-# HDR camera, Bevy's tone mapping off, each pixel over the camera's exposure)
-# with the field and without it (--no-field: Bevy's own lighting), each
-# against `probegi reference` of the same view (scenes/sponza-bevy-example.toml;
-# bump maps off, as the example draws none). Prints `probegi compare`'s
+# (crates/probegi-bevy/examples/bevy_sponza.rs) as exposed radiance (`--out
+# *.exr`: an HDR camera, Bevy's tone mapping off, radiance × the camera's
+# exposure) with the field and without it (--no-field: Bevy's own lighting),
+# each against `probegi reference` of the same view lit × the same exposure
+# (scenes/sponza-bevy-example.toml; bump maps off, as the example draws none). Prints `probegi compare`'s
 # HDR-FLIP, dark fraction and mean ratio (test / reference) for both, and
 # writes the images and contact sheets to $OUT.
 #   SIZE=320x240 FRAMES=40 SPP=256 bash scripts/bevy-sponza-flip.sh

@@ -25,6 +25,7 @@ use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use probegi_bevy::{ProbegiCascades, ProbegiLit, ProbegiMaterial, ProbegiPlugin};
 use probegi_scene::Scene;
+use probegi_scene::material::SpecularModel;
 
 #[path = "common/bevy_example.rs"]
 pub mod bevy_example;
@@ -123,6 +124,17 @@ fn material_mesh(scene: &Scene, m: u32) -> Option<Mesh> {
 fn standard_material(m: &probegi_scene::Material, textures: &[Handle<Image>]) -> StandardMaterial {
     let texture = |i: Option<usize>| i.and_then(|i| textures.get(i).cloned());
     let e = m.emissive_factor * m.emissive_strength;
+    // An MTL material's F0 is its Ks: Bevy's F0 = 0.16 × (reflectance ×
+    // tint)², so reflectance² = max(Ks) / 0.16 and tint² = Ks / max(Ks).
+    let (reflectance, specular_tint) = match m.specular_model {
+        SpecularModel::Mtl | SpecularModel::None => {
+            let ks = if m.specular_model == SpecularModel::Mtl { m.specular_color } else { glam::Vec3::ZERO };
+            let k = ks.max_element();
+            let tint = if k > 0.0 { (ks / k).to_array().map(f32::sqrt) } else { [1.0; 3] };
+            ((k / 0.16).sqrt(), Color::linear_rgb(tint[0], tint[1], tint[2]))
+        }
+        SpecularModel::MetallicRoughness => (0.5, Color::WHITE),
+    };
     StandardMaterial {
         base_color: Color::linear_rgb(m.base_color_factor.x, m.base_color_factor.y, m.base_color_factor.z),
         base_color_texture: texture(m.base_color_texture),
@@ -130,6 +142,8 @@ fn standard_material(m: &probegi_scene::Material, textures: &[Handle<Image>]) ->
         emissive_texture: texture(m.emissive_texture),
         perceptual_roughness: m.roughness,
         metallic: m.metallic,
+        reflectance,
+        specular_tint,
         alpha_mode: match m.alpha_mode {
             probegi_scene::material::AlphaMode::Opaque => AlphaMode::Opaque,
             probegi_scene::material::AlphaMode::Mask { cutoff } => AlphaMode::Mask(cutoff),

@@ -14,7 +14,12 @@
 //!   (`RenderAssetUsages::RENDER_WORLD` only) cannot be read: an error names it.
 //! - `StandardMaterial`: `base_color` (to linear) and `base_color_texture`,
 //!   `emissive` and `emissive_texture`, `perceptual_roughness`, `metallic`,
-//!   `alpha_mode`. `AlphaMode::Mask(c)` cuts out below `c`; the blended modes
+//!   `reflectance` and `specular_tint`, `alpha_mode`. The specular lobe is
+//!   Bevy's: a dielectric (`metallic` 0) has F0 = 0.16 × (reflectance ×
+//!   tint)² (`calculate_F0_dielectric`), probegi's MTL model with that F0;
+//!   a metallic one probegi's metallic-roughness model, F0 = mix(0.04, base,
+//!   metallic), which is Bevy's at its default reflectance 0.5 and white tint
+//!   (others are not expressible there and read as that). `AlphaMode::Mask(c)` cuts out below `c`; the blended modes
 //!   cut out below 0.5, as probegi's glTF loader reads glTF `BLEND` (the field
 //!   has no partial coverage). `unlit` materials keep their base colour as
 //!   albedo (they reflect the field's light in probegi, not in Bevy). An entity
@@ -22,10 +27,9 @@
 //! - Textures: `Rgba8UnormSrgb` and `Rgba8Unorm` images with their data in the
 //!   main world; others are an error that names the entity and the format.
 //!
-//! Deliberate limits of this first version: every mesh is static geometry of
-//! the scene (one BVH, rebuilt when anything it holds changes), not probegi's
-//! moving top-level instances; normal maps and the metallic-roughness texture
-//! are not read (the field's surfaces are diffuse); the sky is a constant.
+//! Deliberate limits: normal maps and the metallic-roughness texture are not
+//! read (the field's surfaces keep their interpolated normals and the
+//! material's factors).
 
 use std::collections::HashMap;
 
@@ -209,9 +213,13 @@ impl SceneBuilder {
             roughness: m.perceptual_roughness,
             metallic: m.metallic,
             specular_model: SpecularModel::MetallicRoughness,
+            specular_color: Vec3::ZERO,
             alpha_mode: cutoff.map_or(AlphaMode::Opaque, |cutoff| AlphaMode::Mask { cutoff }),
             ..Material::default_grey(name)
         };
+        if m.metallic == 0.0 {
+            (out.specular_model, out.specular_color) = (SpecularModel::Mtl, dielectric_f0(m));
+        }
         // A texture still loading is left out until it arrives (its asset
         // event rebuilds the geometry then), as a loading mesh is.
         if let Some(t) = m.base_color_texture.as_ref().map(|h| self.texture(h.id(), images)).transpose()?.flatten() {
@@ -260,6 +268,15 @@ fn texture_from_image(image: &Image, source: &str) -> Result<Texture, String> {
     let alpha: Vec<u8> = pixels.map(|p| p[3]).collect();
     let alpha = alpha.iter().any(|a| *a < 255).then_some(alpha);
     Ok(Texture { width, height, texels, alpha, source: source.to_owned(), sampler: Sampler::default() })
+}
+
+/// Bevy's F0 of a dielectric `StandardMaterial`: 0.16 × (reflectance ×
+/// linear specular tint)² (`bevy_pbr`'s `calculate_F0_dielectric`; the
+/// default reflectance 0.5 gives 0.04).
+pub fn dielectric_f0(m: &StandardMaterial) -> Vec3 {
+    let t = m.specular_tint.to_linear();
+    let r = Vec3::new(t.red, t.green, t.blue) * m.reflectance;
+    0.16 * r * r
 }
 
 fn linear_to_srgb8(v: u8) -> u8 {

@@ -18,8 +18,9 @@ pub struct Args {
     /// Frames to render headless before the picture is taken.
     pub frames: u32,
     /// Where the headless picture goes; `None`: a window (with the `window`
-    /// feature), else `<example>.png`. A `.exr` is the frame's radiance:
-    /// an HDR camera without tone mapping, its pixels over its exposure.
+    /// feature), else `<example>.png`. A `.exr` is the frame's exposed
+    /// radiance (radiance × the camera's exposure, as Bevy draws light):
+    /// an HDR camera without tone mapping.
     pub out: Option<PathBuf>,
     /// No DDGI volume: Bevy's own lighting, to compare with.
     pub no_field: bool,
@@ -225,7 +226,7 @@ pub fn run(mut app: App, args: &Args) -> Result<Option<Vec<u8>>, String> {
     let rgba = last_frame(&mut app, &target)?;
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}.png", example_name())));
     if args.radiance() {
-        write_radiance(&mut app, &out, args.size, &rgba)?;
+        write_radiance(&out, args.size, &rgba)?;
     } else {
         let rgb: Vec<u8> = rgba.chunks_exact(4).flat_map(|p| [p[0], p[1], p[2]]).collect();
         if rgb.len() != (args.size.x * args.size.y * 3) as usize {
@@ -271,20 +272,20 @@ fn bench_json(args: &Args, frame_ms: &[f64]) -> String {
     )
 }
 
-/// Writes an HDR camera's `Rgba16Float` frame `texels` as radiance to the
-/// EXR `out`: each pixel over the camera's exposure (Bevy draws light ×
-/// exposure), so that it compares with `probegi reference` of the same view.
-fn write_radiance(app: &mut App, out: &std::path::Path, size: UVec2, texels: &[u8]) -> Result<(), String> {
+/// Writes an HDR camera's `Rgba16Float` frame `texels` to the EXR `out`:
+/// exposed radiance, radiance × the camera's exposure as Bevy draws light:
+/// values in display range, as an HDR-FLIP comparison and a contact sheet
+/// read them, which compare with `probegi reference` of the same view lit ×
+/// that exposure (`scenes/sponza-bevy-example.toml`).
+fn write_radiance(out: &std::path::Path, size: UVec2, texels: &[u8]) -> Result<(), String> {
     if texels.len() != (size.x * size.y * 8) as usize {
         return Err(format!("read back {} bytes for {}×{} half-float pixels", texels.len(), size.x, size.y));
     }
-    let mut cameras = app.world_mut().query_filtered::<Option<&Exposure>, With<Camera3d>>();
-    let exposure = cameras.iter(app.world()).next().flatten().copied().unwrap_or_default().exposure();
     let half = |b: &[u8]| probegi_bevy::environment_sky::half_to_f32(u16::from_le_bytes([b[0], b[1]]));
     let pixels = texels
         .chunks_exact(8)
         .map(|p| {
-            let c = glam::Vec3::new(half(&p[0..2]), half(&p[2..4]), half(&p[4..6])) / exposure;
+            let c = glam::Vec3::new(half(&p[0..2]), half(&p[2..4]), half(&p[4..6]));
             if c.is_finite() { c.max(glam::Vec3::ZERO) } else { glam::Vec3::ZERO }
         })
         .collect();

@@ -57,6 +57,8 @@ fn spawn_world(app: &mut App) {
         base_color: Color::srgb(0.5, 0.5, 0.5),
         base_color_texture: Some(image),
         alpha_mode: AlphaMode::Mask(0.3),
+        reflectance: 0.25,
+        specular_tint: Color::linear_rgb(1.0, 0.5, 0.0),
         ..default()
     });
     world.spawn((
@@ -112,6 +114,12 @@ fn meshes_materials_lights_and_volumes_come_from_the_ecs() {
     let floor = sc.materials.iter().find(|m| m.base_color_texture.is_some()).expect("the floor's material");
     assert!((floor.base_color_factor.x - 0.214).abs() < 1e-3, "sRGB 0.5 is linear 0.214");
     assert_eq!(floor.alpha_mode, ProbegiAlpha::Mask { cutoff: 0.3 });
+    // Bevy's specular lobe: a dielectric's F0 = 0.16 × (reflectance × tint)²,
+    // probegi's MTL model; a metallic one the metallic-roughness model.
+    use probegi_scene::material::SpecularModel;
+    assert_eq!(floor.specular_model, SpecularModel::Mtl);
+    assert!(floor.specular_color.abs_diff_eq(glam::Vec3::new(0.01, 0.0025, 0.0), 1e-7), "{}", floor.specular_color);
+    assert_eq!(red.specular_model, SpecularModel::MetallicRoughness);
     let tex = &sc.textures[floor.base_color_texture.expect("texture")];
     assert_eq!((tex.width, tex.height, tex.texels[3]), (2, 2, [255, 128, 0]));
     assert_eq!(tex.alpha.as_deref(), Some(&[100u8; 4][..]));
