@@ -16,9 +16,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ "${1:-}" = --prepare ]; then
-  toolchain=nightly
-  rustc +stable --version 2>/dev/null | awk '{ print $2 }' | grep -Eq '^1\.(9[7-9]|[1-9][0-9][0-9])' && toolchain=stable
-  (cd crates/probegi-bevy && cargo "+$toolchain" build --release --locked --ignore-rust-version --example bevy_sponza)
+  # shellcheck source=scripts/bevy-toolchain.sh
+  source scripts/bevy-toolchain.sh
+  [ -n "$bevy_toolchain" ] || { echo "bevy-gpu-timing: no Rust 1.97.1 or 1.97 nightly for Bevy 0.20" >&2; exit 2; }
+  (cd crates/probegi-bevy && cargo "+$bevy_toolchain" build --release --locked "${bevy_flags[@]}" --example bevy_sponza)
   mkdir -p .device/bin
   cp crates/probegi-bevy/target/release/examples/bevy_sponza .device/bin/
   strip .device/bin/bevy_sponza 2>/dev/null || true

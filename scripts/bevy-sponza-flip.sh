@@ -20,14 +20,15 @@ BIN=${BIN:-./target/release/probegi}
 [ -x "$BIN" ] || cargo build --release --locked -q
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
-toolchain=nightly
-rustc +stable --version 2>/dev/null | awk '{ print $2 }' | grep -Eq '^1\.(9[7-9]|[1-9][0-9][0-9])' && toolchain=stable
+# shellcheck source=scripts/bevy-toolchain.sh
+source scripts/bevy-toolchain.sh
+[ -n "$bevy_toolchain" ] || { echo "bevy-sponza-flip: no Rust 1.97.1 or 1.97 nightly for Bevy 0.20" >&2; exit 2; }
 (
   cd crates/probegi-bevy
   for run in field no-field; do
     flags=()
     [ "$run" = no-field ] && flags=(--no-field)
-    cargo "+$toolchain" run -q --locked --ignore-rust-version --example bevy_sponza -- \
+    cargo "+$bevy_toolchain" run -q --locked "${bevy_flags[@]}" --example bevy_sponza -- \
       --size "$SIZE" --frames "$FRAMES" --out "$OUT/bevy-$run.exr" "${flags[@]}" 2>/dev/null
   done
 )

@@ -120,17 +120,8 @@ RUSTC_WORKSPACE_WRAPPER="$CLIPPY_DRIVER" CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnin
 # an installed nightly of 1.97 with --ignore-rust-version. Formatting, lints
 # with warnings denied and its tests, as above, with the `window` feature (one
 # build: the examples in a window too, which a test runs under Xvfb).
-rust_version() { rustc "+$1" --version 2>/dev/null | awk '{ print $2 }' | cut -d- -f1; }
-at_least() { [ -n "$1" ] && printf '%s\n%s\n' "$2" "$1" | sort -V -C; }
-bevy_flags=()
-if at_least "$(rust_version stable)" 1.97.1; then
-  bevy_toolchain=stable
-elif at_least "$(rust_version nightly)" 1.97.0; then
-  bevy_toolchain=nightly
-  bevy_flags=(--ignore-rust-version)
-else
-  bevy_toolchain=""
-fi
+# shellcheck source=scripts/bevy-toolchain.sh
+source scripts/bevy-toolchain.sh
 if [ -z "$bevy_toolchain" ]; then
   echo "warning: no Rust 1.97.1 (stable) or 1.97 nightly: the Bevy plugin's tests will SKIP (rustup toolchain install nightly)" >&2
 else

@@ -26,7 +26,7 @@ use std::path::Path;
 
 use bevy::image::{Image, TextureFormatPixelInfo};
 use bevy::math::Quat;
-use bevy::render::render_resource::{TextureDataOrder, TextureFormat};
+use bevy::render::render_resource::{TextureDataOrder, TextureDimension, TextureFormat, TextureSampleType};
 use glam::{Vec2, Vec3};
 use probegi_core::color::srgb_to_linear;
 use probegi_scene::EnvironmentMap;
@@ -137,9 +137,17 @@ fn cube_width(image: &Image, name: &str) -> Result<u32, String> {
 }
 
 /// The black map, of the size [`equirect_from_cubemap`] would make, that a
-/// cubemap the host cannot read stands for until the device writes it.
+/// cubemap the host cannot read stands for until the device writes it; an
+/// error for an image the device pass cannot read either (not a 2D cubemap
+/// of a float format: `probegi_wgpu::sky_from_cubemap`).
 pub fn device_sky_placeholder(image: &Image, name: &str) -> Result<EnvironmentMap, String> {
-    let width = map_width(cube_width(image, name)?);
+    let face = cube_width(image, name)?;
+    let d = &image.texture_descriptor;
+    let float = matches!(d.format.sample_type(None, None), Some(TextureSampleType::Float { .. }));
+    if d.dimension != TextureDimension::D2 || !float {
+        return Err(format!("{name}: a {:?} {:?} image is no cubemap the field can read", d.dimension, d.format));
+    }
+    let width = map_width(face);
     let texels = vec![Vec3::ZERO; (width * width / 2) as usize];
     EnvironmentMap::from_texels(Path::new(name), width, width / 2, texels).map_err(|e| format!("{name}: {e}"))
 }

@@ -203,16 +203,13 @@ pub(crate) fn update_field(
     let sky = write_sky_on_device(f, &x, &gpu_images);
     let result = f.set.update_on_device(&f.scene, &f.bvh, &f.tracer, f.seed, f.frame, &mut pass_ms);
     f.tracer.ctx.defer_submissions(false);
-    if let Err(e) = sky {
-        report(&mut out, e);
-        return;
+    if result.is_ok() {
+        f.frame += 1;
     }
-    match result {
-        Ok(_) => {
-            f.frame += 1;
-            out.error = None;
-        }
-        Err(e) => report(&mut out, format!("the field update failed: {e}")),
+    match (result, sky) {
+        (Ok(_), Ok(())) => out.error = None,
+        (Err(e), _) => report(&mut out, format!("the field update failed: {e}")),
+        (Ok(_), Err(e)) => report(&mut out, e),
     }
 }
 

@@ -425,8 +425,11 @@ fn extract_scene(
         ProbegiSky::Radiance(l) => l,
         ProbegiSky::ClearColor => skies.clear_color_radiance(),
     };
+    // Written only when it changed: the resource stays unchanged in a still frame.
     let constant_sky_changed = sky_radiance != out.sky_radiance;
-    out.sky_radiance = sky_radiance;
+    if constant_sky_changed {
+        out.sky_radiance = sky_radiance;
+    }
     if exposure != out.camera_exposure && out.scene.materials.iter().any(|m| m.emissive_factor != glam::Vec3::ZERO) {
         geometry = true;
     }

@@ -76,7 +76,8 @@ impl GpuSkyFromCubemap {
         let (words, first_word, width) =
             scene.sky_map_words().ok_or_else(|| GpuError::Input("the scene has no sky map to write".into()))?;
         let size = cube.size();
-        if size.depth_or_array_layers != 6 || size.width != size.height || size.width == 0 {
+        let square_layers = size.depth_or_array_layers == 6 && size.width == size.height && size.width > 0;
+        if cube.dimension() != wgpu::TextureDimension::D2 || !square_layers {
             return Err(GpuError::Input(format!(
                 "a cubemap has 6 square layers; this texture is {}×{}×{}",
                 size.width, size.height, size.depth_or_array_layers

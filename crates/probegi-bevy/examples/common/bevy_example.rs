@@ -38,7 +38,8 @@ pub struct Args {
 }
 
 impl Args {
-    /// `--frames N`, `--out PATH`, `--no-field`, `--probes`, `--size WxH`, `--screenshot PATH`.
+    /// `--frames N`, `--out PATH`, `--no-field`, `--probes`, `--size WxH`,
+    /// `--screenshot PATH`, `--bench`.
     pub fn parse(mut args: impl Iterator<Item = String>) -> Result<Self, String> {
         let size = UVec2::new(640, 480);
         let mut out =
@@ -73,7 +74,9 @@ impl Args {
         }
         match (&out.screenshot, &out.out) {
             (Some(_), Some(_)) => Err("--screenshot is the window's picture, --out the headless one: not both".into()),
-            (Some(_), _) if out.bench => Err("--bench times a headless run: not with --screenshot".into()),
+            (_, _) if out.bench && (!out.headless() || out.frames < 2) => {
+                Err("--bench times a headless run (--out PATH) of at least 2 frames".into())
+            }
             (Some(_), None) if !cfg!(feature = "window") => {
                 Err("--screenshot needs a window: build the example with --features window".into())
             }

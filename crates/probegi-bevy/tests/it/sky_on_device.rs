@@ -146,6 +146,17 @@ fn a_block_compressed_skybox_lights_an_open_floor_through_the_field() {
     let s = app.world().resource::<ProbegiScene>();
     assert!(s.sky_error.is_none(), "{:?}", s.sky_error);
     assert!(s.sky_on_device.is_some(), "the device makes the map of a BC6H cube");
+    // The sky pass joins the frame's one submission, with no wait.
+    let counters = |app: &App| {
+        let rf = app.sub_app(RenderApp).world().resource::<ProbegiRenderField>();
+        rf.field.as_ref().expect("a field").tracer.ctx.counters()
+    };
+    let before = counters(&app);
+    for _ in 0..3 {
+        app.update();
+    }
+    let d = counters(&app) - before;
+    assert_eq!((d.submissions, d.blocking_waits), (3, 0), "one submission a frame, no wait, with the sky pass");
     let render_world = app.sub_app_mut(RenderApp).world_mut();
     let mut rf = render_world.resource_mut::<ProbegiRenderField>();
     assert!(rf.error.is_none(), "{:?}", rf.error);
@@ -159,4 +170,25 @@ fn a_block_compressed_skybox_lights_an_open_floor_through_the_field() {
         let e = field.set.irradiance(p, glam::Vec3::Y, glam::Vec3::Y);
         assert!((e - want).abs().max_element() < 0.01 * want.max_element(), "E at {p}: {e}, want {want}");
     }
+}
+
+#[test]
+fn a_cube_the_device_cannot_read_either_is_an_error_naming_it() {
+    // An integer cube: neither the host nor the device pass reads it as radiance.
+    let size = Extent3d { width: 4, height: 4, depth_or_array_layers: 6 };
+    let bytes = vec![7u8; 4 * 4 * 6 * 4];
+    let image = Image::new(size, TextureDimension::D2, bytes, TextureFormat::Rgba8Uint, RenderAssetUsages::default());
+    assert!(!probegi_bevy::environment_sky::host_reads(&image));
+    let e = device_sky_placeholder(&image, "camera 3's sky").expect_err("no float format");
+    assert!(e.starts_with("camera 3's sky:") && e.contains("Rgba8Uint"), "{e}");
+    // A 3D texture of six slices is no cubemap either.
+    let mut image = Image::new(
+        size,
+        TextureDimension::D3,
+        vec![0u8; 4 * 4 * 6 * 8],
+        TextureFormat::Rgba16Float,
+        RenderAssetUsages::default(),
+    );
+    image.texture_descriptor.dimension = TextureDimension::D3;
+    assert!(device_sky_placeholder(&image, "a volume").is_err());
 }

@@ -66,7 +66,8 @@ fn sky_from_cubemap(@builtin(global_invocation_id) id: vec3<u32>) {
     let x = min(u32(f.y * f32(n)), n - 1u);
     let y = min(u32(f.z * f32(n)), n - 1u);
     let c = textureLoad(sky_cube, vec2<u32>(x, y), u32(f.x), 0).rgb;
-    // Radiance is finite and non-negative, as the host's maps are.
+    // Radiance is finite and non-negative: a negative or non-finite texel reads as
+    // black (the host's map refuses such a cube instead).
     let r = select(vec3<f32>(0.0), max(c, vec3<f32>(0.0)), all(c == c) && all(abs(c) < vec3<f32>(3.0e38)));
     let k = sky_params.first_word + 3u * (id.y * w + id.x);
     sky_words[k] = bitcast<u32>(r.x);
