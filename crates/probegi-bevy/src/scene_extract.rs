@@ -17,19 +17,21 @@
 //!   `reflectance` and `specular_tint`, `alpha_mode`. The specular lobe is
 //!   Bevy's: a dielectric (`metallic` 0) has F0 = 0.16 × (reflectance ×
 //!   tint)² (`calculate_F0_dielectric`), probegi's MTL model with that F0;
-//!   a metallic one probegi's metallic-roughness model, F0 = mix(0.04, base,
-//!   metallic), which is Bevy's at its default reflectance 0.5 and white tint
-//!   (others are not expressible there and read as that). `AlphaMode::Mask(c)` cuts out below `c`; the blended modes
-//!   cut out below 0.5, as probegi's glTF loader reads glTF `BLEND` (the field
-//!   has no partial coverage). `unlit` materials keep their base colour as
-//!   albedo (they reflect the field's light in probegi, not in Bevy). An entity
+//!   a metallic one, or one with a metallic-roughness texture, probegi's
+//!   metallic-roughness model, F0 = mix(0.04, base, metallic), which is
+//!   Bevy's at its default reflectance 0.5 and white tint (others are not
+//!   expressible there and read as that). `metallic_roughness_texture` (G
+//!   roughness, B metalness) is kept as its linear values, as probegi reads
+//!   it. `AlphaMode::Mask(c)` cuts out below `c`; the blended modes cut out
+//!   below 0.5, as probegi's glTF loader reads glTF `BLEND` (the field has no
+//!   partial coverage). `unlit` materials keep their base colour as albedo
+//!   (they reflect the field's light in probegi, not in Bevy). An entity
 //!   without a `StandardMaterial` gets probegi's default grey 0.5.
 //! - Textures: `Rgba8UnormSrgb` and `Rgba8Unorm` images with their data in the
 //!   main world; others are an error that names the entity and the format.
 //!
-//! Deliberate limits: normal maps and the metallic-roughness texture are not
-//! read (the field's surfaces keep their interpolated normals and the
-//! material's factors).
+//! Deliberate limits: normal maps are not read (the field's surfaces keep
+//! their interpolated normals).
 
 use std::collections::HashMap;
 
@@ -80,7 +82,9 @@ pub struct MeshEntity<'a> {
 pub struct SceneBuilder {
     scene: Scene,
     materials: HashMap<Option<UntypedAssetId>, u32>,
-    textures: HashMap<AssetId<Image>, usize>,
+    /// Each image's texture: sRGB-encoded (`false`, colours) or its linear
+    /// values as they are (`true`, the metallic-roughness channels).
+    textures: HashMap<(AssetId<Image>, bool), usize>,
     /// The camera's exposure, for display-weighted emissives
     /// (`light_units::emissive_luminance`).
     camera_exposure: f32,
@@ -217,35 +221,46 @@ impl SceneBuilder {
             alpha_mode: cutoff.map_or(AlphaMode::Opaque, |cutoff| AlphaMode::Mask { cutoff }),
             ..Material::default_grey(name)
         };
-        if m.metallic == 0.0 {
+        // Bevy's metallic-roughness texture: roughness in G, metalness in B,
+        // linear (probegi reads its bytes as they are).
+        let mr = m.metallic_roughness_texture.as_ref();
+        out.metallic_roughness_texture = mr.map(|h| self.texture(h.id(), images, true)).transpose()?.flatten();
+        // A dielectric without that texture: Bevy's own F0 (MTL model).
+        if m.metallic == 0.0 && m.metallic_roughness_texture.is_none() {
             (out.specular_model, out.specular_color) = (SpecularModel::Mtl, dielectric_f0(m));
         }
         // A texture still loading is left out until it arrives (its asset
         // event rebuilds the geometry then), as a loading mesh is.
-        if let Some(t) = m.base_color_texture.as_ref().map(|h| self.texture(h.id(), images)).transpose()?.flatten() {
+        if let Some(t) =
+            m.base_color_texture.as_ref().map(|h| self.texture(h.id(), images, false)).transpose()?.flatten()
+        {
             out.base_color_texture = Some(t);
             out.alpha_texture = cutoff.is_some().then_some(t);
         }
-        out.emissive_texture = m.emissive_texture.as_ref().map(|h| self.texture(h.id(), images)).transpose()?.flatten();
+        out.emissive_texture =
+            m.emissive_texture.as_ref().map(|h| self.texture(h.id(), images, false)).transpose()?.flatten();
         Ok(out)
     }
 
-    /// The image's index in the scene's textures; `None` while it loads.
-    fn texture(&mut self, id: AssetId<Image>, images: &Assets<Image>) -> Result<Option<usize>, String> {
-        if let Some(i) = self.textures.get(&id) {
+    /// The image's index in the scene's textures, its values `linear` as
+    /// they are or sRGB-encoded; `None` while it loads.
+    fn texture(&mut self, id: AssetId<Image>, images: &Assets<Image>, linear: bool) -> Result<Option<usize>, String> {
+        if let Some(i) = self.textures.get(&(id, linear)) {
             return Ok(Some(*i));
         }
         let Some(image) = images.get(id) else { return Ok(None) };
-        let texture = texture_from_image(image, &format!("{id:?}"))?;
+        let texture = texture_from_image(image, &format!("{id:?}"), linear)?;
         let i = self.scene.textures.len();
         self.scene.textures.push(texture);
-        self.textures.insert(id, i);
+        self.textures.insert((id, linear), i);
         Ok(Some(i))
     }
 }
 
-/// A probegi texture (sRGB RGB8 and alpha) from an RGBA8 Bevy image.
-fn texture_from_image(image: &Image, source: &str) -> Result<Texture, String> {
+/// A probegi texture (RGB8 and alpha) from an RGBA8 Bevy image: colours
+/// sRGB-encoded, or (`linear`) its linear values, as probegi reads a
+/// metallic-roughness texture.
+fn texture_from_image(image: &Image, source: &str, linear: bool) -> Result<Texture, String> {
     let format = image.texture_descriptor.format;
     let srgb = match format {
         TextureFormat::Rgba8UnormSrgb => true,
@@ -262,8 +277,13 @@ fn texture_from_image(image: &Image, source: &str) -> Result<Texture, String> {
         return Err(format!("its texture {source} holds {} bytes for {width}×{height} RGBA8", data.len()));
     }
     let pixels = data.chunks_exact(4).take(width as usize * height as usize);
-    // probegi keeps sRGB-encoded texels: a linear (Unorm) image is encoded.
-    let encode = |v: u8| if srgb { v } else { linear_to_srgb8(v) };
+    // probegi keeps colours sRGB-encoded (a linear Unorm image is encoded)
+    // and data textures linear (an sRGB image is decoded, as Bevy samples it).
+    let encode = |v: u8| match (srgb, linear) {
+        (true, true) => (probegi_core::color::srgb_to_linear(v as f32 / 255.0) * 255.0).round() as u8,
+        (false, false) => linear_to_srgb8(v),
+        _ => v,
+    };
     let texels = pixels.clone().map(|p| [encode(p[0]), encode(p[1]), encode(p[2])]).collect();
     let alpha: Vec<u8> = pixels.map(|p| p[3]).collect();
     let alpha = alpha.iter().any(|a| *a < 255).then_some(alpha);

@@ -486,3 +486,42 @@ fn the_clear_colour_is_the_sky_its_camera_draws() {
     app.update();
     assert_eq!(sky(&app), glam::Vec3::new(4.0, 5.0, 6.0));
 }
+
+#[test]
+fn a_metallic_roughness_texture_is_read_as_bevy_reads_it() {
+    // Bevy's channels: roughness in G, metalness in B, linear values.
+    let mut app = app();
+    let world = app.world_mut();
+    let quad = world.resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().size(1.0, 1.0));
+    let size = Extent3d { width: 1, height: 1, depth_or_array_layers: 1 };
+    let texels = [0u8, 128, 64, 255];
+    let linear =
+        Image::new_fill(size, TextureDimension::D2, &texels, TextureFormat::Rgba8Unorm, RenderAssetUsages::default());
+    let mr = world.resource_mut::<Assets<Image>>().add(linear);
+    let material = StandardMaterial {
+        base_color_texture: Some(mr.clone()), // the same image as a colour too
+        metallic: 1.0,
+        perceptual_roughness: 1.0,
+        metallic_roughness_texture: Some(mr),
+        ..default()
+    };
+    let material = world.resource_mut::<Assets<StandardMaterial>>().add(material);
+    world.spawn((Mesh3d(quad), MeshMaterial3d(material)));
+    app.update();
+    let s = scene(&app);
+    assert!(s.error.is_none(), "{:?}", s.error);
+    let sc = &s.scene;
+    let m = sc.materials.iter().find(|m| m.metallic_roughness_texture.is_some()).expect("the textured material");
+    assert_eq!(m.specular_model, probegi_scene::material::SpecularModel::MetallicRoughness);
+    let at = probegi_scene::material::VertexAttributes { uv: [glam::Vec2::splat(0.5); 2], color: glam::Vec3::ONE };
+    let (roughness, metallic) = m.roughness_metallic(&sc.textures, &at);
+    assert!(
+        (roughness - 128.0 / 255.0).abs() < 1e-6 && (metallic - 64.0 / 255.0).abs() < 1e-6,
+        "{roughness} {metallic}"
+    );
+    // As a colour the same image is sRGB-encoded: another texture.
+    let colour = &sc.textures[m.base_color_texture.expect("base colour")];
+    let data = &sc.textures[m.metallic_roughness_texture.expect("data")];
+    assert_eq!(data.texels[0], [0, 128, 64]);
+    assert_ne!(colour.texels[0], data.texels[0], "the colour copy is sRGB-encoded");
+}
