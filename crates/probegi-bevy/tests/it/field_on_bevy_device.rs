@@ -296,6 +296,26 @@ fn own_field(
     set
 }
 
+/// The sky furnace's scene: a grey 40 m floor, a camera 2 m above it with
+/// `cubemap` as its skybox (brightness 2, turned 0.4 rad about +y), and a
+/// 4×3×4 volume over the floor; then `frames` frames.
+pub(crate) fn sky_furnace_frames(app: &mut App, cubemap: Image, frames: u32) {
+    let world = app.world_mut();
+    let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(20.0)));
+    let grey = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
+    world.spawn((Mesh3d(floor), MeshMaterial3d(grey)));
+    let image = world.resource_mut::<Assets<Image>>().add(cubemap);
+    let skybox = bevy::light::Skybox { image: Some(image), brightness: 2.0, rotation: Quat::from_rotation_y(0.4) };
+    world.spawn((Camera3d::default(), skybox, Transform::from_xyz(0.0, 2.0, 0.0)));
+    let settings = DdgiVolumeSettings { probe_counts: glam::UVec3::new(4, 3, 4), ..default() };
+    // Probe rows at y = −0.25 (under the floor: switched off), 1.25 and 2.75.
+    let around = Transform::from_xyz(0.0, 1.25, 0.0).with_scale(Vec3::new(4.0, 3.0, 4.0));
+    world.spawn((ProbegiVolume { settings }, around));
+    for _ in 0..frames {
+        app.update();
+    }
+}
+
 #[test]
 fn a_uniform_skybox_lights_an_open_floor_through_the_field_to_pi_l() {
     // The sky's furnace on Bevy's device: a skybox of radiance 1 × brightness
@@ -307,20 +327,7 @@ fn a_uniform_skybox_lights_an_open_floor_through_the_field_to_pi_l() {
     let Some(mut app) = render_app_with(ProbegiPlugin { sky: ProbegiSky::Radiance(Vec3::ZERO), seed: SEED }) else {
         return;
     };
-    let world = app.world_mut();
-    let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(20.0)));
-    let grey = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
-    world.spawn((Mesh3d(floor), MeshMaterial3d(grey)));
-    let image = world.resource_mut::<Assets<Image>>().add(crate::extract::cubemap([[1.0; 3]; 6], 4));
-    let skybox = bevy::light::Skybox { image: Some(image), brightness: 2.0, rotation: Quat::from_rotation_y(0.4) };
-    world.spawn((Camera3d::default(), skybox, Transform::from_xyz(0.0, 2.0, 0.0)));
-    let settings = DdgiVolumeSettings { probe_counts: glam::UVec3::new(4, 3, 4), ..default() };
-    // Probe rows at y = −0.25 (under the floor: switched off), 1.25 and 2.75.
-    let around = Transform::from_xyz(0.0, 1.25, 0.0).with_scale(Vec3::new(4.0, 3.0, 4.0));
-    world.spawn((ProbegiVolume { settings }, around));
-    for _ in 0..40 {
-        app.update();
-    }
+    sky_furnace_frames(&mut app, crate::extract::cubemap([[1.0; 3]; 6], 4), 40);
     let render_world = app.sub_app_mut(RenderApp).world_mut();
     let mut rf = render_world.resource_mut::<ProbegiRenderField>();
     assert!(rf.error.is_none(), "{:?}", rf.error);

@@ -105,8 +105,7 @@ fn a_block_compressed_skybox_lights_an_open_floor_through_the_field() {
     use bevy::prelude::*;
     use bevy::render::RenderApp;
     use probegi_bevy::field_on_bevy_device::ProbegiRenderField;
-    use probegi_bevy::{ProbegiPlugin, ProbegiScene, ProbegiSky, ProbegiVolume};
-    use probegi_core::ddgi_settings::DdgiVolumeSettings;
+    use probegi_bevy::{ProbegiPlugin, ProbegiScene, ProbegiSky};
     // The sky furnace of `field_on_bevy_device` with a BC6H skybox, which
     // the host cannot read: the device makes the map, and the floor's E is
     // π L × brightness once the blend has converged (within 1 %).
@@ -130,19 +129,7 @@ fn a_block_compressed_skybox_lights_an_open_floor_through_the_field() {
         dimension: Some(bevy::render::render_resource::TextureViewDimension::Cube),
         ..default()
     });
-    let world = app.world_mut();
-    let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(20.0)));
-    let grey = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
-    world.spawn((Mesh3d(floor), MeshMaterial3d(grey)));
-    let image = world.resource_mut::<Assets<Image>>().add(image);
-    let skybox = bevy::light::Skybox { image: Some(image), brightness: 2.0, rotation: Quat::from_rotation_y(0.4) };
-    world.spawn((Camera3d::default(), skybox, Transform::from_xyz(0.0, 2.0, 0.0)));
-    let settings = DdgiVolumeSettings { probe_counts: glam::UVec3::new(4, 3, 4), ..default() };
-    let around = Transform::from_xyz(0.0, 1.25, 0.0).with_scale(Vec3::new(4.0, 3.0, 4.0));
-    world.spawn((ProbegiVolume { settings }, around));
-    for _ in 0..40 {
-        app.update();
-    }
+    crate::field_on_bevy_device::sky_furnace_frames(&mut app, image, 40);
     let s = app.world().resource::<ProbegiScene>();
     assert!(s.sky_error.is_none(), "{:?}", s.sky_error);
     assert!(s.sky_on_device.is_some(), "the device makes the map of a BC6H cube");
