@@ -331,9 +331,14 @@ fn moving_meshes_are_posed_without_making_the_geometry_again() {
 pub(crate) fn cubemap(faces: [[f32; 3]; 6], size: u32) -> Image {
     let texel = |c: [f32; 3]| [c[0], c[1], c[2], 1.0].into_iter().flat_map(f32::to_le_bytes).collect::<Vec<u8>>();
     let data: Vec<u8> = faces.iter().flat_map(|c| (0..size * size).flat_map(move |_| texel(*c))).collect();
+    cube_image(size, TextureFormat::Rgba32Float, data)
+}
+
+/// Six `size`² layers of `format` holding `data`, viewed as a cube (as a
+/// skybox's image is).
+pub(crate) fn cube_image(size: u32, format: TextureFormat, data: Vec<u8>) -> Image {
     let size = Extent3d { width: size, height: size, depth_or_array_layers: 6 };
-    let mut image =
-        Image::new(size, TextureDimension::D2, data, TextureFormat::Rgba32Float, RenderAssetUsages::default());
+    let mut image = Image::new(size, TextureDimension::D2, data, format, RenderAssetUsages::default());
     image.texture_view_descriptor = Some(bevy::render::render_resource::TextureViewDescriptor {
         dimension: Some(bevy::render::render_resource::TextureViewDimension::Cube),
         ..default()

@@ -122,13 +122,7 @@ fn a_block_compressed_skybox_lights_an_open_floor_through_the_field() {
     let face = 16u32;
     let blocks = (face / 4) * (face / 4) * 6;
     let data: Vec<u8> = (0..blocks).flat_map(|_| bc6h_constant_block(c)).collect();
-    let size = Extent3d { width: face, height: face, depth_or_array_layers: 6 };
-    let mut image =
-        Image::new(size, TextureDimension::D2, data, TextureFormat::Bc6hRgbUfloat, RenderAssetUsages::default());
-    image.texture_view_descriptor = Some(bevy::render::render_resource::TextureViewDescriptor {
-        dimension: Some(bevy::render::render_resource::TextureViewDimension::Cube),
-        ..default()
-    });
+    let image = crate::extract::cube_image(face, TextureFormat::Bc6hRgbUfloat, data);
     crate::field_on_bevy_device::sky_furnace_frames(&mut app, image, 40);
     let s = app.world().resource::<ProbegiScene>();
     assert!(s.sky_error.is_none(), "{:?}", s.sky_error);
