@@ -31,23 +31,50 @@ pub fn trace_probe_batch(tracer: &dyn RayTracer, batch: &ProbeRayBatch, hits: &m
     batch.len() as u64
 }
 
-/// The seam's record of one traced ray: signed distance and, when `with_normal`
-/// (the rounds that read it, [`probegi_field::DdgiFieldSet::hit_normals_needed`]),
-/// the shading normal facing the ray's origin; zero otherwise.
-pub fn probe_ray_hit(scene: &Scene, hit: &Option<RayHit>, with_normal: bool) -> ProbeRayHit {
+/// Which normal a seam hit carries ([`probegi_field::DdgiFieldSet::hit_normals_needed`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HitNormal {
+    /// None (zero): relocation rounds and update batches read distances only.
+    None,
+    /// The triangle's plane, facing the ray's origin: what the jcgt
+    /// classification of an initialisation round reads (which side of a
+    /// surface's plane a probe lies on; [`Scene::facing_geometric_normal`]).
+    Plane,
+    /// The facing shading normal: the shadowing field's surfels of an update batch.
+    Shading,
+}
+
+impl HitNormal {
+    /// The normal a round of `kind` reads, when the set says it reads one.
+    pub fn for_round(needed: bool, initialization: bool) -> Self {
+        match (needed, initialization) {
+            (false, _) => Self::None,
+            (true, true) => Self::Plane,
+            (true, false) => Self::Shading,
+        }
+    }
+}
+
+/// The seam's record of one traced ray: signed distance and the normal
+/// `normal` asks for (zero for [`HitNormal::None`]).
+pub fn probe_ray_hit(scene: &Scene, hit: &Option<RayHit>, normal: HitNormal) -> ProbeRayHit {
     match hit {
         None => ProbeRayHit::MISS,
         Some(h) => {
-            let normal = if with_normal { scene.surface_point(h).facing_normal() } else { Vec3::ZERO };
-            if h.backface { ProbeRayHit::back(h.t, normal) } else { ProbeRayHit::front(h.t, normal) }
+            let n = match normal {
+                HitNormal::None => Vec3::ZERO,
+                HitNormal::Plane => scene.facing_geometric_normal(h),
+                HitNormal::Shading => scene.surface_point(h).facing_normal(),
+            };
+            if h.backface { ProbeRayHit::back(h.t, n) } else { ProbeRayHit::front(h.t, n) }
         }
     }
 }
 
 /// The seam hits of `hits` into `out` (see [`probe_ray_hit`]), in parallel.
-pub fn probe_ray_hits(scene: &Scene, hits: &[Option<RayHit>], with_normal: bool, out: &mut Vec<ProbeRayHit>) {
+pub fn probe_ray_hits(scene: &Scene, hits: &[Option<RayHit>], normal: HitNormal, out: &mut Vec<ProbeRayHit>) {
     out.clear();
-    hits.par_iter().map(|h| probe_ray_hit(scene, h, with_normal)).collect_into_vec(out);
+    hits.par_iter().map(|h| probe_ray_hit(scene, h, normal)).collect_into_vec(out);
 }
 
 /// Traces `dirs` from every probe position (distance only, no surface point);

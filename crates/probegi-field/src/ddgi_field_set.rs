@@ -654,7 +654,7 @@ impl DdgiFieldSet {
 
     /// Whether the current batch's round reads [`ProbeRayHit::normal`]: an
     /// initialisation round that classifies (seed 004 Listing 5 reads the hit
-    /// points' facing normals). Relocation rounds and update batches read
+    /// points' facing plane normals). Relocation rounds and update batches read
     /// distances only, so a caller may submit any finite normal there (zero)
     /// and skip building the surface point of every hit.
     pub fn hit_normals_needed(&self) -> bool {

@@ -250,10 +250,14 @@ pub struct ProbeRayHit {
     /// Signed hit distance in metres: `t` on a front face, `−t` on a back face,
     /// `+∞` for a miss (nothing within the ray's max distance).
     pub distance_m: f32,
-    /// Unit normal at the hit on the side facing the ray's origin, read only by
-    /// the jcgt classification round
-    /// ([`DdgiFieldSet::hit_normals_needed`](crate::DdgiFieldSet::hit_normals_needed));
-    /// any finite value (zero) in other rounds and for a miss.
+    /// Unit normal at the hit on the side facing the ray's origin, read only
+    /// where [`DdgiFieldSet::hit_normals_needed`](crate::DdgiFieldSet::hit_normals_needed)
+    /// says: in an initialisation round the triangle's plane (geometric)
+    /// normal, which the jcgt classification's front-side test reads (a
+    /// shading normal, interpolated or from a normal map, is not the plane a
+    /// probe lies in front of); in an update batch with a host shadowing
+    /// field, the shading normal of its surfels. Any finite value (zero) in
+    /// other rounds and for a miss.
     pub normal: Vec3,
 }
 

@@ -18,7 +18,7 @@ use probegi_field::probe_ray_gen::probe_ray_directions;
 
 use probegi_cpu::direct::DirectLighting;
 use probegi_cpu::probe_shade::{ProbeShadeInputs, shade_probe_rays};
-use probegi_cpu::probe_trace::{probe_ray_hits, trace_probe_batch, trace_probe_distances};
+use probegi_cpu::probe_trace::{HitNormal, probe_ray_hits, trace_probe_batch, trace_probe_distances};
 
 /// The convenience update on a [`DdgiFieldSet`] (see the module docs).
 pub trait FieldSetUpdate {
@@ -275,12 +275,12 @@ impl<'u> SeamDriver<'u> {
             }
             None => trace_probe_batch(tr, set.ray_batch(), &mut self.batch_hits),
         };
-        probe_ray_hits(self.scene, &self.batch_hits, set.hit_normals_needed(), &mut self.hits);
+        let normal = HitNormal::for_round(set.hit_normals_needed(), init);
+        probe_ray_hits(self.scene, &self.batch_hits, normal, &mut self.hits);
         let step = if init {
-            // The normals of the hits the set keeps for its classification round.
+            // The plane normals of the hits the set keeps for its classification round.
             let (scene, batch_hits) = (self.scene, &self.batch_hits);
-            let normal_of =
-                |r: usize| batch_hits[r].as_ref().map_or(Vec3::ZERO, |h| scene.surface_point(h).facing_normal());
+            let normal_of = |r: usize| batch_hits[r].as_ref().map_or(Vec3::ZERO, |h| scene.facing_geometric_normal(h));
             set.submit_init_hits(&self.hits, &normal_of)
         } else {
             set.submit_hits(&self.hits)

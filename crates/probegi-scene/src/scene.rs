@@ -295,6 +295,23 @@ pub const MAX_EMISSION: f32 = 1e15;
 pub const MAX_COORDINATE_M: f32 = 1e15;
 
 impl Scene {
+    /// The unit geometric normal at a hit, world space, turned toward the side
+    /// the ray came from: [`SurfacePoint::facing_geometric_normal`] of
+    /// [`Self::surface_point`], from the triangle's corners alone (no
+    /// attributes, no normal map). Zero for a degenerate triangle.
+    pub fn facing_geometric_normal(&self, hit: &RayHit) -> Vec3 {
+        let tri = hit.triangle as usize;
+        let p = match self.instances.get(hit.instance as usize) {
+            Some(inst) => {
+                let mesh = &self.prototypes[inst.prototype as usize].mesh;
+                mesh.triangles[tri].map(|i| inst.world_from_local.transform_point3(mesh.positions[i as usize]))
+            }
+            None => self.mesh.triangles[tri].map(|i| self.mesh.positions[i as usize]),
+        };
+        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        if hit.backface { -n } else { n }
+    }
+
     /// Reconstructs the surface at a hit reported by a tracer, in world space.
     pub fn surface_point(&self, hit: &RayHit) -> SurfacePoint {
         let tri = hit.triangle as usize;

@@ -250,7 +250,7 @@ impl DdgiVolume {
 
     /// Keeps the hits of every probe that traced in this round from where it
     /// now is (`current`) in `probe_init_hits`, with their normals from
-    /// `normal_of` (a batch ray's facing normal) where given, else as the hits
+    /// `normal_of` (a batch ray's facing plane normal) where given, else as the hits
     /// carry them. Only front hits' normals are read (by the classification).
     fn keep_init_hits(
         &mut self,
@@ -378,7 +378,9 @@ impl DdgiVolume {
     }
 }
 
-/// A batch ray's facing normal at its hit, computed where a round's hits are
+/// A batch ray's facing plane normal at its hit (its triangle's geometric
+/// normal turned toward the ray's origin, what the classification's
+/// front-side test reads), computed where a round's hits are
 /// kept (`DdgiFieldSet::submit_init_hits`).
 pub type HitNormals<'a> = dyn Fn(usize) -> Vec3 + Sync + 'a;
 

@@ -222,3 +222,30 @@ fn gltf_animation_channels_move_the_node_on_the_scene_clock() {
     let p = at(&placed, 5.0);
     assert!((p[1] - (expected + Vec3::new(0.0, 0.0, 5.0))).length() < 1e-3, "{}", p[1]);
 }
+
+/// `Scene::facing_geometric_normal` (the classification's plane normal, from
+/// the triangle's corners alone) is the surface point's facing geometric
+/// normal bit for bit, on instanced geometry and on back faces alike.
+#[test]
+fn the_plane_normal_of_a_hit_is_its_surface_points_facing_geometric_normal() {
+    let scene = load_scene("builtin:forest").expect("builtin forest");
+    let tracer = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let (lo, hi) = scene.bounds().expect("bounds");
+    let centre = (lo + hi) * 0.5 + Vec3::new(0.0, -0.3, 0.0) * (hi - lo);
+    let (mut instanced, mut back, mut hits) = (0, 0, 0);
+    for k in 0..4096 {
+        let z = 1.0 - 2.0 * (k as f32 + 0.5) / 4096.0;
+        let phi = k as f32 * 2.399_963;
+        let dir = Vec3::new((1.0 - z * z).sqrt() * phi.cos(), z, (1.0 - z * z).sqrt() * phi.sin());
+        let Some(hit) = tracer.closest_hit(&Ray::new(centre, dir)) else { continue };
+        let plane = scene.facing_geometric_normal(&hit);
+        let expected = scene.surface_point(&hit).facing_geometric_normal();
+        assert_eq!(plane, expected, "ray {k}: hit {hit:?}");
+        assert!((plane.length() - 1.0).abs() < 1e-5, "ray {k}: {plane}");
+        assert!(plane.dot(dir) <= 0.0, "ray {k}: the plane normal faces the ray's origin");
+        hits += 1;
+        instanced += (hit.instance != u32::MAX) as usize;
+        back += hit.backface as usize;
+    }
+    assert!(hits > 1000 && instanced > 50 && back > 0, "{hits} hits, {instanced} instanced, {back} back faces");
+}

@@ -14,7 +14,7 @@
 //   point still uncovered keeps its proposal). Order-free, so the CPU's result
 //   bit for bit.
 // Included after bvh.wgsl and scene.wgsl (groups 1 and 3) for the hits' facing
-// shading normals. Must match `probegi_wgpu::probe_classification::ClassifyParams`
+// plane normals. Must match `probegi_wgpu::probe_classification::ClassifyParams`
 // and the trace pass's `GpuRay` / `GpuRayHit`.
 
 struct ClassifyParams {
@@ -90,8 +90,9 @@ fn classify_grid_point(coords: vec3<u32>) -> vec3<f32> {
     return classify_params.origin_m + classify_params.spacing_m * vec3<f32>(coords);
 }
 
-// The ray's front-face hit point and facing shading normal (probegi_cpu::ddgi's
-// front_hits: the ray's origin + direction × t), or false.
+// The ray's front-face hit point (the ray's origin + direction × t) and the
+// triangle's facing plane normal (Scene::facing_geometric_normal, which
+// probegi_cpu::probe_trace's HitNormal::Plane gives the host rounds), or false.
 struct FrontHit {
     ok: bool,
     point: vec3<f32>,
@@ -105,7 +106,7 @@ fn classify_front_hit(r: u32) -> FrontHit {
     if (!out.ok) { return out; }
     let ray = classify_rays[r];
     out.point = ray.origin + ray.dir * h.t;
-    out.normal = scene_facing_normal(scene_surface_point(h.triangle, h.instance, h.bary, false));
+    out.normal = scene_facing_geometric_normal(scene_surface_point(h.triangle, h.instance, h.bary, false));
     return out;
 }
 
