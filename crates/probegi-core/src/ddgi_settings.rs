@@ -112,6 +112,13 @@ pub struct DdgiVolumeSettings {
     /// frames. PEERS names the idea, not PGI's estimator; this is ours. 0 (the
     /// default): off; measured in docs/RESULTS.md.
     pub probe_hit_ao_radius_rel: f32,
+    /// With `probe_hit_ao_radius_rel`: an AO ray that hits a front face within
+    /// its length carries that occluder's radiance (its emission plus its
+    /// diffuse albedo/π × the field's irradiance there) instead of zero, so
+    /// the field's term is the one-bounce near-field estimate
+    /// π · mean(escaped ? E_field(x)/π : L_occluder): exact in a furnace,
+    /// where the plain AO darkens. Off by default; measured in docs/RESULTS.md.
+    pub probe_hit_ao_near_field: bool,
     /// Probe position optimizer at initialisation (seed 004 §5, Listing 4).
     pub probe_relocation: bool,
     /// Optimizer iterations (seed 004: five).
@@ -288,6 +295,7 @@ impl Default for DdgiVolumeSettings {
             probe_adaptive_hysteresis: false,
             probe_adaptive_hysteresis_tolerance: 0.0,
             probe_hit_ao_radius_rel: 0.0,
+            probe_hit_ao_near_field: false,
             probe_relocation: true,
             probe_relocation_iterations: 5,
             probe_init_rays_per_probe: 32,

@@ -47,6 +47,11 @@ pub struct DirectLighting<'a> {
 }
 
 impl<'a> DirectLighting<'a> {
+    /// The closest hit of `ray`, with this lighting's tracer.
+    pub fn closest_hit(&self, ray: &probegi_scene::Ray) -> Option<probegi_scene::RayHit> {
+        self.tracer.closest_hit(ray)
+    }
+
     /// Whether `ray` hits anything, with this lighting's tracer.
     pub fn occluded(&self, ray: &probegi_scene::Ray) -> bool {
         self.tracer.occluded(ray)

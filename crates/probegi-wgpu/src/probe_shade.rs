@@ -55,18 +55,25 @@ const _: () = assert!(std::mem::size_of::<ShadeProbe>() == 16);
 
 /// Shading flags of `probe_shade.wgsl`'s `ShadeProbe::info`: whether the
 /// probe's radiance is needed (bit 31), second-order glossy (bit 30), the
-/// sky-map samples (bits 16..27; `probe_sky_light_samples`, at most 1024) and
+/// sky-map samples (bits 16..26; `probe_sky_light_samples`, at most 1024) and
 /// the area-light samples (low 16 bits).
 pub fn shade_info(needs_radiance: bool, glossy_second_order: bool, area_samples: u32, sky_samples: u32) -> u32 {
     (needs_radiance as u32) << 31
         | (glossy_second_order as u32) << 30
-        | sky_samples.min(0xfff) << 16
+        | sky_samples.min(SHADE_SKY_SAMPLES_MAX) << 16
         | area_samples.min(0xffff)
 }
 
 /// [`shade_info`]'s flag (bit 29): punctual lights' visibility from the
 /// shadowing field (`shadow_field_probe_shading`) instead of shadow rays.
 pub const SHADE_SHADOW_FIELD: u32 = 1 << 29;
+
+/// The most sky-map samples [`shade_info`] holds (bits 16..26).
+pub const SHADE_SKY_SAMPLES_MAX: u32 = 0x7ff;
+
+/// [`shade_info`]'s flag (bit 27): the hit AO's occluded rays carry the
+/// occluder's radiance (`probe_hit_ao_near_field`).
+pub const SHADE_HIT_AO_NEAR_FIELD: u32 = 1 << 27;
 
 /// [`shade_info`]'s flag (bit 28): misses read the sky map
 /// (`probe_sky_map_on_miss`; the hits then take no sky samples).
@@ -104,6 +111,7 @@ pub fn volume_shade_info(needs_radiance: bool, s: &probegi_core::ddgi_settings::
     shade_info(needs_radiance, s.glossy_second_order, s.probe_area_light_samples, sky_samples)
         | if s.shadow_field && s.shadow_field_probe_shading { SHADE_SHADOW_FIELD } else { 0 }
         | if s.probe_sky_map_on_miss { SHADE_SKY_MAP_ON_MISS } else { 0 }
+        | if s.probe_hit_ao_near_field { SHADE_HIT_AO_NEAR_FIELD } else { 0 }
 }
 
 /// The length of `volume`'s hit-AO rays (`probe_hit_ao_radius_rel` × its

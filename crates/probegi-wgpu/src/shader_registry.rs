@@ -179,8 +179,10 @@ const F32_CONSTANTS: [(&str, f32); 11] = [
 ];
 
 /// The `u32` constants of the prelude.
-const U32_CONSTANTS: [(&str, u32); 4] = [
+const U32_CONSTANTS: [(&str, u32); 6] = [
     ("SHADE_SKY_MAP_ON_MISS", crate::probe_shade::SHADE_SKY_MAP_ON_MISS),
+    ("SHADE_HIT_AO_NEAR_FIELD", crate::probe_shade::SHADE_HIT_AO_NEAR_FIELD),
+    ("SHADE_SKY_SAMPLES_MAX", crate::probe_shade::SHADE_SKY_SAMPLES_MAX),
     ("BVH_INSTANCE_IDENTITY", BVH_INSTANCE_IDENTITY),
     ("BVH_INSTANCE_MOVING", BVH_INSTANCE_MOVING),
     ("TRACE_MAX_SEGMENTS", crate::bvh_trace::TRACE_MAX_SEGMENTS as u32),

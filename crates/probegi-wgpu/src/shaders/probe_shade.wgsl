@@ -89,6 +89,30 @@ fn probe_hit_ao(sp: SurfacePoint, radius_m: f32, rng: ptr<function, u32>) -> f32
     return select(0.0, 1.0, hit.leaf == BVH_NO_HIT);
 }
 
+// probegi_cpu::probe_shade::hit_ao_irradiance with near_field: the field's
+// irradiance `field_e` when the AO ray escapes; π × the occluder's radiance
+// toward the hit (its direct light, emission and field term, as this pass
+// shades a hit) when it hits a front face within radius_m; zero on a back face.
+fn probe_hit_ao_near_field(sp: SurfacePoint, field_e: vec3<f32>, radius_m: f32, info: u32, rng: ptr<function, u32>) -> vec3<f32> {
+    let u = vec2<f32>(rng_next(rng), rng_next(rng));
+    let wi = frame_to_world(frame_from_normal(scene_facing_normal(sp)), sample_cosine_hemisphere(u));
+    let t_max = radius_m * (1.0 - 1e-4);
+    let hit = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, t_max), false);
+    if (hit.leaf == BVH_NO_HIT) {
+        return field_e;
+    }
+    if (hit.backface) {
+        return vec3<f32>(0.0);
+    }
+    let q = scene_surface_point(bvh_triangle_id(hit.leaf), hit.instance, hit.bary, false);
+    let wo = -wi;
+    var l = shadow_lit_direct(q, wo, info & 0xffffu, true, (info & 0x20000000u) != 0u, rng);
+    l += scene_sky_direct(q, (info >> 16u) & SHADE_SKY_SAMPLES_MAX, rng);
+    let e_q = ddgi_irradiance(q.position, scene_facing_normal(q), wo);
+    l += bsdf_diffuse_albedo(scene_bsdf(q)) / SCENE_PI * e_q;
+    return SCENE_PI * l;
+}
+
 @compute @workgroup_size(64)
 fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = (wid.y * shade_params.groups_x + wid.x) * 64u + lid;
@@ -125,13 +149,17 @@ fn shade_probe_rays(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invoca
     let to_viewer = -r.dir;
     let n = scene_facing_normal(sp);
     var l = shadow_lit_direct(sp, to_viewer, info & 0xffffu, true, (info & 0x20000000u) != 0u, &rng);
-    l += scene_sky_direct(sp, (info >> 16u) & 0xfffu, &rng);
-    var ao = 1.0;
+    l += scene_sky_direct(sp, (info >> 16u) & SHADE_SKY_SAMPLES_MAX, &rng);
+    var e = ddgi_irradiance(sp.position, n, to_viewer);
     if (probe.hit_ao_radius_m > 0.0) {
-        ao = probe_hit_ao(sp, probe.hit_ao_radius_m, &rng);
+        if ((info & SHADE_HIT_AO_NEAR_FIELD) != 0u) {
+            e = probe_hit_ao_near_field(sp, e, probe.hit_ao_radius_m, info, &rng);
+        } else {
+            e *= probe_hit_ao(sp, probe.hit_ao_radius_m, &rng);
+        }
     }
     let bsdf = scene_bsdf(sp);
-    l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * ddgi_irradiance(sp.position, n, to_viewer) * ao;
+    l += bsdf_diffuse_albedo(bsdf) / SCENE_PI * e;
     if ((info & 0x40000000u) != 0u && max(max(bsdf.specular_f0.x, bsdf.specular_f0.y), bsdf.specular_f0.z) > 0.0) {
         // probegi_cpu::glossy::second_order_specular
         let mirror = r.dir - n * (2.0 * dot(r.dir, n));
