@@ -125,8 +125,9 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                         rays += k;
                         let e = if ao_radius_m > 0.0 {
                             rays += 1;
-                            // The occluder's radiance toward the hit: its direct light, emission
-                            // and field term, as this pass shades a hit (no glossy term).
+                            // The occluder's radiance toward the hit: its direct light (by shadow
+                            // rays), emission and field term, as this pass shades a hit (no
+                            // glossy term). `probe_shade.wgsl`'s `probe_hit_ao_near_field`.
                             let occluder = |q: &SurfacePoint, wo: Vec3, rng: &mut Pcg32| {
                                 let ctx = ShadingContext::new(inputs.scene, q, wo);
                                 let (direct, _) = inputs.direct.reflected_with(q, &ctx, area, true, None, rng);

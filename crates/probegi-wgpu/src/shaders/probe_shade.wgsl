@@ -106,7 +106,8 @@ fn probe_hit_ao_near_field(sp: SurfacePoint, field_e: vec3<f32>, radius_m: f32, 
     }
     let q = scene_surface_point(bvh_triangle_id(hit.leaf), hit.instance, hit.bary, false);
     let wo = -wi;
-    var l = shadow_lit_direct(q, wo, info & 0xffffu, true, (info & 0x20000000u) != 0u, rng);
+    // Shadow rays for the occluder's lights, as the CPU's twin (not the shadowing field).
+    var l = shadow_lit_direct(q, wo, info & 0xffffu, true, false, rng);
     l += scene_sky_direct(q, (info >> 16u) & SHADE_SKY_SAMPLES_MAX, rng);
     let e_q = ddgi_irradiance(q.position, scene_facing_normal(q), wo);
     l += bsdf_diffuse_albedo(scene_bsdf(q)) / SCENE_PI * e_q;
