@@ -123,30 +123,9 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
                             .then_some(&from_field as &crate::shading::PunctualVisibility<'_>);
                         let (direct, k) = inputs.direct.reflected_with(sp, &ctx, area, true, visibility, &mut rng);
                         rays += k;
-                        let e = if ao_radius_m > 0.0 {
-                            rays += 1;
-                            // The occluder's radiance toward the hit: its direct light (by shadow
-                            // rays), emission and field term, as this pass shades a hit (no
-                            // glossy term). `probe_shade.wgsl`'s `probe_hit_ao_near_field`.
-                            let occluder = |q: &SurfacePoint, wo: Vec3, rng: &mut Pcg32| {
-                                let ctx = ShadingContext::new(inputs.scene, q, wo);
-                                let (direct, _) = inputs.direct.reflected_with(q, &ctx, area, true, None, rng);
-                                let e_q = field_set_irradiance(inputs.field, q.position, q.facing_normal(), wo);
-                                direct + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e_q
-                            };
-                            let near_field = settings.probe_hit_ao_near_field.then_some(&occluder as &OccluderRadiance);
-                            hit_ao_irradiance(
-                                inputs.direct,
-                                inputs.scene,
-                                near_field,
-                                sp,
-                                field_e[i],
-                                ao_radius_m,
-                                &mut rng,
-                            )
-                        } else {
-                            field_e[i]
-                        };
+                        let near_field = settings.probe_hit_ao_near_field;
+                        let (e, k) = hit_ao_irradiance(inputs, area, near_field, sp, field_e[i], ao_radius_m, &mut rng);
+                        rays += k;
                         let mut l = direct + ctx.bsdf.diffuse_albedo() * FRAC_1_PI * e;
                         if settings.glossy_second_order {
                             l += crate::glossy::second_order_specular(inputs.field, sp, &ctx, dir);
@@ -173,36 +152,44 @@ pub fn hit_ao(direct: &DirectLighting<'_>, sp: &SurfacePoint, radius_m: f32, rng
 }
 
 /// The field's irradiance `field_e` at a front hit `sp` through
-/// `probe_hit_ao_radius_rel`'s sample ([`hit_ao`]'s ray): `field_e` when the
-/// ray escapes; when it hits within `radius_m`, zero (the plain AO) or, with
-/// `near_field` (`probe_hit_ao_near_field`), π × the occluder's radiance
-/// toward `sp` (a back face: zero, the ray is inside geometry).
-/// `probe_shade.wgsl`'s `probe_hit_ao_irradiance` is its twin.
-pub fn hit_ao_irradiance(
-    direct: &DirectLighting<'_>,
-    scene: &Scene,
-    near_field: Option<&OccluderRadiance<'_>>,
+/// `probe_hit_ao_radius_rel`'s sample of `radius_m` ([`hit_ao`]'s ray; 0: no
+/// sample, `field_e` as it is), and the rays it traced. When the ray escapes,
+/// `field_e`; when it hits within `radius_m`, zero (the plain AO) or, with
+/// `near_field` (`probe_hit_ao_near_field`), π × the occluder's radiance toward `sp`, shaded
+/// as this pass shades a hit: its direct light by shadow rays (`area`'s
+/// samples), emission, and albedo/π × the field's irradiance there, no
+/// glossy term (a back face: zero, the ray is inside geometry).
+/// `probe_shade.wgsl`'s `probe_hit_ao_near_field` is its twin.
+fn hit_ao_irradiance(
+    inputs: &ProbeShadeInputs<'_>,
+    area: DirectSettings,
+    near_field: bool,
     sp: &SurfacePoint,
     field_e: Vec3,
     radius_m: f32,
     rng: &mut Pcg32,
-) -> Vec3 {
-    let Some(occluder) = near_field else {
-        return field_e * hit_ao(direct, sp, radius_m, rng);
-    };
+) -> (Vec3, u64) {
+    if radius_m <= 0.0 {
+        return (field_e, 0);
+    }
+    if !near_field {
+        return (field_e * hit_ao(inputs.direct, sp, radius_m, rng), 1);
+    }
     let u = glam::Vec2::new(rng.next_f32(), rng.next_f32());
     let frame = probegi_core::sampling::Frame::from_normal(sp.facing_normal());
     let wi = frame.to_world(probegi_core::sampling::sample_cosine_hemisphere(u));
-    match direct.closest_hit(&crate::shading::shadow_ray_along(sp, wi, radius_m)) {
-        None => field_e,
-        Some(h) if h.backface => Vec3::ZERO,
-        Some(h) => std::f32::consts::PI * occluder(&scene.surface_point(&h), -wi, rng),
+    match inputs.direct.closest_hit(&crate::shading::shadow_ray_along(sp, wi, radius_m)) {
+        None => (field_e, 1),
+        Some(h) if h.backface => (Vec3::ZERO, 1),
+        Some(h) => {
+            let q = inputs.scene.surface_point(&h);
+            let ctx = ShadingContext::new(inputs.scene, &q, -wi);
+            let (direct, k) = inputs.direct.reflected_with(&q, &ctx, area, true, None, rng);
+            let e_q = field_set_irradiance(inputs.field, q.position, q.facing_normal(), -wi);
+            (std::f32::consts::PI * direct + ctx.bsdf.diffuse_albedo() * e_q, 1 + k)
+        }
     }
 }
-
-/// A near-field occluder's radiance toward `wo` at its surface point (its
-/// direct light and the field's term, as the shade pass shades a hit).
-pub type OccluderRadiance<'a> = dyn Fn(&SurfacePoint, Vec3, &mut Pcg32) -> Vec3 + 'a;
 
 /// Rays per parallel work item of the per-ray steps.
 const SHADE_CHUNK_RAYS: usize = 512;
