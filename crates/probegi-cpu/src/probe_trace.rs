@@ -45,7 +45,8 @@ pub enum HitNormal {
 }
 
 impl HitNormal {
-    /// The normal a round of `kind` reads, when the set says it reads one.
+    /// The normal a round reads: none unless the set says it reads one
+    /// (`needed`), the plane in an `initialization` round, else the shading normal.
     pub fn for_round(needed: bool, initialization: bool) -> Self {
         match (needed, initialization) {
             (false, _) => Self::None,
