@@ -113,11 +113,14 @@ pub struct DdgiVolumeSettings {
     /// default): off; measured in docs/RESULTS.md.
     pub probe_hit_ao_radius_rel: f32,
     /// With `probe_hit_ao_radius_rel`: an AO ray that hits a front face within
-    /// its length carries that occluder's radiance (its emission plus its
-    /// diffuse albedo/π × the field's irradiance there) instead of zero, so
-    /// the field's term is the one-bounce near-field estimate
-    /// π · mean(escaped ? E_field(x)/π : L_occluder): exact in a furnace,
-    /// where the plain AO darkens. Off by default; measured in docs/RESULTS.md.
+    /// its length carries that occluder's radiance (shaded as a probe-ray hit
+    /// is: its direct light by shadow rays, emission, and diffuse albedo/π ×
+    /// the field's irradiance there) instead of zero, so the field's term is
+    /// the one-bounce near-field estimate π · mean(escaped ? E_field(x)/π :
+    /// L_occluder): exact in a furnace, where the plain AO darkens. Not in the
+    /// papers: seed 000 §6 names DDGI's over-illumination and ambient
+    /// occlusion as its remedy; this form of it is ours. Off by default (the
+    /// papers have no such term); measured in docs/RESULTS.md.
     pub probe_hit_ao_near_field: bool,
     /// Probe position optimizer at initialisation (seed 004 §5, Listing 4).
     pub probe_relocation: bool,

@@ -242,7 +242,8 @@ pub fn probe_watches(grid: &ProbeGrid, coords: UVec3, offset_m: Vec3, reach_rel:
 }
 
 /// The second pass of the jcgt classification, for one front-face surface point
-/// (`point`, `normal`: the hit triangle's plane normal, facing the ray) a probe ray found: `None` when one of its cage's probes on
+/// (`point`, `normal`: the hit triangle's plane normal, facing the ray) a
+/// probe ray found: `None` when one of its cage's probes on
 /// the surface's front side (probe position strictly in front of the surface's
 /// plane) is already `kept`; else the front-side probe with the largest trilinear
 /// weight there (the query's weights, clamped onto the boundary layers beyond the

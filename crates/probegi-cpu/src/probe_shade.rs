@@ -145,20 +145,26 @@ pub fn shade_probe_rays(inputs: &ProbeShadeInputs<'_>, radiance: &mut Vec<Vec3>)
 /// draws from `rng`, after the direct light's). `probe_shade.wgsl`'s
 /// `probe_hit_ao` is its twin.
 pub fn hit_ao(direct: &DirectLighting<'_>, sp: &SurfacePoint, radius_m: f32, rng: &mut Pcg32) -> f32 {
+    if direct.occluded(&hit_ao_ray(sp, radius_m, rng).1) { 0.0 } else { 1.0 }
+}
+
+/// The hit AO's ray at `sp`: its cosine-distributed direction around the
+/// facing normal (two draws from `rng`) and the segment of `radius_m` along it.
+fn hit_ao_ray(sp: &SurfacePoint, radius_m: f32, rng: &mut Pcg32) -> (Vec3, probegi_scene::Ray) {
     let u = glam::Vec2::new(rng.next_f32(), rng.next_f32());
     let frame = probegi_core::sampling::Frame::from_normal(sp.facing_normal());
     let wi = frame.to_world(probegi_core::sampling::sample_cosine_hemisphere(u));
-    if direct.occluded(&crate::shading::shadow_ray_along(sp, wi, radius_m)) { 0.0 } else { 1.0 }
+    (wi, crate::shading::shadow_ray_along(sp, wi, radius_m))
 }
 
 /// The field's irradiance `field_e` at a front hit `sp` through
 /// `probe_hit_ao_radius_rel`'s sample of `radius_m` ([`hit_ao`]'s ray; 0: no
 /// sample, `field_e` as it is), and the rays it traced. When the ray escapes,
 /// `field_e`; when it hits within `radius_m`, zero (the plain AO) or, with
-/// `near_field` (`probe_hit_ao_near_field`), π × the occluder's radiance toward `sp`, shaded
-/// as this pass shades a hit: its direct light by shadow rays (`area`'s
-/// samples), emission, and albedo/π × the field's irradiance there, no
-/// glossy term (a back face: zero, the ray is inside geometry).
+/// `near_field` (`probe_hit_ao_near_field`), π × the occluder's radiance
+/// toward `sp`, shaded as this pass shades a hit: its direct light by shadow
+/// rays (`area`'s samples), emission, and albedo/π × the field's irradiance
+/// there, no glossy term (a back face: zero, the ray is inside geometry).
 /// `probe_shade.wgsl`'s `probe_hit_ao_near_field` is its twin.
 fn hit_ao_irradiance(
     inputs: &ProbeShadeInputs<'_>,
@@ -175,10 +181,8 @@ fn hit_ao_irradiance(
     if !near_field {
         return (field_e * hit_ao(inputs.direct, sp, radius_m, rng), 1);
     }
-    let u = glam::Vec2::new(rng.next_f32(), rng.next_f32());
-    let frame = probegi_core::sampling::Frame::from_normal(sp.facing_normal());
-    let wi = frame.to_world(probegi_core::sampling::sample_cosine_hemisphere(u));
-    match inputs.direct.closest_hit(&crate::shading::shadow_ray_along(sp, wi, radius_m)) {
+    let (wi, ray) = hit_ao_ray(sp, radius_m, rng);
+    match inputs.direct.closest_hit(&ray) {
         None => (field_e, 1),
         Some(h) if h.backface => (Vec3::ZERO, 1),
         Some(h) => {

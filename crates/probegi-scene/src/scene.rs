@@ -281,6 +281,11 @@ fn uv_derivatives(p: [Vec3; 3], uv: [Vec2; 3]) -> Option<(Vec3, Vec3)> {
     (dpdu.is_finite() && dpdv.is_finite()).then_some((dpdu, dpdv))
 }
 
+/// The unit counter-clockwise normal of the triangle `p` (zero when degenerate).
+fn plane_normal(p: [Vec3; 3]) -> Vec3 {
+    (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero()
+}
+
 /// Instanced vertices up to which [`Scene::bounds`] transforms every one.
 pub const MAX_TIGHT_BOUND_VERTICES: usize = 50_000_000;
 
@@ -304,11 +309,11 @@ impl Scene {
         let p = match self.instances.get(hit.instance as usize) {
             Some(inst) => {
                 let mesh = &self.prototypes[inst.prototype as usize].mesh;
-                mesh.triangles[tri].map(|i| inst.world_from_local.transform_point3(mesh.positions[i as usize]))
+                mesh.vertices(tri).map(|p| inst.world_from_local.transform_point3(p))
             }
-            None => self.mesh.triangles[tri].map(|i| self.mesh.positions[i as usize]),
+            None => self.mesh.vertices(tri),
         };
-        let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        let n = plane_normal(p);
         if hit.backface { -n } else { n }
     }
 
@@ -327,7 +332,7 @@ impl Scene {
         let mix3 = |v: [Vec3; 3]| v[0] * bary.x + v[1] * bary.y + v[2] * bary.z;
         let p = corners.p;
         let position = mix3(p);
-        let geometric_normal = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        let geometric_normal = plane_normal(p);
         let mut shading_normal = mix3(corners.n).normalize_or_zero();
         if shading_normal == Vec3::ZERO {
             shading_normal = geometric_normal;

@@ -82,11 +82,16 @@ fn ray_shade_probe(i: u32) -> ShadeProbe {
 // facing normal leaves the hit unoccluded for radius_m, else 0 (two draws after
 // the direct light's).
 fn probe_hit_ao(sp: SurfacePoint, radius_m: f32, rng: ptr<function, u32>) -> f32 {
+    let hit = bvh_trace(probe_hit_ao_ray(sp, radius_m, rng), true);
+    return select(0.0, 1.0, hit.leaf == BVH_NO_HIT);
+}
+
+// probegi_cpu::probe_shade::hit_ao_ray: the hit AO's cosine-distributed ray
+// around the facing normal (two draws), radius_m long.
+fn probe_hit_ao_ray(sp: SurfacePoint, radius_m: f32, rng: ptr<function, u32>) -> BvhRay {
     let u = vec2<f32>(rng_next(rng), rng_next(rng));
     let wi = frame_to_world(frame_from_normal(scene_facing_normal(sp)), sample_cosine_hemisphere(u));
-    let t_max = radius_m * (1.0 - 1e-4);
-    let hit = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, t_max), true);
-    return select(0.0, 1.0, hit.leaf == BVH_NO_HIT);
+    return bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, radius_m * (1.0 - 1e-4));
 }
 
 // probegi_cpu::probe_shade::hit_ao_irradiance with near_field: the field's
@@ -94,10 +99,8 @@ fn probe_hit_ao(sp: SurfacePoint, radius_m: f32, rng: ptr<function, u32>) -> f32
 // toward the hit (its direct light, emission and field term, as this pass
 // shades a hit) when it hits a front face within radius_m; zero on a back face.
 fn probe_hit_ao_near_field(sp: SurfacePoint, field_e: vec3<f32>, radius_m: f32, info: u32, rng: ptr<function, u32>) -> vec3<f32> {
-    let u = vec2<f32>(rng_next(rng), rng_next(rng));
-    let wi = frame_to_world(frame_from_normal(scene_facing_normal(sp)), sample_cosine_hemisphere(u));
-    let t_max = radius_m * (1.0 - 1e-4);
-    let hit = bvh_trace(bvh_make_ray(scene_spawn_origin(sp, wi), wi, 0.0, t_max), false);
+    let ray = probe_hit_ao_ray(sp, radius_m, rng);
+    let hit = bvh_trace(ray, false);
     if (hit.leaf == BVH_NO_HIT) {
         return field_e;
     }
@@ -105,7 +108,7 @@ fn probe_hit_ao_near_field(sp: SurfacePoint, field_e: vec3<f32>, radius_m: f32, 
         return vec3<f32>(0.0);
     }
     let q = scene_surface_point(bvh_triangle_id(hit.leaf), hit.instance, hit.bary, false);
-    let wo = -wi;
+    let wo = -ray.dir;
     // Shadow rays for the occluder's lights, as the CPU's twin (not the shadowing field).
     var l = shadow_lit_direct(q, wo, info & 0xffffu, true, false, rng);
     l += scene_sky_direct(q, (info >> 16u) & SHADE_SKY_SAMPLES_MAX, rng);

@@ -184,7 +184,9 @@ fn the_near_field_hit_ao_shades_alike_on_both_backends_and_gives_back_the_occlud
     // `probe_hit_ao_near_field`: an occluded AO ray carries the occluder's
     // radiance (its direct light and field term), on each backend from its own
     // streams, so they agree within seed noise; the field keeps more light
-    // than under the plain AO, which counts an occluded ray as black.
+    // than under the plain AO, which counts an occluded ray as black. The
+    // plain AO takes 1.3 % of this atlas (0.4249 against 0.4306 without AO);
+    // the near-field form gives it back (0.4306), so 1 % tells them apart.
     let near = DdgiVolumeSettings { probe_hit_ao_radius_rel: 1.0, probe_hit_ao_near_field: true, ..settings() };
     let plain = DdgiVolumeSettings { probe_hit_ao_radius_rel: 1.0, ..settings() };
     let (Some(near), Some(plain)) = (shaded_within_seed_noise(near, 30), shaded_within_seed_noise(plain, 30)) else {
