@@ -339,7 +339,9 @@ impl DdgiSweep<'_> {
 /// (`GpuContext::counters` since `before`), each way, and per probe and per
 /// ray of the last batch: O(probes) when nothing per ray crosses. `kept`: the
 /// bytes the passes found already on the device (per-probe records that
-/// repeated the last frame's) and did not upload.
+/// repeated the last frame's) and did not upload. `ray_batches_made`: ray
+/// batches allocated a frame (48 bytes a ray; 0 once a still field's batches
+/// reuse the buffers of the one two frames before).
 fn bus_json(
     gpu: Option<&WgpuProbeTracer>,
     before: Option<probegi_wgpu::GpuCounters>,
@@ -354,6 +356,7 @@ fn bus_json(
         "host_to_device": up,
         "device_to_host": down,
         "kept": per_frame(d.bytes_kept),
+        "ray_batches_made": per_frame(d.ray_batches_made),
         "per_batch_probe": (up + down) / batch.probes.len().max(1) as f64,
         "per_batch_ray": (up + down) / batch.len().max(1) as f64,
         "batch_probes": batch.probes.len(),

@@ -791,10 +791,14 @@ impl DdgiFieldSet {
         self.hits.clear();
         self.distances.clear();
         self.batch.needs_radiance.clear();
-        let mut per_volume: Vec<Vec<Option<(i32, u32, u32)>>> =
-            self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect();
-        for (bp, c) in self.batch.probes.iter().zip(usage_counts) {
-            per_volume[bp.volume as usize][bp.probe as usize] = Some(*c);
+        // Per probe of each volume its counts, where the usage scheme reads
+        // them (none otherwise: no per-probe work for a still field).
+        let mut per_volume: Vec<Vec<Option<(i32, u32, u32)>>> = vec![Vec::new(); self.volumes.len()];
+        if wanted > 0 {
+            per_volume = self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect();
+            for (bp, c) in self.batch.probes.iter().zip(usage_counts) {
+                per_volume[bp.volume as usize][bp.probe as usize] = Some(*c);
+            }
         }
         for ((v, f), counts) in self.volumes.iter_mut().zip(&mut self.frames).zip(&per_volume) {
             v.accept_device_hits(f, self.frame, counts);
@@ -922,6 +926,53 @@ mod tests {
         assert_eq!(expanded.origins_m, a.origins_m);
         assert_eq!(expanded.directions, a.directions);
         assert_eq!(expanded.max_distances_m, a.max_distances_m);
+    }
+
+    /// Plans frames 0..=`frames` of a one-volume set under `states`, the
+    /// device keeping the hits and the atlases (every ray a miss), and
+    /// returns the last frame's blend plan as (per-probe frame counts, probes
+    /// that blend).
+    fn device_plan_after(states: probegi_core::ddgi_settings::ProbeStatesMode, frames: u32) -> (Vec<u32>, usize) {
+        let s = DdgiVolumeSettings {
+            probe_counts: glam::UVec3::new(4, 2, 3),
+            probe_rays_per_probe: 16,
+            probe_states: states,
+            probe_relocation: false,
+            ..Default::default()
+        };
+        let mut set = DdgiFieldSet::single(DdgiVolume::new(s, (Vec3::ZERO, Vec3::splat(4.0))));
+        set.set_update_rays_on_device(true);
+        for frame in 0..=frames {
+            set.begin_update(5, frame);
+            while set.ray_batch().kind == ProbeRayBatchKind::Initialization {
+                let misses = vec![ProbeRayHit::MISS; set.ray_batch().len()];
+                set.submit_hits(&misses).expect("init round");
+            }
+            assert_eq!(set.submit_device_hits(&[]), Ok(UpdateStep::ShadeRays));
+            let plan = set.device_blend_plan().expect("plan");
+            let last = (plan[0].probe_blend_frames.clone(), plan[0].probe_blend.iter().flatten().count());
+            drop(plan);
+            assert_eq!(set.submit_device_blend(&[]), Ok(UpdateStep::Done));
+            if frame == frames {
+                return last;
+            }
+        }
+        unreachable!()
+    }
+
+    #[test]
+    fn a_still_fields_device_plan_carries_frame_counts_only_where_a_blend_stands_for_several() {
+        use probegi_core::ddgi_settings::ProbeStatesMode;
+        // Every probe blends every frame: no per-probe counts (1 for all).
+        let (frames, blending) = device_plan_after(ProbeStatesMode::AllActive, 3);
+        assert!(frames.is_empty(), "{frames:?}");
+        assert_eq!(blending, 24);
+        // The screen scheme's idle probes blend once an interval (8): each
+        // blend then stands for the frames since its last, per probe.
+        let (frames, blending) = device_plan_after(ProbeStatesMode::Screen, 9);
+        assert_eq!(frames.len(), 24);
+        assert!(blending > 0 && blending < 24, "{blending} of 24 idle probes blend in one frame");
+        assert!(frames.iter().any(|&k| k > 1), "{frames:?}");
     }
 
     #[test]

@@ -401,6 +401,13 @@ pub struct GpuRayBatch {
 }
 
 impl GpuRayBatch {
+    /// Whether a pass may write a batch of `ray_count` rays (`any_hit` or
+    /// closest) into this one's buffers, as [`GpuRayTrace::empty_batch`]
+    /// would have made them.
+    pub(crate) fn reusable_for(&self, ray_count: u32, any_hit: bool) -> bool {
+        self.ray_count == ray_count && self.any_hit == any_hit
+    }
+
     pub(crate) fn rays_buffer(&self) -> &wgpu::Buffer {
         &self.rays
     }
@@ -497,6 +504,7 @@ impl GpuRayTrace {
 
     /// A batch around `rays`: its parameters, a hit buffer and the bind group.
     fn bind_batch(&self, ctx: &GpuContext, rays: wgpu::Buffer, n: u32, any_hit: bool) -> GpuRayBatch {
+        ctx.count_ray_batch();
         let (groups_x, _) = dispatch_2d(n);
         let params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, ..Default::default() };
         let device = &ctx.device;

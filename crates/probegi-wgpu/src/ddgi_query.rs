@@ -179,12 +179,22 @@ fn gpu_volume(f: &DdgiFieldView<'_>, [irr_first, dist_first]: [u32; 2]) -> GpuDd
 
 /// `ddgi_probes`' rows of a member: offset, and the usable flag with the fallback.
 fn push_probe_rows(f: &DdgiFieldView<'_>, probes: &mut Vec<[f32; 4]>) {
-    for p in 0..f.grid.probe_count() {
+    let n = f.grid.probe_count();
+    probes.reserve(n);
+    let row = |o: Vec3, usable: bool, fallback: u32| {
+        let fallback = if fallback == u32::MAX || fallback >= NO_PROBE { NO_PROBE } else { fallback };
+        [o.x, o.y, o.z, f32::from_bits(fallback | (usable as u32) << 31)]
+    };
+    if [f.probe_usable.len(), f.probe_fallback.len(), f.probe_offsets_m.len()] == [n; 3] {
+        // Every array full (a field set's volume): one pass without lookups.
+        let rows = f.probe_offsets_m.iter().zip(f.probe_usable).zip(f.probe_fallback);
+        probes.extend(rows.map(|((&o, &usable), &fallback)| row(o, usable, fallback)));
+        return;
+    }
+    for p in 0..n {
         let usable = f.probe_usable.get(p).copied().unwrap_or(true);
         let fallback = f.probe_fallback.get(p).copied().unwrap_or(u32::MAX);
-        let fallback = if fallback == u32::MAX || fallback >= NO_PROBE { NO_PROBE } else { fallback };
-        let o = f.probe_offsets_m.get(p).copied().unwrap_or(Vec3::ZERO);
-        probes.push([o.x, o.y, o.z, f32::from_bits(fallback | (usable as u32) << 31)]);
+        probes.push(row(f.probe_offsets_m.get(p).copied().unwrap_or(Vec3::ZERO), usable, fallback));
     }
 }
 

@@ -80,6 +80,7 @@ struct TransferCounts {
     waits: std::sync::atomic::AtomicU64,
     wait_ns: std::sync::atomic::AtomicU64,
     kept: std::sync::atomic::AtomicU64,
+    ray_batches: std::sync::atomic::AtomicU64,
 }
 
 /// What a [`GpuContext`] has done so far (differences between two readings
@@ -101,6 +102,9 @@ pub struct GpuCounters {
     pub bytes_kept: u64,
     /// Wall milliseconds the host spent blocked in those waits and inside submissions.
     pub wait_ms: f64,
+    /// Ray batches allocated (a batch's rays, hits and parameter buffers:
+    /// 48 bytes a ray), uploaded or left for a pass to write.
+    pub ray_batches_made: u64,
 }
 
 impl std::ops::Sub for GpuCounters {
@@ -113,6 +117,7 @@ impl std::ops::Sub for GpuCounters {
             bytes_down: self.bytes_down - o.bytes_down,
             bytes_kept: self.bytes_kept - o.bytes_kept,
             wait_ms: self.wait_ms - o.wait_ms,
+            ray_batches_made: self.ray_batches_made - o.ray_batches_made,
         }
     }
 }
@@ -285,6 +290,7 @@ impl GpuContext {
             bytes_down: t.down.load(Relaxed),
             bytes_kept: t.kept.load(Relaxed),
             wait_ms: t.wait_ns.load(Relaxed) as f64 * 1e-6,
+            ray_batches_made: t.ray_batches.load(Relaxed),
         }
     }
 
@@ -369,6 +375,11 @@ impl GpuContext {
     /// Counts `bytes` as read back (a caller that maps a staging buffer itself).
     pub(crate) fn count_read_back(&self, bytes: u64) {
         self.transfers.down.fetch_add(bytes, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Counts a ray batch allocated ([`GpuCounters::ray_batches_made`]).
+    pub(crate) fn count_ray_batch(&self) {
+        self.transfers.ray_batches.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     }
 
     /// Counts `bytes` as kept: a pass found them already on the device and

@@ -160,6 +160,14 @@ pub struct WgpuProbeTracer {
     pub shading_note: Option<String>,
     /// The last traced batch, resident for the shade pass.
     last: Mutex<Option<GpuRayBatch>>,
+    /// The batch traced before `last` (or, where the shadowing field's passes
+    /// keep the last update batch as `prev_update`, the one before that): the
+    /// next batch generated on the device with as many rays takes its buffers
+    /// (rays, hits, parameters, bind group) instead of allocating new ones, so
+    /// a still field's update allocates no ray batch. Two traces old when it
+    /// is taken, its passes were submitted before the new batch's, which the
+    /// queue orders after them.
+    spare_batch: Mutex<Option<GpuRayBatch>>,
     /// Keep the field on the device (see the crate docs); needs GPU shading.
     keep_field: bool,
     /// The passes of the device-resident update, made with `keeping_field`.
@@ -237,6 +245,7 @@ impl WgpuProbeTracer {
             sky_radiance: Mutex::new(scene.sky_radiance),
             shading_note: note,
             last: Mutex::new(None),
+            spare_batch: Mutex::new(None),
             keep_field: false,
             resident_passes: None,
             classification: None,
@@ -379,7 +388,12 @@ impl WgpuProbeTracer {
         if batch.generated.is_empty() || covered != batch.len() as u64 {
             return Ok(None);
         }
-        let out = self.trace.empty_batch(&self.ctx, batch.len() as u32, false)?;
+        let n = batch.len() as u32;
+        let spare = self.spare_batch.lock().ok().and_then(|mut s| s.take_if(|b| b.reusable_for(n, false)));
+        let out = match spare {
+            Some(batch) => batch,
+            None => self.trace.empty_batch(&self.ctx, n, false)?,
+        };
         for g in &batch.generated {
             let probes = batch.probes.get(g.first_probe as usize..(g.first_probe + g.probe_count) as usize);
             let Some(probes) = probes.filter(|p| p.iter().all(|p| p.ray_count == g.rays_per_probe)) else {
@@ -405,6 +419,15 @@ impl WgpuProbeTracer {
             ray_gen.generate_kept(&self.ctx, &out, rays, Some(key), None)?;
         }
         Ok(Some(out))
+    }
+
+    /// Makes `resident` the last batch; the one it replaces becomes the spare.
+    fn keep_last(&self, resident: GpuRayBatch) -> Result<(), BackendError> {
+        let before = self.last.lock().map_err(poisoned)?.replace(resident);
+        if let Some(before) = before {
+            *self.spare_batch.lock().map_err(poisoned)? = Some(before);
+        }
+        Ok(())
     }
 
     /// Traces `batch` on the device and keeps it there as the last batch. An
@@ -547,8 +570,7 @@ impl ProbeBatchTracer for WgpuProbeTracer {
         let resident = self.trace_resident(batch, static_only)?;
         let gpu = self.trace.download(&self.ctx, &resident)?;
         hits.extend(gpu.iter().map(|h| h.ray_hit()));
-        *self.last.lock().map_err(poisoned)? = Some(resident);
-        Ok(())
+        self.keep_last(resident)
     }
 
     fn shade_batch(
@@ -785,7 +807,7 @@ impl DeviceField for WgpuProbeTracer {
                 Some(diagonals) => usage.counts(&self.ctx, &resident, &batch.probes, diagonals)?,
                 None => vec![],
             };
-            *self.last.lock().map_err(poisoned)? = Some(resident);
+            self.keep_last(resident)?;
             Ok(counts)
         };
         Some(run())
@@ -882,7 +904,11 @@ impl DeviceField for WgpuProbeTracer {
         // This batch's hits are where the next frame's shadow rays start.
         if let (Ok(_), Some(_)) = (&result, &self.shadow) {
             let batch = self.last.lock().map_err(poisoned)?.take();
-            *self.prev_update.lock().map_err(poisoned)? = batch.map(|b| (frame, b));
+            let before = std::mem::replace(&mut *self.prev_update.lock().map_err(poisoned)?, batch.map(|b| (frame, b)));
+            // The batch it replaces is the spare (`spare_batch`), as `keep_last` makes it.
+            if let Some((_, before)) = before {
+                *self.spare_batch.lock().map_err(poisoned)? = Some(before);
+            }
         }
         result
     }

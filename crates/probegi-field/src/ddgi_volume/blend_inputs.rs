@@ -222,11 +222,12 @@ impl DdgiVolume {
         // the shadowing field's plan takes it in.
         let (base, irradiance_scale, visibility_scale) = self.blend_plan_with(frame, false);
         let hysteresis_cap = self.startup_hysteresis_cap();
-        let capped: Vec<_> = base.iter().map(|b| b.map(|(first, h)| (first, h.min(hysteresis_cap)))).collect();
-        let frames = self.blend_frames(frame);
-        let shadow = self.device_shadow_blend(&shadow_base(&capped, irradiance_scale, &frames), lights);
+        let shadow = self.shadow.is_some().then(|| {
+            let capped: Vec<_> = base.iter().map(|b| b.map(|(first, h)| (first, h.min(hysteresis_cap)))).collect();
+            self.device_shadow_blend(&shadow_base(&capped, irradiance_scale, &self.blend_frames(frame)), lights)
+        });
         DeviceVolumeBlend {
-            shadow,
+            shadow: shadow.flatten(),
             settings: &self.settings,
             ray_dirs: &frame.rays.dirs,
             probe_blend: base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect(),
@@ -237,7 +238,7 @@ impl DdgiVolume {
             reset_probes: &self.probes_reset_since_blend,
             seeds: &self.pending_seeds,
             measure_change: frame.measure_change,
-            probe_blend_frames: frames,
+            probe_blend_frames: self.device_blend_frames(frame),
         }
     }
 
@@ -258,7 +259,7 @@ impl DdgiVolume {
                 self.accept_device_shadow_blend(&plan);
             }
         }
-        let updated: Vec<bool> = (0..self.grid.probe_count()).map(|p| frame.blends(p)).collect();
+        let updated = frame.blending();
         if frame.measure_change {
             self.accept_device_change(&updated, change);
         }

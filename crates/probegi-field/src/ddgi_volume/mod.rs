@@ -187,6 +187,11 @@ impl VolumeFrame {
     pub(crate) fn blends(&self, p: usize) -> bool {
         self.active.get(p).copied().unwrap_or(false) && self.first_ray.get(p).is_some_and(|f| *f != u32::MAX)
     }
+
+    /// [`Self::blends`] of every probe planned this frame, in probe order.
+    pub(crate) fn blending(&self) -> Vec<bool> {
+        self.active.iter().zip(&self.first_ray).map(|(a, f)| *a && *f != u32::MAX).collect()
+    }
 }
 
 impl DdgiVolume {

@@ -87,6 +87,16 @@ impl DdgiVolume {
             .collect()
     }
 
+    /// [`Self::blend_frames`] as a device plan takes it
+    /// (`DeviceVolumeBlend::probe_blend_frames`): empty where every probe's
+    /// blend stands for one frame (no screen scheme, no budget's waits), so a
+    /// still field's plan carries no per-probe array for it.
+    pub(super) fn device_blend_frames(&self, frame: &VolumeFrame) -> Vec<u32> {
+        let one_each = frame.screen_blend_frames.is_empty()
+            && (frame.budget_traces.is_none() || !self.settings.ray_budget_hysteresis_per_frame);
+        if one_each { Vec::new() } else { self.blend_frames(frame) }
+    }
+
     /// Per probe, the frames its blend this frame stands for: under the screen
     /// scheme the frames since it last traced, capped at the idle interval
     /// (`screen_requests`); under a budget
@@ -140,10 +150,12 @@ impl DdgiVolume {
     /// the frame (so the frames its next blend stands for are the budget's
     /// alone, not its state's own schedule).
     pub(super) fn count_unblended_frames(&mut self, frame: &VolumeFrame, updated: &[bool]) {
-        for (p, n) in self.probe_unblended_frames.iter_mut().enumerate() {
-            if updated.get(p).copied().unwrap_or(false) {
+        let flags =
+            updated.iter().chain(std::iter::repeat(&false)).zip(frame.active.iter().chain(std::iter::repeat(&false)));
+        for (n, (&blended, &active)) in self.probe_unblended_frames.iter_mut().zip(flags) {
+            if blended {
                 *n = 0;
-            } else if frame.active.get(p).copied().unwrap_or(false) {
+            } else if active {
                 *n = n.saturating_add(1);
             }
         }

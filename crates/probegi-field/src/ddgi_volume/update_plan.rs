@@ -26,25 +26,29 @@ impl DdgiVolume {
     ) {
         let probes = self.grid.probe_count();
         let interval = self.settings.probe_sleeping_update_interval;
-        let chosen = |p: usize| frame.budget_traces.as_ref().is_none_or(|c| c[p]);
-        frame.tracing = (0..probes).map(|p| self.traces_in_frame(p, frame_index) && chosen(p)).collect();
+        // The frame's per-probe arrays reuse last frame's storage: a still
+        // field's planning allocates nothing per probe.
+        frame.tracing.clear();
+        if frame.budget_traces.is_none() && self.settings.probe_states != ProbeStatesMode::Screen {
+            // As the state says (`traces_in_frame` outside the screen scheme).
+            frame.tracing.extend(self.probe_states.iter().map(|s| s.traces()));
+        } else {
+            let chosen = |p: usize| frame.budget_traces.as_ref().is_none_or(|c| c[p]);
+            frame.tracing.extend((0..probes).map(|p| self.traces_in_frame(p, frame_index) && chosen(p)));
+        }
         self.screen_blend_frames(frame);
         self.count_untraced_frames(frame);
-        frame.active = self.probe_states.iter().map(|s| s.updates_in_frame(frame_index, interval)).collect();
+        frame.active.clear();
+        frame.active.extend(self.probe_states.iter().map(|s| s.updates_in_frame(frame_index, interval)));
         frame.rays = generate_probe_rays(&self.settings, self.stream_seed(seed), frame_index);
         frame.ray_count = frame.rays.dirs.len();
-        frame.first_ray = vec![u32::MAX; probes];
+        frame.first_ray.clear();
+        frame.first_ray.resize(probes, u32::MAX);
         let first_probe = batch.probes.len() as u32;
-        for p in 0..probes {
-            if frame.tracing[p] {
-                frame.first_ray[p] = batch.push_probe(
-                    volume,
-                    p as u32,
-                    self.probe_positions[p],
-                    &frame.rays.dirs,
-                    self.settings.probe_max_ray_distance_m,
-                );
-            }
+        let max_m = self.settings.probe_max_ray_distance_m;
+        let planned = frame.tracing.iter().zip(&mut frame.first_ray).zip(&self.probe_positions);
+        for (p, ((_, first), &origin)) in planned.enumerate().filter(|(_, ((t, _), _))| **t) {
+            *first = batch.push_probe(volume, p as u32, origin, &frame.rays.dirs, max_m);
         }
         batch.generated.push(crate::seam::GeneratedProbeRays {
             volume,
@@ -54,7 +58,7 @@ impl DdgiVolume {
             rotation: crate::probe_ray_gen::probe_ray_rotation(self.stream_seed(seed), frame_index),
             max_distance_m: self.settings.probe_max_ray_distance_m,
         });
-        self.traced_probes_last = frame.tracing.iter().filter(|t| **t).count();
+        self.traced_probes_last = (batch.probes.len() as u32 - first_probe) as usize;
     }
 
     /// After the trace: the usage scheme's classification from the hits (seed 003

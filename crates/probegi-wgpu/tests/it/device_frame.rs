@@ -189,6 +189,8 @@ fn a_steady_frame_waits_for_nothing_and_reads_back_no_pixel() {
             assert_eq!(c.blocking_waits, 0, "{size}: a steady frame waited: {c:?}");
             // The field update's passes and the camera frame's: one submission.
             assert_eq!(c.submissions, 1, "{size}: one submission a frame: {c:?}");
+            // The update batch takes the buffers of the one two frames before.
+            assert_eq!(c.ray_batches_made, 0, "{size}: a still field allocated a ray batch: {c:?}");
         }
         per_size.push(frames);
         let image = stepper.image().expect("read back on request");
