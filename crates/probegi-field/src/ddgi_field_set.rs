@@ -793,12 +793,12 @@ impl DdgiFieldSet {
         self.batch.needs_radiance.clear();
         // Per probe of each volume its counts, where the usage scheme reads
         // them (none otherwise: no per-probe work for a still field).
-        let mut per_volume: Vec<Vec<Option<(i32, u32, u32)>>> = vec![Vec::new(); self.volumes.len()];
-        if wanted > 0 {
-            per_volume = self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect();
-            for (bp, c) in self.batch.probes.iter().zip(usage_counts) {
-                per_volume[bp.volume as usize][bp.probe as usize] = Some(*c);
-            }
+        let mut per_volume: Vec<Vec<Option<(i32, u32, u32)>>> = match wanted {
+            0 => vec![Vec::new(); self.volumes.len()],
+            _ => self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect(),
+        };
+        for (bp, c) in self.batch.probes.iter().zip(usage_counts) {
+            per_volume[bp.volume as usize][bp.probe as usize] = Some(*c);
         }
         for ((v, f), counts) in self.volumes.iter_mut().zip(&mut self.frames).zip(&per_volume) {
             v.accept_device_hits(f, self.frame, counts);
@@ -942,6 +942,7 @@ mod tests {
         };
         let mut set = DdgiFieldSet::single(DdgiVolume::new(s, (Vec3::ZERO, Vec3::splat(4.0))));
         set.set_update_rays_on_device(true);
+        let mut last = (Vec::new(), 0);
         for frame in 0..=frames {
             set.begin_update(5, frame);
             while set.ray_batch().kind == ProbeRayBatchKind::Initialization {
@@ -950,14 +951,11 @@ mod tests {
             }
             assert_eq!(set.submit_device_hits(&[]), Ok(UpdateStep::ShadeRays));
             let plan = set.device_blend_plan().expect("plan");
-            let last = (plan[0].probe_blend_frames.clone(), plan[0].probe_blend.iter().flatten().count());
+            last = (plan[0].probe_blend_frames.clone(), plan[0].probe_blend.iter().flatten().count());
             drop(plan);
             assert_eq!(set.submit_device_blend(&[]), Ok(UpdateStep::Done));
-            if frame == frames {
-                return last;
-            }
         }
-        unreachable!()
+        last
     }
 
     #[test]

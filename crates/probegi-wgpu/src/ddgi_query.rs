@@ -179,23 +179,16 @@ fn gpu_volume(f: &DdgiFieldView<'_>, [irr_first, dist_first]: [u32; 2]) -> GpuDd
 
 /// `ddgi_probes`' rows of a member: offset, and the usable flag with the fallback.
 fn push_probe_rows(f: &DdgiFieldView<'_>, probes: &mut Vec<[f32; 4]>) {
-    let n = f.grid.probe_count();
-    probes.reserve(n);
-    let row = |o: Vec3, usable: bool, fallback: u32| {
+    use std::iter::repeat;
+    // A view without some array reads its default (usable, no fallback, no offset).
+    let offsets = f.probe_offsets_m.iter().copied().chain(repeat(Vec3::ZERO));
+    let usable = f.probe_usable.iter().copied().chain(repeat(true));
+    let fallback = f.probe_fallback.iter().copied().chain(repeat(u32::MAX));
+    let rows = offsets.zip(usable).zip(fallback).take(f.grid.probe_count());
+    probes.extend(rows.map(|((o, usable), fallback)| {
         let fallback = if fallback == u32::MAX || fallback >= NO_PROBE { NO_PROBE } else { fallback };
         [o.x, o.y, o.z, f32::from_bits(fallback | (usable as u32) << 31)]
-    };
-    if [f.probe_usable.len(), f.probe_fallback.len(), f.probe_offsets_m.len()] == [n; 3] {
-        // Every array full (a field set's volume): one pass without lookups.
-        let rows = f.probe_offsets_m.iter().zip(f.probe_usable).zip(f.probe_fallback);
-        probes.extend(rows.map(|((&o, &usable), &fallback)| row(o, usable, fallback)));
-        return;
-    }
-    for p in 0..n {
-        let usable = f.probe_usable.get(p).copied().unwrap_or(true);
-        let fallback = f.probe_fallback.get(p).copied().unwrap_or(u32::MAX);
-        probes.push(row(f.probe_offsets_m.get(p).copied().unwrap_or(Vec3::ZERO), usable, fallback));
-    }
+    }));
 }
 
 /// The shadowing field's occlusion maps after every distance atlas in the

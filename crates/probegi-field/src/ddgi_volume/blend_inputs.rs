@@ -238,7 +238,7 @@ impl DdgiVolume {
             reset_probes: &self.probes_reset_since_blend,
             seeds: &self.pending_seeds,
             measure_change: frame.measure_change,
-            probe_blend_frames: self.device_blend_frames(frame),
+            probe_blend_frames: self.blend_frames_beyond_one(frame).unwrap_or_default(),
         }
     }
 

@@ -87,16 +87,6 @@ impl DdgiVolume {
             .collect()
     }
 
-    /// [`Self::blend_frames`] as a device plan takes it
-    /// (`DeviceVolumeBlend::probe_blend_frames`): empty where every probe's
-    /// blend stands for one frame (no screen scheme, no budget's waits), so a
-    /// still field's plan carries no per-probe array for it.
-    pub(super) fn device_blend_frames(&self, frame: &VolumeFrame) -> Vec<u32> {
-        let one_each = frame.screen_blend_frames.is_empty()
-            && (frame.budget_traces.is_none() || !self.settings.ray_budget_hysteresis_per_frame);
-        if one_each { Vec::new() } else { self.blend_frames(frame) }
-    }
-
     /// Per probe, the frames its blend this frame stands for: under the screen
     /// scheme the frames since it last traced, capped at the idle interval
     /// (`screen_requests`); under a budget
@@ -104,14 +94,22 @@ impl DdgiVolume {
     /// (capped at the floor's interval), so that each texel's hysteresis, after
     /// Listing 3, is raised to that power; else 1.
     pub(super) fn blend_frames(&self, frame: &VolumeFrame) -> Vec<u32> {
+        self.blend_frames_beyond_one(frame).unwrap_or_else(|| vec![1; self.grid.probe_count()])
+    }
+
+    /// [`Self::blend_frames`], or `None` where every probe's blend stands for
+    /// one frame (no screen scheme, no budget's waits): a device plan then
+    /// carries no per-probe array for it (`DeviceVolumeBlend::probe_blend_frames`
+    /// empty).
+    pub(super) fn blend_frames_beyond_one(&self, frame: &VolumeFrame) -> Option<Vec<u32>> {
         if !frame.screen_blend_frames.is_empty() {
-            return frame.screen_blend_frames.clone();
+            return Some(frame.screen_blend_frames.clone());
         }
         if frame.budget_traces.is_none() || !self.settings.ray_budget_hysteresis_per_frame {
-            return vec![1; self.grid.probe_count()];
+            return None;
         }
         let cap = self.settings.ray_budget_max_interval_frames;
-        self.probe_unblended_frames.iter().map(|n| n.saturating_add(1).min(cap)).collect()
+        Some(self.probe_unblended_frames.iter().map(|n| n.saturating_add(1).min(cap)).collect())
     }
 
     /// Every probe counts as fully changed until it traces again (a scene event).
@@ -150,12 +148,10 @@ impl DdgiVolume {
     /// the frame (so the frames its next blend stands for are the budget's
     /// alone, not its state's own schedule).
     pub(super) fn count_unblended_frames(&mut self, frame: &VolumeFrame, updated: &[bool]) {
-        let flags =
-            updated.iter().chain(std::iter::repeat(&false)).zip(frame.active.iter().chain(std::iter::repeat(&false)));
-        for (n, (&blended, &active)) in self.probe_unblended_frames.iter_mut().zip(flags) {
-            if blended {
+        for (p, n) in self.probe_unblended_frames.iter_mut().enumerate() {
+            if updated.get(p).copied().unwrap_or(false) {
                 *n = 0;
-            } else if active {
+            } else if frame.active.get(p).copied().unwrap_or(false) {
                 *n = n.saturating_add(1);
             }
         }

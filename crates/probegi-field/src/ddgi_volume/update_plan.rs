@@ -28,14 +28,9 @@ impl DdgiVolume {
         let interval = self.settings.probe_sleeping_update_interval;
         // The frame's per-probe arrays reuse last frame's storage: a still
         // field's planning allocates nothing per probe.
+        let chosen = |p: usize| frame.budget_traces.as_ref().is_none_or(|c| c[p]);
         frame.tracing.clear();
-        if frame.budget_traces.is_none() && self.settings.probe_states != ProbeStatesMode::Screen {
-            // As the state says (`traces_in_frame` outside the screen scheme).
-            frame.tracing.extend(self.probe_states.iter().map(|s| s.traces()));
-        } else {
-            let chosen = |p: usize| frame.budget_traces.as_ref().is_none_or(|c| c[p]);
-            frame.tracing.extend((0..probes).map(|p| self.traces_in_frame(p, frame_index) && chosen(p)));
-        }
+        frame.tracing.extend((0..probes).map(|p| self.traces_in_frame(p, frame_index) && chosen(p)));
         self.screen_blend_frames(frame);
         self.count_untraced_frames(frame);
         frame.active.clear();
