@@ -225,6 +225,9 @@ fn pipelined_json(
         "field_set_ms": per(field_set_ms),
         "submissions": per(d.submissions as f64),
         "blocking_waits": per(d.blocking_waits as f64 - 1.0),
+        "bytes_up": per(d.bytes_up as f64),
+        "buffers_made": per(d.buffers_made as f64),
+        "bind_groups_made": per(d.bind_groups_made as f64),
     }))
 }
 
@@ -341,7 +344,9 @@ impl DdgiSweep<'_> {
 /// bytes the passes found already on the device (per-probe records that
 /// repeated the last frame's) and did not upload. `ray_batches_made`: ray
 /// batches allocated a frame (48 bytes a ray; 0 once a still field's batches
-/// reuse the buffers of the one two frames before).
+/// reuse the buffers of the one two frames before). `buffers_made`,
+/// `bind_groups_made`: what the passes made a frame (0 for a still field,
+/// whose passes keep their buffers and bind groups).
 fn bus_json(
     gpu: Option<&WgpuProbeTracer>,
     before: Option<probegi_wgpu::GpuCounters>,
@@ -357,6 +362,8 @@ fn bus_json(
         "device_to_host": down,
         "kept": per_frame(d.bytes_kept),
         "ray_batches_made": per_frame(d.ray_batches_made),
+        "buffers_made": per_frame(d.buffers_made),
+        "bind_groups_made": per_frame(d.bind_groups_made),
         "per_batch_probe": (up + down) / batch.probes.len().max(1) as f64,
         "per_batch_ray": (up + down) / batch.len().max(1) as f64,
         "batch_probes": batch.probes.len(),

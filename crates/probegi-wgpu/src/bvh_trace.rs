@@ -263,7 +263,7 @@ impl GpuBvh {
             init("bvh guards", bytemuck::cast_slice(&[0u32; 2]), wgpu::BufferUsages::COPY_SRC),
         ];
         let bytes = buffers.iter().map(|b| b.size()).sum();
-        let bind_group = buffers_bind_group(device, "bvh", &bvh_bind_group_layout(device), &buffers);
+        let bind_group = buffers_bind_group(ctx, "bvh", &bvh_bind_group_layout(device), &buffers);
         let [nodes, _, _, instance_buffer, guards] = buffers;
         Ok(Self {
             node_count: export.node_count(),
@@ -397,6 +397,9 @@ pub struct GpuRayBatch {
     rays: wgpu::Buffer,
     hits: wgpu::Buffer,
     params: wgpu::Buffer,
+    /// What `params` holds once every write recorded so far has landed
+    /// ([`Self::configure`] skips a write that would not change it).
+    params_written: std::sync::Mutex<TraceParams>,
     bind_group: wgpu::BindGroup,
 }
 
@@ -459,7 +462,15 @@ impl GpuRayBatch {
             params.segments[params.segment_count as usize] = [s.first_ray, s.probe_count, s.rays_per_probe, 0];
             params.segment_count += 1;
         }
+        // A batch reused for the same kind of trace (a still field's updates,
+        // `WgpuProbeTracer::spare_batch`) holds these parameters already.
+        let mut written = self.params_written.lock().unwrap_or_else(|e| e.into_inner());
+        if bytemuck::bytes_of(&*written) == bytemuck::bytes_of(&params) {
+            ctx.count_kept(std::mem::size_of::<TraceParams>() as u64);
+            return;
+        }
         ctx.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        *written = params;
     }
 
     /// Device memory of the rays and hits.
@@ -506,20 +517,19 @@ impl GpuRayTrace {
     fn bind_batch(&self, ctx: &GpuContext, rays: wgpu::Buffer, n: u32, any_hit: bool) -> GpuRayBatch {
         ctx.count_ray_batch();
         let (groups_x, _) = dispatch_2d(n);
-        let params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, ..Default::default() };
-        let device = &ctx.device;
+        let first_params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, ..Default::default() };
         let params = ctx.buffer_with(
             "trace params",
-            bytemuck::bytes_of(&params),
+            bytemuck::bytes_of(&first_params),
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         );
-        let hits = device.create_buffer(&wgpu::BufferDescriptor {
+        let hits = ctx.create_buffer(&wgpu::BufferDescriptor {
             label: Some("ray hits"),
             size: (n.max(1) as usize * std::mem::size_of::<GpuRayHit>()) as u64,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let bind_group = ctx.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("trace rays"),
             layout: &self.layout,
             entries: &[
@@ -528,7 +538,8 @@ impl GpuRayTrace {
                 wgpu::BindGroupEntry { binding: 2, resource: hits.as_entire_binding() },
             ],
         });
-        GpuRayBatch { ray_count: n, any_hit, rays, hits, params, bind_group }
+        let params_written = std::sync::Mutex::new(first_params);
+        GpuRayBatch { ray_count: n, any_hit, rays, hits, params, params_written, bind_group }
     }
 
     /// A batch of `ray_count` rays left for a pass on the device to write
@@ -536,7 +547,7 @@ impl GpuRayTrace {
     pub fn empty_batch(&self, ctx: &GpuContext, ray_count: u32, any_hit: bool) -> Result<GpuRayBatch, GpuError> {
         let bytes = ray_count.max(1) as u64 * std::mem::size_of::<GpuRay>() as u64;
         ctx.check_buffer(bytes, "a ray batch")?;
-        let rays = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        let rays = ctx.create_buffer(&wgpu::BufferDescriptor {
             label: Some("rays"),
             size: bytes,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,

@@ -151,16 +151,15 @@ impl GpuCameraPass {
         targets: &CameraTargets<'_>,
         timestamps: Option<wgpu::ComputePassTimestampWrites<'_>>,
     ) {
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("camera frame"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: targets.params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: targets.direct.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: targets.irradiance.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: targets.requests.as_entire_binding() },
-            ],
-        });
+        let buffers = [targets.params, targets.direct, targets.irradiance, targets.requests];
+        // The device frame binds the same images every frame: one bind group,
+        // kept. The host path's images are new each call: so is its group.
+        let bind_group = if targets.kept {
+            ctx.bind_group_kept("camera frame", 0, &self.layout, &buffers)
+        } else {
+            let buffers: Vec<wgpu::Buffer> = buffers.into_iter().cloned().collect();
+            crate::gpu_context::buffers_bind_group(ctx, "camera frame", &self.layout, &buffers)
+        };
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("camera frame"),
             timestamp_writes: timestamps,
@@ -195,7 +194,7 @@ impl GpuCameraPass {
         let image = |label, texels_per_pixel: u64| -> Result<wgpu::Buffer, GpuError> {
             let size = n * 16 * texels_per_pixel;
             ctx.check_buffer(size, label)?;
-            Ok(device.create_buffer(&wgpu::BufferDescriptor {
+            Ok(ctx.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
@@ -206,13 +205,19 @@ impl GpuCameraPass {
         // albedo, the hit point (their w: the normal's octahedral coordinates, a hit).
         let (direct, irradiance) = (image("camera direct, albedo and normal", 3)?, image("camera irradiance", 1)?);
         // Zeroed at creation; at least one word so the binding is never empty.
-        let requests = device.create_buffer(&wgpu::BufferDescriptor {
+        let requests = ctx.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera probe requests"),
             size: 4 * f.request_words.max(1) as u64,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let targets = CameraTargets { params: &params, direct: &direct, irradiance: &irradiance, requests: &requests };
+        let targets = CameraTargets {
+            params: &params,
+            direct: &direct,
+            irradiance: &irradiance,
+            requests: &requests,
+            kept: false,
+        };
         let mut encoder = device.create_command_encoder(&Default::default());
         self.record(ctx, &mut encoder, (bvh, field, scene), f, &targets, None);
         ctx.submit(encoder.finish());
@@ -257,6 +262,8 @@ pub(crate) struct CameraTargets<'a> {
     pub(crate) direct: &'a wgpu::Buffer,
     pub(crate) irradiance: &'a wgpu::Buffer,
     pub(crate) requests: &'a wgpu::Buffer,
+    /// Images kept from frame to frame (the device frame's): their bind group is too.
+    pub(crate) kept: bool,
 }
 
 /// A pixel's normal from its three `camera_direct` texels: the octahedral

@@ -119,7 +119,7 @@ pub struct GpuDdgiField {
 /// A zeroed buffer of adaptive-hysteresis states (`texel_hysteresis_bytes`).
 fn texel_hysteresis_buffer(ctx: &GpuContext, bytes: u64) -> Result<wgpu::Buffer, GpuError> {
     ctx.check_buffer(bytes, "the adaptive-hysteresis states")?;
-    Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
+    Ok(ctx.create_buffer(&wgpu::BufferDescriptor {
         label: Some("ddgi irradiance texel hysteresis"),
         size: bytes,
         usage: wgpu::BufferUsages::STORAGE,
@@ -342,12 +342,8 @@ impl GpuDdgiField {
             init("ddgi distance", bytemuck::cast_slice(&packed.distance)),
             init("ddgi probes", bytemuck::cast_slice(&packed.probes)),
         ];
-        let bind_group = crate::gpu_context::buffers_bind_group(
-            &ctx.device,
-            "ddgi query",
-            &Self::bind_group_layout(&ctx.device),
-            &buffers,
-        );
+        let bind_group =
+            crate::gpu_context::buffers_bind_group(ctx, "ddgi query", &Self::bind_group_layout(&ctx.device), &buffers);
         let texel_hysteresis = texel_hysteresis_buffer(ctx, texel_hysteresis_bytes(set, packed.irradiance_texels))?;
         Ok(Self {
             volumes: set.members.len(),
@@ -527,13 +523,13 @@ impl GpuFieldQuery {
         let params = FieldQueryParams { point_count: n, groups_x, _pad: [0; 2] };
         let params = ctx.buffer_with("query params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let input = ctx.buffer_with("query points", bytemuck::cast_slice(points), wgpu::BufferUsages::STORAGE);
-        let output = device.create_buffer(&wgpu::BufferDescriptor {
+        let output = ctx.create_buffer(&wgpu::BufferDescriptor {
             label: Some("query irradiance"),
             size: points.len() as u64 * 16,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let bind_group = ctx.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("field query"),
             layout: &self.layout,
             entries: &[

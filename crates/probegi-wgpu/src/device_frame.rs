@@ -107,6 +107,9 @@ struct FrameImages {
     height: u32,
     camera_params: wgpu::Buffer,
     frame_params: wgpu::Buffer,
+    /// [`GpuContext::write_buffer_in_place`]'s record of when a pass reading
+    /// `camera_params` / `frame_params` was last recorded.
+    params_handed_out_at: [std::sync::atomic::AtomicU64; 2],
     direct: wgpu::Buffer,
     irradiance: wgpu::Buffer,
     /// The two histories; `current` holds the last frame's.
@@ -154,7 +157,7 @@ impl FrameReadbackRing {
         if let Some(i) = self.free.iter().position(|b| b.size() == size) {
             return self.free.swap_remove(i);
         }
-        ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        ctx.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame readback"),
             size,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -291,7 +294,7 @@ impl GpuFrame {
                 ty: wgpu::QueryType::Timestamp,
                 count: 2 * passes,
             });
-            let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            let resolve = ctx.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("frame timestamp resolve"),
                 size: TIMESTAMP_BYTES,
                 usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
@@ -327,7 +330,7 @@ impl GpuFrame {
         let n = width as u64 * height as u64;
         let storage = |label: &str, bytes: u64| -> Result<wgpu::Buffer, GpuError> {
             ctx.check_buffer(bytes, label)?;
-            Ok(ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            Ok(ctx.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size: bytes.max(16),
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
@@ -335,7 +338,7 @@ impl GpuFrame {
             }))
         };
         let uniform = |label: &str, bytes: u64| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            ctx.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size: bytes,
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
@@ -359,11 +362,7 @@ impl GpuFrame {
                 .enumerate()
                 .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
                 .collect();
-            ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("device frame"),
-                layout,
-                entries: &entries,
-            })
+            ctx.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("device frame"), layout, entries: &entries })
         };
         let bind_groups = [group(0), group(1)];
         Ok(FrameImages {
@@ -371,6 +370,7 @@ impl GpuFrame {
             height,
             camera_params: uniform("camera params", std::mem::size_of::<CameraParams>() as u64),
             frame_params,
+            params_handed_out_at: Default::default(),
             direct,
             irradiance,
             history,
@@ -430,8 +430,11 @@ impl GpuFrame {
             clip: [clip.max(0.0), 0.0, 0.0, 0.0],
             layout: [rgba8_pitch(f.width), 0, 0, 0],
         };
-        ctx.write_buffer(&images.camera_params, 0, bytemuck::bytes_of(&camera_params));
-        ctx.write_buffer(&images.frame_params, 0, bytemuck::bytes_of(&params));
+        // The frame's own uniform blocks, through the queue: the passes that
+        // read them last were submitted with the frame before.
+        let [camera_at, frame_at] = &images.params_handed_out_at;
+        ctx.write_buffer_in_place(&images.camera_params, 0, bytemuck::bytes_of(&camera_params), camera_at);
+        ctx.write_buffer_in_place(&images.frame_params, 0, bytemuck::bytes_of(&params), frame_at);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         encoder.clear_buffer(&images.stats, 0, None);
         if f.request_words > 0 {
@@ -442,6 +445,7 @@ impl GpuFrame {
             direct: &images.direct,
             irradiance: &images.irradiance,
             requests: &images.requests,
+            kept: true,
         };
         pass.record(ctx, &mut encoder, resources, f, &targets, writes(0));
         let group = &images.bind_groups[images.current];
@@ -508,7 +512,8 @@ impl GpuFrame {
             FrameLayer::Indirect => 2,
         };
         // Field `info.z` of the uniform block: 2 cameras of 64 bytes, then mode and frames.
-        ctx.write_buffer(&images.frame_params, 128 + 8, bytemuck::bytes_of(&layer_index));
+        let at = &images.params_handed_out_at[1];
+        ctx.write_buffer_in_place(&images.frame_params, 128 + 8, bytemuck::bytes_of(&layer_index), at);
         let (gx, gy) = (images.width.div_ceil(8), images.height.div_ceil(8));
         // The group that wrote the current history reads it as `history_next`.
         let mut p = encoder.begin_compute_pass(&Default::default());

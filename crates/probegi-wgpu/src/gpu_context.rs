@@ -57,7 +57,38 @@ pub struct GpuContext {
     /// [`GpuContext::buffer_kept`]'s buffers: per (label, key), the contents
     /// the device holds and the buffer holding them.
     kept: std::sync::Mutex<std::collections::HashMap<(&'static str, u64), KeptBuffer>>,
+    /// [`GpuContext::buffer_rewritten`]'s and [`GpuContext::scratch_buffer`]'s
+    /// buffers, per (label, key).
+    frame_buffers: std::sync::Mutex<std::collections::HashMap<(&'static str, u64), FrameBuffer>>,
+    /// [`GpuContext::bind_group_kept`]'s bind groups, per (label, key): the
+    /// last few made, with the layout and buffers each binds.
+    bind_groups: std::sync::Mutex<std::collections::HashMap<(&'static str, u64), Vec<KeptBindGroup>>>,
 }
+
+/// A buffer a pass keeps from frame to frame and rewrites in place
+/// ([`GpuContext::buffer_rewritten`], [`GpuContext::scratch_buffer`]).
+struct FrameBuffer {
+    buffer: wgpu::Buffer,
+    usage: wgpu::BufferUsages,
+    /// The contents last written (empty for a scratch buffer).
+    contents: Vec<u8>,
+    /// The queue submissions made when it was last handed out: a pass recorded
+    /// since then, not yet submitted, may still read what it holds.
+    handed_out_at: u64,
+}
+
+/// A bind group [`GpuContext::bind_group_kept`] made, with what it binds.
+struct KeptBindGroup {
+    layout: wgpu::BindGroupLayout,
+    buffers: Vec<wgpu::Buffer>,
+    bind_group: wgpu::BindGroup,
+}
+
+/// How many bind groups [`GpuContext::bind_group_kept`] keeps per (label, key):
+/// a pass that binds the ray batch sees the two batches it alternates between
+/// (`WgpuProbeTracer::spare_batch`). No more: a kept bind group keeps the
+/// buffers it binds alive, and these two are the batches the tracer holds anyway.
+const KEPT_BIND_GROUPS: usize = 2;
 
 /// A buffer [`GpuContext::buffer_kept`] made, with a host copy of its contents
 /// and its usage, to hand it out again while a pass's inputs repeat.
@@ -81,6 +112,8 @@ struct TransferCounts {
     wait_ns: std::sync::atomic::AtomicU64,
     kept: std::sync::atomic::AtomicU64,
     ray_batches: std::sync::atomic::AtomicU64,
+    buffers: std::sync::atomic::AtomicU64,
+    bind_groups: std::sync::atomic::AtomicU64,
 }
 
 /// What a [`GpuContext`] has done so far (differences between two readings
@@ -105,6 +138,12 @@ pub struct GpuCounters {
     /// Ray batches allocated (a batch's rays, hits and parameter buffers:
     /// 48 bytes a ray), uploaded or left for a pass to write.
     pub ray_batches_made: u64,
+    /// Buffers made (every buffer this crate makes goes through
+    /// [`GpuContext::create_buffer`] or a helper built on it; the staging
+    /// memory wgpu's own `Queue::write_buffer` takes is not counted).
+    pub buffers_made: u64,
+    /// Bind groups made ([`GpuContext::create_bind_group`]).
+    pub bind_groups_made: u64,
 }
 
 impl std::ops::Sub for GpuCounters {
@@ -118,6 +157,8 @@ impl std::ops::Sub for GpuCounters {
             bytes_kept: self.bytes_kept - o.bytes_kept,
             wait_ms: self.wait_ms - o.wait_ms,
             ray_batches_made: self.ray_batches_made - o.ray_batches_made,
+            buffers_made: self.buffers_made - o.buffers_made,
+            bind_groups_made: self.bind_groups_made - o.bind_groups_made,
         }
     }
 }
@@ -166,6 +207,8 @@ impl GpuContext {
             pending: Default::default(),
             last_submission: Default::default(),
             kept: Default::default(),
+            frame_buffers: Default::default(),
+            bind_groups: Default::default(),
         })
     }
 
@@ -199,6 +242,8 @@ impl GpuContext {
             pending: Default::default(),
             last_submission: Default::default(),
             kept: Default::default(),
+            frame_buffers: Default::default(),
+            bind_groups: Default::default(),
         }
     }
 
@@ -291,6 +336,8 @@ impl GpuContext {
             bytes_kept: t.kept.load(Relaxed),
             wait_ms: t.wait_ns.load(Relaxed) as f64 * 1e-6,
             ray_batches_made: t.ray_batches.load(Relaxed),
+            buffers_made: t.buffers.load(Relaxed),
+            bind_groups_made: t.bind_groups.load(Relaxed),
         }
     }
 
@@ -391,6 +438,7 @@ impl GpuContext {
     /// A buffer holding `contents` (counted as uploaded).
     pub(crate) fn buffer_with(&self, label: &str, contents: &[u8], usage: wgpu::BufferUsages) -> wgpu::Buffer {
         self.transfers.up.fetch_add(contents.len() as u64, std::sync::atomic::Ordering::Relaxed);
+        self.transfers.buffers.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
     }
 
@@ -428,6 +476,7 @@ impl GpuContext {
             self.queue.write_buffer(buffer, offset, data);
             return;
         }
+        self.transfers.buffers.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let staging = self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("deferred write"),
             contents: data,
@@ -438,9 +487,158 @@ impl GpuContext {
         self.submit(encoder.finish());
     }
 
+    /// A buffer (counted in [`GpuCounters::buffers_made`]).
+    pub fn create_buffer(&self, desc: &wgpu::BufferDescriptor<'_>) -> wgpu::Buffer {
+        self.transfers.buffers.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.device.create_buffer(desc)
+    }
+
+    /// A bind group (counted in [`GpuCounters::bind_groups_made`]).
+    pub fn create_bind_group(&self, desc: &wgpu::BindGroupDescriptor<'_>) -> wgpu::BindGroup {
+        self.transfers.bind_groups.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.device.create_bind_group(desc)
+    }
+
+    /// Queue submissions made so far (what [`FrameBuffer::handed_out_at`] compares).
+    fn queue_submissions(&self) -> u64 {
+        self.transfers.submissions.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// A buffer of `usage` (plus `COPY_DST`) holding `contents`, for a pass's
+    /// inputs that change from frame to frame (its uniform block, the frame's
+    /// ray directions): kept per `(label, key)` and rewritten in place. Nothing
+    /// is uploaded while the contents repeat (counted as kept), else one
+    /// `Queue::write_buffer`, which lands before the next submission and
+    /// after the ones before it. Where a pass recorded since the last
+    /// submission may still read the old contents (the buffer was handed out
+    /// since), writing in place would change what that pass reads: a new
+    /// buffer replaces it instead. So a pass keyed per volume that runs once a
+    /// frame makes no buffer, where it made one a frame before.
+    pub(crate) fn buffer_rewritten(
+        &self,
+        label: &'static str,
+        key: u64,
+        contents: &[u8],
+        usage: wgpu::BufferUsages,
+    ) -> wgpu::Buffer {
+        let usage = usage | wgpu::BufferUsages::COPY_DST;
+        let size = contents.len().max(16) as u64;
+        let now = self.queue_submissions();
+        let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(k) = kept.get_mut(&(label, key)).filter(|k| k.buffer.size() == size && k.usage == usage) {
+            if k.contents == contents {
+                self.count_kept(contents.len() as u64);
+                k.handed_out_at = now;
+                return k.buffer.clone();
+            }
+            if k.handed_out_at != now {
+                self.transfers.up.fetch_add(contents.len() as u64, std::sync::atomic::Ordering::Relaxed);
+                self.queue.write_buffer(&k.buffer, 0, contents);
+                k.contents.clear();
+                k.contents.extend_from_slice(contents);
+                k.handed_out_at = now;
+                return k.buffer.clone();
+            }
+        }
+        let mut padded = contents.to_vec();
+        padded.resize(size as usize, 0);
+        let buffer = self.buffer_with(label, &padded, usage);
+        let entry = FrameBuffer { buffer: buffer.clone(), usage, contents: contents.to_vec(), handed_out_at: now };
+        kept.insert((label, key), entry);
+        buffer
+    }
+
+    /// A storage buffer of `bytes` for a pass to write and a later pass of the
+    /// same frame to read (the shade pass's radiance, the blend's weight
+    /// tables), kept per `(label, key)` while its size and usage repeat. Its
+    /// contents are whatever the pass last wrote: it is for data a pass
+    /// rewrites whole before it is read, and the caller reads it before the
+    /// next call with the same key records its writer (queue order does the rest).
+    pub(crate) fn scratch_buffer(
+        &self,
+        label: &'static str,
+        key: u64,
+        bytes: u64,
+        usage: wgpu::BufferUsages,
+    ) -> wgpu::Buffer {
+        let bytes = bytes.max(16);
+        let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(k) = kept.get(&(label, key)).filter(|k| k.buffer.size() == bytes && k.usage == usage) {
+            return k.buffer.clone();
+        }
+        let buffer = self.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes,
+            usage,
+            mapped_at_creation: false,
+        });
+        let entry = FrameBuffer { buffer: buffer.clone(), usage, contents: Vec::new(), handed_out_at: 0 };
+        kept.insert((label, key), entry);
+        buffer
+    }
+
+    /// A bind group of `buffers` (whole, at bindings 0, 1, …) over `layout`:
+    /// one made earlier for the same `(label, key)`, layout and buffers when
+    /// there is one among the last [`KEPT_BIND_GROUPS`], else a new one. With
+    /// [`Self::buffer_rewritten`] and [`Self::scratch_buffer`] a still field's
+    /// passes bind the same buffers every frame and make no bind group.
+    pub(crate) fn bind_group_kept(
+        &self,
+        label: &'static str,
+        key: u64,
+        layout: &wgpu::BindGroupLayout,
+        buffers: &[&wgpu::Buffer],
+    ) -> wgpu::BindGroup {
+        let mut kept = self.bind_groups.lock().unwrap_or_else(|e| e.into_inner());
+        let list = kept.entry((label, key)).or_default();
+        let same = |k: &KeptBindGroup| &k.layout == layout && k.buffers.iter().eq(buffers.iter().copied());
+        if let Some(i) = list.iter().position(same) {
+            let k = list.remove(i);
+            let bind_group = k.bind_group.clone();
+            list.push(k);
+            return bind_group;
+        }
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+            .collect();
+        let bind_group =
+            self.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries });
+        if list.len() == KEPT_BIND_GROUPS {
+            list.remove(0);
+        }
+        let buffers = buffers.iter().map(|b| (*b).clone()).collect();
+        list.push(KeptBindGroup { layout: layout.clone(), buffers, bind_group: bind_group.clone() });
+        bind_group
+    }
+
+    /// [`Self::write_buffer`] for a buffer the caller keeps and rewrites each
+    /// frame (a frame's uniform blocks): through the queue at once, with no
+    /// staging buffer, where no pass recorded since the last submission reads
+    /// it, else as `write_buffer` records it, in order. `handed_out_at` holds
+    /// the queue submissions made when a pass reading the buffer was last
+    /// recorded; this call sets it, for the pass the caller records next.
+    pub(crate) fn write_buffer_in_place(
+        &self,
+        buffer: &wgpu::Buffer,
+        offset: u64,
+        data: &[u8],
+        handed_out_at: &std::sync::atomic::AtomicU64,
+    ) {
+        use std::sync::atomic::Ordering::Relaxed;
+        let now = self.queue_submissions();
+        if handed_out_at.swap(now, Relaxed) == now {
+            self.write_buffer(buffer, offset, data);
+            return;
+        }
+        self.transfers.up.fetch_add(data.len() as u64, Relaxed);
+        self.queue.write_buffer(buffer, offset, data);
+    }
+
     /// A storage buffer of `bytes` a pass writes and the host reads back.
     pub(crate) fn output_buffer(&self, label: &str, bytes: u64) -> wgpu::Buffer {
-        self.device.create_buffer(&wgpu::BufferDescriptor {
+        self.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size: bytes.max(16),
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
@@ -493,7 +691,7 @@ impl GpuContext {
 
     /// Copies a `COPY_SRC` buffer into a staging buffer and reads it back.
     pub(crate) fn read_back(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+        let staging = self.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size: buffer.size(),
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -507,7 +705,7 @@ impl GpuContext {
 
     /// Reads `bytes` of a `COPY_SRC` buffer back from byte `offset` on.
     pub(crate) fn read_back_range(&self, buffer: &wgpu::Buffer, offset: u64, bytes: u64) -> Result<Vec<u8>, GpuError> {
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+        let staging = self.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size: bytes.max(4),
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -528,7 +726,7 @@ impl GpuContext {
         let staging: Vec<wgpu::Buffer> = buffers
             .iter()
             .map(|b| {
-                let s = self.device.create_buffer(&wgpu::BufferDescriptor {
+                let s = self.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("readback"),
                     size: b.size(),
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -596,7 +794,7 @@ pub(crate) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLay
 
 /// A bind group of `buffers` at bindings 0, 1, … (a layout of storage buffers).
 pub(crate) fn buffers_bind_group(
-    device: &wgpu::Device,
+    ctx: &GpuContext,
     label: &str,
     layout: &wgpu::BindGroupLayout,
     buffers: &[wgpu::Buffer],
@@ -606,7 +804,7 @@ pub(crate) fn buffers_bind_group(
         .enumerate()
         .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
         .collect();
-    device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
+    ctx.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
 }
 
 /// A compute-visible uniform-buffer layout entry at `binding`.

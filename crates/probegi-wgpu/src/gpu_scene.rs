@@ -283,12 +283,8 @@ impl GpuScene {
             ),
             init_rw("scene lights", bytemuck::cast_slice(&lights)),
         ];
-        let bind_group = crate::gpu_context::buffers_bind_group(
-            &ctx.device,
-            "scene",
-            &scene_bind_group_layout(&ctx.device),
-            &buffers,
-        );
+        let bind_group =
+            crate::gpu_context::buffers_bind_group(ctx, "scene", &scene_bind_group_layout(&ctx.device), &buffers);
         let bytes = buffers.iter().map(|b| b.size()).sum();
         let moving = scene.objects.iter().filter(|o| o.is_animated()).map(|o| o.triangles()).collect();
         let [triangle_buffer, _, textures, lights] = buffers;

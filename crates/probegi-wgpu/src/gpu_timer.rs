@@ -20,7 +20,7 @@ impl GpuTimer {
                 ty: wgpu::QueryType::Timestamp,
                 count: passes * 2,
             });
-            let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            let resolve = ctx.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("timestamp resolve"),
                 size: passes as u64 * 16,
                 usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,

@@ -102,7 +102,7 @@ impl GpuVolumeAtlases {
     /// Zeroed atlases for `probe_count` probes.
     pub fn new(ctx: &GpuContext, probe_count: usize, irradiance_interior: u32, distance_interior: u32) -> Self {
         let make = |label: &str, bytes: usize| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            ctx.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size: bytes.max(16) as u64,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
@@ -157,7 +157,7 @@ impl GpuVolumeAtlases {
     /// Reads both atlases back.
     pub fn download(&self, ctx: &GpuContext) -> Result<(ProbeAtlas<Vec3>, ProbeAtlas<Vec2>), GpuError> {
         let read = |buffer: &wgpu::Buffer, (offset, size): (u64, u64)| {
-            let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            let staging = ctx.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("atlas readback"),
                 size: size.max(4),
                 usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -292,7 +292,6 @@ impl GpuProbeBlend {
         let per_row = (probes as u32).min(MAX_GROUPS);
         let params = blend_params(atlases, plan, per_row);
         let weight_count = params.weight_count;
-        let init = |label: &str, contents: &[u8], usage: wgpu::BufferUsages| ctx.buffer_with(label, contents, usage);
         let frames = |p: usize| plan.probe_blend_frames.get(p).copied().unwrap_or(1).max(1);
         let per_probe: Vec<[u32; 4]> = plan
             .probe_blend
@@ -304,24 +303,22 @@ impl GpuProbeBlend {
             })
             .collect();
         let storage = wgpu::BufferUsages::STORAGE;
-        let params = init("blend params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        // The weights turn with the frame's rays (the device computes them
-        // from the directions); the per-probe entries and the texels'
-        // directions repeat from frame to frame for a still volume: kept per
-        // volume, by where its atlas starts.
-        let weights = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("blend weights"),
-            size: weight_count.max(4) as u64 * 4,
-            usage: storage,
-            mapped_at_creation: false,
-        });
+        // Kept per volume, by where its atlas starts, and rewritten in place:
+        // the uniform block, the per-probe entries (which repeat for a still
+        // volume) and the frame's ray directions (which turn every frame);
+        // the texels' directions never change; the weight tables are the
+        // device's to rewrite each frame. A still volume's blend then makes
+        // no buffer and no bind group.
         let key = atlases.irradiance_first as u64;
-        let per_probe = ctx.buffer_kept("probe blend", key, bytemuck::cast_slice(&per_probe), storage);
+        let params =
+            ctx.buffer_rewritten("blend params", key, bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let weights = ctx.scratch_buffer("blend weights", key, weight_count.max(4) as u64 * 4, storage);
+        let per_probe = ctx.buffer_rewritten("probe blend", key, bytemuck::cast_slice(&per_probe), storage);
         let texel_dirs: Vec<[f32; 4]> =
             texel_directions(ni).into_iter().chain(texel_directions(nd)).map(|d| d.extend(0.0).into()).collect();
         let texel_dirs = ctx.buffer_kept("blend texel directions", key, bytemuck::cast_slice(&texel_dirs), storage);
         let ray_dirs: Vec<[f32; 4]> = plan.ray_dirs.iter().map(|d| d.extend(0.0).into()).collect();
-        let ray_dirs = init("blend ray directions", bytemuck::cast_slice(&ray_dirs), storage);
+        let ray_dirs = ctx.buffer_rewritten("blend ray directions", key, bytemuck::cast_slice(&ray_dirs), storage);
         let buffers = [
             &params,
             &weights,
@@ -333,16 +330,7 @@ impl GpuProbeBlend {
             &texel_dirs,
             &ray_dirs,
         ];
-        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-            .collect();
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("probe blend"),
-            layout: &self.layout,
-            entries: &entries,
-        });
+        let bind_group = ctx.bind_group_kept("probe blend", key, &self.layout, &buffers);
         let rows = (probes as u32).div_ceil(per_row);
         let groups = |texels: u32| texels.div_ceil(WORKGROUP);
         // The blend: one workgroup per probe; the borders: one thread per tile texel.

@@ -72,7 +72,7 @@ impl GpuProbeChange {
         let list = ctx.buffer_with("change probes", bytemuck::cast_slice(probes), wgpu::BufferUsages::STORAGE);
         let out = ctx.output_buffer("probe change", probes.len() as u64 * 4);
         let buffers = [params, list, atlases.irradiance.clone(), atlases.distance.clone(), out.clone()];
-        let bind_group = crate::gpu_context::buffers_bind_group(&ctx.device, "probe change", &self.layout, &buffers);
+        let bind_group = crate::gpu_context::buffers_bind_group(ctx, "probe change", &self.layout, &buffers);
         ctx.run_passes("probe change", &[(&self.pipeline, vec![Some(&bind_group)], groups)]);
         let bytes = ctx.read_back(&out)?;
         Ok(bytemuck::cast_slice::<u8, f32>(&bytes).iter().take(probes.len()).copied().collect())

@@ -121,7 +121,7 @@ impl GpuProbeClassification {
             let buffers = [params, batch.rays_buffer().clone(), batch.hits_buffer().clone()];
             let own = [b.rows.clone(), b.positions.clone(), b.out.clone(), b.list.clone(), b.keepers.clone()];
             let buffers = [buffers.as_slice(), &own].concat();
-            crate::gpu_context::buffers_bind_group(&ctx.device, "probe classification", &self.layout, &buffers)
+            crate::gpu_context::buffers_bind_group(ctx, "probe classification", &self.layout, &buffers)
         };
         let base = bind(&params);
         let rounds: Vec<wgpu::BindGroup> =
@@ -213,12 +213,7 @@ impl ClassifyBuffers {
             round.probes.iter().filter(|p| p.first_ray.is_some()).count() as u64 * round.rays_per_probe as u64;
         let storage = wgpu::BufferUsages::STORAGE;
         let buffer = |label, size, usage| {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
+            ctx.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage, mapped_at_creation: false })
         };
         Self {
             rows: ctx.buffer_with("classify probes", bytemuck::cast_slice(&rows), storage),

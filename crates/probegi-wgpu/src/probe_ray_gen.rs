@@ -136,22 +136,28 @@ impl GpuProbeRayGen {
         };
         let t_max = max_distance_m.min(f32::MAX);
         let probes: Vec<[f32; 4]> = origins.iter().map(|o| [o.x, o.y, o.z, t_max]).collect();
-        let device = &ctx.device;
-        let params = ctx.buffer_with("ray gen params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let (probes, usage) = (bytemuck::cast_slice(&probes), wgpu::BufferUsages::STORAGE);
-        let probes = match kept {
-            Some(key) => ctx.buffer_kept("ray gen probes", key, probes, usage),
-            None => ctx.buffer_with("ray gen probes", probes, usage),
+        let params = bytemuck::bytes_of(&params);
+        let bind_group = match kept {
+            // A still volume's update: its records, uniform block and bind
+            // group are the ones of the frame before (two batches alternate).
+            Some(key) => {
+                let params = ctx.buffer_rewritten("ray gen params", key, params, wgpu::BufferUsages::UNIFORM);
+                let probes = ctx.buffer_kept("ray gen probes", key, probes, usage);
+                ctx.bind_group_kept("probe ray gen", key, &self.layout, &[&params, &probes, batch.rays_buffer()])
+            }
+            None => {
+                let params = ctx.buffer_with("ray gen params", params, wgpu::BufferUsages::UNIFORM);
+                let probes = ctx.buffer_with("ray gen probes", probes, usage);
+                crate::gpu_context::buffers_bind_group(
+                    ctx,
+                    "probe ray gen",
+                    &self.layout,
+                    &[params, probes, batch.rays_buffer().clone()],
+                )
+            }
         };
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("probe ray gen"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: probes.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: batch.rays_buffer().as_entire_binding() },
-            ],
-        });
+        let device = &ctx.device;
         let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {

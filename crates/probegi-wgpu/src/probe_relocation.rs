@@ -93,7 +93,7 @@ impl GpuProbeRelocation {
         round.configure(ctx, true, &[]);
         let kept = trace.empty_batch(ctx, if keep { rays } else { 1 }, false)?;
         let buffers = ChainBuffers::new(ctx, chain, &round, &kept, keep);
-        let bind = crate::gpu_context::buffers_bind_group(&ctx.device, "init rounds", &self.layout, &buffers.all);
+        let bind = crate::gpu_context::buffers_bind_group(ctx, "init rounds", &self.layout, &buffers.all);
         let per_probe = dispatch_2d(probes);
         let per_ray = dispatch_2d(rays);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());

@@ -105,8 +105,7 @@ impl GpuProbeSeeding {
             let params = ctx.buffer_with("seed params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
             let list = ctx.buffer_with("seeds", bytemuck::cast_slice(chunk), wgpu::BufferUsages::STORAGE);
             let buffers = [params, list, target.irradiance.clone(), target.distance.clone()];
-            let bind_group =
-                crate::gpu_context::buffers_bind_group(&ctx.device, "probe seeding", &self.layout, &buffers);
+            let bind_group = crate::gpu_context::buffers_bind_group(ctx, "probe seeding", &self.layout, &buffers);
             ctx.run_passes(
                 "probe seeding",
                 &[(&self.pipeline, vec![Some(&bind_group)], (groups_x, chunk.len() as u32))],

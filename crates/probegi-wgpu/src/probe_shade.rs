@@ -172,6 +172,10 @@ impl GpuProbeShade {
     /// The shade pass submitted, its output left on the device: per ray a
     /// `vec4<f32>` of radiance and the blend's signed distance, which
     /// `probe_blend`'s passes read as they lie (`GpuProbeBlend::prepare_resident`).
+    /// The output is one buffer kept from call to call
+    /// ([`GpuContext::scratch_buffer`]): what reads it is recorded before the
+    /// next shade (queue order keeps the next shade's writes after it), and it
+    /// is not zeroed, since the pass writes every ray's entry.
     #[allow(clippy::too_many_arguments)]
     pub fn shade_on_device(
         &self,
@@ -193,32 +197,28 @@ impl GpuProbeShade {
         let device = &ctx.device;
         let params =
             ShadeParams { ray_count: n, groups_x: gx, seed, frame, probe_count: probes.len() as u32, _pad: [0; 3] };
-        let params = ctx.buffer_with("shade params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        // One shade a frame: its uniform block, probe records, output and bind
+        // group are the frame before's while the batch keeps its size.
+        let params = ctx.buffer_rewritten("shade params", 0, bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let empty = [ShadeProbe::default()];
-        // One shade a batch; its probe records repeat while the probes do.
-        let info = ctx.buffer_kept(
+        let info = ctx.buffer_rewritten(
             "shade probes",
             0,
             bytemuck::cast_slice(if probes.is_empty() { &empty[..] } else { probes }),
             wgpu::BufferUsages::STORAGE,
         );
-        let radiance = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("probe ray radiance"),
-            size: (n as u64).max(1) * 16,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("probe shade"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: batch.rays_buffer().as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: batch.hits_buffer().as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: info.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: radiance.as_entire_binding() },
-            ],
-        });
+        let radiance = ctx.scratch_buffer(
+            "probe ray radiance",
+            0,
+            (n as u64).max(1) * 16,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        );
+        let bind_group = ctx.bind_group_kept(
+            "probe shade",
+            0,
+            &self.layout,
+            &[&params, batch.rays_buffer(), batch.hits_buffer(), &info, &radiance],
+        );
         let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {

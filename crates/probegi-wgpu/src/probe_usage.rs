@@ -64,7 +64,7 @@ impl GpuProbeUsage {
         let diagonals = ctx.buffer_with("usage cage diagonals", bytemuck::cast_slice(diagonals), storage);
         let out = ctx.output_buffer("usage counts", probes.len() as u64 * 16);
         let bind_group = crate::gpu_context::buffers_bind_group(
-            &ctx.device,
+            ctx,
             "probe usage",
             &self.layout,
             &[params, batch.hits_buffer().clone(), rows, diagonals, out.clone()],

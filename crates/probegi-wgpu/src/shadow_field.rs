@@ -139,7 +139,7 @@ impl GpuShadowField {
                 shadow.hits_buffer().clone(),
                 target.buffer.clone(),
             ];
-            crate::gpu_context::buffers_bind_group(&ctx.device, "shadow field", &self.layout, &buffers)
+            crate::gpu_context::buffers_bind_group(ctx, "shadow field", &self.layout, &buffers)
         };
         let (gen_group, blend_group) = (bind(params(gx)), bind(params(ex)));
         let groups = |g| {

@@ -103,7 +103,7 @@ impl GpuSkyFromCubemap {
             array_layer_count: Some(6),
             ..Default::default()
         });
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        let bind_group = ctx.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("sky from cubemap"),
             layout: &self.layout,
             entries: &[

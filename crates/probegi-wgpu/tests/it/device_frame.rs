@@ -191,6 +191,9 @@ fn a_steady_frame_waits_for_nothing_and_reads_back_no_pixel() {
             assert_eq!(c.submissions, 1, "{size}: one submission a frame: {c:?}");
             // The update batch takes the buffers of the one two frames before.
             assert_eq!(c.ray_batches_made, 0, "{size}: a still field allocated a ray batch: {c:?}");
+            // Every pass's inputs, outputs and bind groups are the frame before's.
+            assert_eq!(c.buffers_made, 0, "{size}: a steady frame made buffers: {c:?}");
+            assert_eq!(c.bind_groups_made, 0, "{size}: a steady frame made bind groups: {c:?}");
         }
         per_size.push(frames);
         let image = stepper.image().expect("read back on request");
