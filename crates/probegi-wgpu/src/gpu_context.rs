@@ -820,3 +820,77 @@ pub(crate) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
         count: None,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn read(ctx: &GpuContext, b: &wgpu::Buffer, bytes: u64) -> Vec<u8> {
+        ctx.read_back_range(b, 0, bytes).expect("read back")
+    }
+
+    /// `buffer_rewritten` writes in place only where no pass recorded since the
+    /// last submission may read the old contents; else the old buffer keeps
+    /// them and a new one takes the new. What each buffer holds is read back.
+    #[test]
+    fn a_rewritten_buffer_handed_out_since_the_last_submission_is_replaced_not_overwritten() {
+        let Some(ctx) = GpuContext::headless_unless_absent().expect("device") else { return };
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let (a, b, c) = ([1u8; 32], [2u8; 32], [3u8; 32]);
+        ctx.defer_submissions(true);
+        let first = ctx.buffer_rewritten("test input", 7, &a, usage);
+        // Same contents: the same buffer, nothing uploaded.
+        let before = ctx.counters();
+        assert_eq!(ctx.buffer_rewritten("test input", 7, &a, usage), first);
+        assert_eq!((ctx.counters() - before).bytes_kept, 32);
+        assert_eq!((ctx.counters() - before).buffers_made, 0);
+        // New contents before any submission: `first` may be read by a pass
+        // recorded meanwhile, so it keeps `a` and a new buffer holds `b`.
+        let second = ctx.buffer_rewritten("test input", 7, &b, usage);
+        assert_ne!(second, first);
+        // Flushing nothing is no submission: still replaced, not overwritten.
+        ctx.flush();
+        assert_ne!(ctx.buffer_rewritten("test input", 7, &a, usage), second);
+        let second = ctx.buffer_rewritten("test input", 7, &b, usage);
+        ctx.submit(ctx.device.create_command_encoder(&Default::default()).finish());
+        ctx.flush();
+        // After a submission: rewritten in place, no buffer made.
+        let before = ctx.counters();
+        let third = ctx.buffer_rewritten("test input", 7, &c, usage);
+        assert_eq!(third, second);
+        assert_eq!((ctx.counters() - before).buffers_made, 0);
+        assert_eq!((ctx.counters() - before).bytes_up, 32);
+        ctx.defer_submissions(false);
+        assert_eq!(read(&ctx, &first, 32), a);
+        assert_eq!(read(&ctx, &third, 32), c);
+        // Another key is another buffer.
+        assert_ne!(ctx.buffer_rewritten("test input", 8, &c, usage), third);
+    }
+
+    /// `bind_group_kept` hands out the bind group made for the same layout and
+    /// buffers, and keeps the last two: a pass alternating between two ray
+    /// batches makes none after the first two frames.
+    #[test]
+    fn kept_bind_groups_follow_the_buffers_they_bind() {
+        let Some(ctx) = GpuContext::headless_unless_absent().expect("device") else { return };
+        let layout = ctx.pass_layout("test", &[true]);
+        let uniform = ctx.buffer_with("u", &[0; 16], wgpu::BufferUsages::UNIFORM);
+        let storage = |n| ctx.buffer_with("s", &[n; 16], wgpu::BufferUsages::STORAGE);
+        let (s1, s2, s3) = (storage(1), storage(2), storage(3));
+        let made = |f: &dyn Fn()| {
+            let before = ctx.counters().bind_groups_made;
+            f();
+            ctx.counters().bind_groups_made - before
+        };
+        let group = |s: &wgpu::Buffer| ctx.bind_group_kept("test", 0, &layout, &[&uniform, s]);
+        assert_eq!(made(&|| drop(group(&s1))), 1);
+        assert_eq!(made(&|| drop(group(&s2))), 1);
+        assert_eq!(made(&|| drop((group(&s1), group(&s2), group(&s1)))), 0, "two alternating: kept");
+        assert_eq!(group(&s1), group(&s1));
+        assert_ne!(group(&s1), group(&s2));
+        // A third pushes out the least recently used (s1's, s2's used since).
+        assert_eq!(made(&|| drop(group(&s3))), 1);
+        assert_eq!(made(&|| drop(group(&s2))), 0);
+        assert_eq!(made(&|| drop(group(&s1))), 1);
+    }
+}
