@@ -226,6 +226,7 @@ fn pipelined_json(
         "submissions": per(d.submissions as f64),
         "blocking_waits": per(d.blocking_waits as f64 - 1.0),
         "bytes_up": per(d.bytes_up as f64),
+        "ray_batches_made": per(d.ray_batches_made as f64),
         "buffers_made": per(d.buffers_made as f64),
         "bind_groups_made": per(d.bind_groups_made as f64),
     }))

@@ -393,6 +393,9 @@ pub struct GpuRayTrace {
 pub struct GpuRayBatch {
     /// Rays in the batch.
     pub ray_count: u32,
+    /// Rays its buffers hold (≥ `ray_count`: a batch reused for fewer rays,
+    /// [`Self::reused_for`]).
+    capacity: u32,
     any_hit: bool,
     rays: wgpu::Buffer,
     hits: wgpu::Buffer,
@@ -400,6 +403,9 @@ pub struct GpuRayBatch {
     /// What `params` holds once every write recorded so far has landed
     /// ([`Self::configure`] skips a write that would not change it).
     params_written: std::sync::Mutex<TraceParams>,
+    /// When a trace reading `params` was last recorded
+    /// ([`GpuContext::write_buffer_in_place`]).
+    params_handed_out_at: std::sync::atomic::AtomicU64,
     bind_group: wgpu::BindGroup,
 }
 
@@ -407,8 +413,23 @@ impl GpuRayBatch {
     /// Whether a pass may write a batch of `ray_count` rays (`any_hit` or
     /// closest) into this one's buffers, as [`GpuRayTrace::empty_batch`]
     /// would have made them.
+    /// Its buffers hold `ray_count` rays and at most twice as many (a batch
+    /// much larger than the frame's is let go rather than held).
     pub(crate) fn reusable_for(&self, ray_count: u32, any_hit: bool) -> bool {
-        self.ray_count == ray_count && self.any_hit == any_hit
+        self.any_hit == any_hit && self.capacity >= ray_count && self.capacity / 2 <= ray_count
+    }
+
+    /// This batch's buffers for a batch of `ray_count` rays
+    /// ([`Self::reusable_for`]); the passes run over the first `ray_count`
+    /// (its trace parameters are written by the next [`Self::configure`]).
+    pub(crate) fn reused_for(mut self, ray_count: u32) -> Self {
+        self.ray_count = ray_count;
+        self
+    }
+
+    /// Rays its buffers hold.
+    pub(crate) fn capacity(&self) -> u32 {
+        self.capacity
     }
 
     pub(crate) fn rays_buffer(&self) -> &wgpu::Buffer {
@@ -464,12 +485,16 @@ impl GpuRayBatch {
         }
         // A batch reused for the same kind of trace (a still field's updates,
         // `WgpuProbeTracer::spare_batch`) holds these parameters already.
+        // A batch reused for another count (the screen scheme's) is rewritten
+        // through the queue: the traces that read it before were submitted.
         let mut written = self.params_written.lock().unwrap_or_else(|e| e.into_inner());
         if bytemuck::bytes_of(&*written) == bytemuck::bytes_of(&params) {
             ctx.count_kept(std::mem::size_of::<TraceParams>() as u64);
+            // The trace recorded next reads these parameters.
+            self.params_handed_out_at.store(ctx.queue_submissions(), std::sync::atomic::Ordering::Relaxed);
             return;
         }
-        ctx.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        ctx.write_buffer_in_place(&self.params, 0, bytemuck::bytes_of(&params), &self.params_handed_out_at);
         *written = params;
     }
 
@@ -510,11 +535,11 @@ impl GpuRayTrace {
             ray_bytes,
             wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
         );
-        Ok(self.bind_batch(ctx, ray_buffer, rays.len() as u32, any_hit))
+        Ok(self.bind_batch(ctx, ray_buffer, rays.len() as u32, rays.len() as u32, any_hit))
     }
 
     /// A batch around `rays`: its parameters, a hit buffer and the bind group.
-    fn bind_batch(&self, ctx: &GpuContext, rays: wgpu::Buffer, n: u32, any_hit: bool) -> GpuRayBatch {
+    fn bind_batch(&self, ctx: &GpuContext, rays: wgpu::Buffer, n: u32, capacity: u32, any_hit: bool) -> GpuRayBatch {
         ctx.count_ray_batch();
         let (groups_x, _) = dispatch_2d(n);
         let first_params = TraceParams { ray_count: n, groups_x, any_hit: any_hit as u32, ..Default::default() };
@@ -525,7 +550,7 @@ impl GpuRayTrace {
         );
         let hits = ctx.create_buffer(&wgpu::BufferDescriptor {
             label: Some("ray hits"),
-            size: (n.max(1) as usize * std::mem::size_of::<GpuRayHit>()) as u64,
+            size: (capacity.max(1) as usize * std::mem::size_of::<GpuRayHit>()) as u64,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
@@ -539,13 +564,39 @@ impl GpuRayTrace {
             ],
         });
         let params_written = std::sync::Mutex::new(first_params);
-        GpuRayBatch { ray_count: n, any_hit, rays, hits, params, params_written, bind_group }
+        // Made with the batch (`buffer_with`): no pass has read it yet.
+        let params_handed_out_at = std::sync::atomic::AtomicU64::new(u64::MAX);
+        GpuRayBatch {
+            ray_count: n,
+            capacity,
+            any_hit,
+            rays,
+            hits,
+            params,
+            params_written,
+            params_handed_out_at,
+            bind_group,
+        }
     }
 
     /// A batch of `ray_count` rays left for a pass on the device to write
     /// (`probe_ray_gen`).
     pub fn empty_batch(&self, ctx: &GpuContext, ray_count: u32, any_hit: bool) -> Result<GpuRayBatch, GpuError> {
-        let bytes = ray_count.max(1) as u64 * std::mem::size_of::<GpuRay>() as u64;
+        self.empty_batch_holding(ctx, ray_count, ray_count, any_hit)
+    }
+
+    /// [`Self::empty_batch`] with buffers for `capacity` rays (at least
+    /// `ray_count`): room for the later batches of a field whose batch
+    /// size moves from frame to frame (the screen scheme's).
+    pub(crate) fn empty_batch_holding(
+        &self,
+        ctx: &GpuContext,
+        ray_count: u32,
+        capacity: u32,
+        any_hit: bool,
+    ) -> Result<GpuRayBatch, GpuError> {
+        let capacity = capacity.max(ray_count);
+        let bytes = capacity.max(1) as u64 * std::mem::size_of::<GpuRay>() as u64;
         ctx.check_buffer(bytes, "a ray batch")?;
         let rays = ctx.create_buffer(&wgpu::BufferDescriptor {
             label: Some("rays"),
@@ -553,7 +604,7 @@ impl GpuRayTrace {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        Ok(self.bind_batch(ctx, rays, ray_count, any_hit))
+        Ok(self.bind_batch(ctx, rays, ray_count, capacity, any_hit))
     }
 
     /// The rays of a batch, read back.

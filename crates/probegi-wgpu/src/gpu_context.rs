@@ -500,7 +500,7 @@ impl GpuContext {
     }
 
     /// Queue submissions made so far (what [`FrameBuffer::handed_out_at`] compares).
-    fn queue_submissions(&self) -> u64 {
+    pub(crate) fn queue_submissions(&self) -> u64 {
         self.transfers.submissions.load(std::sync::atomic::Ordering::Relaxed)
     }
 
@@ -513,7 +513,11 @@ impl GpuContext {
     /// submission may still read the old contents (the buffer was handed out
     /// since), writing in place would change what that pass reads: a new
     /// buffer replaces it instead. So a pass keyed per volume that runs once a
-    /// frame makes no buffer, where it made one a frame before.
+    /// frame makes no buffer, where it made one a frame before. Contents that
+    /// change length (the screen scheme's probe records) keep a buffer that
+    /// holds them and at most twice as many bytes ([`holds`]; a new one
+    /// leaves a quarter more room): the passes read such inputs by the counts
+    /// their uniform blocks give, never by the buffer's length.
     pub(crate) fn buffer_rewritten(
         &self,
         label: &'static str,
@@ -525,7 +529,8 @@ impl GpuContext {
         let size = contents.len().max(16) as u64;
         let now = self.queue_submissions();
         let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(k) = kept.get_mut(&(label, key)).filter(|k| k.buffer.size() == size && k.usage == usage) {
+        let before = kept.get(&(label, key)).map(|k| k.buffer.size());
+        if let Some(k) = kept.get_mut(&(label, key)).filter(|k| holds(k.buffer.size(), size) && k.usage == usage) {
             if k.contents == contents {
                 self.count_kept(contents.len() as u64);
                 k.handed_out_at = now;
@@ -540,6 +545,8 @@ impl GpuContext {
                 return k.buffer.clone();
             }
         }
+        // Room to grow where the length changed (a uniform block's never does).
+        let size = if before.is_some_and(|b| b != size) { (size + size / 4).next_multiple_of(16) } else { size };
         let mut padded = contents.to_vec();
         padded.resize(size as usize, 0);
         let buffer = self.buffer_with(label, &padded, usage);
@@ -548,11 +555,12 @@ impl GpuContext {
         buffer
     }
 
-    /// A storage buffer of `bytes` for a pass to write and a later pass of the
-    /// same frame to read (the shade pass's radiance, the blend's weight
-    /// tables), kept per `(label, key)` while its size and usage repeat. Its
-    /// contents are whatever the pass last wrote: it is for data a pass
-    /// rewrites whole before it is read, and the caller reads it before the
+    /// A storage buffer of at least `bytes` for a pass to write and a later
+    /// pass of the same frame to read (the shade pass's radiance, the blend's
+    /// weight tables), kept per `(label, key)` while it holds `bytes` and at
+    /// most twice as many ([`holds`]). Its contents are whatever a pass last
+    /// wrote: it is for data a pass writes before it is read, read by counts
+    /// and indices the passes are given, and the caller reads it before the
     /// next call with the same key records its writer (queue order does the rest).
     pub(crate) fn scratch_buffer(
         &self,
@@ -563,7 +571,7 @@ impl GpuContext {
     ) -> wgpu::Buffer {
         let bytes = bytes.max(16);
         let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(k) = kept.get(&(label, key)).filter(|k| k.buffer.size() == bytes && k.usage == usage) {
+        if let Some(k) = kept.get(&(label, key)).filter(|k| holds(k.buffer.size(), bytes) && k.usage == usage) {
             return k.buffer.clone();
         }
         let buffer = self.create_buffer(&wgpu::BufferDescriptor {
@@ -776,6 +784,12 @@ impl GpuContext {
         self.transfers.down.fetch_add(bytes.len() as u64, std::sync::atomic::Ordering::Relaxed);
         Ok(bytes)
     }
+}
+
+/// Whether a kept buffer of `size` bytes serves for `need`: it holds them,
+/// and not more than twice as many (a much larger one is let go, not held).
+fn holds(size: u64, need: u64) -> bool {
+    size >= need && size / 2 <= need
 }
 
 /// A compute-visible storage-buffer layout entry at `binding`.

@@ -143,7 +143,7 @@ impl GpuProbeRayGen {
             // group are the ones of the frame before (two batches alternate).
             Some(key) => {
                 let params = ctx.buffer_rewritten("ray gen params", key, params, wgpu::BufferUsages::UNIFORM);
-                let probes = ctx.buffer_kept("ray gen probes", key, probes, usage);
+                let probes = ctx.buffer_rewritten("ray gen probes", key, probes, usage);
                 ctx.bind_group_kept("probe ray gen", key, &self.layout, &[&params, &probes, batch.rays_buffer()])
             }
             None => {

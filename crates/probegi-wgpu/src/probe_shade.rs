@@ -210,7 +210,8 @@ impl GpuProbeShade {
         let radiance = ctx.scratch_buffer(
             "probe ray radiance",
             0,
-            (n as u64).max(1) * 16,
+            // The batch's capacity: the same buffer while a reused batch's size moves.
+            (batch.capacity() as u64).max(1) * 16,
             wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         );
         let bind_group = ctx.bind_group_kept(

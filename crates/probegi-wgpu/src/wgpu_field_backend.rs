@@ -331,6 +331,13 @@ impl WgpuProbeTracer {
         self.timing.load(std::sync::atomic::Ordering::Relaxed)
     }
 
+    /// Rays of the last batch traced on the device for an update (tests and
+    /// benchmarks: the screen scheme's size moves from frame to frame).
+    pub fn last_batch_rays(&self) -> Option<u32> {
+        let last = self.last.lock().ok()?.as_ref().map(|b| b.ray_count);
+        last.or_else(|| self.prev_update.lock().ok()?.as_ref().map(|(_, b)| b.ray_count))
+    }
+
     /// Whether update batches keep the field on the device.
     pub fn keeps_field(&self) -> bool {
         self.keep_field
@@ -389,11 +396,15 @@ impl WgpuProbeTracer {
             return Ok(None);
         }
         let n = batch.len() as u32;
-        let spare = self.spare_batch.lock().ok().and_then(|mut s| s.take_if(|b| b.reusable_for(n, false)));
-        let out = match spare {
-            Some(batch) => batch,
+        let mut spare = self.spare_batch.lock().map_err(|_| GpuError::Input("a GPU pass panicked".into()))?;
+        let out = match spare.take() {
+            Some(batch) if batch.reusable_for(n, false) => batch.reused_for(n),
+            // A batch of another size: the field's batches change size from
+            // frame to frame (the screen scheme's), so leave room for more.
+            Some(_) => self.trace.empty_batch_holding(&self.ctx, n, n.saturating_add(n / 4), false)?,
             None => self.trace.empty_batch(&self.ctx, n, false)?,
         };
+        drop(spare);
         for g in &batch.generated {
             let probes = batch.probes.get(g.first_probe as usize..(g.first_probe + g.probe_count) as usize);
             let Some(probes) = probes.filter(|p| p.iter().all(|p| p.ray_count == g.rays_per_probe)) else {

@@ -39,7 +39,7 @@ use std::sync::Arc;
 
 use glam::{UVec3, Vec3};
 use probegi_core::camera::{Camera, CameraRays};
-use probegi_core::ddgi_settings::DdgiVolumeSettings;
+use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::image::Image;
 use probegi_cpu::DirectSettings;
 use probegi_field::{ProbeBatchTracer, ProbeTracerHandle};
@@ -208,6 +208,45 @@ fn a_steady_frame_waits_for_nothing_and_reads_back_no_pixel() {
     assert_eq!(total(&per_size[0]) % 6, 0, "six frames' readouts of one size");
     assert!(total(&per_size[1]) < 6 * 4 * 1024, "no pixel comes back: {}", total(&per_size[1]));
     assert_eq!(per_size[0][0].submissions, per_size[1][0].submissions);
+}
+
+/// Under the screen scheme (the cascades' default) a still camera's field
+/// traces the probes whose request countdowns ran out, so its batch changes
+/// size from frame to frame: the batches, buffers and bind groups of the
+/// frames before serve it anyway (a batch holds up to twice its rays, a kept
+/// input up to twice its bytes), and a steady frame makes none.
+#[test]
+fn a_screen_scheme_frame_makes_no_batch_buffer_or_bind_group_while_its_batch_size_moves() {
+    let scene = probegi_scene::builtin::cornell_box();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let Some(gpu) = tracer(&scene, true) else { return };
+    let mut s = settings(32, 0, Vec::new(), &gpu);
+    if let GiMethod::Ddgi(v) = &mut s.gi {
+        v.probe_states = ProbeStatesMode::Screen;
+    }
+    s.device_readback_lag_frames = 2;
+    let camera = CameraRays::new(&scene.camera.expect("camera"), 32, 32);
+    let mut stepper = FrameStepper::new(&scene, &bvh, &camera, &s);
+    for _ in 0..24 {
+        stepper.advance(&camera).expect("frame");
+    }
+    let (mut sizes, mut frames) = (Vec::new(), Vec::new());
+    for _ in 0..12 {
+        let before = gpu.ctx.counters();
+        stepper.advance(&camera).expect("frame");
+        frames.push(gpu.ctx.counters() - before);
+        sizes.push(gpu.last_batch_rays().expect("a batch on the device"));
+    }
+    eprintln!("batch rays {sizes:?}");
+    sizes.sort_unstable();
+    sizes.dedup();
+    assert!(sizes.len() >= 2, "the batch kept its size, so this test shows nothing: {sizes:?}");
+    for c in &frames {
+        assert_eq!(c.submissions, 1, "one submission a frame: {c:?}");
+        assert_eq!(c.ray_batches_made, 0, "a steady frame allocated a ray batch: {c:?}");
+        assert_eq!(c.buffers_made, 0, "a steady frame made buffers: {c:?}");
+        assert_eq!(c.bind_groups_made, 0, "a steady frame made bind groups: {c:?}");
+    }
 }
 
 /// The device's tone map (`read_rgba8`, the frame compose pass) is
