@@ -54,9 +54,6 @@ pub struct GpuContext {
     pending: std::sync::Mutex<Option<Vec<wgpu::CommandBuffer>>>,
     /// The last submission made to the queue.
     last_submission: std::sync::Mutex<Option<wgpu::SubmissionIndex>>,
-    /// [`GpuContext::buffer_kept`]'s buffers: per (label, key), the contents
-    /// the device holds and the buffer holding them.
-    kept: std::sync::Mutex<std::collections::HashMap<(&'static str, u64), KeptBuffer>>,
     /// [`GpuContext::buffer_rewritten`]'s and [`GpuContext::scratch_buffer`]'s
     /// buffers, per (label, key).
     frame_buffers: std::sync::Mutex<std::collections::HashMap<(&'static str, u64), FrameBuffer>>,
@@ -89,14 +86,6 @@ struct KeptBindGroup {
 /// (`WgpuProbeTracer::spare_batch`). No more: a kept bind group keeps the
 /// buffers it binds alive, and these two are the batches the tracer holds anyway.
 const KEPT_BIND_GROUPS: usize = 2;
-
-/// A buffer [`GpuContext::buffer_kept`] made, with a host copy of its contents
-/// and its usage, to hand it out again while a pass's inputs repeat.
-struct KeptBuffer {
-    contents: Vec<u8>,
-    usage: wgpu::BufferUsages,
-    buffer: wgpu::Buffer,
-}
 
 /// Bytes uploaded (buffers made from host data, queue writes) and read back,
 /// counted where every pass moves them: [`GpuContext::buffer_with`],
@@ -131,7 +120,7 @@ pub struct GpuCounters {
     /// Bytes read back to the host.
     pub bytes_down: u64,
     /// Bytes a pass would have uploaded but the device already held
-    /// ([`GpuContext::buffer_kept`]: its inputs repeated the last frame's).
+    /// ([`GpuContext::buffer_rewritten`]: its inputs repeated the last frame's).
     pub bytes_kept: u64,
     /// Wall milliseconds the host spent blocked in those waits and inside submissions.
     pub wait_ms: f64,
@@ -206,7 +195,6 @@ impl GpuContext {
             transfers: TransferCounts::default(),
             pending: Default::default(),
             last_submission: Default::default(),
-            kept: Default::default(),
             frame_buffers: Default::default(),
             bind_groups: Default::default(),
         })
@@ -241,7 +229,6 @@ impl GpuContext {
             transfers: TransferCounts::default(),
             pending: Default::default(),
             last_submission: Default::default(),
-            kept: Default::default(),
             frame_buffers: Default::default(),
             bind_groups: Default::default(),
         }
@@ -440,31 +427,6 @@ impl GpuContext {
         self.transfers.up.fetch_add(contents.len() as u64, std::sync::atomic::Ordering::Relaxed);
         self.transfers.buffers.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
-    }
-
-    /// A buffer holding `contents`, for a pass whose inputs mostly repeat from
-    /// frame to frame (the per-probe records of a field in a still scene): the
-    /// buffer made for `(label, key)` last time when it holds these very bytes
-    /// with this usage (nothing uploaded; counted as kept), else a new one
-    /// (counted as uploaded) that replaces it. A buffer is never written after
-    /// it is made, so a pass recorded earlier keeps the contents it was given.
-    /// `key` tells apart the calls one pass makes in a frame (a volume's
-    /// index), so their number stays bounded.
-    pub(crate) fn buffer_kept(
-        &self,
-        label: &'static str,
-        key: u64,
-        contents: &[u8],
-        usage: wgpu::BufferUsages,
-    ) -> wgpu::Buffer {
-        let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(k) = kept.get(&(label, key)).filter(|k| k.usage == usage && k.contents == contents) {
-            self.count_kept(contents.len() as u64);
-            return k.buffer.clone();
-        }
-        let buffer = self.buffer_with(label, contents, usage);
-        kept.insert((label, key), KeptBuffer { contents: contents.to_vec(), usage, buffer: buffer.clone() });
-        buffer
     }
 
     /// Writes `data` into `buffer` at `offset` (counted as uploaded): through

@@ -316,7 +316,8 @@ impl GpuProbeBlend {
         let per_probe = ctx.buffer_rewritten("probe blend", key, bytemuck::cast_slice(&per_probe), storage);
         let texel_dirs: Vec<[f32; 4]> =
             texel_directions(ni).into_iter().chain(texel_directions(nd)).map(|d| d.extend(0.0).into()).collect();
-        let texel_dirs = ctx.buffer_kept("blend texel directions", key, bytemuck::cast_slice(&texel_dirs), storage);
+        let texel_dirs =
+            ctx.buffer_rewritten("blend texel directions", key, bytemuck::cast_slice(&texel_dirs), storage);
         let ray_dirs: Vec<[f32; 4]> = plan.ray_dirs.iter().map(|d| d.extend(0.0).into()).collect();
         let ray_dirs = ctx.buffer_rewritten("blend ray directions", key, bytemuck::cast_slice(&ray_dirs), storage);
         let buffers = [

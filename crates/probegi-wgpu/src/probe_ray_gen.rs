@@ -104,7 +104,7 @@ impl GpuProbeRayGen {
     }
 
     /// As [`Self::generate_into`]; with `kept` (a volume's index), the probe
-    /// records are [`GpuContext::buffer_kept`]'s under that key: a still
+    /// records are [`GpuContext::buffer_rewritten`]'s under that key: a still
     /// volume's update uploads none of them after its first frame.
     pub(crate) fn generate_kept(
         &self,

@@ -456,9 +456,9 @@ fn a_still_field_on_the_device_uploads_no_per_probe_record_again() {
     // still scene: once the probes' states have settled, each update's
     // per-probe records (ray generation, shading, blend plan, the query's
     // offsets and flags) repeat the last frame's, and the device keeps them
-    // (`GpuContext::buffer_kept`): what goes up is the passes' parameter
-    // blocks and the blend's texel-to-ray weights, which turn with the
-    // frame's rays (7 KB at 16 rays), where it was 16 bytes a probe for each
+    // (`GpuContext::buffer_rewritten`): what goes up is the passes' parameter
+    // blocks and the blend's ray directions, which turn with the frame's
+    // rays, where it was 16 bytes a probe for each
     // record (110 KB a frame here). The start-up ramp's cap is a parameter, so this holds from the
     // second frame on, ramp or not.
     let scene = probegi_scene::builtin::cornell_box();
