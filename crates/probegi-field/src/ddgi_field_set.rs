@@ -121,6 +121,10 @@ pub struct DdgiFieldSet {
     shadow_lights: Vec<probegi_scene::PunctualLight>,
     /// A device casts and blends the shadowing field's rays ([`Self::set_shadow_on_device`]).
     shadow_on_device: bool,
+    /// A still field's update keeps the last plan ([`Self::set_steady_plans`]).
+    steady_plans: bool,
+    /// The current update kept the last one's plan (`ddgi_volume::steady_frames`).
+    plan_kept: bool,
 }
 
 impl DdgiFieldSet {
@@ -167,6 +171,8 @@ impl DdgiFieldSet {
             update_rays_on_device: false,
             shadow_lights: Vec::new(),
             shadow_on_device: false,
+            steady_plans: true,
+            plan_kept: false,
         }
     }
 
@@ -390,6 +396,22 @@ impl DdgiFieldSet {
         self.update_rays_on_device = on_device;
     }
 
+    /// With `keep` (the default), an update whose every volume is as it was
+    /// when the last update was planned keeps that plan, its batch and its
+    /// blend plan, with the frame's ray rotation (`ddgi_volume::steady_frames`:
+    /// the host then visits no probe to plan or classify it). Only where a
+    /// device makes the rays ([`Self::set_update_rays_on_device`]), with no
+    /// host shadow rays. Without, every update is planned in full; both give
+    /// the same batches, plans and counters.
+    pub fn set_steady_plans(&mut self, keep: bool) {
+        self.steady_plans = keep;
+    }
+
+    /// Whether the current (or last) update kept the plan before it.
+    pub fn update_kept_plan(&self) -> bool {
+        self.plan_kept
+    }
+
     /// Fills the current batch's per-ray arrays where it was planned without
     /// them ([`Self::set_update_rays_on_device`]); the rays equal the host
     /// plan's bit for bit.
@@ -402,6 +424,7 @@ impl DdgiFieldSet {
         self.seed = seed;
         self.frame = frame;
         self.init_round = 0;
+        self.plan_kept = false;
         self.expected = UpdateStep::Done;
         self.last_scrolled_in = match self.pending_target_m.take() {
             Some(t) => self.set_tracking_target(t),
@@ -427,6 +450,9 @@ impl DdgiFieldSet {
             let pending: Vec<usize> = (0..self.volumes.len()).filter(|&i| self.volumes[i].needs_init()).collect();
             if pending.is_empty() {
                 break;
+            }
+            for &i in &pending {
+                self.volumes[i].forget_plan_snapshot(&mut self.frames[i]);
             }
             // A device that makes the update rays makes these too (no per-ray
             // arrays; a host trace fills them first).
@@ -457,6 +483,10 @@ impl DdgiFieldSet {
             }
             self.init_round += 1;
         }
+        if self.keep_steady_plan() {
+            self.expected = UpdateStep::TraceRays;
+            return UpdateStep::TraceRays;
+        }
         // Shadow rays are made on the host: a batch with them keeps per-ray arrays.
         let per_ray = !self.update_rays_on_device || self.has_host_shadow_rays();
         self.batch.clear(ProbeRayBatchKind::Update, per_ray);
@@ -471,10 +501,43 @@ impl DdgiFieldSet {
         for i in 0..self.volumes.len() {
             self.volumes[i].plan_shadow_rays(&mut self.frames[i], lights, &mut self.batch);
         }
+        // (Kept whether or not the set keeps steady plans: the volumes stay
+        // the same either way.)
+        for (v, f) in self.volumes.iter_mut().zip(&mut self.frames) {
+            match !per_ray {
+                true => v.keep_plan_snapshot(f),
+                false => v.forget_plan_snapshot(f),
+            }
+        }
         self.last_batch_rays = self.batch.len() as u64;
         self.last_batch_rays_per_volume = self.batch.rays_per_volume(self.volumes.len());
         self.expected = UpdateStep::TraceRays;
         UpdateStep::TraceRays
+    }
+
+    /// Keeps the last update's plan for this frame where every volume is
+    /// as it was when that plan was made (`ddgi_volume::steady_frames`): the
+    /// batch's probes and first rays stay, its rays take the frame's rotation,
+    /// and each volume counts its probes' untraced frames. Returns whether it
+    /// did.
+    fn keep_steady_plan(&mut self) -> bool {
+        let kept = self.steady_plans
+            && self.update_rays_on_device
+            && !self.has_host_shadow_rays()
+            && self.ray_budget() == 0
+            && self.batch.kind == ProbeRayBatchKind::Update
+            && !self.batch.planned_with_ray_arrays()
+            && self.batch.generated.iter().map(|g| g.volume as usize).eq(0..self.volumes.len())
+            && self.volumes.iter().zip(&self.frames).all(|(v, f)| v.plan_is_steady(f));
+        self.plan_kept = kept;
+        if !kept {
+            return false;
+        }
+        for (i, (v, f)) in self.volumes.iter_mut().zip(&mut self.frames).enumerate() {
+            self.batch.generated[i].rotation = v.plan_steady_update(f, self.seed, self.frame);
+        }
+        self.batch.renew_rays();
+        true
     }
 
     /// The set's ray budget: the largest `ray_budget` of its volumes (0: none).
@@ -803,7 +866,10 @@ impl DdgiFieldSet {
         for ((v, f), counts) in self.volumes.iter_mut().zip(&mut self.frames).zip(&per_volume) {
             v.accept_device_hits(f, self.frame, counts);
         }
-        self.mark_probes_needing_radiance();
+        if !self.plan_kept {
+            // A kept plan's batch kept them.
+            self.mark_probes_needing_radiance();
+        }
         self.time("classify", t);
         self.expected = UpdateStep::ShadeRays;
         Ok(UpdateStep::ShadeRays)
@@ -834,6 +900,10 @@ impl DdgiFieldSet {
             }
         }
         for i in 0..self.volumes.len() {
+            if self.plan_kept {
+                self.volumes[i].accept_steady_blend(&self.frames[i]);
+                continue;
+            }
             self.volumes[i].accept_device_blend(&self.frames[i], &self.shadow_lights, change(i));
             self.volumes[i].record_shadow_batch(&self.frames[i], self.frame);
         }

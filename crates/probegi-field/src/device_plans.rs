@@ -7,6 +7,14 @@ use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::probe_classification::ClassificationProbe;
 use probegi_core::probe_grid::ProbeGrid;
 
+/// A new plan identity (`DeviceVolumeBlend::probe_blend_id`,
+/// `GeneratedProbeRays::plan_id`): unique in the process, so two sets (or
+/// two frames of one) never share one by chance.
+pub(crate) fn next_plan_id() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+}
+
 /// One volume's share of an update blended on another device (see
 /// `DdgiFieldSet::device_blend_plan`): what `blend_results` would do, as data.
 #[derive(Clone, Debug)]
@@ -20,7 +28,12 @@ pub struct DeviceVolumeBlend<'a> {
     /// Per probe: its first ray in the batch and its blend hysteresis (before the
     /// start-up cap and the scene-event scales), or `None` when it does not
     /// blend this frame.
-    pub probe_blend: Vec<Option<(u32, f32)>>,
+    pub probe_blend: std::borrow::Cow<'a, [Option<(u32, f32)>]>,
+    /// An identity of `probe_blend` (`device_plans::next_plan_id`): plans with the
+    /// same `Some` id have the same entries (a steady frame's kept plan,
+    /// `ddgi_volume::steady_frames`), so a device may keep what it made of
+    /// them; `None`: made for this frame alone.
+    pub probe_blend_id: Option<u64>,
     /// The start-up ramp's cap on every probe's hysteresis this frame
     /// (`probe_hysteresis_startup_ramp`; 1: none). The device blends with the
     /// smaller of it and the probe's own, so `probe_blend`'s entries repeat

@@ -84,6 +84,11 @@ pub struct GeneratedProbeRays {
     pub rotation: glam::Quat,
     /// Hits beyond this distance are misses (the volume's trace limit).
     pub max_distance_m: f32,
+    /// The records' identity (`device_plans::next_plan_id`): two batches whose
+    /// entries carry the same id hold the same probes, origins, first rays and
+    /// counts for it (a steady frame keeps them; the rotation may turn), so a
+    /// device may keep what it made of them.
+    pub plan_id: u64,
 }
 
 /// One frame's probe rays for every volume: structure of arrays, probe-major.
@@ -213,6 +218,22 @@ impl ProbeRayBatch {
         self.generated.clear();
         self.ray_count = 0;
         self.ray_arrays = ray_arrays;
+    }
+
+    /// A kept update plan's next frame (`ddgi_volume::steady_frames`): the
+    /// same probes and first rays, the per-ray arrays and the rays to shade
+    /// dropped (the rotation turned), `probe_needs_radiance` kept.
+    pub(crate) fn renew_rays(&mut self) {
+        debug_assert!(!self.ray_arrays && self.kind == ProbeRayBatchKind::Update);
+        self.origins_m.clear();
+        self.directions.clear();
+        self.max_distances_m.clear();
+        self.needs_radiance.clear();
+    }
+
+    /// Whether the batch was planned with per-ray arrays (a host makes the rays).
+    pub(crate) fn planned_with_ray_arrays(&self) -> bool {
+        self.ray_arrays
     }
 
     /// Appends rays that belong to no probe entry (the shadow field's shadow

@@ -72,6 +72,9 @@ struct FrameBuffer {
     /// The queue submissions made when it was last handed out: a pass recorded
     /// since then, not yet submitted, may still read what it holds.
     handed_out_at: u64,
+    /// The identity of the contents, where they were written from one
+    /// ([`GpuContext::buffer_identified`]).
+    id: Option<u64>,
 }
 
 /// A bind group [`GpuContext::bind_group_kept`] made, with what it binds.
@@ -501,6 +504,7 @@ impl GpuContext {
             if k.handed_out_at != now {
                 self.transfers.up.fetch_add(contents.len() as u64, std::sync::atomic::Ordering::Relaxed);
                 self.queue.write_buffer(&k.buffer, 0, contents);
+                k.id = None;
                 k.contents.clear();
                 k.contents.extend_from_slice(contents);
                 k.handed_out_at = now;
@@ -512,8 +516,40 @@ impl GpuContext {
         let mut padded = contents.to_vec();
         padded.resize(size as usize, 0);
         let buffer = self.buffer_with(label, &padded, usage);
-        let entry = FrameBuffer { buffer: buffer.clone(), usage, contents: contents.to_vec(), handed_out_at: now };
+        let entry =
+            FrameBuffer { buffer: buffer.clone(), usage, contents: contents.to_vec(), handed_out_at: now, id: None };
         kept.insert((label, key), entry);
+        buffer
+    }
+
+    /// [`Self::buffer_rewritten`] for contents with an identity `id` (a
+    /// field's kept plan: `probegi_field::device_plans::DeviceVolumeBlend::probe_blend_id`,
+    /// `GeneratedProbeRays::plan_id`; equal ids, equal contents): where the
+    /// buffer kept under `(label, key)` was last written from `id`, it holds
+    /// them already, and `contents` is not called (the host packs and
+    /// compares nothing); else `buffer_rewritten` of `contents()`.
+    pub(crate) fn buffer_identified(
+        &self,
+        label: &'static str,
+        key: u64,
+        id: Option<u64>,
+        contents: impl FnOnce() -> Vec<u8>,
+        usage: wgpu::BufferUsages,
+    ) -> wgpu::Buffer {
+        let with_dst = usage | wgpu::BufferUsages::COPY_DST;
+        if let Some(id) = id {
+            let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
+            if let Some(k) = kept.get_mut(&(label, key)).filter(|k| k.id == Some(id) && k.usage == with_dst) {
+                self.count_kept(k.contents.len() as u64);
+                k.handed_out_at = self.queue_submissions();
+                return k.buffer.clone();
+            }
+        }
+        let buffer = self.buffer_rewritten(label, key, &contents(), usage);
+        let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(k) = kept.get_mut(&(label, key)) {
+            k.id = id;
+        }
         buffer
     }
 
@@ -542,7 +578,7 @@ impl GpuContext {
             usage,
             mapped_at_creation: false,
         });
-        let entry = FrameBuffer { buffer: buffer.clone(), usage, contents: Vec::new(), handed_out_at: 0 };
+        let entry = FrameBuffer { buffer: buffer.clone(), usage, contents: Vec::new(), handed_out_at: 0, id: None };
         kept.insert((label, key), entry);
         buffer
     }

@@ -258,6 +258,7 @@ impl GpuProbeBlend {
             settings: frame.settings,
             ray_dirs: frame.ray_dirs,
             probe_blend: (0..probes).map(|p| frame.probe_hysteresis[p].map(|h| ((p * rays) as u32, h))).collect(),
+            probe_blend_id: None,
             hysteresis_cap: 1.0,
             irradiance_scale: frame.irradiance_scale,
             visibility_scale: frame.visibility_scale,
@@ -293,15 +294,16 @@ impl GpuProbeBlend {
         let params = blend_params(atlases, plan, per_row);
         let weight_count = params.weight_count;
         let frames = |p: usize| plan.probe_blend_frames.get(p).copied().unwrap_or(1).max(1);
-        let per_probe: Vec<[u32; 4]> = plan
-            .probe_blend
-            .iter()
-            .enumerate()
-            .map(|(p, b)| match b {
+        let per_probe = || -> Vec<u8> {
+            let entries = plan.probe_blend.iter().enumerate().map(|(p, b)| match b {
                 Some((first, h)) => [*first, h.max(0.0).to_bits(), frames(p), 0],
                 None => [0, (-1.0f32).to_bits(), 1, 0],
-            })
-            .collect();
+            });
+            entries.flat_map(bytemuck::cast::<[u32; 4], [u8; 16]>).collect()
+        };
+        // A kept plan's entries (the same id) are packed once; its frame
+        // counts are 1 (a kept plan has none).
+        let per_probe_id = plan.probe_blend_id.filter(|_| plan.probe_blend_frames.is_empty());
         let storage = wgpu::BufferUsages::STORAGE;
         // Kept per volume, by where its atlas starts, and rewritten in place:
         // the uniform block, the per-probe entries (which repeat for a still
@@ -313,7 +315,7 @@ impl GpuProbeBlend {
         let params =
             ctx.buffer_rewritten("blend params", key, bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let weights = ctx.scratch_buffer("blend weights", key, weight_count.max(4) as u64 * 4, storage);
-        let per_probe = ctx.buffer_rewritten("probe blend", key, bytemuck::cast_slice(&per_probe), storage);
+        let per_probe = ctx.buffer_identified("probe blend", key, per_probe_id, per_probe, storage);
         let texel_dirs: Vec<[f32; 4]> =
             texel_directions(ni).into_iter().chain(texel_directions(nd)).map(|d| d.extend(0.0).into()).collect();
         let texel_dirs =

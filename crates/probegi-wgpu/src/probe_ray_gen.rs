@@ -103,15 +103,17 @@ impl GpuProbeRayGen {
         self.generate_kept(ctx, batch, rays, None, timer)
     }
 
-    /// As [`Self::generate_into`]; with `kept` (a volume's index), the probe
-    /// records are [`GpuContext::buffer_rewritten`]'s under that key: a still
-    /// volume's update uploads none of them after its first frame.
+    /// As [`Self::generate_into`]; with `kept` (a key per volume, and the
+    /// records' identity, `GeneratedProbeRays::plan_id`), the probe records
+    /// are [`GpuContext::buffer_identified`]'s under that key: a still
+    /// volume's update uploads none of them after its first frame, and a kept
+    /// plan's (the same id) packs and compares none either.
     pub(crate) fn generate_kept(
         &self,
         ctx: &GpuContext,
         batch: &GpuRayBatch,
         rays: RayGenRays<'_>,
-        kept: Option<u64>,
+        kept: Option<(u64, u64)>,
         timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
     ) -> Result<(), GpuError> {
         let RayGenRays { first_ray, origins, max_distance_m, rotation, rays_per_probe } = rays;
@@ -135,20 +137,22 @@ impl GpuProbeRayGen {
             first_ray,
         };
         let t_max = max_distance_m.min(f32::MAX);
-        let probes: Vec<[f32; 4]> = origins.iter().map(|o| [o.x, o.y, o.z, t_max]).collect();
-        let (probes, usage) = (bytemuck::cast_slice(&probes), wgpu::BufferUsages::STORAGE);
+        let records = || -> Vec<u8> {
+            origins.iter().flat_map(|o| bytemuck::cast::<[f32; 4], [u8; 16]>([o.x, o.y, o.z, t_max])).collect()
+        };
+        let usage = wgpu::BufferUsages::STORAGE;
         let params = bytemuck::bytes_of(&params);
         let bind_group = match kept {
             // A still volume's update: its records, uniform block and bind
             // group are the ones of the frame before (two batches alternate).
-            Some(key) => {
+            Some((key, id)) => {
                 let params = ctx.buffer_rewritten("ray gen params", key, params, wgpu::BufferUsages::UNIFORM);
-                let probes = ctx.buffer_rewritten("ray gen probes", key, probes, usage);
+                let probes = ctx.buffer_identified("ray gen probes", key, Some(id), records, usage);
                 ctx.bind_group_kept("probe ray gen", key, &self.layout, &[&params, &probes, batch.rays_buffer()])
             }
             None => {
                 let params = ctx.buffer_with("ray gen params", params, wgpu::BufferUsages::UNIFORM);
-                let probes = ctx.buffer_with("ray gen probes", probes, usage);
+                let probes = ctx.buffer_with("ray gen probes", &records(), usage);
                 crate::gpu_context::buffers_bind_group(
                     ctx,
                     "probe ray gen",

@@ -427,7 +427,7 @@ impl WgpuProbeTracer {
             // Kept per volume and batch kind: an update's records repeat while
             // the volume's probes and states stay as they are.
             let key = (g.volume as u64) << 1 | (batch.kind == probegi_field::seam::ProbeRayBatchKind::Update) as u64;
-            ray_gen.generate_kept(&self.ctx, &out, rays, Some(key), None)?;
+            ray_gen.generate_kept(&self.ctx, &out, rays, Some((key, g.plan_id)), None)?;
         }
         Ok(Some(out))
     }

@@ -177,14 +177,13 @@ impl DdgiVolume {
 
     /// [`Self::blend_plan`], its hysteresis capped by the start-up ramp or
     /// (`startup_cap` false) not yet.
-    fn blend_plan_with(&self, frame: &VolumeFrame, startup_cap: bool) -> (Vec<Option<(usize, f32)>>, f32, f32) {
+    pub(super) fn blend_plan_with(
+        &self,
+        frame: &VolumeFrame,
+        startup_cap: bool,
+    ) -> (Vec<Option<(usize, f32)>>, f32, f32) {
         let cap = if startup_cap { self.startup_hysteresis_cap() } else { 1.0 };
-        let event_scale = |events: &[HysteresisReduction]| events.iter().map(|e| e.scale).product::<f32>();
-        let (irr_scale, vis_scale) = if self.settings.probe_fast_convergence {
-            (event_scale(&self.irradiance_events), event_scale(&self.visibility_events))
-        } else {
-            (1.0, 1.0)
-        };
+        let (irr_scale, vis_scale) = self.event_scales();
         let base = (0..self.grid.probe_count())
             .map(|p| {
                 let first = frame.first_ray[p];
@@ -212,6 +211,17 @@ impl DdgiVolume {
         (base, irr_scale, vis_scale)
     }
 
+    /// The scene events' irradiance and visibility hysteresis scales now
+    /// (1 without `probe_fast_convergence`).
+    fn event_scales(&self) -> (f32, f32) {
+        let event_scale = |events: &[HysteresisReduction]| events.iter().map(|e| e.scale).product::<f32>();
+        if self.settings.probe_fast_convergence {
+            (event_scale(&self.irradiance_events), event_scale(&self.visibility_events))
+        } else {
+            (1.0, 1.0)
+        }
+    }
+
     /// This frame's blend as data, for a device that holds the atlases.
     pub(crate) fn device_blend<'a>(
         &'a self,
@@ -220,17 +230,27 @@ impl DdgiVolume {
     ) -> DeviceVolumeBlend<'a> {
         // The start-up cap goes apart (`DeviceVolumeBlend::hysteresis_cap`);
         // the shadowing field's plan takes it in.
-        let (base, irradiance_scale, visibility_scale) = self.blend_plan_with(frame, false);
+        let (irradiance_scale, visibility_scale) = self.event_scales();
         let hysteresis_cap = self.startup_hysteresis_cap();
-        let shadow = self.shadow.is_some().then(|| {
-            let capped: Vec<_> = base.iter().map(|b| b.map(|(first, h)| (first, h.min(hysteresis_cap)))).collect();
-            self.device_shadow_blend(&shadow_base(&capped, irradiance_scale, &self.blend_frames(frame)), lights)
-        });
+        let (probe_blend, shadow) = match &frame.steady_blend {
+            // A steady frame's plan is the one kept (`steady_frames`).
+            Some(kept) => (std::borrow::Cow::Borrowed(kept.as_slice()), None),
+            None => {
+                let (base, _, _) = self.blend_plan_with(frame, false);
+                let shadow = self.shadow.is_some().then(|| {
+                    let capped: Vec<_> =
+                        base.iter().map(|b| b.map(|(first, h)| (first, h.min(hysteresis_cap)))).collect();
+                    self.device_shadow_blend(&shadow_base(&capped, irradiance_scale, &self.blend_frames(frame)), lights)
+                });
+                (base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect(), shadow.flatten())
+            }
+        };
         DeviceVolumeBlend {
-            shadow: shadow.flatten(),
+            shadow,
             settings: &self.settings,
             ray_dirs: &frame.rays.dirs,
-            probe_blend: base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect(),
+            probe_blend,
+            probe_blend_id: frame.steady_blend.as_ref().map(|_| frame.steady_blend_id),
             hysteresis_cap,
             irradiance_scale,
             visibility_scale,
@@ -288,6 +308,11 @@ impl DdgiVolume {
             self.probe_states[p] = state;
         }
         self.refresh_usable();
+        self.tick_scene_events();
+    }
+
+    /// One update less for each scene event's hysteresis reduction.
+    pub(super) fn tick_scene_events(&mut self) {
         for events in [&mut self.irradiance_events, &mut self.visibility_events] {
             for e in events.iter_mut() {
                 e.frames_left = e.frames_left.saturating_sub(1);

@@ -13,7 +13,9 @@
 //!   (seed 004 §4.1), the blend and the borders;
 //! - `screen_requests`: the screen scheme's countdowns from the camera frame's
 //!   requests, and which probes trace in a frame;
-//! - `scrolling`: a tracking window's whole-cell move over the circular buffer.
+//! - `scrolling`: a tracking window's whole-cell move over the circular buffer;
+//! - `steady_frames`: a still volume's plan kept from frame to frame, its
+//!   probes' counters counted without planning them again.
 //!
 //! A probe's first update (and a Newly Awake / Newly Vigilant probe's, and a
 //! scrolled-in probe's) replaces its history, i.e. blends with hysteresis 0; until
@@ -35,6 +37,7 @@ mod probe_budget;
 mod screen_requests;
 mod scrolling;
 mod shadow_rays;
+mod steady_frames;
 mod update_plan;
 mod usage_states;
 
@@ -146,6 +149,9 @@ pub struct DdgiVolume {
     /// atlas (`probe_adaptive_hysteresis`; empty without it, sized at the
     /// first blend with it, from 0).
     irradiance_texel_hysteresis: Vec<f32>,
+    /// What the last full update plan read, where a later frame may keep
+    /// that plan (`steady_frames`).
+    plan_snapshot: Option<steady_frames::PlanSnapshot>,
 }
 
 /// One volume's per-frame scratch.
@@ -180,6 +186,11 @@ pub struct VolumeFrame {
     /// Screen scheme: per probe, the frames its blend stands for (empty
     /// under the other schemes; `screen_requests`).
     pub(crate) screen_blend_frames: Vec<u32>,
+    /// A steady frame's blend plan (`steady_frames`): per probe its first ray
+    /// and hysteresis, kept while the plan is; `None` after a full plan.
+    pub(crate) steady_blend: Option<Vec<Option<(u32, f32)>>>,
+    /// The kept blend plan's identity (`DeviceVolumeBlend::probe_blend_id`).
+    pub(crate) steady_blend_id: u64,
 }
 
 impl VolumeFrame {
@@ -262,6 +273,7 @@ impl DdgiVolume {
             probe_requested: vec![false; probes],
             probe_blends: vec![0; probes],
             irradiance_texel_hysteresis: Vec::new(),
+            plan_snapshot: None,
             settings,
         }
     }

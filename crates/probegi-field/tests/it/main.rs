@@ -5,4 +5,5 @@
 mod hysteresis_ramp;
 mod init_rounds;
 mod screen_requests;
+mod steady_frames;
 mod tracking_bounds;

@@ -1,0 +1,150 @@
+//! Steady frames: a still volume's update plan kept from one frame to the next
+//! (issue 45, "the host off the critical path").
+//!
+//! Under the all-active and jcgt schemes a probe's state decides alone
+//! whether it traces and blends, and a probe in a lasting state (Active, Off,
+//! Sleeping, Awake, Vigilant) that has blended before keeps its state,
+//! history and hysteresis through the update. So when a volume's plan inputs
+//! (states, histories, seeds, hysteresis, positions, grid, window edges,
+//! settings) are what they were when its last plan was made, this frame's plan
+//! is that plan with the frame's ray rotation: which probes trace, their
+//! first rays, which blend and with what hysteresis. The set then keeps its
+//! batch and the volume's blend plan, and the host visits no probe but to
+//! count the frames its counters count (`probe_budget`), instead of planning,
+//! classifying and bookkeeping each probe again.
+//!
+//! The check is a comparison with a snapshot taken at the last full plan, so
+//! any change, through the set or through the volume's public fields, makes
+//! the next plan a full one. Left out (always a full plan): the usage and
+//! screen schemes (their states move with the hits and the camera), a ray
+//! budget (its choice moves every frame), the shadowing field (its pairs of
+//! frames), the per-probe hysteresis ramp (a probe's cap moves with its
+//! blends), probes reset or seeded since the last blend, and Newly Awake /
+//! Newly Vigilant probes.
+
+use glam::{IVec3, Vec3};
+use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
+use probegi_core::probe_classification::ProbeState;
+use probegi_core::probe_grid::ProbeGrid;
+
+use super::{DdgiVolume, VolumeFrame};
+
+/// What a volume's update plan read when it was made (see the module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct PlanSnapshot {
+    states: Vec<ProbeState>,
+    has_history: Vec<bool>,
+    hysteresis: Vec<f32>,
+    positions: Vec<Vec3>,
+    grid: ProbeGrid,
+    scroll_leading: IVec3,
+    stream: u64,
+    settings: DdgiVolumeSettings,
+}
+
+/// A slice's bytes: floats compared bit for bit (stricter than `==`, and a
+/// memory comparison rather than one per float).
+fn bits<T: bytemuck::Pod>(values: &[T]) -> &[u8] {
+    bytemuck::cast_slice(values)
+}
+
+/// Whether a probe in `state` keeps it through an update, traces and blends
+/// on the same frames whatever the frame, and keeps its hysteresis.
+fn lasting(state: ProbeState) -> bool {
+    matches!(
+        state,
+        ProbeState::Active | ProbeState::Off | ProbeState::Sleeping | ProbeState::Awake | ProbeState::Vigilant
+    )
+}
+
+impl DdgiVolume {
+    /// The snapshot of the plan just made, where a later frame may reuse it
+    /// (`None` where the volume's scheme or state rules that out).
+    pub(crate) fn steady_snapshot(&self) -> Option<PlanSnapshot> {
+        let s = &self.settings;
+        let scheme = matches!(s.probe_states, ProbeStatesMode::AllActive | ProbeStatesMode::Jcgt);
+        let eligible = scheme
+            && self.initialized
+            && s.ray_budget == 0
+            && self.shadow.is_none()
+            && !s.probe_hysteresis_ramp
+            && self.probes_reset_since_blend.is_empty()
+            && self.pending_seeds.is_empty()
+            && !self.probe_seeded.iter().any(|s| *s)
+            && !self.probe_pending_init.iter().any(|p| *p)
+            && self.probe_states.iter().all(|s| lasting(*s));
+        eligible.then(|| PlanSnapshot {
+            states: self.probe_states.clone(),
+            has_history: self.probe_has_history.clone(),
+            hysteresis: self.probe_hysteresis.clone(),
+            positions: self.probe_positions.clone(),
+            grid: self.grid,
+            scroll_leading: self.scroll_leading,
+            stream: self.stream,
+            settings: self.settings.clone(),
+        })
+    }
+
+    /// Whether this frame's plan would be the last one's (with the frame's
+    /// rotation): the volume is as its snapshot says. (A probe whose first
+    /// blend was in that plan has a history now, and so differs from it.)
+    pub(crate) fn plan_is_steady(&self, frame: &VolumeFrame) -> bool {
+        let Some(snap) = self.plan_snapshot.as_ref() else { return false };
+        let unchanged = snap.states == self.probe_states
+            && snap.has_history == self.probe_has_history
+            && bits(&snap.hysteresis) == bits(&self.probe_hysteresis)
+            && bits(&snap.positions) == bits(&self.probe_positions)
+            && snap.grid == self.grid
+            && snap.scroll_leading == self.scroll_leading
+            && snap.stream == self.stream
+            && snap.settings == self.settings;
+        unchanged
+            && self.probes_reset_since_blend.is_empty()
+            && self.pending_seeds.is_empty()
+            && frame.first_ray.len() == self.grid.probe_count()
+    }
+
+    /// Forgets the snapshot (and `frame`'s kept blend plan): the next plan
+    /// is a full one.
+    pub(crate) fn forget_plan_snapshot(&mut self, frame: &mut VolumeFrame) {
+        self.plan_snapshot = None;
+        frame.steady_blend = None;
+    }
+
+    /// Takes the snapshot of the plan just made (or none).
+    pub(crate) fn keep_plan_snapshot(&mut self, frame: &mut VolumeFrame) {
+        self.plan_snapshot = self.steady_snapshot();
+        frame.steady_blend = None;
+    }
+
+    /// A steady frame's plan: the frame's rays (the rotation turns every
+    /// frame) and the frames since each probe traced, with the last plan's
+    /// tracing probes, first rays and blends. Returns the frame's rotation.
+    pub(crate) fn plan_steady_update(&mut self, frame: &mut VolumeFrame, seed: u64, frame_index: u32) -> glam::Quat {
+        let stream = self.stream_seed(seed);
+        frame.rays = crate::probe_ray_gen::generate_probe_rays(&self.settings, stream, frame_index);
+        debug_assert_eq!(frame.ray_count, frame.rays.dirs.len());
+        self.count_untraced_frames(frame);
+        if frame.steady_blend.is_none() {
+            let (base, _, _) = self.blend_plan_with(frame, false);
+            frame.steady_blend = Some(base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect());
+            frame.steady_blend_id = crate::device_plans::next_plan_id();
+        }
+        crate::probe_ray_gen::probe_ray_rotation(stream, frame_index)
+    }
+
+    /// A steady frame's bookkeeping after its blend (`after_update`'s, where
+    /// no state, history or hysteresis moves): the blend counts, the frames a
+    /// probe waited, and the scene events' remaining frames.
+    pub(crate) fn accept_steady_blend(&mut self, frame: &VolumeFrame) {
+        self.frames_updated += 1;
+        let counts = self.probe_unblended_frames.iter_mut().zip(&mut self.probe_blends);
+        for ((n, b), (&active, &first)) in counts.zip(frame.active.iter().zip(&frame.first_ray)) {
+            // `VolumeFrame::blends`: active, and traced.
+            let blends = active && first != u32::MAX;
+            *n = if blends { 0 } else { n.saturating_add(active as u32) };
+            *b = b.saturating_add(blends as u32);
+        }
+        self.tick_scene_events();
+    }
+}

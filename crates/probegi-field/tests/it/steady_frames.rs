@@ -1,0 +1,133 @@
+//! `ddgi_volume::steady_frames`: a still field's update keeps the last plan,
+//! and gives the batches, blend plans and volumes the full plan gives, frame
+//! by frame, through scene events, woken probes, a settings change and a
+//! window that scrolls.
+
+use glam::{UVec3, Vec3};
+use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
+use probegi_field::ddgi_field_set::ProbeRayBatchKind;
+use probegi_field::{DdgiFieldSet, DdgiVolume, ProbeRayHit, SceneEvent, UpdateStep};
+
+/// Two volumes over a 4 m box: a tracking all-active window and a jcgt grid
+/// (every init ray a miss, so its probes sleep until woken).
+fn two_volumes(keep_plans: bool) -> DdgiFieldSet {
+    let window = DdgiVolumeSettings {
+        probe_counts: UVec3::new(4, 3, 4),
+        probe_rays_per_probe: 24,
+        probe_states: ProbeStatesMode::AllActive,
+        volume_tracks_camera: true,
+        probe_spacing_m: Some(Vec3::splat(0.5)),
+        ..Default::default()
+    };
+    let grid = DdgiVolumeSettings {
+        probe_counts: UVec3::new(5, 2, 4),
+        probe_rays_per_probe: 32,
+        probe_states: ProbeStatesMode::Jcgt,
+        ..Default::default()
+    };
+    let bounds = (Vec3::ZERO, Vec3::splat(4.0));
+    let camera = Vec3::splat(2.0);
+    let volumes = vec![DdgiVolume::placed(window, bounds, Some(camera)), DdgiVolume::new(grid, bounds)];
+    let mut set = DdgiFieldSet::from_volumes(volumes, Default::default(), Some(camera));
+    set.set_update_rays_on_device(true);
+    set.set_steady_plans(keep_plans);
+    set
+}
+
+/// One frame's batch and blend plan, printed (every field bit for bit but
+/// their identities), and the identities: each volume's ray records' and
+/// blend plan's.
+struct Update {
+    printed: String,
+    record_ids: Vec<u64>,
+    blend_ids: Vec<Option<u64>>,
+}
+
+/// One update as a device that keeps the hits and atlases drives it.
+fn device_update(set: &mut DdgiFieldSet, frame: u32) -> Update {
+    set.begin_update(9, frame);
+    while set.ray_batch().kind == ProbeRayBatchKind::Initialization {
+        let misses = vec![ProbeRayHit::MISS; set.ray_batch().len()];
+        set.submit_hits(&misses).expect("init round");
+    }
+    let b = set.ray_batch();
+    let generated: Vec<_> =
+        b.generated.iter().map(|g| (g.volume, g.first_probe, g.probe_count, g.rays_per_probe, g.rotation)).collect();
+    let batch = format!(
+        "{} {:?} {:?} {generated:?} {:?} {:?}",
+        b.len(),
+        b.probes,
+        b.probe_origins_m,
+        b.expanded().directions,
+        set.hits_needed_on_host()
+    );
+    let record_ids = b.generated.iter().map(|g| g.plan_id).collect();
+    assert_eq!(set.submit_device_hits(&[]), Ok(UpdateStep::ShadeRays));
+    let mut plan = set.device_blend_plan().expect("plan");
+    let blend_ids = plan.iter().map(|p| p.probe_blend_id).collect();
+    plan.iter_mut().for_each(|p| p.probe_blend_id = None);
+    let plan = format!("{:?} {plan:?}", set.ray_batch().probe_needs_radiance);
+    assert_eq!(set.submit_device_blend(&[]), Ok(UpdateStep::Done));
+    Update { printed: format!("{batch}\n{plan}"), record_ids, blend_ids }
+}
+
+#[test]
+fn a_kept_plan_gives_the_full_plans_batches_and_volumes_through_changes() {
+    let (mut kept, mut full) = (two_volumes(true), two_volumes(false));
+    let (mut kept_frames, mut last) = (Vec::new(), None);
+    for frame in 0..24u32 {
+        for set in [&mut kept, &mut full] {
+            match frame {
+                5 => set.notify_scene_event(SceneEvent::LargeLightChange),
+                // Probes of the jcgt grid wake (Newly Awake, then Awake).
+                8 => assert!(set.wake_probes_near(&[(Vec3::new(1.0, 0.5, 1.0), Vec3::new(1.5, 1.0, 1.5))]) > 0),
+                12 => set.volumes_mut()[1].settings.probe_hysteresis = 0.9,
+                // The window scrolls a plane in (initialisation rounds for it).
+                15 => assert!(set.set_tracking_target(Vec3::new(3.2, 2.0, 2.0)) > 0),
+                // The per-probe ramp reads every probe's blend count: none is kept from here.
+                20 => set.volumes_mut().iter_mut().for_each(|v| v.settings.probe_hysteresis_ramp = true),
+                _ => {}
+            }
+        }
+        let (a, b) = (device_update(&mut kept, frame), device_update(&mut full, frame));
+        assert_eq!(a.printed, b.printed, "frame {frame}: batch and blend plan");
+        assert_eq!(format!("{:?}", kept.volumes()), format!("{:?}", full.volumes()), "frame {frame}: volumes");
+        assert!(!full.update_kept_plan());
+        // A full plan's records and blend plan are new; a kept one's keep their ids.
+        assert!(b.blend_ids.iter().all(|id| id.is_none()));
+        let last_ids = last.replace((a.record_ids.clone(), a.blend_ids.clone()));
+        if kept.update_kept_plan() {
+            kept_frames.push(frame);
+            assert!(a.blend_ids.iter().all(|id| id.is_some()), "frame {frame}");
+            let (records, blends) = last_ids.expect("a frame before");
+            assert_eq!(a.record_ids, records, "frame {frame}");
+            assert!(blends.iter().all(|id| id.is_none()) || blends == a.blend_ids, "frame {frame}");
+        } else {
+            assert!(a.blend_ids.iter().all(|id| id.is_none()), "frame {frame}");
+            assert!(last_ids.is_none_or(|(records, _)| records.iter().all(|r| !a.record_ids.contains(r))));
+        }
+    }
+    // Frames 0 and 1 are first blends (a history begins); 8 and 9 wake probes
+    // (Newly Awake, then Awake), 12 changes a setting, 15 and 16 scroll and
+    // give the scrolled-in probes their first blend; from 20 the ramp is on.
+    let want: Vec<u32> = (2..20).filter(|f| ![8, 9, 12, 15, 16].contains(f)).collect();
+    assert_eq!(kept_frames, want);
+    assert!(kept.volumes()[1].state_counts().get("awake").is_some_and(|n| *n > 0));
+}
+
+#[test]
+fn a_kept_plan_needs_a_device_that_makes_the_rays() {
+    // A host that traces from per-ray arrays plans every frame in full.
+    let mut set = two_volumes(true);
+    set.set_update_rays_on_device(false);
+    for frame in 0..4 {
+        let mut step = set.begin_update(9, frame);
+        while step == UpdateStep::TraceRays {
+            let misses = vec![ProbeRayHit::MISS; set.ray_batch().len()];
+            step = set.submit_hits(&misses).expect("hits");
+        }
+        assert!(!set.update_kept_plan());
+        let radiance = vec![Vec3::ONE; set.ray_batch().len()];
+        assert_eq!(set.submit_radiance(&radiance), Ok(UpdateStep::Done));
+    }
+}
