@@ -190,11 +190,13 @@ const PIPELINED_MIN_FRAMES: u32 = 4;
 /// the update calls less any time blocked on the device (with lavapipe that
 /// includes the driver's own work inside a submission, counted as waiting),
 /// and `field_set_ms` the field set's own part of it ([`HOST_PLAN_PASS`]:
-/// planning and bookkeeping, no command recording), which `update` returns.
+/// planning and bookkeeping, no command recording), which `update` returns
+/// with whether the update kept the plan before it
+/// (`DdgiFieldSet::update_kept_plan`; `plans_kept`: the share that did).
 fn pipelined_json(
     gpu: &WgpuProbeTracer,
     frames: std::ops::RangeInclusive<u32>,
-    mut update: impl FnMut(u32) -> Result<f64>,
+    mut update: impl FnMut(u32) -> Result<(f64, bool)>,
     rays_per_frame: u64,
 ) -> Result<serde_json::Value> {
     let ctx = &gpu.ctx;
@@ -202,13 +204,15 @@ fn pipelined_json(
     ctx.wait()?;
     let before = ctx.counters();
     let (t, count) = (Instant::now(), frames.clone().count());
-    let (mut inside_ms, mut waited_in_ms, mut field_set_ms) = (0.0, 0.0, 0.0);
+    let (mut inside_ms, mut waited_in_ms, mut field_set_ms, mut kept) = (0.0, 0.0, 0.0, 0);
     for f in frames {
         let (t_update, waited) = (Instant::now(), ctx.counters().wait_ms);
         ctx.defer_submissions(true);
         let result = update(f);
         ctx.defer_submissions(false);
-        field_set_ms += result?;
+        let (ms, plan_kept) = result?;
+        field_set_ms += ms;
+        kept += plan_kept as u32;
         inside_ms += t_update.elapsed().as_secs_f64() * 1e3;
         waited_in_ms += ctx.counters().wait_ms - waited;
     }
@@ -223,6 +227,7 @@ fn pipelined_json(
         "mrays_per_s": rays_per_frame as f64 / (per(wall_ms) * 1e-3) / 1e6,
         "host_ms": per((inside_ms - waited_in_ms).max(0.0)),
         "field_set_ms": per(field_set_ms),
+        "plans_kept": per(kept as f64),
         "submissions": per(d.submissions as f64),
         "blocking_waits": per(d.blocking_waits as f64 - 1.0),
         "bytes_up": per(d.bytes_up as f64),
@@ -276,7 +281,7 @@ impl DdgiSweep<'_> {
                     let mut ms = BTreeMap::new();
                     set.update_traced_by(scene, bvh, batch_tracer, direct, args.seed, f, &mut ms)
                         .map_err(anyhow::Error::msg)?;
-                    Ok(ms.get(HOST_PLAN_PASS).copied().unwrap_or(0.0))
+                    Ok((ms.get(HOST_PLAN_PASS).copied().unwrap_or(0.0), set.update_kept_plan()))
                 };
                 pipelined_json(g, frames, update, rays)?
             }
