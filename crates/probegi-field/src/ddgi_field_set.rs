@@ -399,10 +399,13 @@ impl DdgiFieldSet {
     /// With `keep` (the default), an update whose every volume is as it was
     /// when the last update was planned keeps that plan, its batch and its
     /// blend plan, with the frame's ray rotation (`ddgi_volume::steady_frames`:
-    /// the host then visits no probe to plan or classify it). Only where a
-    /// device makes the rays ([`Self::set_update_rays_on_device`]), with no
-    /// host shadow rays. Without, every update is planned in full; both give
-    /// the same batches, plans and counters.
+    /// the host then visits no probe to plan or classify it; the kept batch
+    /// keeps its `probe_needs_radiance`). Only where a device makes the rays
+    /// ([`Self::set_update_rays_on_device`]), with no host shadow rays, and
+    /// after an update that was finished. Without, every update is planned in
+    /// full; both give the same batches, blend plans and volumes (but for the
+    /// plans' identities, `GeneratedProbeRays::plan_id` and
+    /// `DeviceVolumeBlend::probe_blend_id`).
     pub fn set_steady_plans(&mut self, keep: bool) {
         self.steady_plans = keep;
     }
@@ -425,6 +428,11 @@ impl DdgiFieldSet {
         self.frame = frame;
         self.init_round = 0;
         self.plan_kept = false;
+        if self.expected != UpdateStep::Done {
+            // The last update was left unfinished: its plan's blend never
+            // ran, so no later frame may keep that plan.
+            self.frames.iter_mut().for_each(DdgiVolume::forget_plan_snapshot);
+        }
         self.expected = UpdateStep::Done;
         self.last_scrolled_in = match self.pending_target_m.take() {
             Some(t) => self.set_tracking_target(t),
@@ -452,7 +460,7 @@ impl DdgiFieldSet {
                 break;
             }
             for &i in &pending {
-                self.volumes[i].forget_plan_snapshot(&mut self.frames[i]);
+                DdgiVolume::forget_plan_snapshot(&mut self.frames[i]);
             }
             // A device that makes the update rays makes these too (no per-ray
             // arrays; a host trace fills them first).
@@ -503,10 +511,10 @@ impl DdgiFieldSet {
         }
         // (Kept whether or not the set keeps steady plans: the volumes stay
         // the same either way.)
-        for (v, f) in self.volumes.iter_mut().zip(&mut self.frames) {
+        for (v, f) in self.volumes.iter().zip(&mut self.frames) {
             match !per_ray {
                 true => v.keep_plan_snapshot(f),
-                false => v.forget_plan_snapshot(f),
+                false => DdgiVolume::forget_plan_snapshot(f),
             }
         }
         self.last_batch_rays = self.batch.len() as u64;

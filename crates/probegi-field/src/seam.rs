@@ -84,11 +84,13 @@ pub struct GeneratedProbeRays {
     pub rotation: glam::Quat,
     /// Hits beyond this distance are misses (the volume's trace limit).
     pub max_distance_m: f32,
-    /// The records' identity (`device_plans::next_plan_id`): two batches whose
-    /// entries carry the same id hold the same probes, origins, first rays and
-    /// counts for it (a steady frame keeps them; the rotation may turn), so a
-    /// device may keep what it made of them.
-    pub plan_id: u64,
+    /// The records' identity, where the field set made them
+    /// (`device_plans::next_plan_id`, unique in the process): two batches
+    /// whose entries carry the same `Some` id hold the same probes, origins,
+    /// first rays, counts and max distance for it (a steady frame keeps them;
+    /// the rotation may turn), so a device may keep what it made of them.
+    /// `None`: no identity (a device packs the records again).
+    pub plan_id: Option<u64>,
 }
 
 /// One frame's probe rays for every volume: structure of arrays, probe-major.

@@ -113,7 +113,7 @@ impl GpuProbeRayGen {
         ctx: &GpuContext,
         batch: &GpuRayBatch,
         rays: RayGenRays<'_>,
-        kept: Option<(u64, u64)>,
+        kept: Option<(u64, Option<u64>)>,
         timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
     ) -> Result<(), GpuError> {
         let RayGenRays { first_ray, origins, max_distance_m, rotation, rays_per_probe } = rays;
@@ -147,7 +147,7 @@ impl GpuProbeRayGen {
             // group are the ones of the frame before (two batches alternate).
             Some((key, id)) => {
                 let params = ctx.buffer_rewritten("ray gen params", key, params, wgpu::BufferUsages::UNIFORM);
-                let probes = ctx.buffer_identified("ray gen probes", key, Some(id), records, usage);
+                let probes = ctx.buffer_identified("ray gen probes", key, id, records, usage);
                 ctx.bind_group_kept("probe ray gen", key, &self.layout, &[&params, &probes, batch.rays_buffer()])
             }
             None => {

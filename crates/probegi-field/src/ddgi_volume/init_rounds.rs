@@ -182,7 +182,7 @@ impl DdgiVolume {
             rays_per_probe: frame.ray_count as u32,
             rotation,
             max_distance_m: self.settings.probe_max_ray_distance_m,
-            plan_id: crate::device_plans::next_plan_id(),
+            plan_id: Some(crate::device_plans::next_plan_id()),
         });
         true
     }

@@ -149,9 +149,6 @@ pub struct DdgiVolume {
     /// atlas (`probe_adaptive_hysteresis`; empty without it, sized at the
     /// first blend with it, from 0).
     irradiance_texel_hysteresis: Vec<f32>,
-    /// What the last full update plan read, where a later frame may keep
-    /// that plan (`steady_frames`).
-    plan_snapshot: Option<steady_frames::PlanSnapshot>,
 }
 
 /// One volume's per-frame scratch.
@@ -191,6 +188,10 @@ pub struct VolumeFrame {
     pub(crate) steady_blend: Option<Vec<Option<(u32, f32)>>>,
     /// The kept blend plan's identity (`DeviceVolumeBlend::probe_blend_id`).
     pub(crate) steady_blend_id: u64,
+    /// What the volume's last full update plan read (in this frame's slot of
+    /// the set, with the batch it vouches for), where a later frame may keep
+    /// that plan (`steady_frames`).
+    pub(crate) plan_snapshot: Option<steady_frames::PlanSnapshot>,
 }
 
 impl VolumeFrame {
@@ -273,7 +274,6 @@ impl DdgiVolume {
             probe_requested: vec![false; probes],
             probe_blends: vec![0; probes],
             irradiance_texel_hysteresis: Vec::new(),
-            plan_snapshot: None,
             settings,
         }
     }

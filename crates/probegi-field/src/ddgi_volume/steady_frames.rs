@@ -13,9 +13,12 @@
 //! count the frames its counters count (`probe_budget`), instead of planning,
 //! classifying and bookkeeping each probe again.
 //!
-//! The check is a comparison with a snapshot taken at the last full plan, so
-//! any change, through the set or through the volume's public fields, makes
-//! the next plan a full one. Left out (always a full plan): the usage and
+//! The check is a comparison with a snapshot taken at the last full plan,
+//! kept by the set beside the plan (a volume swapped or restored into
+//! another's place meets another's snapshot), so a change through the set
+//! or through the volume's public fields makes the next plan a full one; so
+//! does an update left unfinished (the snapshot stands for a plan whose
+//! blend ran). Left out (always a full plan): the usage and
 //! screen schemes (their states move with the hits and the camera), a ray
 //! budget (its choice moves every frame), the shadowing field (its pairs of
 //! frames), the per-probe hysteresis ramp (a probe's cap moves with its
@@ -89,7 +92,7 @@ impl DdgiVolume {
     /// rotation): the volume is as its snapshot says. (A probe whose first
     /// blend was in that plan has a history now, and so differs from it.)
     pub(crate) fn plan_is_steady(&self, frame: &VolumeFrame) -> bool {
-        let Some(snap) = self.plan_snapshot.as_ref() else { return false };
+        let Some(snap) = frame.plan_snapshot.as_ref() else { return false };
         let unchanged = snap.states == self.probe_states
             && snap.has_history == self.probe_has_history
             && bits(&snap.hysteresis) == bits(&self.probe_hysteresis)
@@ -99,6 +102,7 @@ impl DdgiVolume {
             && snap.stream == self.stream
             && snap.settings == self.settings;
         unchanged
+            && self.shadow.is_none()
             && self.probes_reset_since_blend.is_empty()
             && self.pending_seeds.is_empty()
             && frame.first_ray.len() == self.grid.probe_count()
@@ -106,14 +110,14 @@ impl DdgiVolume {
 
     /// Forgets the snapshot (and `frame`'s kept blend plan): the next plan
     /// is a full one.
-    pub(crate) fn forget_plan_snapshot(&mut self, frame: &mut VolumeFrame) {
-        self.plan_snapshot = None;
+    pub(crate) fn forget_plan_snapshot(frame: &mut VolumeFrame) {
+        frame.plan_snapshot = None;
         frame.steady_blend = None;
     }
 
-    /// Takes the snapshot of the plan just made (or none).
-    pub(crate) fn keep_plan_snapshot(&mut self, frame: &mut VolumeFrame) {
-        self.plan_snapshot = self.steady_snapshot();
+    /// Takes the snapshot of the plan just made (or none) into `frame`.
+    pub(crate) fn keep_plan_snapshot(&self, frame: &mut VolumeFrame) {
+        frame.plan_snapshot = self.steady_snapshot();
         frame.steady_blend = None;
     }
 

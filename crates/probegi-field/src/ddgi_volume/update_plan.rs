@@ -52,7 +52,7 @@ impl DdgiVolume {
             rays_per_probe: frame.ray_count as u32,
             rotation: crate::probe_ray_gen::probe_ray_rotation(self.stream_seed(seed), frame_index),
             max_distance_m: self.settings.probe_max_ray_distance_m,
-            plan_id: crate::device_plans::next_plan_id(),
+            plan_id: Some(crate::device_plans::next_plan_id()),
         });
         self.traced_probes_last = (batch.probes.len() as u32 - first_probe) as usize;
     }

@@ -1,10 +1,12 @@
 //! `ddgi_volume::steady_frames`: a still field's update keeps the last plan,
 //! and gives the batches, blend plans and volumes the full plan gives, frame
-//! by frame, through scene events, woken probes, a settings change and a
-//! window that scrolls.
+//! by frame, through scene events, woken probes, a settings change, a window
+//! that scrolls, a state changed through a public field and an update left
+//! unfinished.
 
 use glam::{UVec3, Vec3};
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
+use probegi_core::probe_classification::ProbeState;
 use probegi_field::ddgi_field_set::ProbeRayBatchKind;
 use probegi_field::{DdgiFieldSet, DdgiVolume, ProbeRayHit, SceneEvent, UpdateStep};
 
@@ -39,7 +41,7 @@ fn two_volumes(keep_plans: bool) -> DdgiFieldSet {
 /// blend plan's.
 struct Update {
     printed: String,
-    record_ids: Vec<u64>,
+    record_ids: Vec<Option<u64>>,
     blend_ids: Vec<Option<u64>>,
 }
 
@@ -84,6 +86,16 @@ fn a_kept_plan_gives_the_full_plans_batches_and_volumes_through_changes() {
                 12 => set.volumes_mut()[1].settings.probe_hysteresis = 0.9,
                 // The window scrolls a plane in (initialisation rounds for it).
                 15 => assert!(set.set_tracking_target(Vec3::new(3.2, 2.0, 2.0)) > 0),
+                // An Awake probe put to sleep through the volume's public states.
+                17 => {
+                    let states = &mut set.volumes_mut()[1].probe_states;
+                    let awake = states.iter().position(|s| *s == ProbeState::Awake).expect("an awake probe");
+                    states[awake] = ProbeState::Sleeping;
+                }
+                // An update begun and left unfinished: its plan's blend never ran.
+                18 => {
+                    set.begin_update(9, frame);
+                }
                 // The per-probe ramp reads every probe's blend count: none is kept from here.
                 20 => set.volumes_mut().iter_mut().for_each(|v| v.settings.probe_hysteresis_ramp = true),
                 _ => {}
@@ -109,8 +121,9 @@ fn a_kept_plan_gives_the_full_plans_batches_and_volumes_through_changes() {
     }
     // Frames 0 and 1 are first blends (a history begins); 8 and 9 wake probes
     // (Newly Awake, then Awake), 12 changes a setting, 15 and 16 scroll and
-    // give the scrolled-in probes their first blend; from 20 the ramp is on.
-    let want: Vec<u32> = (2..20).filter(|f| ![8, 9, 12, 15, 16].contains(f)).collect();
+    // give the scrolled-in probes their first blend, 17 changes a state, 18
+    // follows an unfinished update; from 20 the ramp is on.
+    let want: Vec<u32> = (2..20).filter(|f| ![8, 9, 12, 15, 16, 17, 18].contains(f)).collect();
     assert_eq!(kept_frames, want);
     assert!(kept.volumes()[1].state_counts().get("awake").is_some_and(|n| *n > 0));
 }
