@@ -133,7 +133,7 @@ impl DdgiVolume {
             *pass_ms.entry("shadow_blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
         }
         self.record_change(&irradiance_change, &occlusion_change);
-        self.count_unblended_frames(frame, &updated);
+        self.count_unblended_frames(frame);
         self.after_update(&updated);
         #[cfg(debug_assertions)]
         self.validate();
@@ -242,7 +242,7 @@ impl DdgiVolume {
                         base.iter().map(|b| b.map(|(first, h)| (first, h.min(hysteresis_cap)))).collect();
                     self.device_shadow_blend(&shadow_base(&capped, irradiance_scale, &self.blend_frames(frame)), lights)
                 });
-                (base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect(), shadow.flatten())
+                (device_entries(base).into(), shadow.flatten())
             }
         };
         DeviceVolumeBlend {
@@ -283,7 +283,7 @@ impl DdgiVolume {
         if frame.measure_change {
             self.accept_device_change(&updated, change);
         }
-        self.count_unblended_frames(frame, &updated);
+        self.count_unblended_frames(frame);
         self.after_update(&updated);
     }
 
@@ -320,6 +320,12 @@ impl DdgiVolume {
             events.retain(|e| e.frames_left > 0);
         }
     }
+}
+
+/// A blend plan's per-probe entries as a device takes them
+/// (`DeviceVolumeBlend::probe_blend`: first ray as `u32`).
+pub(super) fn device_entries(base: Vec<Option<(usize, f32)>>) -> Vec<Option<(u32, f32)>> {
+    base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect()
 }
 
 /// The hysteresis cap of a ramp's blend `n` (from 0): 1 − 1/(n + 1), the

@@ -143,17 +143,15 @@ impl DdgiVolume {
         }
     }
 
-    /// After a blend: a probe that blended starts counting again; one its
-    /// state wanted to blend (`frame.active`) but the budget held back counts
-    /// the frame (so the frames its next blend stands for are the budget's
-    /// alone, not its state's own schedule).
-    pub(super) fn count_unblended_frames(&mut self, frame: &VolumeFrame, updated: &[bool]) {
-        for (p, n) in self.probe_unblended_frames.iter_mut().enumerate() {
-            if updated.get(p).copied().unwrap_or(false) {
-                *n = 0;
-            } else if frame.active.get(p).copied().unwrap_or(false) {
-                *n = n.saturating_add(1);
-            }
+    /// After a blend: a probe that blended (`VolumeFrame::blends`) starts
+    /// counting again; one its state wanted to blend (`frame.active`) but the
+    /// budget held back counts the frame (so the frames its next blend stands
+    /// for are the budget's alone, not its state's own schedule).
+    pub(super) fn count_unblended_frames(&mut self, frame: &VolumeFrame) {
+        let planned = frame.active.iter().zip(&frame.first_ray);
+        for (n, (&active, &first)) in self.probe_unblended_frames.iter_mut().zip(planned) {
+            let blended = active && first != u32::MAX;
+            *n = if blended { 0 } else { n.saturating_add(active as u32) };
         }
     }
 

@@ -1,12 +1,18 @@
 //! Steady frames: a still volume's update plan kept from one frame to the next
 //! (issue 45, "the host off the critical path").
 //!
+//! Not a pass of the seeds, and no change to one: the plan kept is the one
+//! seed 003 §4.2 and seed 004 Listing 5's states make (which probes trace and
+//! blend, with seed 004 Listing 3's hysteresis), made once instead of every
+//! frame while its inputs stand still. No parameter: it is on by default and
+//! gives the same plans (`DdgiFieldSet::set_steady_plans` turns it off).
+//!
 //! Under the all-active and jcgt schemes a probe's state decides alone
 //! whether it traces and blends, and a probe in a lasting state (Active, Off,
 //! Sleeping, Awake, Vigilant) that has blended before keeps its state,
 //! history and hysteresis through the update. So when a volume's plan inputs
-//! (states, histories, seeds, hysteresis, positions, grid, window edges,
-//! settings) are what they were when its last plan was made, this frame's plan
+//! (states, histories, hysteresis, positions, grid, window edges, settings;
+//! no probe seeded or reset) are what they were when its last plan was made, this frame's plan
 //! is that plan with the frame's ray rotation: which probes trace, their
 //! first rays, which blend and with what hysteresis. The set then keeps its
 //! batch and the volume's blend plan, and the host visits no probe but to
@@ -131,7 +137,7 @@ impl DdgiVolume {
         self.count_untraced_frames(frame);
         if frame.steady_blend.is_none() {
             let (base, _, _) = self.blend_plan_with(frame, false);
-            frame.steady_blend = Some(base.into_iter().map(|b| b.map(|(first, h)| (first as u32, h))).collect());
+            frame.steady_blend = Some(super::blend_inputs::device_entries(base));
             frame.steady_blend_id = crate::device_plans::next_plan_id();
         }
         crate::probe_ray_gen::probe_ray_rotation(stream, frame_index)
@@ -142,12 +148,11 @@ impl DdgiVolume {
     /// probe waited, and the scene events' remaining frames.
     pub(crate) fn accept_steady_blend(&mut self, frame: &VolumeFrame) {
         self.frames_updated += 1;
-        let counts = self.probe_unblended_frames.iter_mut().zip(&mut self.probe_blends);
-        for ((n, b), (&active, &first)) in counts.zip(frame.active.iter().zip(&frame.first_ray)) {
-            // `VolumeFrame::blends`: active, and traced.
-            let blends = active && first != u32::MAX;
-            *n = if blends { 0 } else { n.saturating_add(active as u32) };
-            *b = b.saturating_add(blends as u32);
+        self.count_unblended_frames(frame);
+        // `after_update`'s blend count of a probe with a history (a kept plan has no fresh one).
+        let planned = frame.active.iter().zip(&frame.first_ray);
+        for (b, (&active, &first)) in self.probe_blends.iter_mut().zip(planned) {
+            *b = b.saturating_add((active && first != u32::MAX) as u32);
         }
         self.tick_scene_events();
     }
