@@ -189,6 +189,10 @@ const PIPELINED_MIN_FRAMES: u32 = 4;
 /// a frame pays for the field; `host_ms` is the host's share, the time inside
 /// the update calls less any time blocked on the device (with lavapipe that
 /// includes the driver's own work inside a submission, counted as waiting),
+/// and `host_cpu_ms` the CPU time the calling thread spent inside them
+/// (`null` where the platform does not say): the same host work, apart
+/// from the time other threads held the cores (lavapipe's, running the
+/// update before on the same cores, stretch `host_ms` by up to a half),
 /// and `field_set_ms` the field set's own part of it ([`HOST_PLAN_PASS`]:
 /// planning and bookkeeping, no command recording), which `update` returns
 /// with whether the update kept the plan before it
@@ -205,11 +209,15 @@ fn pipelined_json(
     let before = ctx.counters();
     let (t, count) = (Instant::now(), frames.clone().count());
     let (mut inside_ms, mut waited_in_ms, mut field_set_ms, mut kept) = (0.0, 0.0, 0.0, 0);
+    let mut cpu_ms = Some(0.0);
     for f in frames {
         let (t_update, waited) = (Instant::now(), ctx.counters().wait_ms);
+        let cpu = cpu_time::ThreadTime::try_now().ok();
         ctx.defer_submissions(true);
         let result = update(f);
         ctx.defer_submissions(false);
+        let cpu = cpu.and_then(|c| c.try_elapsed().ok());
+        cpu_ms = cpu_ms.zip(cpu).map(|(sum, c)| sum + c.as_secs_f64() * 1e3);
         let (ms, plan_kept) = result?;
         field_set_ms += ms;
         kept += plan_kept as u32;
@@ -226,6 +234,7 @@ fn pipelined_json(
         "update_ms": per(wall_ms),
         "mrays_per_s": rays_per_frame as f64 / (per(wall_ms) * 1e-3) / 1e6,
         "host_ms": per((inside_ms - waited_in_ms).max(0.0)),
+        "host_cpu_ms": cpu_ms.map(per),
         "field_set_ms": per(field_set_ms),
         "plans_kept": per(kept as f64),
         "submissions": per(d.submissions as f64),

@@ -88,7 +88,10 @@ pub struct GeneratedProbeRays {
     /// (`device_plans::next_plan_id`, unique in the process): two batches
     /// whose entries carry the same `Some` id hold the same probes, origins,
     /// first rays, counts and max distance for it (a steady frame keeps them;
-    /// the rotation may turn), so a device may keep what it made of them.
+    /// the rotation may turn), and once the batch is traced the same
+    /// `probe_needs_radiance` flags under the same volume settings, so a
+    /// device may keep what it made of them (the ray generation's and the
+    /// shade's per-probe records).
     /// `None`: no identity (a device packs the records again).
     pub plan_id: Option<u64>,
 }

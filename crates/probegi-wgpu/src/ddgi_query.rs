@@ -110,10 +110,58 @@ pub struct GpuDdgiField {
     /// [`Self::refresh`] allocates them, zeroed, when a member turns it on).
     texel_hysteresis: std::sync::Mutex<wgpu::Buffer>,
     bind_group: wgpu::BindGroup,
-    /// What the set and probes buffers hold (only `upload` and `refresh` write
-    /// them; the query binds them read-only): `refresh` writes them only when
-    /// the host's differ.
-    written: std::sync::Mutex<[Vec<u8>; 2]>,
+    /// What the set and probes buffers were written from (only `upload` and
+    /// `refresh` write them; the query binds them read-only): `refresh`
+    /// writes them only when the host's differ.
+    written: std::sync::Mutex<WrittenField>,
+}
+
+/// The set buffer's bytes and, per member in sampling order, the per-probe
+/// arrays its probe rows were packed from. A still field's arrays repeat, and
+/// comparing them costs less than packing the rows to compare those.
+struct WrittenField {
+    set: Vec<u8>,
+    rows: Vec<ProbeRowSources>,
+}
+
+/// One member's per-probe arrays as they were when its rows were written:
+/// offsets bit for bit (so a NaN offset is still "the same").
+#[derive(Default)]
+struct ProbeRowSources {
+    offsets: Vec<u8>,
+    usable: Vec<bool>,
+    fallback: Vec<u32>,
+}
+
+impl ProbeRowSources {
+    fn of(f: &DdgiFieldView<'_>) -> Self {
+        Self {
+            offsets: bytemuck::cast_slice(f.probe_offsets_m).to_vec(),
+            usable: f.probe_usable.to_vec(),
+            fallback: f.probe_fallback.to_vec(),
+        }
+    }
+
+    fn holds(&self, f: &DdgiFieldView<'_>) -> bool {
+        self.offsets.as_slice() == bytemuck::cast_slice::<Vec3, u8>(f.probe_offsets_m)
+            && self.usable == f.probe_usable
+            && self.fallback == f.probe_fallback
+    }
+}
+
+impl WrittenField {
+    fn of(set: &DdgiFieldSetView<'_>, set_bytes: Vec<u8>) -> Self {
+        Self { set: set_bytes, rows: Self::rows_of(set) }
+    }
+
+    fn rows_of(set: &DdgiFieldSetView<'_>) -> Vec<ProbeRowSources> {
+        set.members.iter().map(|m| ProbeRowSources::of(&m.field)).collect()
+    }
+
+    /// Whether every member's probe rows would pack as they were written.
+    fn holds_rows(&self, set: &DdgiFieldSetView<'_>) -> bool {
+        self.rows.len() == set.members.len() && self.rows.iter().zip(&set.members).all(|(r, m)| r.holds(&m.field))
+    }
 }
 
 /// A zeroed buffer of adaptive-hysteresis states (`texel_hysteresis_bytes`).
@@ -142,7 +190,10 @@ struct PackedField {
     set: Vec<u8>,
     irradiance: Vec<[f32; 4]>,
     distance: Vec<[f32; 2]>,
+    /// The probe rows; left empty unless asked for.
     probes: Vec<[f32; 4]>,
+    /// Rows of the probes buffer (packed or not; at least 1).
+    probe_rows: usize,
     /// Texels of the atlases (packed or not).
     irradiance_texels: usize,
     distance_texels: usize,
@@ -216,7 +267,7 @@ fn pack_occlusion(
     rows
 }
 
-fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedField, GpuError> {
+fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool, with_probes: bool) -> Result<PackedField, GpuError> {
     let header = GpuDdgiSetHeader {
         header: [
             set.members.len() as u32,
@@ -230,7 +281,7 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
     let mut irradiance: Vec<[f32; 4]> = vec![];
     let mut distance: Vec<[f32; 2]> = vec![];
     let mut probes: Vec<[f32; 4]> = vec![];
-    let (mut irradiance_texels, mut distance_texels) = (0usize, 0usize);
+    let (mut irradiance_texels, mut distance_texels, mut probe_rows) = (0usize, 0usize, 0usize);
     let mut members = vec![];
     for m in &set.members {
         let f = &m.field;
@@ -246,7 +297,7 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
         let (irr_first, dist_first) = (irradiance_texels as u32, distance_texels as u32);
         members.push([n as u32, f.irradiance.interior, f.distance.interior, irr_first, dist_first, m.volume as u32]);
         let mut v = gpu_volume(f, [irr_first, dist_first]);
-        v.extra = [probes.len() as u32, m.tracks_camera as u32, 0, 0];
+        v.extra = [probe_rows as u32, m.tracks_camera as u32, 0, 0];
         volumes.push(v);
         irradiance_texels += f.irradiance.texels.len();
         distance_texels += f.distance.texels.len();
@@ -254,7 +305,10 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
             irradiance.extend(f.irradiance.texels.iter().map(|t| [t.x, t.y, t.z, 0.0]));
             distance.extend(f.distance.texels.iter().map(|t| [t.x, t.y]));
         }
-        push_probe_rows(f, &mut probes);
+        probe_rows += n;
+        if with_probes {
+            push_probe_rows(f, &mut probes);
+        }
     }
     // The shadowing field's occlusion maps follow every distance atlas in the
     // distance buffer, one texel as (visibility, 0).
@@ -264,7 +318,8 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
         set_bytes.extend_from_slice(bytemuck::bytes_of(&GpuDdgiVolume::default()));
     }
     set_bytes.extend_from_slice(bytemuck::cast_slice(&volumes));
-    if probes.is_empty() {
+    probe_rows = probe_rows.max(1);
+    if with_probes && probes.is_empty() {
         probes.push([0.0; 4]);
     }
     // Empty sets keep one texel so every binding has a size.
@@ -279,6 +334,7 @@ fn pack_field(set: &DdgiFieldSetView<'_>, with_atlases: bool) -> Result<PackedFi
         irradiance,
         distance,
         probes,
+        probe_rows,
         irradiance_texels,
         distance_texels,
         members,
@@ -321,7 +377,7 @@ impl GpuDdgiField {
     /// Uploads every member of `set` (grids, settings, atlases, relocation offsets,
     /// usable flags and fallback table) in the shader's layout.
     pub fn upload(ctx: &GpuContext, set: &DdgiFieldSetView<'_>) -> Result<Self, GpuError> {
-        let packed = pack_field(set, true)?;
+        let packed = pack_field(set, true, true)?;
         for (what, bytes) in [
             ("the irradiance atlases", packed.irradiance.len() * 16),
             ("the distance atlases", packed.distance.len() * 8),
@@ -355,7 +411,7 @@ impl GpuDdgiField {
             buffers,
             texel_hysteresis: std::sync::Mutex::new(texel_hysteresis),
             bind_group,
-            written: std::sync::Mutex::new([packed.set, bytemuck::cast_slice(&packed.probes).to_vec()]),
+            written: std::sync::Mutex::new(WrittenField::of(set, packed.set)),
         })
     }
 
@@ -364,12 +420,16 @@ impl GpuDdgiField {
     /// `atlases`, the atlases too. `set` must have the shape the field was
     /// uploaded with (members, probe counts, texels).
     pub fn refresh(&self, ctx: &GpuContext, set: &DdgiFieldSetView<'_>, atlases: bool) -> Result<(), GpuError> {
-        let packed = pack_field(set, atlases)?;
+        let mut written = self.written.lock().map_err(|_| GpuError::Input("a GPU pass panicked".into()))?;
+        // A still field's per-probe data repeats: packed and written only
+        // where it changed.
+        let rows_held = written.holds_rows(set);
+        let packed = pack_field(set, atlases, !rows_held)?;
         let sizes = [
             packed.set.len() as u64,
             packed.irradiance_texels as u64 * 16,
             packed.distance_texels as u64 * 8,
-            packed.probes.len() as u64 * 16,
+            packed.probe_rows as u64 * 16,
         ];
         if packed.members != self.members
             || packed.occlusion != self.occlusion
@@ -383,19 +443,17 @@ impl GpuDdgiField {
             // A member turned the adaptive hysteresis on: its states start at 0.
             *states = texel_hysteresis_buffer(ctx, hysteresis_bytes)?;
         }
-        // A still field's per-probe data repeats: written only where it changed.
-        let mut written = self.written.lock().map_err(|_| GpuError::Input("a GPU pass panicked".into()))?;
-        for (held, (buffer, now)) in written
-            .iter_mut()
-            .zip([(&self.buffers[0], &packed.set[..]), (&self.buffers[3], bytemuck::cast_slice(&packed.probes))])
-        {
-            if held.as_slice() == now {
-                ctx.count_kept(now.len() as u64);
-            } else {
-                ctx.write_buffer(buffer, 0, now);
-                held.clear();
-                held.extend_from_slice(now);
-            }
+        if written.set == packed.set {
+            ctx.count_kept(packed.set.len() as u64);
+        } else {
+            ctx.write_buffer(&self.buffers[0], 0, &packed.set);
+            written.set = packed.set;
+        }
+        if rows_held {
+            ctx.count_kept(packed.probe_rows as u64 * 16);
+        } else {
+            ctx.write_buffer(&self.buffers[3], 0, bytemuck::cast_slice(&packed.probes));
+            written.rows = WrittenField::rows_of(set);
         }
         if atlases {
             ctx.write_buffer(&self.buffers[1], 0, bytemuck::cast_slice(&packed.irradiance));
@@ -550,5 +608,60 @@ impl GpuFieldQuery {
         let bytes = ctx.read_back(&output)?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
         Ok(v.iter().map(|e| Vec3::new(e[0], e[1], e[2])).collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use probegi_core::ddgi_volume_blend::SetMember;
+    use probegi_field::ddgi_volume::DdgiVolume;
+
+    fn one_member<'a>(field: DdgiFieldView<'a>) -> DdgiFieldSetView<'a> {
+        let member = SetMember { field, volume: 0, tracks_camera: false, occlusion: None };
+        DdgiFieldSetView { members: vec![member], blending: VolumeBlending::Density, camera_m: None }
+    }
+
+    fn with_rows<'a>(base: DdgiFieldView<'a>, offsets: &'a [Vec3], usable: &'a [bool]) -> DdgiFieldView<'a> {
+        DdgiFieldView { probe_offsets_m: offsets, probe_usable: usable, ..base }
+    }
+
+    /// `refresh` compares the per-probe arrays the rows come from instead of
+    /// the rows: a still field's rows are kept, and a moved offset or a probe
+    /// turned unusable writes them all, as `pack_field` packs them.
+    #[test]
+    fn refresh_writes_the_probe_rows_only_when_their_arrays_change() {
+        let Some(ctx) = GpuContext::headless_unless_absent().expect("device") else { return };
+        let settings = probegi_core::ddgi_settings::DdgiVolumeSettings {
+            probe_counts: glam::UVec3::new(4, 3, 2),
+            ..Default::default()
+        };
+        let volume = DdgiVolume::new(settings, (Vec3::ZERO, Vec3::splat(4.0)));
+        let n = volume.grid.probe_count();
+        let mut offsets = vec![Vec3::ZERO; n];
+        let mut usable = vec![true; n];
+        let fallback: Vec<u32> = (0..n as u32).collect();
+        let base = DdgiFieldView { probe_fallback: &fallback, ..volume.view() };
+        let field = GpuDdgiField::upload(&ctx, &one_member(with_rows(base, &offsets, &usable))).expect("upload");
+        let rows_bytes = n as u64 * 16;
+        let refresh_and_check = |o: &[Vec3], u: &[bool], written: bool| {
+            let set = one_member(with_rows(base, o, u));
+            let before = ctx.counters();
+            field.refresh(&ctx, &set, false).expect("refresh");
+            let d = ctx.counters() - before;
+            assert_eq!(d.bytes_up, if written { rows_bytes } else { 0 }, "rows written: {written}");
+            let rows = ctx.read_back(&field.buffers[3]).expect("read back");
+            let packed = pack_field(&set, false, true).expect("pack");
+            assert_eq!(rows, bytemuck::cast_slice::<[f32; 4], u8>(&packed.probes));
+        };
+        refresh_and_check(&offsets, &usable, false);
+        offsets[5] = Vec3::new(0.1, -0.2, 0.05);
+        refresh_and_check(&offsets, &usable, true);
+        refresh_and_check(&offsets, &usable, false);
+        usable[7] = false;
+        refresh_and_check(&offsets, &usable, true);
+        // −0 equals 0 as a float but not as the row's bits: written.
+        offsets[6].x = -0.0;
+        refresh_and_check(&offsets, &usable, true);
     }
 }

@@ -52,6 +52,12 @@ pub struct GpuContext {
     /// While deferring ([`GpuContext::defer_submissions`]): the command buffers
     /// recorded since the last [`GpuContext::flush`], in order.
     pending: std::sync::Mutex<Option<Vec<wgpu::CommandBuffer>>>,
+    /// While deferring: the encoder [`GpuContext::record`] records into, after
+    /// every buffer of `pending` (finished and appended by the next
+    /// [`GpuContext::submit`] or [`GpuContext::flush`]). A frame's passes then
+    /// share one command buffer: each encoder finished costs the host as much
+    /// as recording a pass.
+    open_encoder: std::sync::Mutex<Option<wgpu::CommandEncoder>>,
     /// The last submission made to the queue.
     last_submission: std::sync::Mutex<Option<wgpu::SubmissionIndex>>,
     /// [`GpuContext::buffer_rewritten`]'s and [`GpuContext::scratch_buffer`]'s
@@ -74,7 +80,7 @@ struct FrameBuffer {
     handed_out_at: u64,
     /// The identity of the contents, where they were written from one
     /// ([`GpuContext::buffer_identified`]).
-    id: Option<u64>,
+    id: Option<Vec<u64>>,
 }
 
 /// A bind group [`GpuContext::bind_group_kept`] made, with what it binds.
@@ -197,6 +203,7 @@ impl GpuContext {
             timestamps: !required_features.is_empty(),
             transfers: TransferCounts::default(),
             pending: Default::default(),
+            open_encoder: Default::default(),
             last_submission: Default::default(),
             frame_buffers: Default::default(),
             bind_groups: Default::default(),
@@ -231,6 +238,7 @@ impl GpuContext {
             timestamps,
             transfers: TransferCounts::default(),
             pending: Default::default(),
+            open_encoder: Default::default(),
             last_submission: Default::default(),
             frame_buffers: Default::default(),
             bind_groups: Default::default(),
@@ -359,19 +367,54 @@ impl GpuContext {
     /// submission (a queue still busy with earlier work: lavapipe runs the work
     /// on the host's own cores) counts as waiting for the device.
     pub fn submit(&self, commands: wgpu::CommandBuffer) {
+        let open = self.open_encoder.lock().unwrap_or_else(|e| e.into_inner()).take();
         let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(list) = pending.as_mut() {
+            // What `record` recorded before this buffer goes before it.
+            list.extend(open.map(wgpu::CommandEncoder::finish));
             list.push(commands);
             return;
         }
         drop(pending);
-        self.queue_submit(vec![commands]);
+        self.queue_submit(open.map(wgpu::CommandEncoder::finish).into_iter().chain([commands]).collect());
+    }
+
+    /// Runs `f` on a command encoder: while deferring, the one the deferred
+    /// commands end with (made when none is open), so that a frame's passes
+    /// finish as one command buffer at the next flush; otherwise a new one,
+    /// submitted when `f` returns. `f` records into the encoder only: it must
+    /// not submit, flush or write buffers through this context (what it
+    /// submitted would run before what it recorded).
+    pub fn record<T>(&self, f: impl FnOnce(&mut wgpu::CommandEncoder) -> T) -> T {
+        if !self.deferring() {
+            let mut encoder = self.device.create_command_encoder(&Default::default());
+            let out = f(&mut encoder);
+            self.submit(encoder.finish());
+            return out;
+        }
+        let open = self.open_encoder.lock().unwrap_or_else(|e| e.into_inner()).take();
+        let mut encoder = open.unwrap_or_else(|| self.device.create_command_encoder(&Default::default()));
+        let out = f(&mut encoder);
+        *self.open_encoder.lock().unwrap_or_else(|e| e.into_inner()) = Some(encoder);
+        out
     }
 
     /// Submits what deferring recorded, as one submission, and returns the
     /// last submission made (this one, or an earlier one when nothing was pending).
     pub fn flush(&self) -> Option<wgpu::SubmissionIndex> {
-        let list = self.pending.lock().unwrap_or_else(|e| e.into_inner()).as_mut().map(std::mem::take);
+        let open = self.open_encoder.lock().unwrap_or_else(|e| e.into_inner()).take();
+        let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+        match (pending.as_mut(), open) {
+            (Some(list), Some(open)) => list.push(open.finish()),
+            // Deferring ended while an encoder was open: it goes alone.
+            (None, Some(open)) => {
+                drop(pending);
+                return Some(self.queue_submit(vec![open.finish()]));
+            }
+            _ => {}
+        }
+        let list = pending.as_mut().map(std::mem::take);
+        drop(pending);
         match list {
             Some(list) if !list.is_empty() => Some(self.queue_submit(list)),
             _ => self.last_submission.lock().unwrap_or_else(|e| e.into_inner()).clone(),
@@ -527,30 +570,33 @@ impl GpuContext {
     /// `GeneratedProbeRays::plan_id`; equal ids, equal contents): where the
     /// buffer kept under `(label, key)` was last written from `id`, it holds
     /// them already, and `contents` is not called (the host packs and
-    /// compares nothing); else `buffer_rewritten` of `contents()`.
+    /// compares nothing); else `buffer_rewritten` of `contents()`, whose
+    /// error (contents it would not write) is returned, no identity kept.
+    /// An identity is a list (one plan id per volume, for a batch's records).
     pub(crate) fn buffer_identified(
         &self,
         label: &'static str,
         key: u64,
-        id: Option<u64>,
-        contents: impl FnOnce() -> Vec<u8>,
+        id: Option<&[u64]>,
+        contents: impl FnOnce() -> Result<Vec<u8>, GpuError>,
         usage: wgpu::BufferUsages,
-    ) -> wgpu::Buffer {
+    ) -> Result<wgpu::Buffer, GpuError> {
         let with_dst = usage | wgpu::BufferUsages::COPY_DST;
         if let Some(id) = id {
             let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
-            if let Some(k) = kept.get_mut(&(label, key)).filter(|k| k.id == Some(id) && k.usage == with_dst) {
+            if let Some(k) = kept.get_mut(&(label, key)).filter(|k| k.id.as_deref() == Some(id) && k.usage == with_dst)
+            {
                 self.count_kept(k.contents.len() as u64);
                 k.handed_out_at = self.queue_submissions();
-                return k.buffer.clone();
+                return Ok(k.buffer.clone());
             }
         }
-        let buffer = self.buffer_rewritten(label, key, &contents(), usage);
+        let buffer = self.buffer_rewritten(label, key, &contents()?, usage);
         let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(k) = kept.get_mut(&(label, key)) {
-            k.id = id;
+            k.id = id.map(<[u64]>::to_vec);
         }
-        buffer
+        Ok(buffer)
     }
 
     /// A storage buffer of at least `bytes` for a pass to write and a later
@@ -839,6 +885,44 @@ mod tests {
 
     fn read(ctx: &GpuContext, b: &wgpu::Buffer, bytes: u64) -> Vec<u8> {
         ctx.read_back_range(b, 0, bytes).expect("read back")
+    }
+
+    /// While deferring, `record`'s commands share one open encoder, and a
+    /// buffer submitted after a record runs after it: copies into one buffer,
+    /// recorded and submitted in turn, land in program order, in one
+    /// submission.
+    #[test]
+    fn recorded_and_submitted_commands_run_in_program_order_in_one_submission() {
+        let Some(ctx) = GpuContext::headless_unless_absent().expect("device") else { return };
+        let usage = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        let sources: Vec<wgpu::Buffer> = (1..=3u8).map(|k| ctx.buffer_with("test source", &[k; 16], usage)).collect();
+        let target = ctx.buffer_with("test target", &[0; 16], usage);
+        let copy = |e: &mut wgpu::CommandEncoder, k: usize| e.copy_buffer_to_buffer(&sources[k], 0, &target, 0, 16);
+        // (recorded?, source) in program order: the last copy must win.
+        let sequences: [&[(bool, usize)]; 3] =
+            [&[(true, 0), (false, 1)], &[(false, 0), (true, 1)], &[(true, 2), (false, 0), (true, 1), (false, 2)]];
+        for ops in sequences {
+            ctx.defer_submissions(true);
+            let before = ctx.counters();
+            for &(recorded, k) in ops {
+                if recorded {
+                    ctx.record(|e| copy(e, k));
+                } else {
+                    let mut submitted = ctx.device.create_command_encoder(&Default::default());
+                    copy(&mut submitted, k);
+                    ctx.submit(submitted.finish());
+                }
+            }
+            ctx.defer_submissions(false);
+            assert_eq!((ctx.counters() - before).submissions, 1);
+            let last = ops.last().expect("an op").1 as u8 + 1;
+            assert_eq!(read(&ctx, &target, 16), [last; 16], "copies {ops:?}");
+        }
+        // Not deferring: recorded and submitted at once.
+        let before = ctx.counters();
+        ctx.record(|e| copy(e, 0));
+        assert_eq!((ctx.counters() - before).submissions, 1);
+        assert_eq!(read(&ctx, &target, 16), [1; 16]);
     }
 
     /// `buffer_rewritten` writes in place only where no pass recorded since the

@@ -209,6 +209,10 @@ pub struct GpuProbeBlend {
     layout: wgpu::BindGroupLayout,
     weights: wgpu::ComputePipeline,
     pipelines: [wgpu::ComputePipeline; 3],
+    /// Per volume (where its atlas starts), the kept plan whose entries were
+    /// last checked against a batch: (plan id, rays a probe, batch rays). A
+    /// kept plan's entries are the same, so the same check passes again.
+    checked: std::sync::Mutex<std::collections::HashMap<u64, (u64, usize, u64)>>,
 }
 
 impl GpuProbeBlend {
@@ -217,7 +221,7 @@ impl GpuProbeBlend {
         let layout = ctx.pass_layout("probe blend", &[false, true, true, false, false, false, true, true]);
         let pipelines = ctx.compute_pipelines(&PROBE_BLEND, &[Some(&layout)], PASS_NAMES);
         let [weights] = ctx.compute_pipelines(&PROBE_BLEND, &[Some(&layout)], ["blend_weights_table"]);
-        Self { layout, weights, pipelines }
+        Self { layout, weights, pipelines, checked: Default::default() }
     }
 
     /// Blends `frame` into `atlases` and refreshes the borders of the probes that updated.
@@ -287,7 +291,7 @@ impl GpuProbeBlend {
         plan: &DeviceVolumeBlend<'_>,
         ray_results: &wgpu::Buffer,
     ) -> Result<BlendBindings, GpuError> {
-        check_resident(atlases, plan, ray_results.size() / 16)?;
+        self.check_resident_once(atlases, plan, ray_results.size() / 16)?;
         let probes = atlases.probe_count;
         let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
         let per_row = (probes as u32).min(MAX_GROUPS);
@@ -315,7 +319,8 @@ impl GpuProbeBlend {
         let params =
             ctx.buffer_rewritten("blend params", key, bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let weights = ctx.scratch_buffer("blend weights", key, weight_count.max(4) as u64 * 4, storage);
-        let per_probe = ctx.buffer_identified("probe blend", key, per_probe_id, per_probe, storage);
+        let per_probe_id = per_probe_id.as_ref().map(std::slice::from_ref);
+        let per_probe = ctx.buffer_identified("probe blend", key, per_probe_id, || Ok(per_probe()), storage)?;
         let texel_dirs: Vec<[f32; 4]> =
             texel_directions(ni).into_iter().chain(texel_directions(nd)).map(|d| d.extend(0.0).into()).collect();
         let texel_dirs =
@@ -340,6 +345,28 @@ impl GpuProbeBlend {
         let dispatches = [1, groups((ni + 2) * (ni + 2)), groups((nd + 2) * (nd + 2))];
         let weight_groups = crate::bvh_trace::dispatch_2d(ni * ni + nd * nd);
         Ok(BlendBindings { bind_group, dispatches, per_row, rows, weight_groups })
+    }
+
+    /// [`check_resident`], skipped where the same kept plan (its
+    /// `probe_blend_id`) passed it last with the same rays and batch.
+    fn check_resident_once(
+        &self,
+        atlases: &GpuVolumeAtlases,
+        plan: &DeviceVolumeBlend<'_>,
+        batch_rays: u64,
+    ) -> Result<(), GpuError> {
+        let key = atlases.irradiance_first as u64;
+        let mut checked = self.checked.lock().unwrap_or_else(|e| e.into_inner());
+        let this = plan.probe_blend_id.map(|id| (id, plan.ray_dirs.len(), batch_rays));
+        if this.is_some() && checked.get(&key) == this.as_ref() && plan.probe_blend.len() == atlases.probe_count {
+            return Ok(());
+        }
+        checked.remove(&key);
+        check_resident(atlases, plan, batch_rays)?;
+        if let Some(this) = this {
+            checked.insert(key, this);
+        }
+        Ok(())
     }
 
     /// Records the three passes ([`PASS_NAMES`]: blend, border irradiance,

@@ -147,7 +147,8 @@ impl GpuProbeRayGen {
             // group are the ones of the frame before (two batches alternate).
             Some((key, id)) => {
                 let params = ctx.buffer_rewritten("ray gen params", key, params, wgpu::BufferUsages::UNIFORM);
-                let probes = ctx.buffer_identified("ray gen probes", key, id, records, usage);
+                let id = id.as_ref().map(std::slice::from_ref);
+                let probes = ctx.buffer_identified("ray gen probes", key, id, || Ok(records()), usage)?;
                 ctx.bind_group_kept("probe ray gen", key, &self.layout, &[&params, &probes, batch.rays_buffer()])
             }
             None => {
@@ -161,9 +162,7 @@ impl GpuProbeRayGen {
                 )
             }
         };
-        let device = &ctx.device;
-        let mut encoder = device.create_command_encoder(&Default::default());
-        {
+        ctx.record(|encoder| {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("probe ray gen"),
                 timestamp_writes: timer.and_then(|(t, i)| t.writes(i)),
@@ -171,8 +170,7 @@ impl GpuProbeRayGen {
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(gx, gy, 1);
-        }
-        ctx.submit(encoder.finish());
+        });
         Ok(())
     }
 }

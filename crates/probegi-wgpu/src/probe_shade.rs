@@ -53,6 +53,20 @@ pub struct ShadeProbe {
 }
 const _: () = assert!(std::mem::size_of::<ShadeProbe>() == 16);
 
+/// The shade pass's per-probe records as [`GpuProbeShade::shade_on_device`]
+/// takes them: `count` records, made by `records` only where the device
+/// does not hold them already. With `ids` (a kept plan's: one plan id per
+/// volume of the batch, `GeneratedProbeRays::plan_id`), records last
+/// written under the same ids stand, and `records` is not called.
+pub struct ShadeProbes<'a> {
+    /// How many records there are.
+    pub count: usize,
+    /// The records' identity, where they have one.
+    pub ids: Option<&'a [u64]>,
+    /// Makes the records.
+    pub records: &'a dyn Fn() -> Vec<ShadeProbe>,
+}
+
 /// Shading flags of `probe_shade.wgsl`'s `ShadeProbe::info`: whether the
 /// probe's radiance is needed (bit 31), second-order glossy (bit 30), the
 /// sky-map samples (bits 16..26; `probe_sky_light_samples`, at most 1024) and
@@ -163,6 +177,7 @@ impl GpuProbeShade {
         if batch.ray_count == 0 {
             return Ok(vec![]);
         }
+        let probes = ShadeProbes { count: probes.len(), ids: None, records: &|| probes.to_vec() };
         let results = self.shade_on_device(ctx, bvh, field, scene, batch, probes, seed, frame, timer)?;
         let bytes = ctx.read_back(&results)?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
@@ -184,29 +199,31 @@ impl GpuProbeShade {
         field: &GpuDdgiField,
         scene: &GpuScene,
         batch: &GpuRayBatch,
-        probes: &[ShadeProbe],
+        probes: ShadeProbes<'_>,
         seed: u32,
         frame: u32,
         timer: Option<(&crate::gpu_timer::GpuTimer, u32)>,
     ) -> Result<wgpu::Buffer, GpuError> {
         let n = batch.ray_count;
-        if probes.windows(2).any(|w| w[1].first_ray < w[0].first_ray) {
-            return Err(GpuError::Input("shade probes out of ray order".into()));
-        }
         let (gx, gy) = dispatch_2d(n);
-        let device = &ctx.device;
         let params =
-            ShadeParams { ray_count: n, groups_x: gx, seed, frame, probe_count: probes.len() as u32, _pad: [0; 3] };
+            ShadeParams { ray_count: n, groups_x: gx, seed, frame, probe_count: probes.count as u32, _pad: [0; 3] };
         // One shade a frame: its uniform block, probe records, output and bind
         // group are the frame before's while the batch keeps its size.
         let params = ctx.buffer_rewritten("shade params", 0, bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        let empty = [ShadeProbe::default()];
-        let info = ctx.buffer_rewritten(
-            "shade probes",
-            0,
-            bytemuck::cast_slice(if probes.is_empty() { &empty[..] } else { probes }),
-            wgpu::BufferUsages::STORAGE,
-        );
+        let records = || -> Result<Vec<u8>, GpuError> {
+            let records = (probes.records)();
+            if records.len() != probes.count || records.windows(2).any(|w| w[1].first_ray < w[0].first_ray) {
+                return Err(GpuError::Input(format!(
+                    "{} shade probes, not {}, or out of ray order",
+                    records.len(),
+                    probes.count
+                )));
+            }
+            let records = if records.is_empty() { vec![ShadeProbe::default()] } else { records };
+            Ok(bytemuck::cast_slice(&records).to_vec())
+        };
+        let info = ctx.buffer_identified("shade probes", 0, probes.ids, records, wgpu::BufferUsages::STORAGE)?;
         let radiance = ctx.scratch_buffer(
             "probe ray radiance",
             0,
@@ -220,8 +237,7 @@ impl GpuProbeShade {
             &self.layout,
             &[&params, batch.rays_buffer(), batch.hits_buffer(), &info, &radiance],
         );
-        let mut encoder = device.create_command_encoder(&Default::default());
-        {
+        ctx.record(|encoder| {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("shade probe rays"),
                 timestamp_writes: timer.and_then(|(t, i)| t.writes(i)),
@@ -232,8 +248,7 @@ impl GpuProbeShade {
             pass.set_bind_group(FIELD_GROUP, field.bind_group(), &[]);
             pass.set_bind_group(SCENE_GROUP, scene.bind_group(), &[]);
             pass.dispatch_workgroups(gx, gy, 1);
-        }
-        ctx.submit(encoder.finish());
+        });
         Ok(radiance)
     }
 }

@@ -50,7 +50,7 @@ use crate::probe_blend::GpuProbeBlend;
 use crate::probe_classification::{GpuProbeClassification, classification_results};
 use crate::probe_ray_gen::GpuProbeRayGen;
 use crate::probe_relocation::GpuProbeRelocation;
-use crate::probe_shade::{GpuProbeShade, batch_shade_probes};
+use crate::probe_shade::{GpuProbeShade, ShadeProbes, batch_shade_probes};
 use crate::probe_usage::GpuProbeUsage;
 use crate::shadow_field::GpuShadowField;
 use crate::{GpuContext, GpuError};
@@ -119,6 +119,15 @@ impl WgpuProbeTracer {
 
 /// The update volumes of `batch` whose probes cast the same rays each and lie
 /// consecutively, as the trace's direction-major segments (`bvh_trace::TraceSegment`).
+/// The identity of an update batch's shade records: every volume's plan id,
+/// where the field set made every probe's records
+/// (`GeneratedProbeRays::plan_id`); `None` otherwise.
+fn shade_records_ids(batch: &ProbeRayBatch) -> Option<Vec<u64>> {
+    let covered: usize = batch.generated.iter().map(|g| g.probe_count as usize).sum();
+    let update = batch.kind == probegi_field::seam::ProbeRayBatchKind::Update;
+    (update && covered == batch.probes.len()).then(|| batch.generated.iter().map(|g| g.plan_id).collect())?
+}
+
 fn trace_segments(batch: &ProbeRayBatch) -> Vec<TraceSegment> {
     batch
         .generated
@@ -369,22 +378,25 @@ impl WgpuProbeTracer {
         timer: Option<&GpuTimer>,
     ) -> Result<Vec<usize>, GpuError> {
         let per_member = crate::probe_blend::PASS_NAMES.len() as u32;
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-        let mut recorded = vec![];
+        // Every member's inputs first (their writes go through the context),
+        // then their passes into one encoder.
+        let mut prepared = vec![];
         for (i, p) in plan.iter().enumerate() {
             if p.probe_blend.iter().all(|b| b.is_none()) {
                 continue;
             }
             let atlases = f.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
-            let bindings = blend.prepare_resident(&self.ctx, &atlases, p, results)?;
-            blend.record(&mut encoder, &bindings, timer.map(|t| (t, 1 + per_member * i as u32)));
-            recorded.push(i);
+            prepared.push((i, blend.prepare_resident(&self.ctx, &atlases, p, results)?));
         }
-        if let Some(t) = timer {
-            t.resolve(&mut encoder);
-        }
-        self.ctx.submit(encoder.finish());
-        Ok(recorded)
+        self.ctx.record(|encoder| {
+            for (i, bindings) in &prepared {
+                blend.record(encoder, bindings, timer.map(|t| (t, 1 + per_member * *i as u32)));
+            }
+            if let Some(t) = timer {
+                t.resolve(encoder);
+            }
+        });
+        Ok(prepared.into_iter().map(|(i, _)| i).collect())
     }
 
     /// `batch`'s rays generated on the device, when it records how to make all
@@ -452,9 +464,7 @@ impl WgpuProbeTracer {
             None => self.trace.batch(&self.ctx, &batch_rays(batch), false)?,
         };
         resident.configure(&self.ctx, static_only, &trace_segments(batch));
-        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
-        self.trace.record(&mut encoder, &self.bvh, &resident, None);
-        self.ctx.submit(encoder.finish());
+        self.ctx.record(|encoder| self.trace.record(encoder, &self.bvh, &resident, None));
         Ok(resident)
     }
 
@@ -871,7 +881,9 @@ impl DeviceField for WgpuProbeTracer {
         let run = |gpu_field: &mut Option<GpuDdgiField>| -> Result<DeviceBlendOutput, GpuError> {
             let t = std::time::Instant::now();
             let f = self.resident_field(gpu_field, field, upload_atlases, plan)?;
-            let probes = batch_shade_probes(batch, volumes);
+            let ids = shade_records_ids(batch);
+            let records = || batch_shade_probes(batch, volumes);
+            let probes = ShadeProbes { count: batch.probes.len(), ids: ids.as_deref(), records: &records };
             let seed32 = (seed ^ (seed >> 32)) as u32;
             // Timestamp queries where the device has them: the shade pass, then
             // each member's blend and border passes.
@@ -880,7 +892,7 @@ impl DeviceField for WgpuProbeTracer {
                 .then(|| GpuTimer::new(&self.ctx, 1 + per_member * plan.len() as u32));
             let shade_timer = timer.as_ref().map(|t| (t, 0));
             let results =
-                shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, &probes, seed32, frame, shade_timer)?;
+                shade.shade_on_device(&self.ctx, &self.bvh, f, scene, resident, probes, seed32, frame, shade_timer)?;
             // With `timing` the host waits after each pass so that its wall times
             // are the device's (`bench`); otherwise the passes queue up unwaited.
             if self.timing() {

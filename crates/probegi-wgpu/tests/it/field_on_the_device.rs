@@ -533,3 +533,61 @@ fn the_initialisation_rounds_run_chained_in_one_submission_with_one_read_back() 
     assert_eq!(differ, 0, "probe states");
     assert_eq!(chained.last_init_rays, by_rounds.last_init_rays, "the same rounds skipped and kept");
 }
+
+#[test]
+fn kept_plans_on_the_device_blend_as_full_plans_through_a_shading_change() {
+    // A still field keeps its plan (`DdgiFieldSet::update_kept_plan`), and
+    // the device keeps what it made of it: the ray generation's, the shade's
+    // and the blend's per-probe records, by the plan's identity, and the
+    // blend's check of its entries. Against the same device passes re-planned
+    // every frame (`set_steady_plans(false)`), the atlases are bit-identical,
+    // through a change of the shading (the hit AO switched on at frame 12,
+    // which every shade record carries) that must renew them.
+    //
+    // Both device sets carry identities; the host blend over a shade given
+    // its records every frame (no identity) holds the device's reuse of them:
+    // they differ by the device rays' rounding only
+    // (`a_field_kept_on_the_gpu_with_its_own_rays_stays_within_the_ray_directions_rounding`:
+    // 7.3e-5 of the largest irradiance texel at 128 rays; twice that a flipped
+    // ray at 64 rays, and twice again with an AO ray per hit that may flip:
+    // bound 1.2e-3, measured 5.2e-4). Records kept past the AO switch would
+    // miss the AO's darkening, several per cent of the light.
+    let scene = probegi_scene::builtin::cornell_box();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let (Some(kept), Some(full), Some(host)) =
+        (gpu_generating(&scene, &bvh, true, true), gpu_generating(&scene, &bvh, true, true), gpu(&scene, &bvh, false))
+    else {
+        return;
+    };
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    let settings = DdgiVolumeSettings { probe_counts: UVec3::splat(6), probe_rays_per_probe: 64, ..Default::default() };
+    let bounds = scene.bounds().expect("geometry");
+    let mut sets = [0, 1, 2].map(|_| DdgiFieldSet::single(DdgiVolume::new(settings.clone(), bounds)));
+    sets[1].set_steady_plans(false);
+    let mut kept_frames = [0u32; 2];
+    for f in 0..24 {
+        if f == 12 {
+            for set in &mut sets {
+                set.volumes_mut()[0].settings.probe_hit_ao_radius_rel = 0.5;
+            }
+        }
+        let mut ms = BTreeMap::new();
+        for (set, t) in sets.iter_mut().zip([&kept, &full, &host]) {
+            set.update_traced_by(&scene, &bvh, Some(t), &direct, 5, f, &mut ms).expect("update");
+        }
+        assert!(!sets[1].update_kept_plan() && !sets[2].update_kept_plan());
+        kept_frames[(f >= 12) as usize] += sets[0].update_kept_plan() as u32;
+        assert!(f != 12 || !sets[0].update_kept_plan(), "a settings change plans again");
+    }
+    assert!(kept_frames.iter().all(|k| *k >= 4), "kept plans before and after the change: {kept_frames:?}");
+    for (set, t) in sets.iter_mut().zip([&kept, &full, &host]) {
+        set.sync_host_atlases(Some(t)).expect("read back");
+    }
+    let [a, b, c] = [0, 1, 2].map(|i| &sets[i].volumes()[0]);
+    assert_eq!(a.probe_states, b.probe_states);
+    assert_eq!(a.probe_states, c.probe_states);
+    assert_eq!(max_difference(a, b), (0.0, 0.0), "kept plans against full plans on the device");
+    let (di, dd) = max_difference(a, c);
+    eprintln!("kept plans {kept_frames:?}; against the host blend: irradiance {di:.1e}, distance {dd:.1e}");
+    assert!(di < 1.2e-3 && dd < 3e-3, "{di:e} {dd:e}");
+}
