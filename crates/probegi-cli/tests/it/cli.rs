@@ -593,6 +593,10 @@ fn gpu_bench_runs_the_pipelined_update_as_one_submission_without_a_wait() {
         let (host, field_set) =
             (piped["host_ms"].as_f64().expect("host"), piped["field_set_ms"].as_f64().expect("set"));
         assert!(field_set > 0.0 && field_set <= host, "{piped}");
+        // The calling thread's CPU time, where the platform says (Linux does).
+        if cfg!(target_os = "linux") {
+            assert!(piped["host_cpu_ms"].as_f64().is_some_and(|ms| ms > 0.0), "{piped}");
+        }
         // A still field: past the warm-up's and the timed update's first
         // blends (a history begins, Newly Vigilant probes settle), every
         // pipelined update keeps the plan before it.
