@@ -190,9 +190,11 @@ const PIPELINED_MIN_FRAMES: u32 = 4;
 /// the update calls less any time blocked on the device (with lavapipe that
 /// includes the driver's own work inside a submission, counted as waiting),
 /// and `host_cpu_ms` the CPU time the calling thread spent inside them
-/// (`null` where the platform does not say): the same host work, apart
-/// from the time other threads held the cores (lavapipe's, running the
-/// update before on the same cores, stretch `host_ms` by up to a half),
+/// (`null` where the platform does not say): the host work apart from the
+/// time other threads held the cores (lavapipe's, running the update
+/// before on the same cores, stretch `host_ms` by up to a half), and with
+/// the driver's own work inside the submission, which `host_ms` counts as
+/// waiting,
 /// and `field_set_ms` the field set's own part of it ([`HOST_PLAN_PASS`]:
 /// planning and bookkeeping, no command recording), which `update` returns
 /// with whether the update kept the plan before it

@@ -395,7 +395,17 @@ impl GpuContext {
         let open = self.open_encoder.lock().unwrap_or_else(|e| e.into_inner()).take();
         let mut encoder = open.unwrap_or_else(|| self.device.create_command_encoder(&Default::default()));
         let out = f(&mut encoder);
-        *self.open_encoder.lock().unwrap_or_else(|e| e.into_inner()) = Some(encoder);
+        let mut open = self.open_encoder.lock().unwrap_or_else(|e| e.into_inner());
+        debug_assert!(open.is_none(), "GpuContext::record called inside a record");
+        if let Some(inner) = open.take() {
+            // `f` recorded through this context (a misuse): keep both, this
+            // encoder's commands first, rather than drop the other's.
+            drop(open);
+            self.submit(encoder.finish());
+            self.submit(inner.finish());
+            return out;
+        }
+        *open = Some(encoder);
         out
     }
 

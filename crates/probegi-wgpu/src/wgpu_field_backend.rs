@@ -117,8 +117,6 @@ impl WgpuProbeTracer {
     }
 }
 
-/// The update volumes of `batch` whose probes cast the same rays each and lie
-/// consecutively, as the trace's direction-major segments (`bvh_trace::TraceSegment`).
 /// The identity of an update batch's shade records: every volume's plan id,
 /// where the field set made every probe's records
 /// (`GeneratedProbeRays::plan_id`); `None` otherwise.
@@ -128,6 +126,8 @@ fn shade_records_ids(batch: &ProbeRayBatch) -> Option<Vec<u64>> {
     (update && covered == batch.probes.len()).then(|| batch.generated.iter().map(|g| g.plan_id).collect())?
 }
 
+/// The update volumes of `batch` whose probes cast the same rays each and lie
+/// consecutively, as the trace's direction-major segments (`bvh_trace::TraceSegment`).
 fn trace_segments(batch: &ProbeRayBatch) -> Vec<TraceSegment> {
     batch
         .generated
