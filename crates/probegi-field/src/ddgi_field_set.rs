@@ -461,6 +461,7 @@ impl DdgiFieldSet {
             }
             for &i in &pending {
                 DdgiVolume::forget_plan_snapshot(&mut self.frames[i]);
+                self.volumes[i].settle_steady_counts();
             }
             // A device that makes the update rays makes these too (no per-ray
             // arrays; a host trace fills them first).
@@ -495,6 +496,8 @@ impl DdgiFieldSet {
             self.expected = UpdateStep::TraceRays;
             return UpdateStep::TraceRays;
         }
+        // A full plan: the counters the kept frames owe first (the budget reads them).
+        self.volumes.iter_mut().for_each(DdgiVolume::settle_steady_counts);
         // Shadow rays are made on the host: a batch with them keeps per-ray arrays.
         let per_ray = !self.update_rays_on_device || self.has_host_shadow_rays();
         self.batch.clear(ProbeRayBatchKind::Update, per_ray);

@@ -403,9 +403,6 @@ pub struct GpuRayBatch {
     /// What `params` holds once every write recorded so far has landed
     /// ([`Self::configure`] skips a write that would not change it).
     params_written: std::sync::Mutex<TraceParams>,
-    /// When a trace reading `params` was last recorded
-    /// ([`GpuContext::write_buffer_in_place`]).
-    params_handed_out_at: std::sync::atomic::AtomicU64,
     bind_group: wgpu::BindGroup,
 }
 
@@ -486,15 +483,13 @@ impl GpuRayBatch {
         // A batch reused for the same kind of trace (a still field's updates,
         // `WgpuProbeTracer::spare_batch`) holds these parameters already.
         // A batch reused for another count (the screen scheme's) is rewritten
-        // through the queue: the traces that read it before were submitted.
+        // in order: the traces recorded before read the old parameters.
         let mut written = self.params_written.lock().unwrap_or_else(|e| e.into_inner());
         if bytemuck::bytes_of(&*written) == bytemuck::bytes_of(&params) {
             ctx.count_kept(std::mem::size_of::<TraceParams>() as u64);
-            // The trace recorded next reads these parameters.
-            self.params_handed_out_at.store(ctx.queue_submissions(), std::sync::atomic::Ordering::Relaxed);
             return;
         }
-        ctx.write_buffer_in_place(&self.params, 0, bytemuck::bytes_of(&params), &self.params_handed_out_at);
+        ctx.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         *written = params;
     }
 
@@ -564,19 +559,7 @@ impl GpuRayTrace {
             ],
         });
         let params_written = std::sync::Mutex::new(first_params);
-        // Made with the batch (`buffer_with`): no pass has read it yet.
-        let params_handed_out_at = std::sync::atomic::AtomicU64::new(u64::MAX);
-        GpuRayBatch {
-            ray_count: n,
-            capacity,
-            any_hit,
-            rays,
-            hits,
-            params,
-            params_written,
-            params_handed_out_at,
-            bind_group,
-        }
+        GpuRayBatch { ray_count: n, capacity, any_hit, rays, hits, params, params_written, bind_group }
     }
 
     /// A batch of `ray_count` rays left for a pass on the device to write

@@ -107,9 +107,6 @@ struct FrameImages {
     height: u32,
     camera_params: wgpu::Buffer,
     frame_params: wgpu::Buffer,
-    /// [`GpuContext::write_buffer_in_place`]'s record of when a pass reading
-    /// `camera_params` / `frame_params` was last recorded.
-    params_handed_out_at: [std::sync::atomic::AtomicU64; 2],
     direct: wgpu::Buffer,
     irradiance: wgpu::Buffer,
     /// The two histories; `current` holds the last frame's.
@@ -370,7 +367,6 @@ impl GpuFrame {
             height,
             camera_params: uniform("camera params", std::mem::size_of::<CameraParams>() as u64),
             frame_params,
-            params_handed_out_at: Default::default(),
             direct,
             irradiance,
             history,
@@ -430,11 +426,9 @@ impl GpuFrame {
             clip: [clip.max(0.0), 0.0, 0.0, 0.0],
             layout: [rgba8_pitch(f.width), 0, 0, 0],
         };
-        // The frame's own uniform blocks, through the queue: the passes that
-        // read them last were submitted with the frame before.
-        let [camera_at, frame_at] = &images.params_handed_out_at;
-        ctx.write_buffer_in_place(&images.camera_params, 0, bytemuck::bytes_of(&camera_params), camera_at);
-        ctx.write_buffer_in_place(&images.frame_params, 0, bytemuck::bytes_of(&params), frame_at);
+        // The frame's own uniform blocks, written in order before its passes.
+        ctx.write_buffer(&images.camera_params, 0, bytemuck::bytes_of(&camera_params));
+        ctx.write_buffer(&images.frame_params, 0, bytemuck::bytes_of(&params));
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         encoder.clear_buffer(&images.stats, 0, None);
         if f.request_words > 0 {
@@ -512,8 +506,7 @@ impl GpuFrame {
             FrameLayer::Indirect => 2,
         };
         // Field `info.z` of the uniform block: 2 cameras of 64 bytes, then mode and frames.
-        let at = &images.params_handed_out_at[1];
-        ctx.write_buffer_in_place(&images.frame_params, 128 + 8, bytemuck::bytes_of(&layer_index), at);
+        ctx.write_buffer(&images.frame_params, 128 + 8, bytemuck::bytes_of(&layer_index));
         let (gx, gy) = (images.width.div_ceil(8), images.height.div_ceil(8));
         // The group that wrote the current history reads it as `history_next`.
         let mut p = encoder.begin_compute_pass(&Default::default());

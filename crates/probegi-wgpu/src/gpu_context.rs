@@ -66,7 +66,36 @@ pub struct GpuContext {
     /// [`GpuContext::bind_group_kept`]'s bind groups, per (label, key): the
     /// last few made, with the layout and buffers each binds.
     bind_groups: std::sync::Mutex<std::collections::HashMap<(&'static str, u64), Vec<KeptBindGroup>>>,
+    /// While deferring: the bytes of this submission's buffer writes
+    /// ([`UploadArena`]).
+    uploads: std::sync::Mutex<UploadArena>,
 }
+
+/// The bytes a deferred submission's buffer writes carry, staged on the host
+/// in a few device buffers (chunks) that are filled with one
+/// `Queue::write_buffer` each when the submission goes to the queue; each
+/// write is a copy from its chunk, recorded in order among the passes. On
+/// lavapipe every `Queue::write_buffer` costs the host a staging buffer of
+/// its own (about 20 µs), as did a deferred write's own staging buffer: a
+/// frame's parameter blocks (ray generation's rotation, the trace's, the
+/// shade's frame, the blend's ray directions) now share one. A chunk the
+/// previous submission copied from is refilled only by the next submission's
+/// queue write, which the queue orders after that submission.
+#[derive(Default)]
+struct UploadArena {
+    /// The chunks, with the bytes staged in each since the last submission.
+    chunks: Vec<(wgpu::Buffer, Vec<u8>)>,
+    /// The chunk the next write goes to first.
+    current: usize,
+}
+
+/// Bytes of a new [`UploadArena`] chunk (more for a larger write).
+const UPLOAD_CHUNK_BYTES: u64 = 64 << 10;
+/// The largest write staged in the arena; a larger one (a scene's upload while
+/// deferring) gets a staging buffer of its own, not a chunk kept for good.
+const UPLOAD_LARGEST_BYTES: u64 = 4 << 20;
+/// Chunk bytes the arena keeps between submissions; chunks beyond are let go.
+const UPLOAD_KEPT_BYTES: u64 = 8 << 20;
 
 /// A buffer a pass keeps from frame to frame and rewrites in place
 /// ([`GpuContext::buffer_rewritten`], [`GpuContext::scratch_buffer`]).
@@ -207,6 +236,7 @@ impl GpuContext {
             last_submission: Default::default(),
             frame_buffers: Default::default(),
             bind_groups: Default::default(),
+            uploads: Default::default(),
         })
     }
 
@@ -242,6 +272,7 @@ impl GpuContext {
             last_submission: Default::default(),
             frame_buffers: Default::default(),
             bind_groups: Default::default(),
+            uploads: Default::default(),
         }
     }
 
@@ -433,6 +464,7 @@ impl GpuContext {
 
     fn queue_submit(&self, commands: Vec<wgpu::CommandBuffer>) -> wgpu::SubmissionIndex {
         use std::sync::atomic::Ordering::Relaxed;
+        self.upload_staged();
         let t = std::time::Instant::now();
         self.transfers.submissions.fetch_add(1, Relaxed);
         let index = self.queue.submit(commands);
@@ -487,11 +519,17 @@ impl GpuContext {
 
     /// Writes `data` into `buffer` at `offset` (counted as uploaded): through
     /// the queue, or, while deferring, as a copy recorded after the passes
-    /// before it.
+    /// before it, from the [`UploadArena`] (or, for a write larger than
+    /// [`UPLOAD_LARGEST_BYTES`], from a staging buffer of its own).
     pub(crate) fn write_buffer(&self, buffer: &wgpu::Buffer, offset: u64, data: &[u8]) {
         self.transfers.up.fetch_add(data.len() as u64, std::sync::atomic::Ordering::Relaxed);
-        if self.pending.lock().unwrap_or_else(|e| e.into_inner()).is_none() || data.is_empty() {
+        if !self.deferring() || data.is_empty() {
             self.queue.write_buffer(buffer, offset, data);
+            return;
+        }
+        let len = data.len() as u64;
+        if let Some((chunk, at)) = self.stage(data) {
+            self.record(|e| e.copy_buffer_to_buffer(&chunk, at, buffer, offset, len));
             return;
         }
         self.transfers.buffers.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -500,9 +538,58 @@ impl GpuContext {
             contents: data,
             usage: wgpu::BufferUsages::COPY_SRC,
         });
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(&staging, 0, buffer, offset, data.len() as u64);
-        self.submit(encoder.finish());
+        self.record(|e| e.copy_buffer_to_buffer(&staging, 0, buffer, offset, len));
+    }
+
+    /// Stages `data` in the [`UploadArena`]: the chunk and the byte offset it
+    /// will sit at once [`Self::upload_staged`] writes the chunk. `None` for a
+    /// write the arena does not take (larger than [`UPLOAD_LARGEST_BYTES`],
+    /// or of a length a copy cannot have).
+    fn stage(&self, data: &[u8]) -> Option<(wgpu::Buffer, u64)> {
+        let len = data.len() as u64;
+        if len > UPLOAD_LARGEST_BYTES || !len.is_multiple_of(wgpu::COPY_BUFFER_ALIGNMENT) {
+            return None;
+        }
+        let mut arena = self.uploads.lock().unwrap_or_else(|e| e.into_inner());
+        let start = arena.current;
+        let room = |(b, bytes): &(wgpu::Buffer, Vec<u8>)| b.size() - bytes.len() as u64 >= len;
+        let index = match arena.chunks.iter().skip(start).position(room) {
+            Some(i) => start + i,
+            None => {
+                let size = UPLOAD_CHUNK_BYTES.max(len.next_power_of_two());
+                let buffer = self.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("upload arena"),
+                    size,
+                    usage: wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                arena.chunks.push((buffer, Vec::with_capacity(size as usize)));
+                arena.chunks.len() - 1
+            }
+        };
+        arena.current = index;
+        let (buffer, bytes) = &mut arena.chunks[index];
+        let at = bytes.len() as u64;
+        bytes.extend_from_slice(data);
+        Some((buffer.clone(), at))
+    }
+
+    /// Writes what [`Self::stage`] staged since the last submission into its
+    /// chunks, one `Queue::write_buffer` a chunk, which lands before the
+    /// submission made next (the one holding the copies from them), and
+    /// lets go of chunks beyond [`UPLOAD_KEPT_BYTES`].
+    fn upload_staged(&self) {
+        let mut arena = self.uploads.lock().unwrap_or_else(|e| e.into_inner());
+        for (buffer, bytes) in arena.chunks.iter_mut().filter(|(_, b)| !b.is_empty()) {
+            self.queue.write_buffer(buffer, 0, bytes);
+            bytes.clear();
+        }
+        arena.current = 0;
+        let mut kept = 0;
+        arena.chunks.retain(|(b, _)| {
+            kept += b.size();
+            kept <= UPLOAD_KEPT_BYTES
+        });
     }
 
     /// A buffer (counted in [`GpuCounters::buffers_made`]).
@@ -526,11 +613,14 @@ impl GpuContext {
     /// inputs that change from frame to frame (its uniform block, the frame's
     /// ray directions): kept per `(label, key)` and rewritten in place. Nothing
     /// is uploaded while the contents repeat (counted as kept), else one
-    /// `Queue::write_buffer`, which lands before the next submission and
-    /// after the ones before it. Where a pass recorded since the last
-    /// submission may still read the old contents (the buffer was handed out
-    /// since), writing in place would change what that pass reads: a new
-    /// buffer replaces it instead. So a pass keyed per volume that runs once a
+    /// [`Self::write_buffer`]: while deferring, a copy from the
+    /// [`UploadArena`] recorded before the passes recorded after this call;
+    /// otherwise a `Queue::write_buffer`, which lands before the next
+    /// submission and after the ones before it. Where a pass recorded since
+    /// the last submission, or about to be recorded, may still read the old
+    /// contents (the buffer was handed out since the last submission),
+    /// writing in place would change what that pass reads: a new buffer
+    /// replaces it instead. So a pass keyed per volume that runs once a
     /// frame makes no buffer, where it made one a frame before. Contents that
     /// change length (the screen scheme's probe records) keep a buffer that
     /// holds them and at most twice as many bytes ([`holds`]; a new one
@@ -555,8 +645,7 @@ impl GpuContext {
                 return k.buffer.clone();
             }
             if k.handed_out_at != now {
-                self.transfers.up.fetch_add(contents.len() as u64, std::sync::atomic::Ordering::Relaxed);
-                self.queue.write_buffer(&k.buffer, 0, contents);
+                self.write_buffer(&k.buffer, 0, contents);
                 k.id = None;
                 k.contents.clear();
                 k.contents.extend_from_slice(contents);
@@ -673,29 +762,6 @@ impl GpuContext {
         let buffers = buffers.iter().map(|b| (*b).clone()).collect();
         list.push(KeptBindGroup { layout: layout.clone(), buffers, bind_group: bind_group.clone() });
         bind_group
-    }
-
-    /// [`Self::write_buffer`] for a buffer the caller keeps and rewrites each
-    /// frame (a frame's uniform blocks): through the queue at once, with no
-    /// staging buffer, where no pass recorded since the last submission reads
-    /// it, else as `write_buffer` records it, in order. `handed_out_at` holds
-    /// the queue submissions made when a pass reading the buffer was last
-    /// recorded; this call sets it, for the pass the caller records next.
-    pub(crate) fn write_buffer_in_place(
-        &self,
-        buffer: &wgpu::Buffer,
-        offset: u64,
-        data: &[u8],
-        handed_out_at: &std::sync::atomic::AtomicU64,
-    ) {
-        use std::sync::atomic::Ordering::Relaxed;
-        let now = self.queue_submissions();
-        if handed_out_at.swap(now, Relaxed) == now {
-            self.write_buffer(buffer, offset, data);
-            return;
-        }
-        self.transfers.up.fetch_add(data.len() as u64, Relaxed);
-        self.queue.write_buffer(buffer, offset, data);
     }
 
     /// A storage buffer of `bytes` a pass writes and the host reads back.
@@ -935,6 +1001,57 @@ mod tests {
         assert_eq!(read(&ctx, &target, 16), [1; 16]);
     }
 
+    /// While deferring, buffer writes are copies from the upload arena, recorded
+    /// in program order among the passes: a buffer written, copied, written
+    /// again and copied gives each copy its own contents, in one submission.
+    /// The arena's chunks are made on the first frame (one of 64 KiB, one for
+    /// a write larger than that) and refilled on the next, where the copies
+    /// read that frame's bytes; a write larger than the arena takes gets a
+    /// staging buffer of its own.
+    #[test]
+    fn deferred_writes_share_the_upload_arena_and_land_in_program_order() {
+        let Some(ctx) = GpuContext::headless_unless_absent().expect("device") else { return };
+        let usage = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        let target = ctx.buffer_with("test target", &[0; 16], usage);
+        let snaps: Vec<wgpu::Buffer> = (0..2).map(|_| ctx.buffer_with("test snapshot", &[0; 16], usage)).collect();
+        let big_bytes = 100 << 10;
+        let big = ctx.buffer_with("test big", &vec![0; big_bytes], usage);
+        let snapshot = |k: usize| ctx.record(|e| e.copy_buffer_to_buffer(&target, 0, &snaps[k], 0, 16));
+        for frame in 1..=2u8 {
+            ctx.defer_submissions(true);
+            let before = ctx.counters();
+            ctx.write_buffer(&target, 0, &[frame; 16]);
+            snapshot(0);
+            ctx.write_buffer(&target, 0, &[frame + 10; 16]);
+            snapshot(1);
+            ctx.write_buffer(&big, 0, &vec![frame; big_bytes]);
+            ctx.write_buffer(&target, 8, &[frame + 20; 8]);
+            ctx.defer_submissions(false);
+            let d = ctx.counters() - before;
+            assert_eq!((d.submissions, d.bytes_up), (1, 16 + 16 + big_bytes as u64 + 8));
+            assert_eq!(d.buffers_made, if frame == 1 { 2 } else { 0 }, "frame {frame}");
+            assert_eq!(read(&ctx, &snaps[0], 16), [frame; 16]);
+            assert_eq!(read(&ctx, &snaps[1], 16), [frame + 10; 16]);
+            assert_eq!(read(&ctx, &target, 16), [[frame + 10; 8], [frame + 20; 8]].concat());
+            assert_eq!(read(&ctx, &big, big_bytes as u64), vec![frame; big_bytes]);
+        }
+        let huge_bytes = UPLOAD_LARGEST_BYTES as usize + 16;
+        let huge = ctx.buffer_with("test huge", &vec![0; huge_bytes], usage);
+        ctx.defer_submissions(true);
+        let before = ctx.counters();
+        ctx.write_buffer(&target, 0, &[7; 16]);
+        snapshot(0);
+        ctx.write_buffer(&huge, 0, &vec![9; huge_bytes]);
+        ctx.record(|e| e.copy_buffer_to_buffer(&huge, 0, &target, 0, 16));
+        snapshot(1);
+        ctx.defer_submissions(false);
+        let d = ctx.counters() - before;
+        assert_eq!((d.submissions, d.buffers_made), (1, 1), "the huge write's own staging buffer");
+        assert_eq!(read(&ctx, &snaps[0], 16), [7; 16]);
+        assert_eq!(read(&ctx, &snaps[1], 16), [9; 16]);
+        assert_eq!(read(&ctx, &huge, huge_bytes as u64), vec![9; huge_bytes]);
+    }
+
     /// `buffer_rewritten` writes in place only where no pass recorded since the
     /// last submission may read the old contents; else the old buffer keeps
     /// them and a new one takes the new. What each buffer holds is read back.
@@ -960,12 +1077,22 @@ mod tests {
         let second = ctx.buffer_rewritten("test input", 7, &b, usage);
         ctx.submit(ctx.device.create_command_encoder(&Default::default()).finish());
         ctx.flush();
-        // After a submission: rewritten in place, no buffer made.
+        // After a submission: rewritten in place, the bytes staged in the
+        // upload arena (whose first chunk this write makes).
         let before = ctx.counters();
         let third = ctx.buffer_rewritten("test input", 7, &c, usage);
         assert_eq!(third, second);
-        assert_eq!((ctx.counters() - before).buffers_made, 0);
+        assert_eq!((ctx.counters() - before).buffers_made, 1);
         assert_eq!((ctx.counters() - before).bytes_up, 32);
+        ctx.submit(ctx.device.create_command_encoder(&Default::default()).finish());
+        ctx.flush();
+        // The next frame's rewrite makes no buffer at all.
+        let before = ctx.counters();
+        assert_eq!(ctx.buffer_rewritten("test input", 7, &b, usage), second);
+        assert_eq!((ctx.counters() - before).buffers_made, 0);
+        ctx.submit(ctx.device.create_command_encoder(&Default::default()).finish());
+        ctx.flush();
+        let third = ctx.buffer_rewritten("test input", 7, &c, usage);
         ctx.defer_submissions(false);
         assert_eq!(read(&ctx, &first, 32), a);
         assert_eq!(read(&ctx, &third, 32), c);

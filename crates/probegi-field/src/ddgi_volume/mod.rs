@@ -149,6 +149,9 @@ pub struct DdgiVolume {
     /// atlas (`probe_adaptive_hysteresis`; empty without it, sized at the
     /// first blend with it, from 0).
     irradiance_texel_hysteresis: Vec<f32>,
+    /// The counters above that a kept plan's frames have not yet added
+    /// (`steady_frames::OwedCounts`): `None` where every counter is current.
+    steady_owed: Option<steady_frames::OwedCounts>,
 }
 
 /// One volume's per-frame scratch.
@@ -188,6 +191,9 @@ pub struct VolumeFrame {
     pub(crate) steady_blend: Option<Vec<Option<(u32, f32)>>>,
     /// The kept blend plan's identity (`DeviceVolumeBlend::probe_blend_id`).
     pub(crate) steady_blend_id: u64,
+    /// The kept plan's per-probe flags for the frame counters
+    /// (`steady_frames::OwedCounts`), made with `steady_blend`.
+    pub(crate) steady_flags: Option<std::sync::Arc<[u8]>>,
     /// What the volume's last full update plan read (in this frame's slot of
     /// the set, with the batch it vouches for), where a later frame may keep
     /// that plan (`steady_frames`).
@@ -274,6 +280,7 @@ impl DdgiVolume {
             probe_requested: vec![false; probes],
             probe_blends: vec![0; probes],
             irradiance_texel_hysteresis: Vec::new(),
+            steady_owed: None,
             settings,
         }
     }
@@ -324,7 +331,10 @@ impl DdgiVolume {
 
     /// Frames since probe `p` last traced (0: it traced in the last update).
     pub fn probe_frames_since_traced(&self, p: usize) -> u32 {
-        self.probe_untraced_frames[p]
+        match &self.steady_owed {
+            Some(owed) => owed.untraced(p, self.probe_untraced_frames[p]),
+            None => self.probe_untraced_frames[p],
+        }
     }
 
     /// Whether probe `p` has been blended since it was created or last reset.

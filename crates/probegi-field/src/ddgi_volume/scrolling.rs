@@ -80,6 +80,7 @@ impl DdgiVolume {
 
     /// Forgets everything probe `p` knew: it is a new probe at its grid point.
     fn reset_probe(&mut self, p: usize) {
+        self.settle_steady_counts();
         self.irradiance.tile_mut(p).fill(Vec3::ZERO);
         self.distance.tile_mut(p).fill(Vec2::ZERO);
         self.probe_offsets[p] = Vec3::ZERO;

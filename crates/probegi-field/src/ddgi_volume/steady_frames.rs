@@ -19,6 +19,13 @@
 //! count the frames its counters count (`probe_budget`), instead of planning,
 //! classifying and bookkeeping each probe again.
 //!
+//! Those counters (frames since a probe traced, frames in a row it traced,
+//! frames its blend waited, its blends) move by the same step every kept
+//! frame, so a kept frame only counts itself ([`OwedCounts`]); they are
+//! brought up to date, probe by probe, before anything else reads or writes
+//! them: a full plan, an initialisation round, a probe's reset, the ray
+//! budget's choice ([`DdgiVolume::settle_steady_counts`]).
+//!
 //! The check is a comparison with a snapshot taken at the last full plan,
 //! kept by the set beside the plan (a volume swapped or restored into
 //! another's place meets another's snapshot), so a change through the set
@@ -51,10 +58,61 @@ pub(crate) struct PlanSnapshot {
     settings: DdgiVolumeSettings,
 }
 
+/// The frame counters a run of kept frames owes a volume: how many kept
+/// frames were planned (they count the frames since each probe traced and
+/// the frames in a row it traced) and how many of them blended (the frames
+/// each probe's blend waited, and its blends), with the kept plan's flags per
+/// probe ([`STEADY_TRACED`], [`STEADY_ACTIVE`], [`STEADY_BLENDED`]).
+/// Adding `n` frames at once gives what `n` frames one by one give: each
+/// counter either restarts every frame or adds the same step, saturating.
+#[derive(Clone, Debug)]
+pub(crate) struct OwedCounts {
+    planned: u32,
+    blended: u32,
+    flags: std::sync::Arc<[u8]>,
+}
+
+/// [`OwedCounts`]'s flag: the probe traces in the kept plan.
+const STEADY_TRACED: u8 = 1;
+/// The probe's state wants a blend in the kept plan (`VolumeFrame::active`).
+const STEADY_ACTIVE: u8 = 2;
+/// The probe blends in the kept plan (`VolumeFrame::blends`).
+const STEADY_BLENDED: u8 = 4;
+
+impl OwedCounts {
+    /// Probe `p`'s frames since it traced, from `counted` (what the volume
+    /// holds) and what is owed.
+    pub(crate) fn untraced(&self, p: usize, counted: u32) -> u32 {
+        match (self.flags[p] & STEADY_TRACED != 0, self.planned) {
+            (_, 0) => counted,
+            (true, _) => 0,
+            (false, n) => counted.saturating_add(n),
+        }
+    }
+}
+
+/// A kept plan's per-probe flags for [`OwedCounts`].
+fn steady_flags(frame: &VolumeFrame) -> std::sync::Arc<[u8]> {
+    let planned = frame.tracing.iter().zip(&frame.active).zip(&frame.first_ray);
+    planned
+        .map(|((&traced, &active), &first)| {
+            let blended = active && first != u32::MAX;
+            traced as u8 * STEADY_TRACED + active as u8 * STEADY_ACTIVE + blended as u8 * STEADY_BLENDED
+        })
+        .collect()
+}
+
 /// A slice's bytes: floats compared bit for bit (stricter than `==`, and a
 /// memory comparison rather than one per float).
 fn bits<T: bytemuck::Pod>(values: &[T]) -> &[u8] {
     bytemuck::cast_slice(values)
+}
+
+/// Whether two probes' state lists are equal: compared whole, without the
+/// early exit of `==` on a slice of enums, so the loop vectorises (a still
+/// field compares every probe's state every frame).
+fn same_states(a: &[ProbeState], b: &[ProbeState]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(true, |same, (x, y)| same & (*x as u8 == *y as u8))
 }
 
 /// Whether a probe in `state` keeps it through an update, traces and blends
@@ -99,7 +157,7 @@ impl DdgiVolume {
     /// blend was in that plan has a history now, and so differs from it.)
     pub(crate) fn plan_is_steady(&self, frame: &VolumeFrame) -> bool {
         let Some(snap) = frame.plan_snapshot.as_ref() else { return false };
-        let unchanged = snap.states == self.probe_states
+        let unchanged = same_states(&snap.states, &self.probe_states)
             && snap.has_history == self.probe_has_history
             && bits(&snap.hysteresis) == bits(&self.probe_hysteresis)
             && bits(&snap.positions) == bits(&self.probe_positions)
@@ -119,12 +177,14 @@ impl DdgiVolume {
     pub(crate) fn forget_plan_snapshot(frame: &mut VolumeFrame) {
         frame.plan_snapshot = None;
         frame.steady_blend = None;
+        frame.steady_flags = None;
     }
 
     /// Takes the snapshot of the plan just made (or none) into `frame`.
     pub(crate) fn keep_plan_snapshot(&self, frame: &mut VolumeFrame) {
         frame.plan_snapshot = self.steady_snapshot();
         frame.steady_blend = None;
+        frame.steady_flags = None;
     }
 
     /// A steady frame's plan: the frame's rays (the rotation turns every
@@ -134,13 +194,69 @@ impl DdgiVolume {
         let stream = self.stream_seed(seed);
         frame.rays = crate::probe_ray_gen::generate_probe_rays(&self.settings, stream, frame_index);
         debug_assert_eq!(frame.ray_count, frame.rays.dirs.len());
-        self.count_untraced_frames(frame);
         if frame.steady_blend.is_none() {
             let (base, _, _) = self.blend_plan_with(frame, false);
             frame.steady_blend = Some(super::blend_inputs::device_entries(base));
             frame.steady_blend_id = crate::device_plans::next_plan_id();
+            frame.steady_flags = Some(steady_flags(frame));
         }
+        self.owe_steady_frame(frame, true);
         crate::probe_ray_gen::probe_ray_rotation(stream, frame_index)
+    }
+
+    /// Counts a kept frame in [`OwedCounts`]: planned (`planning`) or
+    /// blended. Counters owed for another kept plan are settled first.
+    fn owe_steady_frame(&mut self, frame: &VolumeFrame, planning: bool) {
+        let Some(flags) = frame.steady_flags.as_ref() else {
+            // Not reached (a kept plan's first frame makes the flags); count eagerly.
+            self.settle_steady_counts();
+            match planning {
+                true => self.count_untraced_frames(frame),
+                false => self.count_blended_frames(frame),
+            }
+            return;
+        };
+        if self.steady_owed.as_ref().is_some_and(|o| !std::sync::Arc::ptr_eq(&o.flags, flags)) {
+            self.settle_steady_counts();
+        }
+        let owed = self.steady_owed.get_or_insert_with(|| OwedCounts { planned: 0, blended: 0, flags: flags.clone() });
+        match planning {
+            true => owed.planned += 1,
+            false => owed.blended += 1,
+        }
+    }
+
+    /// Brings the frame counters that a run of kept plans (module docs) left
+    /// owing up to date: each probe's frames since it traced, frames in a row
+    /// it traced, frames its blend waited and blends. The volume does this
+    /// itself before anything else reads or writes them; a caller that
+    /// compares two volumes whole (their `Debug`) calls it first.
+    pub fn settle_steady_counts(&mut self) {
+        let Some(OwedCounts { planned, blended, flags }) = self.steady_owed.take() else { return };
+        for (p, &f) in flags.iter().enumerate() {
+            let (traced, active, blends) = (f & STEADY_TRACED != 0, f & STEADY_ACTIVE != 0, f & STEADY_BLENDED != 0);
+            if planned > 0 {
+                let untraced = &mut self.probe_untraced_frames[p];
+                *untraced = if traced { 0 } else { untraced.saturating_add(planned) };
+                let run = &mut self.probe_trace_run[p];
+                *run = if traced { run.saturating_add(planned) } else { 0 };
+            }
+            if blended > 0 {
+                let waited = &mut self.probe_unblended_frames[p];
+                *waited = if blends { 0 } else { waited.saturating_add(active as u32 * blended) };
+                self.probe_blends[p] = self.probe_blends[p].saturating_add(blends as u32 * blended);
+            }
+        }
+    }
+
+    /// A frame's blend counters, one frame at once: the frames each probe's
+    /// blend waited, and its blends (`after_update`'s, for a probe with a history).
+    fn count_blended_frames(&mut self, frame: &VolumeFrame) {
+        self.count_unblended_frames(frame);
+        let planned = frame.active.iter().zip(&frame.first_ray);
+        for (b, (&active, &first)) in self.probe_blends.iter_mut().zip(planned) {
+            *b = b.saturating_add((active && first != u32::MAX) as u32);
+        }
     }
 
     /// A steady frame's bookkeeping after its blend (`after_update`'s, where
@@ -148,12 +264,7 @@ impl DdgiVolume {
     /// probe waited, and the scene events' remaining frames.
     pub(crate) fn accept_steady_blend(&mut self, frame: &VolumeFrame) {
         self.frames_updated += 1;
-        self.count_unblended_frames(frame);
-        // `after_update`'s blend count of a probe with a history (a kept plan has no fresh one).
-        let planned = frame.active.iter().zip(&frame.first_ray);
-        for (b, (&active, &first)) in self.probe_blends.iter_mut().zip(planned) {
-            *b = b.saturating_add((active && first != u32::MAX) as u32);
-        }
+        self.owe_steady_frame(frame, false);
         self.tick_scene_events();
     }
 }

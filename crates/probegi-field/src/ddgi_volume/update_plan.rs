@@ -24,6 +24,7 @@ impl DdgiVolume {
         volume: u32,
         batch: &mut ProbeRayBatch,
     ) {
+        self.settle_steady_counts();
         let probes = self.grid.probe_count();
         let interval = self.settings.probe_sleeping_update_interval;
         // The frame's per-probe arrays reuse last frame's storage: a still
