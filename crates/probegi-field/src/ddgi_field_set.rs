@@ -496,8 +496,12 @@ impl DdgiFieldSet {
             self.expected = UpdateStep::TraceRays;
             return UpdateStep::TraceRays;
         }
-        // A full plan: the counters the kept frames owe first (the budget reads them).
-        self.volumes.iter_mut().for_each(DdgiVolume::settle_steady_counts);
+        // A full plan: the counters the kept frames owe first, and the screen
+        // scheme's idle phases (the budget reads them).
+        for v in &mut self.volumes {
+            v.settle_steady_counts();
+            v.keep_idle_phases();
+        }
         // Shadow rays are made on the host: a batch with them keeps per-ray arrays.
         let per_ray = !self.update_rays_on_device || self.has_host_shadow_rays();
         self.batch.clear(ProbeRayBatchKind::Update, per_ray);

@@ -152,6 +152,9 @@ pub struct DdgiVolume {
     /// The counters above that a kept plan's frames have not yet added
     /// (`steady_frames::OwedCounts`): `None` where every counter is current.
     steady_owed: Option<steady_frames::OwedCounts>,
+    /// Screen scheme: every probe's idle phase and the grid and interval they
+    /// were computed for (`screen_requests`).
+    idle_phases: (Option<(ProbeGrid, u32)>, Vec<u32>),
 }
 
 /// One volume's per-frame scratch.
@@ -281,6 +284,7 @@ impl DdgiVolume {
             probe_blends: vec![0; probes],
             irradiance_texel_hysteresis: Vec::new(),
             steady_owed: None,
+            idle_phases: (None, Vec::new()),
             settings,
         }
     }
@@ -403,6 +407,7 @@ fn check_borders<T: PartialEq + Copy + std::fmt::Debug>(tile: &[T], interior: u3
 #[cfg(test)]
 mod tests {
     use super::*;
+    use probegi_core::ddgi_settings::ProbeStatesMode;
 
     #[test]
     fn a_repeated_event_restarts_its_window_instead_of_compounding() {
@@ -416,6 +421,47 @@ mod tests {
         assert!((scales(&v.irradiance_events) - 0.5 * 0.85).abs() < 1e-6);
         assert!((scales(&v.visibility_events) - 0.5).abs() < 1e-6);
         assert_eq!(v.irradiance_events.iter().map(|r| r.frames_left).max(), Some(10));
+    }
+
+    /// The screen scheme's idle phases kept per grid are each probe's phase
+    /// from its world cell: at a negative origin, after the window scrolls
+    /// (stale until kept again), and for another interval; other schemes keep none.
+    #[test]
+    fn kept_idle_phases_are_every_probes_phase_and_follow_the_grid() {
+        let settings = DdgiVolumeSettings {
+            probe_counts: UVec3::new(5, 3, 4),
+            probe_spacing_m: Some(Vec3::splat(0.75)),
+            probe_states: ProbeStatesMode::Screen,
+            volume_tracks_camera: true,
+            ..Default::default()
+        };
+        let mut v = DdgiVolume::placed(settings.clone(), (Vec3::ZERO, Vec3::ONE), Some(Vec3::splat(-7.3)));
+        let direct = |v: &DdgiVolume| {
+            let interval = v.settings.probe_screen_idle_interval_frames.max(1);
+            (0..v.grid.probe_count())
+                .map(|p| probegi_core::probe_classification::screen_idle_phase(v.world_cell(p), interval))
+                .collect::<Vec<u32>>()
+        };
+        assert!(v.grid.origin_m.x < 0.0 && v.idle_phases().is_none());
+        v.keep_idle_phases();
+        assert_eq!(v.idle_phases(), Some(direct(&v).as_slice()));
+        // Every phase of the interval occurs (the phases are not all one value).
+        assert_eq!(direct(&v).iter().collect::<std::collections::BTreeSet<_>>().len(), 8);
+        assert!(v.scroll_to(Vec3::new(-5.2, -7.3, -9.9)) > 0);
+        assert!(v.idle_phases().is_none(), "stale after a scroll");
+        v.keep_idle_phases();
+        assert_eq!(v.idle_phases(), Some(direct(&v).as_slice()));
+        v.settings.probe_screen_idle_interval_frames = 5;
+        assert!(v.idle_phases().is_none(), "stale for another interval");
+        v.keep_idle_phases();
+        assert_eq!(v.idle_phases(), Some(direct(&v).as_slice()));
+        let mut jcgt = DdgiVolume::placed(
+            DdgiVolumeSettings { probe_states: ProbeStatesMode::Jcgt, ..settings },
+            (Vec3::ZERO, Vec3::ONE),
+            None,
+        );
+        jcgt.keep_idle_phases();
+        assert!(jcgt.idle_phases().is_none());
     }
 
     #[test]

@@ -34,8 +34,9 @@ impl DdgiVolume {
         } else {
             vec![1.0; self.grid.probe_count()]
         };
+        let phases = self.idle_phases();
         for (p, state) in self.probe_states.iter().enumerate() {
-            if !self.traces_in_frame(p, frame_index) {
+            if !self.traces_in_frame(p, frame_index, phases) {
                 continue;
             }
             let age = self.probe_untraced_frames[p].saturating_add(1);

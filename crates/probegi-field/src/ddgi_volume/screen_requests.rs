@@ -57,14 +57,15 @@ impl DdgiVolume {
     /// its phase of `probe_screen_idle_interval_frames`
     /// (`probegi_core::probe_classification::screen_idle_phase`) and, with a
     /// shadowing field, the frame after; under the other schemes, as the
-    /// state says.
-    pub(crate) fn traces_in_frame(&self, p: usize, frame: u32) -> bool {
+    /// state says. `phases`: every probe's phase where the caller holds them
+    /// ([`Self::idle_phases`]), else each is computed here.
+    pub(crate) fn traces_in_frame(&self, p: usize, frame: u32, phases: Option<&[u32]>) -> bool {
         let state = self.probe_states[p];
         if state != ProbeState::Idle || !self.probe_has_content(p) {
             return state.traces();
         }
         let interval = self.settings.probe_screen_idle_interval_frames.max(1);
-        let phase = screen_idle_phase(self.world_cell(p), interval);
+        let phase = phases.map_or_else(|| screen_idle_phase(self.world_cell(p), interval), |ph| ph[p]);
         let now = frame % interval;
         // A shadowing field blends a probe's occlusion maps from the surfels of
         // its trace the frame before (`shadow_rays`): with one, an Idle probe
@@ -72,9 +73,30 @@ impl DdgiVolume {
         now == phase || (self.shadow.is_some() && now == (phase + 1) % interval)
     }
 
+    /// Screen scheme: every probe's idle phase (`screen_idle_phase` of its
+    /// world cell), where [`Self::keep_idle_phases`] computed them for the
+    /// volume's grid and interval as they are now; `None` otherwise.
+    pub(crate) fn idle_phases(&self) -> Option<&[u32]> {
+        let key = (self.grid, self.settings.probe_screen_idle_interval_frames.max(1));
+        (self.idle_phases.0 == Some(key)).then_some(self.idle_phases.1.as_slice())
+    }
+
+    /// Screen scheme: computes every probe's idle phase where the grid or the
+    /// interval changed since they were last computed (a window that scrolls
+    /// moves the grid), so a frame's plan looks each up instead of deriving
+    /// it from the probe's coordinates (three divisions and a remainder a probe).
+    pub(crate) fn keep_idle_phases(&mut self) {
+        if self.settings.probe_states != ProbeStatesMode::Screen || self.idle_phases().is_some() {
+            return;
+        }
+        let interval = self.settings.probe_screen_idle_interval_frames.max(1);
+        let phases = (0..self.grid.probe_count()).map(|p| screen_idle_phase(self.world_cell(p), interval)).collect();
+        self.idle_phases = (Some((self.grid, interval)), phases);
+    }
+
     /// Probe `p`'s lattice point in whole cells from the world origin: a
     /// probe keeps it while a tracking window scrolls around it.
-    fn world_cell(&self, p: usize) -> glam::IVec3 {
+    pub(super) fn world_cell(&self, p: usize) -> glam::IVec3 {
         let g = &self.grid;
         // floor(x + ½), not round(): a tie never flips with the origin's sign.
         (g.origin_m / g.spacing_m + 0.5).floor().as_ivec3() + g.probe_coords(p).as_ivec3()
