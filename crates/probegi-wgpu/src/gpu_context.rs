@@ -414,8 +414,10 @@ impl GpuContext {
     /// commands end with (made when none is open), so that a frame's passes
     /// finish as one command buffer at the next flush; otherwise a new one,
     /// submitted when `f` returns. `f` records into the encoder only: it must
-    /// not submit, flush or write buffers through this context (what it
-    /// submitted would run before what it recorded).
+    /// not submit, flush or write buffers through this context, nor call what
+    /// writes through it (`buffer_rewritten`, `buffer_identified`,
+    /// `GpuRayBatch::configure`): what it submitted would run before what it
+    /// recorded, and a write's copy after it.
     pub fn record<T>(&self, f: impl FnOnce(&mut wgpu::CommandEncoder) -> T) -> T {
         if !self.deferring() {
             let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -551,10 +553,12 @@ impl GpuContext {
             return None;
         }
         let mut arena = self.uploads.lock().unwrap_or_else(|e| e.into_inner());
-        let start = arena.current;
+        // Any chunk with room (each copy has its own offset, so the order of
+        // the chunks is free): the current one first, then the others.
         let room = |(b, bytes): &(wgpu::Buffer, Vec<u8>)| b.size() - bytes.len() as u64 >= len;
-        let index = match arena.chunks.iter().skip(start).position(room) {
-            Some(i) => start + i,
+        let current = arena.chunks.get(arena.current).filter(|c| room(c)).map(|_| arena.current);
+        let index = match current.or_else(|| arena.chunks.iter().position(room)) {
+            Some(i) => i,
             None => {
                 let size = UPLOAD_CHUNK_BYTES.max(len.next_power_of_two());
                 let buffer = self.create_buffer(&wgpu::BufferDescriptor {

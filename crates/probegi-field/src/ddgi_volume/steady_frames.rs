@@ -24,7 +24,9 @@
 //! frame, so a kept frame only counts itself ([`OwedCounts`]); they are
 //! brought up to date, probe by probe, before anything else reads or writes
 //! them: a full plan, an initialisation round, a probe's reset, the ray
-//! budget's choice ([`DdgiVolume::settle_steady_counts`]).
+//! budget's choice ([`DdgiVolume::settle_steady_counts`]). A volume's
+//! derived `Debug` and `Clone` see the counters as held, with what is owed
+//! beside them: settle first to compare two volumes whole.
 //!
 //! The check is a comparison with a snapshot taken at the last full plan,
 //! kept by the set beside the plan (a volume swapped or restored into
