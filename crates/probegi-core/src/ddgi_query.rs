@@ -75,6 +75,12 @@ pub struct DdgiFieldView<'a> {
     /// Per probe, the nearest usable probe (itself when usable; `u32::MAX` when no
     /// probe is usable), from [`nearest_usable_probes`]; empty = no fallback.
     pub probe_fallback: &'a [u32],
+    /// An identity of the three per-probe arrays above, where the field set
+    /// that owns them gives one (`probegi_field::DdgiFieldSet::view`): views
+    /// with the same `Some` identity and the same arrays (the same addresses
+    /// and lengths) hold the same values, so a device that wrote their rows
+    /// may keep them without comparing. `None`: no identity (compare).
+    pub probe_rows_id: Option<u64>,
 }
 
 /// For every probe, the index of the nearest usable probe in grid steps (the
@@ -298,6 +304,7 @@ mod tests {
             probe_offsets_m: &[],
             probe_usable: &[],
             probe_fallback: &[],
+            probe_rows_id: None,
         }
     }
 

@@ -262,6 +262,7 @@ mod tests {
                     probe_offsets_m: &[],
                     probe_usable: &[],
                     probe_fallback: &[],
+                    probe_rows_id: None,
                 },
                 tracks_camera,
             }

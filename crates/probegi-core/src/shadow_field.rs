@@ -231,6 +231,7 @@ mod tests {
             probe_offsets_m: &[],
             probe_usable: &[],
             probe_fallback: &[],
+            probe_rows_id: None,
         };
         let mut occlusion = ProbeAtlas::<f32>::new(8, 16);
         occlusion.texels.fill(0.5);

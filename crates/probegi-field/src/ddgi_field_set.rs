@@ -140,6 +140,8 @@ impl DdgiFieldSet {
     pub fn from_volumes(mut volumes: Vec<DdgiVolume>, blending: VolumeBlending, camera_m: Option<Vec3>) -> Self {
         for (i, v) in volumes.iter_mut().enumerate() {
             v.stream = i as u64;
+            // Made elsewhere: their public fields may have changed since.
+            v.renew_probe_rows_id();
         }
         let mut order: Vec<usize> = (0..volumes.len()).collect();
         // Densest (smallest cell) first; a stable sort keeps the given order on ties.
@@ -190,6 +192,9 @@ impl DdgiFieldSet {
     /// during an exchange (between `begin_update` and `Done`) takes effect from
     /// the next update: the current batch keeps the counts it was planned with.
     pub fn volumes_mut(&mut self) -> &mut [DdgiVolume] {
+        // Their public fields may change: the rows' identities go (and with
+        // them a kept plan, `ddgi_volume::steady_frames`).
+        self.volumes.iter_mut().for_each(DdgiVolume::renew_probe_rows_id);
         &mut self.volumes
     }
 
@@ -209,7 +214,7 @@ impl DdgiFieldSet {
                 .map(|&i| {
                     let v = &self.volumes[i];
                     SetMember {
-                        field: v.view(),
+                        field: v.view_with_rows_id(),
                         volume: i,
                         tracks_camera: v.settings.volume_tracks_camera,
                         occlusion: v.shadow.as_ref().map(|s| &s.occlusion),
@@ -1036,7 +1041,7 @@ mod tests {
             }
             assert_eq!(set.submit_device_hits(&[]), Ok(UpdateStep::ShadeRays));
             let plan = set.device_blend_plan().expect("plan");
-            last = (plan[0].probe_blend_frames.clone(), plan[0].probe_blend.iter().flatten().count());
+            last = (plan[0].probe_blend_frames.to_vec(), plan[0].probe_blend.iter().flatten().count());
             drop(plan);
             assert_eq!(set.submit_device_blend(&[]), Ok(UpdateStep::Done));
         }

@@ -65,7 +65,7 @@ pub struct DeviceVolumeBlend<'a> {
     /// waited, `ray_budget_hysteresis_per_frame`): each texel's hysteresis,
     /// after the scene-event scale and Listing 3, is raised to it
     /// (`probegi_core::probe_blend::hysteresis_over_frames`). Empty: 1 for all.
-    pub probe_blend_frames: Vec<u32>,
+    pub probe_blend_frames: std::borrow::Cow<'a, [u32]>,
 }
 
 /// What [`crate::DeviceField::shade_and_blend`] returns.

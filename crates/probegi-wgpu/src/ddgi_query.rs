@@ -125,27 +125,46 @@ struct WrittenField {
 }
 
 /// One member's per-probe arrays as they were when its rows were written:
-/// offsets bit for bit (so a NaN offset is still "the same").
-#[derive(Default)]
-struct ProbeRowSources {
-    offsets: Vec<u8>,
-    usable: Vec<bool>,
-    fallback: Vec<u32>,
+/// their identity where the view gave one (`DdgiFieldView::probe_rows_id`),
+/// with the arrays' addresses and lengths (a view whose arrays were swapped
+/// for others keeps no identity of theirs); else a copy, offsets bit for bit
+/// (so a NaN offset is still "the same").
+enum ProbeRowSources {
+    Identified { id: u64, arrays: [(usize, usize); 3] },
+    Copied { offsets: Vec<u8>, usable: Vec<bool>, fallback: Vec<u32> },
+}
+
+/// Where `f`'s three per-probe arrays lie: (address, length) each.
+fn row_arrays(f: &DdgiFieldView<'_>) -> [(usize, usize); 3] {
+    [
+        (f.probe_offsets_m.as_ptr() as usize, f.probe_offsets_m.len()),
+        (f.probe_usable.as_ptr() as usize, f.probe_usable.len()),
+        (f.probe_fallback.as_ptr() as usize, f.probe_fallback.len()),
+    ]
 }
 
 impl ProbeRowSources {
     fn of(f: &DdgiFieldView<'_>) -> Self {
-        Self {
-            offsets: bytemuck::cast_slice(f.probe_offsets_m).to_vec(),
-            usable: f.probe_usable.to_vec(),
-            fallback: f.probe_fallback.to_vec(),
+        match f.probe_rows_id {
+            Some(id) => Self::Identified { id, arrays: row_arrays(f) },
+            None => Self::Copied {
+                offsets: bytemuck::cast_slice(f.probe_offsets_m).to_vec(),
+                usable: f.probe_usable.to_vec(),
+                fallback: f.probe_fallback.to_vec(),
+            },
         }
     }
 
     fn holds(&self, f: &DdgiFieldView<'_>) -> bool {
-        self.offsets.as_slice() == bytemuck::cast_slice::<Vec3, u8>(f.probe_offsets_m)
-            && self.usable == f.probe_usable
-            && self.fallback == f.probe_fallback
+        match self {
+            Self::Identified { id, arrays } => f.probe_rows_id == Some(*id) && *arrays == row_arrays(f),
+            Self::Copied { offsets, usable, fallback } => {
+                f.probe_rows_id.is_none()
+                    && offsets.as_slice() == bytemuck::cast_slice::<Vec3, u8>(f.probe_offsets_m)
+                    && usable == f.probe_usable
+                    && fallback == f.probe_fallback
+            }
+        }
     }
 }
 
@@ -663,5 +682,42 @@ mod tests {
         // −0 equals 0 as a float but not as the row's bits: written.
         offsets[6].x = -0.0;
         refresh_and_check(&offsets, &usable, true);
+    }
+
+    /// A field set's view names its rows (`DdgiFieldView::probe_rows_id`):
+    /// `refresh` keeps them by that identity with the arrays' addresses, and
+    /// writes them when the set may have changed them (`volumes_mut`) or a
+    /// view carries the identity over other arrays.
+    #[test]
+    fn refresh_keeps_a_sets_rows_by_their_identity() {
+        let Some(ctx) = GpuContext::headless_unless_absent().expect("device") else { return };
+        let settings = probegi_core::ddgi_settings::DdgiVolumeSettings {
+            probe_counts: glam::UVec3::new(4, 3, 2),
+            ..Default::default()
+        };
+        let mut set = probegi_field::DdgiFieldSet::single(DdgiVolume::new(settings, (Vec3::ZERO, Vec3::splat(4.0))));
+        let rows_bytes = set.volumes()[0].grid.probe_count() as u64 * 16;
+        let field = GpuDdgiField::upload(&ctx, &set.view()).expect("upload");
+        let refresh_and_check = |view: &DdgiFieldSetView<'_>, written: bool| {
+            assert!(view.members[0].field.probe_rows_id.is_some());
+            let before = ctx.counters();
+            field.refresh(&ctx, view, false).expect("refresh");
+            let d = ctx.counters() - before;
+            assert_eq!(d.bytes_up, if written { rows_bytes } else { 0 }, "rows written: {written}");
+            let rows = ctx.read_back(&field.buffers[3]).expect("read back");
+            let packed = pack_field(view, false, true).expect("pack");
+            assert_eq!(rows, bytemuck::cast_slice::<[f32; 4], u8>(&packed.probes));
+        };
+        // The upload wrote the rows under the set's identity.
+        refresh_and_check(&set.view(), false);
+        set.volumes_mut()[0].probe_offsets[2] = Vec3::new(0.1, 0.0, 0.0);
+        refresh_and_check(&set.view(), true);
+        refresh_and_check(&set.view(), false);
+        // The same identity over a copy of the offsets (other addresses): written.
+        let copy = set.volumes()[0].probe_offsets.clone();
+        let mut swapped = set.view();
+        swapped.members[0].field.probe_offsets_m = &copy;
+        refresh_and_check(&swapped, true);
+        refresh_and_check(&set.view(), true);
     }
 }

@@ -28,8 +28,12 @@
 //! signed blend distance in w (backface −0.2·t, miss the ray's max distance:
 //! `probegi_field::ddgi_volume::blend_inputs`), as the shade pass writes them, so a batch
 //! shaded on the device is blended without leaving it ([`GpuProbeBlend::prepare_resident`]).
-//! Per probe the passes read its first ray in the batch, its hysteresis and the
-//! frames its blend stands for (a ray budget's, `probegi_field::device_plans::DeviceVolumeBlend::probe_blend_frames`).
+//! Per probe that blends the passes read its first ray in the batch, its
+//! hysteresis and the frames its blend stands for (a ray budget's,
+//! `probegi_field::device_plans::DeviceVolumeBlend::probe_blend_frames`): a
+//! list of the blending probes alone, one workgroup each, so a frame that
+//! blends an eighth of the probes (the screen scheme) packs, uploads and
+//! dispatches an eighth.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
@@ -46,7 +50,8 @@ use crate::shader_registry::PROBE_BLEND;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub(crate) struct BlendParams {
-    pub(crate) probe_count: u32,
+    /// Entries of the per-probe buffer: the probes that blend this frame.
+    pub(crate) blend_count: u32,
     pub(crate) rays_per_probe: u32,
     pub(crate) irradiance_interior: u32,
     pub(crate) distance_interior: u32,
@@ -204,15 +209,19 @@ pub struct BlendFrame<'a> {
     pub distance_clamp_m: f32,
 }
 
+/// A kept plan checked against a batch: (plan id, rays a probe, batch rays).
+type KeptPlanCheck = (u64, usize, u64);
+
 /// The weights pass and the three compute pipelines of [`PASS_NAMES`].
 pub struct GpuProbeBlend {
     layout: wgpu::BindGroupLayout,
     weights: wgpu::ComputePipeline,
     pipelines: [wgpu::ComputePipeline; 3],
     /// Per volume (where its atlas starts), the kept plan whose entries were
-    /// last checked against a batch: (plan id, rays a probe, batch rays). A
-    /// kept plan's entries are the same, so the same check passes again.
-    checked: std::sync::Mutex<std::collections::HashMap<u64, (u64, usize, u64)>>,
+    /// last checked against a batch: (plan id, rays a probe, batch rays), and
+    /// the probes it blends. A kept plan's entries are the same, so the same
+    /// check passes again.
+    checked: std::sync::Mutex<std::collections::HashMap<u64, (KeptPlanCheck, u32)>>,
 }
 
 impl GpuProbeBlend {
@@ -271,7 +280,7 @@ impl GpuProbeBlend {
             seeds: &[],
             shadow: None,
             measure_change: false,
-            probe_blend_frames: Vec::new(),
+            probe_blend_frames: Default::default(),
         };
         self.prepare_resident(ctx, atlases, &plan, &results)
     }
@@ -291,20 +300,11 @@ impl GpuProbeBlend {
         plan: &DeviceVolumeBlend<'_>,
         ray_results: &wgpu::Buffer,
     ) -> Result<BlendBindings, GpuError> {
-        self.check_resident_once(atlases, plan, ray_results.size() / 16)?;
-        let probes = atlases.probe_count;
+        let blending = self.check_resident_once(atlases, plan, ray_results.size() / 16)?;
         let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
-        let per_row = (probes as u32).min(MAX_GROUPS);
-        let params = blend_params(atlases, plan, per_row);
+        let per_row = blending.clamp(1, MAX_GROUPS);
+        let params = blend_params(atlases, plan, blending, per_row);
         let weight_count = params.weight_count;
-        let frames = |p: usize| plan.probe_blend_frames.get(p).copied().unwrap_or(1).max(1);
-        let per_probe = || -> Vec<u8> {
-            let entries = plan.probe_blend.iter().enumerate().map(|(p, b)| match b {
-                Some((first, h)) => [*first, h.max(0.0).to_bits(), frames(p), 0],
-                None => [0, (-1.0f32).to_bits(), 1, 0],
-            });
-            entries.flat_map(bytemuck::cast::<[u32; 4], [u8; 16]>).collect()
-        };
         // A kept plan's entries (the same id) are packed once; its frame
         // counts are 1 (a kept plan has none).
         let per_probe_id = plan.probe_blend_id.filter(|_| plan.probe_blend_frames.is_empty());
@@ -320,7 +320,7 @@ impl GpuProbeBlend {
             ctx.buffer_rewritten("blend params", key, bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let weights = ctx.scratch_buffer("blend weights", key, weight_count.max(4) as u64 * 4, storage);
         let per_probe_id = per_probe_id.as_ref().map(std::slice::from_ref);
-        let per_probe = ctx.buffer_identified("probe blend", key, per_probe_id, || Ok(per_probe()), storage)?;
+        let per_probe = ctx.buffer_identified("probe blend", key, per_probe_id, || Ok(blend_entries(plan)), storage)?;
         let texel_dirs: Vec<[f32; 4]> =
             texel_directions(ni).into_iter().chain(texel_directions(nd)).map(|d| d.extend(0.0).into()).collect();
         let texel_dirs =
@@ -339,9 +339,10 @@ impl GpuProbeBlend {
             &ray_dirs,
         ];
         let bind_group = ctx.bind_group_kept("probe blend", key, &self.layout, &buffers);
-        let rows = (probes as u32).div_ceil(per_row);
+        let rows = blending.div_ceil(per_row);
         let groups = |texels: u32| texels.div_ceil(WORKGROUP);
-        // The blend: one workgroup per probe; the borders: one thread per tile texel.
+        // The blend: one workgroup per blending probe; the borders: one
+        // thread per tile texel of each.
         let dispatches = [1, groups((ni + 2) * (ni + 2)), groups((nd + 2) * (nd + 2))];
         let weight_groups = crate::bvh_trace::dispatch_2d(ni * ni + nd * nd);
         Ok(BlendBindings { bind_group, dispatches, per_row, rows, weight_groups })
@@ -349,24 +350,28 @@ impl GpuProbeBlend {
 
     /// [`check_resident`], skipped where the same kept plan (its
     /// `probe_blend_id`) passed it last with the same rays and batch.
+    /// Returns the probes that blend.
     fn check_resident_once(
         &self,
         atlases: &GpuVolumeAtlases,
         plan: &DeviceVolumeBlend<'_>,
         batch_rays: u64,
-    ) -> Result<(), GpuError> {
+    ) -> Result<u32, GpuError> {
         let key = atlases.irradiance_first as u64;
         let mut checked = self.checked.lock().unwrap_or_else(|e| e.into_inner());
         let this = plan.probe_blend_id.map(|id| (id, plan.ray_dirs.len(), batch_rays));
-        if this.is_some() && checked.get(&key) == this.as_ref() && plan.probe_blend.len() == atlases.probe_count {
-            return Ok(());
+        if let Some((kept, blending)) = checked.get(&key).copied()
+            && this == Some(kept)
+            && plan.probe_blend.len() == atlases.probe_count
+        {
+            return Ok(blending);
         }
         checked.remove(&key);
-        check_resident(atlases, plan, batch_rays)?;
+        let blending = check_resident(atlases, plan, batch_rays)?;
         if let Some(this) = this {
-            checked.insert(key, this);
+            checked.insert(key, (this, blending));
         }
-        Ok(())
+        Ok(blending)
     }
 
     /// Records the three passes ([`PASS_NAMES`]: blend, border irradiance,
@@ -415,8 +420,9 @@ pub struct BlendBindings {
 }
 
 /// An error unless `plan` fits `atlases` and a batch of `batch_rays` rays: its
-/// weights a buffer, its rays the batch, one entry per probe.
-fn check_resident(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, batch_rays: u64) -> Result<(), GpuError> {
+/// weights a buffer, its rays the batch, one entry per probe. Returns the
+/// probes that blend (the entries [`blend_entries`] packs).
+fn check_resident(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, batch_rays: u64) -> Result<u32, GpuError> {
     let probes = atlases.probe_count;
     let rays = plan.ray_dirs.len();
     let (ni, nd) = (atlases.irradiance_interior as u64, atlases.distance_interior as u64);
@@ -429,21 +435,42 @@ fn check_resident(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, batc
             plan.probe_blend.len()
         )));
     }
-    if let Some(p) = plan.probe_blend.iter().flatten().find(|(first, _)| *first as u64 + rays as u64 > batch_rays) {
-        return Err(GpuError::Input(format!(
-            "a probe's rays {}..{} lie past the batch's {batch_rays} rays",
-            p.0,
-            p.0 as u64 + rays as u64
-        )));
+    let mut blending = 0u32;
+    for (first, _) in plan.probe_blend.iter().flatten() {
+        if *first as u64 + rays as u64 > batch_rays {
+            return Err(GpuError::Input(format!(
+                "a probe's rays {first}..{} lie past the batch's {batch_rays} rays",
+                *first as u64 + rays as u64
+            )));
+        }
+        blending += 1;
     }
-    Ok(())
+    Ok(blending)
+}
+
+/// The per-probe buffer of `probe_blend.wgsl`: one entry per probe that
+/// blends, in probe order: (first ray, hysteresis bits, frames, probe). A
+/// frame whose blends are a few of the probes (the screen scheme's eighth)
+/// uploads and dispatches those alone.
+fn blend_entries(plan: &DeviceVolumeBlend<'_>) -> Vec<u8> {
+    let frames = |p: usize| plan.probe_blend_frames.get(p).copied().unwrap_or(1).max(1);
+    let entries = plan.probe_blend.iter().enumerate().filter_map(|(p, b)| {
+        let (first, h) = (*b)?;
+        Some([first, h.max(0.0).to_bits(), frames(p), p as u32])
+    });
+    entries.flat_map(bytemuck::cast::<[u32; 4], [u8; 16]>).collect()
 }
 
 /// The blend passes' uniform block for `plan` into `atlases`.
-fn blend_params(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, probes_per_row: u32) -> BlendParams {
+fn blend_params(
+    atlases: &GpuVolumeAtlases,
+    plan: &DeviceVolumeBlend<'_>,
+    blend_count: u32,
+    probes_per_row: u32,
+) -> BlendParams {
     let s = plan.settings;
     BlendParams {
-        probe_count: atlases.probe_count as u32,
+        blend_count,
         rays_per_probe: plan.ray_dirs.len() as u32,
         irradiance_interior: atlases.irradiance_interior,
         distance_interior: atlases.distance_interior,

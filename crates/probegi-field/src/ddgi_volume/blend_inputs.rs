@@ -184,31 +184,35 @@ impl DdgiVolume {
     ) -> (Vec<Option<(usize, f32)>>, f32, f32) {
         let cap = if startup_cap { self.startup_hysteresis_cap() } else { 1.0 };
         let (irr_scale, vis_scale) = self.event_scales();
-        let base = (0..self.grid.probe_count())
-            .map(|p| {
-                let first = frame.first_ray[p];
-                frame.blends(p).then(|| {
-                    let fresh = !self.probe_has_history[p] || self.probe_states[p].is_new();
-                    let h = if fresh && !self.probe_seeded[p] {
-                        0.0
-                    } else if self.in_edge_buffer(p) {
-                        self.probe_hysteresis[p].min(self.settings.volume_edge_buffer_hysteresis)
-                    } else {
-                        self.probe_hysteresis[p]
-                    };
-                    let h = if self.settings.probe_hysteresis_ramp {
-                        // Blends so far, the seed counting as one: 0 for a fresh probe.
-                        let n = if fresh { self.probe_seeded[p] as u32 } else { self.probe_blends[p] };
-                        h.min(ramp_cap(n))
-                    } else {
-                        h
-                    };
-                    // The start-up ramp: the volume's blends so far.
-                    (first as usize, h.min(cap))
-                })
-            })
-            .collect();
-        (base, irr_scale, vis_scale)
+        (self.blend_entries(frame, cap, |first| first as usize), irr_scale, vis_scale)
+    }
+
+    /// Per probe, its first ray (as `first` makes it) and its blend's
+    /// hysteresis capped at `cap` where it blends this frame, else `None`.
+    fn blend_entries<T>(&self, frame: &VolumeFrame, cap: f32, first: impl Fn(u32) -> T) -> Vec<Option<(T, f32)>> {
+        let entry = |p: usize| frame.blends(p).then(|| (first(frame.first_ray[p]), self.blend_hysteresis(p).min(cap)));
+        (0..self.grid.probe_count()).map(entry).collect()
+    }
+
+    /// Probe `p`'s blend hysteresis before the start-up cap: 0 for a fresh
+    /// probe (not seeded), the edge buffer's where it lies there, and the
+    /// per-probe ramp's cap where that runs.
+    fn blend_hysteresis(&self, p: usize) -> f32 {
+        let fresh = !self.probe_has_history[p] || self.probe_states[p].is_new();
+        let h = if fresh && !self.probe_seeded[p] {
+            0.0
+        } else if self.in_edge_buffer(p) {
+            self.probe_hysteresis[p].min(self.settings.volume_edge_buffer_hysteresis)
+        } else {
+            self.probe_hysteresis[p]
+        };
+        if self.settings.probe_hysteresis_ramp {
+            // Blends so far, the seed counting as one: 0 for a fresh probe.
+            let n = if fresh { self.probe_seeded[p] as u32 } else { self.probe_blends[p] };
+            h.min(ramp_cap(n))
+        } else {
+            h
+        }
     }
 
     /// The scene events' irradiance and visibility hysteresis scales now
@@ -235,15 +239,14 @@ impl DdgiVolume {
         let (probe_blend, shadow) = match &frame.steady_blend {
             // A steady frame's plan is the one kept (`steady_frames`).
             Some(kept) => (std::borrow::Cow::Borrowed(kept.as_slice()), None),
-            None => {
+            None if self.shadow.is_some() => {
                 let (base, _, _) = self.blend_plan_with(frame, false);
-                let shadow = self.shadow.is_some().then(|| {
-                    let capped: Vec<_> =
-                        base.iter().map(|b| b.map(|(first, h)| (first, h.min(hysteresis_cap)))).collect();
-                    self.device_shadow_blend(&shadow_base(&capped, irradiance_scale, &self.blend_frames(frame)), lights)
-                });
-                (device_entries(base).into(), shadow.flatten())
+                let capped: Vec<_> = base.iter().map(|b| b.map(|(first, h)| (first, h.min(hysteresis_cap)))).collect();
+                let shadow_plan = shadow_base(&capped, irradiance_scale, &self.blend_frames(frame));
+                (device_entries(base).into(), self.device_shadow_blend(&shadow_plan, lights))
             }
+            // The device's entries made as they are (no plan in `usize` first).
+            None => (self.blend_entries(frame, 1.0, |first| first).into(), None),
         };
         DeviceVolumeBlend {
             shadow,
@@ -258,7 +261,7 @@ impl DdgiVolume {
             reset_probes: &self.probes_reset_since_blend,
             seeds: &self.pending_seeds,
             measure_change: frame.measure_change,
-            probe_blend_frames: self.blend_frames_beyond_one(frame).unwrap_or_default(),
+            probe_blend_frames: self.blend_frames_borrowed(frame),
         }
     }
 

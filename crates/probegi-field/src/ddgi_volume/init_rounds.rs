@@ -93,6 +93,7 @@ impl DdgiVolume {
     /// initialisation. A non-finite offset keeps the probe where it was.
     pub(crate) fn accept_device_init(&mut self, result: &DeviceInitResult) {
         let probes = self.grid.probe_count();
+        self.renew_probe_rows_id();
         for (p, &o) in result.offsets_m.iter().enumerate().take(probes) {
             if self.probe_pending_init[p] && o.is_finite() {
                 self.probe_offsets[p] = o;
@@ -226,6 +227,7 @@ impl DdgiVolume {
                     self.probe_positions[p] =
                         self.grid.probe_position(self.grid.probe_coords(p)) + self.probe_offsets[p];
                 }
+                self.renew_probe_rows_id();
                 // A settled probe traced from where it stays: its hits are the
                 // classification's, kept where the caller gives their normals.
                 if let (true, Some(normal_of)) = (self.keeps_init_hits(), normal_of) {

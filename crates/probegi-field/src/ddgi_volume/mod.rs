@@ -155,6 +155,26 @@ pub struct DdgiVolume {
     /// Screen scheme: every probe's idle phase and the grid and interval they
     /// were computed for (`screen_requests`).
     idle_phases: (Option<(ProbeGrid, u32)>, Vec<u32>),
+    /// An identity of the probe rows (offsets and positions, usable flags,
+    /// fallback table), drawn anew (`device_plans::next_plan_id`) by every
+    /// write to them and whenever the volume may be changed from outside
+    /// (`DdgiFieldSet::volumes_mut`): equal identities, equal rows. What
+    /// [`DdgiFieldSet::view`](crate::DdgiFieldSet::view) gives the queries
+    /// (`DdgiFieldView::probe_rows_id`), and what a kept plan's snapshot holds
+    /// of the positions (`steady_frames`).
+    probe_rows_id: RowsId,
+}
+
+/// [`DdgiVolume`]'s `probe_rows_id`: an identity, not a value, so a volume's
+/// `Debug` leaves it out (two volumes with equal rows compare equal there
+/// whatever identities they drew).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) struct RowsId(pub(crate) u64);
+
+impl std::fmt::Debug for RowsId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("RowsId")
+    }
 }
 
 /// One volume's per-frame scratch.
@@ -285,11 +305,15 @@ impl DdgiVolume {
             irradiance_texel_hysteresis: Vec::new(),
             steady_owed: None,
             idle_phases: (None, Vec::new()),
+            probe_rows_id: RowsId(crate::device_plans::next_plan_id()),
             settings,
         }
     }
 
-    /// The field as queries read it: atlases, offsets and which probes are usable.
+    /// The field as queries read it: atlases, offsets and which probes are
+    /// usable. No identity of the rows (`DdgiFieldView::probe_rows_id`): a
+    /// volume's public fields may have changed since its last write; the set
+    /// that owns it gives one ([`crate::DdgiFieldSet::view`]).
     pub fn view(&self) -> DdgiFieldView<'_> {
         DdgiFieldView {
             grid: &self.grid,
@@ -299,7 +323,21 @@ impl DdgiVolume {
             probe_offsets_m: &self.probe_offsets,
             probe_usable: &self.probe_usable,
             probe_fallback: &self.probe_fallback,
+            probe_rows_id: None,
         }
+    }
+
+    /// [`Self::view`] with the rows' identity, for a set that owns the
+    /// volume (every change to its rows since goes through its methods or
+    /// `DdgiFieldSet::volumes_mut`, which draw a new one).
+    pub(crate) fn view_with_rows_id(&self) -> DdgiFieldView<'_> {
+        DdgiFieldView { probe_rows_id: Some(self.probe_rows_id.0), ..self.view() }
+    }
+
+    /// Draws a new identity of the probe rows (see `probe_rows_id`): after
+    /// any write to them, or where they may be written from outside.
+    pub(crate) fn renew_probe_rows_id(&mut self) {
+        self.probe_rows_id = RowsId(crate::device_plans::next_plan_id());
     }
 
     /// Probe rays traced by the last update (tracing probes × rays per probe).

@@ -102,6 +102,16 @@ impl DdgiVolume {
     /// one frame (no screen scheme, no budget's waits): a device plan then
     /// carries no per-probe array for it (`DeviceVolumeBlend::probe_blend_frames`
     /// empty).
+    /// [`Self::blend_frames_beyond_one`] for a device plan: the screen
+    /// scheme's frames borrowed from `frame`, none where every blend stands
+    /// for one frame.
+    pub(super) fn blend_frames_borrowed<'a>(&self, frame: &'a VolumeFrame) -> std::borrow::Cow<'a, [u32]> {
+        if !frame.screen_blend_frames.is_empty() {
+            return std::borrow::Cow::Borrowed(&frame.screen_blend_frames);
+        }
+        self.blend_frames_beyond_one(frame).unwrap_or_default().into()
+    }
+
     pub(super) fn blend_frames_beyond_one(&self, frame: &VolumeFrame) -> Option<Vec<u32>> {
         if !frame.screen_blend_frames.is_empty() {
             return Some(frame.screen_blend_frames.clone());

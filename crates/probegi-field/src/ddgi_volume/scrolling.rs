@@ -45,6 +45,7 @@ impl DdgiVolume {
         // The slots changed places on the grid: the nearest usable probe of each is
         // another one now, whether or not the usable set changed.
         self.probe_fallback = nearest_usable_probes(&self.grid, &self.probe_usable);
+        self.renew_probe_rows_id();
         reset
     }
 
@@ -84,6 +85,7 @@ impl DdgiVolume {
         self.irradiance.tile_mut(p).fill(Vec3::ZERO);
         self.distance.tile_mut(p).fill(Vec2::ZERO);
         self.probe_offsets[p] = Vec3::ZERO;
+        self.renew_probe_rows_id();
         self.probe_states[p] = ProbeState::Active;
         self.probe_hysteresis[p] = self.settings.probe_hysteresis;
         self.probe_has_history[p] = false;

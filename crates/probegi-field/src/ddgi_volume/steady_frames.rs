@@ -28,7 +28,9 @@
 //! derived `Debug` and `Clone` see the counters as held, with what is owed
 //! beside them: settle first to compare two volumes whole.
 //!
-//! The check is a comparison with a snapshot taken at the last full plan,
+//! The check is a comparison with a snapshot taken at the last full plan
+//! (the positions by their identity, `DdgiVolume::probe_rows_id`, which every
+//! write to them and `DdgiFieldSet::volumes_mut` draw anew, not a copy),
 //! kept by the set beside the plan (a volume swapped or restored into
 //! another's place meets another's snapshot), so a change through the set
 //! or through the volume's public fields makes the next plan a full one; so
@@ -40,7 +42,7 @@
 //! blends), probes reset or seeded since the last blend, and Newly Awake /
 //! Newly Vigilant probes.
 
-use glam::{IVec3, Vec3};
+use glam::IVec3;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::probe_classification::ProbeState;
 use probegi_core::probe_grid::ProbeGrid;
@@ -53,7 +55,10 @@ pub(crate) struct PlanSnapshot {
     states: Vec<ProbeState>,
     has_history: Vec<bool>,
     hysteresis: Vec<f32>,
-    positions: Vec<Vec3>,
+    /// The positions' identity (`DdgiVolume::probe_rows_id`, drawn anew by
+    /// every write to them and by `DdgiFieldSet::volumes_mut`), in place of
+    /// a copy: the largest of the arrays, compared every still frame.
+    probe_rows_id: super::RowsId,
     grid: ProbeGrid,
     scroll_leading: IVec3,
     stream: u64,
@@ -146,7 +151,7 @@ impl DdgiVolume {
             states: self.probe_states.clone(),
             has_history: self.probe_has_history.clone(),
             hysteresis: self.probe_hysteresis.clone(),
-            positions: self.probe_positions.clone(),
+            probe_rows_id: self.probe_rows_id,
             grid: self.grid,
             scroll_leading: self.scroll_leading,
             stream: self.stream,
@@ -162,7 +167,7 @@ impl DdgiVolume {
         let unchanged = same_states(&snap.states, &self.probe_states)
             && snap.has_history == self.probe_has_history
             && bits(&snap.hysteresis) == bits(&self.probe_hysteresis)
-            && bits(&snap.positions) == bits(&self.probe_positions)
+            && snap.probe_rows_id == self.probe_rows_id
             && snap.grid == self.grid
             && snap.scroll_leading == self.scroll_leading
             && snap.stream == self.stream

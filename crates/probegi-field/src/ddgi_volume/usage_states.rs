@@ -23,6 +23,7 @@ impl DdgiVolume {
         }
         if changed {
             self.probe_fallback = nearest_usable_probes(&self.grid, &self.probe_usable);
+            self.renew_probe_rows_id();
         }
     }
 

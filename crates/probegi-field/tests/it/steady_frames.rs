@@ -74,10 +74,22 @@ fn device_update(set: &mut DdgiFieldSet, frame: u32) -> Update {
     Update { printed: format!("{batch}\n{plan}"), record_ids, blend_ids }
 }
 
+/// Per member of `set`'s view, its rows' identity and its rows (offsets bit
+/// for bit, usable flags, fallback table).
+fn rows_and_ids(set: &DdgiFieldSet) -> Vec<(Option<u64>, String)> {
+    let view = set.view();
+    let row = |f: &probegi_core::ddgi_query::DdgiFieldView<'_>| {
+        let offsets: Vec<[u32; 3]> = f.probe_offsets_m.iter().map(|o| o.to_array().map(f32::to_bits)).collect();
+        format!("{offsets:?} {:?} {:?}", f.probe_usable, f.probe_fallback)
+    };
+    view.members.iter().map(|m| (m.field.probe_rows_id, row(&m.field))).collect()
+}
+
 #[test]
 fn a_kept_plan_gives_the_full_plans_batches_and_volumes_through_changes() {
     let (mut kept, mut full) = (two_volumes(true), two_volumes(false));
     let (mut kept_frames, mut last) = (Vec::new(), None);
+    let (mut rows_before, mut rows_changed) = (rows_and_ids(&kept), 0);
     for frame in 0..24u32 {
         for set in [&mut kept, &mut full] {
             match frame {
@@ -85,6 +97,12 @@ fn a_kept_plan_gives_the_full_plans_batches_and_volumes_through_changes() {
                 // Probes of the jcgt grid wake (Newly Awake, then Awake).
                 8 => assert!(set.wake_probes_near(&[(Vec3::new(1.0, 0.5, 1.0), Vec3::new(1.5, 1.0, 1.5))]) > 0),
                 12 => set.volumes_mut()[1].settings.probe_hysteresis = 0.9,
+                // A probe moved through the volume's public offsets and positions.
+                13 => {
+                    let v = &mut set.volumes_mut()[1];
+                    v.probe_offsets[3] += Vec3::new(0.0, 0.1, 0.0);
+                    v.probe_positions[3] += Vec3::new(0.0, 0.1, 0.0);
+                }
                 // The window scrolls a plane in (initialisation rounds for it).
                 15 => assert!(set.set_tracking_target(Vec3::new(3.2, 2.0, 2.0)) > 0),
                 // An Awake probe put to sleep through the volume's public states.
@@ -103,6 +121,13 @@ fn a_kept_plan_gives_the_full_plans_batches_and_volumes_through_changes() {
             }
         }
         let (a, b) = (device_update(&mut kept, frame), device_update(&mut full, frame));
+        // The rows' identities a set's view gives: one identity, one set of rows.
+        let rows_now = rows_and_ids(&kept);
+        for (now, before) in rows_now.iter().zip(&rows_before) {
+            assert!(now.0 != before.0 || now.1 == before.1, "frame {frame}: rows changed under one identity");
+            rows_changed += (now.1 != before.1) as u32;
+        }
+        rows_before = rows_now;
         assert_eq!(a.printed, b.printed, "frame {frame}: batch and blend plan");
         // The frame counters a kept plan owes read as the full plan's, and
         // settle to them.
@@ -130,11 +155,14 @@ fn a_kept_plan_gives_the_full_plans_batches_and_volumes_through_changes() {
         }
     }
     // Frames 0 and 1 are first blends (a history begins); 8 and 9 wake probes
-    // (Newly Awake, then Awake), 12 changes a setting, 15 and 16 scroll and
-    // give the scrolled-in probes their first blend, 17 changes a state, 18
-    // follows an unfinished update; from 20 the ramp is on.
-    let want: Vec<u32> = (2..20).filter(|f| ![8, 9, 12, 15, 16, 17, 18].contains(f)).collect();
+    // (Newly Awake, then Awake), 12 changes a setting, 13 moves a probe, 15
+    // and 16 scroll and give the scrolled-in probes their first blend, 17
+    // changes a state, 18 follows an unfinished update; from 20 the ramp is on.
+    let want: Vec<u32> = (2..20).filter(|f| ![8, 9, 12, 13, 15, 16, 17, 18].contains(f)).collect();
     assert_eq!(kept_frames, want);
+    // The rows changed (first blends, the moved probe, the scroll), each time
+    // under a new identity.
+    assert!(rows_changed >= 3, "{rows_changed}");
     assert!(kept.volumes()[1].state_counts().get("awake").is_some_and(|n| *n > 0));
 }
 

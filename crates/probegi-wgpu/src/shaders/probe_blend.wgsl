@@ -7,7 +7,7 @@
 // which probe_change.wgsl averages; queries read xyz only.
 
 struct BlendParams {
-    probe_count: u32,
+    blend_count: u32,          // entries of probe_blend: the probes that blend this frame
     rays_per_probe: u32,
     irradiance_interior: u32,
     distance_interior: u32,
@@ -19,7 +19,7 @@ struct BlendParams {
     new_distribution: f32,     // Listing 3
     distance_exponent: f32,    // k_s of eq. 4.14
     distance_clamp_m: f32,
-    probes_per_row: u32,       // dispatch: probe = wid.y + wid.z * probes_per_row
+    probes_per_row: u32,       // dispatch: entry = wid.y + wid.z * probes_per_row
     irradiance_first: u32,     // the volume's first texel in the irradiance buffer
     distance_first: u32,       // the volume's first texel in the distance buffer
     weight_count: u32,         // u32s of blend_weights: texels × (1 + 2 × rays), texels = irradiance_interior² + distance_interior²
@@ -40,8 +40,9 @@ struct BlendParams {
 // Per batch ray: xyz radiance, w the signed blend distance (backfaces −0.2·t,
 // misses the ray's max distance), as probe_shade.wgsl writes them.
 @group(0) @binding(2) var<storage, read> ray_results: array<vec4<f32>>;
-// Per probe: x its first ray in the batch, y the bits of its blend hysteresis (< 0: not
-// updated), z the frames the blend stands for (a ray budget's; 1 otherwise), w 0.
+// Per probe that blends this frame, in probe order (params.blend_count entries):
+// x its first ray in the batch, y the bits of its blend hysteresis, z the frames
+// the blend stands for (a ray budget's; 1 otherwise), w the probe (its tile).
 @group(0) @binding(3) var<storage, read> probe_blend: array<vec4<u32>>;
 @group(0) @binding(4) var<storage, read_write> irradiance: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> distance: array<vec2<f32>>;
@@ -96,7 +97,8 @@ fn is_finite3(v: vec3<f32>) -> bool {
     return all(abs(v) <= vec3<f32>(3.4028235e38));
 }
 
-fn probe_of(wid: vec3<u32>) -> u32 {
+// The entry of probe_blend a workgroup serves.
+fn entry_of(wid: vec3<u32>) -> u32 {
     return wid.y + wid.z * params.probes_per_row;
 }
 
@@ -122,16 +124,15 @@ fn probe_ray(first: u32, r: u32) -> vec4<f32> {
 // table's entries in ray order, as the CPU sums its own table's.
 @compute @workgroup_size(64)
 fn blend_probe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let probe = probe_of(wid);
-    if (probe >= params.probe_count) { return; }
+    let entry = entry_of(wid);
+    if (entry >= params.blend_count) { return; }
     if (lid == 0u) {
-        staged_probe = probe_blend[probe];
+        staged_probe = probe_blend[entry];
     }
-    // x its first ray, y its hysteresis bits (< 0: not updated), z its frames.
+    // x its first ray, y its hysteresis bits, z its frames, w the probe.
     let pb = workgroupUniformLoad(&staged_probe);
-    let planned = bitcast<f32>(pb.y);
-    if (planned < 0.0) { return; }
-    let h0 = min(planned, params.hysteresis_cap);
+    let probe = pb.w;
+    let h0 = min(bitcast<f32>(pb.y), params.hysteresis_cap);
     if (params.rays_per_probe <= MAX_STAGED_RAYS) {
         for (var r = lid; r < params.rays_per_probe; r += 64u) {
             staged_rays[r] = ray_results[pb.x + r];
@@ -282,10 +283,11 @@ fn blend_distance_texel(probe: u32, first: u32, h0: f32, frames: u32, texel: u32
 
 @compute @workgroup_size(64)
 fn border_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
-    let probe = probe_of(wid);
+    let entry = entry_of(wid);
     let n = params.irradiance_interior;
     let s = n + 2u;
-    if (probe >= params.probe_count || gid.x >= s * s || bitcast<f32>(probe_blend[probe].y) < 0.0) { return; }
+    if (entry >= params.blend_count || gid.x >= s * s) { return; }
+    let probe = probe_blend[entry].w;
     let x = gid.x % s;
     let y = gid.x / s;
     if (!is_border(x, y, n)) { return; }
@@ -296,10 +298,11 @@ fn border_irradiance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(wor
 
 @compute @workgroup_size(64)
 fn border_distance(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
-    let probe = probe_of(wid);
+    let entry = entry_of(wid);
     let n = params.distance_interior;
     let s = n + 2u;
-    if (probe >= params.probe_count || gid.x >= s * s || bitcast<f32>(probe_blend[probe].y) < 0.0) { return; }
+    if (entry >= params.blend_count || gid.x >= s * s) { return; }
+    let probe = probe_blend[entry].w;
     let x = gid.x % s;
     let y = gid.x / s;
     if (!is_border(x, y, n)) { return; }

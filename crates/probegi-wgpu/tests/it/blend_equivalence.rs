@@ -203,3 +203,31 @@ fn bad_inputs_are_errors() {
     };
     assert!(blend.run(&ctx, &atlases, &frame).is_err());
 }
+
+/// The blend uploads one 16-byte entry per probe that blends, none for the
+/// others (the screen scheme blends an eighth of its probes a frame): two
+/// blends of the same rays, one with every probe and one with three, differ in
+/// the bytes the passes hand the device (uploaded or kept) by 16 a probe left out.
+#[test]
+fn the_blend_uploads_an_entry_per_blending_probe_alone() {
+    let Some(ctx) = context() else { return };
+    let s = DdgiVolumeSettings::default();
+    let (probes, rays) = (37usize, 16u32);
+    let blend = GpuProbeBlend::new(&ctx);
+    let atlases = GpuVolumeAtlases::new(&ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
+    let fr = frame(&mut Pcg32::new(3, 1), probes, rays, 2);
+    let every: Vec<Option<f32>> = vec![Some(0.97); probes];
+    let three: Vec<Option<f32>> = (0..probes).map(|p| [3, 10, 30].contains(&p).then_some(0.97)).collect();
+    let handed = |hysteresis: &[Option<f32>]| {
+        let before = ctx.counters();
+        let frame = BlendFrame { probe_hysteresis: hysteresis, ..gpu_frame(&s, &fr, 0.0) };
+        blend.run(&ctx, &atlases, &frame).expect("blend");
+        let d = ctx.counters() - before;
+        d.bytes_up + d.bytes_kept
+    };
+    // Each plan twice: the second finds the buffers sized (a new one leaves
+    // room to grow, which the first would count).
+    let all = [handed(&every), handed(&every)][1];
+    let few = [handed(&three), handed(&three)][1];
+    assert_eq!(all - few, 16 * (probes as u64 - 3), "every probe's entry: {all} bytes, three: {few}");
+}
