@@ -79,7 +79,8 @@ pub struct DdgiFieldView<'a> {
     /// that owns them gives one (`probegi_field::DdgiFieldSet::view`): views
     /// with the same `Some` identity and the same arrays (the same addresses
     /// and lengths) hold the same values, so a device that wrote their rows
-    /// may keep them without comparing. `None`: no identity (compare).
+    /// may keep them without comparing. `None`: no identity (compare). A
+    /// caller that puts arrays of its own into a view sets `None`.
     pub probe_rows_id: Option<u64>,
 }
 

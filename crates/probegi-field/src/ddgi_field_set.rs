@@ -191,6 +191,9 @@ impl DdgiFieldSet {
     /// The volumes, to change their settings between updates. Changing a volume
     /// during an exchange (between `begin_update` and `Done`) takes effect from
     /// the next update: the current batch keeps the counts it was planned with.
+    /// Every volume's rows draw a new identity (`DdgiFieldView::probe_rows_id`):
+    /// the next update plans in full and the query's rows are written again,
+    /// so a caller that changes nothing reads [`Self::volumes`] instead.
     pub fn volumes_mut(&mut self) -> &mut [DdgiVolume] {
         // Their public fields may change: the rows' identities go (and with
         // them a kept plan, `ddgi_volume::steady_frames`).
@@ -198,8 +201,10 @@ impl DdgiFieldSet {
         &mut self.volumes
     }
 
-    /// The volumes, taken out of the set.
-    pub fn into_volumes(self) -> Vec<DdgiVolume> {
+    /// The volumes, taken out of the set, their rows under new identities
+    /// (their public fields may change from here).
+    pub fn into_volumes(mut self) -> Vec<DdgiVolume> {
+        self.volumes.iter_mut().for_each(DdgiVolume::renew_probe_rows_id);
         self.volumes
     }
 
@@ -363,6 +368,15 @@ impl DdgiFieldSet {
     /// Reports a scene change to every volume (seed 004 §4.3).
     pub fn notify_scene_event(&mut self, event: SceneEvent) {
         self.volumes.iter_mut().for_each(|v| v.notify_scene_event(event));
+    }
+
+    /// Reports a scene change to volume `volume` alone (an object that jumped
+    /// near it); nothing for a volume the set does not have. Unlike a change
+    /// through [`Self::volumes_mut`], the volume's rows keep their identity.
+    pub fn notify_volume_scene_event(&mut self, volume: usize, event: SceneEvent) {
+        if let Some(v) = self.volumes.get_mut(volume) {
+            v.notify_scene_event(event);
+        }
     }
 
     /// Wakes Sleeping probes around moving objects in every volume; returns the

@@ -94,7 +94,10 @@ impl SceneChangeDetector {
             let bounds = scene.moving_object_bounds();
             changes.probes_woken = set.wake_probes_near(&bounds);
             if self.object_bounds.len() == bounds.len() {
-                for (i, v) in set.volumes_mut().iter_mut().enumerate() {
+                // Found through the shared view and notified one by one:
+                // `volumes_mut` would draw new identities of every volume's
+                // rows (a kept plan and the query's kept rows would go).
+                for (i, v) in set.volumes().iter().enumerate() {
                     let g = &v.grid;
                     let (lo, hi) = (g.probe_position(UVec3::ZERO), g.probe_position(g.probe_counts - 1));
                     let near =
@@ -106,9 +109,11 @@ impl SceneChangeDetector {
                         .zip(&bounds)
                         .any(|(a, b)| (near(a) || near(b)) && centre(a).distance(centre(b)) > g.min_spacing_m());
                     if jumped {
-                        v.notify_scene_event(SceneEvent::LargeObjectChange);
                         changes.object_jumps.push(i);
                     }
+                }
+                for &i in &changes.object_jumps {
+                    set.notify_volume_scene_event(i, SceneEvent::LargeObjectChange);
                 }
             }
             self.object_bounds = bounds;
@@ -151,5 +156,30 @@ mod tests {
         // Dimming to half is a jump too.
         scene.sky_map.as_mut().expect("map").intensity = 0.4;
         assert_eq!(at(&scene, &mut set).0, Some(true));
+    }
+
+    /// Moving geometry, jumps included, leaves the rows' identity of every
+    /// volume as it was (`DdgiFieldView::probe_rows_id`): a still field keeps
+    /// its plan and the query keeps its rows while an object moves.
+    #[test]
+    fn moving_geometry_keeps_the_rows_identity() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/moving-box.toml");
+        let base = probegi_scene::load_scene(path).expect("moving box");
+        assert!(base.has_moving_geometry());
+        let mut scene = base.clone();
+        let settings = DdgiVolumeSettings { probe_counts: UVec3::splat(4), ..Default::default() };
+        let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, base.bounds().expect("bounds")));
+        let id = |set: &DdgiFieldSet| set.view().members[0].field.probe_rows_id;
+        let first = id(&set);
+        let mut detector = SceneChangeDetector::new();
+        let mut moved = 0;
+        for f in 0..60 {
+            scene.set_frame_from(&base, f as f32 * 4.0);
+            let before = scene.moving_object_bounds();
+            let changes = detector.observe(&scene, &mut set);
+            moved += changes.object_jumps.len() + (before != base.moving_object_bounds()) as usize;
+        }
+        assert!(moved > 0, "the object moved");
+        assert!(first.is_some() && id(&set) == first, "{first:?} → {:?}", id(&set));
     }
 }

@@ -686,8 +686,8 @@ mod tests {
 
     /// A field set's view names its rows (`DdgiFieldView::probe_rows_id`):
     /// `refresh` keeps them by that identity with the arrays' addresses, and
-    /// writes them when the set may have changed them (`volumes_mut`) or a
-    /// view carries the identity over other arrays.
+    /// writes them when the set may have changed them (`volumes_mut`,
+    /// `into_volumes`) or a view carries the identity over other arrays.
     #[test]
     fn refresh_keeps_a_sets_rows_by_their_identity() {
         let Some(ctx) = GpuContext::headless_unless_absent().expect("device") else { return };
@@ -719,5 +719,13 @@ mod tests {
         swapped.members[0].field.probe_offsets_m = &copy;
         refresh_and_check(&swapped, true);
         refresh_and_check(&set.view(), true);
+        // The volume taken out, changed in place (the same arrays, moved with
+        // it) and put in another set's place: written.
+        let mut volumes = set.into_volumes();
+        volumes[0].probe_offsets[5] = Vec3::new(0.0, 0.2, 0.0);
+        let mut other = probegi_field::DdgiFieldSet::single(volumes[0].clone());
+        other.volumes_mut()[0] = volumes.remove(0);
+        refresh_and_check(&other.view(), true);
+        refresh_and_check(&other.view(), false);
     }
 }

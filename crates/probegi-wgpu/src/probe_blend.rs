@@ -1,7 +1,7 @@
 //! The blend and border passes on the GPU (`shaders/probe_blend.wgsl`), mirroring
 //! `probegi_core::probe_blend::{blend_irradiance_tile, blend_distance_tile}` and
 //! `probegi_core::probe_border::update_tile_border` (seed 003 §4.5, seed 004
-//! §2.3 eq. 1, §4.2 Listing 1, §4.3 Listing 3). One workgroup per probe stages
+//! §2.3 eq. 1, §4.2 Listing 1, §4.3 Listing 3). One workgroup per blending probe stages
 //! the probe's rays in workgroup memory (RTXGI's `ProbeBlendingCS` with
 //! `RTXGI_DDGI_BLEND_SHARED_MEMORY`; up to 512 rays, more are read from the
 //! batch), then blends every interior texel of both atlases, over the frame's
@@ -405,7 +405,7 @@ impl GpuProbeBlend {
 }
 
 /// The names of [`GpuProbeBlend::record`]'s passes, in order: the blend of
-/// both atlases (one workgroup per probe, its rays staged in workgroup memory),
+/// both atlases (one workgroup per blending probe, its rays staged in workgroup memory),
 /// then each atlas's borders.
 pub const PASS_NAMES: [&str; 3] = ["blend_probe", "border_irradiance", "border_distance"];
 

@@ -157,8 +157,9 @@ pub struct DdgiVolume {
     idle_phases: (Option<(ProbeGrid, u32)>, Vec<u32>),
     /// An identity of the probe rows (offsets and positions, usable flags,
     /// fallback table), drawn anew (`device_plans::next_plan_id`) by every
-    /// write to them and whenever the volume may be changed from outside
-    /// (`DdgiFieldSet::volumes_mut`): equal identities, equal rows. What
+    /// write to them, by a clone, and whenever the volume may be changed from
+    /// outside (`DdgiFieldSet::volumes_mut`, `into_volumes`, `from_volumes`):
+    /// equal identities, equal rows. What
     /// [`DdgiFieldSet::view`](crate::DdgiFieldSet::view) gives the queries
     /// (`DdgiFieldView::probe_rows_id`), and what a kept plan's snapshot holds
     /// of the positions (`steady_frames`).
@@ -167,9 +168,16 @@ pub struct DdgiVolume {
 
 /// [`DdgiVolume`]'s `probe_rows_id`: an identity, not a value, so a volume's
 /// `Debug` leaves it out (two volumes with equal rows compare equal there
-/// whatever identities they drew).
-#[derive(Clone, Copy, PartialEq, Eq)]
+/// whatever identities they drew), and a clone draws its own (a clone's
+/// public fields may change apart from the original's).
+#[derive(PartialEq, Eq)]
 pub(crate) struct RowsId(pub(crate) u64);
+
+impl Clone for RowsId {
+    fn clone(&self) -> Self {
+        Self(crate::device_plans::next_plan_id())
+    }
+}
 
 impl std::fmt::Debug for RowsId {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

@@ -98,10 +98,6 @@ impl DdgiVolume {
         self.blend_frames_beyond_one(frame).unwrap_or_else(|| vec![1; self.grid.probe_count()])
     }
 
-    /// [`Self::blend_frames`], or `None` where every probe's blend stands for
-    /// one frame (no screen scheme, no budget's waits): a device plan then
-    /// carries no per-probe array for it (`DeviceVolumeBlend::probe_blend_frames`
-    /// empty).
     /// [`Self::blend_frames_beyond_one`] for a device plan: the screen
     /// scheme's frames borrowed from `frame`, none where every blend stands
     /// for one frame.
@@ -112,6 +108,10 @@ impl DdgiVolume {
         self.blend_frames_beyond_one(frame).unwrap_or_default().into()
     }
 
+    /// [`Self::blend_frames`], or `None` where every probe's blend stands for
+    /// one frame (no screen scheme, no budget's waits): a device plan then
+    /// carries no per-probe array for it (`DeviceVolumeBlend::probe_blend_frames`
+    /// empty).
     pub(super) fn blend_frames_beyond_one(&self, frame: &VolumeFrame) -> Option<Vec<u32>> {
         if !frame.screen_blend_frames.is_empty() {
             return Some(frame.screen_blend_frames.clone());

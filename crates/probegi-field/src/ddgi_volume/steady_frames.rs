@@ -30,7 +30,8 @@
 //!
 //! The check is a comparison with a snapshot taken at the last full plan
 //! (the positions by their identity, `DdgiVolume::probe_rows_id`, which every
-//! write to them and `DdgiFieldSet::volumes_mut` draw anew, not a copy),
+//! write to them, a clone and `DdgiFieldSet::volumes_mut` draw anew, not a
+//! copy),
 //! kept by the set beside the plan (a volume swapped or restored into
 //! another's place meets another's snapshot), so a change through the set
 //! or through the volume's public fields makes the next plan a full one; so
@@ -58,7 +59,7 @@ pub(crate) struct PlanSnapshot {
     /// The positions' identity (`DdgiVolume::probe_rows_id`, drawn anew by
     /// every write to them and by `DdgiFieldSet::volumes_mut`), in place of
     /// a copy: the largest of the arrays, compared every still frame.
-    probe_rows_id: super::RowsId,
+    probe_rows_id: u64,
     grid: ProbeGrid,
     scroll_leading: IVec3,
     stream: u64,
@@ -151,7 +152,7 @@ impl DdgiVolume {
             states: self.probe_states.clone(),
             has_history: self.probe_has_history.clone(),
             hysteresis: self.probe_hysteresis.clone(),
-            probe_rows_id: self.probe_rows_id,
+            probe_rows_id: self.probe_rows_id.0,
             grid: self.grid,
             scroll_leading: self.scroll_leading,
             stream: self.stream,
@@ -167,7 +168,7 @@ impl DdgiVolume {
         let unchanged = same_states(&snap.states, &self.probe_states)
             && snap.has_history == self.probe_has_history
             && bits(&snap.hysteresis) == bits(&self.probe_hysteresis)
-            && snap.probe_rows_id == self.probe_rows_id
+            && snap.probe_rows_id == self.probe_rows_id.0
             && snap.grid == self.grid
             && snap.scroll_leading == self.scroll_leading
             && snap.stream == self.stream

@@ -1,8 +1,9 @@
 //! `ddgi_volume::steady_frames`: a still field's update keeps the last plan,
 //! and gives the batches, blend plans and volumes the full plan gives, frame
-//! by frame, through scene events, woken probes, a settings change, a window
-//! that scrolls, a state changed through a public field and an update left
-//! unfinished. The frame counters a kept plan leaves owing read and settle
+//! by frame, through scene events, woken probes, a settings change, probes
+//! moved through public fields (in place, and in a clone put in the volume's
+//! place), a window that scrolls, a state changed through a public field and
+//! an update left unfinished. The frame counters a kept plan leaves owing read and settle
 //! as the full plan's.
 
 use glam::{UVec3, Vec3};
@@ -103,6 +104,13 @@ fn a_kept_plan_gives_the_full_plans_batches_and_volumes_through_changes() {
                     v.probe_offsets[3] += Vec3::new(0.0, 0.1, 0.0);
                     v.probe_positions[3] += Vec3::new(0.0, 0.1, 0.0);
                 }
+                // A clone with another probe moved, put in the volume's place.
+                14 => {
+                    let mut v = set.volumes()[1].clone();
+                    v.probe_offsets[4] += Vec3::new(0.1, 0.0, 0.0);
+                    v.probe_positions[4] += Vec3::new(0.1, 0.0, 0.0);
+                    set.volumes_mut()[1] = v;
+                }
                 // The window scrolls a plane in (initialisation rounds for it).
                 15 => assert!(set.set_tracking_target(Vec3::new(3.2, 2.0, 2.0)) > 0),
                 // An Awake probe put to sleep through the volume's public states.
@@ -155,10 +163,11 @@ fn a_kept_plan_gives_the_full_plans_batches_and_volumes_through_changes() {
         }
     }
     // Frames 0 and 1 are first blends (a history begins); 8 and 9 wake probes
-    // (Newly Awake, then Awake), 12 changes a setting, 13 moves a probe, 15
-    // and 16 scroll and give the scrolled-in probes their first blend, 17
-    // changes a state, 18 follows an unfinished update; from 20 the ramp is on.
-    let want: Vec<u32> = (2..20).filter(|f| ![8, 9, 12, 13, 15, 16, 17, 18].contains(f)).collect();
+    // (Newly Awake, then Awake), 12 changes a setting, 13 moves a probe, 14
+    // puts a clone with a moved probe in place, 15 and 16 scroll and give the
+    // scrolled-in probes their first blend, 17 changes a state, 18 follows an
+    // unfinished update; from 20 the ramp is on.
+    let want: Vec<u32> = (2..20).filter(|f| ![8, 9, 12, 13, 14, 15, 16, 17, 18].contains(f)).collect();
     assert_eq!(kept_frames, want);
     // The rows changed (first blends, the moved probe, the scroll), each time
     // under a new identity.

@@ -119,7 +119,7 @@ fn probe_ray(first: u32, r: u32) -> vec4<f32> {
     return ray_results[first + r];
 }
 
-// One workgroup per probe: its rays staged once, then every interior texel of
+// One workgroup per blending probe (an entry of probe_blend): its rays staged once, then every interior texel of
 // both atlases (irradiance first), 64 at a time. Each texel sums its weight
 // table's entries in ray order, as the CPU sums its own table's.
 @compute @workgroup_size(64)
