@@ -510,6 +510,43 @@ mod tests {
         assert!(jcgt.idle_phases().is_none());
     }
 
+    /// `extend_tracing` with the kept phases gives `traces_in_frame` of every
+    /// probe, every frame of the interval, with and without a shadowing field
+    /// (an Idle probe then traces in its phase and the frame after) and a
+    /// budget's choice, over Requested, Idle, content-less and seeded probes.
+    #[test]
+    fn every_probes_tracing_flag_is_traces_in_frame() {
+        for shadow_field in [false, true] {
+            let settings = DdgiVolumeSettings {
+                probe_counts: UVec3::new(5, 3, 4),
+                probe_states: ProbeStatesMode::Screen,
+                shadow_field,
+                ..Default::default()
+            };
+            let mut v = DdgiVolume::new(settings, (Vec3::ZERO, Vec3::splat(3.0)));
+            let n = v.grid.probe_count();
+            for p in 0..n {
+                v.probe_states[p] = if p % 5 == 0 { ProbeState::Requested } else { ProbeState::Idle };
+                v.probe_has_history[p] = p % 7 != 3;
+                v.probe_seeded[p] = p % 11 == 3;
+            }
+            v.keep_idle_phases();
+            let chosen: Vec<bool> = (0..n).map(|p| p % 4 != 1).collect();
+            let mut idle_traced = 0;
+            for frame in 0..2 * v.settings.probe_screen_idle_interval_frames + 1 {
+                for budget in [None, Some(chosen.as_slice())] {
+                    let mut fast = Vec::new();
+                    v.extend_tracing(&mut fast, frame, v.idle_phases(), budget);
+                    let each: Vec<bool> =
+                        (0..n).map(|p| v.traces_in_frame(p, frame, None) && budget.is_none_or(|c| c[p])).collect();
+                    assert_eq!(fast, each, "frame {frame}, shadow field {shadow_field}");
+                    idle_traced += (0..n).filter(|&p| fast[p] && v.probe_states[p] == ProbeState::Idle).count();
+                }
+            }
+            assert!(idle_traced > 0 && idle_traced < 17 * n, "{idle_traced}");
+        }
+    }
+
     #[test]
     fn edge_buffers_are_the_planes_nearest_the_faces_the_window_scrolled_toward() {
         let settings = DdgiVolumeSettings {

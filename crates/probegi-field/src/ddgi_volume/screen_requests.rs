@@ -73,6 +73,41 @@ impl DdgiVolume {
         now == phase || (self.shadow.is_some() && now == (phase + 1) % interval)
     }
 
+    /// Every probe's [`Self::traces_in_frame`] in probe order, appended to
+    /// `tracing`, and where `chosen` (a ray budget's choice) is given, only
+    /// the probes it chose. With `phases` (every probe's), the frame's place
+    /// in the idle interval is worked out once instead of a remainder a
+    /// probe, and the per-probe arrays are read in step.
+    pub(crate) fn extend_tracing(
+        &self,
+        tracing: &mut Vec<bool>,
+        frame: u32,
+        phases: Option<&[u32]>,
+        chosen: Option<&[bool]>,
+    ) {
+        let probes = self.grid.probe_count();
+        let Some(phases) = phases.filter(|ph| ph.len() == probes) else {
+            tracing.extend((0..probes).map(|p| self.traces_in_frame(p, frame, None) && chosen.is_none_or(|c| c[p])));
+            return;
+        };
+        let interval = self.settings.probe_screen_idle_interval_frames.max(1);
+        let now = frame % interval;
+        // The phase whose next frame is this one (`traces_in_frame`'s second
+        // frame with a shadowing field).
+        let before = (now + interval - 1) % interval;
+        let shadow = self.shadow.is_some();
+        let screen = self.settings.probe_states == ProbeStatesMode::Screen;
+        let probes_in_step = self.probe_states.iter().zip(&self.probe_has_history).zip(&self.probe_seeded).zip(phases);
+        tracing.extend(probes_in_step.enumerate().map(|(p, (((&state, &history), &seeded), &phase))| {
+            // `probe_has_content`, and `traces_in_frame` from there.
+            let traces = match state == ProbeState::Idle && (history || (seeded && screen)) {
+                true => phase == now || (shadow && phase == before),
+                false => state.traces(),
+            };
+            traces && chosen.is_none_or(|c| c[p])
+        }));
+    }
+
     /// Screen scheme: every probe's idle phase (`screen_idle_phase` of its
     /// world cell), where [`Self::keep_idle_phases`] computed them for the
     /// volume's grid and interval as they are now; `None` otherwise.

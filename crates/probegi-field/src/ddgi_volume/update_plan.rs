@@ -29,11 +29,9 @@ impl DdgiVolume {
         let interval = self.settings.probe_sleeping_update_interval;
         // The frame's per-probe arrays reuse last frame's storage: a still
         // field's planning allocates nothing per probe.
-        let chosen = |p: usize| frame.budget_traces.as_ref().is_none_or(|c| c[p]);
         self.keep_idle_phases();
-        let phases = self.idle_phases();
         frame.tracing.clear();
-        frame.tracing.extend((0..probes).map(|p| self.traces_in_frame(p, frame_index, phases) && chosen(p)));
+        self.extend_tracing(&mut frame.tracing, frame_index, self.idle_phases(), frame.budget_traces.as_deref());
         self.screen_blend_frames(frame);
         self.count_untraced_frames(frame);
         frame.active.clear();
