@@ -510,6 +510,25 @@ mod tests {
         assert!(jcgt.idle_phases().is_none());
     }
 
+    /// A scroll moves every probe's position: its rows draw a new identity
+    /// even where no usable flag changes (no probe has blended yet, so none
+    /// is usable before or after).
+    #[test]
+    fn a_scroll_draws_a_new_rows_identity_with_the_usable_flags_unchanged() {
+        let settings = DdgiVolumeSettings {
+            probe_counts: UVec3::new(4, 3, 4),
+            probe_spacing_m: Some(Vec3::splat(0.5)),
+            volume_tracks_camera: true,
+            ..Default::default()
+        };
+        let mut v = DdgiVolume::placed(settings, (Vec3::ZERO, Vec3::ONE), Some(Vec3::ZERO));
+        let (id, usable, positions) = (v.probe_rows_id.0, v.probe_usable.clone(), v.probe_positions.clone());
+        assert!(v.scroll_to(Vec3::new(1.3, 0.0, 0.0)) > 0);
+        assert_eq!(v.probe_usable, usable);
+        assert_ne!(v.probe_positions, positions);
+        assert_ne!(v.probe_rows_id.0, id);
+    }
+
     /// `extend_tracing` with the kept phases gives `traces_in_frame` of every
     /// probe, every frame of the interval, with and without a shadowing field
     /// (an Idle probe then traces in its phase and the frame after) and a
