@@ -159,6 +159,29 @@ pub enum ProbeState {
 }
 
 impl ProbeState {
+    /// Every state, each at the index of its discriminant (`state as usize`),
+    /// so a per-frame table indexed by state stands in for a match a probe.
+    pub const ALL: [ProbeState; 12] = [
+        Self::Active,
+        Self::Off,
+        Self::Sleeping,
+        Self::NewlyAwake,
+        Self::NewlyVigilant,
+        Self::Awake,
+        Self::Vigilant,
+        Self::Alive,
+        Self::UsageSleeping,
+        Self::Dead,
+        Self::Requested,
+        Self::Idle,
+    ];
+
+    /// [`Self::updates_in_frame`] of every state in frame `frame`, indexed by
+    /// `state as usize`: one match a state instead of one a probe.
+    pub fn updates_in_frame_table(frame: u32, sleep_interval: u32) -> [bool; Self::ALL.len()] {
+        Self::ALL.map(|s| s.updates_in_frame(frame, sleep_interval))
+    }
+
     /// The state's snake-case name (`"newly_awake"`, `"usage_sleeping"`, …), the key of
     /// per-state probe counts.
     pub fn name(self) -> &'static str {
@@ -439,6 +462,32 @@ mod tests {
     use super::*;
 
     #[test]
+    fn all_lists_every_state_once_at_its_discriminant() {
+        // A match without a wildcard: a new state fails to compile here until
+        // it is added to `ProbeState::ALL` (and this list).
+        let listed = |s: ProbeState| match s {
+            ProbeState::Active
+            | ProbeState::Off
+            | ProbeState::Sleeping
+            | ProbeState::NewlyAwake
+            | ProbeState::NewlyVigilant
+            | ProbeState::Awake
+            | ProbeState::Vigilant
+            | ProbeState::Alive
+            | ProbeState::UsageSleeping
+            | ProbeState::Dead
+            | ProbeState::Requested
+            | ProbeState::Idle => true,
+        };
+        for (i, s) in ProbeState::ALL.into_iter().enumerate() {
+            assert!(listed(s));
+            assert_eq!(s as usize, i, "{s:?}");
+        }
+        let names: std::collections::BTreeSet<_> = ProbeState::ALL.iter().map(|s| s.name()).collect();
+        assert_eq!(names.len(), ProbeState::ALL.len());
+    }
+
+    #[test]
     fn jcgt_classification_keeps_probes_that_watch_a_surface_per_axis() {
         // Cells 4 × 1 × 1 m: a probe watches 2 m in x and 0.5 m in y and z (plus bias).
         let grid = ProbeGrid::new(Vec3::ZERO, UVec3::splat(3), Vec3::new(4.0, 1.0, 1.0));
@@ -551,6 +600,12 @@ mod tests {
         assert_eq!(classify_usage(0, 0, 0), ProbeState::UsageSleeping);
         assert_eq!(classify_usage(-3, 4, 3), ProbeState::Dead);
         assert!(ProbeState::UsageSleeping.updates_in_frame(20, 10));
+        for (frame, interval) in [(20, 10), (21, 10), (0, 0), (7, 1)] {
+            let table = ProbeState::updates_in_frame_table(frame, interval);
+            for s in ProbeState::ALL {
+                assert_eq!(table[s as usize], s.updates_in_frame(frame, interval), "{s:?} in frame {frame}");
+            }
+        }
         assert!(!ProbeState::UsageSleeping.updates_in_frame(21, 10));
         assert!(ProbeState::UsageSleeping.traces() && ProbeState::Dead.traces());
         assert!(!ProbeState::Dead.updates_in_frame(20, 10));

@@ -7,7 +7,9 @@
 //! taking the device's hits, the blend plan and the bookkeeping after the
 //! blend, in ms an update over updates 10 to 39, with every probe active and
 //! under jcgt states (where every probe sleeps: none traces), with and
-//! without the kept plan of a steady frame (`DdgiFieldSet::set_steady_plans`).
+//! without the kept plan of a steady frame (`DdgiFieldSet::set_steady_plans`),
+//! and under the screen scheme (no camera: every probe Idle, an eighth of
+//! them tracing each frame in its phase), which plans in full every frame.
 //! The `bench --backend wgpu` figure `field_set_ms` is these steps' sum in
 //! the real loop; this separates them.
 
@@ -21,8 +23,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<u32> = std::env::args().skip(1).map(|a| a.parse()).collect::<Result<_, _>>()?;
     let (n, rays) = (args.first().copied().unwrap_or(32), args.get(1).copied().unwrap_or(32));
     println!("{n}³ probes × {rays} rays, ms an update: begin / hits / blend plan / after the blend = sum");
-    for states in [ProbeStatesMode::AllActive, ProbeStatesMode::Jcgt] {
-        for keep in [false, true] {
+    for states in [ProbeStatesMode::AllActive, ProbeStatesMode::Jcgt, ProbeStatesMode::Screen] {
+        // The screen scheme plans in full every frame (its idle phases turn).
+        for keep in if states == ProbeStatesMode::Screen { &[false][..] } else { &[false, true][..] } {
+            let keep = *keep;
             let ms = time_steps(states, keep, n, rays)?;
             let label = if keep { "kept plan" } else { "full plan" };
             let steps = ms.map(|m| format!("{m:.3}")).join(" / ");

@@ -300,7 +300,26 @@ impl GpuProbeBlend {
         plan: &DeviceVolumeBlend<'_>,
         ray_results: &wgpu::Buffer,
     ) -> Result<BlendBindings, GpuError> {
-        let blending = self.check_resident_once(atlases, plan, ray_results.size() / 16)?;
+        self.prepare_blending(ctx, atlases, plan, ray_results)?
+            .ok_or_else(|| GpuError::Input("a blend plan in which no probe blends".into()))
+    }
+
+    /// [`Self::prepare_resident`], or `None` where no probe of `plan` blends
+    /// (nothing to bind or record). The plan's entries are checked and packed
+    /// in one pass over its probes, and not at all where the same kept plan
+    /// passed last ([`Self::entries_once`]).
+    pub(crate) fn prepare_blending(
+        &self,
+        ctx: &GpuContext,
+        atlases: &GpuVolumeAtlases,
+        plan: &DeviceVolumeBlend<'_>,
+        ray_results: &wgpu::Buffer,
+    ) -> Result<Option<BlendBindings>, GpuError> {
+        let batch_rays = ray_results.size() / 16;
+        let (blending, packed) = self.entries_once(atlases, plan, batch_rays)?;
+        if blending == 0 {
+            return Ok(None);
+        }
         let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
         let per_row = blending.clamp(1, MAX_GROUPS);
         let params = blend_params(atlases, plan, blending, per_row);
@@ -312,19 +331,23 @@ impl GpuProbeBlend {
         // Kept per volume, by where its atlas starts, and rewritten in place:
         // the uniform block, the per-probe entries (which repeat for a still
         // volume) and the frame's ray directions (which turn every frame);
-        // the texels' directions never change; the weight tables are the
-        // device's to rewrite each frame. A still volume's blend then makes
-        // no buffer and no bind group.
+        // the texels' directions never change (kept by the tile sizes); the
+        // weight tables are the device's to rewrite each frame. A still
+        // volume's blend then makes no buffer and no bind group.
         let key = atlases.irradiance_first as u64;
         let params =
             ctx.buffer_rewritten("blend params", key, bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let weights = ctx.scratch_buffer("blend weights", key, weight_count.max(4) as u64 * 4, storage);
         let per_probe_id = per_probe_id.as_ref().map(std::slice::from_ref);
-        let per_probe = ctx.buffer_identified("probe blend", key, per_probe_id, || Ok(blend_entries(plan)), storage)?;
-        let texel_dirs: Vec<[f32; 4]> =
-            texel_directions(ni).into_iter().chain(texel_directions(nd)).map(|d| d.extend(0.0).into()).collect();
-        let texel_dirs =
-            ctx.buffer_rewritten("blend texel directions", key, bytemuck::cast_slice(&texel_dirs), storage);
+        let entries = || packed.map_or_else(|| blend_entries(plan, batch_rays), Ok);
+        let per_probe = ctx.buffer_identified("probe blend", key, per_probe_id, entries, storage)?;
+        // The texels' directions follow from the tile sizes alone: made once.
+        let texel_dirs = || {
+            let dirs = texel_directions(ni).into_iter().chain(texel_directions(nd));
+            Ok(dirs.flat_map(|d| bytemuck::cast::<[f32; 4], [u8; 16]>(d.extend(0.0).into())).collect())
+        };
+        let tiles = [ni as u64, nd as u64];
+        let texel_dirs = ctx.buffer_identified("blend texel directions", key, Some(&tiles), texel_dirs, storage)?;
         let ray_dirs: Vec<[f32; 4]> = plan.ray_dirs.iter().map(|d| d.extend(0.0).into()).collect();
         let ray_dirs = ctx.buffer_rewritten("blend ray directions", key, bytemuck::cast_slice(&ray_dirs), storage);
         let buffers = [
@@ -345,18 +368,19 @@ impl GpuProbeBlend {
         // thread per tile texel of each.
         let dispatches = [1, groups((ni + 2) * (ni + 2)), groups((nd + 2) * (nd + 2))];
         let weight_groups = crate::bvh_trace::dispatch_2d(ni * ni + nd * nd);
-        Ok(BlendBindings { bind_group, dispatches, per_row, rows, weight_groups })
+        Ok(Some(BlendBindings { bind_group, dispatches, per_row, rows, weight_groups }))
     }
 
-    /// [`check_resident`], skipped where the same kept plan (its
-    /// `probe_blend_id`) passed it last with the same rays and batch.
-    /// Returns the probes that blend.
-    fn check_resident_once(
+    /// The probes of `plan` that blend and their packed entries
+    /// ([`check_resident`], then [`blend_entries`]); where the same kept plan
+    /// (its `probe_blend_id`) passed last with the same rays and batch, the
+    /// count alone (its entries are on the device already).
+    fn entries_once(
         &self,
         atlases: &GpuVolumeAtlases,
         plan: &DeviceVolumeBlend<'_>,
         batch_rays: u64,
-    ) -> Result<u32, GpuError> {
+    ) -> Result<(u32, Option<Vec<u8>>), GpuError> {
         let key = atlases.irradiance_first as u64;
         let mut checked = self.checked.lock().unwrap_or_else(|e| e.into_inner());
         let this = plan.probe_blend_id.map(|id| (id, plan.ray_dirs.len(), batch_rays));
@@ -364,14 +388,16 @@ impl GpuProbeBlend {
             && this == Some(kept)
             && plan.probe_blend.len() == atlases.probe_count
         {
-            return Ok(blending);
+            return Ok((blending, None));
         }
         checked.remove(&key);
-        let blending = check_resident(atlases, plan, batch_rays)?;
+        check_resident(atlases, plan)?;
+        let packed = blend_entries(plan, batch_rays)?;
+        let blending = (packed.len() / BLEND_ENTRY_BYTES) as u32;
         if let Some(this) = this {
             checked.insert(key, (this, blending));
         }
-        Ok(blending)
+        Ok((blending, Some(packed)))
     }
 
     /// Records the three passes ([`PASS_NAMES`]: blend, border irradiance,
@@ -419,10 +445,10 @@ pub struct BlendBindings {
     weight_groups: (u32, u32),
 }
 
-/// An error unless `plan` fits `atlases` and a batch of `batch_rays` rays: its
-/// weights a buffer, its rays the batch, one entry per probe. Returns the
-/// probes that blend (the entries [`blend_entries`] packs).
-fn check_resident(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, batch_rays: u64) -> Result<u32, GpuError> {
+/// An error unless `plan` fits `atlases`: its weights a buffer, one entry
+/// per probe (the entries' rays are checked against the batch as
+/// [`blend_entries`] packs them).
+fn check_resident(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>) -> Result<(), GpuError> {
     let probes = atlases.probe_count;
     let rays = plan.ray_dirs.len();
     let (ni, nd) = (atlases.irradiance_interior as u64, atlases.distance_interior as u64);
@@ -435,30 +461,33 @@ fn check_resident(atlases: &GpuVolumeAtlases, plan: &DeviceVolumeBlend<'_>, batc
             plan.probe_blend.len()
         )));
     }
-    let mut blending = 0u32;
-    for (first, _) in plan.probe_blend.iter().flatten() {
-        if *first as u64 + rays as u64 > batch_rays {
-            return Err(GpuError::Input(format!(
-                "a probe's rays {first}..{} lie past the batch's {batch_rays} rays",
-                *first as u64 + rays as u64
-            )));
-        }
-        blending += 1;
-    }
-    Ok(blending)
+    Ok(())
 }
+
+/// Bytes of one entry of [`blend_entries`].
+const BLEND_ENTRY_BYTES: usize = 16;
 
 /// The per-probe buffer of `probe_blend.wgsl`: one entry per probe that
 /// blends, in probe order: (first ray, hysteresis bits, frames, probe). A
 /// frame whose blends are a few of the probes (the screen scheme's eighth)
-/// uploads and dispatches those alone.
-fn blend_entries(plan: &DeviceVolumeBlend<'_>) -> Vec<u8> {
+/// uploads and dispatches those alone. An error where a probe's rays lie
+/// past the batch's `batch_rays` (checked in the same pass over the probes).
+fn blend_entries(plan: &DeviceVolumeBlend<'_>, batch_rays: u64) -> Result<Vec<u8>, GpuError> {
+    let rays = plan.ray_dirs.len() as u64;
     let frames = |p: usize| plan.probe_blend_frames.get(p).copied().unwrap_or(1).max(1);
-    let entries = plan.probe_blend.iter().enumerate().filter_map(|(p, b)| {
-        let (first, h) = (*b)?;
-        Some([first, h.max(0.0).to_bits(), frames(p), p as u32])
-    });
-    entries.flat_map(bytemuck::cast::<[u32; 4], [u8; 16]>).collect()
+    let mut packed = Vec::with_capacity(BLEND_ENTRY_BYTES * 64);
+    for (p, b) in plan.probe_blend.iter().enumerate() {
+        let Some((first, h)) = *b else { continue };
+        if first as u64 + rays > batch_rays {
+            return Err(GpuError::Input(format!(
+                "a probe's rays {first}..{} lie past the batch's {batch_rays} rays",
+                first as u64 + rays
+            )));
+        }
+        let entry: [u32; 4] = [first, h.max(0.0).to_bits(), frames(p), p as u32];
+        packed.extend_from_slice(bytemuck::bytes_of(&entry));
+    }
+    Ok(packed)
 }
 
 /// The blend passes' uniform block for `plan` into `atlases`.
@@ -492,5 +521,48 @@ fn blend_params(
         adaptive_hysteresis: s.probe_adaptive_hysteresis as u32,
         adaptive_tolerance: s.probe_adaptive_hysteresis_tolerance,
         hysteresis_cap: plan.hysteresis_cap,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use probegi_core::ddgi_settings::DdgiVolumeSettings;
+
+    /// A plan of four probes with 2 rays each: probes 1 and 3 blend, probe 3
+    /// standing for `frames_3` frames.
+    fn plan<'a>(settings: &'a DdgiVolumeSettings, dirs: &'a [Vec3], frames_3: u32) -> DeviceVolumeBlend<'a> {
+        DeviceVolumeBlend {
+            settings,
+            ray_dirs: dirs,
+            probe_blend: vec![None, Some((0, 0.5)), None, Some((2, -1.0))].into(),
+            probe_blend_id: None,
+            hysteresis_cap: 1.0,
+            irradiance_scale: 1.0,
+            visibility_scale: 1.0,
+            distance_clamp_m: 1.0,
+            reset_probes: &[],
+            seeds: &[],
+            shadow: None,
+            measure_change: false,
+            probe_blend_frames: if frames_3 == 0 { Default::default() } else { vec![1, 1, 1, frames_3].into() },
+        }
+    }
+
+    #[test]
+    fn blend_entries_pack_the_blending_probes_alone_and_refuse_rays_past_the_batch() {
+        let settings = DdgiVolumeSettings::default();
+        let dirs = [Vec3::X, Vec3::Y];
+        let words = |bytes: Vec<u8>| bytemuck::cast_slice::<u8, u32>(&bytes).to_vec();
+        // (first ray, hysteresis bits, frames, probe), in probe order; a
+        // negative hysteresis is sent as 0, missing frame counts as 1.
+        let packed = words(blend_entries(&plan(&settings, &dirs, 0), 4).expect("fits the batch"));
+        assert_eq!(packed, [0, 0.5f32.to_bits(), 1, 1, 2, 0.0f32.to_bits(), 1, 3]);
+        let packed = words(blend_entries(&plan(&settings, &dirs, 5), 4).expect("fits the batch"));
+        assert_eq!(packed[4..], [2, 0.0f32.to_bits(), 5, 3]);
+        // Probe 3's rays 2..4 need a batch of 4 rays.
+        let err = blend_entries(&plan(&settings, &dirs, 0), 3).expect_err("probe 3's rays pass the batch");
+        assert!(err.to_string().contains("2..4"), "{err}");
     }
 }

@@ -382,11 +382,11 @@ impl WgpuProbeTracer {
         // then their passes into one encoder.
         let mut prepared = vec![];
         for (i, p) in plan.iter().enumerate() {
-            if p.probe_blend.iter().all(|b| b.is_none()) {
-                continue;
-            }
             let atlases = f.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
-            prepared.push((i, blend.prepare_resident(&self.ctx, &atlases, p, results)?));
+            // A member in which no probe blends records nothing.
+            if let Some(bindings) = blend.prepare_blending(&self.ctx, &atlases, p, results)? {
+                prepared.push((i, bindings));
+            }
         }
         self.ctx.record(|encoder| {
             for (i, bindings) in &prepared {

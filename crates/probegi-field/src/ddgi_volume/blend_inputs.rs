@@ -190,8 +190,15 @@ impl DdgiVolume {
     /// Per probe, its first ray (as `first` makes it) and its blend's
     /// hysteresis capped at `cap` where it blends this frame, else `None`.
     fn blend_entries<T>(&self, frame: &VolumeFrame, cap: f32, first: impl Fn(u32) -> T) -> Vec<Option<(T, f32)>> {
-        let entry = |p: usize| frame.blends(p).then(|| (first(frame.first_ray[p]), self.blend_hysteresis(p).min(cap)));
-        (0..self.grid.probe_count()).map(entry).collect()
+        // `frame.blends(p)` over the frame's arrays in step; a probe past them does not blend.
+        let planned = frame.active.iter().zip(&frame.first_ray).enumerate();
+        let mut entries: Vec<_> = planned
+            .map(|(p, (&active, &ray))| {
+                (active && ray != u32::MAX).then(|| (first(ray), self.blend_hysteresis(p).min(cap)))
+            })
+            .collect();
+        entries.resize_with(self.grid.probe_count(), || None);
+        entries
     }
 
     /// Probe `p`'s blend hysteresis before the start-up cap: 0 for a fresh

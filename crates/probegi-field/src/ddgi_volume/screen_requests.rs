@@ -41,12 +41,14 @@ impl DdgiVolume {
             return;
         }
         let frames = self.settings.probe_screen_request_frames;
-        for p in 0..self.grid.probe_count() {
-            let countdown = &mut self.probe_request_countdown[p];
-            *countdown =
-                if std::mem::take(&mut self.probe_requested[p]) { frames } else { countdown.saturating_sub(1) };
-            if !self.probe_pending_init[p] {
-                self.probe_states[p] = if *countdown > 0 { ProbeState::Requested } else { ProbeState::Idle };
+        // The per-probe arrays in step (no index checks), so the loop has no
+        // branch a probe but the pending one.
+        let probes = self.probe_request_countdown.iter_mut().zip(&mut self.probe_requested);
+        let probes = probes.zip(self.probe_states.iter_mut().zip(&self.probe_pending_init));
+        for ((countdown, requested), (state, &pending)) in probes {
+            *countdown = if std::mem::take(requested) { frames } else { countdown.saturating_sub(1) };
+            if !pending {
+                *state = if *countdown > 0 { ProbeState::Requested } else { ProbeState::Idle };
             }
         }
     }

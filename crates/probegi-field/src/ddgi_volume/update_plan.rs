@@ -5,7 +5,7 @@
 //! rays' radiance the blend needs.
 
 use probegi_core::ddgi_settings::ProbeStatesMode;
-use probegi_core::probe_classification::probe_usage;
+use probegi_core::probe_classification::{ProbeState, probe_usage};
 
 use crate::probe_ray_gen::generate_probe_rays;
 use crate::seam::{ProbeRayBatch, ProbeRayHit};
@@ -35,7 +35,9 @@ impl DdgiVolume {
         self.screen_blend_frames(frame);
         self.count_untraced_frames(frame);
         frame.active.clear();
-        frame.active.extend(self.probe_states.iter().map(|s| s.updates_in_frame(frame_index, interval)));
+        // One match a state, not one a probe.
+        let updates = ProbeState::updates_in_frame_table(frame_index, interval);
+        frame.active.extend(self.probe_states.iter().map(|&s| updates[s as usize]));
         frame.rays = generate_probe_rays(&self.settings, self.stream_seed(seed), frame_index);
         frame.ray_count = frame.rays.dirs.len();
         frame.first_ray.clear();

@@ -16,10 +16,14 @@ impl DdgiVolume {
     /// Recomputes which probes queries may read, and the fallback table if that changed.
     pub(super) fn refresh_usable(&mut self) {
         let mut changed = false;
-        for p in 0..self.probe_usable.len() {
-            let now = self.probe_states[p].usable_in_queries() && self.probe_has_content(p);
-            changed |= self.probe_usable[p] != now;
-            self.probe_usable[p] = now;
+        // `probe_has_content` and the state's usability, over the arrays in step.
+        let seeds_count = self.settings.probe_states == ProbeStatesMode::Screen;
+        let usable = ProbeState::ALL.map(ProbeState::usable_in_queries);
+        let content = self.probe_has_history.iter().zip(&self.probe_seeded).map(|(&h, &s)| h || (s && seeds_count));
+        for ((u, &state), content) in self.probe_usable.iter_mut().zip(&self.probe_states).zip(content) {
+            let now = usable[state as usize] && content;
+            changed |= *u != now;
+            *u = now;
         }
         if changed {
             self.probe_fallback = nearest_usable_probes(&self.grid, &self.probe_usable);
