@@ -300,8 +300,8 @@ impl GpuProbeBlend {
         plan: &DeviceVolumeBlend<'_>,
         ray_results: &wgpu::Buffer,
     ) -> Result<BlendBindings, GpuError> {
-        self.prepare_blending(ctx, atlases, plan, ray_results)?
-            .ok_or_else(|| GpuError::Input("a blend plan in which no probe blends".into()))
+        let (blending, packed) = self.entries_once(atlases, plan, ray_results.size() / 16)?;
+        self.bind_blend(ctx, atlases, plan, ray_results, blending, packed)
     }
 
     /// [`Self::prepare_resident`], or `None` where no probe of `plan` blends
@@ -315,11 +315,26 @@ impl GpuProbeBlend {
         plan: &DeviceVolumeBlend<'_>,
         ray_results: &wgpu::Buffer,
     ) -> Result<Option<BlendBindings>, GpuError> {
-        let batch_rays = ray_results.size() / 16;
-        let (blending, packed) = self.entries_once(atlases, plan, batch_rays)?;
+        let (blending, packed) = self.entries_once(atlases, plan, ray_results.size() / 16)?;
         if blending == 0 {
             return Ok(None);
         }
+        self.bind_blend(ctx, atlases, plan, ray_results, blending, packed).map(Some)
+    }
+
+    /// The buffers and bind group of `plan`'s blend of `blending` probes, its
+    /// entries `packed` where [`Self::entries_once`] packed them (else packed
+    /// here, unless the device holds them under the plan's id).
+    fn bind_blend(
+        &self,
+        ctx: &GpuContext,
+        atlases: &GpuVolumeAtlases,
+        plan: &DeviceVolumeBlend<'_>,
+        ray_results: &wgpu::Buffer,
+        blending: u32,
+        packed: Option<Vec<u8>>,
+    ) -> Result<BlendBindings, GpuError> {
+        let batch_rays = ray_results.size() / 16;
         let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
         let per_row = blending.clamp(1, MAX_GROUPS);
         let params = blend_params(atlases, plan, blending, per_row);
@@ -368,7 +383,7 @@ impl GpuProbeBlend {
         // thread per tile texel of each.
         let dispatches = [1, groups((ni + 2) * (ni + 2)), groups((nd + 2) * (nd + 2))];
         let weight_groups = crate::bvh_trace::dispatch_2d(ni * ni + nd * nd);
-        Ok(Some(BlendBindings { bind_group, dispatches, per_row, rows, weight_groups }))
+        Ok(BlendBindings { bind_group, dispatches, per_row, rows, weight_groups })
     }
 
     /// The probes of `plan` that blend and their packed entries

@@ -191,13 +191,14 @@ impl DdgiVolume {
     /// hysteresis capped at `cap` where it blends this frame, else `None`.
     fn blend_entries<T>(&self, frame: &VolumeFrame, cap: f32, first: impl Fn(u32) -> T) -> Vec<Option<(T, f32)>> {
         // `frame.blends(p)` over the frame's arrays in step; a probe past them does not blend.
-        let planned = frame.active.iter().zip(&frame.first_ray).enumerate();
+        let probes = self.grid.probe_count();
+        let planned = frame.active.iter().zip(&frame.first_ray).take(probes).enumerate();
         let mut entries: Vec<_> = planned
             .map(|(p, (&active, &ray))| {
                 (active && ray != u32::MAX).then(|| (first(ray), self.blend_hysteresis(p).min(cap)))
             })
             .collect();
-        entries.resize_with(self.grid.probe_count(), || None);
+        entries.resize_with(probes, || None);
         entries
     }
 

@@ -231,3 +231,24 @@ fn the_blend_uploads_an_entry_per_blending_probe_alone() {
     let few = [handed(&three), handed(&three)][1];
     assert_eq!(all - few, 16 * (probes as u64 - 3), "every probe's entry: {all} bytes, three: {few}");
 }
+
+/// A blend in which no probe blends is no error and changes no texel (the
+/// public `run`/`prepare_resident`; the field's own update records nothing
+/// for such a volume).
+#[test]
+fn a_blend_in_which_no_probe_blends_leaves_the_atlases_as_they_were() {
+    let Some(ctx) = context() else { return };
+    let s = DdgiVolumeSettings::default();
+    let (probes, rays) = (5usize, 16u32);
+    let blend = GpuProbeBlend::new(&ctx);
+    let atlases = GpuVolumeAtlases::new(&ctx, probes, s.probe_irradiance_texels, s.probe_distance_texels);
+    let fr = frame(&mut Pcg32::new(9, 1), probes, rays, 2);
+    let every = vec![Some(0.0); probes];
+    blend.run(&ctx, &atlases, &BlendFrame { probe_hysteresis: &every, ..gpu_frame(&s, &fr, 0.0) }).expect("blend");
+    let before = atlases.download(&ctx).expect("download");
+    let none = vec![None; probes];
+    blend.run(&ctx, &atlases, &BlendFrame { probe_hysteresis: &none, ..gpu_frame(&s, &fr, 0.0) }).expect("no blend");
+    let after = atlases.download(&ctx).expect("download");
+    assert!(before.0.texels.iter().any(|t| t.max_element() > 0.0), "the first blend wrote light");
+    assert_eq!(max_error(&before, &after), (0.0, 0.0));
+}
