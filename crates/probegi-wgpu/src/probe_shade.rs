@@ -100,18 +100,26 @@ pub fn batch_shade_probes(
     batch: &probegi_field::seam::ProbeRayBatch,
     volumes: &[probegi_field::ddgi_volume::DdgiVolume],
 ) -> Vec<ShadeProbe> {
+    // Per volume once: its flags with and without radiance needed, and its hit-AO reach.
+    let per_volume: Vec<([u32; 2], u32)> = volumes
+        .iter()
+        .map(|v| {
+            let info = [volume_shade_info(false, &v.settings), volume_shade_info(true, &v.settings)];
+            (info, hit_ao_radius_m(v).to_bits())
+        })
+        .collect();
     batch
         .probes
         .iter()
         .enumerate()
         .map(|(k, bp)| {
-            let s = &volumes[bp.volume as usize].settings;
+            let (info, hit_ao_radius_bits) = per_volume[bp.volume as usize];
             let needed = batch.probe_needs_radiance.get(k).copied().unwrap_or(false);
             ShadeProbe {
                 first_ray: bp.first_ray,
                 ray_count: bp.ray_count,
-                info: volume_shade_info(needed, s),
-                hit_ao_radius_bits: hit_ao_radius_m(&volumes[bp.volume as usize]).to_bits(),
+                info: info[needed as usize],
+                hit_ao_radius_bits,
             }
         })
         .collect()
