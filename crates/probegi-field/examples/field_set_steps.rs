@@ -25,8 +25,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("{n}³ probes × {rays} rays, ms an update: begin / hits / blend plan / after the blend = sum");
     for states in [ProbeStatesMode::AllActive, ProbeStatesMode::Jcgt, ProbeStatesMode::Screen] {
         // The screen scheme plans in full every frame (its idle phases turn).
-        for keep in if states == ProbeStatesMode::Screen { &[false][..] } else { &[false, true][..] } {
-            let keep = *keep;
+        let keeps: &[bool] = if states == ProbeStatesMode::Screen { &[false] } else { &[false, true] };
+        for &keep in keeps {
             let ms = time_steps(states, keep, n, rays)?;
             let label = if keep { "kept plan" } else { "full plan" };
             let steps = ms.map(|m| format!("{m:.3}")).join(" / ");

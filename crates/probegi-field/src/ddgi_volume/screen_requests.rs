@@ -98,11 +98,10 @@ impl DdgiVolume {
         // frame with a shadowing field).
         let before = (now + interval - 1) % interval;
         let shadow = self.shadow.is_some();
-        let screen = self.settings.probe_states == ProbeStatesMode::Screen;
-        let probes_in_step = self.probe_states.iter().zip(&self.probe_has_history).zip(&self.probe_seeded).zip(phases);
-        tracing.extend(probes_in_step.enumerate().map(|(p, (((&state, &history), &seeded), &phase))| {
-            // `probe_has_content`, and `traces_in_frame` from there.
-            let traces = match state == ProbeState::Idle && (history || (seeded && screen)) {
+        let probes_in_step = self.probe_states.iter().zip(self.probes_have_content()).zip(phases);
+        tracing.extend(probes_in_step.enumerate().map(|(p, ((&state, content), &phase))| {
+            // `traces_in_frame`, with the arrays read in step.
+            let traces = match state == ProbeState::Idle && content {
                 true => phase == now || (shadow && phase == before),
                 false => state.traces(),
             };

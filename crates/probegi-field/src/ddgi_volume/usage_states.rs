@@ -16,10 +16,10 @@ impl DdgiVolume {
     /// Recomputes which probes queries may read, and the fallback table if that changed.
     pub(super) fn refresh_usable(&mut self) {
         let mut changed = false;
-        // `probe_has_content` and the state's usability, over the arrays in step.
-        let seeds_count = self.settings.probe_states == ProbeStatesMode::Screen;
+        // The state's usability (a table) and `probes_have_content`, over the arrays in step.
         let usable = ProbeState::ALL.map(ProbeState::usable_in_queries);
-        let content = self.probe_has_history.iter().zip(&self.probe_seeded).map(|(&h, &s)| h || (s && seeds_count));
+        let screen = self.settings.probe_states == ProbeStatesMode::Screen;
+        let content = have_content(&self.probe_has_history, &self.probe_seeded, screen);
         for ((u, &state), content) in self.probe_usable.iter_mut().zip(&self.probe_states).zip(content) {
             let now = usable[state as usize] && content;
             changed |= *u != now;
@@ -37,6 +37,13 @@ impl DdgiVolume {
     /// schemes a seeded probe blends in the frame it was seeded anyway).
     pub(super) fn probe_has_content(&self, p: usize) -> bool {
         self.probe_has_history[p] || (self.probe_seeded[p] && self.settings.probe_states == ProbeStatesMode::Screen)
+    }
+
+    /// [`Self::probe_has_content`] of every probe, in probe order, read from
+    /// the arrays in step (for loops over every probe each frame).
+    pub(super) fn probes_have_content(&self) -> impl Iterator<Item = bool> + '_ {
+        let screen = self.settings.probe_states == ProbeStatesMode::Screen;
+        have_content(&self.probe_has_history, &self.probe_seeded, screen)
     }
 
     /// Number of probes per state name.
@@ -107,4 +114,12 @@ impl DdgiVolume {
             self.probe_states[p] = next;
         }
     }
+}
+
+/// [`DdgiVolume::probe_has_content`] over the per-probe histories and seeds
+/// in step (`screen`: the volume runs the screen scheme, whose seeded probes
+/// count as having content); apart from the volume, so a loop may borrow
+/// its other arrays mutably beside it.
+fn have_content<'a>(history: &'a [bool], seeded: &'a [bool], screen: bool) -> impl Iterator<Item = bool> + 'a {
+    history.iter().zip(seeded).map(move |(&history, &seeded)| history || (seeded && screen))
 }
