@@ -154,6 +154,14 @@ pub struct DdgiVolumeSettings {
     /// §6.1 keeps ALIVE probes "for some minimum of frames" without a number; we use
     /// the sleeping interval, so a probe at the rim r is never stale longer than it).
     pub probe_alive_min_frames: u32,
+    /// Usage scheme: update batches between a batch's trace and the
+    /// classification its usage counts feed (0: the same batch, as seed 003
+    /// §6.1 has it). Deliberate deviation, default 2: a device that keeps the
+    /// hits counts usage there and the host reads the counts back this many
+    /// batches late, never waiting on the device inside an update; the CPU
+    /// backend lags alike, so both give the same states. A probe's state then
+    /// follows what it saw two updates ago, well inside the sleeping interval.
+    pub probe_usage_lag_updates: u32,
     /// Screen scheme: frames a probe stays Requested after a camera pixel last
     /// read its cage (PGI's direct countdown: 63).
     pub probe_screen_request_frames: u32,
@@ -308,6 +316,7 @@ impl Default for DdgiVolumeSettings {
             probe_classification_reach_rel: 0.5,
             probe_sleeping_update_interval: 10,
             probe_alive_min_frames: 10,
+            probe_usage_lag_updates: 2,
             probe_screen_request_frames: 63,
             probe_screen_idle_interval_frames: 8,
             glossy_second_order: true,
@@ -456,6 +465,9 @@ impl DdgiVolumeSettings {
                 "ray_budget_max_interval_frames",
                 format!("{} must be in 1..=1000", self.ray_budget_max_interval_frames),
             ));
+        }
+        if self.probe_usage_lag_updates > 8 {
+            return Err(("probe_usage_lag_updates", format!("{} must be at most 8", self.probe_usage_lag_updates)));
         }
         if self.probe_screen_request_frames == 0 || self.probe_screen_request_frames > 10_000 {
             return Err((

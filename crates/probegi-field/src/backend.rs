@@ -14,11 +14,10 @@
 use glam::Vec3;
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_volume_blend::DdgiFieldSetView;
-use probegi_core::probe_classification::ProbeUsageCounts;
 use probegi_scene::{RayHit, Scene};
 
 use crate::ddgi_volume::DdgiVolume;
-use crate::device_plans::{DeviceInitChain, DeviceInitResult, DeviceVolumeBlend};
+use crate::device_plans::{DeviceInitChain, DeviceInitResult, DeviceUsageCounts, DeviceUsageRequest, DeviceVolumeBlend};
 use crate::seam::{ProbeRayBatch, SeamError};
 
 /// Why a backend could not do what the field asked of it.
@@ -167,15 +166,19 @@ pub struct CameraFrameOut<'a> {
 /// for the device, a pass the adapter cannot bind.
 pub trait DeviceField: Sync {
     /// Traces the update batch and keeps its hits on the device, for
-    /// [`Self::shade_and_blend`]. With `usage_cage_diagonals_m` (one per
-    /// volume), returns per entry of `batch.probes` seed 003's usage counts
-    /// (usage, relevant, backfaces; `probegi_core::probe_classification::probe_usage`)
-    /// with its volume's cage diagonal; otherwise an empty vector.
+    /// [`Self::shade_and_blend`]. With `usage`
+    /// ([`DdgiFieldSet::device_usage_request`](crate::DdgiFieldSet::device_usage_request)),
+    /// counts seed 003's usage (usage, relevant, backfaces;
+    /// `probegi_core::probe_classification::probe_usage`) of every entry of
+    /// `batch.probes` with its volume's cage diagonal, and returns the counts
+    /// of the set's earlier batches now `usage.lag_updates` old, oldest
+    /// first, without waiting for the device unless it has not finished them;
+    /// otherwise an empty vector.
     fn trace_resident(
         &self,
         batch: &ProbeRayBatch,
-        usage_cage_diagonals_m: Option<&[f32]>,
-    ) -> Option<Result<Vec<ProbeUsageCounts>, BackendError>>;
+        usage: Option<&DeviceUsageRequest>,
+    ) -> Option<Result<Vec<DeviceUsageCounts>, BackendError>>;
 
     /// Runs every initialisation round of `plan` (per volume, `None`: none
     /// pending) chained on the device, with one submission and no result

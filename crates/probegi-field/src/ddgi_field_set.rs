@@ -66,6 +66,7 @@ use std::collections::BTreeMap;
 
 use glam::Vec3;
 use probegi_core::ddgi_settings::DdgiFieldSetSettings;
+use probegi_core::probe_classification::ProbeUsageCounts;
 use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, SetMember, VolumeBlending, field_set_irradiance};
 
 use crate::backend::{BackendError, ProbeBatchTracer};
@@ -125,6 +126,12 @@ pub struct DdgiFieldSet {
     steady_plans: bool,
     /// The current update kept the last one's plan (`ddgi_volume::steady_frames`).
     plan_kept: bool,
+    /// The usage scheme's lagged counts (`ddgi_volume::usage_states`): the
+    /// set's identity for a device, the next update batch's number, and per
+    /// batch whose counts are still on the device its (volume, probe) entries.
+    usage_set_id: u64,
+    update_batches: u64,
+    usage_on_device: std::collections::VecDeque<(u64, Vec<[u32; 2]>)>,
 }
 
 impl DdgiFieldSet {
@@ -148,6 +155,8 @@ impl DdgiFieldSet {
         let cell = |v: &DdgiVolume| v.grid.spacing_m.element_product();
         order.sort_by(|&a, &b| cell(&volumes[a]).total_cmp(&cell(&volumes[b])));
         let n = volumes.len();
+        // Batch numbers only grow, whatever sets these volumes served before.
+        let update_batches = volumes.iter().map(DdgiVolume::usage_batches).max().unwrap_or(0);
         Self {
             volumes,
             blending,
@@ -175,6 +184,9 @@ impl DdgiFieldSet {
             shadow_on_device: false,
             steady_plans: true,
             plan_kept: false,
+            usage_set_id: crate::device_plans::next_plan_id(),
+            update_batches,
+            usage_on_device: std::collections::VecDeque::new(),
         }
     }
 
@@ -682,11 +694,14 @@ impl DdgiFieldSet {
             }
             ProbeRayBatchKind::Update => {
                 self.batch.needs_radiance = vec![false; self.batch.len()];
+                let batch = self.update_batches;
+                self.update_batches += 1;
                 for i in 0..self.volumes.len() {
                     let (frames, volumes) = (&mut self.frames, &mut self.volumes);
                     volumes[i].accept_update_hits(
                         &mut frames[i],
                         self.frame,
+                        batch,
                         &self.hits,
                         &mut self.batch.needs_radiance,
                     );
@@ -869,36 +884,59 @@ impl DdgiFieldSet {
         Ok(step)
     }
 
+    /// What a device that keeps the update batch's hits must count there for
+    /// the usage scheme ([`HostHits::ProbeUsage`]; `None` otherwise): each
+    /// volume's cage diagonal, this batch's number, and how many batches late
+    /// the counts may come back (the smallest `probe_usage_lag_updates` of the
+    /// volumes under the usage scheme).
+    pub fn device_usage_request(&self) -> Option<crate::DeviceUsageRequest> {
+        if self.hits_needed_on_host() != HostHits::ProbeUsage {
+            return None;
+        }
+        let usage = probegi_core::ddgi_settings::ProbeStatesMode::Usage;
+        let lag = self.volumes.iter().filter(|v| v.settings.probe_states == usage);
+        Some(crate::DeviceUsageRequest {
+            cage_diagonals_m: self.volumes.iter().map(|v| v.grid.spacing_m.length()).collect(),
+            set_id: self.usage_set_id,
+            batch: self.update_batches,
+            lag_updates: lag.map(|v| v.settings.probe_usage_lag_updates).min().unwrap_or(0),
+        })
+    }
+
     /// In place of [`Self::submit_hits`] for an update batch whose hits stayed on
-    /// another device: `usage_counts` holds one (usage, relevant, backfaces) per
-    /// entry of `ray_batch().probes` when [`Self::hits_needed_on_host`] asked for
-    /// them (empty otherwise). Each probe that updates is then marked in
-    /// `probe_needs_radiance` (`needs_radiance` stays empty: O(probes), not
-    /// O(rays), on the host); the device applies the backface rule itself.
-    pub fn submit_device_hits(&mut self, usage_counts: &[(i32, u32, u32)]) -> Result<UpdateStep, SeamError> {
+    /// another device. Under the usage scheme ([`Self::device_usage_request`])
+    /// the device keeps this batch's counts for now, and `usage_counts` holds
+    /// those of earlier batches that it read back (empty otherwise); a batch
+    /// whose counts never come classifies nothing. Each probe that updates is
+    /// then marked in `probe_needs_radiance` (`needs_radiance` stays empty:
+    /// O(probes), not O(rays), on the host); the device applies the backface
+    /// rule itself.
+    pub fn submit_device_hits(&mut self, usage_counts: &[crate::DeviceUsageCounts]) -> Result<UpdateStep, SeamError> {
         self.expect(UpdateStep::TraceRays, "submit_device_hits")?;
         if self.batch.kind != ProbeRayBatchKind::Update {
             return Err(SeamError::OutOfOrder { expected: UpdateStep::TraceRays, called: "submit_device_hits" });
         }
-        let wanted = if self.hits_needed_on_host() == HostHits::ProbeUsage { self.batch.probes.len() } else { 0 };
-        if usage_counts.len() != wanted {
-            return Err(SeamError::WrongLength { what: "usage counts", expected: wanted, got: usage_counts.len() });
-        }
         let t = std::time::Instant::now();
+        let batch = self.update_batches;
+        if self.hits_needed_on_host() == HostHits::ProbeUsage {
+            // This batch's entries first: with no lag its own counts are here.
+            let entries = self.batch.probes.iter().map(|bp| [bp.volume, bp.probe]).collect();
+            self.usage_on_device.push_back((batch, entries));
+        }
+        let earlier = match self.earlier_device_usage(usage_counts) {
+            Ok(earlier) => earlier,
+            Err(e) => {
+                // As if never called: the batch's entries go again.
+                self.usage_on_device.retain(|(b, _)| *b != batch);
+                return Err(e);
+            }
+        };
+        self.update_batches += 1;
         self.hits.clear();
         self.distances.clear();
         self.batch.needs_radiance.clear();
-        // Per probe of each volume its counts, where the usage scheme reads
-        // them (none otherwise: no per-probe work for a still field).
-        let mut per_volume: Vec<Vec<Option<(i32, u32, u32)>>> = match wanted {
-            0 => vec![Vec::new(); self.volumes.len()],
-            _ => self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect(),
-        };
-        for (bp, c) in self.batch.probes.iter().zip(usage_counts) {
-            per_volume[bp.volume as usize][bp.probe as usize] = Some(*c);
-        }
-        for ((v, f), counts) in self.volumes.iter_mut().zip(&mut self.frames).zip(&per_volume) {
-            v.accept_device_hits(f, self.frame, counts);
+        for ((v, f), earlier) in self.volumes.iter_mut().zip(&mut self.frames).zip(earlier) {
+            v.accept_device_hits(f, self.frame, batch, earlier);
         }
         if !self.plan_kept {
             // A kept plan's batch kept them.
@@ -907,6 +945,42 @@ impl DdgiFieldSet {
         self.time("classify", t);
         self.expected = UpdateStep::ShadeRays;
         Ok(UpdateStep::ShadeRays)
+    }
+
+    /// Per volume, the usage counts of earlier batches a device read back,
+    /// by batch number, each spread over the volume's probes; the batches
+    /// before one that came back and never came themselves are forgotten.
+    #[allow(clippy::type_complexity)]
+    fn earlier_device_usage(
+        &mut self,
+        usage_counts: &[crate::DeviceUsageCounts],
+    ) -> Result<Vec<Vec<(u64, Vec<Option<ProbeUsageCounts>>)>>, SeamError> {
+        let mut per_volume = vec![Vec::new(); self.volumes.len()];
+        for c in usage_counts {
+            while self.usage_on_device.front().is_some_and(|(b, _)| *b < c.batch) {
+                self.usage_on_device.pop_front();
+            }
+            let entries = match self.usage_on_device.front() {
+                Some((b, entries)) if *b == c.batch => entries,
+                _ => return Err(SeamError::UnknownBatch { batch: c.batch }),
+            };
+            if entries.len() != c.counts.len() {
+                let (expected, got) = (entries.len(), c.counts.len());
+                return Err(SeamError::WrongLength { what: "usage counts", expected, got });
+            }
+            let mut spread: Vec<Vec<Option<ProbeUsageCounts>>> =
+                self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect();
+            for (&[volume, probe], &counts) in entries.iter().zip(&c.counts) {
+                if let Some(slot) = spread.get_mut(volume as usize).and_then(|s| s.get_mut(probe as usize)) {
+                    *slot = Some(counts);
+                }
+            }
+            for (v, spread) in per_volume.iter_mut().zip(spread) {
+                v.push((c.batch, spread));
+            }
+            self.usage_on_device.pop_front();
+        }
+        Ok(per_volume)
     }
 
     /// In place of [`Self::submit_radiance`] when another device shades the
@@ -1080,11 +1154,8 @@ mod tests {
     #[test]
     fn device_hits_mark_probes_not_rays() {
         let mut set = update_batch(true);
-        let usage = match set.hits_needed_on_host() {
-            HostHits::ProbeUsage => vec![(0, 0, 0); set.ray_batch().probes.len()],
-            _ => vec![],
-        };
-        assert_eq!(set.submit_device_hits(&usage), Ok(UpdateStep::ShadeRays));
+        // The first batch's usage counts (if any) stay on the device for now.
+        assert_eq!(set.submit_device_hits(&[]), Ok(UpdateStep::ShadeRays));
         let batch = set.ray_batch();
         assert!(batch.needs_radiance.is_empty());
         assert_eq!(batch.probe_needs_radiance.len(), batch.probes.len());

@@ -78,6 +78,37 @@ pub struct DeviceBlendOutput {
     pub probe_change: Vec<Vec<f32>>,
 }
 
+/// What a device that keeps an update batch's hits counts there for the
+/// usage scheme (`DdgiFieldSet::device_usage_request`; seed 003 §6.1): per
+/// probe of the batch, (usage, relevant, backfaces)
+/// (`probegi_core::probe_classification::probe_usage`), read back
+/// `lag_updates` batches later ([`DeviceUsageCounts`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeviceUsageRequest {
+    /// Per volume of the set, its cage diagonal (m): a probe's counts use its volume's.
+    pub cage_diagonals_m: Vec<f32>,
+    /// The set's identity (`device_plans::next_plan_id`): a device that serves
+    /// several sets keeps their counts apart.
+    pub set_id: u64,
+    /// The batch's number in the set; the counts come back under it.
+    pub batch: u64,
+    /// Batches a batch's counts may stay on the device: the call for batch `n`
+    /// returns those of every batch up to `n − lag_updates` not yet returned
+    /// (waiting for them only if the device has not finished them). 0: this
+    /// batch's own, waited for.
+    pub lag_updates: u32,
+}
+
+/// The usage counts of one earlier update batch, as a device read them back
+/// ([`DeviceUsageRequest`]): one per entry of that batch's `probes`, in order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeviceUsageCounts {
+    /// The batch's number in its set ([`DeviceUsageRequest::batch`]).
+    pub batch: u64,
+    /// (usage, relevant, backfaces) per probe of the batch.
+    pub counts: Vec<probegi_core::probe_classification::ProbeUsageCounts>,
+}
+
 /// One volume's shadowing-field update on another device (seed 003 §5.1, eq.
 /// 5.2–5.3; `ddgi_volume::shadow_rays` on the host): shadow rays from the hits
 /// of the previous frame's update batch, which the device kept, toward

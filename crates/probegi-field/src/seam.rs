@@ -324,6 +324,13 @@ pub enum SeamError {
     /// A host blend while another device holds the current atlases: copy them
     /// back first ([`DdgiFieldSet::accept_host_atlases`](crate::DdgiFieldSet::accept_host_atlases)).
     FieldOnDevice,
+    /// Usage counts for an update batch whose counts the set does not wait
+    /// for ([`DdgiFieldSet::submit_device_hits`](crate::DdgiFieldSet::submit_device_hits)):
+    /// not counted on the device, or already given.
+    UnknownBatch {
+        /// The batch's number ([`crate::DeviceUsageCounts::batch`]).
+        batch: u64,
+    },
 }
 
 impl std::fmt::Display for SeamError {
@@ -337,6 +344,9 @@ impl std::fmt::Display for SeamError {
             }
             SeamError::FieldOnDevice => {
                 write!(f, "the host blend needs the field's atlases, which are on another device")
+            }
+            SeamError::UnknownBatch { batch } => {
+                write!(f, "usage counts of update batch {batch}, whose counts the field set does not wait for")
             }
         }
     }

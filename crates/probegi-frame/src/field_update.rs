@@ -314,9 +314,8 @@ impl<'u> SeamDriver<'u> {
         }
         // The update batch on a device that keeps the field: the hits stay there.
         if let (Some(bt), false, false) = (self.device, init, set.hits_needed_on_host() == HostHits::All) {
-            let usage = (set.hits_needed_on_host() == HostHits::ProbeUsage)
-                .then(|| set.volumes().iter().map(|v| v.grid.spacing_m.length()).collect::<Vec<_>>());
-            if let Some(counts) = bt.trace_resident(set.ray_batch(), usage.as_deref()) {
+            let usage = set.device_usage_request();
+            if let Some(counts) = bt.trace_resident(set.ray_batch(), usage.as_ref()) {
                 self.traced += set.ray_batch().len() as u64;
                 let counts = counts?;
                 let t_plan = Instant::now();

@@ -608,6 +608,11 @@ impl GpuContext {
         self.device.create_bind_group(desc)
     }
 
+    /// The last submission made to the queue, if any.
+    pub(crate) fn last_submission(&self) -> Option<wgpu::SubmissionIndex> {
+        self.last_submission.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
     /// Queue submissions made so far (what [`FrameBuffer::handed_out_at`] compares).
     pub(crate) fn queue_submissions(&self) -> u64 {
         self.transfers.submissions.load(std::sync::atomic::Ordering::Relaxed)

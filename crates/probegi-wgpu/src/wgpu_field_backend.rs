@@ -32,11 +32,12 @@ use std::sync::Mutex;
 use glam::Vec3;
 use probegi_core::camera::CameraRays;
 use probegi_core::ddgi_volume_blend::DdgiFieldSetView;
-use probegi_core::probe_classification::ProbeUsageCounts;
 use probegi_field::backend::{BackendError, CameraFrameOut, DeviceField, ProbeBatchTracer};
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::device_frame::{DeviceFrame, DeviceFrameInput, DeviceFrameReadout, FrameLayer};
-use probegi_field::device_plans::{DeviceBlendOutput, DeviceInitChain, DeviceInitResult, DeviceVolumeBlend};
+use probegi_field::device_plans::{
+    DeviceBlendOutput, DeviceInitChain, DeviceInitResult, DeviceUsageCounts, DeviceUsageRequest, DeviceVolumeBlend,
+};
 use probegi_field::seam::ProbeRayBatch;
 use probegi_scene::{BvhTracer, RayHit, Scene, TlasLayout};
 
@@ -813,19 +814,19 @@ impl DeviceField for WgpuProbeTracer {
     fn trace_resident(
         &self,
         batch: &ProbeRayBatch,
-        usage_cage_diagonals_m: Option<&[f32]>,
-    ) -> Option<Result<Vec<ProbeUsageCounts>, BackendError>> {
-        let (_, usage, _) = self.resident_passes.as_ref()?;
+        usage: Option<&DeviceUsageRequest>,
+    ) -> Option<Result<Vec<DeviceUsageCounts>, BackendError>> {
+        let (_, usage_pass, _) = self.resident_passes.as_ref()?;
         if batch.len() > GpuRayTrace::max_batch_rays(&self.ctx) {
             return None;
         }
-        let run = || -> Result<Vec<ProbeUsageCounts>, BackendError> {
+        let run = || -> Result<Vec<DeviceUsageCounts>, BackendError> {
             let resident = self.trace_resident(batch, false)?;
             if self.timing() {
                 self.ctx.wait()?;
             }
-            let counts = match usage_cage_diagonals_m {
-                Some(diagonals) => usage.counts(&self.ctx, &resident, &batch.probes, diagonals)?,
+            let counts = match usage {
+                Some(request) => usage_pass.counts_late(&self.ctx, &resident, &batch.probes, request)?,
                 None => vec![],
             };
             self.keep_last(resident)?;

@@ -374,6 +374,7 @@ impl DdgiVolume {
             }
             self.probe_pending_init[p] = false;
             self.probe_init_hits_current[p] = false;
+            self.restart_usage(p);
         }
         self.probe_init_hits = Vec::new();
         self.initialized = true;

@@ -98,6 +98,12 @@ pub struct DdgiVolume {
     probe_has_history: Vec<bool>,
     /// Usage scheme: consecutive frames the probe has been ALIVE.
     probe_alive_frames: Vec<u32>,
+    /// Usage scheme (`usage_states`): the update batches whose usage counts
+    /// wait for their classification, one past the last batch number queued,
+    /// and per probe the first batch whose counts describe it where it is now.
+    usage_pending: std::collections::VecDeque<usage_states::PendingUsage>,
+    usage_batches: u64,
+    probe_usage_from_batch: Vec<u64>,
     /// Probes waiting for initialisation (relocation, classification).
     probe_pending_init: Vec<bool>,
     /// Initialisation: the probe's last relocation round left its offset as it
@@ -288,6 +294,9 @@ impl DdgiVolume {
             probe_fallback: vec![u32::MAX; probes],
             probe_has_history: vec![false; probes],
             probe_alive_frames: vec![0; probes],
+            usage_pending: std::collections::VecDeque::new(),
+            usage_batches: 0,
+            probe_usage_from_batch: vec![0; probes],
             probe_pending_init: vec![true; probes],
             probe_relocation_settled: vec![false; probes],
             probe_init_hits: Vec::new(),

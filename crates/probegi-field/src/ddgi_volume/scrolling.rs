@@ -90,6 +90,7 @@ impl DdgiVolume {
         self.probe_hysteresis[p] = self.settings.probe_hysteresis;
         self.probe_has_history[p] = false;
         self.probe_alive_frames[p] = 0;
+        self.restart_usage(p);
         self.probe_pending_init[p] = true;
         self.probe_init_hits_current[p] = false;
         self.probe_change[p] = 1.0;

@@ -1,11 +1,12 @@
 //! Update planning: the frame's rays (`probe_ray_gen`) for the probes whose state
 //! traces (jcgt: not Off or Sleeping; usage: all), and the acceptance of the
 //! frame's hits, from a host batch or from the device. With the usage scheme the
-//! hits classify every probe (see `usage_states`); the accepted hits mark which
-//! rays' radiance the blend needs.
+//! hits' usage counts classify every probe `probe_usage_lag_updates` batches
+//! later (see `usage_states`); the accepted hits mark which rays' radiance the
+//! blend needs.
 
 use probegi_core::ddgi_settings::ProbeStatesMode;
-use probegi_core::probe_classification::{ProbeState, probe_usage};
+use probegi_core::probe_classification::{ProbeState, ProbeUsageCounts, probe_usage};
 
 use crate::probe_ray_gen::generate_probe_rays;
 use crate::seam::{ProbeRayBatch, ProbeRayHit};
@@ -60,20 +61,21 @@ impl DdgiVolume {
         self.traced_probes_last = (batch.probes.len() as u32 - first_probe) as usize;
     }
 
-    /// After the trace: the usage scheme's classification from the hits (seed 003
-    /// §6.1), then which rays the caller must shade (those of probes that update
+    /// After the trace: the usage scheme's counts from the hits queued, and the
+    /// classification of a batch now due (seed 003 §6.1), then which rays the caller must shade (those of probes that update
     /// this frame, except backface hits, whose radiance is zero by rule).
     pub(crate) fn accept_update_hits(
         &mut self,
         frame: &mut VolumeFrame,
         frame_index: u32,
+        batch: u64,
         hits: &[ProbeRayHit],
         needs_radiance: &mut [bool],
     ) {
         let n = frame.ray_count;
         if self.settings.probe_states == ProbeStatesMode::Usage {
             let cage_diagonal = self.grid.spacing_m.length();
-            let counts: Vec<Option<(i32, u32, u32)>> = frame
+            let counts: Vec<Option<ProbeUsageCounts>> = frame
                 .first_ray
                 .iter()
                 .map(|&first| {
@@ -83,7 +85,7 @@ impl DdgiVolume {
                     })
                 })
                 .collect();
-            self.classify_usage_states(frame, frame_index, &counts);
+            self.queue_usage(frame, frame_index, batch, counts);
         }
         for p in 0..self.grid.probe_count() {
             let first = frame.first_ray[p];
@@ -98,18 +100,21 @@ impl DdgiVolume {
     }
 
     /// As [`Self::accept_update_hits`] for hits that stayed on another device:
-    /// `usage_counts` holds, per probe that traced, seed 003's (usage, relevant,
-    /// backfaces) counted there (`probegi_core::probe_classification::probe_usage`;
-    /// read only under the usage scheme). Which probes blend is then
-    /// `frame.active`; the device zeroes backface radiance itself.
+    /// batch `batch`'s usage counts stay there for now (under the usage
+    /// scheme), and `earlier_counts` holds those of earlier batches that came
+    /// back, by batch number, per probe seed 003's (usage, relevant, backfaces) counted there
+    /// (`probegi_core::probe_classification::probe_usage`; `None` where the
+    /// probe did not trace). Which probes blend is then `frame.active`; the
+    /// device zeroes backface radiance itself.
     pub(crate) fn accept_device_hits(
         &mut self,
         frame: &mut VolumeFrame,
         frame_index: u32,
-        usage_counts: &[Option<(i32, u32, u32)>],
+        batch: u64,
+        earlier_counts: Vec<(u64, Vec<Option<ProbeUsageCounts>>)>,
     ) {
         if self.settings.probe_states == ProbeStatesMode::Usage {
-            self.classify_usage_states(frame, frame_index, usage_counts);
+            self.queue_device_usage(frame, frame_index, batch, earlier_counts);
         }
     }
 }

@@ -1,14 +1,23 @@
 //! Probe usage states: which probes queries may read (and the fallback table for
 //! empty cages), the state counts a caller reports, waking probes near dynamic
 //! objects, and the usage scheme's classification of every probe from the
-//! frame's hits (seed 003 §6.1).
+//! hits of an update batch (seed 003 §6.1).
+//!
+//! Deliberate deviation: the classification reads the usage counts of the
+//! batch `probe_usage_lag_updates` batches back (default 2; 0 is seed 003's
+//! same-frame rule). A device that keeps the hits counts usage there and the
+//! host reads the counts back that late, so an update never waits on the
+//! device for them; the host path holds its own counts as long, so every
+//! backend gives the same states. Counts traced before a probe was reset
+//! (scrolled in, initialised again) describe another place and are dropped
+//! for it.
 
 use std::collections::BTreeMap;
 
 use glam::Vec3;
 use probegi_core::ddgi_query::nearest_usable_probes;
 use probegi_core::ddgi_settings::ProbeStatesMode;
-use probegi_core::probe_classification::{ProbeState, classify_usage, inside_grown_aabb};
+use probegi_core::probe_classification::{ProbeState, ProbeUsageCounts, classify_usage, inside_grown_aabb};
 
 use super::{DdgiVolume, VolumeFrame};
 
@@ -81,21 +90,84 @@ impl DdgiVolume {
         woken
     }
 
-    /// Usage scheme (seed 003 §6.1): every probe's state from this frame's usage
-    /// counts (per probe, `None` when it did not trace), and which probes blend
-    /// this frame (see `probegi_core::probe_classification`).
-    pub(super) fn classify_usage_states(
+    /// Usage scheme: queues the counts of the set's update batch `batch` (per
+    /// probe, `None` where it did not trace), then classifies from the batch
+    /// now `probe_usage_lag_updates` old.
+    pub(super) fn queue_usage(
         &mut self,
         frame: &mut VolumeFrame,
         frame_index: u32,
-        counts: &[Option<(i32, u32, u32)>],
+        batch: u64,
+        counts: Vec<Option<ProbeUsageCounts>>,
+    ) {
+        self.usage_pending.push_back(PendingUsage { batch, counts: Some(counts) });
+        self.usage_batches = batch + 1;
+        self.classify_due_usage(frame, frame_index);
+    }
+
+    /// As [`Self::queue_usage`] where batch `batch`'s counts stay on the
+    /// device for now: `earlier_counts` are those of earlier batches that came
+    /// back, by batch number.
+    pub(super) fn queue_device_usage(
+        &mut self,
+        frame: &mut VolumeFrame,
+        frame_index: u32,
+        batch: u64,
+        earlier_counts: Vec<(u64, Vec<Option<ProbeUsageCounts>>)>,
+    ) {
+        self.usage_pending.push_back(PendingUsage { batch, counts: None });
+        self.usage_batches = batch + 1;
+        for (batch, counts) in earlier_counts {
+            if let Some(waiting) = self.usage_pending.iter_mut().find(|u| u.batch == batch) {
+                waiting.counts = Some(counts);
+            }
+        }
+        self.classify_due_usage(frame, frame_index);
+    }
+
+    /// One past the last update batch number queued (the set numbers its
+    /// batches from the largest of its volumes').
+    pub(crate) fn usage_batches(&self) -> u64 {
+        self.usage_batches
+    }
+
+    /// Classifies from every queued batch now `probe_usage_lag_updates` old.
+    fn classify_due_usage(&mut self, frame: &mut VolumeFrame, frame_index: u32) {
+        let lag = self.settings.probe_usage_lag_updates as usize;
+        while self.usage_pending.len() > lag {
+            let Some(due) = self.usage_pending.pop_front() else { break };
+            // A batch whose counts never came (its device went): no classification.
+            if let Some(counts) = due.counts {
+                self.classify_usage_states(frame, frame_index, due.batch, &counts);
+            }
+        }
+    }
+
+    /// From the next update batch on, probe `p`'s counts describe it where it
+    /// is now: the queued ones are dropped for it (a reset, a new start).
+    /// (The set's batch numbers only grow, so the next one is at least
+    /// `usage_batches`.)
+    pub(super) fn restart_usage(&mut self, p: usize) {
+        self.probe_usage_from_batch[p] = self.usage_batches;
+    }
+
+    /// Usage scheme (seed 003 §6.1): every probe's state from the usage counts
+    /// of update batch `batch` (per probe, `None` when it did not trace), and
+    /// which probes blend this frame (see `probegi_core::probe_classification`).
+    fn classify_usage_states(
+        &mut self,
+        frame: &mut VolumeFrame,
+        frame_index: u32,
+        batch: u64,
+        counts: &[Option<ProbeUsageCounts>],
     ) {
         let (interval, min_alive) =
             (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
-        for p in 0..self.grid.probe_count() {
-            let Some(&Some((usage, relevant, backfaces))) = counts.get(p) else {
+        for p in 0..self.grid.probe_count().min(counts.len()) {
+            let Some((usage, relevant, backfaces)) = counts[p] else { continue };
+            if batch < self.probe_usage_from_batch[p] {
                 continue;
-            };
+            }
             let prev = self.probe_states[p];
             let mut next = classify_usage(usage, relevant, backfaces);
             if prev == ProbeState::Alive && next == ProbeState::UsageSleeping && self.probe_alive_frames[p] < min_alive
@@ -107,14 +179,27 @@ impl DdgiVolume {
                 // Uncovered: the atlas holds light from before, so start over.
                 self.probe_has_history[p] = false;
             }
-            frame.active[p] = match next {
-                ProbeState::Dead => prev != ProbeState::Dead,
-                s => s.updates_in_frame(frame_index, interval) || !self.probe_has_history[p],
-            };
+            if let Some(active) = frame.active.get_mut(p) {
+                *active = match next {
+                    ProbeState::Dead => prev != ProbeState::Dead,
+                    s => s.updates_in_frame(frame_index, interval) || !self.probe_has_history[p],
+                };
+            }
             self.probe_states[p] = next;
         }
     }
 }
+
+/// One update batch's usage counts, queued until the classification they
+/// feed (`probe_usage_lag_updates` batches later).
+#[derive(Clone, Debug)]
+pub(super) struct PendingUsage {
+    /// The volume's number of the batch (`DdgiVolume::usage_batches` when queued).
+    batch: u64,
+    /// Per probe its counts (`None`: it did not trace); `None` while they are on the device.
+    counts: Option<Vec<Option<ProbeUsageCounts>>>,
+}
+
 
 /// [`DdgiVolume::probe_has_content`] over the per-probe histories and seeds
 /// in step (`screen`: the volume runs the screen scheme, whose seeded probes

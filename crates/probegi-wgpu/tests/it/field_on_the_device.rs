@@ -23,7 +23,7 @@ use glam::UVec3;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
 use probegi_core::probe_classification::probe_usage;
 use probegi_cpu::{DirectLighting, DirectSettings};
-use probegi_field::ProbeBatchTracer;
+use probegi_field::{DeviceUsageRequest, ProbeBatchTracer};
 use probegi_field::ddgi_field_set::{DdgiFieldSet, HostHits, UpdateStep};
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_scene::{BvhSettings, BvhTracer, Scene};
@@ -218,6 +218,45 @@ fn usage_states_from_gpu_counts_match_the_host_ones() {
 }
 
 #[test]
+fn usage_states_with_counts_read_at_once_match_the_host_ones() {
+    // `probe_usage_lag_updates` 0: seed 003's same-batch classification, the
+    // device's counts waited for inside the update.
+    let settings = DdgiVolumeSettings { probe_usage_lag_updates: 0, ..usage_settings() };
+    run_pair(settings, 12, &[0, 11], false, (1e-5, 1e-5));
+}
+
+#[test]
+fn usage_counts_come_back_late_and_an_update_never_waits_for_them() {
+    // Issue "The field update at the seeds' GPU rates…", goal 2: under the
+    // usage scheme the host reads the counts back `probe_usage_lag_updates`
+    // batches late. Once the device has finished the earlier batches (the
+    // test waits for it outside the update), an update blocks on nothing;
+    // with the counts read at once (lag 0) it waits once, so the count is
+    // the lag's doing.
+    let scene = probegi_scene::builtin::cornell_box();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    for (lag, waits) in [(2, 0), (1, 0), (0, 1)] {
+        let Some(device) = gpu(&scene, &bvh, true) else { return };
+        let settings = DdgiVolumeSettings { probe_usage_lag_updates: lag, ..usage_settings() };
+        let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, scene.bounds().expect("geometry")));
+        for f in 0..6 {
+            device.ctx.wait().expect("the device finishes the earlier frames");
+            let before = device.ctx.counters();
+            set.update_traced_by(&scene, &bvh, Some(&device), &direct, 3, f, &mut BTreeMap::new()).expect("frame");
+            let d = device.ctx.counters() - before;
+            if f >= 1 {
+                // (Frame 0 runs the initialisation rounds, which read back once.)
+                assert_eq!(d.blocking_waits, waits, "lag {lag}, frame {f}: {d:?}");
+            }
+        }
+        // The states moved on from the start-up's (every probe Alive): the counts arrived.
+        let counts = set.volumes()[0].state_counts();
+        assert!(counts.get("dead").copied().unwrap_or(0) > 0, "lag {lag}: {counts:?}");
+    }
+}
+
+#[test]
 fn gpu_usage_counts_equal_the_core_function_over_the_same_hits() {
     let scene = probegi_scene::builtin::cornell_box();
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
@@ -229,15 +268,21 @@ fn gpu_usage_counts_equal_the_core_function_over_the_same_hits() {
     assert_eq!(set.begin_update(3, 1), UpdateStep::TraceRays);
     assert_eq!(set.hits_needed_on_host(), HostHits::ProbeUsage);
     let diagonal = set.volumes()[0].grid.spacing_m.length();
+    // Lag 0: this batch's own counts, read back at once.
+    let request = DeviceUsageRequest { lag_updates: 0, ..set.device_usage_request().expect("usage") };
+    assert_eq!(request.cage_diagonals_m, [diagonal]);
     let batch = set.ray_batch();
-    let counts = probegi_field::DeviceField::trace_resident(&device, batch, Some(&[diagonal]))
+    let back = probegi_field::DeviceField::trace_resident(&device, batch, Some(&request))
         .expect("keeps the field")
         .expect("trace");
+    // (Frame 0's batch, two batches from due, comes back with it.)
+    assert_eq!(back.iter().map(|c| c.batch).collect::<Vec<_>>(), [request.batch - 1, request.batch]);
+    let counts = &back[1].counts;
     let mut hits = Vec::new();
     device.closest_hits(batch, false, &mut hits).expect("trace");
     assert_eq!(counts.len(), batch.probes.len());
     let (mut dead, mut mismatches) = (0, 0);
-    for (bp, c) in batch.probes.iter().zip(&counts) {
+    for (bp, c) in batch.probes.iter().zip(counts) {
         let rays = bp.first_ray as usize..(bp.first_ray + bp.ray_count) as usize;
         let signed = hits[rays].iter().map(|h| match h {
             Some(h) if h.backface => -h.t,
