@@ -17,7 +17,9 @@ use probegi_core::ddgi_volume_blend::DdgiFieldSetView;
 use probegi_scene::{RayHit, Scene};
 
 use crate::ddgi_volume::DdgiVolume;
-use crate::device_plans::{DeviceInitChain, DeviceInitResult, DeviceUsageCounts, DeviceUsageRequest, DeviceVolumeBlend};
+use crate::device_plans::{
+    DeviceInitChain, DeviceInitResult, DeviceUsageCounts, DeviceUsageRequest, DeviceVolumeBlend,
+};
 use crate::seam::{ProbeRayBatch, SeamError};
 
 /// Why a backend could not do what the field asked of it.

@@ -66,8 +66,8 @@ use std::collections::BTreeMap;
 
 use glam::Vec3;
 use probegi_core::ddgi_settings::DdgiFieldSetSettings;
-use probegi_core::probe_classification::ProbeUsageCounts;
 use probegi_core::ddgi_volume_blend::{DdgiFieldSetView, SetMember, VolumeBlending, field_set_irradiance};
+use probegi_core::probe_classification::ProbeUsageCounts;
 
 use crate::backend::{BackendError, ProbeBatchTracer};
 use crate::ddgi_volume::{DdgiVolume, SceneEvent, VolumeFrame};
@@ -950,24 +950,29 @@ impl DdgiFieldSet {
     /// Per volume, the usage counts of earlier batches a device read back,
     /// by batch number, each spread over the volume's probes; the batches
     /// before one that came back and never came themselves are forgotten.
+    /// Checked before anything is taken: an error leaves the queue as it was.
     #[allow(clippy::type_complexity)]
     fn earlier_device_usage(
         &mut self,
         usage_counts: &[crate::DeviceUsageCounts],
     ) -> Result<Vec<Vec<(u64, Vec<Option<ProbeUsageCounts>>)>>, SeamError> {
+        let mut after = 0;
+        for c in usage_counts {
+            let Some(at) = (after..self.usage_on_device.len()).find(|&i| self.usage_on_device[i].0 == c.batch) else {
+                return Err(SeamError::UnknownBatch { batch: c.batch });
+            };
+            let expected = self.usage_on_device[at].1.len();
+            if expected != c.counts.len() {
+                return Err(SeamError::WrongLength { what: "usage counts", expected, got: c.counts.len() });
+            }
+            after = at + 1;
+        }
         let mut per_volume = vec![Vec::new(); self.volumes.len()];
         for c in usage_counts {
-            while self.usage_on_device.front().is_some_and(|(b, _)| *b < c.batch) {
+            while self.usage_on_device.front().is_some_and(|(b, _)| *b != c.batch) {
                 self.usage_on_device.pop_front();
             }
-            let entries = match self.usage_on_device.front() {
-                Some((b, entries)) if *b == c.batch => entries,
-                _ => return Err(SeamError::UnknownBatch { batch: c.batch }),
-            };
-            if entries.len() != c.counts.len() {
-                let (expected, got) = (entries.len(), c.counts.len());
-                return Err(SeamError::WrongLength { what: "usage counts", expected, got });
-            }
+            let Some((_, entries)) = self.usage_on_device.pop_front() else { break };
             let mut spread: Vec<Vec<Option<ProbeUsageCounts>>> =
                 self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect();
             for (&[volume, probe], &counts) in entries.iter().zip(&c.counts) {
@@ -978,7 +983,6 @@ impl DdgiFieldSet {
             for (v, spread) in per_volume.iter_mut().zip(spread) {
                 v.push((c.batch, spread));
             }
-            self.usage_on_device.pop_front();
         }
         Ok(per_volume)
     }
@@ -1068,6 +1072,7 @@ impl DdgiFieldSet {
 mod tests {
     use super::*;
     use probegi_core::ddgi_settings::DdgiVolumeSettings;
+    use probegi_core::probe_classification::{ProbeState, probe_usage};
 
     /// A set of two volumes (every probe active) past initialisation (every init ray a miss), its
     /// frame-3 update batch planned with or without per-ray arrays.
@@ -1169,5 +1174,107 @@ mod tests {
             assert!(rays.iter().all(|&r| r == hb.probe_needs_radiance[k]));
         }
         assert!(hb.probe_needs_radiance.iter().any(|&n| n));
+    }
+
+    /// A one-volume usage set (4×2×3 probes, 16 rays) whose classification
+    /// reads the counts `lag` batches back; the device keeps the hits with `on_device`.
+    fn usage_set(lag: u32, on_device: bool) -> DdgiFieldSet {
+        let s = DdgiVolumeSettings {
+            probe_counts: glam::UVec3::new(4, 2, 3),
+            probe_rays_per_probe: 16,
+            probe_states: probegi_core::ddgi_settings::ProbeStatesMode::Usage,
+            probe_relocation: false,
+            probe_usage_lag_updates: lag,
+            ..Default::default()
+        };
+        let mut set = DdgiFieldSet::single(DdgiVolume::new(s, (Vec3::ZERO, Vec3::splat(4.0))));
+        set.set_update_rays_on_device(on_device);
+        set
+    }
+
+    /// Starts frame `frame` and runs its initialisation rounds (every ray a miss).
+    fn begin_usage_frame(set: &mut DdgiFieldSet, frame: u32) {
+        set.begin_update(5, frame);
+        while set.ray_batch().kind == ProbeRayBatchKind::Initialization {
+            let misses = vec![ProbeRayHit::MISS; set.ray_batch().len()];
+            set.submit_hits(&misses).expect("init round");
+        }
+    }
+
+    /// Frame `frame`'s hit of every ray: misses before frame 3, then back
+    /// faces 0.1 m away (every probe buried: DEAD by seed 003 §6.1.1).
+    fn usage_hit(frame: u32) -> ProbeRayHit {
+        match frame {
+            0..3 => ProbeRayHit::MISS,
+            _ => ProbeRayHit { distance_m: -0.1, normal: Vec3::Y },
+        }
+    }
+
+    #[test]
+    fn usage_states_follow_the_counts_of_the_batch_lag_updates_back() {
+        // Probes start Alive; the hits bury them from frame 3 on. With the
+        // counts read `lag` batches late, they die `lag` frames later, all at
+        // once, on the host path (which holds its own counts as long).
+        for lag in [0, 1, 2] {
+            let mut set = usage_set(lag, false);
+            let mut dead = Vec::new();
+            for frame in 0..8 {
+                begin_usage_frame(&mut set, frame);
+                let hits = vec![usage_hit(frame); set.ray_batch().len()];
+                assert_eq!(set.submit_hits(&hits), Ok(UpdateStep::ShadeRays));
+                let zeros = vec![Vec3::ZERO; set.ray_batch().len()];
+                assert_eq!(set.submit_radiance(&zeros), Ok(UpdateStep::Done));
+                dead.push(set.volumes()[0].state_counts().get("dead").copied().unwrap_or(0));
+            }
+            let probes = set.probe_count();
+            let want: Vec<usize> = (0..8).map(|f| if f >= 3 + lag as usize { probes } else { 0 }).collect();
+            assert_eq!(dead, want, "lag {lag}: dead probes by frame");
+        }
+    }
+
+    #[test]
+    fn device_usage_counts_given_late_classify_as_the_host_path() {
+        // The device path with the counts a device would read back (each
+        // batch's, `lag` batches later) gives the host path's states every
+        // frame; counts for a batch the set does not wait for, or of another
+        // length, are refused and leave the step as it was.
+        let lag = 2;
+        let (mut host, mut device) = (usage_set(lag, false), usage_set(lag, true));
+        let mut traced: Vec<(u64, Vec<probegi_core::probe_classification::ProbeUsageCounts>)> = Vec::new();
+        for frame in 0..8 {
+            begin_usage_frame(&mut host, frame);
+            let hits = vec![usage_hit(frame); host.ray_batch().len()];
+            host.submit_hits(&hits).expect("host hits");
+            host.submit_radiance(&vec![Vec3::ZERO; host.ray_batch().len()]).expect("host blend");
+
+            begin_usage_frame(&mut device, frame);
+            let request = device.device_usage_request().expect("the usage scheme counts on the device");
+            assert_eq!(request.lag_updates, lag);
+            let diagonal = request.cage_diagonals_m[0];
+            let counts = device
+                .ray_batch()
+                .probes
+                .iter()
+                .map(|_| probe_usage((0..16).map(|_| usage_hit(frame).distance_m), diagonal))
+                .collect();
+            traced.push((request.batch, counts));
+            let due: Vec<crate::DeviceUsageCounts> = traced
+                .iter()
+                .filter(|(b, _)| b + lag as u64 == request.batch)
+                .map(|(batch, counts)| crate::DeviceUsageCounts { batch: *batch, counts: counts.clone() })
+                .collect();
+            if let Some(first) = due.first() {
+                let short = crate::DeviceUsageCounts { batch: first.batch, counts: first.counts[1..].to_vec() };
+                assert!(matches!(device.submit_device_hits(&[short]), Err(SeamError::WrongLength { .. })));
+                let later = crate::DeviceUsageCounts { batch: request.batch + 1, counts: first.counts.clone() };
+                let unknown = device.submit_device_hits(&[later]);
+                assert_eq!(unknown, Err(SeamError::UnknownBatch { batch: request.batch + 1 }));
+            }
+            assert_eq!(device.submit_device_hits(&due), Ok(UpdateStep::ShadeRays), "frame {frame}");
+            assert_eq!(device.submit_device_blend(&[]), Ok(UpdateStep::Done));
+            let (h, d) = (&host.volumes()[0], &device.volumes()[0]);
+            assert_eq!(h.probe_states, d.probe_states, "frame {frame}");
+        }
+        assert!(host.volumes()[0].probe_states.iter().all(|&s| s == ProbeState::Dead));
     }
 }

@@ -227,7 +227,8 @@ impl UsageReadback {
             let _ = ctx.device.poll(wgpu::PollType::Poll);
         }
         if !slot.mapped.load(Ordering::Acquire) {
-            let submission = slot.submission.clone().ok_or_else(|| GpuError::Readback("usage counts unsubmitted".into()))?;
+            let submission =
+                slot.submission.clone().ok_or_else(|| GpuError::Readback("usage counts unsubmitted".into()))?;
             ctx.wait_for(submission)?;
         }
         let counts = match (&slot.buffer, slot.mapped.load(Ordering::Acquire)) {

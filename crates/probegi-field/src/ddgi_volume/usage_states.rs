@@ -200,7 +200,6 @@ pub(super) struct PendingUsage {
     counts: Option<Vec<Option<ProbeUsageCounts>>>,
 }
 
-
 /// [`DdgiVolume::probe_has_content`] over the per-probe histories and seeds
 /// in step (`screen`: the volume runs the screen scheme, whose seeded probes
 /// count as having content); apart from the volume, so a loop may borrow
