@@ -163,8 +163,8 @@ impl DdgiVolume {
     ) {
         let (interval, min_alive) =
             (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
-        for p in 0..self.grid.probe_count().min(counts.len()) {
-            let Some((usage, relevant, backfaces)) = counts[p] else { continue };
+        for (p, &counts) in counts.iter().enumerate().take(self.grid.probe_count()) {
+            let Some((usage, relevant, backfaces)) = counts else { continue };
             if batch < self.probe_usage_from_batch[p] {
                 continue;
             }
