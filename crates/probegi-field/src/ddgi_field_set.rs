@@ -129,9 +129,26 @@ pub struct DdgiFieldSet {
     /// The usage scheme's lagged counts (`ddgi_volume::usage_states`): the
     /// set's identity for a device, the next update batch's number, and per
     /// batch whose counts are still on the device its (volume, probe) entries.
-    usage_set_id: u64,
+    usage_set_id: SetId,
     update_batches: u64,
     usage_on_device: std::collections::VecDeque<(u64, Vec<[u32; 2]>)>,
+}
+
+/// A set's identity for a device that keeps usage counts of several sets
+/// ([`crate::DeviceUsageRequest::set_id`]): a clone draws its own, so two
+/// sets never take each other's counts.
+struct SetId(u64);
+
+impl Clone for SetId {
+    fn clone(&self) -> Self {
+        Self(crate::device_plans::next_plan_id())
+    }
+}
+
+impl std::fmt::Debug for SetId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("SetId")
+    }
 }
 
 impl DdgiFieldSet {
@@ -184,7 +201,7 @@ impl DdgiFieldSet {
             shadow_on_device: false,
             steady_plans: true,
             plan_kept: false,
-            usage_set_id: crate::device_plans::next_plan_id(),
+            usage_set_id: SetId(crate::device_plans::next_plan_id()),
             update_batches,
             usage_on_device: std::collections::VecDeque::new(),
         }
@@ -897,7 +914,7 @@ impl DdgiFieldSet {
         let lag = self.volumes.iter().filter(|v| v.settings.probe_states == usage);
         Some(crate::DeviceUsageRequest {
             cage_diagonals_m: self.volumes.iter().map(|v| v.grid.spacing_m.length()).collect(),
-            set_id: self.usage_set_id,
+            set_id: self.usage_set_id.0,
             batch: self.update_batches,
             lag_updates: lag.map(|v| v.settings.probe_usage_lag_updates).min().unwrap_or(0),
         })

@@ -35,8 +35,9 @@ pub(crate) struct UsageParams {
 }
 const _: () = assert!(std::mem::size_of::<UsageParams>() == 16);
 
-/// Batches of other sets kept waiting at most (a set that stopped updating
-/// leaves its last batches behind; the oldest beyond this are let go).
+/// Batches kept waiting at most: beyond it, other sets' oldest are let go (a
+/// set that stopped updating leaves its last batches behind); the asking
+/// set's own are at most its lag + 1.
 const USAGE_SLOTS_KEPT: usize = 32;
 
 /// The usage counts' pipeline, and the batches' counts on their way back.
@@ -105,6 +106,14 @@ impl GpuProbeUsage {
             slot.start_map(ctx.last_submission());
         }
         let mut ring = self.readback.lock().unwrap_or_else(|e| e.into_inner());
+        // A batch counted again (its update failed after the count and the
+        // set asks under the same number) replaces the first count.
+        let same = |s: &UsageSlot| s.set_id == request.set_id && s.batch == request.batch;
+        if let Some(i) = ring.slots.iter().position(same)
+            && let Some(stale) = ring.slots.remove(i)
+        {
+            ring.release(stale);
+        }
         ring.slots.push_back(slot);
         ring.start_maps(ctx);
         ring.take_due(ctx, request)
@@ -198,7 +207,8 @@ impl UsageReadback {
 
     /// The counts of `request`'s set's slots now due, oldest first (see
     /// [`GpuProbeUsage::counts_late`]); other sets' slots beyond
-    /// [`USAGE_SLOTS_KEPT`] are let go, oldest first.
+    /// [`USAGE_SLOTS_KEPT`] are let go, oldest first. On an error the due
+    /// slots already read are lost: the set classifies nothing from them.
     fn take_due(&mut self, ctx: &GpuContext, request: &DeviceUsageRequest) -> Result<Vec<DeviceUsageCounts>, GpuError> {
         let due = |s: &UsageSlot| s.set_id == request.set_id && s.batch + request.lag_updates as u64 <= request.batch;
         let mut out = Vec::new();
@@ -207,7 +217,8 @@ impl UsageReadback {
             out.push(DeviceUsageCounts { batch: slot.batch, counts: self.read(ctx, slot)? });
         }
         while self.slots.len() > USAGE_SLOTS_KEPT {
-            if let Some(slot) = self.slots.pop_front() {
+            let Some(i) = self.slots.iter().position(|s| s.set_id != request.set_id) else { break };
+            if let Some(slot) = self.slots.remove(i) {
                 self.release(slot);
             }
         }

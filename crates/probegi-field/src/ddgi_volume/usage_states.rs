@@ -10,7 +10,9 @@
 //! device for them; the host path holds its own counts as long, so every
 //! backend gives the same states. Counts traced before a probe was reset
 //! (scrolled in, initialised again) describe another place and are dropped
-//! for it.
+//! for it. A batch whose counts never come (its update failed, or a later
+//! update went the host way while the device still held them) classifies
+//! nothing: the states hold until the next batch's counts.
 
 use std::collections::BTreeMap;
 
