@@ -8,8 +8,11 @@
 //! blend, in ms an update over updates 10 to 39, with every probe active and
 //! under jcgt states (where every probe sleeps: none traces), with and
 //! without the kept plan of a steady frame (`DdgiFieldSet::set_steady_plans`),
-//! and under the screen scheme (no camera: every probe Idle, an eighth of
-//! them tracing each frame in its phase), which plans in full every frame.
+//! under the screen scheme (no camera: every probe Idle, an eighth of
+//! them tracing each frame in its phase), which plans in full every frame,
+//! and under the usage scheme (every probe traces every frame; the counts a
+//! device would read back, two batches late, alternate the probes between
+//! ALIVE and SLEEPING by probe parity).
 //! The `bench --backend wgpu` figure `field_set_ms` is these steps' sum in
 //! the real loop; this separates them.
 
@@ -23,9 +26,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<u32> = std::env::args().skip(1).map(|a| a.parse()).collect::<Result<_, _>>()?;
     let (n, rays) = (args.first().copied().unwrap_or(32), args.get(1).copied().unwrap_or(32));
     println!("{n}³ probes × {rays} rays, ms an update: begin / hits / blend plan / after the blend = sum");
-    for states in [ProbeStatesMode::AllActive, ProbeStatesMode::Jcgt, ProbeStatesMode::Screen] {
-        // The screen scheme plans in full every frame (its idle phases turn).
-        let keeps: &[bool] = if states == ProbeStatesMode::Screen { &[false] } else { &[false, true] };
+    for states in [ProbeStatesMode::AllActive, ProbeStatesMode::Jcgt, ProbeStatesMode::Screen, ProbeStatesMode::Usage] {
+        // The screen and usage schemes plan in full every frame (their states move).
+        let full_only = matches!(states, ProbeStatesMode::Screen | ProbeStatesMode::Usage);
+        let keeps: &[bool] = if full_only { &[false] } else { &[false, true] };
         for &keep in keeps {
             let ms = time_steps(states, keep, n, rays)?;
             let label = if keep { "kept plan" } else { "full plan" };
@@ -49,6 +53,7 @@ fn time_steps(states: ProbeStatesMode, keep: bool, n: u32, rays: u32) -> Result<
     set.set_update_rays_on_device(true);
     set.set_steady_plans(keep);
     let (mut ms, timed) = ([0.0f64; 4], 30);
+    let mut on_device = std::collections::VecDeque::new();
     for frame in 0..10 + timed {
         let t0 = Instant::now();
         set.begin_update(5, frame);
@@ -56,8 +61,19 @@ fn time_steps(states: ProbeStatesMode, keep: bool, n: u32, rays: u32) -> Result<
             let misses = vec![ProbeRayHit::MISS; set.ray_batch().len()];
             set.submit_hits(&misses)?;
         }
+        // The counts a device reads back under the usage scheme: this batch's
+        // made now (outside the timing), the one two batches back handed over.
+        let due = match set.device_usage_request() {
+            Some(request) => {
+                let counts = (0..set.ray_batch().probes.len()).map(|k| (k as i32 % 2, 1, 0)).collect();
+                on_device.push_back(probegi_field::DeviceUsageCounts { batch: request.batch, counts });
+                let lag = request.lag_updates as usize;
+                if on_device.len() > lag { on_device.pop_front().into_iter().collect() } else { vec![] }
+            }
+            None => vec![],
+        };
         let t1 = Instant::now();
-        set.submit_device_hits(&[])?;
+        set.submit_device_hits(&due)?;
         let t2 = Instant::now();
         drop(set.device_blend_plan()?);
         let t3 = Instant::now();
