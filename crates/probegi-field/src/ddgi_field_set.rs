@@ -1294,4 +1294,32 @@ mod tests {
         }
         assert!(host.volumes()[0].probe_states.iter().all(|&s| s == ProbeState::Dead));
     }
+
+    #[test]
+    fn counts_traced_before_a_scroll_do_not_classify_the_probes_scrolled_in() {
+        // Lag 2, every ray buried from the start: the probes that stay die at
+        // frame 2, from batch 0's counts. The plane scrolled in after frame 1
+        // drops batches 0 and 1 (traced where its storage slots stood before)
+        // and dies at frame 4, from batch 2, its first traced where it is now.
+        let s = DdgiVolumeSettings { volume_tracks_camera: true, ..usage_set(2, false).volumes()[0].settings.clone() };
+        let mut set = DdgiFieldSet::single(DdgiVolume::new(s, (Vec3::ZERO, Vec3::splat(4.0))));
+        let buried = ProbeRayHit { distance_m: -0.1, normal: Vec3::Y };
+        let mut scrolled: Vec<u32> = Vec::new();
+        for frame in 0..6 {
+            begin_usage_frame(&mut set, frame);
+            set.submit_hits(&vec![buried; set.ray_batch().len()]).expect("hits");
+            set.submit_radiance(&vec![Vec3::ZERO; set.ray_batch().len()]).expect("blend");
+            if frame == 1 {
+                let grid = set.volumes()[0].grid;
+                assert!(set.set_tracking_target(grid.centre_m() + 2.0 * grid.spacing_m * Vec3::X) > 0);
+                scrolled = set.volumes()[0].probes_reset_since_blend().to_vec();
+            }
+            let v = &set.volumes()[0];
+            for (p, state) in v.probe_states.iter().enumerate() {
+                let dies_at = if scrolled.contains(&(p as u32)) { 4 } else { 2 };
+                assert_eq!(*state == ProbeState::Dead, frame >= dies_at, "probe {p}, frame {frame}: {state:?}");
+            }
+        }
+        assert!(!scrolled.is_empty() && scrolled.len() < set.probe_count());
+    }
 }
