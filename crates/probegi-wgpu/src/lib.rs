@@ -56,6 +56,7 @@ pub mod device_frame;
 pub mod gpu_context;
 pub mod gpu_scene;
 pub mod gpu_timer;
+mod late_readback;
 pub mod probe_blend;
 pub mod probe_change;
 pub mod probe_classification;

@@ -6,15 +6,10 @@
 //! of 24 a ray. The batch's probes (`probegi_field::seam::BatchProbe`,
 //! `#[repr(C)]` + `Pod`) are uploaded as they are, with one cage diagonal per volume.
 //!
-//! The counts come back late ([`GpuProbeUsage::counts_late`]): each batch's
-//! are copied into a staging buffer in the batch's own submission and mapped
-//! once it is made, and the set reads them `probe_usage_lag_updates` batches
-//! later (`probegi_field::ddgi_volume`'s `usage_states`), so the update does
-//! not wait on the device for them.
-
-use std::collections::VecDeque;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+//! The counts come back late ([`GpuProbeUsage::counts_late`],
+//! `late_readback`): the set reads each batch's `probe_usage_lag_updates`
+//! batches later (`probegi_field::ddgi_volume`'s `usage_states`), so the
+//! update does not wait on the device for them.
 
 use bytemuck::{Pod, Zeroable};
 use probegi_core::probe_classification::ProbeUsageCounts;
@@ -23,6 +18,7 @@ use probegi_field::{DeviceUsageCounts, DeviceUsageRequest};
 
 use crate::bvh_trace::{GpuRayBatch, dispatch_2d};
 use crate::gpu_context::{GpuContext, GpuError};
+use crate::late_readback::{LateKey, LateReadback};
 use crate::shader_registry::PROBE_USAGE;
 
 /// Must match `UsageParams` in `probe_usage.wgsl`.
@@ -35,16 +31,11 @@ pub(crate) struct UsageParams {
 }
 const _: () = assert!(std::mem::size_of::<UsageParams>() == 16);
 
-/// Batches kept waiting at most: beyond it, other sets' oldest are let go (a
-/// set that stopped updating leaves its last batches behind); the asking
-/// set's own are at most its lag + 1.
-const USAGE_SLOTS_KEPT: usize = 32;
-
 /// The usage counts' pipeline, and the batches' counts on their way back.
 pub struct GpuProbeUsage {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
-    readback: std::sync::Mutex<UsageReadback>,
+    readback: std::sync::Mutex<LateReadback>,
 }
 
 impl GpuProbeUsage {
@@ -70,12 +61,9 @@ impl GpuProbeUsage {
     }
 
     /// Counts `probes` of `batch` as [`Self::counts`] does, under `request`'s
-    /// batch number, with a copy into a staging buffer recorded behind the
-    /// pass (in the batch's own submission while the context defers); then
-    /// returns the counts of the request's set's batches now
-    /// `request.lag_updates` old, oldest first. A batch's map starts once its
-    /// submission is made; the host waits for one only when it is due and
-    /// the device has not finished it (lag 0: always).
+    /// batch number, its result read late (`late_readback`); then returns
+    /// the counts of the request's set's batches now `request.lag_updates`
+    /// old, oldest first.
     pub fn counts_late(
         &self,
         ctx: &GpuContext,
@@ -83,40 +71,17 @@ impl GpuProbeUsage {
         probes: &[BatchProbe],
         request: &DeviceUsageRequest,
     ) -> Result<Vec<DeviceUsageCounts>, GpuError> {
-        let staging = match self.record(ctx, batch, probes, &request.cage_diagonals_m)? {
-            Some(out) => {
-                let mut ring = self.readback.lock().unwrap_or_else(|e| e.into_inner());
-                let staging = ring.staging(ctx, out.size());
-                ctx.record(|encoder| encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, out.size()));
-                Some(staging)
-            }
-            None => None,
-        };
-        let mut slot = UsageSlot {
-            set_id: request.set_id,
-            batch: request.batch,
-            probes: probes.len(),
-            buffer: staging,
-            recorded_at: ctx.queue_submissions(),
-            submission: None,
-            mapped: Arc::new(AtomicBool::new(false)),
-        };
-        if !ctx.deferring() {
-            // The copy went with its own submission, the last one.
-            slot.start_map(ctx.last_submission());
-        }
+        // (The output is 16 bytes a probe, exactly: one probe at least.)
+        let out = self.record(ctx, batch, probes, &request.cage_diagonals_m)?;
+        let key = LateKey { set_id: request.set_id, batch: request.batch, part: 0 };
         let mut ring = self.readback.lock().unwrap_or_else(|e| e.into_inner());
-        // A batch counted again (its update failed after the count and the
-        // set asks under the same number) replaces the first count.
-        let same = |s: &UsageSlot| s.set_id == request.set_id && s.batch == request.batch;
-        if let Some(i) = ring.slots.iter().position(same)
-            && let Some(stale) = ring.slots.remove(i)
-        {
-            ring.release(stale);
-        }
-        ring.slots.push_back(slot);
-        ring.start_maps(ctx);
-        ring.take_due(ctx, request)
+        ring.push(ctx, key, out.as_ref().map(|o| (o, o.size())));
+        let Some(last) = request.batch.checked_sub(request.lag_updates as u64) else { return Ok(vec![]) };
+        let due = ring.take_due(ctx, request.set_id, last)?;
+        Ok(due
+            .into_iter()
+            .map(|(key, bytes)| DeviceUsageCounts { batch: key.batch, counts: decode(&bytes, bytes.len() / 16) })
+            .collect())
     }
 
     /// Records the usage pass over `probes` of `batch`; its output buffer
@@ -158,121 +123,4 @@ impl GpuProbeUsage {
 fn decode(bytes: &[u8], probes: usize) -> Vec<ProbeUsageCounts> {
     let counts: &[[i32; 4]] = bytemuck::cast_slice(bytes);
     counts.iter().take(probes).map(|c| (c[0], c[1] as u32, c[2] as u32)).collect()
-}
-
-/// One batch's counts on their way back.
-struct UsageSlot {
-    set_id: u64,
-    batch: u64,
-    probes: usize,
-    /// The staging buffer the counts are copied into (`None`: no probe).
-    buffer: Option<wgpu::Buffer>,
-    /// `GpuContext::queue_submissions` once the copy was recorded (deferred):
-    /// a larger count since means a flush has submitted it.
-    recorded_at: u64,
-    /// A submission at or after the copy's, once made; its map has started then.
-    submission: Option<wgpu::SubmissionIndex>,
-    mapped: Arc<AtomicBool>,
-}
-
-/// The batches whose counts are on their way back, in the order recorded,
-/// and staging buffers free for reuse.
-#[derive(Default)]
-struct UsageReadback {
-    free: Vec<wgpu::Buffer>,
-    slots: VecDeque<UsageSlot>,
-}
-
-impl UsageReadback {
-    /// A staging buffer of `bytes`, reused when a free one has the size.
-    fn staging(&mut self, ctx: &GpuContext, bytes: u64) -> wgpu::Buffer {
-        if let Some(i) = self.free.iter().position(|b| b.size() == bytes) {
-            return self.free.swap_remove(i);
-        }
-        ctx.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("usage counts readback"),
-            size: bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        })
-    }
-
-    /// Starts the map of every slot whose copy has been submitted since.
-    fn start_maps(&mut self, ctx: &GpuContext) {
-        let submitted = ctx.queue_submissions();
-        for slot in self.slots.iter_mut().filter(|s| s.submission.is_none() && submitted > s.recorded_at) {
-            slot.start_map(ctx.last_submission());
-        }
-    }
-
-    /// The counts of `request`'s set's slots now due, oldest first (see
-    /// [`GpuProbeUsage::counts_late`]); other sets' slots beyond
-    /// [`USAGE_SLOTS_KEPT`] are let go, oldest first. On an error the due
-    /// slots already read are lost: the set classifies nothing from them.
-    fn take_due(&mut self, ctx: &GpuContext, request: &DeviceUsageRequest) -> Result<Vec<DeviceUsageCounts>, GpuError> {
-        let due = |s: &UsageSlot| s.set_id == request.set_id && s.batch + request.lag_updates as u64 <= request.batch;
-        let mut out = Vec::new();
-        while let Some(i) = self.slots.iter().position(due) {
-            let Some(slot) = self.slots.remove(i) else { break };
-            out.push(DeviceUsageCounts { batch: slot.batch, counts: self.read(ctx, slot)? });
-        }
-        while self.slots.len() > USAGE_SLOTS_KEPT {
-            let Some(i) = self.slots.iter().position(|s| s.set_id != request.set_id) else { break };
-            if let Some(slot) = self.slots.remove(i) {
-                self.release(slot);
-            }
-        }
-        Ok(out)
-    }
-
-    /// A due slot's counts: submitted first if its copy is still deferred,
-    /// waited for if the device has not finished it.
-    fn read(&mut self, ctx: &GpuContext, mut slot: UsageSlot) -> Result<Vec<ProbeUsageCounts>, GpuError> {
-        if slot.buffer.is_none() {
-            return Ok(vec![]);
-        }
-        if slot.submission.is_none() {
-            slot.start_map(ctx.flush());
-        }
-        if !slot.mapped.load(Ordering::Acquire) {
-            let _ = ctx.device.poll(wgpu::PollType::Poll);
-        }
-        if !slot.mapped.load(Ordering::Acquire) {
-            let submission =
-                slot.submission.clone().ok_or_else(|| GpuError::Readback("usage counts unsubmitted".into()))?;
-            ctx.wait_for(submission)?;
-        }
-        let counts = match (&slot.buffer, slot.mapped.load(Ordering::Acquire)) {
-            (Some(buffer), true) => {
-                let view = buffer.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
-                ctx.count_read_back(view.len() as u64);
-                Ok(decode(&view, slot.probes))
-            }
-            _ => Err(GpuError::Readback("usage counts could not be mapped".into())),
-        };
-        self.release(slot);
-        counts
-    }
-
-    /// Keeps a slot's staging buffer for reuse where its map has completed
-    /// (unmapped first); one whose copy or map is still pending is dropped.
-    fn release(&mut self, slot: UsageSlot) {
-        let Some(buffer) = slot.buffer else { return };
-        if slot.mapped.load(Ordering::Acquire) {
-            buffer.unmap();
-            if self.free.len() < 4 {
-                self.free.push(buffer);
-            }
-        }
-    }
-}
-
-impl UsageSlot {
-    /// Records the submission that holds the copy (or a later one) and starts the map.
-    fn start_map(&mut self, submission: Option<wgpu::SubmissionIndex>) {
-        let (Some(buffer), Some(submission)) = (&self.buffer, submission) else { return };
-        let flag = self.mapped.clone();
-        buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| flag.store(r.is_ok(), Ordering::Release));
-        self.submission = Some(submission);
-    }
 }
