@@ -231,6 +231,14 @@ pub struct DdgiVolumeSettings {
     /// probes wait. Measured in docs/RESULTS.md: off, a budget of half the rays
     /// doubles the lag of a change that reaches every probe.
     pub ray_budget_hysteresis_per_frame: bool,
+    /// Ray budget: update batches between a blend and the moment its probes'
+    /// changes (`probegi_core::probe_change`) enter the budget's priorities
+    /// (0: the next plan reads them, as seed 003 §8.2 has it). Deliberate
+    /// deviation, default 2: a device measures the changes after its blend
+    /// and the host reads them back this many batches late, never waiting on
+    /// the device inside an update; the CPU backend lags alike, so both
+    /// choose the same probes.
+    pub ray_budget_change_lag_updates: u32,
     /// Edge buffers (seed 003 §6.2.1's "buffering probes with low hysteresis",
     /// seed 004 §7.3's leapfrogging planes): in a tracking window, the this many
     /// planes nearest the face it last scrolled toward, on each axis it has
@@ -332,6 +340,7 @@ impl Default for DdgiVolumeSettings {
             ray_budget: 0,
             ray_budget_max_interval_frames: 8,
             ray_budget_hysteresis_per_frame: true,
+            ray_budget_change_lag_updates: 2,
             volume_edge_buffer_planes: 0,
             volume_edge_buffer_hysteresis: 0.8,
             probe_seeding: false,
@@ -465,6 +474,10 @@ impl DdgiVolumeSettings {
                 "ray_budget_max_interval_frames",
                 format!("{} must be in 1..=1000", self.ray_budget_max_interval_frames),
             ));
+        }
+        if self.ray_budget_change_lag_updates > 8 {
+            let lag = self.ray_budget_change_lag_updates;
+            return Err(("ray_budget_change_lag_updates", format!("{lag} must be at most 8")));
         }
         if self.probe_usage_lag_updates > 8 {
             return Err(("probe_usage_lag_updates", format!("{} must be at most 8", self.probe_usage_lag_updates)));

@@ -751,7 +751,14 @@ impl DdgiFieldSet {
             &mut self.blend_distance,
         );
         for i in 0..self.volumes.len() {
-            self.volumes[i].blend_results(&self.frames[i], &self.blend_radiance, &self.blend_distance, &mut pass_ms);
+            let batch = self.current_batch();
+            self.volumes[i].blend_results(
+                &self.frames[i],
+                batch,
+                &self.blend_radiance,
+                &self.blend_distance,
+                &mut pass_ms,
+            );
         }
         self.last_pass_ms = pass_ms;
         self.expected = UpdateStep::Done;
@@ -1010,22 +1017,48 @@ impl DdgiFieldSet {
     /// device has run it.
     pub fn device_blend_plan(&self) -> Result<Vec<DeviceVolumeBlend<'_>>, SeamError> {
         self.expect(UpdateStep::ShadeRays, "device_blend_plan")?;
-        Ok(self.volumes.iter().zip(&self.frames).map(|(v, f)| v.device_blend(f, &self.shadow_lights)).collect())
+        let plan = self.volumes.iter().zip(&self.frames).map(|(v, f)| {
+            let change_key = crate::DeviceChangeKey {
+                set_id: self.usage_set_id.0,
+                batch: self.current_batch(),
+                lag_updates: v.settings.ray_budget_change_lag_updates,
+            };
+            DeviceVolumeBlend { change_key, ..v.device_blend(f, &self.shadow_lights) }
+        });
+        Ok(plan.collect())
+    }
+
+    /// The number of the update batch in hand (the last one whose hits came).
+    fn current_batch(&self) -> u64 {
+        self.update_batches.saturating_sub(1)
     }
 
     /// The set's bookkeeping after a device ran [`Self::device_blend_plan`]
     /// (hysteresis ramps, Newly * states, usable probes). The volumes' own
     /// atlases are stale from here until [`Self::accept_host_atlases`].
-    /// `probe_change`: per volume, the changes the device measured
-    /// ([`crate::DeviceBlendOutput::probe_change`]; read only where the plan
-    /// asked for them).
-    pub fn submit_device_blend(&mut self, probe_change: &[Vec<f32>]) -> Result<UpdateStep, SeamError> {
+    /// `probe_change`: the changes the device measured after earlier blends
+    /// and read back since ([`crate::DeviceBlendOutput::probe_change`]), one
+    /// entry per volume and batch the set waits for; anything else is
+    /// refused before the set changes.
+    pub fn submit_device_blend(&mut self, probe_change: &[crate::DeviceProbeChanges]) -> Result<UpdateStep, SeamError> {
         self.expect(UpdateStep::ShadeRays, "submit_device_blend")?;
-        let change = |i: usize| probe_change.get(i).map_or(&[][..], |c| c.as_slice());
-        for (i, f) in self.frames.iter().enumerate().filter(|(_, f)| f.measure_change) {
-            let wanted = (0..f.first_ray.len()).filter(|&p| f.blends(p)).count();
-            if change(i).len() != wanted {
-                return Err(SeamError::WrongLength { what: "probe changes", expected: wanted, got: change(i).len() });
+        let batch = self.current_batch();
+        for c in probe_change {
+            let (v, f) = (self.volumes.get(c.volume as usize), self.frames.get(c.volume as usize));
+            let wanted = match (v, f) {
+                // This batch's own (no lag): every probe it blends now.
+                (Some(_), Some(f)) if c.batch == batch && f.measure_change => {
+                    Some((0..f.first_ray.len()).filter(|&p| f.blends(p)).count())
+                }
+                (Some(v), _) => v.changes_awaited(c.batch),
+                _ => None,
+            };
+            match wanted {
+                None => return Err(SeamError::UnknownBatch { batch: c.batch }),
+                Some(n) if n != c.changes.len() => {
+                    return Err(SeamError::WrongLength { what: "probe changes", expected: n, got: c.changes.len() });
+                }
+                Some(_) => {}
             }
         }
         for i in 0..self.volumes.len() {
@@ -1033,7 +1066,12 @@ impl DdgiFieldSet {
                 self.volumes[i].accept_steady_blend(&self.frames[i]);
                 continue;
             }
-            self.volumes[i].accept_device_blend(&self.frames[i], &self.shadow_lights, change(i));
+            let earlier: Vec<(u64, &[f32])> = probe_change
+                .iter()
+                .filter(|c| c.volume as usize == i)
+                .map(|c| (c.batch, c.changes.as_slice()))
+                .collect();
+            self.volumes[i].accept_device_blend(&self.frames[i], &self.shadow_lights, batch, &earlier);
             self.volumes[i].record_shadow_batch(&self.frames[i], self.frame);
         }
         self.field_on_device = true;
@@ -1321,5 +1359,82 @@ mod tests {
             }
         }
         assert!(!scrolled.is_empty() && scrolled.len() < set.probe_count());
+    }
+
+    /// A one-volume set under a ray budget that covers every probe (so every
+    /// probe traces and blends each frame, and its change is measured), the
+    /// changes recorded `lag` batches late; the device keeps the field with `on_device`.
+    fn budget_set(lag: u32, on_device: bool) -> DdgiFieldSet {
+        let s = DdgiVolumeSettings {
+            probe_counts: glam::UVec3::new(4, 2, 3),
+            probe_rays_per_probe: 16,
+            probe_states: probegi_core::ddgi_settings::ProbeStatesMode::AllActive,
+            probe_relocation: false,
+            ray_budget: 24 * 16,
+            ray_budget_change_lag_updates: lag,
+            ..Default::default()
+        };
+        let mut set = DdgiFieldSet::single(DdgiVolume::new(s, (Vec3::ZERO, Vec3::splat(4.0))));
+        set.set_update_rays_on_device(on_device);
+        set
+    }
+
+    #[test]
+    fn a_blends_changes_reach_the_budget_lag_updates_later_and_a_mark_outlives_older_ones() {
+        // Every ray a miss shaded 1: the first blend replaces an empty history
+        // (change 1), the ones after blend the same light again (change 0).
+        // The budget reads the second blend's change `lag` updates later. A
+        // probe marked changed after frame 4 (a moving object nearby) keeps
+        // its mark against the blends before the mark, whose changes arrive
+        // after it, and takes frame 5's, its first blend since, at 5 + lag.
+        for lag in [0u32, 1, 2] {
+            let mut set = budget_set(lag, false);
+            let mut seen = Vec::new();
+            for frame in 0..10 {
+                begin_usage_frame(&mut set, frame);
+                set.submit_hits(&vec![ProbeRayHit::MISS; set.ray_batch().len()]).expect("hits");
+                set.submit_radiance(&vec![Vec3::ONE; set.ray_batch().len()]).expect("blend");
+                if frame == 4 {
+                    let at = set.volumes()[0].probe_positions[0];
+                    assert!(set.volumes_mut()[0].mark_changed_near(&[(at, at)]) > 0);
+                }
+                let v = &set.volumes()[0];
+                seen.push((v.probe_change(0), v.probe_change(23)));
+            }
+            let lag = lag as usize;
+            for (frame, (marked, still)) in seen.iter().enumerate() {
+                let still_want = if frame >= 1 + lag { 0.0 } else { 1.0 };
+                assert_eq!(*still, still_want, "lag {lag}, frame {frame}: a still probe's change");
+                let marked_want = if (1 + lag..4).contains(&frame) || frame >= 5 + lag { 0.0 } else { 1.0 };
+                assert_eq!(*marked, marked_want, "lag {lag}, frame {frame}: the marked probe's change");
+            }
+        }
+    }
+
+    #[test]
+    fn device_changes_given_late_reach_the_budget_as_the_host_blends_do() {
+        // A device's changes for batch n, handed over with batch n + lag's
+        // blend, are recorded then; changes for a batch the set does not
+        // wait for, or of another length, are refused before anything moves.
+        let lag = 2u64;
+        let mut set = budget_set(lag as u32, true);
+        let probes = set.probe_count();
+        for frame in 0..8u32 {
+            begin_usage_frame(&mut set, frame);
+            set.submit_device_hits(&[]).expect("hits stay on the device");
+            let key = set.device_blend_plan().expect("plan")[0].change_key;
+            assert_eq!(key.lag_updates as u64, lag);
+            let change = |batch: u64, n: usize| crate::DeviceProbeChanges { volume: 0, batch, changes: vec![0.25; n] };
+            let due: Vec<_> = key.batch.checked_sub(lag).map(|b| change(b, probes)).into_iter().collect();
+            if let Some(d) = due.first() {
+                let short = crate::DeviceProbeChanges { changes: vec![0.25; probes - 1], ..d.clone() };
+                assert!(matches!(set.submit_device_blend(&[short]), Err(SeamError::WrongLength { .. })));
+                let unknown = set.submit_device_blend(&[change(key.batch + 1, probes)]);
+                assert_eq!(unknown, Err(SeamError::UnknownBatch { batch: key.batch + 1 }));
+            }
+            assert_eq!(set.submit_device_blend(&due), Ok(UpdateStep::Done), "frame {frame}");
+            let want = if frame as u64 >= lag { 0.25 } else { 1.0 };
+            assert_eq!(set.volumes()[0].probe_change(5), want, "frame {frame}");
+        }
     }
 }

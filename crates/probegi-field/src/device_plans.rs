@@ -59,8 +59,12 @@ pub struct DeviceVolumeBlend<'a> {
     /// (`probegi_core::probe_change::probe_change` of its irradiance and
     /// occlusion tiles, before against after) and returns one per probe
     /// with `probe_blend` set, in increasing probe order
-    /// ([`crate::DeviceBlendOutput::probe_change`]).
+    /// ([`crate::DeviceBlendOutput::probe_change`]), read back
+    /// `change_key.lag_updates` batches later.
     pub measure_change: bool,
+    /// Under which set and batch the measured changes come back, and how
+    /// late ([`DeviceChangeKey`]).
+    pub change_key: DeviceChangeKey,
     /// Per probe, the frames its blend stands for (a ray budget's probe that
     /// waited, `ray_budget_hysteresis_per_frame`): each texel's hysteresis,
     /// after the scene-event scale and Listing 3, is raised to it
@@ -68,14 +72,50 @@ pub struct DeviceVolumeBlend<'a> {
     pub probe_blend_frames: std::borrow::Cow<'a, [u32]>,
 }
 
+/// Where a blend's measured probe changes come back
+/// (`DeviceVolumeBlend::change_key`): the set's identity (a device that
+/// serves several sets keeps theirs apart), the update batch's number in the
+/// set, and the batches they may wait on the device: the blend of batch `n`
+/// returns the changes of every blend up to `n − lag_updates` not yet
+/// returned (0: its own, waited for).
+#[derive(Clone, Copy, Default, PartialEq, Eq)]
+pub struct DeviceChangeKey {
+    /// The set's identity (`device_plans::next_plan_id`).
+    pub set_id: u64,
+    /// The update batch's number in the set.
+    pub batch: u64,
+    /// `ray_budget_change_lag_updates`.
+    pub lag_updates: u32,
+}
+
+/// An identity, not a value: `Debug` leaves `set_id` out, so two sets' equal
+/// plans print alike.
+impl std::fmt::Debug for DeviceChangeKey {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DeviceChangeKey").field("batch", &self.batch).field("lag_updates", &self.lag_updates).finish()
+    }
+}
+
+/// The changes a device measured after one volume's blend of an earlier
+/// update batch ([`DeviceChangeKey`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeviceProbeChanges {
+    /// The volume's index in the plan.
+    pub volume: u32,
+    /// The update batch's number in the set.
+    pub batch: u64,
+    /// One per probe the volume blended in that batch, in increasing probe order.
+    pub changes: Vec<f32>,
+}
+
 /// What [`crate::DeviceField::shade_and_blend`] returns.
 #[derive(Clone, Debug, Default)]
 pub struct DeviceBlendOutput {
     /// Wall milliseconds by pass (`shade`, `blend`, ...), the host having waited for each.
     pub pass_ms: Vec<(&'static str, f64)>,
-    /// Per volume of the plan, the change of each probe it blended where the
-    /// plan asked for it (`DeviceVolumeBlend::measure_change`; empty otherwise).
-    pub probe_change: Vec<Vec<f32>>,
+    /// The changes measured after earlier blends now due, where a plan asked
+    /// for them (`DeviceVolumeBlend::measure_change`), oldest first.
+    pub probe_change: Vec<DeviceProbeChanges>,
 }
 
 /// What a device that keeps an update batch's hits counts there for the

@@ -45,5 +45,5 @@ pub use ddgi_volume::{DdgiVolume, SceneEvent};
 pub use device_frame::{
     DEVICE_FRAME_PASSES, DeviceFrame, DeviceFrameInput, DeviceFrameReadout, FrameHistory, FrameLayer,
 };
-pub use device_plans::{DeviceBlendOutput, DeviceUsageCounts, DeviceUsageRequest};
+pub use device_plans::{DeviceBlendOutput, DeviceChangeKey, DeviceProbeChanges, DeviceUsageCounts, DeviceUsageRequest};
 pub use seam::{ProbeRayBatch, ProbeRayHit, SeamError, UpdateStep};

@@ -280,6 +280,7 @@ impl GpuProbeBlend {
             seeds: &[],
             shadow: None,
             measure_change: false,
+            change_key: Default::default(),
             probe_blend_frames: Default::default(),
         };
         self.prepare_resident(ctx, atlases, &plan, &results)
@@ -561,6 +562,7 @@ mod tests {
             seeds: &[],
             shadow: None,
             measure_change: false,
+            change_key: Default::default(),
             probe_blend_frames: if frames_3 == 0 { Default::default() } else { vec![1, 1, 1, frames_3].into() },
         }
     }

@@ -36,7 +36,8 @@ use probegi_field::backend::{BackendError, CameraFrameOut, DeviceField, ProbeBat
 use probegi_field::ddgi_volume::DdgiVolume;
 use probegi_field::device_frame::{DeviceFrame, DeviceFrameInput, DeviceFrameReadout, FrameLayer};
 use probegi_field::device_plans::{
-    DeviceBlendOutput, DeviceInitChain, DeviceInitResult, DeviceUsageCounts, DeviceUsageRequest, DeviceVolumeBlend,
+    DeviceBlendOutput, DeviceChangeKey, DeviceInitChain, DeviceInitResult, DeviceProbeChanges, DeviceUsageCounts,
+    DeviceUsageRequest, DeviceVolumeBlend,
 };
 use probegi_field::seam::ProbeRayBatch;
 use probegi_scene::{BvhTracer, RayHit, Scene, TlasLayout};
@@ -101,18 +102,28 @@ impl WgpuProbeTracer {
 
 impl WgpuProbeTracer {
     /// After the blends: per volume, the change of each probe it blended where
-    /// `plan` asks for it (the ray budget's; empty elsewhere).
-    fn measure_changes(&self, field: &GpuDdgiField, plan: &[DeviceVolumeBlend<'_>]) -> Result<Vec<Vec<f32>>, GpuError> {
-        let mut out = Vec::with_capacity(plan.len());
-        for (i, p) in plan.iter().enumerate() {
-            let Some(pass) = self.change.as_ref().filter(|_| p.measure_change) else {
-                out.push(Vec::new());
-                continue;
-            };
+    /// `plan` asks for it (the ray budget's), kept on its way back; returns
+    /// those of earlier blends now due (`DeviceChangeKey`).
+    fn measure_changes(
+        &self,
+        field: &GpuDdgiField,
+        plan: &[DeviceVolumeBlend<'_>],
+    ) -> Result<Vec<DeviceProbeChanges>, GpuError> {
+        let Some(pass) = self.change.as_ref() else { return Ok(Vec::new()) };
+        let mut keys: Vec<DeviceChangeKey> = Vec::new();
+        for (i, p) in plan.iter().enumerate().filter(|(_, p)| p.measure_change) {
             let atlases = field.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
             let probes: Vec<u32> =
                 p.probe_blend.iter().enumerate().filter(|(_, b)| b.is_some()).map(|(k, _)| k as u32).collect();
-            out.push(pass.measure(&self.ctx, &atlases, field.member_occlusion(i).as_ref(), &probes)?);
+            let occlusion = field.member_occlusion(i);
+            pass.measure_late(&self.ctx, &atlases, occlusion.as_ref(), &probes, &p.change_key, i as u32)?;
+            if !keys.iter().any(|k| k.set_id == p.change_key.set_id && k.lag_updates == p.change_key.lag_updates) {
+                keys.push(p.change_key);
+            }
+        }
+        let mut out = Vec::new();
+        for key in &keys {
+            out.extend(pass.take_due(&self.ctx, key)?);
         }
         Ok(out)
     }

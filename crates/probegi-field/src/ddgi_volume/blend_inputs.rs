@@ -64,6 +64,7 @@ impl DdgiVolume {
     pub(crate) fn blend_results(
         &mut self,
         frame: &VolumeFrame,
+        batch: u64,
         ray_radiance: &[Vec3],
         ray_distance: &[f32],
         pass_ms: &mut BTreeMap<&'static str, f64>,
@@ -132,7 +133,7 @@ impl DdgiVolume {
             occlusion_change = self.blend_shadow_maps(frame, &hysteresis);
             *pass_ms.entry("shadow_blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
         }
-        self.record_change(&irradiance_change, &occlusion_change);
+        self.record_change(batch, &irradiance_change, &occlusion_change);
         self.count_unblended_frames(frame);
         self.after_update(&updated);
         #[cfg(debug_assertions)]
@@ -269,17 +270,22 @@ impl DdgiVolume {
             reset_probes: &self.probes_reset_since_blend,
             seeds: &self.pending_seeds,
             measure_change: frame.measure_change,
+            // The set fills it in (`DdgiFieldSet::device_blend_plan`).
+            change_key: Default::default(),
             probe_blend_frames: self.blend_frames_borrowed(frame),
         }
     }
 
-    /// The bookkeeping of a blend another device ran by [`Self::device_blend`];
-    /// `change`: the probe changes it measured (`DeviceVolumeBlend::measure_change`).
+    /// The bookkeeping of a blend another device ran by [`Self::device_blend`]
+    /// for update batch `batch`; `earlier_changes`: the probe changes it
+    /// measured after earlier batches' blends and read back since
+    /// (`DeviceVolumeBlend::measure_change`), by batch.
     pub(crate) fn accept_device_blend(
         &mut self,
         frame: &VolumeFrame,
         lights: &[probegi_scene::PunctualLight],
-        change: &[f32],
+        batch: u64,
+        earlier_changes: &[(u64, &[f32])],
     ) {
         if self.shadow.is_some() {
             // The shadowing field's bookkeeping needs the plan's hysteresis;
@@ -292,7 +298,7 @@ impl DdgiVolume {
         }
         let updated = frame.blending();
         if frame.measure_change {
-            self.accept_device_change(&updated, change);
+            self.accept_device_change(batch, &updated, earlier_changes);
         }
         self.count_unblended_frames(frame);
         self.after_update(&updated);

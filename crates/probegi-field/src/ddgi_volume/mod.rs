@@ -129,6 +129,12 @@ pub struct DdgiVolume {
     /// last blend (1 before any), and the frames since it last traced.
     probe_change: Vec<f32>,
     probe_untraced_frames: Vec<u32>,
+    /// The blends whose changes wait to be recorded (`probe_budget`), one
+    /// past the last batch queued, and per probe the first batch whose
+    /// change counts for it (the batches before it blended before a mark).
+    change_pending: std::collections::VecDeque<probe_budget::PendingChange>,
+    change_batches: u64,
+    probe_change_from_batch: Vec<u64>,
     /// The occlusion change of each probe's last occlusion blend.
     probe_occlusion_change: Vec<f32>,
     /// Frames its state wanted each probe to blend but the budget held it
@@ -310,6 +316,9 @@ impl DdgiVolume {
             shadow: settings.shadow_field.then(|| ShadowField::new(probes, settings.shadow_field_texels)),
             probe_change: vec![1.0; probes],
             probe_untraced_frames: vec![0; probes],
+            change_pending: std::collections::VecDeque::new(),
+            change_batches: 0,
+            probe_change_from_batch: vec![0; probes],
             probe_occlusion_change: vec![0.0; probes],
             probe_unblended_frames: vec![0; probes],
             probe_trace_run: vec![0; probes],

@@ -2,6 +2,15 @@
 //! with their priorities and floor, and each probe's change
 //! (`probegi_core::probe_change`), as the host blend reports it or as the
 //! device measured it.
+//!
+//! Deliberate deviation: a blend's changes are recorded
+//! `ray_budget_change_lag_updates` batches after it (default 2; 0 is seed
+//! 003 §8.2's next plan). A device measures them after its blend and the
+//! host reads them back that late, so an update never waits on the device
+//! for them; the host blend holds its own as long, so both backends choose
+//! the same probes. A probe marked changed since a blend (a reset, a scene
+//! event, a moving object nearby) keeps its mark against that blend's
+//! change.
 
 use probegi_core::probe_change::probe_change;
 use probegi_core::probe_classification::ProbeState;
@@ -126,6 +135,14 @@ impl DdgiVolume {
     /// Every probe counts as fully changed until it traces again (a scene event).
     pub(super) fn mark_all_changed(&mut self) {
         self.probe_change.fill(1.0);
+        self.probe_change_from_batch.fill(self.change_batches);
+    }
+
+    /// Probe `p` counts as fully changed until it blends again: the changes
+    /// of blends before now, still on their way, no longer count for it.
+    pub(super) fn mark_changed(&mut self, p: usize) {
+        self.probe_change[p] = 1.0;
+        self.probe_change_from_batch[p] = self.change_batches;
     }
 
     /// Probes inside `aabbs` grown by a cell (moving objects' boxes) count as
@@ -133,14 +150,14 @@ impl DdgiVolume {
     /// before the still ones. Returns how many.
     pub fn mark_changed_near(&mut self, aabbs: &[(glam::Vec3, glam::Vec3)]) -> usize {
         let grow = self.grid.spacing_m;
-        let mut marked = 0;
+        let mut marked = Vec::new();
         for (p, pos) in self.probe_positions.iter().enumerate() {
             if aabbs.iter().any(|&(lo, hi)| probegi_core::probe_classification::inside_grown_aabb(*pos, lo, hi, grow)) {
-                self.probe_change[p] = 1.0;
-                marked += 1;
+                marked.push(p);
             }
         }
-        marked
+        marked.iter().for_each(|&p| self.mark_changed(p));
+        marked.len()
     }
 
     /// Counts the frames since each probe last traced, and how many frames in
@@ -166,30 +183,82 @@ impl DdgiVolume {
         }
     }
 
-    /// The changes a host blend reported (`probegi_core::probe_change`):
-    /// per probe, its irradiance change if it blended and its occlusion
-    /// change if its occlusion tile blended.
-    pub(super) fn record_change(&mut self, irradiance: &[Option<f32>], occlusion: &[Option<f32>]) {
+    /// The changes a host blend of update batch `batch` reported
+    /// (`probegi_core::probe_change`): per probe, its irradiance change if it
+    /// blended and its occlusion change if its occlusion tile blended;
+    /// recorded `ray_budget_change_lag_updates` batches later.
+    pub(super) fn record_change(&mut self, batch: u64, irradiance: &[Option<f32>], occlusion: &[Option<f32>]) {
         for (p, o) in occlusion.iter().enumerate() {
             if let Some(o) = o {
                 self.probe_occlusion_change[p] = *o;
             }
         }
+        let (mut probes, mut changes) = (Vec::new(), Vec::new());
         for (p, e) in irradiance.iter().enumerate() {
             if let Some(e) = e {
                 let occ = self.shadow.is_some().then(|| self.probe_occlusion_change[p]);
-                self.probe_change[p] = probe_change(*e, occ);
+                probes.push(p as u32);
+                changes.push(probe_change(*e, occ));
+            }
+        }
+        self.queue_changes(PendingChange { batch, probes, changes: Some(changes) });
+    }
+
+    /// The changes a device measured after the blend of batch `batch` come
+    /// later (`DeviceVolumeBlend::measure_change`): its blended probes are
+    /// queued for them, and `earlier` (by batch, each per blended probe in
+    /// increasing probe order; the larger of the irradiance and last
+    /// occlusion change, as [`Self::record_change`] keeps it) fill their
+    /// batches' places.
+    pub(super) fn accept_device_change(&mut self, batch: u64, updated: &[bool], earlier: &[(u64, &[f32])]) {
+        let probes = updated.iter().enumerate().filter(|(_, u)| **u).map(|(p, _)| p as u32).collect();
+        self.change_pending.push_back(PendingChange { batch, probes, changes: None });
+        self.change_batches = batch + 1;
+        for &(batch, changes) in earlier {
+            if let Some(waiting) = self.change_pending.iter_mut().find(|c| c.batch == batch) {
+                waiting.changes = Some(changes.to_vec());
+            }
+        }
+        self.record_due_changes();
+    }
+
+    /// The number of changes batch `batch`'s blend measures (its blended
+    /// probes), where the volume waits for them; `None` otherwise.
+    pub(crate) fn changes_awaited(&self, batch: u64) -> Option<usize> {
+        self.change_pending.iter().find(|c| c.batch == batch && c.changes.is_none()).map(|c| c.probes.len())
+    }
+
+    fn queue_changes(&mut self, pending: PendingChange) {
+        self.change_batches = pending.batch + 1;
+        self.change_pending.push_back(pending);
+        self.record_due_changes();
+    }
+
+    /// Records the changes of every queued blend now `ray_budget_change_lag_updates` old.
+    fn record_due_changes(&mut self) {
+        let lag = self.settings.ray_budget_change_lag_updates as usize;
+        while self.change_pending.len() > lag {
+            let Some(due) = self.change_pending.pop_front() else { break };
+            // Changes that never came (their device went) record nothing.
+            let Some(changes) = due.changes else { continue };
+            for (&p, &c) in due.probes.iter().zip(&changes) {
+                let p = p as usize;
+                if p < self.probe_change.len() && due.batch >= self.probe_change_from_batch[p] {
+                    self.probe_change[p] = probe_change(c, None);
+                }
             }
         }
     }
+}
 
-    /// The change a device measured for each probe it blended, in increasing
-    /// probe order (`DeviceVolumeBlend::measure_change`; the larger of the
-    /// irradiance and last occlusion change, as [`Self::record_change`] keeps it).
-    pub(super) fn accept_device_change(&mut self, updated: &[bool], change: &[f32]) {
-        let blended = updated.iter().enumerate().filter(|(_, u)| **u).map(|(p, _)| p);
-        for (p, &c) in blended.zip(change) {
-            self.probe_change[p] = probe_change(c, None);
-        }
-    }
+/// One blend's probe changes, queued until they are recorded
+/// (`ray_budget_change_lag_updates` batches later).
+#[derive(Clone, Debug)]
+pub(super) struct PendingChange {
+    /// The set's number of the blend's update batch.
+    batch: u64,
+    /// The probes that blended, in increasing order.
+    probes: Vec<u32>,
+    /// Their changes, in the same order; `None` while they are on the device.
+    changes: Option<Vec<f32>>,
 }

@@ -93,7 +93,7 @@ impl DdgiVolume {
         self.restart_usage(p);
         self.probe_pending_init[p] = true;
         self.probe_init_hits_current[p] = false;
-        self.probe_change[p] = 1.0;
+        self.mark_changed(p);
         self.probe_untraced_frames[p] = 0;
         self.probe_occlusion_change[p] = 0.0;
         self.probe_unblended_frames[p] = 0;

@@ -257,6 +257,45 @@ fn usage_counts_come_back_late_and_an_update_never_waits_for_them() {
 }
 
 #[test]
+fn probe_changes_come_back_late_and_a_budgeted_update_never_waits_for_them() {
+    // Goal 2 again, for the ray budget: the device measures each blended
+    // probe's change after its blend and the host reads the changes back
+    // `ray_budget_change_lag_updates` batches late. With the device done
+    // with the earlier batches, a budgeted update blocks on nothing; read at
+    // once (lag 0) it may wait (not on lavapipe, which finishes the work
+    // inside the submission). Half the probes' rays a frame.
+    let scene = probegi_scene::builtin::cornell_box();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    for (lag, most_waits) in [(2, 0), (1, 0), (0, 1)] {
+        let Some(device) = gpu(&scene, &bvh, true) else { return };
+        let settings = DdgiVolumeSettings {
+            probe_counts: UVec3::splat(6),
+            probe_rays_per_probe: 32,
+            probe_relocation: false,
+            probe_states: ProbeStatesMode::AllActive,
+            ray_budget: 6 * 6 * 6 * 32 / 2,
+            ray_budget_change_lag_updates: lag,
+            ..Default::default()
+        };
+        let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, scene.bounds().expect("geometry")));
+        for f in 0..6 {
+            device.ctx.wait().expect("the device finishes the earlier frames");
+            let before = device.ctx.counters();
+            set.update_traced_by(&scene, &bvh, Some(&device), &direct, 3, f, &mut BTreeMap::new()).expect("frame");
+            let d = device.ctx.counters() - before;
+            if f >= 1 {
+                assert!(d.blocking_waits <= most_waits, "lag {lag}, frame {f}: {d:?}");
+            }
+        }
+        // The changes arrived: the first blends' full change gave way to measured ones.
+        let v = &set.volumes()[0];
+        let measured = (0..v.grid.probe_count()).filter(|&p| v.probe_change(p) < 1.0).count();
+        assert!(measured > 0, "lag {lag}: no change came back");
+    }
+}
+
+#[test]
 fn a_batch_counted_again_comes_back_once() {
     // An update that fails after the count is retried under the same batch
     // number: the second count replaces the first, so the set gets each
