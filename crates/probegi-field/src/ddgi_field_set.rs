@@ -1403,7 +1403,7 @@ mod tests {
             }
             let lag = lag as usize;
             for (frame, (marked, still)) in seen.iter().enumerate() {
-                let still_want = if frame >= 1 + lag { 0.0 } else { 1.0 };
+                let still_want = if frame > lag { 0.0 } else { 1.0 };
                 assert_eq!(*still, still_want, "lag {lag}, frame {frame}: a still probe's change");
                 let marked_want = if (1 + lag..4).contains(&frame) || frame >= 5 + lag { 0.0 } else { 1.0 };
                 assert_eq!(*marked, marked_want, "lag {lag}, frame {frame}: the marked probe's change");
