@@ -23,14 +23,16 @@
 //! - [`probe_seeding`]: new probes' tiles mixed from a coarser volume's
 //!   (`probegi_field::probe_seeding`) in the resident field;
 //! - [`probe_change`]: each blended probe's change, the ray budget's signal
-//!   (`probegi_core::probe_change`), read back 4 bytes a probe;
+//!   (`probegi_core::probe_change`), read back 4 bytes a probe, late;
 //! - [`probe_classification`]: seed 004 Listing 5's classification round;
 //! - [`probe_ray_gen`]: rotated spherical Fibonacci rays written straight into
 //!   a trace batch;
 //! - [`probe_relocation`]: seed 004 Listing 4's relocation iteration;
 //! - [`probe_shade`]: the shade pass of the probe rays (sky, back faces, direct
 //!   light with shadow rays, the previous field, second-order glossy);
-//! - [`probe_usage`]: seed 003's usage counts over a traced batch where it lies;
+//! - [`probe_usage`]: seed 003's usage counts over a traced batch where it lies, read back late;
+//! - `late_readback` (crate-private): results read some update batches after
+//!   their pass, so that an update does not wait on the device for them;
 //! - [`shadow_field`]: the shadowing field's shadow rays and occlusion blend (seed 003 ch. 5);
 //! - `shader_registry` (crate-private): the one owner of the WGSL: each pass's
 //!   files in order, the constants prelude generated from the Rust `const`s,
