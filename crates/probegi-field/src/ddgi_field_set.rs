@@ -173,7 +173,7 @@ impl DdgiFieldSet {
         order.sort_by(|&a, &b| cell(&volumes[a]).total_cmp(&cell(&volumes[b])));
         let n = volumes.len();
         // Batch numbers only grow, whatever sets these volumes served before.
-        let update_batches = volumes.iter().map(DdgiVolume::usage_batches).max().unwrap_or(0);
+        let update_batches = volumes.iter().map(|v| v.usage_batches().max(v.change_batches())).max().unwrap_or(0);
         Self {
             volumes,
             blending,
@@ -973,29 +973,33 @@ impl DdgiFieldSet {
 
     /// Per volume, the usage counts of earlier batches a device read back,
     /// by batch number, each spread over the volume's probes; the batches
-    /// before one that came back and never came themselves are forgotten.
+    /// before one that came back and never came themselves are forgotten,
+    /// and so are counts of earlier batches the set no longer waits for.
     /// Checked before anything is taken: an error leaves the queue as it was.
     #[allow(clippy::type_complexity)]
     fn earlier_device_usage(
         &mut self,
         usage_counts: &[crate::DeviceUsageCounts],
     ) -> Result<Vec<Vec<(u64, Vec<Option<ProbeUsageCounts>>)>>, SeamError> {
-        let mut after = 0;
+        let current = self.update_batches;
         for c in usage_counts {
-            let Some(at) = (after..self.usage_on_device.len()).find(|&i| self.usage_on_device[i].0 == c.batch) else {
-                return Err(SeamError::UnknownBatch { batch: c.batch });
-            };
-            let expected = self.usage_on_device[at].1.len();
-            if expected != c.counts.len() {
-                return Err(SeamError::WrongLength { what: "usage counts", expected, got: c.counts.len() });
+            match self.usage_on_device.iter().find(|(b, _)| *b == c.batch) {
+                Some((_, entries)) if entries.len() != c.counts.len() => {
+                    let (expected, got) = (entries.len(), c.counts.len());
+                    return Err(SeamError::WrongLength { what: "usage counts", expected, got });
+                }
+                Some(_) => {}
+                // An earlier batch the set no longer waits for (its update
+                // failed after the count): dropped, as the device cannot know.
+                None if c.batch < current => {}
+                None => return Err(SeamError::UnknownBatch { batch: c.batch }),
             }
-            after = at + 1;
         }
         let mut per_volume = vec![Vec::new(); self.volumes.len()];
         for c in usage_counts {
-            while self.usage_on_device.front().is_some_and(|(b, _)| *b != c.batch) {
-                self.usage_on_device.pop_front();
-            }
+            let Some(at) = self.usage_on_device.iter().position(|(b, _)| *b == c.batch) else { continue };
+            // The batches before it whose counts never came are forgotten.
+            self.usage_on_device.drain(..at);
             let Some((_, entries)) = self.usage_on_device.pop_front() else { break };
             let mut spread: Vec<Vec<Option<ProbeUsageCounts>>> =
                 self.volumes.iter().map(|v| vec![None; v.grid.probe_count()]).collect();
@@ -1050,7 +1054,10 @@ impl DdgiFieldSet {
                 (Some(_), Some(f)) if c.batch == batch && f.measure_change => {
                     Some((0..f.first_ray.len()).filter(|&p| f.blends(p)).count())
                 }
-                (Some(v), _) => v.changes_awaited(c.batch),
+                // An earlier batch the volume no longer waits for (its update
+                // failed, or went the host way): dropped, as the device
+                // cannot know.
+                (Some(v), _) if c.batch < batch => v.changes_awaited(c.batch).or(Some(c.changes.len())),
                 _ => None,
             };
             match wanted {
@@ -1313,11 +1320,19 @@ mod tests {
                 .map(|_| probe_usage((0..16).map(|_| usage_hit(frame).distance_m), diagonal))
                 .collect();
             traced.push((request.batch, counts));
-            let due: Vec<crate::DeviceUsageCounts> = traced
+            let mut due: Vec<crate::DeviceUsageCounts> = traced
                 .iter()
                 .filter(|(b, _)| b + lag as u64 == request.batch)
                 .map(|(batch, counts)| crate::DeviceUsageCounts { batch: *batch, counts: counts.clone() })
                 .collect();
+            // A batch already taken, counted again by a device whose update
+            // failed: dropped (were it taken, every probe would come alive).
+            let alive = crate::DeviceUsageCounts {
+                batch: 0,
+                counts: vec![(5, 5, 0); due.first().map_or(0, |d| d.counts.len())],
+            };
+            let stale =
+                request.batch.checked_sub(lag as u64 + 1).map(|batch| crate::DeviceUsageCounts { batch, ..alive });
             if let Some(first) = due.first() {
                 let short = crate::DeviceUsageCounts { batch: first.batch, counts: first.counts[1..].to_vec() };
                 assert!(matches!(device.submit_device_hits(&[short]), Err(SeamError::WrongLength { .. })));
@@ -1325,6 +1340,7 @@ mod tests {
                 let unknown = device.submit_device_hits(&[later]);
                 assert_eq!(unknown, Err(SeamError::UnknownBatch { batch: request.batch + 1 }));
             }
+            due.extend(stale);
             assert_eq!(device.submit_device_hits(&due), Ok(UpdateStep::ShadeRays), "frame {frame}");
             assert_eq!(device.submit_device_blend(&[]), Ok(UpdateStep::Done));
             let (h, d) = (&host.volumes()[0], &device.volumes()[0]);
@@ -1425,16 +1441,43 @@ mod tests {
             let key = set.device_blend_plan().expect("plan")[0].change_key;
             assert_eq!(key.lag_updates as u64, lag);
             let change = |batch: u64, n: usize| crate::DeviceProbeChanges { volume: 0, batch, changes: vec![0.25; n] };
-            let due: Vec<_> = key.batch.checked_sub(lag).map(|b| change(b, probes)).into_iter().collect();
+            let mut due: Vec<_> = key.batch.checked_sub(lag).map(|b| change(b, probes)).into_iter().collect();
             if let Some(d) = due.first() {
                 let short = crate::DeviceProbeChanges { changes: vec![0.25; probes - 1], ..d.clone() };
                 assert!(matches!(set.submit_device_blend(&[short]), Err(SeamError::WrongLength { .. })));
                 let unknown = set.submit_device_blend(&[change(key.batch + 1, probes)]);
                 assert_eq!(unknown, Err(SeamError::UnknownBatch { batch: key.batch + 1 }));
             }
+            // A blend already recorded, measured again by a device whose
+            // update failed: dropped (were it taken, the change would read 0.9).
+            let stale = key
+                .batch
+                .checked_sub(lag + 1)
+                .map(|b| crate::DeviceProbeChanges { changes: vec![0.9; probes], ..change(b, probes) });
+            due.extend(stale);
             assert_eq!(set.submit_device_blend(&due), Ok(UpdateStep::Done), "frame {frame}");
             let want = if frame as u64 >= lag { 0.25 } else { 1.0 };
             assert_eq!(set.volumes()[0].probe_change(5), want, "frame {frame}");
         }
+    }
+
+    #[test]
+    fn a_volume_moved_into_a_new_set_keeps_its_batch_numbers_growing() {
+        // A mark made in the new set counts against the batches before it;
+        // the new set numbers its batches past the volume's, so its own
+        // blends' changes still reach the budget `lag` updates later.
+        let frame = |set: &mut DdgiFieldSet, f: u32| {
+            begin_usage_frame(set, f);
+            set.submit_hits(&vec![ProbeRayHit::MISS; set.ray_batch().len()]).expect("hits");
+            set.submit_radiance(&vec![Vec3::ONE; set.ray_batch().len()]).expect("blend");
+        };
+        let mut set = budget_set(2, false);
+        (0..5).for_each(|f| frame(&mut set, f));
+        let mut set = DdgiFieldSet::from_volumes(set.into_volumes(), VolumeBlending::default(), None);
+        let every = (Vec3::splat(-10.0), Vec3::splat(10.0));
+        assert_eq!(set.volumes_mut()[0].mark_changed_near(&[every]), set.probe_count());
+        (5..8).for_each(|f| frame(&mut set, f));
+        // Frame 5's blend (the first after the mark, change 0) is recorded at frame 7.
+        assert_eq!(set.volumes()[0].probe_change(0), 0.0);
     }
 }

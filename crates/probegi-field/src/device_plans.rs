@@ -114,7 +114,7 @@ pub struct DeviceBlendOutput {
     /// Wall milliseconds by pass (`shade`, `blend`, ...), the host having waited for each.
     pub pass_ms: Vec<(&'static str, f64)>,
     /// The changes measured after earlier blends now due, where a plan asked
-    /// for them (`DeviceVolumeBlend::measure_change`), oldest first.
+    /// for them (`DeviceVolumeBlend::measure_change`), by volume and batch.
     pub probe_change: Vec<DeviceProbeChanges>,
 }
 

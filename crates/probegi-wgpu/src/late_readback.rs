@@ -19,7 +19,7 @@ use crate::gpu_context::{GpuContext, GpuError};
 /// Results kept waiting at most: beyond it, other sets' oldest are let go (a
 /// set that stopped updating leaves its last results behind); the asking
 /// set's own are bounded by its lag.
-const SLOTS_KEPT: usize = 64;
+const SLOTS_KEPT: usize = 256;
 
 /// Which result: the field set's identity, the update batch that made it,
 /// and its part of the batch (a volume, or 0 where the batch has one).

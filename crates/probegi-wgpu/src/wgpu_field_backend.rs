@@ -109,7 +109,12 @@ impl WgpuProbeTracer {
         field: &GpuDdgiField,
         plan: &[DeviceVolumeBlend<'_>],
     ) -> Result<Vec<DeviceProbeChanges>, GpuError> {
-        let Some(pass) = self.change.as_ref() else { return Ok(Vec::new()) };
+        let Some(pass) = self.change.as_ref() else {
+            return match plan.iter().any(|p| p.measure_change) {
+                true => Err(GpuError::Input("a ray budget's changes, and this device has no change pass".into())),
+                false => Ok(Vec::new()),
+            };
+        };
         let mut keys: Vec<DeviceChangeKey> = Vec::new();
         for (i, p) in plan.iter().enumerate().filter(|(_, p)| p.measure_change) {
             let atlases = field.member_atlases(i).ok_or_else(|| GpuError::Input("member".into()))?;
