@@ -133,7 +133,7 @@ impl DdgiVolume {
             occlusion_change = self.blend_shadow_maps(frame, &hysteresis);
             *pass_ms.entry("shadow_blend").or_default() += t.elapsed().as_secs_f64() * 1e3;
         }
-        self.record_change(batch, frame.measure_change, &irradiance_change, &occlusion_change);
+        self.record_change(batch, &irradiance_change, &occlusion_change);
         self.count_unblended_frames(frame);
         self.after_update(&updated);
         #[cfg(debug_assertions)]
@@ -299,7 +299,8 @@ impl DdgiVolume {
         let updated = frame.blending();
         match frame.measure_change {
             true => self.accept_device_change(batch, &updated, earlier_changes),
-            // No budget: nothing waits to be recorded (as the host blend).
+            // No budget: the device measures nothing, and what it measured
+            // before is stale by the time a budget runs again.
             false => self.forget_pending_changes(),
         }
         self.count_unblended_frames(frame);

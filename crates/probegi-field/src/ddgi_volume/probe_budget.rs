@@ -186,24 +186,14 @@ impl DdgiVolume {
     /// The changes a host blend of update batch `batch` reported
     /// (`probegi_core::probe_change`): per probe, its irradiance change if it
     /// blended and its occlusion change if its occlusion tile blended;
-    /// recorded `ray_budget_change_lag_updates` batches later where a budget
-    /// runs (`measure`; as a device measures them only then), else dropped
-    /// with those still waiting.
-    pub(super) fn record_change(
-        &mut self,
-        batch: u64,
-        measure: bool,
-        irradiance: &[Option<f32>],
-        occlusion: &[Option<f32>],
-    ) {
+    /// recorded `ray_budget_change_lag_updates` batches later, budget or not
+    /// (a budget switched on finds them; a device measures them only under
+    /// one).
+    pub(super) fn record_change(&mut self, batch: u64, irradiance: &[Option<f32>], occlusion: &[Option<f32>]) {
         for (p, o) in occlusion.iter().enumerate() {
             if let Some(o) = o {
                 self.probe_occlusion_change[p] = *o;
             }
-        }
-        if !measure {
-            self.forget_pending_changes();
-            return;
         }
         let (mut probes, mut changes) = (Vec::new(), Vec::new());
         for (p, e) in irradiance.iter().enumerate() {
@@ -234,8 +224,9 @@ impl DdgiVolume {
         self.record_due_changes();
     }
 
-    /// Drops the changes still waiting (no budget runs this frame): when one
-    /// runs again, it starts from the changes measured from then on.
+    /// Drops the changes still waiting for a device (no budget runs this
+    /// frame, so it measures none): when one runs again, it starts from the
+    /// changes measured from then on.
     pub(super) fn forget_pending_changes(&mut self) {
         self.change_pending.clear();
     }
