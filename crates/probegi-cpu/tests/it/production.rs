@@ -193,7 +193,10 @@ fn usage_scene(covered: bool) -> Scene {
     scene
 }
 
-fn usage_volume(min_alive: u32) -> DdgiVolume {
+/// A 3³ usage-scheme volume; `lag`: `probe_usage_lag_updates` (0: seed 003
+/// §6.1's rule, the classification from the frame's own rays, which these
+/// tests time frame by frame).
+fn usage_volume_lagging(min_alive: u32, lag: u32) -> DdgiVolume {
     let settings = DdgiVolumeSettings {
         probe_counts: UVec3::splat(3),
         probe_origin_m: Some(Vec3::new(-1.0, 0.5, -1.0)),
@@ -202,26 +205,37 @@ fn usage_volume(min_alive: u32) -> DdgiVolume {
         probe_relocation: false,
         probe_states: ProbeStatesMode::Usage,
         probe_alive_min_frames: min_alive,
+        probe_usage_lag_updates: lag,
         ..Default::default()
     };
     DdgiVolume::new(settings, (Vec3::splat(-5.0), Vec3::splat(5.0)))
+}
+
+fn usage_volume(min_alive: u32) -> DdgiVolume {
+    usage_volume_lagging(min_alive, 0)
 }
 
 #[test]
 fn a_probe_covered_from_frame_0_leaves_dead_once_uncovered() {
     // The box covers the middle probe from the very first frame (as a moving object
     // passing there at frame 0 would), then it is gone.
+    // With the counts read `lag` updates late it dies and leaves DEAD that
+    // many frames after the rays say so.
     let middle = 13;
-    let mut v = usage_volume(10);
-    run(&mut v, &usage_scene(true), 0..3);
-    assert_eq!(v.probe_states[middle], ProbeState::Dead, "{:?}", v.state_counts());
-    assert!(!v.probe_usable(middle));
-    run(&mut v, &usage_scene(false), 3..4);
-    assert_ne!(v.probe_states[middle], ProbeState::Dead, "usage says it is free: it must leave DEAD");
-    assert!(v.probe_usable(middle), "blended (history replaced) in the frame it left DEAD");
-    // Its atlas now holds the open sky above the floor, not the box's dark inside.
-    let up = irradiance(&v.view(), Vec3::new(0.0, 1.5, 0.0), Vec3::Y, Vec3::Y);
-    assert!(up.x > 0.5 * std::f32::consts::PI, "{up}");
+    for lag in [0, 2] {
+        let mut v = usage_volume_lagging(10, lag);
+        run(&mut v, &usage_scene(true), 0..3 + lag);
+        assert_eq!(v.probe_states[middle], ProbeState::Dead, "lag {lag}: {:?}", v.state_counts());
+        assert!(!v.probe_usable(middle));
+        run(&mut v, &usage_scene(false), 3 + lag..3 + 2 * lag);
+        assert_eq!(v.probe_states[middle], ProbeState::Dead, "lag {lag}: the counts from under the box still come");
+        run(&mut v, &usage_scene(false), 3 + 2 * lag..4 + 2 * lag);
+        assert_ne!(v.probe_states[middle], ProbeState::Dead, "lag {lag}: usage says it is free: it must leave DEAD");
+        assert!(v.probe_usable(middle), "lag {lag}: blended (history replaced) in the frame it left DEAD");
+        // Its atlas now holds the open sky above the floor, not the box's dark inside.
+        let up = irradiance(&v.view(), Vec3::new(0.0, 1.5, 0.0), Vec3::Y, Vec3::Y);
+        assert!(up.x > 0.5 * std::f32::consts::PI, "lag {lag}: {up}");
+    }
 }
 
 #[test]
