@@ -611,6 +611,9 @@ fn ray_budget_inputs_are_checked_before_rendering() {
         ("ray_budget=-5", "ray_budget"),
         ("ray_budget_max_interval_frames=0", "ray_budget_max_interval_frames"),
         ("ray_budget_hysteresis_per_frame=maybe", "ray_budget_hysteresis_per_frame"),
+        ("ray_budget_change_lag_updates=9", "ray_budget_change_lag_updates"),
+        ("probe_usage_lag_updates=9", "probe_usage_lag_updates"),
+        ("probe_usage_lag_updates=-1", "probe_usage_lag_updates"),
     ] {
         fails_with(&["render", "--gi", "ddgi", "--set", set], key);
     }
