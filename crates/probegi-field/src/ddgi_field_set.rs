@@ -1238,20 +1238,28 @@ mod tests {
         assert!(hb.probe_needs_radiance.iter().any(|&n| n));
     }
 
-    /// A one-volume usage set (4×2×3 probes, 16 rays) whose classification
-    /// reads the counts `lag` batches back; the device keeps the hits with `on_device`.
-    fn usage_set(lag: u32, on_device: bool) -> DdgiFieldSet {
+    /// A one-volume set of 4×2×3 probes, 16 rays, no relocation, with
+    /// `settings`' other fields; the device keeps the hits with `on_device`.
+    fn small_set(settings: DdgiVolumeSettings, on_device: bool) -> DdgiFieldSet {
         let s = DdgiVolumeSettings {
             probe_counts: glam::UVec3::new(4, 2, 3),
             probe_rays_per_probe: 16,
-            probe_states: probegi_core::ddgi_settings::ProbeStatesMode::Usage,
             probe_relocation: false,
-            probe_usage_lag_updates: lag,
-            ..Default::default()
+            ..settings
         };
         let mut set = DdgiFieldSet::single(DdgiVolume::new(s, (Vec3::ZERO, Vec3::splat(4.0))));
         set.set_update_rays_on_device(on_device);
         set
+    }
+
+    /// A [`small_set`] under the usage scheme whose classification reads the
+    /// counts `lag` batches back.
+    fn usage_set(lag: u32, on_device: bool) -> DdgiFieldSet {
+        let usage = probegi_core::ddgi_settings::ProbeStatesMode::Usage;
+        small_set(
+            DdgiVolumeSettings { probe_states: usage, probe_usage_lag_updates: lag, ..Default::default() },
+            on_device,
+        )
     }
 
     /// Starts frame `frame` and runs its initialisation rounds (every ray a miss).
@@ -1281,11 +1289,7 @@ mod tests {
             let mut set = usage_set(lag, false);
             let mut dead = Vec::new();
             for frame in 0..8 {
-                begin_usage_frame(&mut set, frame);
-                let hits = vec![usage_hit(frame); set.ray_batch().len()];
-                assert_eq!(set.submit_hits(&hits), Ok(UpdateStep::ShadeRays));
-                let zeros = vec![Vec3::ZERO; set.ray_batch().len()];
-                assert_eq!(set.submit_radiance(&zeros), Ok(UpdateStep::Done));
+                host_frame(&mut set, frame, usage_hit(frame), Vec3::ZERO);
                 dead.push(set.volumes()[0].state_counts().get("dead").copied().unwrap_or(0));
             }
             let probes = set.probe_count();
@@ -1304,10 +1308,7 @@ mod tests {
         let (mut host, mut device) = (usage_set(lag, false), usage_set(lag, true));
         let mut traced: Vec<(u64, Vec<probegi_core::probe_classification::ProbeUsageCounts>)> = Vec::new();
         for frame in 0..8 {
-            begin_usage_frame(&mut host, frame);
-            let hits = vec![usage_hit(frame); host.ray_batch().len()];
-            host.submit_hits(&hits).expect("host hits");
-            host.submit_radiance(&vec![Vec3::ZERO; host.ray_batch().len()]).expect("host blend");
+            host_frame(&mut host, frame, usage_hit(frame), Vec3::ZERO);
 
             begin_usage_frame(&mut device, frame);
             let request = device.device_usage_request().expect("the usage scheme counts on the device");
@@ -1360,9 +1361,7 @@ mod tests {
         let buried = ProbeRayHit { distance_m: -0.1, normal: Vec3::Y };
         let mut scrolled: Vec<u32> = Vec::new();
         for frame in 0..6 {
-            begin_usage_frame(&mut set, frame);
-            set.submit_hits(&vec![buried; set.ray_batch().len()]).expect("hits");
-            set.submit_radiance(&vec![Vec3::ZERO; set.ray_batch().len()]).expect("blend");
+            host_frame(&mut set, frame, buried, Vec3::ZERO);
             if frame == 1 {
                 let grid = set.volumes()[0].grid;
                 assert!(set.set_tracking_target(grid.centre_m() + 2.0 * grid.spacing_m * Vec3::X) > 0);
@@ -1377,22 +1376,24 @@ mod tests {
         assert!(!scrolled.is_empty() && scrolled.len() < set.probe_count());
     }
 
-    /// A one-volume set under a ray budget that covers every probe (so every
+    /// A [`small_set`] under a ray budget that covers every probe (so every
     /// probe traces and blends each frame, and its change is measured), the
-    /// changes recorded `lag` batches late; the device keeps the field with `on_device`.
+    /// changes recorded `lag` batches late.
     fn budget_set(lag: u32, on_device: bool) -> DdgiFieldSet {
         let s = DdgiVolumeSettings {
-            probe_counts: glam::UVec3::new(4, 2, 3),
-            probe_rays_per_probe: 16,
             probe_states: probegi_core::ddgi_settings::ProbeStatesMode::AllActive,
-            probe_relocation: false,
             ray_budget: 24 * 16,
             ray_budget_change_lag_updates: lag,
             ..Default::default()
         };
-        let mut set = DdgiFieldSet::single(DdgiVolume::new(s, (Vec3::ZERO, Vec3::splat(4.0))));
-        set.set_update_rays_on_device(on_device);
-        set
+        small_set(s, on_device)
+    }
+
+    /// A whole host update of frame `frame`: every ray `hit`, every shaded ray `radiance`.
+    fn host_frame(set: &mut DdgiFieldSet, frame: u32, hit: ProbeRayHit, radiance: Vec3) {
+        begin_usage_frame(set, frame);
+        assert_eq!(set.submit_hits(&vec![hit; set.ray_batch().len()]), Ok(UpdateStep::ShadeRays));
+        assert_eq!(set.submit_radiance(&vec![radiance; set.ray_batch().len()]), Ok(UpdateStep::Done));
     }
 
     #[test]
@@ -1407,9 +1408,7 @@ mod tests {
             let mut set = budget_set(lag, false);
             let mut seen = Vec::new();
             for frame in 0..10 {
-                begin_usage_frame(&mut set, frame);
-                set.submit_hits(&vec![ProbeRayHit::MISS; set.ray_batch().len()]).expect("hits");
-                set.submit_radiance(&vec![Vec3::ONE; set.ray_batch().len()]).expect("blend");
+                host_frame(&mut set, frame, ProbeRayHit::MISS, Vec3::ONE);
                 if frame == 4 {
                     let at = set.volumes()[0].probe_positions[0];
                     assert!(set.volumes_mut()[0].mark_changed_near(&[(at, at)]) > 0);
@@ -1466,11 +1465,7 @@ mod tests {
         // A mark made in the new set counts against the batches before it;
         // the new set numbers its batches past the volume's, so its own
         // blends' changes still reach the budget `lag` updates later.
-        let frame = |set: &mut DdgiFieldSet, f: u32| {
-            begin_usage_frame(set, f);
-            set.submit_hits(&vec![ProbeRayHit::MISS; set.ray_batch().len()]).expect("hits");
-            set.submit_radiance(&vec![Vec3::ONE; set.ray_batch().len()]).expect("blend");
-        };
+        let frame = |set: &mut DdgiFieldSet, f: u32| host_frame(set, f, ProbeRayHit::MISS, Vec3::ONE);
         let mut set = budget_set(2, false);
         (0..5).for_each(|f| frame(&mut set, f));
         let mut set = DdgiFieldSet::from_volumes(set.into_volumes(), VolumeBlending::default(), None);

@@ -49,20 +49,7 @@ impl GpuProbeChange {
 
     /// After the blends: the change of each of `probes` (increasing storage
     /// slots of the volume whose atlases are `atlases`, occlusion maps
-    /// `occlusion`), in their order, read back at once (a blocking wait).
-    pub fn measure(
-        &self,
-        ctx: &GpuContext,
-        atlases: &GpuVolumeAtlases,
-        occlusion: Option<&OcclusionTarget<'_>>,
-        probes: &[u32],
-    ) -> Result<Vec<f32>, GpuError> {
-        let Some(out) = self.record(ctx, atlases, occlusion, probes)? else { return Ok(Vec::new()) };
-        let bytes = ctx.read_back(&out)?;
-        Ok(bytemuck::cast_slice::<u8, f32>(&bytes).iter().take(probes.len()).copied().collect())
-    }
-
-    /// As [`Self::measure`], the result kept on its way back under volume
+    /// `occlusion`), in their order, kept on its way back under volume
     /// `volume` of `key`'s batch (read by [`Self::take_due`]).
     pub fn measure_late(
         &self,

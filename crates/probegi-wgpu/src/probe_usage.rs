@@ -46,22 +46,10 @@ impl GpuProbeUsage {
         Self { layout, pipeline, readback: Default::default() }
     }
 
-    /// (usage, relevant, backfaces) of every probe in `probes` (a batch's), from
-    /// `batch`'s hits, read back at once (a blocking wait); a probe's cage
-    /// diagonal is `cage_diagonals_m[probe.volume]` (0 past its end).
-    pub fn counts(
-        &self,
-        ctx: &GpuContext,
-        batch: &GpuRayBatch,
-        probes: &[BatchProbe],
-        cage_diagonals_m: &[f32],
-    ) -> Result<Vec<ProbeUsageCounts>, GpuError> {
-        let Some(out) = self.record(ctx, batch, probes, cage_diagonals_m)? else { return Ok(vec![]) };
-        Ok(decode(&ctx.read_back(&out)?, probes.len()))
-    }
-
-    /// Counts `probes` of `batch` as [`Self::counts`] does, under `request`'s
-    /// batch number, its result read late (`late_readback`); then returns
+    /// (usage, relevant, backfaces) of every probe in `probes` (a batch's),
+    /// from `batch`'s hits, with a probe's cage diagonal
+    /// `request.cage_diagonals_m[probe.volume]` (0 past its end), counted
+    /// under `request`'s batch number and read late (`late_readback`); returns
     /// the counts of the request's set's batches now `request.lag_updates`
     /// old, oldest first.
     pub fn counts_late(

@@ -25,7 +25,7 @@ use glam::{UVec3, Vec2, Vec3};
 use probegi_core::ddgi_query::DdgiFieldView;
 use probegi_core::ddgi_settings::DdgiVolumeSettings;
 use probegi_core::probe_atlas::ProbeAtlas;
-use probegi_core::probe_classification::ProbeState;
+use probegi_core::probe_classification::{ProbeState, ProbeUsageCounts};
 use probegi_core::probe_grid::ProbeGrid;
 use probegi_core::rng::hash_combine;
 
@@ -33,6 +33,7 @@ use crate::probe_ray_gen::ProbeRayDirections;
 
 mod blend_inputs;
 mod init_rounds;
+mod late_results;
 mod probe_budget;
 mod screen_requests;
 mod scrolling;
@@ -99,10 +100,9 @@ pub struct DdgiVolume {
     /// Usage scheme: consecutive frames the probe has been ALIVE.
     probe_alive_frames: Vec<u32>,
     /// Usage scheme (`usage_states`): the update batches whose usage counts
-    /// wait for their classification, one past the last batch number queued,
-    /// and per probe the first batch whose counts describe it where it is now.
-    usage_pending: std::collections::VecDeque<usage_states::PendingUsage>,
-    usage_batches: u64,
+    /// wait for their classification, and per probe the first batch whose
+    /// counts describe it where it is now.
+    usage_pending: late_results::LateResults<(), Vec<Option<ProbeUsageCounts>>>,
     probe_usage_from_batch: Vec<u64>,
     /// Probes waiting for initialisation (relocation, classification).
     probe_pending_init: Vec<bool>,
@@ -129,11 +129,10 @@ pub struct DdgiVolume {
     /// last blend (1 before any), and the frames since it last traced.
     probe_change: Vec<f32>,
     probe_untraced_frames: Vec<u32>,
-    /// The blends whose changes wait to be recorded (`probe_budget`), one
-    /// past the last batch queued, and per probe the first batch whose
+    /// The blends whose changes (per blended probe, in increasing order) wait
+    /// to be recorded (`probe_budget`), and per probe the first batch whose
     /// change counts for it (the batches before it blended before a mark).
-    change_pending: std::collections::VecDeque<probe_budget::PendingChange>,
-    change_batches: u64,
+    change_pending: late_results::LateResults<Vec<u32>, Vec<f32>>,
     probe_change_from_batch: Vec<u64>,
     /// The occlusion change of each probe's last occlusion blend.
     probe_occlusion_change: Vec<f32>,
@@ -300,8 +299,7 @@ impl DdgiVolume {
             probe_fallback: vec![u32::MAX; probes],
             probe_has_history: vec![false; probes],
             probe_alive_frames: vec![0; probes],
-            usage_pending: std::collections::VecDeque::new(),
-            usage_batches: 0,
+            usage_pending: Default::default(),
             probe_usage_from_batch: vec![0; probes],
             probe_pending_init: vec![true; probes],
             probe_relocation_settled: vec![false; probes],
@@ -316,8 +314,7 @@ impl DdgiVolume {
             shadow: settings.shadow_field.then(|| ShadowField::new(probes, settings.shadow_field_texels)),
             probe_change: vec![1.0; probes],
             probe_untraced_frames: vec![0; probes],
-            change_pending: std::collections::VecDeque::new(),
-            change_batches: 0,
+            change_pending: Default::default(),
             probe_change_from_batch: vec![0; probes],
             probe_occlusion_change: vec![0.0; probes],
             probe_unblended_frames: vec![0; probes],

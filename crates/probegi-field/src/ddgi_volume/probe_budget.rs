@@ -135,14 +135,14 @@ impl DdgiVolume {
     /// Every probe counts as fully changed until it traces again (a scene event).
     pub(super) fn mark_all_changed(&mut self) {
         self.probe_change.fill(1.0);
-        self.probe_change_from_batch.fill(self.change_batches);
+        self.probe_change_from_batch.fill(self.change_pending.next_batch());
     }
 
     /// Probe `p` counts as fully changed until it blends again: the changes
     /// of blends before now, still on their way, no longer count for it.
     pub(super) fn mark_changed(&mut self, p: usize) {
         self.probe_change[p] = 1.0;
-        self.probe_change_from_batch[p] = self.change_batches;
+        self.probe_change_from_batch[p] = self.change_pending.next_batch();
     }
 
     /// Probes inside `aabbs` grown by a cell (moving objects' boxes) count as
@@ -203,7 +203,8 @@ impl DdgiVolume {
                 changes.push(probe_change(*e, occ));
             }
         }
-        self.queue_changes(PendingChange { batch, probes, changes: Some(changes) });
+        self.change_pending.push(batch, probes, Some(changes));
+        self.record_due_changes();
     }
 
     /// The changes a device measured after the blend of batch `batch` come
@@ -214,12 +215,9 @@ impl DdgiVolume {
     /// batches' places.
     pub(super) fn accept_device_change(&mut self, batch: u64, updated: &[bool], earlier: &[(u64, &[f32])]) {
         let probes = updated.iter().enumerate().filter(|(_, u)| **u).map(|(p, _)| p as u32).collect();
-        self.change_pending.push_back(PendingChange { batch, probes, changes: None });
-        self.change_batches = batch + 1;
+        self.change_pending.push(batch, probes, None);
         for &(batch, changes) in earlier {
-            if let Some(waiting) = self.change_pending.iter_mut().find(|c| c.batch == batch) {
-                waiting.changes = Some(changes.to_vec());
-            }
+            self.change_pending.fill(batch, changes.to_vec());
         }
         self.record_due_changes();
     }
@@ -233,46 +231,25 @@ impl DdgiVolume {
 
     /// One past the last update batch number whose changes were queued.
     pub(crate) fn change_batches(&self) -> u64 {
-        self.change_batches
+        self.change_pending.next_batch()
     }
 
     /// The number of changes batch `batch`'s blend measures (its blended
     /// probes), where the volume waits for them; `None` otherwise.
     pub(crate) fn changes_awaited(&self, batch: u64) -> Option<usize> {
-        self.change_pending.iter().find(|c| c.batch == batch && c.changes.is_none()).map(|c| c.probes.len())
+        self.change_pending.waiting(batch).map(Vec::len)
     }
 
-    fn queue_changes(&mut self, pending: PendingChange) {
-        self.change_batches = pending.batch + 1;
-        self.change_pending.push_back(pending);
-        self.record_due_changes();
-    }
-
-    /// Records the changes of every queued blend now `ray_budget_change_lag_updates` old.
+    /// Records the changes of every queued blend now `ray_budget_change_lag_updates`
+    /// old (changes that never came, their device gone, record nothing).
     fn record_due_changes(&mut self) {
-        let lag = self.settings.ray_budget_change_lag_updates as usize;
-        while self.change_pending.len() > lag {
-            let Some(due) = self.change_pending.pop_front() else { break };
-            // Changes that never came (their device went) record nothing.
-            let Some(changes) = due.changes else { continue };
-            for (&p, &c) in due.probes.iter().zip(&changes) {
+        for (batch, probes, changes) in self.change_pending.take_due(self.settings.ray_budget_change_lag_updates) {
+            for (&p, &c) in probes.iter().zip(&changes) {
                 let p = p as usize;
-                if p < self.probe_change.len() && due.batch >= self.probe_change_from_batch[p] {
+                if p < self.probe_change.len() && batch >= self.probe_change_from_batch[p] {
                     self.probe_change[p] = probe_change(c, None);
                 }
             }
         }
     }
-}
-
-/// One blend's probe changes, queued until they are recorded
-/// (`ray_budget_change_lag_updates` batches later).
-#[derive(Clone, Debug)]
-pub(super) struct PendingChange {
-    /// The set's number of the blend's update batch.
-    batch: u64,
-    /// The probes that blended, in increasing order.
-    probes: Vec<u32>,
-    /// Their changes, in the same order; `None` while they are on the device.
-    changes: Option<Vec<f32>>,
 }

@@ -102,8 +102,7 @@ impl DdgiVolume {
         batch: u64,
         counts: Vec<Option<ProbeUsageCounts>>,
     ) {
-        self.usage_pending.push_back(PendingUsage { batch, counts: Some(counts) });
-        self.usage_batches = batch + 1;
+        self.usage_pending.push(batch, (), Some(counts));
         self.classify_due_usage(frame, frame_index);
     }
 
@@ -117,12 +116,9 @@ impl DdgiVolume {
         batch: u64,
         earlier_counts: Vec<(u64, Vec<Option<ProbeUsageCounts>>)>,
     ) {
-        self.usage_pending.push_back(PendingUsage { batch, counts: None });
-        self.usage_batches = batch + 1;
+        self.usage_pending.push(batch, (), None);
         for (batch, counts) in earlier_counts {
-            if let Some(waiting) = self.usage_pending.iter_mut().find(|u| u.batch == batch) {
-                waiting.counts = Some(counts);
-            }
+            self.usage_pending.fill(batch, counts);
         }
         self.classify_due_usage(frame, frame_index);
     }
@@ -130,27 +126,23 @@ impl DdgiVolume {
     /// One past the last update batch number queued (the set numbers its
     /// batches from the largest of its volumes').
     pub(crate) fn usage_batches(&self) -> u64 {
-        self.usage_batches
+        self.usage_pending.next_batch()
     }
 
-    /// Classifies from every queued batch now `probe_usage_lag_updates` old.
+    /// Classifies from every queued batch now `probe_usage_lag_updates` old
+    /// (a batch whose counts never came, its device gone, classifies nothing).
     fn classify_due_usage(&mut self, frame: &mut VolumeFrame, frame_index: u32) {
-        let lag = self.settings.probe_usage_lag_updates as usize;
-        while self.usage_pending.len() > lag {
-            let Some(due) = self.usage_pending.pop_front() else { break };
-            // A batch whose counts never came (its device went): no classification.
-            if let Some(counts) = due.counts {
-                self.classify_usage_states(frame, frame_index, due.batch, &counts);
-            }
+        for (batch, (), counts) in self.usage_pending.take_due(self.settings.probe_usage_lag_updates) {
+            self.classify_usage_states(frame, frame_index, batch, &counts);
         }
     }
 
     /// From the next update batch on, probe `p`'s counts describe it where it
     /// is now: the queued ones are dropped for it (a reset, a new start).
     /// (The set's batch numbers only grow, so the next one is at least
-    /// `usage_batches`.)
+    /// the queue's next.)
     pub(super) fn restart_usage(&mut self, p: usize) {
-        self.probe_usage_from_batch[p] = self.usage_batches;
+        self.probe_usage_from_batch[p] = self.usage_pending.next_batch();
     }
 
     /// Usage scheme (seed 003 §6.1): every probe's state from the usage counts
@@ -190,16 +182,6 @@ impl DdgiVolume {
             self.probe_states[p] = next;
         }
     }
-}
-
-/// One update batch's usage counts, queued until the classification they
-/// feed (`probe_usage_lag_updates` batches later).
-#[derive(Clone, Debug)]
-pub(super) struct PendingUsage {
-    /// The volume's number of the batch (`DdgiVolume::usage_batches` when queued).
-    batch: u64,
-    /// Per probe its counts (`None`: it did not trace); `None` while they are on the device.
-    counts: Option<Vec<Option<ProbeUsageCounts>>>,
 }
 
 /// [`DdgiVolume::probe_has_content`] over the per-probe histories and seeds

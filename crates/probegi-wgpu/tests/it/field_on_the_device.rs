@@ -225,6 +225,27 @@ fn usage_states_with_counts_read_at_once_match_the_host_ones() {
     run_pair(settings, 12, &[0, 11], false, (1e-5, 1e-5));
 }
 
+/// The blocking waits of each of `frames` updates of `set` on `device` after
+/// frame 0 (whose initialisation rounds read back once), the device having
+/// finished the earlier frames before each (the test waits outside the update).
+fn waits_by_frame(
+    device: &WgpuProbeTracer,
+    set: &mut DdgiFieldSet,
+    scene: &Scene,
+    bvh: &BvhTracer,
+    direct: &DirectLighting,
+    frames: u32,
+) -> Vec<u64> {
+    let mut waits = Vec::new();
+    for f in 0..frames {
+        device.ctx.wait().expect("the device finishes the earlier frames");
+        let before = device.ctx.counters();
+        set.update_traced_by(scene, bvh, Some(device), direct, 3, f, &mut BTreeMap::new()).expect("frame");
+        waits.extend((f >= 1).then(|| (device.ctx.counters() - before).blocking_waits));
+    }
+    waits
+}
+
 #[test]
 fn usage_counts_come_back_late_and_an_update_never_waits_for_them() {
     // Issue "The field update at the seeds' GPU rates…", goal 2: under the
@@ -240,16 +261,8 @@ fn usage_counts_come_back_late_and_an_update_never_waits_for_them() {
         let Some(device) = gpu(&scene, &bvh, true) else { return };
         let settings = DdgiVolumeSettings { probe_usage_lag_updates: lag, ..usage_settings() };
         let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, scene.bounds().expect("geometry")));
-        for f in 0..6 {
-            device.ctx.wait().expect("the device finishes the earlier frames");
-            let before = device.ctx.counters();
-            set.update_traced_by(&scene, &bvh, Some(&device), &direct, 3, f, &mut BTreeMap::new()).expect("frame");
-            let d = device.ctx.counters() - before;
-            if f >= 1 {
-                // (Frame 0 runs the initialisation rounds, which read back once.)
-                assert!(d.blocking_waits <= most_waits, "lag {lag}, frame {f}: {d:?}");
-            }
-        }
+        let waits = waits_by_frame(&device, &mut set, &scene, &bvh, &direct, 6);
+        assert!(waits.iter().all(|&w| w <= most_waits), "lag {lag}: blocking waits by frame {waits:?}");
         // The states moved on from the start-up's (every probe Alive): the counts arrived.
         let counts = set.volumes()[0].state_counts();
         assert!(counts.get("dead").copied().unwrap_or(0) > 0, "lag {lag}: {counts:?}");
@@ -279,15 +292,8 @@ fn probe_changes_come_back_late_and_a_budgeted_update_never_waits_for_them() {
             ..Default::default()
         };
         let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, scene.bounds().expect("geometry")));
-        for f in 0..6 {
-            device.ctx.wait().expect("the device finishes the earlier frames");
-            let before = device.ctx.counters();
-            set.update_traced_by(&scene, &bvh, Some(&device), &direct, 3, f, &mut BTreeMap::new()).expect("frame");
-            let d = device.ctx.counters() - before;
-            if f >= 1 {
-                assert!(d.blocking_waits <= most_waits, "lag {lag}, frame {f}: {d:?}");
-            }
-        }
+        let waits = waits_by_frame(&device, &mut set, &scene, &bvh, &direct, 6);
+        assert!(waits.iter().all(|&w| w <= most_waits), "lag {lag}: blocking waits by frame {waits:?}");
         // The changes arrived: the first blends' full change gave way to measured ones.
         let v = &set.volumes()[0];
         let measured = (0..v.grid.probe_count()).filter(|&p| v.probe_change(p) < 1.0).count();
