@@ -198,11 +198,13 @@ const PIPELINED_MIN_FRAMES: u32 = 4;
 /// and `field_set_ms` the field set's own part of it ([`HOST_PLAN_PASS`]:
 /// planning and bookkeeping, no command recording), which `update` returns
 /// with whether the update kept the plan before it
-/// (`DdgiFieldSet::update_kept_plan`; `plans_kept`: the share that did).
+/// (`DdgiFieldSet::update_kept_plan`; `plans_kept`: the share that did) or
+/// its trace plan alone (`DdgiFieldSet::update_kept_trace_plan`, the usage
+/// scheme; `traces_kept`).
 fn pipelined_json(
     gpu: &WgpuProbeTracer,
     frames: std::ops::RangeInclusive<u32>,
-    mut update: impl FnMut(u32) -> Result<(f64, bool)>,
+    mut update: impl FnMut(u32) -> Result<(f64, bool, bool)>,
     rays_per_frame: u64,
 ) -> Result<serde_json::Value> {
     let ctx = &gpu.ctx;
@@ -210,7 +212,7 @@ fn pipelined_json(
     ctx.wait()?;
     let before = ctx.counters();
     let (t, count) = (Instant::now(), frames.clone().count());
-    let (mut inside_ms, mut waited_in_ms, mut field_set_ms, mut kept) = (0.0, 0.0, 0.0, 0);
+    let (mut inside_ms, mut waited_in_ms, mut field_set_ms, mut kept, mut traces_kept) = (0.0, 0.0, 0.0, 0, 0);
     let mut cpu_ms = Some(0.0);
     for f in frames {
         let (t_update, waited) = (Instant::now(), ctx.counters().wait_ms);
@@ -220,9 +222,10 @@ fn pipelined_json(
         ctx.defer_submissions(false);
         let cpu = cpu.and_then(|c| c.try_elapsed().ok());
         cpu_ms = cpu_ms.zip(cpu).map(|(sum, c)| sum + c.as_secs_f64() * 1e3);
-        let (ms, plan_kept) = result?;
+        let (ms, plan_kept, trace_kept) = result?;
         field_set_ms += ms;
         kept += plan_kept as u32;
+        traces_kept += trace_kept as u32;
         inside_ms += t_update.elapsed().as_secs_f64() * 1e3;
         waited_in_ms += ctx.counters().wait_ms - waited;
     }
@@ -239,6 +242,7 @@ fn pipelined_json(
         "host_cpu_ms": cpu_ms.map(per),
         "field_set_ms": per(field_set_ms),
         "plans_kept": per(kept as f64),
+        "traces_kept": per(traces_kept as f64),
         "submissions": per(d.submissions as f64),
         "blocking_waits": per(d.blocking_waits as f64 - 1.0),
         "bytes_up": per(d.bytes_up as f64),
@@ -292,7 +296,8 @@ impl DdgiSweep<'_> {
                     let mut ms = BTreeMap::new();
                     set.update_traced_by(scene, bvh, batch_tracer, direct, args.seed, f, &mut ms)
                         .map_err(anyhow::Error::msg)?;
-                    Ok((ms.get(HOST_PLAN_PASS).copied().unwrap_or(0.0), set.update_kept_plan()))
+                    let host_ms = ms.get(HOST_PLAN_PASS).copied().unwrap_or(0.0);
+                    Ok((host_ms, set.update_kept_plan(), set.update_kept_trace_plan()))
                 };
                 pipelined_json(g, frames, update, rays)?
             }

@@ -12,7 +12,7 @@
 //! them tracing each frame in its phase), which plans in full every frame,
 //! and under the usage scheme (every probe traces every frame; the counts a
 //! device would read back, two batches late, alternate the probes between
-//! ALIVE and SLEEPING by probe parity).
+//! ALIVE and SLEEPING by probe parity), with and without its kept trace plan.
 //! The `bench --backend wgpu` figure `field_set_ms` is these steps' sum in
 //! the real loop; this separates them.
 
@@ -27,12 +27,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (n, rays) = (args.first().copied().unwrap_or(32), args.get(1).copied().unwrap_or(32));
     println!("{n}³ probes × {rays} rays, ms an update: begin / hits / blend plan / after the blend = sum");
     for states in [ProbeStatesMode::AllActive, ProbeStatesMode::Jcgt, ProbeStatesMode::Screen, ProbeStatesMode::Usage] {
-        // The screen and usage schemes plan in full every frame (their states move).
-        let full_only = matches!(states, ProbeStatesMode::Screen | ProbeStatesMode::Usage);
-        let keeps: &[bool] = if full_only { &[false] } else { &[false, true] };
+        // The screen scheme plans in full every frame (its states move); the
+        // usage scheme keeps its trace plan alone.
+        let keeps: &[bool] = if states == ProbeStatesMode::Screen { &[false] } else { &[false, true] };
         for &keep in keeps {
             let ms = time_steps(states, keep, n, rays)?;
-            let label = if keep { "kept plan" } else { "full plan" };
+            let label = match (keep, states) {
+                (false, _) => "full plan",
+                (true, ProbeStatesMode::Usage) => "kept trace",
+                (true, _) => "kept plan",
+            };
             let steps = ms.map(|m| format!("{m:.3}")).join(" / ");
             println!("{states:?}, {label}: {steps} = {:.3}", ms.iter().sum::<f64>());
         }

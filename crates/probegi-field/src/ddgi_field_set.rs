@@ -126,6 +126,9 @@ pub struct DdgiFieldSet {
     steady_plans: bool,
     /// The current update kept the last one's plan (`ddgi_volume::steady_frames`).
     plan_kept: bool,
+    /// The current update kept the last one's trace plan alone (the usage
+    /// scheme, `ddgi_volume::steady_frames`).
+    trace_kept: bool,
     /// The usage scheme's lagged counts (`ddgi_volume::usage_states`): the
     /// set's identity for a device, the next update batch's number, and per
     /// batch whose counts are still on the device its (volume, probe) entries.
@@ -201,6 +204,7 @@ impl DdgiFieldSet {
             shadow_on_device: false,
             steady_plans: true,
             plan_kept: false,
+            trace_kept: false,
             usage_set_id: SetId(crate::device_plans::next_plan_id()),
             update_batches,
             usage_on_device: std::collections::VecDeque::new(),
@@ -463,6 +467,14 @@ impl DdgiFieldSet {
         self.plan_kept
     }
 
+    /// Whether the current (or last) update kept the trace plan alone of the
+    /// update before it: the batch's probes, first rays and records'
+    /// identities, under the usage scheme (`ddgi_volume::steady_frames`);
+    /// the classification, the blend plan and the bookkeeping ran in full.
+    pub fn update_kept_trace_plan(&self) -> bool {
+        self.trace_kept
+    }
+
     /// Fills the current batch's per-ray arrays where it was planned without
     /// them ([`Self::set_update_rays_on_device`]); the rays equal the host
     /// plan's bit for bit.
@@ -476,6 +488,7 @@ impl DdgiFieldSet {
         self.frame = frame;
         self.init_round = 0;
         self.plan_kept = false;
+        self.trace_kept = false;
         if self.expected != UpdateStep::Done {
             // The last update was left unfinished: its plan's blend never
             // ran, so no later frame may keep that plan.
@@ -540,7 +553,7 @@ impl DdgiFieldSet {
             }
             self.init_round += 1;
         }
-        if self.keep_steady_plan() {
+        if self.keep_steady_plan() || self.keep_trace_plan() {
             self.expected = UpdateStep::TraceRays;
             return UpdateStep::TraceRays;
         }
@@ -603,6 +616,33 @@ impl DdgiFieldSet {
         true
     }
 
+    /// Keeps the last update's trace plan alone where every volume's trace
+    /// would repeat it (the usage scheme, `ddgi_volume::steady_frames`): the
+    /// batch's probes, first rays and records' identities stay, its rays take
+    /// the frame's rotation, and each volume plans the rest of the frame
+    /// (counters, which probes' states want a blend). Returns whether it did.
+    fn keep_trace_plan(&mut self) -> bool {
+        let kept = self.steady_plans
+            && self.update_rays_on_device
+            && !self.has_host_shadow_rays()
+            && self.ray_budget() == 0
+            && self.batch.kind == ProbeRayBatchKind::Update
+            && !self.batch.planned_with_ray_arrays()
+            && self.batch.generated.iter().map(|g| g.volume as usize).eq(0..self.volumes.len())
+            && self.volumes.iter().zip(&self.frames).all(|(v, f)| v.trace_plan_is_steady(f));
+        self.trace_kept = kept;
+        if !kept {
+            return false;
+        }
+        // No budget: which probes trace is the states' alone.
+        self.apply_ray_budget();
+        for (i, (v, f)) in self.volumes.iter_mut().zip(&mut self.frames).enumerate() {
+            self.batch.generated[i].rotation = v.plan_kept_trace_update(f, self.seed, self.frame);
+        }
+        self.batch.renew_rays();
+        true
+    }
+
     /// The set's ray budget: the largest `ray_budget` of its volumes (0: none).
     pub fn ray_budget(&self) -> u64 {
         self.volumes.iter().map(|v| v.settings.ray_budget).max().unwrap_or(0)
@@ -636,12 +676,16 @@ impl DdgiFieldSet {
 
     /// `probe_needs_radiance` of the update batch: the probes that blend this
     /// frame (after the hits classified them).
+    /// A kept trace plan's batch keeps the flags' identity where they repeat.
     fn mark_probes_needing_radiance(&mut self) {
         let frames = &self.frames;
-        self.batch.probe_needs_radiance.clear();
-        self.batch
-            .probe_needs_radiance
-            .extend(self.batch.probes.iter().map(|bp| frames[bp.volume as usize].active[bp.probe as usize]));
+        let flags = self.batch.probes.iter().map(|bp| frames[bp.volume as usize].active[bp.probe as usize]);
+        let same = self.trace_kept && self.batch.probe_needs_radiance.iter().copied().eq(flags.clone());
+        if !same {
+            self.batch.probe_needs_radiance.clear();
+            self.batch.probe_needs_radiance.extend(flags);
+            self.batch.renew_radiance_id();
+        }
     }
 
     fn expect(&self, step: UpdateStep, called: &'static str) -> Result<(), SeamError> {

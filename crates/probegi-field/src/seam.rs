@@ -144,6 +144,8 @@ pub struct ProbeRayBatch {
     ray_count: usize,
     /// Whether `push_probe` fills the per-ray arrays.
     ray_arrays: bool,
+    /// [`Self::probe_needs_radiance_id`].
+    radiance_id: u64,
 }
 
 impl ProbeRayBatch {
@@ -223,6 +225,22 @@ impl ProbeRayBatch {
         self.generated.clear();
         self.ray_count = 0;
         self.ray_arrays = ray_arrays;
+        self.renew_radiance_id();
+    }
+
+    /// An identity of `probe_needs_radiance` within the batch's plan: where a
+    /// device's shade keeps per-probe records by the plan's identities
+    /// (`GeneratedProbeRays::plan_id`) and this, equal identities mean equal
+    /// flags. Drawn anew (`device_plans::next_plan_id`) whenever the set
+    /// writes other flags (a kept trace plan's batch keeps its probes and
+    /// record identities while the flags move with the states).
+    pub fn probe_needs_radiance_id(&self) -> u64 {
+        self.radiance_id
+    }
+
+    /// Draws [`Self::probe_needs_radiance_id`] anew.
+    pub(crate) fn renew_radiance_id(&mut self) {
+        self.radiance_id = crate::device_plans::next_plan_id();
     }
 
     /// A kept update plan's next frame (`ddgi_volume::steady_frames`): the

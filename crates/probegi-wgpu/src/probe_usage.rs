@@ -51,19 +51,22 @@ impl GpuProbeUsage {
     /// `request.cage_diagonals_m[probe.volume]` (0 past its end), counted
     /// under `request`'s batch number and read late (`late_readback`); returns
     /// the counts of the request's set's batches now `request.lag_updates`
-    /// old, oldest first.
+    /// old, oldest first. `records_id`: an identity of `probes` (equal ids,
+    /// equal records; `None`: none), so a kept batch's are not uploaded again.
     pub fn counts_late(
         &self,
         ctx: &GpuContext,
         batch: &GpuRayBatch,
         probes: &[BatchProbe],
+        records_id: Option<&[u64]>,
         request: &DeviceUsageRequest,
     ) -> Result<Vec<DeviceUsageCounts>, GpuError> {
         // (The output is 16 bytes a probe, exactly: one probe at least.)
-        let out = self.record(ctx, batch, probes, &request.cage_diagonals_m)?;
+        let out = self.record(ctx, batch, probes, records_id, &request.cage_diagonals_m)?;
         let key = LateKey { set_id: request.set_id, batch: request.batch, part: 0 };
         let mut ring = self.readback.lock().unwrap_or_else(|e| e.into_inner());
-        ring.push(ctx, key, out.as_ref().map(|o| (o, o.size())));
+        // (The scratch output may hold more than this batch's probes.)
+        ring.push(ctx, key, out.as_ref().map(|o| (o, probes.len() as u64 * 16)));
         let Some(last) = request.batch.checked_sub(request.lag_updates as u64) else { return Ok(vec![]) };
         let due = ring.take_due(ctx, request.set_id, last)?;
         Ok(due
@@ -73,34 +76,51 @@ impl GpuProbeUsage {
     }
 
     /// Records the usage pass over `probes` of `batch`; its output buffer
-    /// (16 bytes a probe), or `None` for no probe.
+    /// (16 bytes a probe), or `None` for no probe. Its inputs, output and
+    /// bind group are kept from one batch to the next (`GpuContext`'s
+    /// `buffer_identified`, `scratch_buffer`, `bind_group_kept`): a still
+    /// field's batch (`records_id`: the batch's `GeneratedProbeRays::plan_id`s,
+    /// equal for equal records) uploads and makes nothing. The output is read
+    /// by the copy `counts_late` records behind the pass, in the same
+    /// submission, so the next batch's pass may write it again.
     fn record(
         &self,
         ctx: &GpuContext,
         batch: &GpuRayBatch,
         probes: &[BatchProbe],
+        records_id: Option<&[u64]>,
         cage_diagonals_m: &[f32],
     ) -> Result<Option<wgpu::Buffer>, GpuError> {
         if probes.is_empty() {
             return Ok(None);
         }
-        for p in probes {
-            batch.check_rays(p.first_ray, p.ray_count)?;
+        if records_id.is_none() {
+            for p in probes {
+                batch.check_rays(p.first_ray, p.ray_count)?;
+            }
         }
         let (gx, gy) = dispatch_2d(probes.len() as u32);
         let params = UsageParams { probe_count: probes.len() as u32, groups_x: gx, _pad: [0; 2] };
         let storage = wgpu::BufferUsages::STORAGE;
-        let params = ctx.buffer_with("usage params", bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
-        let rows = ctx.buffer_with("usage probes", bytemuck::cast_slice(probes), storage);
+        let params = ctx.buffer_rewritten("usage params", 0, bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
+        let records = || {
+            // A kept batch's records were checked when they were written.
+            for p in probes {
+                batch.check_rays(p.first_ray, p.ray_count)?;
+            }
+            Ok(bytemuck::cast_slice(probes).to_vec())
+        };
+        let rows = ctx.buffer_identified("usage probes", 0, records_id, records, storage)?;
         // An empty table still binds one entry; the shader reads 0 for it, as past the end.
         let diagonals = if cage_diagonals_m.is_empty() { &[0.0][..] } else { cage_diagonals_m };
-        let diagonals = ctx.buffer_with("usage cage diagonals", bytemuck::cast_slice(diagonals), storage);
-        let out = ctx.output_buffer("usage counts", probes.len() as u64 * 16);
-        let bind_group = crate::gpu_context::buffers_bind_group(
-            ctx,
+        let diagonals = ctx.buffer_rewritten("usage cage diagonals", 0, bytemuck::cast_slice(diagonals), storage);
+        let out_usage = storage | wgpu::BufferUsages::COPY_SRC;
+        let out = ctx.scratch_buffer("usage counts", 0, probes.len() as u64 * 16, out_usage);
+        let bind_group = ctx.bind_group_kept(
             "probe usage",
+            0,
             &self.layout,
-            &[params, batch.hits_buffer().clone(), rows, diagonals, out.clone()],
+            &[&params, batch.hits_buffer(), &rows, &diagonals, &out],
         );
         ctx.run_passes("probe usage", &[(&self.pipeline, vec![Some(&bind_group)], (gx, gy))]);
         Ok(Some(out))

@@ -134,13 +134,22 @@ impl WgpuProbeTracer {
     }
 }
 
-/// The identity of an update batch's shade records: every volume's plan id,
-/// where the field set made every probe's records
+/// The identity of an update batch's probe records (`BatchProbe`): every
+/// volume's plan id, where the field set made every probe's records
 /// (`GeneratedProbeRays::plan_id`); `None` otherwise.
-fn shade_records_ids(batch: &ProbeRayBatch) -> Option<Vec<u64>> {
+fn probe_records_ids(batch: &ProbeRayBatch) -> Option<Vec<u64>> {
     let covered: usize = batch.generated.iter().map(|g| g.probe_count as usize).sum();
     let update = batch.kind == probegi_field::seam::ProbeRayBatchKind::Update;
     (update && covered == batch.probes.len()).then(|| batch.generated.iter().map(|g| g.plan_id).collect())?
+}
+
+/// The identity of an update batch's shade records, which carry each
+/// probe's `probe_needs_radiance` besides its probe record: the probe
+/// records' identity and the flags' (`ProbeRayBatch::probe_needs_radiance_id`).
+fn shade_records_ids(batch: &ProbeRayBatch) -> Option<Vec<u64>> {
+    let mut ids = probe_records_ids(batch)?;
+    ids.push(batch.probe_needs_radiance_id());
+    Some(ids)
 }
 
 /// The update volumes of `batch` whose probes cast the same rays each and lie
@@ -842,7 +851,10 @@ impl DeviceField for WgpuProbeTracer {
                 self.ctx.wait()?;
             }
             let counts = match usage {
-                Some(request) => usage_pass.counts_late(&self.ctx, &resident, &batch.probes, request)?,
+                Some(request) => {
+                    let ids = probe_records_ids(batch);
+                    usage_pass.counts_late(&self.ctx, &resident, &batch.probes, ids.as_deref(), request)?
+                }
                 None => vec![],
             };
             self.keep_last(resident)?;

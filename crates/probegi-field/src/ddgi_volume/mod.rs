@@ -240,6 +240,10 @@ pub struct VolumeFrame {
     /// the set, with the batch it vouches for), where a later frame may keep
     /// that plan (`steady_frames`).
     pub(crate) plan_snapshot: Option<steady_frames::PlanSnapshot>,
+    /// What the volume's last full update plan read for its trace alone,
+    /// where a later frame may keep the batch's entries (the usage scheme,
+    /// `steady_frames`).
+    pub(crate) trace_snapshot: Option<steady_frames::TraceSnapshot>,
 }
 
 impl VolumeFrame {

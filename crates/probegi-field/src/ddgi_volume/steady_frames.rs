@@ -37,11 +37,24 @@
 //! or through the volume's public fields makes the next plan a full one; so
 //! does an update left unfinished (the snapshot stands for a plan whose
 //! blend ran). Left out (always a full plan): the usage and
-//! screen schemes (their states move with the hits and the camera), a ray
-//! budget (its choice moves every frame), the shadowing field (its pairs of
-//! frames), the per-probe hysteresis ramp (a probe's cap moves with its
-//! blends), probes reset or seeded since the last blend, and Newly Awake /
-//! Newly Vigilant probes.
+//! screen schemes (their states move with the hits and the camera; but see
+//! below), a ray budget (its choice moves every frame), the shadowing field
+//! (its pairs of frames), the per-probe hysteresis ramp (a probe's cap moves
+//! with its blends), probes reset or seeded since the last blend, and Newly
+//! Awake / Newly Vigilant probes.
+//!
+//! **The usage scheme's kept trace.** Under the usage scheme every probe
+//! traces every frame (seed 003 §6.1: Dead probes too, to see them
+//! uncovered), while the states, and so which probes blend and with what
+//! hysteresis, move with the counts every frame. Its trace plan alone is
+//! kept ([`TraceSnapshot`]): where every probe of every volume still traces
+//! and the positions, grid, window edges and settings are as at the last
+//! full plan, the batch keeps its probes, first rays and records'
+//! identities (`GeneratedProbeRays::plan_id`, so a device keeps the ray
+//! generation's and the usage pass's records) with the frame's rotation, and
+//! the rest of the update (the classification, which probes need radiance,
+//! the blend plan, the bookkeeping after the blend) runs in full, as it
+//! would have.
 
 use glam::IVec3;
 use probegi_core::ddgi_settings::{DdgiVolumeSettings, ProbeStatesMode};
@@ -60,6 +73,20 @@ pub(crate) struct PlanSnapshot {
     /// every write to them and by `DdgiFieldSet::volumes_mut`), in place of
     /// a copy: the largest of the arrays, compared every still frame.
     probe_rows_id: u64,
+    grid: ProbeGrid,
+    scroll_leading: IVec3,
+    stream: u64,
+    settings: DdgiVolumeSettings,
+}
+
+/// What a volume's last full update plan read for its trace alone, under the
+/// usage scheme (see the module docs): with every probe tracing, its batch
+/// entries depend on nothing else. The positions are a copy, compared bit
+/// for bit, not the rows' identity (`DdgiVolume::probe_rows_id`), which the
+/// usable flags renew as the states move.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct TraceSnapshot {
+    probe_positions: Vec<glam::Vec3>,
     grid: ProbeGrid,
     scroll_leading: IVec3,
     stream: u64,
@@ -180,10 +207,70 @@ impl DdgiVolume {
             && frame.first_ray.len() == self.grid.probe_count()
     }
 
-    /// Forgets the snapshot (and `frame`'s kept blend plan): the next plan
+    /// The trace snapshot of the plan just made in `frame` (or none): the
+    /// usage scheme, initialised, every probe tracing, no ray budget and no
+    /// shadowing field.
+    fn trace_snapshot(&self, frame: &VolumeFrame) -> Option<TraceSnapshot> {
+        let s = &self.settings;
+        let eligible = s.probe_states == ProbeStatesMode::Usage
+            && self.initialized
+            && s.ray_budget == 0
+            && self.shadow.is_none()
+            && !self.probe_pending_init.iter().any(|p| *p)
+            && frame.tracing.len() == self.grid.probe_count()
+            && frame.tracing.iter().all(|t| *t)
+            && frame.first_ray.len() == self.grid.probe_count();
+        eligible.then(|| TraceSnapshot {
+            probe_positions: self.probe_positions.clone(),
+            grid: self.grid,
+            scroll_leading: self.scroll_leading,
+            stream: self.stream,
+            settings: self.settings.clone(),
+        })
+    }
+
+    /// Whether this frame's trace plan would be the last one's (with the
+    /// frame's rotation): every probe still traces, and the volume is as its
+    /// trace snapshot says.
+    pub(crate) fn trace_plan_is_steady(&self, frame: &VolumeFrame) -> bool {
+        let Some(snap) = frame.trace_snapshot.as_ref() else { return false };
+        bits(&snap.probe_positions) == bits(&self.probe_positions)
+            && snap.grid == self.grid
+            && snap.scroll_leading == self.scroll_leading
+            && snap.stream == self.stream
+            && snap.settings == self.settings
+            && self.shadow.is_none()
+            && frame.first_ray.len() == self.grid.probe_count()
+            && !self.probe_pending_init.iter().any(|p| *p)
+            && self.probe_states.iter().all(|s| s.traces())
+    }
+
+    /// A kept trace plan's frame (the usage scheme, module docs): what
+    /// `plan_update` does but for the batch, whose probes and first rays stay:
+    /// the frame counters, which probes' states want a blend this frame, and
+    /// the frame's rays. Returns the frame's rotation.
+    pub(crate) fn plan_kept_trace_update(
+        &mut self,
+        frame: &mut VolumeFrame,
+        seed: u64,
+        frame_index: u32,
+    ) -> glam::Quat {
+        self.settle_steady_counts();
+        self.count_untraced_frames(frame);
+        let updates = ProbeState::updates_in_frame_table(frame_index, self.settings.probe_sleeping_update_interval);
+        frame.active.clear();
+        frame.active.extend(self.probe_states.iter().map(|&s| updates[s as usize]));
+        let stream = self.stream_seed(seed);
+        frame.rays = crate::probe_ray_gen::generate_probe_rays(&self.settings, stream, frame_index);
+        debug_assert_eq!(frame.ray_count, frame.rays.dirs.len());
+        crate::probe_ray_gen::probe_ray_rotation(stream, frame_index)
+    }
+
+    /// Forgets the snapshots (and `frame`'s kept blend plan): the next plan
     /// is a full one.
     pub(crate) fn forget_plan_snapshot(frame: &mut VolumeFrame) {
         frame.plan_snapshot = None;
+        frame.trace_snapshot = None;
         frame.steady_blend = None;
         frame.steady_flags = None;
     }
@@ -191,6 +278,7 @@ impl DdgiVolume {
     /// Takes the snapshot of the plan just made (or none) into `frame`.
     pub(crate) fn keep_plan_snapshot(&self, frame: &mut VolumeFrame) {
         frame.plan_snapshot = self.steady_snapshot();
+        frame.trace_snapshot = self.trace_snapshot(frame);
         frame.steady_blend = None;
         frame.steady_flags = None;
     }

@@ -191,3 +191,126 @@ fn a_kept_plan_needs_a_device_that_makes_the_rays() {
         assert_eq!(set.submit_radiance(&radiance), Ok(UpdateStep::Done));
     }
 }
+
+/// A usage-scheme grid over a 4 m box, and the counts a device would read
+/// back for `batch` (`lag` batches later): per probe entry, by probe parity
+/// and batch, so states move every few frames (Alive, Usage Sleeping and
+/// Dead all come and go).
+fn usage_grid(keep_plans: bool) -> DdgiFieldSet {
+    let grid = DdgiVolumeSettings {
+        probe_counts: UVec3::new(5, 3, 4),
+        probe_rays_per_probe: 16,
+        probe_states: ProbeStatesMode::Usage,
+        probe_alive_min_frames: 2,
+        probe_sleeping_update_interval: 3,
+        ..Default::default()
+    };
+    let mut set = DdgiFieldSet::single(DdgiVolume::new(grid, (Vec3::ZERO, Vec3::splat(4.0))));
+    set.set_update_rays_on_device(true);
+    set.set_steady_plans(keep_plans);
+    set
+}
+
+fn usage_counts(batch: u64, probes: usize) -> probegi_field::DeviceUsageCounts {
+    let counts = (0..probes as u64)
+        .map(|k| match (k + batch / 2) % 5 {
+            0 => (-6, 10, 8),   // Dead
+            1 | 2 => (3, 4, 0), // Alive
+            _ => (0, 0, 0),     // Usage Sleeping
+        })
+        .collect();
+    probegi_field::DeviceUsageCounts { batch, counts }
+}
+
+/// As [`device_update`] under the usage scheme, with the device's counts
+/// handed over `lag` batches late (`on_device`: those still there).
+fn usage_update(
+    set: &mut DdgiFieldSet,
+    frame: u32,
+    on_device: &mut std::collections::VecDeque<probegi_field::DeviceUsageCounts>,
+) -> (String, Vec<Option<u64>>, u64) {
+    set.begin_update(9, frame);
+    while set.ray_batch().kind == ProbeRayBatchKind::Initialization {
+        let misses = vec![ProbeRayHit::MISS; set.ray_batch().len()];
+        set.submit_hits(&misses).expect("init round");
+    }
+    let request = set.device_usage_request().expect("the usage scheme asks for counts");
+    on_device.push_back(usage_counts(request.batch, set.ray_batch().probes.len()));
+    let due: Vec<_> = match on_device.len() > request.lag_updates as usize {
+        true => on_device.pop_front().into_iter().collect(),
+        false => vec![],
+    };
+    let b = set.ray_batch();
+    let generated: Vec<_> =
+        b.generated.iter().map(|g| (g.volume, g.first_probe, g.probe_count, g.rays_per_probe, g.rotation)).collect();
+    let batch =
+        format!("{} {:?} {:?} {generated:?} {:?}", b.len(), b.probes, b.probe_origins_m, b.expanded().directions);
+    let record_ids = b.generated.iter().map(|g| g.plan_id).collect();
+    assert_eq!(set.submit_device_hits(&due), Ok(UpdateStep::ShadeRays));
+    let radiance_id = set.ray_batch().probe_needs_radiance_id();
+    let plan = set.device_blend_plan().expect("plan");
+    let plan = format!("{:?} {plan:?}", set.ray_batch().probe_needs_radiance);
+    assert_eq!(set.submit_device_blend(&[]), Ok(UpdateStep::Done));
+    (format!("{batch}\n{plan}"), record_ids, radiance_id)
+}
+
+#[test]
+fn a_usage_schemes_kept_trace_plan_gives_the_full_plans_batches_states_and_blends() {
+    // Under the usage scheme every probe traces every frame while the states
+    // move with the counts: the trace plan is kept (the batch's probes and
+    // records' identities), the rest planned in full, and everything equals
+    // a set that plans every frame in full, through moving states, a setting
+    // changed, a probe moved, an update left unfinished and a frame in which
+    // not every probe traces (one put Off through the public states).
+    let (mut kept, mut full) = (usage_grid(true), usage_grid(false));
+    let mut devices = [std::collections::VecDeque::new(), std::collections::VecDeque::new()];
+    // The last frame's record identities, radiance flags and their identity.
+    type Last = Option<(Vec<Option<u64>>, String, u64)>;
+    let (mut kept_frames, mut last): (Vec<u32>, Last) = (Vec::new(), None);
+    let mut states_seen = std::collections::BTreeSet::new();
+    for frame in 0..30u32 {
+        for set in [&mut kept, &mut full] {
+            match frame {
+                10 => set.volumes_mut()[0].settings.probe_hysteresis = 0.9,
+                13 => {
+                    let v = &mut set.volumes_mut()[0];
+                    v.probe_offsets[3] += Vec3::new(0.0, 0.1, 0.0);
+                    v.probe_positions[3] += Vec3::new(0.0, 0.1, 0.0);
+                }
+                16 => {
+                    set.begin_update(9, frame);
+                }
+                20 => set.volumes_mut()[0].probe_states[5] = ProbeState::Off,
+                _ => {}
+            }
+        }
+        let [dk, df] = &mut devices;
+        let (a, a_ids, a_radiance) = usage_update(&mut kept, frame, dk);
+        let (b, _, _) = usage_update(&mut full, frame, df);
+        assert_eq!(a, b, "frame {frame}: batch and blend plan");
+        assert_eq!(format!("{:?}", kept.volumes()), format!("{:?}", full.volumes()), "frame {frame}: volumes");
+        assert!(!full.update_kept_trace_plan() && !kept.update_kept_plan());
+        states_seen.extend(kept.volumes()[0].state_counts().into_keys());
+        let flags = format!("{:?}", kept.ray_batch().probe_needs_radiance);
+        let before = last.replace((a_ids.clone(), flags.clone(), a_radiance));
+        if kept.update_kept_trace_plan() {
+            kept_frames.push(frame);
+            let (ids, last_flags, last_radiance) = before.expect("a frame before");
+            assert_eq!(a_ids, ids, "frame {frame}: a kept trace keeps its records' identities");
+            // The flags' identity: the same where the flags repeat, new where not.
+            assert_eq!(flags == last_flags, a_radiance == last_radiance, "frame {frame}: radiance flags' identity");
+        } else if let Some((ids, _, last_radiance)) = before {
+            assert!(ids.iter().all(|r| !a_ids.contains(r)), "frame {frame}: a full plan's records are new");
+            assert_ne!(a_radiance, last_radiance, "frame {frame}");
+        }
+    }
+    // Frame 0 initialises and plans; 10 changes a setting, 13 moves a probe,
+    // 16 follows an unfinished update; at 20 a probe is Off, so it traces
+    // not, and the counts traced before (two batches late) classify it
+    // again in the same update: 21 plans it back in, and 22 keeps that.
+    let want: Vec<u32> = (1..30).filter(|f| ![10, 13, 16, 20, 21].contains(f)).collect();
+    assert_eq!(kept_frames, want);
+    for state in ["alive", "sleeping", "dead"] {
+        assert!(states_seen.iter().any(|s| s.contains(state)), "{state} never seen: {states_seen:?}");
+    }
+}

@@ -249,6 +249,41 @@ fn a_screen_scheme_frame_makes_no_batch_buffer_or_bind_group_while_its_batch_siz
     }
 }
 
+/// Under the usage scheme every probe traces every frame and the usage pass
+/// counts each batch's hits on the device (`probegi_wgpu::probe_usage`): its
+/// inputs, its output (copied behind it into a staging buffer the late
+/// read-back reuses) and its bind group are kept from frame to frame, so a
+/// steady frame makes no buffer and no bind group, and waits for nothing.
+/// The pass made its output buffer and a bind group every frame before.
+#[test]
+fn a_usage_scheme_frame_makes_no_buffer_or_bind_group_and_waits_for_nothing() {
+    let scene = probegi_scene::builtin::cornell_box();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let Some(gpu) = tracer(&scene, true) else { return };
+    let mut s = settings(32, 0, Vec::new(), &gpu);
+    if let GiMethod::Ddgi(v) = &mut s.gi {
+        v.probe_states = ProbeStatesMode::Usage;
+        assert!(v.probe_usage_lag_updates > 0, "the default reads the counts late");
+    }
+    s.device_readback_lag_frames = 2;
+    let camera = CameraRays::new(&scene.camera.expect("camera"), 32, 32);
+    let mut stepper = FrameStepper::new(&scene, &bvh, &camera, &s);
+    for _ in 0..12 {
+        stepper.advance(&camera).expect("frame");
+    }
+    gpu.ctx.wait().expect("the device finishes what was submitted");
+    for frame in 0..8 {
+        let before = gpu.ctx.counters();
+        stepper.advance(&camera).expect("frame");
+        let c = gpu.ctx.counters() - before;
+        gpu.ctx.wait().expect("the device finishes the frame");
+        assert_eq!(c.submissions, 1, "frame {frame}: one submission a frame: {c:?}");
+        assert_eq!(c.buffers_made, 0, "frame {frame}: a steady usage frame made buffers: {c:?}");
+        assert_eq!(c.bind_groups_made, 0, "frame {frame}: a steady usage frame made bind groups: {c:?}");
+        assert_eq!(c.blocking_waits, 0, "frame {frame}: a usage frame waited for its counts: {c:?}");
+    }
+}
+
 /// The device's tone map (`read_rgba8`, the frame compose pass) is
 /// `probegi_core::color::tonemap_rgb8` of the frame, code for code but where
 /// `pow` in the sRGB curve, which WGSL computes as exp2(y·log2 x) to a few

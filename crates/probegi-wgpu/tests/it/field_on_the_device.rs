@@ -652,6 +652,71 @@ fn the_initialisation_rounds_run_chained_in_one_submission_with_one_read_back() 
 }
 
 #[test]
+fn a_usage_schemes_kept_trace_on_the_device_blends_as_full_plans() {
+    // Under the usage scheme a still field keeps its trace plan alone
+    // (`DdgiFieldSet::update_kept_trace_plan`): the batch's probe records
+    // and their identities stay, so the device keeps the ray generation's
+    // and the usage pass's records, while the states, the shade's radiance
+    // flags (their own identity, `ProbeRayBatch::probe_needs_radiance_id`)
+    // and the blend plan move every frame. Against the same device passes
+    // planned every frame in full (`set_steady_plans(false)`), the states and
+    // the atlases are bit-identical; a shade that kept stale radiance flags
+    // would leave the Usage Sleeping probes' rays unshaded (zero radiance) in
+    // the frames they blend, and differ. The two sets run one after the other:
+    // on one device (the tests share one) their kept records would replace
+    // each other's every frame and hide a stale one.
+    let scene = probegi_scene::builtin::cornell_box();
+    let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
+    let (Some(kept), Some(full)) = (gpu_generating(&scene, &bvh, true, true), gpu_generating(&scene, &bvh, true, true))
+    else {
+        return;
+    };
+    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
+    // 12³ probes in the box: the inner ones see few hits within a cage
+    // diagonal, so some sleep (Usage Sleeping blends every third frame).
+    let settings = DdgiVolumeSettings {
+        probe_counts: UVec3::splat(12),
+        probe_rays_per_probe: 16,
+        probe_states: ProbeStatesMode::Usage,
+        probe_sleeping_update_interval: 3,
+        probe_alive_min_frames: 2,
+        ..Default::default()
+    };
+    let bounds = scene.bounds().expect("geometry");
+    let mut sets = [0, 1].map(|_| DdgiFieldSet::single(DdgiVolume::new(settings.clone(), bounds)));
+    sets[1].set_steady_plans(false);
+    let mut runs = Vec::new();
+    for (set, t) in sets.iter_mut().zip([&kept, &full]) {
+        let (mut kept_frames, mut states, mut flags) = (0, Vec::new(), Vec::new());
+        for f in 0..16 {
+            if f == 7 {
+                // A full plan off the sleepers' phase: its records say that
+                // the Usage Sleeping probes need no radiance (frame 0's all do).
+                set.volumes_mut()[0].settings.probe_hysteresis = 0.96;
+            }
+            set.update_traced_by(&scene, &bvh, Some(t), &direct, 5, f, &mut BTreeMap::new()).expect("update");
+            kept_frames += set.update_kept_trace_plan() as u32;
+            states.push(set.volumes()[0].probe_states.clone());
+            flags.push(set.ray_batch().probe_needs_radiance.clone());
+        }
+        set.sync_host_atlases(Some(t)).expect("read back");
+        runs.push((kept_frames, states, flags));
+    }
+    let [(kept_frames, states, flags), (full_kept, full_states, full_flags)] = <[_; 2]>::try_from(runs).expect("two");
+    assert_eq!(full_kept, 0);
+    assert_eq!(kept_frames, 14, "every frame but 0 and 7 keeps its trace");
+    assert_eq!(states, full_states, "states frame by frame");
+    assert_eq!(flags, full_flags, "radiance flags frame by frame");
+    // Flags that turn on under a kept trace: what stale records would miss.
+    let turned_on = flags.windows(2).filter(|w| w[0].iter().zip(&w[1]).any(|(a, b)| !a && *b)).count();
+    assert!(turned_on >= 3, "probes' radiance flags turned on in {turned_on} frames: the test shows nothing");
+    let (a, b) = (&sets[0].volumes()[0], &sets[1].volumes()[0]);
+    eprintln!("needed per frame {:?}", flags.iter().map(|f| f.iter().filter(|x| **x).count()).collect::<Vec<_>>());
+    eprintln!("kept traces {kept_frames}, flags turned on in {turned_on} frames, states {:?}", a.state_counts());
+    assert_eq!(max_difference(a, b), (0.0, 0.0), "kept traces against full plans on the device");
+}
+
+#[test]
 fn kept_plans_on_the_device_blend_as_full_plans_through_a_shading_change() {
     // A still field keeps its plan (`DdgiFieldSet::update_kept_plan`), and
     // the device keeps what it made of it: the ray generation's, the shade's
