@@ -456,8 +456,10 @@ impl DdgiFieldSet {
     /// ([`Self::set_update_rays_on_device`]), with no host shadow rays, and
     /// after an update that was finished. Without, every update is planned in
     /// full; both give the same batches, blend plans and volumes (but for the
-    /// plans' identities, `GeneratedProbeRays::plan_id` and
-    /// `DeviceVolumeBlend::probe_blend_id`).
+    /// plans' identities, `GeneratedProbeRays::plan_id`,
+    /// `DeviceVolumeBlend::probe_blend_id` and
+    /// `ProbeRayBatch::probe_needs_radiance_id`). The same switch keeps the
+    /// usage scheme's trace plan alone ([`Self::update_kept_trace_plan`]).
     pub fn set_steady_plans(&mut self, keep: bool) {
         self.steady_plans = keep;
     }

@@ -87,11 +87,12 @@ pub struct GeneratedProbeRays {
     /// The records' identity, where the field set made them
     /// (`device_plans::next_plan_id`, unique in the process): two batches
     /// whose entries carry the same `Some` id hold the same probes, origins,
-    /// first rays, counts and max distance for it (a steady frame keeps them;
-    /// the rotation may turn), and once the batch is traced the same
-    /// `probe_needs_radiance` flags under the same volume settings, so a
-    /// device may keep what it made of them (the ray generation's and the
-    /// shade's per-probe records).
+    /// first rays, counts and max distance for it (a steady frame or a kept
+    /// trace plan keeps them; the rotation may turn), so a device may keep
+    /// what it made of them (the ray generation's and the usage pass's
+    /// per-probe records). The `probe_needs_radiance` flags have an identity
+    /// of their own ([`ProbeRayBatch::probe_needs_radiance_id`]): a kept
+    /// trace plan keeps this id while they change.
     /// `None`: no identity (a device packs the records again).
     pub plan_id: Option<u64>,
 }
@@ -233,7 +234,10 @@ impl ProbeRayBatch {
     /// (`GeneratedProbeRays::plan_id`) and this, equal identities mean equal
     /// flags. Drawn anew (`device_plans::next_plan_id`) whenever the set
     /// writes other flags (a kept trace plan's batch keeps its probes and
-    /// record identities while the flags move with the states).
+    /// record identities while the flags move with the states). It holds for
+    /// batches as the set made them: a caller that writes the public flags
+    /// of a batch it holds, or builds one (`Default`: 0), gives its device
+    /// no identity to trust.
     pub fn probe_needs_radiance_id(&self) -> u64 {
         self.radiance_id
     }

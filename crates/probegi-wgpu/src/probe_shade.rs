@@ -56,8 +56,10 @@ const _: () = assert!(std::mem::size_of::<ShadeProbe>() == 16);
 /// The shade pass's per-probe records as [`GpuProbeShade::shade_on_device`]
 /// takes them: `count` records, made by `records` only where the device
 /// does not hold them already. With `ids` (a kept plan's: one plan id per
-/// volume of the batch, `GeneratedProbeRays::plan_id`), records last
-/// written under the same ids stand, and `records` is not called.
+/// volume of the batch, `GeneratedProbeRays::plan_id`, then the batch's
+/// `ProbeRayBatch::probe_needs_radiance_id`, since each record carries its
+/// probe's flag), records last written under the same ids stand, and
+/// `records` is not called.
 pub struct ShadeProbes<'a> {
     /// How many records there are.
     pub count: usize,

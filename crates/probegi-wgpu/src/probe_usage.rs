@@ -27,7 +27,10 @@ use crate::shader_registry::PROBE_USAGE;
 pub(crate) struct UsageParams {
     pub(crate) probe_count: u32,
     pub(crate) groups_x: u32,
-    pub(crate) _pad: [u32; 2],
+    /// The cage diagonals given: the kept buffer may hold more from an
+    /// earlier batch, which the shader must not read.
+    pub(crate) diagonal_count: u32,
+    pub(crate) _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<UsageParams>() == 16);
 
@@ -81,8 +84,12 @@ impl GpuProbeUsage {
     /// `buffer_identified`, `scratch_buffer`, `bind_group_kept`): a still
     /// field's batch (`records_id`: the batch's `GeneratedProbeRays::plan_id`s,
     /// equal for equal records) uploads and makes nothing. The output is read
-    /// by the copy `counts_late` records behind the pass, in the same
-    /// submission, so the next batch's pass may write it again.
+    /// by the copy `counts_late` records behind the pass (in the same
+    /// submission while the context defers; otherwise the next one, before
+    /// any later pass), so the next batch's pass may write it again. (One
+    /// thread records a set's update; two threads recording usage passes on
+    /// one context at once could interleave a pass between another's pass
+    /// and its copy.)
     fn record(
         &self,
         ctx: &GpuContext,
@@ -100,7 +107,12 @@ impl GpuProbeUsage {
             }
         }
         let (gx, gy) = dispatch_2d(probes.len() as u32);
-        let params = UsageParams { probe_count: probes.len() as u32, groups_x: gx, _pad: [0; 2] };
+        let params = UsageParams {
+            probe_count: probes.len() as u32,
+            groups_x: gx,
+            diagonal_count: cage_diagonals_m.len() as u32,
+            _pad: 0,
+        };
         let storage = wgpu::BufferUsages::STORAGE;
         let params = ctx.buffer_rewritten("usage params", 0, bytemuck::bytes_of(&params), wgpu::BufferUsages::UNIFORM);
         let records = || {
@@ -111,7 +123,8 @@ impl GpuProbeUsage {
             Ok(bytemuck::cast_slice(probes).to_vec())
         };
         let rows = ctx.buffer_identified("usage probes", 0, records_id, records, storage)?;
-        // An empty table still binds one entry; the shader reads 0 for it, as past the end.
+        // An empty table still binds one entry; the shader reads 0 past
+        // `diagonal_count`, as for no table.
         let diagonals = if cage_diagonals_m.is_empty() { &[0.0][..] } else { cage_diagonals_m };
         let diagonals = ctx.buffer_rewritten("usage cage diagonals", 0, bytemuck::cast_slice(diagonals), storage);
         let out_usage = storage | wgpu::BufferUsages::COPY_SRC;

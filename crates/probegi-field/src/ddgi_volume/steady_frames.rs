@@ -257,6 +257,8 @@ impl DdgiVolume {
     ) -> glam::Quat {
         self.settle_steady_counts();
         self.count_untraced_frames(frame);
+        // Every probe traces (the snapshot's and the check's condition).
+        self.traced_probes_last = self.grid.probe_count();
         let updates = ProbeState::updates_in_frame_table(frame_index, self.settings.probe_sleeping_update_interval);
         frame.active.clear();
         frame.active.extend(self.probe_states.iter().map(|&s| updates[s as usize]));

@@ -9,8 +9,10 @@
 struct UsageParams {
     probe_count: u32,
     groups_x: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // Entries of `usage_cage_diagonals_m` (the buffer, kept from batch to
+    // batch, may hold more).
+    diagonal_count: u32,
+    _pad: u32,
 };
 
 struct UsageHit {
@@ -33,7 +35,7 @@ struct UsageProbe {
 @group(0) @binding(1) var<storage, read> usage_hits: array<UsageHit>;
 // The batch's probes.
 @group(0) @binding(2) var<storage, read> usage_probes: array<UsageProbe>;
-// Per volume: its cage diagonal r (m); a volume past the end has r = 0.
+// Per volume: its cage diagonal r (m); a volume past `diagonal_count` has r = 0.
 @group(0) @binding(3) var<storage, read> usage_cage_diagonals_m: array<f32>;
 // Per batch probe: usage, relevant samples, backfaces, 0.
 @group(0) @binding(4) var<storage, read_write> usage_counts: array<vec4<i32>>;
@@ -48,7 +50,7 @@ fn probe_usage(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_
     }
     let probe = usage_probes[p];
     var r = 0.0;
-    if (probe.volume < arrayLength(&usage_cage_diagonals_m)) {
+    if (probe.volume < usage_params.diagonal_count) {
         r = usage_cage_diagonals_m[probe.volume];
     }
     var usage = 0i;
