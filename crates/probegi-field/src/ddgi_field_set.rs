@@ -599,14 +599,7 @@ impl DdgiFieldSet {
     /// and each volume counts its probes' untraced frames. Returns whether it
     /// did.
     fn keep_steady_plan(&mut self) -> bool {
-        let kept = self.steady_plans
-            && self.update_rays_on_device
-            && !self.has_host_shadow_rays()
-            && self.ray_budget() == 0
-            && self.batch.kind == ProbeRayBatchKind::Update
-            && !self.batch.planned_with_ray_arrays()
-            && self.batch.generated.iter().map(|g| g.volume as usize).eq(0..self.volumes.len())
-            && self.volumes.iter().zip(&self.frames).all(|(v, f)| v.plan_is_steady(f));
+        let kept = self.batch_may_be_kept() && self.volumes.iter().zip(&self.frames).all(|(v, f)| v.plan_is_steady(f));
         self.plan_kept = kept;
         if !kept {
             return false;
@@ -618,20 +611,28 @@ impl DdgiFieldSet {
         true
     }
 
-    /// Keeps the last update's trace plan alone where every volume's trace
-    /// would repeat it (the usage scheme, `ddgi_volume::steady_frames`): the
-    /// batch's probes, first rays and records' identities stay, its rays take
-    /// the frame's rotation, and each volume plans the rest of the frame
-    /// (counters, which probes' states want a blend). Returns whether it did.
-    fn keep_trace_plan(&mut self) -> bool {
-        let kept = self.steady_plans
+    /// What a kept plan or kept trace asks of the set and of the last batch:
+    /// steady plans on, rays made on the device, no host shadow rays, no
+    /// ray budget, and an update batch planned without per-ray arrays with
+    /// one generated entry per volume, in order.
+    fn batch_may_be_kept(&self) -> bool {
+        self.steady_plans
             && self.update_rays_on_device
             && !self.has_host_shadow_rays()
             && self.ray_budget() == 0
             && self.batch.kind == ProbeRayBatchKind::Update
             && !self.batch.planned_with_ray_arrays()
             && self.batch.generated.iter().map(|g| g.volume as usize).eq(0..self.volumes.len())
-            && self.volumes.iter().zip(&self.frames).all(|(v, f)| v.trace_plan_is_steady(f));
+    }
+
+    /// Keeps the last update's trace plan alone where every volume's trace
+    /// would repeat it (the usage scheme, `ddgi_volume::steady_frames`): the
+    /// batch's probes, first rays and records' identities stay, its rays take
+    /// the frame's rotation, and each volume plans the rest of the frame
+    /// (counters, which probes' states want a blend). Returns whether it did.
+    fn keep_trace_plan(&mut self) -> bool {
+        let kept =
+            self.batch_may_be_kept() && self.volumes.iter().zip(&self.frames).all(|(v, f)| v.trace_plan_is_steady(f));
         self.trace_kept = kept;
         if !kept {
             return false;

@@ -210,6 +210,17 @@ fn a_steady_frame_waits_for_nothing_and_reads_back_no_pixel() {
     assert_eq!(per_size[0][0].submissions, per_size[1][0].submissions);
 }
 
+/// [`settings`] for a 32 × 32 still frame under probe states `states`, with
+/// the viewer's read-back lag (2 frames).
+fn scheme_settings(states: ProbeStatesMode, gpu: &Arc<WgpuProbeTracer>) -> RenderSettings {
+    let mut s = settings(32, 0, Vec::new(), gpu);
+    if let GiMethod::Ddgi(v) = &mut s.gi {
+        v.probe_states = states;
+    }
+    s.device_readback_lag_frames = 2;
+    s
+}
+
 /// Under the screen scheme (the cascades' default) a still camera's field
 /// traces the probes whose request countdowns ran out, so its batch changes
 /// size from frame to frame: the batches, buffers and bind groups of the
@@ -220,11 +231,7 @@ fn a_screen_scheme_frame_makes_no_batch_buffer_or_bind_group_while_its_batch_siz
     let scene = probegi_scene::builtin::cornell_box();
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let Some(gpu) = tracer(&scene, true) else { return };
-    let mut s = settings(32, 0, Vec::new(), &gpu);
-    if let GiMethod::Ddgi(v) = &mut s.gi {
-        v.probe_states = ProbeStatesMode::Screen;
-    }
-    s.device_readback_lag_frames = 2;
+    let s = scheme_settings(ProbeStatesMode::Screen, &gpu);
     let camera = CameraRays::new(&scene.camera.expect("camera"), 32, 32);
     let mut stepper = FrameStepper::new(&scene, &bvh, &camera, &s);
     for _ in 0..24 {
@@ -260,12 +267,9 @@ fn a_usage_scheme_frame_makes_no_buffer_or_bind_group_and_waits_for_nothing() {
     let scene = probegi_scene::builtin::cornell_box();
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let Some(gpu) = tracer(&scene, true) else { return };
-    let mut s = settings(32, 0, Vec::new(), &gpu);
-    if let GiMethod::Ddgi(v) = &mut s.gi {
-        v.probe_states = ProbeStatesMode::Usage;
-        assert!(v.probe_usage_lag_updates > 0, "the default reads the counts late");
-    }
-    s.device_readback_lag_frames = 2;
+    let s = scheme_settings(ProbeStatesMode::Usage, &gpu);
+    let GiMethod::Ddgi(v) = &s.gi else { panic!("a DDGI render") };
+    assert!(v.probe_usage_lag_updates > 0, "the default reads the counts late");
     let camera = CameraRays::new(&scene.camera.expect("camera"), 32, 32);
     let mut stepper = FrameStepper::new(&scene, &bvh, &camera, &s);
     for _ in 0..12 {

@@ -301,6 +301,16 @@ fn probe_changes_come_back_late_and_a_budgeted_update_never_waits_for_them() {
     }
 }
 
+/// A usage-scheme set (`usage_settings`) over `scene`, its frame 0 updated
+/// on `device` and frame 1's update batch planned (to trace).
+fn usage_set_at_frame_1(scene: &Scene, bvh: &BvhTracer, device: &WgpuProbeTracer) -> DdgiFieldSet {
+    let direct = DirectLighting::new(scene, bvh, DirectSettings::default());
+    let mut set = DdgiFieldSet::single(DdgiVolume::new(usage_settings(), scene.bounds().expect("geometry")));
+    set.update_traced_by(scene, bvh, Some(device), &direct, 3, 0, &mut BTreeMap::new()).expect("frame 0");
+    assert_eq!(set.begin_update(3, 1), UpdateStep::TraceRays);
+    set
+}
+
 #[test]
 fn a_batch_counted_again_comes_back_once() {
     // An update that fails after the count is retried under the same batch
@@ -309,10 +319,7 @@ fn a_batch_counted_again_comes_back_once() {
     let scene = probegi_scene::builtin::cornell_box();
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let Some(device) = gpu(&scene, &bvh, true) else { return };
-    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
-    let mut set = DdgiFieldSet::single(DdgiVolume::new(usage_settings(), scene.bounds().expect("geometry")));
-    set.update_traced_by(&scene, &bvh, Some(&device), &direct, 3, 0, &mut BTreeMap::new()).expect("frame 0");
-    assert_eq!(set.begin_update(3, 1), UpdateStep::TraceRays);
+    let set = usage_set_at_frame_1(&scene, &bvh, &device);
     let request = set.device_usage_request().expect("usage");
     let dev: &dyn probegi_field::DeviceField = &device;
     let count = |request: &DeviceUsageRequest| {
@@ -333,11 +340,7 @@ fn gpu_usage_counts_equal_the_core_function_over_the_same_hits() {
     let scene = probegi_scene::builtin::cornell_box();
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let Some(device) = gpu(&scene, &bvh, true) else { return };
-    let settings = usage_settings();
-    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
-    let mut set = DdgiFieldSet::single(DdgiVolume::new(settings, scene.bounds().expect("geometry")));
-    set.update_traced_by(&scene, &bvh, Some(&device), &direct, 3, 0, &mut BTreeMap::new()).expect("frame 0");
-    assert_eq!(set.begin_update(3, 1), UpdateStep::TraceRays);
+    let set = usage_set_at_frame_1(&scene, &bvh, &device);
     assert_eq!(set.hits_needed_on_host(), HostHits::ProbeUsage);
     let diagonal = set.volumes()[0].grid.spacing_m.length();
     // Lag 0: this batch's own counts, read back at once.
@@ -379,10 +382,7 @@ fn the_usage_pass_reads_no_cage_diagonal_past_the_table_it_is_given() {
     let scene = probegi_scene::builtin::cornell_box();
     let bvh = BvhTracer::for_scene(&scene, BvhSettings::default());
     let Some(device) = gpu(&scene, &bvh, true) else { return };
-    let direct = DirectLighting::new(&scene, &bvh, DirectSettings::default());
-    let mut set = DdgiFieldSet::single(DdgiVolume::new(usage_settings(), scene.bounds().expect("geometry")));
-    set.update_traced_by(&scene, &bvh, Some(&device), &direct, 3, 0, &mut BTreeMap::new()).expect("frame 0");
-    assert_eq!(set.begin_update(3, 1), UpdateStep::TraceRays);
+    let set = usage_set_at_frame_1(&scene, &bvh, &device);
     // The batch's probes as a second volume's, with no identity to keep them by.
     let mut batch = set.ray_batch().clone();
     batch.probes.iter_mut().for_each(|p| p.volume = 1);
