@@ -83,16 +83,18 @@ impl LateReadback {
     }
 
     /// The results of set `set_id` from batches up to `last_batch`, oldest
-    /// first, as bytes (empty for an empty result), with their keys; starts
+    /// first, each as `decode` makes it of its bytes (empty for an empty
+    /// result), read where they are mapped (no copy first), with their keys; starts
     /// the maps of every result submitted since the last call. Other sets'
     /// results beyond [`SLOTS_KEPT`] are let go, oldest first. On an error
     /// the results already read are lost: the set takes nothing from them.
-    pub(crate) fn take_due(
+    pub(crate) fn take_due<T>(
         &mut self,
         ctx: &GpuContext,
         set_id: u64,
         last_batch: u64,
-    ) -> Result<Vec<(LateKey, Vec<u8>)>, GpuError> {
+        decode: impl Fn(&[u8]) -> T,
+    ) -> Result<Vec<(LateKey, T)>, GpuError> {
         let submitted = ctx.queue_submissions();
         for slot in self.slots.iter_mut().filter(|s| s.submission.is_none() && submitted > s.recorded_at) {
             slot.start_map(ctx.last_submission());
@@ -102,7 +104,7 @@ impl LateReadback {
         while let Some(i) = self.slots.iter().position(due) {
             let Some(slot) = self.slots.remove(i) else { break };
             let key = slot.key;
-            out.push((key, self.read(ctx, slot)?));
+            out.push((key, self.read(ctx, slot, &decode)?));
         }
         while self.slots.len() > SLOTS_KEPT {
             let Some(i) = self.slots.iter().position(|s| s.key.set_id != set_id) else { break };
@@ -126,11 +128,11 @@ impl LateReadback {
         })
     }
 
-    /// A due result's bytes: submitted first if its copy is still deferred,
-    /// waited for if the device has not finished it.
-    fn read(&mut self, ctx: &GpuContext, mut slot: Slot) -> Result<Vec<u8>, GpuError> {
+    /// A due result's bytes, `decode`d: submitted first if its copy is still
+    /// deferred, waited for if the device has not finished it.
+    fn read<T>(&mut self, ctx: &GpuContext, mut slot: Slot, decode: impl Fn(&[u8]) -> T) -> Result<T, GpuError> {
         if slot.buffer.is_none() {
-            return Ok(Vec::new());
+            return Ok(decode(&[]));
         }
         if slot.submission.is_none() {
             slot.start_map(ctx.flush());
@@ -147,7 +149,7 @@ impl LateReadback {
             (Some(buffer), true) => {
                 let view = buffer.slice(..).get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
                 ctx.count_read_back(view.len() as u64);
-                Ok(view.to_vec())
+                Ok(decode(&view))
             }
             _ => Err(GpuError::Readback("a late result could not be mapped".into())),
         };

@@ -73,15 +73,8 @@ impl GpuProbeChange {
     pub fn take_due(&self, ctx: &GpuContext, key: &DeviceChangeKey) -> Result<Vec<DeviceProbeChanges>, GpuError> {
         let Some(last) = key.batch.checked_sub(key.lag_updates as u64) else { return Ok(Vec::new()) };
         let mut ring = self.readback.lock().unwrap_or_else(|e| e.into_inner());
-        let due = ring.take_due(ctx, key.set_id, last)?;
-        Ok(due
-            .into_iter()
-            .map(|(k, bytes)| DeviceProbeChanges {
-                volume: k.part,
-                batch: k.batch,
-                changes: bytemuck::pod_collect_to_vec::<u8, f32>(&bytes),
-            })
-            .collect())
+        let due = ring.take_due(ctx, key.set_id, last, bytemuck::pod_collect_to_vec::<u8, f32>)?;
+        Ok(due.into_iter().map(|(k, changes)| DeviceProbeChanges { volume: k.part, batch: k.batch, changes }).collect())
     }
 
     /// Records the change pass over `probes`; its output (4 bytes a probe),

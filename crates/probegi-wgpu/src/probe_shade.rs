@@ -55,18 +55,35 @@ const _: () = assert!(std::mem::size_of::<ShadeProbe>() == 16);
 
 /// The shade pass's per-probe records as [`GpuProbeShade::shade_on_device`]
 /// takes them: `count` records, made by `records` only where the device
-/// does not hold them already. With `ids` (a kept plan's: one plan id per
-/// volume of the batch, `GeneratedProbeRays::plan_id`, then the batch's
-/// `ProbeRayBatch::probe_needs_radiance_id`, since each record carries its
-/// probe's flag), records last written under the same ids stand, and
-/// `records` is not called.
+/// does not hold them already, and each probe's radiance flag apart. With
+/// `ids` (a kept plan's: one plan id per volume of the batch,
+/// `GeneratedProbeRays::plan_id`), records last written under the same ids
+/// stand, and `records` is not called. The flags move where the records do
+/// not (the usage scheme's states, a sleeping probe's phase), so they go up
+/// on their own: one bit a probe ([`radiance_bits`]), kept while
+/// `radiance_id` repeats (`ProbeRayBatch::probe_needs_radiance_id`).
 pub struct ShadeProbes<'a> {
     /// How many records there are.
     pub count: usize,
     /// The records' identity, where they have one.
     pub ids: Option<&'a [u64]>,
-    /// Makes the records.
+    /// Makes the records (their `info` without the radiance flag, bit 31;
+    /// a flag set there still counts).
     pub records: &'a dyn Fn() -> Vec<ShadeProbe>,
+    /// Per record, whether its probe's radiance is needed (past the end: not).
+    pub radiance: &'a [bool],
+    /// The flags' identity, where they have one (equal ids, equal flags).
+    pub radiance_id: Option<u64>,
+}
+
+/// One bit per record of `flags` (record k: bit k % 32 of word k / 32), as
+/// `probe_shade.wgsl` reads `shade_probe_radiance`; at least one word.
+pub fn radiance_bits(flags: &[bool], count: usize) -> Vec<u32> {
+    let mut words = vec![0u32; count.div_ceil(32).max(1)];
+    for (k, _) in flags.iter().take(count).enumerate().filter(|(_, f)| **f) {
+        words[k / 32] |= 1 << (k % 32);
+    }
+    words
 }
 
 /// Shading flags of `probe_shade.wgsl`'s `ShadeProbe::info`: whether the
@@ -102,27 +119,29 @@ pub fn batch_shade_probes(
     batch: &probegi_field::seam::ProbeRayBatch,
     volumes: &[probegi_field::ddgi_volume::DdgiVolume],
 ) -> Vec<ShadeProbe> {
-    // Per volume once: its flags with and without radiance needed, and its hit-AO reach.
-    let per_volume: Vec<([u32; 2], u32)> = volumes
-        .iter()
-        .map(|v| {
-            let info = [volume_shade_info(false, &v.settings), volume_shade_info(true, &v.settings)];
-            (info, hit_ao_radius_m(v).to_bits())
-        })
-        .collect();
+    let mut records = batch_shade_records(batch, volumes);
+    for (r, _) in records.iter_mut().zip(&batch.probe_needs_radiance).filter(|(_, needed)| **needed) {
+        r.info |= shade_info(true, false, 0, 0);
+    }
+    records
+}
+
+/// [`batch_shade_probes`] without the radiance flags (which
+/// [`ShadeProbes::radiance`] carries apart): what stays while a kept plan's
+/// probes keep their rays and volumes.
+pub fn batch_shade_records(
+    batch: &probegi_field::seam::ProbeRayBatch,
+    volumes: &[probegi_field::ddgi_volume::DdgiVolume],
+) -> Vec<ShadeProbe> {
+    // Per volume once: its flags and its hit-AO reach.
+    let per_volume: Vec<(u32, u32)> =
+        volumes.iter().map(|v| (volume_shade_info(false, &v.settings), hit_ao_radius_m(v).to_bits())).collect();
     batch
         .probes
         .iter()
-        .enumerate()
-        .map(|(k, bp)| {
+        .map(|bp| {
             let (info, hit_ao_radius_bits) = per_volume[bp.volume as usize];
-            let needed = batch.probe_needs_radiance.get(k).copied().unwrap_or(false);
-            ShadeProbe {
-                first_ray: bp.first_ray,
-                ray_count: bp.ray_count,
-                info: info[needed as usize],
-                hit_ao_radius_bits,
-            }
+            ShadeProbe { first_ray: bp.first_ray, ray_count: bp.ray_count, info, hit_ao_radius_bits }
         })
         .collect()
 }
@@ -152,14 +171,14 @@ pub struct GpuProbeShade {
 }
 
 impl GpuProbeShade {
-    /// Storage buffers the pass binds per stage: its own 4, the BVH's, the
+    /// Storage buffers the pass binds per stage: its own 5, the BVH's, the
     /// field's and the scene's.
-    pub const STORAGE_BUFFERS: u32 = 4 + BVH_STORAGE_BUFFERS + FIELD_STORAGE_BUFFERS + SCENE_STORAGE_BUFFERS;
+    pub const STORAGE_BUFFERS: u32 = 5 + BVH_STORAGE_BUFFERS + FIELD_STORAGE_BUFFERS + SCENE_STORAGE_BUFFERS;
 
     /// The pipeline on `ctx`; an error where the device binds too few storage buffers.
     pub fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         ctx.check_pipeline(Self::STORAGE_BUFFERS, "the probe shade pass")?;
-        let layout = ctx.pass_layout("probe shade", &[true, true, true, false]);
+        let layout = ctx.pass_layout("probe shade", &[true, true, true, false, true]);
         let bvh = bvh_bind_group_layout(&ctx.device);
         let field = GpuDdgiField::bind_group_layout(&ctx.device);
         let scene = scene_bind_group_layout(&ctx.device);
@@ -187,7 +206,14 @@ impl GpuProbeShade {
         if batch.ray_count == 0 {
             return Ok(vec![]);
         }
-        let probes = ShadeProbes { count: probes.len(), ids: None, records: &|| probes.to_vec() };
+        let radiance: Vec<bool> = probes.iter().map(|p| p.info & shade_info(true, false, 0, 0) != 0).collect();
+        let probes = ShadeProbes {
+            count: probes.len(),
+            ids: None,
+            records: &|| probes.to_vec(),
+            radiance: &radiance,
+            radiance_id: None,
+        };
         let results = self.shade_on_device(ctx, bvh, field, scene, batch, probes, seed, frame, timer)?;
         let bytes = ctx.read_back(&results)?;
         let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
@@ -234,6 +260,15 @@ impl GpuProbeShade {
             Ok(bytemuck::cast_slice(&records).to_vec())
         };
         let info = ctx.buffer_identified("shade probes", 0, probes.ids, records, wgpu::BufferUsages::STORAGE)?;
+        let bits = || Ok(bytemuck::cast_slice(&radiance_bits(probes.radiance, probes.count)).to_vec());
+        let radiance_id = probes.radiance_id.map(|id| [id]);
+        let radiance_flags = ctx.buffer_identified(
+            "shade radiance flags",
+            0,
+            radiance_id.as_ref().map(|id| &id[..]),
+            bits,
+            wgpu::BufferUsages::STORAGE,
+        )?;
         let radiance = ctx.scratch_buffer(
             "probe ray radiance",
             0,
@@ -245,7 +280,7 @@ impl GpuProbeShade {
             "probe shade",
             0,
             &self.layout,
-            &[&params, batch.rays_buffer(), batch.hits_buffer(), &info, &radiance],
+            &[&params, batch.rays_buffer(), batch.hits_buffer(), &info, &radiance, &radiance_flags],
         );
         ctx.record(|encoder| {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {

@@ -71,11 +71,8 @@ impl GpuProbeUsage {
         // (The scratch output may hold more than this batch's probes.)
         ring.push(ctx, key, out.as_ref().map(|o| (o, probes.len() as u64 * 16)));
         let Some(last) = request.batch.checked_sub(request.lag_updates as u64) else { return Ok(vec![]) };
-        let due = ring.take_due(ctx, request.set_id, last)?;
-        Ok(due
-            .into_iter()
-            .map(|(key, bytes)| DeviceUsageCounts { batch: key.batch, counts: decode(&bytes, bytes.len() / 16) })
-            .collect())
+        let due = ring.take_due(ctx, request.set_id, last, |bytes| decode(bytes, bytes.len() / 16))?;
+        Ok(due.into_iter().map(|(key, counts)| DeviceUsageCounts { batch: key.batch, counts }).collect())
     }
 
     /// Records the usage pass over `probes` of `batch`; its output buffer

@@ -52,7 +52,7 @@ use crate::probe_blend::GpuProbeBlend;
 use crate::probe_classification::{GpuProbeClassification, classification_results};
 use crate::probe_ray_gen::GpuProbeRayGen;
 use crate::probe_relocation::GpuProbeRelocation;
-use crate::probe_shade::{GpuProbeShade, ShadeProbes, batch_shade_probes};
+use crate::probe_shade::{GpuProbeShade, ShadeProbes, batch_shade_probes, batch_shade_records};
 use crate::probe_usage::GpuProbeUsage;
 use crate::shadow_field::GpuShadowField;
 use crate::{GpuContext, GpuError};
@@ -143,13 +143,13 @@ fn probe_records_ids(batch: &ProbeRayBatch) -> Option<Vec<u64>> {
     (update && covered == batch.probes.len()).then(|| batch.generated.iter().map(|g| g.plan_id).collect())?
 }
 
-/// The identity of an update batch's shade records, which carry each
-/// probe's `probe_needs_radiance` besides its probe record: the probe
-/// records' identity and the flags' (`ProbeRayBatch::probe_needs_radiance_id`).
-fn shade_records_ids(batch: &ProbeRayBatch) -> Option<Vec<u64>> {
-    let mut ids = probe_records_ids(batch)?;
-    ids.push(batch.probe_needs_radiance_id());
-    Some(ids)
+/// The identity of an update batch's radiance flags
+/// (`ProbeRayBatch::probe_needs_radiance_id`), where its probe records have
+/// one ([`probe_records_ids`]) and the batch drew it (a batch built as
+/// `Default` holds 0: no identity).
+fn radiance_flags_id(batch: &ProbeRayBatch) -> Option<u64> {
+    let id = batch.probe_needs_radiance_id();
+    (id != 0 && probe_records_ids(batch).is_some()).then_some(id)
 }
 
 /// The update volumes of `batch` whose probes cast the same rays each and lie
@@ -910,9 +910,15 @@ impl DeviceField for WgpuProbeTracer {
         let run = |gpu_field: &mut Option<GpuDdgiField>| -> Result<DeviceBlendOutput, GpuError> {
             let t = std::time::Instant::now();
             let f = self.resident_field(gpu_field, field, upload_atlases, plan)?;
-            let ids = shade_records_ids(batch);
-            let records = || batch_shade_probes(batch, volumes);
-            let probes = ShadeProbes { count: batch.probes.len(), ids: ids.as_deref(), records: &records };
+            let ids = probe_records_ids(batch);
+            let records = || batch_shade_records(batch, volumes);
+            let probes = ShadeProbes {
+                count: batch.probes.len(),
+                ids: ids.as_deref(),
+                records: &records,
+                radiance: &batch.probe_needs_radiance,
+                radiance_id: radiance_flags_id(batch),
+            };
             let seed32 = (seed ^ (seed >> 32)) as u32;
             // Timestamp queries where the device has them: the shade pass, then
             // each member's blend and border passes.

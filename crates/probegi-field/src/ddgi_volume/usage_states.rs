@@ -148,6 +148,8 @@ impl DdgiVolume {
     /// Usage scheme (seed 003 §6.1): every probe's state from the usage counts
     /// of update batch `batch` (per probe, `None` when it did not trace), and
     /// which probes blend this frame (see `probegi_core::probe_classification`).
+    /// One pass over the per-probe arrays in step, with the frame's blending
+    /// flags by state as a table (`ProbeState::updates_in_frame_table`).
     fn classify_usage_states(
         &mut self,
         frame: &mut VolumeFrame,
@@ -157,29 +159,39 @@ impl DdgiVolume {
     ) {
         let (interval, min_alive) =
             (self.settings.probe_sleeping_update_interval, self.settings.probe_alive_min_frames);
-        for (p, &counts) in counts.iter().enumerate().take(self.grid.probe_count()) {
+        let updates = ProbeState::updates_in_frame_table(frame_index, interval);
+        // `frame.active` may be shorter (no frame planned): past its end a
+        // probe's blend flag is not kept.
+        let mut no_flag = false;
+        let mut active = frame.active.iter_mut();
+        let probes = self
+            .probe_states
+            .iter_mut()
+            .zip(self.probe_alive_frames.iter_mut())
+            .zip(self.probe_has_history.iter_mut())
+            .zip(&self.probe_usage_from_batch)
+            .zip(counts.iter().take(self.grid.probe_count()));
+        for ((((state, alive_frames), history), &from_batch), &counts) in probes {
+            let flag = active.next().unwrap_or(&mut no_flag);
             let Some((usage, relevant, backfaces)) = counts else { continue };
-            if batch < self.probe_usage_from_batch[p] {
+            if batch < from_batch {
                 continue;
             }
-            let prev = self.probe_states[p];
+            let prev = *state;
             let mut next = classify_usage(usage, relevant, backfaces);
-            if prev == ProbeState::Alive && next == ProbeState::UsageSleeping && self.probe_alive_frames[p] < min_alive
-            {
+            if prev == ProbeState::Alive && next == ProbeState::UsageSleeping && *alive_frames < min_alive {
                 next = ProbeState::Alive;
             }
-            self.probe_alive_frames[p] = if next == ProbeState::Alive { self.probe_alive_frames[p] + 1 } else { 0 };
+            *alive_frames = if next == ProbeState::Alive { *alive_frames + 1 } else { 0 };
             if prev == ProbeState::Dead && next != ProbeState::Dead {
                 // Uncovered: the atlas holds light from before, so start over.
-                self.probe_has_history[p] = false;
+                *history = false;
             }
-            if let Some(active) = frame.active.get_mut(p) {
-                *active = match next {
-                    ProbeState::Dead => prev != ProbeState::Dead,
-                    s => s.updates_in_frame(frame_index, interval) || !self.probe_has_history[p],
-                };
-            }
-            self.probe_states[p] = next;
+            *flag = match next {
+                ProbeState::Dead => prev != ProbeState::Dead,
+                s => updates[s as usize] || !*history,
+            };
+            *state = next;
         }
     }
 }

@@ -52,6 +52,10 @@ struct ShadeHit {
 // Output per ray: xyz radiance, w the blend's signed distance (probe_blend.wgsl's ray_results).
 @group(0) @binding(3) var<storage, read> shade_probes: array<ShadeProbe>;
 @group(0) @binding(4) var<storage, read_write> shade_radiance: array<vec4<f32>>;
+// Per probe record k, bit k % 32 of word k / 32: the set wants its rays'
+// radiance (ORed into `info`'s bit 31). Apart from the records, which stay
+// while a kept plan's flags move (probe_shade.rs, `ShadeProbes`).
+@group(0) @binding(5) var<storage, read> shade_probe_radiance: array<u32>;
 
 // The shading record of ray i: its probe's (a binary search over the probes'
 // first rays), all 0 for a ray no probe holds.
@@ -71,9 +75,12 @@ fn ray_shade_probe(i: u32) -> ShadeProbe {
     if (shade_params.probe_count == 0u) {
         return none;
     }
-    let p = shade_probes[lo];
+    var p = shade_probes[lo];
     if (i < p.first_ray || i - p.first_ray >= p.ray_count) {
         return none;
+    }
+    if (((shade_probe_radiance[lo / 32u] >> (lo % 32u)) & 1u) != 0u) {
+        p.info = p.info | 0x80000000u;
     }
     return p;
 }

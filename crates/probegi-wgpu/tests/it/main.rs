@@ -15,6 +15,7 @@ mod ray_budget_equivalence;
 mod ray_gen_equivalence;
 mod screen_requests_equivalence;
 mod scroll_on_the_gpu;
+mod shade_flags;
 mod shadow_field_equivalence;
 mod trace_equivalence;
 mod wgpu_embed_example;
