@@ -89,10 +89,10 @@ pub struct GeneratedProbeRays {
     /// whose entries carry the same `Some` id hold the same probes, origins,
     /// first rays, counts and max distance for it (a steady frame or a kept
     /// trace plan keeps them; the rotation may turn), so a device may keep
-    /// what it made of them (the ray generation's and the usage pass's
-    /// per-probe records). The `probe_needs_radiance` flags have an identity
-    /// of their own ([`ProbeRayBatch::probe_needs_radiance_id`]): a kept
-    /// trace plan keeps this id while they change.
+    /// what it made of them (the ray generation's, the usage pass's and the
+    /// shade's per-probe records). The `probe_needs_radiance` flags have an
+    /// identity of their own ([`ProbeRayBatch::probe_needs_radiance_id`]): a
+    /// kept trace plan keeps this id while they change.
     /// `None`: no identity (a device packs the records again).
     pub plan_id: Option<u64>,
 }
@@ -229,10 +229,11 @@ impl ProbeRayBatch {
         self.renew_radiance_id();
     }
 
-    /// An identity of `probe_needs_radiance` within the batch's plan: where a
-    /// device's shade keeps per-probe records by the plan's identities
-    /// (`GeneratedProbeRays::plan_id`) and this, equal identities mean equal
-    /// flags. Drawn anew (`device_plans::next_plan_id`) whenever the set
+    /// An identity of `probe_needs_radiance` within the batch's plan: a
+    /// device's shade keeps the flags it uploaded (one bit a probe, apart
+    /// from its per-probe records, which it keeps by the plans' identities,
+    /// `GeneratedProbeRays::plan_id`) while this repeats: equal identities
+    /// mean equal flags. Drawn anew (`device_plans::next_plan_id`) whenever the set
     /// writes other flags (a kept trace plan's batch keeps its probes and
     /// record identities while the flags move with the states). It holds for
     /// batches as the set made them: a caller that writes the public flags

@@ -100,9 +100,7 @@ fn the_shade_reads_each_probes_radiance_flag_apart_from_its_kept_records() {
         assert_eq!(lit(&second, k), third[k], "probe {k}, every third probe flagged");
     }
     // What went up: the flags' words alone (the uniform block repeats).
-    let words = radiance_bits(&third, PROBES);
-    assert_eq!(words.len(), PROBES.div_ceil(32));
-    assert_eq!(up, 4 * words.len() as u64, "the second shade uploaded more than its flags");
+    assert_eq!(up, 4 * PROBES.div_ceil(32) as u64, "the second shade uploaded more than its flags");
     // The same flags' identity: nothing goes up, and the same rays are lit.
     let (again, up) = run(Some(&ids), &[], Some(u64::MAX - 2), &no_records);
     assert_eq!(up, 0, "kept flags were uploaded again");
@@ -112,7 +110,6 @@ fn the_shade_reads_each_probes_radiance_flag_apart_from_its_kept_records() {
     let flagged: Vec<ShadeProbe> =
         records.iter().map(|r| ShadeProbe { info: r.info | shade_info(true, false, 0, 0), ..*r }).collect();
     let (own, _) = run(None, &[], None, &|| flagged.clone());
-    assert!(own.iter().all(|l| l.is_finite()));
     let wrong = (0..PROBES).filter(|&k| !lit(&own, k)).count();
     assert_eq!(wrong, 0, "{wrong} probes flagged in their records went unshaded");
 }
