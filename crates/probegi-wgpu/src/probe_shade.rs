@@ -76,6 +76,14 @@ pub struct ShadeProbes<'a> {
     pub radiance_id: Option<u64>,
 }
 
+/// The fewest words [`GpuProbeShade::shade_on_device`] uploads the radiance
+/// flags in (256 bytes: 2 048 probes). A batch whose size moves (the screen
+/// scheme's) then keeps one flag buffer: at a few words a probe count's
+/// swing would outgrow or undershoot a kept buffer's `[bytes, 2 × bytes]`
+/// (`GpuContext::buffer_rewritten`) every few frames; past the floor the
+/// flags move with the count as the records do.
+pub const SHADE_RADIANCE_WORDS_MIN: usize = 64;
+
 /// One bit per record of `flags` (record k: bit k % 32 of word k / 32), as
 /// `probe_shade.wgsl` reads `shade_probe_radiance`; at least one word.
 pub fn radiance_bits(flags: &[bool], count: usize) -> Vec<u32> {
@@ -260,7 +268,11 @@ impl GpuProbeShade {
             Ok(bytemuck::cast_slice(&records).to_vec())
         };
         let info = ctx.buffer_identified("shade probes", 0, probes.ids, records, wgpu::BufferUsages::STORAGE)?;
-        let bits = || Ok(bytemuck::cast_slice(&radiance_bits(probes.radiance, probes.count)).to_vec());
+        let bits = || {
+            let mut words = radiance_bits(probes.radiance, probes.count);
+            words.resize(words.len().max(SHADE_RADIANCE_WORDS_MIN), 0);
+            Ok(bytemuck::cast_slice(&words).to_vec())
+        };
         let radiance_id = probes.radiance_id.map(|id| [id]);
         let radiance_flags = ctx.buffer_identified(
             "shade radiance flags",

@@ -1,8 +1,9 @@
 //! The shade pass's radiance flags apart from its per-probe records
 //! (`probegi_wgpu::probe_shade::ShadeProbes`): a probe's rays are shaded only
 //! where its flag is set (otherwise radiance 0 with the blend's distance), the
-//! flags go up on their own (one bit a probe) while records under a kept
-//! identity stay on the device, and a record's own flag (bit 31 of `info`,
+//! flags go up on their own (one bit a probe, in at least
+//! `SHADE_RADIANCE_WORDS_MIN` words) while records under a kept identity stay
+//! on the device, and a record's own flag (bit 31 of `info`,
 //! as `GpuProbeShade::shade` takes it) still counts.
 use crate::common;
 
@@ -15,7 +16,9 @@ use probegi_scene::{BvhSettings, BvhTracer};
 use probegi_wgpu::bvh_trace::{GpuBvh, GpuRay, GpuRayTrace};
 use probegi_wgpu::ddgi_query::GpuDdgiField;
 use probegi_wgpu::gpu_scene::GpuScene;
-use probegi_wgpu::probe_shade::{GpuProbeShade, ShadeProbe, ShadeProbes, radiance_bits, shade_info, volume_shade_info};
+use probegi_wgpu::probe_shade::{
+    GpuProbeShade, SHADE_RADIANCE_WORDS_MIN, ShadeProbe, ShadeProbes, radiance_bits, shade_info, volume_shade_info,
+};
 
 /// Probes, rays a probe.
 const PROBES: usize = 40;
@@ -100,7 +103,8 @@ fn the_shade_reads_each_probes_radiance_flag_apart_from_its_kept_records() {
         assert_eq!(lit(&second, k), third[k], "probe {k}, every third probe flagged");
     }
     // What went up: the flags' words alone (the uniform block repeats).
-    assert_eq!(up, 4 * PROBES.div_ceil(32) as u64, "the second shade uploaded more than its flags");
+    let words = PROBES.div_ceil(32).max(SHADE_RADIANCE_WORDS_MIN);
+    assert_eq!(up, 4 * words as u64, "the second shade uploaded more than its flags");
     // The same flags' identity: nothing goes up, and the same rays are lit.
     let (again, up) = run(Some(&ids), &[], Some(u64::MAX - 2), &no_records);
     assert_eq!(up, 0, "kept flags were uploaded again");
