@@ -827,7 +827,7 @@ impl GpuContext {
     }
 
     /// Copies a `COPY_SRC` buffer into a staging buffer and reads it back.
-    pub(crate) fn read_back(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+    pub fn read_back(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
         let staging = self.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size: buffer.size(),

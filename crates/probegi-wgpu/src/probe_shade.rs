@@ -214,12 +214,12 @@ impl GpuProbeShade {
         if batch.ray_count == 0 {
             return Ok(vec![]);
         }
-        let radiance: Vec<bool> = probes.iter().map(|p| p.info & shade_info(true, false, 0, 0) != 0).collect();
+        // Each record carries its own flag (bit 31), which the shader keeps: no flags apart.
         let probes = ShadeProbes {
             count: probes.len(),
             ids: None,
             records: &|| probes.to_vec(),
-            radiance: &radiance,
+            radiance: &[],
             radiance_id: None,
         };
         let results = self.shade_on_device(ctx, bvh, field, scene, batch, probes, seed, frame, timer)?;

@@ -26,23 +26,7 @@ const RAYS: usize = 16;
 
 /// Radiance a ray of the shade's output (xyz), read back.
 fn read_radiance(ctx: &probegi_wgpu::GpuContext, out: &wgpu::Buffer) -> Vec<Vec3> {
-    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("test readback"),
-        size: out.size(),
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx.device.create_command_encoder(&Default::default());
-    encoder.copy_buffer_to_buffer(out, 0, &staging, 0, out.size());
-    ctx.submit(encoder.finish());
-    ctx.wait().expect("the device finishes the shade");
-    let (tx, rx) = std::sync::mpsc::channel();
-    staging.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    ctx.wait().expect("the device maps the copy");
-    rx.recv().expect("a map result").expect("mapped");
-    let bytes = staging.slice(..).get_mapped_range().expect("mapped range").to_vec();
+    let bytes = ctx.read_back(out).expect("read back");
     let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
     v.iter().take(PROBES * RAYS).map(|l| Vec3::new(l[0], l[1], l[2])).collect()
 }
