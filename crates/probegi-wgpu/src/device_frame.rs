@@ -148,18 +148,30 @@ pub struct FrameReadbackRing {
 }
 
 impl FrameReadbackRing {
-    /// A staging buffer for `words` request words, reused when one of the size is free.
-    fn take(&mut self, ctx: &GpuContext, words: u32) -> wgpu::Buffer {
+    /// A staging buffer for `words` request words, reused when one of the size
+    /// is free. Where none is, the ring makes at once every buffer that a lag
+    /// of `lag_frames` can hold in flight ([`Self::collect`] keeps at most
+    /// `lag_frames` and this frame takes one more) and lets go of free ones of
+    /// other sizes: how many frames' maps are still pending depends on the
+    /// device's timing, so a ring grown one buffer at a time would make one
+    /// in whichever steady frame first found every buffer in flight.
+    fn take(&mut self, ctx: &GpuContext, words: u32, lag_frames: usize) -> wgpu::Buffer {
         let size = STATS_BYTES + 4 * words as u64 + if ctx.timestamps { TIMESTAMP_BYTES } else { 0 };
         if let Some(i) = self.free.iter().position(|b| b.size() == size) {
             return self.free.swap_remove(i);
         }
-        ctx.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("frame readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        })
+        self.free.clear();
+        let in_flight = self.in_flight.iter().filter(|s| s.buffer.size() == size).count();
+        let make = || {
+            ctx.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("frame readback"),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        self.free.extend((in_flight + 1..=lag_frames).map(|_| make()));
+        make()
     }
 
     /// Starts mapping `buffer` (filled by `submission`) for frame `frame`.
@@ -405,7 +417,7 @@ impl GpuFrame {
                 end_of_pass_write_index: Some(2 * i + 1),
             })
         };
-        let staging = ring.take(ctx, f.request_words);
+        let staging = ring.take(ctx, f.request_words, input.readback_lag_frames as usize);
         let images = Self::ensure_images(layout, images, ctx, (f.width, f.height, f.request_words))?;
         let (mode, frames_max, clip) = match (&input.history, images.fresh) {
             (_, true) => (3, 0, 0.0),
@@ -575,5 +587,40 @@ impl GpuFrame {
     /// Device memory the frame holds now.
     pub fn bytes(&self) -> u64 {
         self.images.as_ref().map_or(0, |i| frame_bytes(i.width, i.height))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A submission holding nothing, for a slot to wait on.
+    fn submission(ctx: &GpuContext) -> wgpu::SubmissionIndex {
+        ctx.submit(ctx.device.create_command_encoder(&Default::default()).finish());
+        ctx.flush().expect("submitted")
+    }
+
+    /// With a read-back lag of 2 frames, the ring makes its three buffers with
+    /// the first frame, and steady frames whose maps are all still pending
+    /// (a device running behind: CI's lavapipe beside other tests) make none;
+    /// a new request size makes the three of its size.
+    #[test]
+    fn the_ring_makes_every_buffer_a_lag_holds_in_flight_with_its_first_frame() {
+        let Some(ctx) = GpuContext::headless_unless_absent().expect("device") else { return };
+        let mut ring = FrameReadbackRing::default();
+        let lag = 2;
+        for words in [4, 8] {
+            let before = ctx.counters().buffers_made;
+            for frame in 0..=lag as u32 {
+                let buffer = ring.take(&ctx, words, lag);
+                let made = ctx.counters().buffers_made - before;
+                assert_eq!(made, lag as u64 + 1, "{words} words, frame {frame}: buffers made so far");
+                // Never collected: every slot stays in flight, as behind a slow device.
+                ring.push(buffer, submission(&ctx), frame, words, 0.0);
+            }
+            let readouts = ring.collect(&ctx, 0).expect("drained");
+            assert_eq!(readouts.len(), lag + 1);
+            assert_eq!(ring.free.len(), lag + 1, "{words} words: the buffers back in the ring");
+        }
     }
 }
