@@ -110,6 +110,34 @@ struct FrameBuffer {
     /// The identity of the contents, where they were written from one
     /// ([`GpuContext::buffer_identified`]).
     id: Option<Vec<u64>>,
+    /// How many hand-outs in a row asked for less than half its size
+    /// ([`FrameBuffer::serves`]).
+    oversized_uses: u32,
+}
+
+/// How many hand-outs in a row a kept buffer serves needs of less than half
+/// its size before it is let go ([`FrameBuffer::serves`]). A need that comes
+/// back within them keeps the buffer: the usage scheme's blend entries grow
+/// by 2.6× every `probe_sleeping_update_interval` (10) updates, when its
+/// Usage Sleeping probes join the blend, and shrink the update after; with
+/// the bare window of [`holds`] each swing made a buffer and a bind group.
+const KEPT_OVERSIZED_USES: u32 = 64;
+
+impl FrameBuffer {
+    fn new(buffer: wgpu::Buffer, usage: wgpu::BufferUsages, contents: Vec<u8>, handed_out_at: u64) -> Self {
+        Self { buffer, usage, contents, handed_out_at, id: None, oversized_uses: 0 }
+    }
+
+    /// Whether this buffer serves a need of `need` bytes of `usage`: it holds
+    /// them, and has not been more than twice as large as the needs ([`holds`])
+    /// for over [`KEPT_OVERSIZED_USES`] hand-outs in a row (counted here).
+    fn serves(&mut self, need: u64, usage: wgpu::BufferUsages) -> bool {
+        if self.usage != usage || self.buffer.size() < need {
+            return false;
+        }
+        self.oversized_uses = if holds(self.buffer.size(), need) { 0 } else { self.oversized_uses + 1 };
+        self.oversized_uses <= KEPT_OVERSIZED_USES
+    }
 }
 
 /// A bind group [`GpuContext::bind_group_kept`] made, with what it binds.
@@ -632,9 +660,10 @@ impl GpuContext {
     /// replaces it instead. So a pass keyed per volume that runs once a
     /// frame makes no buffer, where it made one a frame before. Contents that
     /// change length (the screen scheme's probe records) keep a buffer that
-    /// holds them and at most twice as many bytes ([`holds`]; a new one
-    /// leaves a quarter more room): the passes read such inputs by the counts
-    /// their uniform blocks give, never by the buffer's length.
+    /// holds them and at most twice as many bytes, or more for a while
+    /// ([`FrameBuffer::serves`]; a new one leaves a quarter more room): the
+    /// passes read such inputs by the counts their uniform blocks give, never
+    /// by the buffer's length.
     pub(crate) fn buffer_rewritten(
         &self,
         label: &'static str,
@@ -647,7 +676,9 @@ impl GpuContext {
         let now = self.queue_submissions();
         let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
         let before = kept.get(&(label, key)).map(|k| k.buffer.size());
-        if let Some(k) = kept.get_mut(&(label, key)).filter(|k| holds(k.buffer.size(), size) && k.usage == usage) {
+        if let Some(k) = kept.get_mut(&(label, key))
+            && k.serves(size, usage)
+        {
             if k.contents == contents {
                 self.count_kept(contents.len() as u64);
                 k.handed_out_at = now;
@@ -667,9 +698,7 @@ impl GpuContext {
         let mut padded = contents.to_vec();
         padded.resize(size as usize, 0);
         let buffer = self.buffer_with(label, &padded, usage);
-        let entry =
-            FrameBuffer { buffer: buffer.clone(), usage, contents: contents.to_vec(), handed_out_at: now, id: None };
-        kept.insert((label, key), entry);
+        kept.insert((label, key), FrameBuffer::new(buffer.clone(), usage, contents.to_vec(), now));
         buffer
     }
 
@@ -710,7 +739,7 @@ impl GpuContext {
     /// A storage buffer of at least `bytes` for a pass to write and a later
     /// pass of the same frame to read (the shade pass's radiance, the blend's
     /// weight tables), kept per `(label, key)` while it holds `bytes` and at
-    /// most twice as many ([`holds`]). Its contents are whatever a pass last
+    /// most twice as many, or more for a while ([`FrameBuffer::serves`]). Its contents are whatever a pass last
     /// wrote: it is for data a pass writes before it is read, read by counts
     /// and indices the passes are given, and the caller reads it before the
     /// next call with the same key records its writer (queue order does the rest).
@@ -723,7 +752,9 @@ impl GpuContext {
     ) -> wgpu::Buffer {
         let bytes = bytes.max(16);
         let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(k) = kept.get(&(label, key)).filter(|k| holds(k.buffer.size(), bytes) && k.usage == usage) {
+        if let Some(k) = kept.get_mut(&(label, key))
+            && k.serves(bytes, usage)
+        {
             return k.buffer.clone();
         }
         let buffer = self.create_buffer(&wgpu::BufferDescriptor {
@@ -732,8 +763,7 @@ impl GpuContext {
             usage,
             mapped_at_creation: false,
         });
-        let entry = FrameBuffer { buffer: buffer.clone(), usage, contents: Vec::new(), handed_out_at: 0, id: None };
-        kept.insert((label, key), entry);
+        kept.insert((label, key), FrameBuffer::new(buffer.clone(), usage, Vec::new(), 0));
         buffer
     }
 
@@ -915,8 +945,9 @@ impl GpuContext {
     }
 }
 
-/// Whether a kept buffer of `size` bytes serves for `need`: it holds them,
-/// and not more than twice as many (a much larger one is let go, not held).
+/// Whether a kept buffer of `size` bytes fits `need`: it holds them, and not
+/// more than twice as many (a much larger one is let go after a while,
+/// [`FrameBuffer::serves`]).
 fn holds(size: u64, need: u64) -> bool {
     size >= need && size / 2 <= need
 }
@@ -1059,6 +1090,45 @@ mod tests {
         assert_eq!(read(&ctx, &snaps[0], 16), [7; 16]);
         assert_eq!(read(&ctx, &snaps[1], 16), [9; 16]);
         assert_eq!(read(&ctx, &huge, huge_bytes as u64), vec![9; huge_bytes]);
+    }
+
+    /// A need that swings between a size and 2.6 times it (the usage scheme's
+    /// blend entries, whose Usage Sleeping probes join every tenth update)
+    /// keeps the buffer it grew into, where the bare twice-its-bytes window
+    /// made one at every swing; a need under half the buffer's size for more
+    /// than `KEPT_OVERSIZED_USES` hand-outs in a row lets it go.
+    #[test]
+    fn a_kept_buffer_rides_out_a_swing_in_its_size_and_lets_go_of_a_lasting_shrink() {
+        let Some(ctx) = GpuContext::headless_unless_absent().expect("device") else { return };
+        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let (small, large) = (vec![1u8; 1000], vec![2u8; 2600]);
+        ctx.defer_submissions(true);
+        let hand_out = |contents: &[u8]| {
+            let b = ctx.buffer_rewritten("test swing", 3, contents, usage);
+            ctx.submit(ctx.device.create_command_encoder(&Default::default()).finish());
+            ctx.flush();
+            b
+        };
+        hand_out(&small);
+        let grown = hand_out(&large);
+        // Written in place: through the upload arena, whose first chunk this makes.
+        assert_eq!(hand_out(&small), grown);
+        let before = ctx.counters().buffers_made;
+        for update in 0..40 {
+            let contents = if update % 10 == 0 { &large } else { &small };
+            assert_eq!(hand_out(contents), grown, "update {update}");
+        }
+        assert_eq!(ctx.counters().buffers_made - before, 0, "a swing made buffers");
+        assert_eq!(read(&ctx, &grown, 1000), small);
+        hand_out(&large);
+        for _ in 0..KEPT_OVERSIZED_USES {
+            assert_eq!(hand_out(&small), grown);
+        }
+        let shrunk = hand_out(&small);
+        ctx.defer_submissions(false);
+        assert_ne!(shrunk, grown, "kept past KEPT_OVERSIZED_USES hand-outs under half its size");
+        assert!(shrunk.size() < grown.size() / 2);
+        assert_eq!(read(&ctx, &shrunk, 1000), small);
     }
 
     /// `buffer_rewritten` writes in place only where no pass recorded since the
