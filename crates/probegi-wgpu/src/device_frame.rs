@@ -147,10 +147,15 @@ pub struct FrameReadbackRing {
     in_flight: VecDeque<ReadbackSlot>,
 }
 
+/// The most staging buffers [`FrameReadbackRing::take`] makes ahead for a
+/// read-back lag (a larger lag, which nothing bounds, grows the ring as
+/// frames need more).
+const READBACK_RING_MAX: usize = 8;
+
 impl FrameReadbackRing {
     /// A staging buffer for `words` request words, reused when one of the size
     /// is free. Where none is, the ring makes at once every buffer that a lag
-    /// of `lag_frames` can hold in flight ([`Self::collect`] keeps at most
+    /// of `lag_frames` (up to [`READBACK_RING_MAX`]) can hold in flight ([`Self::collect`] keeps at most
     /// `lag_frames` and this frame takes one more) and lets go of free ones of
     /// other sizes: how many frames' maps are still pending depends on the
     /// device's timing, so a ring grown one buffer at a time would make one
@@ -170,7 +175,7 @@ impl FrameReadbackRing {
                 mapped_at_creation: false,
             })
         };
-        self.free.extend((in_flight + 1..=lag_frames).map(|_| make()));
+        self.free.extend((in_flight + 1..=lag_frames.min(READBACK_RING_MAX)).map(|_| make()));
         make()
     }
 

@@ -721,7 +721,11 @@ impl GpuContext {
         let with_dst = usage | wgpu::BufferUsages::COPY_DST;
         if let Some(id) = id {
             let mut kept = self.frame_buffers.lock().unwrap_or_else(|e| e.into_inner());
-            if let Some(k) = kept.get_mut(&(label, key)).filter(|k| k.id.as_deref() == Some(id) && k.usage == with_dst)
+            // Kept by its identity while it would serve its contents' length
+            // (so a buffer that shrank under a lasting id is let go in time).
+            if let Some(k) = kept.get_mut(&(label, key))
+                && k.id.as_deref() == Some(id)
+                && k.serves(k.contents.len().max(16) as u64, with_dst)
             {
                 self.count_kept(k.contents.len() as u64);
                 k.handed_out_at = self.queue_submissions();

@@ -301,41 +301,43 @@ impl GpuProbeBlend {
         plan: &DeviceVolumeBlend<'_>,
         ray_results: &wgpu::Buffer,
     ) -> Result<BlendBindings, GpuError> {
-        let (blending, packed) = self.entries_once(atlases, plan, ray_results.size() / 16)?;
-        self.bind_blend(ctx, atlases, plan, ray_results, blending, packed)
+        let batch_rays = ray_results.size() / 16;
+        let (blending, packed) = self.entries_once(atlases, plan, batch_rays)?;
+        self.bind_blend(ctx, atlases, plan, (ray_results, batch_rays), blending, packed)
     }
 
-    /// [`Self::prepare_resident`], or `None` where no probe of `plan` blends
-    /// (nothing to bind or record). The plan's entries are checked and packed
-    /// in one pass over its probes, and not at all where the same kept plan
-    /// passed last ([`Self::entries_once`]).
+    /// [`Self::prepare_resident`] over the batch's `batch_rays` results (the
+    /// shade's kept buffer may hold more), or `None` where no probe of `plan`
+    /// blends (nothing to bind or record). The plan's entries are checked and
+    /// packed in one pass over its probes, and not at all where the same kept
+    /// plan passed last ([`Self::entries_once`]).
     pub(crate) fn prepare_blending(
         &self,
         ctx: &GpuContext,
         atlases: &GpuVolumeAtlases,
         plan: &DeviceVolumeBlend<'_>,
-        ray_results: &wgpu::Buffer,
+        (ray_results, batch_rays): (&wgpu::Buffer, u64),
     ) -> Result<Option<BlendBindings>, GpuError> {
-        let (blending, packed) = self.entries_once(atlases, plan, ray_results.size() / 16)?;
+        let (blending, packed) = self.entries_once(atlases, plan, batch_rays)?;
         if blending == 0 {
             return Ok(None);
         }
-        self.bind_blend(ctx, atlases, plan, ray_results, blending, packed).map(Some)
+        self.bind_blend(ctx, atlases, plan, (ray_results, batch_rays), blending, packed).map(Some)
     }
 
-    /// The buffers and bind group of `plan`'s blend of `blending` probes, its
-    /// entries `packed` where [`Self::entries_once`] packed them (else packed
-    /// here, unless the device holds them under the plan's id).
+    /// The buffers and bind group of `plan`'s blend of `blending` probes over
+    /// the batch's `batch_rays` results, its entries `packed` where
+    /// [`Self::entries_once`] packed them (else packed here, unless the device
+    /// holds them under the plan's id).
     fn bind_blend(
         &self,
         ctx: &GpuContext,
         atlases: &GpuVolumeAtlases,
         plan: &DeviceVolumeBlend<'_>,
-        ray_results: &wgpu::Buffer,
+        (ray_results, batch_rays): (&wgpu::Buffer, u64),
         blending: u32,
         packed: Option<Vec<u8>>,
     ) -> Result<BlendBindings, GpuError> {
-        let batch_rays = ray_results.size() / 16;
         let (ni, nd) = (atlases.irradiance_interior, atlases.distance_interior);
         let per_row = blending.clamp(1, MAX_GROUPS);
         let params = blend_params(atlases, plan, blending, per_row);

@@ -223,8 +223,9 @@ impl GpuProbeShade {
             radiance_id: None,
         };
         let results = self.shade_on_device(ctx, bvh, field, scene, batch, probes, seed, frame, timer)?;
-        let bytes = ctx.read_back(&results)?;
-        let v: &[[f32; 4]] = bytemuck::cast_slice(&bytes);
+        // The batch's rays alone: the kept buffer may hold more.
+        let bytes = ctx.read_back_range(&results, 0, batch.ray_count as u64 * 16)?;
+        let v: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
         Ok(v.iter().take(batch.ray_count as usize).map(|l| Vec3::new(l[0], l[1], l[2])).collect())
     }
 

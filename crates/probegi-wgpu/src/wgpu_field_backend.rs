@@ -392,15 +392,15 @@ impl WgpuProbeTracer {
     }
 
     /// Records and submits the blend and border passes of every member of
-    /// `plan` that blends this frame, over the shade pass's `results` in the
-    /// resident field `f` (with `timer`, member i's passes at slots from
+    /// `plan` that blends this frame, over the shade pass's `results` (its
+    /// buffer and the batch's rays) in the resident field `f` (with `timer`, member i's passes at slots from
     /// 1 + i × `probe_blend::PASS_NAMES.len()`). Returns the members recorded.
     fn record_blends(
         &self,
         blend: &GpuProbeBlend,
         f: &GpuDdgiField,
         plan: &[DeviceVolumeBlend<'_>],
-        results: &wgpu::Buffer,
+        results: (&wgpu::Buffer, u64),
         timer: Option<&GpuTimer>,
     ) -> Result<Vec<usize>, GpuError> {
         let per_member = crate::probe_blend::PASS_NAMES.len() as u32;
@@ -935,7 +935,8 @@ impl DeviceField for WgpuProbeTracer {
             }
             let shade_ms = t.elapsed().as_secs_f64() * 1e3;
             let t = std::time::Instant::now();
-            let recorded = self.record_blends(blend, f, plan, &results, timer.as_ref())?;
+            let results = (&results, resident.ray_count as u64);
+            let recorded = self.record_blends(blend, f, plan, results, timer.as_ref())?;
             if self.timing() {
                 self.ctx.wait()?;
             }

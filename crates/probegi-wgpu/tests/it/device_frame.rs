@@ -225,7 +225,7 @@ fn scheme_settings(states: ProbeStatesMode, gpu: &Arc<WgpuProbeTracer>) -> Rende
 /// traces the probes whose request countdowns ran out, so its batch changes
 /// size from frame to frame: the batches, buffers and bind groups of the
 /// frames before serve it anyway (a batch holds up to twice its rays, a kept
-/// input up to twice its bytes), and a steady frame makes none.
+/// input up to twice its bytes, or more for a while), and a steady frame makes none.
 #[test]
 fn a_screen_scheme_frame_makes_no_batch_buffer_or_bind_group_while_its_batch_size_moves() {
     let scene = probegi_scene::builtin::cornell_box();
