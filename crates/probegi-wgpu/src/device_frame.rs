@@ -155,9 +155,9 @@ const READBACK_RING_MAX: usize = 8;
 impl FrameReadbackRing {
     /// A staging buffer for `words` request words, reused when one of the size
     /// is free. Where none is, the ring makes at once every buffer that a lag
-    /// of `lag_frames` (up to [`READBACK_RING_MAX`]) can hold in flight ([`Self::collect`] keeps at most
-    /// `lag_frames` and this frame takes one more) and lets go of free ones of
-    /// other sizes: how many frames' maps are still pending depends on the
+    /// of `lag_frames` (up to [`READBACK_RING_MAX`]) can hold in flight
+    /// ([`Self::collect`] keeps at most `lag_frames` and this frame takes one
+    /// more) and lets go of free ones of other sizes: how many frames' maps are still pending depends on the
     /// device's timing, so a ring grown one buffer at a time would make one
     /// in whichever steady frame first found every buffer in flight.
     fn take(&mut self, ctx: &GpuContext, words: u32, lag_frames: usize) -> wgpu::Buffer {

@@ -743,8 +743,8 @@ impl GpuContext {
     /// A storage buffer of at least `bytes` for a pass to write and a later
     /// pass of the same frame to read (the shade pass's radiance, the blend's
     /// weight tables), kept per `(label, key)` while it holds `bytes` and at
-    /// most twice as many, or more for a while ([`FrameBuffer::serves`]). Its contents are whatever a pass last
-    /// wrote: it is for data a pass writes before it is read, read by counts
+    /// most twice as many, or more for a while ([`FrameBuffer::serves`]). Its
+    /// contents are whatever a pass last wrote: it is for data a pass writes before it is read, read by counts
     /// and indices the passes are given, and the caller reads it before the
     /// next call with the same key records its writer (queue order does the rest).
     pub(crate) fn scratch_buffer(

@@ -78,10 +78,11 @@ pub struct ShadeProbes<'a> {
 
 /// The fewest words [`GpuProbeShade::shade_on_device`] uploads the radiance
 /// flags in (256 bytes: 2 048 probes). A batch whose size moves (the screen
-/// scheme's) then keeps one flag buffer: at a few words a probe count's
-/// swing would outgrow or undershoot a kept buffer's `[bytes, 2 × bytes]`
-/// (`GpuContext::buffer_rewritten`) every few frames; past the floor the
-/// flags move with the count as the records do.
+/// scheme's) then keeps one flag buffer from its first frame: a kept buffer
+/// serves smaller needs for a while (`GpuContext::buffer_rewritten`), but one
+/// made at a few words would grow, making a buffer, in whichever frame first
+/// brought more probes; past the floor the flags move with the count as the
+/// records do.
 pub const SHADE_RADIANCE_WORDS_MIN: usize = 64;
 
 /// One bit per record of `flags` (record k: bit k % 32 of word k / 32), as
@@ -226,7 +227,7 @@ impl GpuProbeShade {
         // The batch's rays alone: the kept buffer may hold more.
         let bytes = ctx.read_back_range(&results, 0, batch.ray_count as u64 * 16)?;
         let v: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes);
-        Ok(v.iter().take(batch.ray_count as usize).map(|l| Vec3::new(l[0], l[1], l[2])).collect())
+        Ok(v.iter().map(|l| Vec3::new(l[0], l[1], l[2])).collect())
     }
 
     /// The shade pass submitted, its output left on the device: per ray a
